@@ -1,0 +1,334 @@
+//! Configuration of the per-channel safety envelope ([`EnvelopeConfig`]) and the compiled-in absolute limits no
+//! configuration may widen. A configuration outside the absolute limits is an [`EnvelopeError`], never clamped.
+//!
+//! Sources of the figures (see also `shared/design/model.md` §6):
+//! - Paper, section 2a and 3: operating range 15–48 °C; pain below 15 °C and above 48 °C; display rate 2 °C/s;
+//!   Jones & Berris recommend 10 °C/s.
+//! - IEC 60601-1 (Table 24, applied parts in contact with the patient): 48 °C for 1–10 min contact, 43 °C for
+//!   ≥ 10 min. Hence the absolute maximum of 48 °C and the 10-minute budget at ≥ 43 °C.
+//! - ISO 13732-3 contact criteria: numbness at about 7 °C skin temperature. The absolute minimum of 10 °C keeps a
+//!   3 K margin above it (a display colder than the skin it touches means the skin stays warmer still).
+//! - CEM43 thermal dose (Sapareto & Dewey 1984). Damage thresholds for skin are tens of CEM43-minutes
+//!   (Yarmolenko et al. 2011); van Rhoon et al. 2013 (Eur. Radiol. 23:2215) propose limits of a few CEM43-minutes
+//!   for routine, uncontrolled exposure. The default budget of 1 CEM43-minute stays below that proposal.
+
+use serde::{Deserialize, Serialize};
+
+use crate::dose::CEM43_REFERENCE_C;
+use crate::error::EnvelopeError;
+
+/// Lowest display temperature any configuration may allow, °C (3 K above the 7 °C numbness criterion behind
+/// ISO 13732-3).
+pub const ABSOLUTE_MIN_C: f64 = 10.0;
+/// Highest display temperature any configuration may allow, °C (IEC 60601-1 applied-part limit for 1–10 min
+/// contact; the paper's pain threshold).
+pub const ABSOLUTE_MAX_C: f64 = 48.0;
+/// Highest set-point rate any configuration may allow, °C/s (twice the 10 °C/s of Jones & Berris).
+pub const ABSOLUTE_MAX_RATE_C_PER_S: f64 = 20.0;
+/// Longest cumulative time at or above 43 °C any configuration may allow, s (IEC 60601-1: 43 °C for ≥ 10 min).
+pub const ABSOLUTE_MAX_TIME_AT_OR_ABOVE_43_S: f64 = 600.0;
+/// Largest CEM43 budget any configuration may allow, CEM43-minutes (= 10 min at 43 °C, the IEC long-contact case).
+pub const ABSOLUTE_MAX_CEM43_BUDGET_MIN: f64 = 10.0;
+/// Longest continuous time at or above [`ABSOLUTE_MAX_C`] any configuration may tolerate before a fault, s.
+pub const ABSOLUTE_MAX_TIME_AT_OR_ABOVE_48_S: f64 = 10.0;
+/// Highest hot-side limit any configuration may set, °C: the water-cooled box is worn on the phalanx (paper 3.1),
+/// so it is held to the same 48 °C contact limit as the display.
+pub const ABSOLUTE_MAX_HOT_SIDE_C: f64 = 48.0;
+/// Longest stale-sensor timeout any configuration may set, s.
+pub const ABSOLUTE_MAX_STALE_TIMEOUT_S: f64 = 1.0;
+/// Display set-point used when nothing else is known (no measurement, no valid request yet), °C: the middle of
+/// the 30–36 °C indifference zone (paper 2a), clamped into the configured range.
+pub const NEUTRAL_SETPOINT_C: f64 = 33.0;
+
+/// Safety envelope settings of one channel. Every field has a default (`EnvelopeConfig::default()`), so a TOML
+/// table may give only some keys; unknown keys are refused.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EnvelopeConfig {
+    /// Lowest display set-point, °C. Default 15 (paper: cold pain below 15 °C). Range [10, 48).
+    pub min_display_c: f64,
+    /// Highest display set-point, °C. Default 48 (paper: heat pain above 48 °C; IEC 60601-1). Range (min, 48].
+    pub max_display_c: f64,
+    /// Largest rate of change of the shaped set-point, °C/s. Default 10 (Jones & Berris; the paper used 2).
+    /// Range [0.01, 20].
+    pub max_setpoint_rate_c_per_s: f64,
+    /// Cumulative time at or above 43 °C (measured) after which the maximum drops below 43 °C, s. Default 600
+    /// (IEC 60601-1: 43 °C for ≥ 10 min). Range [0, 600].
+    pub max_time_at_or_above_43_s: f64,
+    /// CEM43 budget after which the maximum drops below 43 °C, CEM43-minutes. Default 1 (below the few
+    /// CEM43-minutes proposed for routine exposure by van Rhoon et al. 2013). Range [0, 10].
+    pub cem43_budget_min: f64,
+    /// After the dose lockout the maximum is `43 − dose_lockout_margin_c`, °C. Default 0.5 (≈ the tolerance of a
+    /// class-B PT-100 at 43 °C, 0.3 + 0.005·43 = 0.52 °C). Range [0.1, 5].
+    pub dose_lockout_margin_c: f64,
+    /// After the dose lockout engages, time the measured display has to fall below 43 °C before any reading at
+    /// or above 43 °C is a fault, s. Default 5 (cooling 48 → 43 °C at the 10 °C/s rate limit takes 0.5 s).
+    /// Range [0, 60].
+    pub dose_lockout_grace_s: f64,
+    /// Continuous time the measured display may stay at or above 48 °C before a fault ("never sustained"), s.
+    /// Default 1 (heating is refused at the maximum, so a display that stays there is heated by something the
+    /// envelope does not command). Range [0, 10].
+    pub max_time_at_or_above_48_s: f64,
+    /// Margin beyond the display limits at which the measured display is a fault, °C. Default 1.
+    /// Range [0.1, 5].
+    pub limit_margin_c: f64,
+    /// Reading at or above which the display sensor is open, °C. Default 150 (an open PT-100 reads as an
+    /// unbounded resistance, far beyond 150 °C). Must exceed `plausible_max_c`; at most 1000.
+    pub sensor_open_c: f64,
+    /// Reading at or below which the display sensor is shorted, °C. Default −50 (a shorted PT-100 reads ≈ 0 Ω,
+    /// about −242 °C). Must be below `plausible_min_c`; at least −300.
+    pub sensor_short_c: f64,
+    /// Lowest plausible display reading, °C. Default 0 (the water loop runs at room temperature; a display on a
+    /// finger cannot reach freezing within the 10 °C absolute minimum). Must be below `min_display_c −
+    /// limit_margin_c`.
+    pub plausible_min_c: f64,
+    /// Highest plausible display reading, °C. Default 70. Must exceed `max_display_c + limit_margin_c`.
+    pub plausible_max_c: f64,
+    /// Longest time without a fresh display sample before a fault, s. Default 0.2 (≥ 10 conversions of a
+    /// 50–60 Hz PT-100 converter; the set-point moves at most 2 °C at the default rate limit). Range [0.001, 1].
+    pub stale_timeout_s: f64,
+    /// Largest plausible rate of change of the measured display, °C/s. Default 50 (a bare 0.2 J/K plate heated
+    /// by the 8×8 mm module at full current warms at about 35 °C/s). Must exceed `max_setpoint_rate_c_per_s`;
+    /// at most 1000.
+    pub max_measured_rate_c_per_s: f64,
+    /// Shortest time span over which the measured rate is evaluated, s (suppresses noise/quantisation between
+    /// close samples: a jump of `max_measured_rate_c_per_s · rate_window_s` = 2.5 °C is implausible). Default
+    /// 0.05. Range [0.001, 1].
+    pub rate_window_s: f64,
+    /// Hot-side temperature above which the cooling has failed, °C. Default 45 (3 K below the 48 °C contact
+    /// limit of the worn box; with water at ≈ 23 °C and 0.3 W/K, 45 °C means > 6 W of rejected heat, beyond
+    /// normal rendering). Range (hot_side_min_c, 48].
+    pub hot_side_max_c: f64,
+    /// Hot-side reading below which its sensor is implausible (shorted), °C. Default 0. Range [−50, hot_side_max_c).
+    pub hot_side_min_c: f64,
+    /// Fraction of the current limit at which the drive counts as "at its limit". Default 0.98. Range [0.5, 1].
+    pub stuck_current_fraction: f64,
+    /// Longest continuous time at the current limit before a fault, s. Default 10 (the rate-limited set-point
+    /// crosses the whole 15–48 °C range in 3.3 s; a plate that needs full current for longer is not following
+    /// the model). Range [0.1, 60].
+    pub stuck_at_limit_s: f64,
+}
+
+impl Default for EnvelopeConfig {
+    fn default() -> Self {
+        Self {
+            min_display_c: 15.0,
+            max_display_c: ABSOLUTE_MAX_C,
+            max_setpoint_rate_c_per_s: 10.0,
+            max_time_at_or_above_43_s: ABSOLUTE_MAX_TIME_AT_OR_ABOVE_43_S,
+            cem43_budget_min: 1.0,
+            dose_lockout_margin_c: 0.5,
+            dose_lockout_grace_s: 5.0,
+            max_time_at_or_above_48_s: 1.0,
+            limit_margin_c: 1.0,
+            sensor_open_c: 150.0,
+            sensor_short_c: -50.0,
+            plausible_min_c: 0.0,
+            plausible_max_c: 70.0,
+            stale_timeout_s: 0.2,
+            max_measured_rate_c_per_s: 50.0,
+            rate_window_s: 0.05,
+            hot_side_max_c: 45.0,
+            hot_side_min_c: 0.0,
+            stuck_current_fraction: 0.98,
+            stuck_at_limit_s: 10.0,
+        }
+    }
+}
+
+/// `Ok` if `value` is finite and in `[min, max]`.
+fn in_range(field: &'static str, value: f64, min: f64, max: f64) -> Result<(), EnvelopeError> {
+    if !value.is_finite() {
+        return Err(EnvelopeError::NotFinite { field, value });
+    }
+    if value < min || value > max {
+        return Err(EnvelopeError::OutOfRange { field, value, min, max });
+    }
+    Ok(())
+}
+
+/// `Ok` if `holds`, else [`EnvelopeError::Inconsistent`].
+fn require(holds: bool, requirement: &'static str) -> Result<(), EnvelopeError> {
+    if holds {
+        Ok(())
+    } else {
+        Err(EnvelopeError::Inconsistent { requirement })
+    }
+}
+
+impl EnvelopeConfig {
+    /// The maximum display set-point once the thermal-dose lockout has engaged, °C.
+    pub fn dose_lockout_max_c(&self) -> f64 {
+        CEM43_REFERENCE_C - self.dose_lockout_margin_c
+    }
+
+    /// Checks every field against its range and the relations between fields.
+    pub fn validate(&self) -> Result<(), EnvelopeError> {
+        self.validate_ranges()?;
+        self.validate_relations()
+    }
+
+    fn validate_ranges(&self) -> Result<(), EnvelopeError> {
+        in_range("min_display_c", self.min_display_c, ABSOLUTE_MIN_C, ABSOLUTE_MAX_C)?;
+        in_range("max_display_c", self.max_display_c, ABSOLUTE_MIN_C, ABSOLUTE_MAX_C)?;
+        in_range(
+            "max_setpoint_rate_c_per_s",
+            self.max_setpoint_rate_c_per_s,
+            0.01,
+            ABSOLUTE_MAX_RATE_C_PER_S,
+        )?;
+        in_range(
+            "max_time_at_or_above_43_s",
+            self.max_time_at_or_above_43_s,
+            0.0,
+            ABSOLUTE_MAX_TIME_AT_OR_ABOVE_43_S,
+        )?;
+        in_range(
+            "cem43_budget_min",
+            self.cem43_budget_min,
+            0.0,
+            ABSOLUTE_MAX_CEM43_BUDGET_MIN,
+        )?;
+        in_range("dose_lockout_margin_c", self.dose_lockout_margin_c, 0.1, 5.0)?;
+        in_range("dose_lockout_grace_s", self.dose_lockout_grace_s, 0.0, 60.0)?;
+        in_range(
+            "max_time_at_or_above_48_s",
+            self.max_time_at_or_above_48_s,
+            0.0,
+            ABSOLUTE_MAX_TIME_AT_OR_ABOVE_48_S,
+        )?;
+        in_range("limit_margin_c", self.limit_margin_c, 0.1, 5.0)?;
+        in_range("sensor_open_c", self.sensor_open_c, -300.0, 1000.0)?;
+        in_range("sensor_short_c", self.sensor_short_c, -300.0, 1000.0)?;
+        in_range("plausible_min_c", self.plausible_min_c, -300.0, 1000.0)?;
+        in_range("plausible_max_c", self.plausible_max_c, -300.0, 1000.0)?;
+        in_range(
+            "stale_timeout_s",
+            self.stale_timeout_s,
+            0.001,
+            ABSOLUTE_MAX_STALE_TIMEOUT_S,
+        )?;
+        in_range(
+            "max_measured_rate_c_per_s",
+            self.max_measured_rate_c_per_s,
+            0.01,
+            1000.0,
+        )?;
+        in_range("rate_window_s", self.rate_window_s, 0.001, 1.0)?;
+        in_range("hot_side_max_c", self.hot_side_max_c, -50.0, ABSOLUTE_MAX_HOT_SIDE_C)?;
+        in_range("hot_side_min_c", self.hot_side_min_c, -50.0, ABSOLUTE_MAX_HOT_SIDE_C)?;
+        in_range("stuck_current_fraction", self.stuck_current_fraction, 0.5, 1.0)?;
+        in_range("stuck_at_limit_s", self.stuck_at_limit_s, 0.1, 60.0)
+    }
+
+    fn validate_relations(&self) -> Result<(), EnvelopeError> {
+        require(self.min_display_c < self.max_display_c, "min_display_c < max_display_c")?;
+        require(
+            self.min_display_c < self.dose_lockout_max_c(),
+            "min_display_c < 43 - dose_lockout_margin_c (the maximum after a dose lockout)",
+        )?;
+        require(
+            self.sensor_short_c < self.plausible_min_c,
+            "sensor_short_c < plausible_min_c",
+        )?;
+        require(
+            self.plausible_min_c < self.min_display_c - self.limit_margin_c,
+            "plausible_min_c < min_display_c - limit_margin_c",
+        )?;
+        require(
+            self.max_display_c + self.limit_margin_c < self.plausible_max_c,
+            "max_display_c + limit_margin_c < plausible_max_c",
+        )?;
+        require(
+            self.plausible_max_c < self.sensor_open_c,
+            "plausible_max_c < sensor_open_c",
+        )?;
+        require(
+            self.max_setpoint_rate_c_per_s < self.max_measured_rate_c_per_s,
+            "max_setpoint_rate_c_per_s < max_measured_rate_c_per_s",
+        )?;
+        require(
+            self.hot_side_min_c < self.hot_side_max_c,
+            "hot_side_min_c < hot_side_max_c",
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_is_valid_and_matches_the_sources() {
+        let c = EnvelopeConfig::default();
+        c.validate().unwrap();
+        assert_eq!((c.min_display_c, c.max_display_c), (15.0, 48.0));
+        assert_eq!(c.max_setpoint_rate_c_per_s, 10.0);
+        assert_eq!(c.max_time_at_or_above_43_s, 600.0);
+        assert_eq!(c.dose_lockout_max_c(), 42.5);
+    }
+
+    #[test]
+    fn wider_than_absolute_is_an_error_not_a_clamp() {
+        let hot = EnvelopeConfig {
+            max_display_c: 48.5,
+            ..Default::default()
+        };
+        assert!(matches!(
+            hot.validate(),
+            Err(EnvelopeError::OutOfRange {
+                field: "max_display_c",
+                ..
+            })
+        ));
+        let cold = EnvelopeConfig {
+            min_display_c: 9.0,
+            ..Default::default()
+        };
+        assert!(matches!(
+            cold.validate(),
+            Err(EnvelopeError::OutOfRange {
+                field: "min_display_c",
+                ..
+            })
+        ));
+        let fast = EnvelopeConfig {
+            max_setpoint_rate_c_per_s: 25.0,
+            ..Default::default()
+        };
+        assert!(matches!(fast.validate(), Err(EnvelopeError::OutOfRange { .. })));
+        let long = EnvelopeConfig {
+            max_time_at_or_above_43_s: 601.0,
+            ..Default::default()
+        };
+        assert!(matches!(long.validate(), Err(EnvelopeError::OutOfRange { .. })));
+        let nan = EnvelopeConfig {
+            cem43_budget_min: f64::NAN,
+            ..Default::default()
+        };
+        assert!(matches!(nan.validate(), Err(EnvelopeError::NotFinite { .. })));
+        let swapped = EnvelopeConfig {
+            min_display_c: 40.0,
+            max_display_c: 30.0,
+            ..Default::default()
+        };
+        assert!(matches!(swapped.validate(), Err(EnvelopeError::Inconsistent { .. })));
+        let narrower = EnvelopeConfig {
+            min_display_c: 20.0,
+            max_display_c: 40.0,
+            ..Default::default()
+        };
+        narrower.validate().unwrap();
+    }
+
+    #[test]
+    fn partial_toml_keeps_defaults_and_unknown_keys_are_refused() {
+        let c: EnvelopeConfig = toml::from_str("max_display_c = 42.0\nstale_timeout_s = 0.1\n").unwrap();
+        assert_eq!(c.max_display_c, 42.0);
+        assert_eq!(c.stale_timeout_s, 0.1);
+        assert_eq!(c.min_display_c, 15.0);
+        assert!(toml::from_str::<EnvelopeConfig>("max_display = 42.0\n").is_err());
+        let back: EnvelopeConfig = toml::from_str(&toml::to_string(&c).unwrap()).unwrap();
+        assert_eq!(back, c);
+    }
+}

@@ -1,0 +1,99 @@
+//! The controller interface every display controller implements, and the paper's controller behind it.
+//!
+//! A [`Controller`] turns one tick's [`ControlInput`] into a requested drive current (A, positive heats the
+//! display). The request is *not* a drive: it must pass [`crate::SafetyEnvelope::gate_drive`], which is the only
+//! way to a [`crate::DriveCommand`]. The trait is object safe (`Box<dyn Controller>`), so the runtime can pick
+//! `pid` or the model-based controller at run time.
+//!
+//! [`PidController`] is the paper's structure (section 3.2, Figure 2): a first-order low-pass filter on the sensor,
+//! then a PID on the filtered value.
+
+use crate::error::ControlError;
+use crate::filter::LowPass;
+use crate::pid::{Pid, PidGains, PidTerms};
+
+/// Everything a controller may use on one tick. Temperatures in °C, current in A (positive heats the display).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ControlInput {
+    /// Time of this tick, s (same clock as the envelope; informative, controllers integrate with `dt_s`).
+    pub time_s: f64,
+    /// Time since the previous tick, s (> 0).
+    pub dt_s: f64,
+    /// The display set-point as shaped by the safety envelope, °C.
+    pub setpoint_c: f64,
+    /// Rate of change of the shaped set-point over the last interval, °C/s (for feed-forward).
+    pub setpoint_rate_c_per_s: f64,
+    /// The newest display sensor reading (raw, unfiltered), °C.
+    pub sensor_c: f64,
+    /// The newest hot-side (reference side) temperature, °C.
+    pub hot_side_c: f64,
+    /// The current the envelope actually let through on the previous tick, A (0 at start). Observers and
+    /// anti-windup schemes should use this rather than their own previous request.
+    pub applied_current_a: f64,
+}
+
+/// A display temperature controller: one requested current per tick.
+pub trait Controller {
+    /// A short stable name for logs and the CLI (`"pid"`, `"model"`).
+    fn name(&self) -> &'static str;
+
+    /// Computes the requested drive current in A (positive heats) for this tick. An invalid input (non-finite
+    /// value, `dt_s` ≤ 0) is an error and must leave the controller's state untouched; the caller then requests
+    /// `f64::NAN` from the envelope, which latches a fault and switches the channel off.
+    fn update(&mut self, input: &ControlInput) -> Result<f64, ControlError>;
+
+    /// Forgets all internal state (filters, integrators, observers), as after a restart.
+    fn reset(&mut self);
+}
+
+/// The paper's controller: sensor → first-order low-pass → PID (derivative on the filtered measurement).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PidController {
+    filter: LowPass,
+    pid: Pid,
+}
+
+impl PidController {
+    /// Builds the filter from `gains.filter_cutoff_hz` and the PID with output limits `±current_limit_a`.
+    pub fn new(gains: PidGains, current_limit_a: f64) -> Result<Self, ControlError> {
+        Ok(Self {
+            filter: LowPass::new(gains.filter_cutoff_hz)?,
+            pid: Pid::new(gains, current_limit_a)?,
+        })
+    }
+
+    /// The PID inside (gains, limits).
+    pub fn pid(&self) -> &Pid {
+        &self.pid
+    }
+
+    /// The last P, I, D terms and output, for logging.
+    pub fn terms(&self) -> PidTerms {
+        self.pid.terms()
+    }
+
+    /// The last filtered sensor value, °C (`None` before the first tick).
+    pub fn filtered_c(&self) -> Option<f64> {
+        self.filter.value()
+    }
+}
+
+impl Controller for PidController {
+    fn name(&self) -> &'static str {
+        "pid"
+    }
+
+    fn update(&mut self, input: &ControlInput) -> Result<f64, ControlError> {
+        // Validate everything the PID uses before touching the filter, so a refused tick changes nothing.
+        crate::filter::check_finite("setpoint_c", input.setpoint_c)?;
+        crate::filter::check_finite("sensor_c", input.sensor_c)?;
+        crate::filter::check_dt(input.dt_s)?;
+        let filtered_c = self.filter.update(input.sensor_c, input.dt_s)?;
+        self.pid.update(input.setpoint_c, filtered_c, input.dt_s)
+    }
+
+    fn reset(&mut self) {
+        self.filter.reset();
+        self.pid.reset();
+    }
+}

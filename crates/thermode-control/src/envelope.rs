@@ -1,0 +1,587 @@
+//! The safety envelope of one display channel. Every drive command passes through it: it is the only way to a
+//! [`DriveCommand`] (its fields are private and it has no public constructor, no `Clone`, no `Deserialize`).
+//!
+//! Per tick the runtime calls, in this order:
+//! 1. [`SafetyEnvelope::observe`] with the newest [`Measurement`] (fault checks, thermal-dose accumulation);
+//! 2. [`SafetyEnvelope::shape_setpoint`] with the requested display set-point (NaN → fault; clamp into
+//!    `[min, effective max]`; rate limit);
+//! 3. the controller, on the shaped set-point;
+//! 4. [`SafetyEnvelope::gate_drive`] with the controller's request (use `f64::NAN` if the controller returned an
+//!    error): 0 A while a fault is latched or before the first measurement; never heating while the measured
+//!    display is at/above the effective maximum, never cooling at/below the minimum; within `±current_limit_a`.
+//!
+//! Sign convention: **positive current heats the display**.
+//!
+//! Faults ([`FaultCode`]) switch the drive off and latch. [`SafetyEnvelope::clear_fault`] refuses while no fresh
+//! measurement has arrived since the fault latched, or while the newest measurement still shows a cause
+//! (sensor fault, temperatures beyond limits, stale sensor, display at/above 48 °C, display at/above 43 °C under a
+//! dose lockout). Causes outside the measurement (NaN set-point or request, stuck drive, time going backwards) are
+//! cleared; they latch again at once if they recur. Clearing never resets the thermal dose: the dose belongs to the
+//! session, and a new session is a new envelope.
+//!
+//! Thermal dose: the measured display temperature feeds a [`DoseTracker`]. Once the time at/above 43 °C reaches
+//! `max_time_at_or_above_43_s` or CEM43 reaches `cem43_budget_min`, the effective maximum becomes
+//! `43 − dose_lockout_margin_c`, which may make the shaped set-point step down (the only case in which the
+//! set-point moves faster than the rate limit: the safe direction wins). All checks act on the **measured**
+//! display temperature; a lagging sensor hides the true plate temperature from the envelope.
+
+use crate::config::{EnvelopeConfig, ABSOLUTE_MAX_C, NEUTRAL_SETPOINT_C};
+use crate::dose::{DoseTracker, CEM43_REFERENCE_C};
+use crate::error::EnvelopeError;
+use crate::fault::FaultCode;
+
+/// One sample of a channel's sensors.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Measurement {
+    /// When the sample was taken, s (same clock as `now_s`).
+    pub time_s: f64,
+    /// Display (plate) sensor reading, °C.
+    pub sensor_c: f64,
+    /// Hot (reference) side reading, °C.
+    pub hot_side_c: f64,
+    /// Sample counter of the sensor; a sample is fresh when its counter exceeds the last one seen. Repeated
+    /// samples are ignored (they neither refresh the stale timer nor add dose).
+    pub sample_seq: u64,
+}
+
+/// Why a shaped set-point differs from the request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SetpointLimits {
+    /// The request was above the effective maximum.
+    pub clamped_high: bool,
+    /// The request was below the minimum.
+    pub clamped_low: bool,
+    /// The rate limit held the set-point back.
+    pub rate_limited: bool,
+    /// The thermal-dose lockout lowers the maximum.
+    pub dose_lockout: bool,
+    /// The request (or the time) was not finite: the previous set-point is held and a fault latched.
+    pub rejected: bool,
+}
+
+/// The set-point the controller shall follow.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SetpointDecision {
+    /// Shaped display set-point, °C (always finite, within `[min, effective max]`).
+    pub setpoint_c: f64,
+    /// Rate of change of the shaped set-point since the previous call, °C/s (0 on the first call).
+    pub rate_c_per_s: f64,
+    /// Which limits acted.
+    pub limited_by: SetpointLimits,
+}
+
+/// Why a gated current differs from the request.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct DriveLimits {
+    /// A fault is latched: the drive is off.
+    pub faulted: bool,
+    /// No measurement has been observed yet: the drive is off.
+    pub no_measurement: bool,
+    /// The request exceeded the current limit.
+    pub clamped_to_limit: bool,
+    /// Heating refused: the measured display is at/above the effective maximum.
+    pub heating_blocked_at_max: bool,
+    /// Cooling refused: the measured display is at/below the minimum.
+    pub cooling_blocked_at_min: bool,
+}
+
+/// A drive current that has passed the safety envelope. Obtainable only from [`SafetyEnvelope::gate_drive`].
+#[must_use = "a gated drive command must be applied to the drive"]
+#[derive(Debug, PartialEq)]
+pub struct DriveCommand {
+    current_a: f64,
+    fault: Option<FaultCode>,
+    limited_by: DriveLimits,
+}
+
+impl DriveCommand {
+    /// The current to apply, A (positive heats the display; 0 when faulted).
+    pub fn current_a(&self) -> f64 {
+        self.current_a
+    }
+
+    /// The latched fault, if any (then `current_a() == 0`).
+    pub fn fault(&self) -> Option<FaultCode> {
+        self.fault
+    }
+
+    /// Which limits acted on this command.
+    pub fn limited_by(&self) -> DriveLimits {
+        self.limited_by
+    }
+}
+
+/// A fault and when it latched.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Latch {
+    code: FaultCode,
+    time_s: f64,
+    /// `sample_seq` of the newest valid sample when the fault latched (None: no sample yet).
+    seq: Option<u64>,
+}
+
+/// The shaped set-point and when it was shaped.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Shaped {
+    value_c: f64,
+    time_s: f64,
+}
+
+/// The safety envelope of one channel. See the module documentation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SafetyEnvelope {
+    config: EnvelopeConfig,
+    current_limit_a: f64,
+    latch: Option<Latch>,
+    /// Latest `now_s` seen by `shape_setpoint`/`gate_drive`.
+    clock_s: Option<f64>,
+    /// First `gate_drive` time: the stale timer runs from here until the first sample.
+    armed_at_s: Option<f64>,
+    shaped: Option<Shaped>,
+    /// Newest fresh sample with finite values (may be implausible: then a fault is latched).
+    sample: Option<Measurement>,
+    /// Highest `sample_seq` seen (also of samples refused as non-finite).
+    last_seq: Option<u64>,
+    /// Reference sample (time, °C) of the measured-rate check.
+    rate_ref: Option<(f64, f64)>,
+    dose: DoseTracker,
+    lockout_at_s: Option<f64>,
+    at_48_since_s: Option<f64>,
+    stuck_since_s: Option<f64>,
+}
+
+impl SafetyEnvelope {
+    /// An envelope for one channel whose drive is limited to `±current_limit_a` (A, finite, > 0). The
+    /// configuration is validated; anything outside the absolute limits is an error.
+    pub fn new(config: EnvelopeConfig, current_limit_a: f64) -> Result<Self, EnvelopeError> {
+        config.validate()?;
+        if !current_limit_a.is_finite() {
+            return Err(EnvelopeError::NotFinite {
+                field: "current_limit_a",
+                value: current_limit_a,
+            });
+        }
+        if current_limit_a <= 0.0 {
+            let (min, max) = (f64::MIN_POSITIVE, f64::MAX);
+            return Err(EnvelopeError::OutOfRange {
+                field: "current_limit_a",
+                value: current_limit_a,
+                min,
+                max,
+            });
+        }
+        Ok(Self {
+            config,
+            current_limit_a,
+            latch: None,
+            clock_s: None,
+            armed_at_s: None,
+            shaped: None,
+            sample: None,
+            last_seq: None,
+            rate_ref: None,
+            dose: DoseTracker::new(),
+            lockout_at_s: None,
+            at_48_since_s: None,
+            stuck_since_s: None,
+        })
+    }
+
+    /// The configuration in force.
+    pub fn config(&self) -> &EnvelopeConfig {
+        &self.config
+    }
+
+    /// The drive current limit, A.
+    pub fn current_limit_a(&self) -> f64 {
+        self.current_limit_a
+    }
+
+    /// The latched fault, if any.
+    pub fn fault(&self) -> Option<FaultCode> {
+        self.latch.map(|l| l.code)
+    }
+
+    /// When the latched fault latched, s.
+    pub fn fault_time_s(&self) -> Option<f64> {
+        self.latch.map(|l| l.time_s)
+    }
+
+    /// Accumulated thermal dose of this channel, CEM43-minutes.
+    pub fn cem43_min(&self) -> f64 {
+        self.dose.cem43_min()
+    }
+
+    /// Accumulated time with the measured display at or above 43 °C, s.
+    pub fn time_at_or_above_43_s(&self) -> f64 {
+        self.dose.time_at_or_above_43_s()
+    }
+
+    /// Whether the thermal-dose lockout is active (time at ≥ 43 °C or CEM43 budget used up).
+    pub fn dose_lockout_active(&self) -> bool {
+        self.dose.time_at_or_above_43_s() >= self.config.max_time_at_or_above_43_s
+            || self.dose.cem43_min() >= self.config.cem43_budget_min
+    }
+
+    /// The lowest display set-point, °C.
+    pub fn min_c(&self) -> f64 {
+        self.config.min_display_c
+    }
+
+    /// The highest display set-point now, °C: `max_display_c`, or below 43 °C under a dose lockout.
+    pub fn effective_max_c(&self) -> f64 {
+        if self.dose_lockout_active() {
+            self.config.max_display_c.min(self.config.dose_lockout_max_c())
+        } else {
+            self.config.max_display_c
+        }
+    }
+
+    /// The newest fresh measurement with finite values, if any.
+    pub fn last_measurement(&self) -> Option<&Measurement> {
+        self.sample.as_ref()
+    }
+
+    /// Latches `code` unless a fault is already latched (the first cause is kept).
+    fn latch(&mut self, code: FaultCode, time_s: f64) {
+        if self.latch.is_none() {
+            let time_s = if time_s.is_finite() {
+                time_s
+            } else {
+                self.clock_s.unwrap_or(0.0)
+            };
+            self.latch = Some(Latch {
+                code,
+                time_s,
+                seq: self.sample.map(|s| s.sample_seq),
+            });
+        }
+    }
+
+    /// Advances the envelope clock to `now_s`; a non-finite or earlier time latches a fault and returns false.
+    fn advance_clock(&mut self, now_s: f64) -> bool {
+        if !now_s.is_finite() {
+            self.latch(FaultCode::NonFiniteTime, now_s);
+            return false;
+        }
+        if self.clock_s.is_some_and(|c| now_s < c) {
+            self.latch(FaultCode::TimeNotMonotonic, now_s);
+            return false;
+        }
+        self.clock_s = Some(now_s);
+        true
+    }
+
+    /// Shapes a requested display set-point (°C) at time `now_s` (s): a non-finite request latches
+    /// [`FaultCode::NonFiniteSetpoint`] and holds the previous set-point; a finite one is clamped into
+    /// `[min, effective max]` and then rate limited to `max_setpoint_rate_c_per_s`. The first call starts from the
+    /// measured display temperature (clamped into range) if one is known, so the set-point never jumps away from
+    /// the plate.
+    pub fn shape_setpoint(&mut self, now_s: f64, requested_c: f64) -> SetpointDecision {
+        let mut limits = SetpointLimits {
+            dose_lockout: self.dose_lockout_active(),
+            ..Default::default()
+        };
+        let time_ok = self.advance_clock(now_s);
+        let target_c = if time_ok {
+            self.clamp_request(now_s, requested_c, &mut limits)
+        } else {
+            None
+        };
+        limits.rejected = target_c.is_none();
+        let (min_c, max_c) = (self.min_c(), self.effective_max_c());
+        let (shaped, rate_c_per_s) = match self.shaped {
+            None => (self.anchor(now_s, time_ok, target_c, &mut limits), 0.0),
+            Some(prev) if time_ok => self.rate_limit(prev, now_s, target_c.unwrap_or(prev.value_c), &mut limits),
+            Some(prev) => (
+                Shaped {
+                    value_c: prev.value_c.clamp(min_c, max_c),
+                    ..prev
+                },
+                0.0,
+            ),
+        };
+        self.shaped = Some(shaped);
+        SetpointDecision {
+            setpoint_c: shaped.value_c,
+            rate_c_per_s,
+            limited_by: limits,
+        }
+    }
+
+    /// A finite request clamped into `[min, effective max]` (flagged); a non-finite one latches a fault → `None`.
+    fn clamp_request(&mut self, now_s: f64, requested_c: f64, limits: &mut SetpointLimits) -> Option<f64> {
+        if !requested_c.is_finite() {
+            self.latch(FaultCode::NonFiniteSetpoint, now_s);
+            return None;
+        }
+        let (min_c, max_c) = (self.min_c(), self.effective_max_c());
+        limits.clamped_high = requested_c > max_c;
+        limits.clamped_low = requested_c < min_c;
+        Some(requested_c.clamp(min_c, max_c))
+    }
+
+    /// The first set-point: the measured display (if a plausible sample exists), else the request, else the
+    /// neutral 33 °C — clamped into range.
+    fn anchor(&self, now_s: f64, time_ok: bool, target_c: Option<f64>, limits: &mut SetpointLimits) -> Shaped {
+        let measured_c = self
+            .sample
+            .filter(|s| self.sensor_fault(s).is_none())
+            .map(|s| s.sensor_c);
+        let anchor_c = measured_c.or(target_c).unwrap_or(NEUTRAL_SETPOINT_C);
+        let value_c = anchor_c.clamp(self.min_c(), self.effective_max_c());
+        limits.rate_limited = target_c.is_some_and(|t| t != value_c);
+        let time_s = if time_ok { now_s } else { self.clock_s.unwrap_or(0.0) };
+        Shaped { value_c, time_s }
+    }
+
+    /// Moves from `prev` towards `target_c` by at most the rate limit, then clamps into `[min, effective max]`
+    /// (a lowered maximum wins over the rate limit). Returns the new set-point and its rate, °C/s.
+    fn rate_limit(&self, prev: Shaped, now_s: f64, target_c: f64, limits: &mut SetpointLimits) -> (Shaped, f64) {
+        let dt_s = (now_s - prev.time_s).max(0.0);
+        let max_step_c = self.config.max_setpoint_rate_c_per_s * dt_s;
+        let step_c = (target_c - prev.value_c).clamp(-max_step_c, max_step_c);
+        limits.rate_limited = step_c != target_c - prev.value_c;
+        let value_c = (prev.value_c + step_c).clamp(self.min_c(), self.effective_max_c());
+        let rate_c_per_s = if dt_s > 0.0 {
+            (value_c - prev.value_c) / dt_s
+        } else {
+            0.0
+        };
+        (Shaped { value_c, time_s: now_s }, rate_c_per_s)
+    }
+
+    /// Checks a measurement: a repeated sample (counter not above the last) is ignored; a fresh one is checked for
+    /// non-finite values, sensor open/short/out of range, hot-side faults, an implausible rate of change, the
+    /// display beyond its limits, 48 °C sustained and the dose lockout, and its interval since the previous valid
+    /// sample is added to the thermal dose. Any fault latches.
+    pub fn observe(&mut self, m: &Measurement) {
+        if self.last_seq.is_some_and(|seq| m.sample_seq <= seq) {
+            return;
+        }
+        self.last_seq = Some(m.sample_seq);
+        if !(m.time_s.is_finite() && m.sensor_c.is_finite() && m.hot_side_c.is_finite()) {
+            self.latch(FaultCode::NonFiniteMeasurement, m.time_s);
+            return;
+        }
+        if self.sample.is_some_and(|s| m.time_s < s.time_s) {
+            self.latch(FaultCode::TimeNotMonotonic, m.time_s);
+            return;
+        }
+        self.sample = Some(*m);
+        if let Some(code) = self.sensor_fault(m) {
+            self.latch(code, m.time_s);
+            return;
+        }
+        if let Some(code) = self.hot_side_fault(m) {
+            self.latch(code, m.time_s);
+        }
+        self.check_rate(m);
+        self.dose.add_sample(m.time_s, m.sensor_c);
+        if let Some(code) = self.display_limit_fault(m) {
+            self.latch(code, m.time_s);
+        }
+        self.check_sustained_48(m);
+        self.check_dose_lockout(m);
+    }
+
+    /// Open, short or implausible display sensor reading.
+    fn sensor_fault(&self, m: &Measurement) -> Option<FaultCode> {
+        let c = &self.config;
+        if m.sensor_c >= c.sensor_open_c {
+            Some(FaultCode::SensorOpen)
+        } else if m.sensor_c <= c.sensor_short_c {
+            Some(FaultCode::SensorShort)
+        } else if m.sensor_c < c.plausible_min_c || m.sensor_c > c.plausible_max_c {
+            Some(FaultCode::SensorOutOfRange)
+        } else {
+            None
+        }
+    }
+
+    /// Hot side over temperature (cooling failure) or implausibly low (sensor shorted).
+    fn hot_side_fault(&self, m: &Measurement) -> Option<FaultCode> {
+        if m.hot_side_c > self.config.hot_side_max_c {
+            Some(FaultCode::HotSideOverTemperature)
+        } else if m.hot_side_c < self.config.hot_side_min_c {
+            Some(FaultCode::HotSideSensorImplausible)
+        } else {
+            None
+        }
+    }
+
+    /// Measured display beyond the configured limits by more than the margin.
+    fn display_limit_fault(&self, m: &Measurement) -> Option<FaultCode> {
+        let c = &self.config;
+        if m.sensor_c > c.max_display_c + c.limit_margin_c {
+            Some(FaultCode::DisplayOverTemperature)
+        } else if m.sensor_c < c.min_display_c - c.limit_margin_c {
+            Some(FaultCode::DisplayUnderTemperature)
+        } else {
+            None
+        }
+    }
+
+    /// Rate of change against a reference sample at least `rate_window_s` old (denominator at least the window).
+    fn check_rate(&mut self, m: &Measurement) {
+        let Some((t_ref, c_ref)) = self.rate_ref else {
+            self.rate_ref = Some((m.time_s, m.sensor_c));
+            return;
+        };
+        let span_s = m.time_s - t_ref;
+        let rate = (m.sensor_c - c_ref).abs() / span_s.max(self.config.rate_window_s);
+        if rate > self.config.max_measured_rate_c_per_s {
+            self.latch(FaultCode::SensorRateImplausible, m.time_s);
+        }
+        if span_s >= self.config.rate_window_s {
+            self.rate_ref = Some((m.time_s, m.sensor_c));
+        }
+    }
+
+    /// Measured display at or above 48 °C continuously for longer than allowed.
+    fn check_sustained_48(&mut self, m: &Measurement) {
+        if m.sensor_c >= ABSOLUTE_MAX_C {
+            let since = *self.at_48_since_s.get_or_insert(m.time_s);
+            if m.time_s - since > self.config.max_time_at_or_above_48_s {
+                self.latch(FaultCode::SustainedAtAbsoluteMax, m.time_s);
+            }
+        } else {
+            self.at_48_since_s = None;
+        }
+    }
+
+    /// After the dose lockout engaged, readings at/above 43 °C past the grace period are a fault.
+    fn check_dose_lockout(&mut self, m: &Measurement) {
+        if !self.dose_lockout_active() {
+            return;
+        }
+        let since = *self.lockout_at_s.get_or_insert(m.time_s);
+        if m.sensor_c >= CEM43_REFERENCE_C && m.time_s - since > self.config.dose_lockout_grace_s {
+            self.latch(FaultCode::DoseLockoutViolated, m.time_s);
+        }
+    }
+
+    /// Stale sensor: no fresh sample for longer than the timeout (timed from the first `gate_drive` call until
+    /// the first sample arrives).
+    fn check_stale(&mut self, now_s: f64) {
+        let since_s = match self.sample {
+            Some(s) => Some(s.time_s),
+            None => self.armed_at_s,
+        };
+        if since_s.is_some_and(|t| now_s - t > self.config.stale_timeout_s) {
+            self.latch(FaultCode::SensorStale, now_s);
+        }
+    }
+
+    /// Gates the controller's requested current (A, positive heats) at time `now_s` (s) into the current allowed.
+    /// Returns 0 A while a fault is latched (a non-finite request, a non-finite or backward time, a stale sensor
+    /// or a drive stuck at its limit latch here) and before the first measurement. Otherwise the request is
+    /// limited to `±current_limit_a`, heating is refused while the measured display is at/above the effective
+    /// maximum, and cooling while it is at/below the minimum.
+    pub fn gate_drive(&mut self, now_s: f64, requested_current_a: f64) -> DriveCommand {
+        let mut limits = DriveLimits::default();
+        if self.advance_clock(now_s) {
+            self.armed_at_s.get_or_insert(now_s);
+            if !requested_current_a.is_finite() {
+                self.latch(FaultCode::NonFiniteCommand, now_s);
+            }
+            self.check_stale(now_s);
+        }
+        if self.latch.is_some() {
+            limits.faulted = true;
+            return self.off(limits);
+        }
+        let Some(sample) = self.sample else {
+            limits.no_measurement = true;
+            return self.off(limits);
+        };
+        let limit_a = self.current_limit_a;
+        let mut current_a = requested_current_a.clamp(-limit_a, limit_a);
+        limits.clamped_to_limit = current_a != requested_current_a;
+        if current_a > 0.0 && sample.sensor_c >= self.effective_max_c() {
+            current_a = 0.0;
+            limits.heating_blocked_at_max = true;
+        }
+        if current_a < 0.0 && sample.sensor_c <= self.min_c() {
+            current_a = 0.0;
+            limits.cooling_blocked_at_min = true;
+        }
+        if self.stuck_at_limit(now_s, current_a) {
+            self.latch(FaultCode::DriveStuckAtLimit, now_s);
+            limits.faulted = true;
+            return self.off(limits);
+        }
+        DriveCommand {
+            current_a,
+            fault: None,
+            limited_by: limits,
+        }
+    }
+
+    /// Tracks how long the drive has been at its limit; true once that exceeds `stuck_at_limit_s`.
+    fn stuck_at_limit(&mut self, now_s: f64, current_a: f64) -> bool {
+        if current_a.abs() >= self.config.stuck_current_fraction * self.current_limit_a {
+            let since = *self.stuck_since_s.get_or_insert(now_s);
+            now_s - since > self.config.stuck_at_limit_s
+        } else {
+            self.stuck_since_s = None;
+            false
+        }
+    }
+
+    /// A zero-current command carrying the latched fault (if any).
+    fn off(&mut self, limits: DriveLimits) -> DriveCommand {
+        self.stuck_since_s = None;
+        DriveCommand {
+            current_a: 0.0,
+            fault: self.fault(),
+            limited_by: limits,
+        }
+    }
+
+    /// Clears the latched fault at time `now_s` (s). Returns the cleared fault (`None` if none was latched).
+    /// Refused while no fresh measurement has arrived since the fault latched
+    /// ([`EnvelopeError::NoFreshMeasurement`]) or while the newest measurement still shows a cause
+    /// ([`EnvelopeError::FaultPersists`]). On success the timers of the time-based checks restart.
+    pub fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, EnvelopeError> {
+        let Some(latch) = self.latch else {
+            return Ok(None);
+        };
+        if !now_s.is_finite() {
+            return Err(EnvelopeError::NotFinite {
+                field: "now_s",
+                value: now_s,
+            });
+        }
+        let fresh = self.sample.filter(|s| match latch.seq {
+            None => true,
+            Some(seq) => s.sample_seq > seq,
+        });
+        let Some(sample) = fresh else {
+            return Err(EnvelopeError::NoFreshMeasurement(latch.code));
+        };
+        if let Some(cause) = self.persisting_cause(&sample, now_s) {
+            return Err(EnvelopeError::FaultPersists(cause));
+        }
+        self.latch = None;
+        self.rate_ref = Some((sample.time_s, sample.sensor_c));
+        self.at_48_since_s = None;
+        self.stuck_since_s = None;
+        self.clock_s = Some(self.clock_s.map_or(now_s, |c| c.max(now_s)));
+        Ok(Some(latch.code))
+    }
+
+    /// A fault cause still visible in the newest measurement at time `now_s`.
+    fn persisting_cause(&self, s: &Measurement, now_s: f64) -> Option<FaultCode> {
+        let stale = now_s - s.time_s > self.config.stale_timeout_s;
+        self.sensor_fault(s)
+            .or_else(|| self.hot_side_fault(s))
+            .or_else(|| self.display_limit_fault(s))
+            .or_else(|| stale.then_some(FaultCode::SensorStale))
+            .or_else(|| (s.sensor_c >= ABSOLUTE_MAX_C).then_some(FaultCode::SustainedAtAbsoluteMax))
+            .or_else(|| {
+                let hot_under_lockout = self.dose_lockout_active() && s.sensor_c >= CEM43_REFERENCE_C;
+                hot_under_lockout.then_some(FaultCode::DoseLockoutViolated)
+            })
+    }
+}

@@ -1,0 +1,56 @@
+//! thermode-control: everything between the renderer's display set-point and the drive current of one thermal
+//! display channel — controllers, filters and the safety envelope.
+//!
+//! Pure library: no I/O, no clock (time comes in as `now_s`/`dt_s`), no allocation on the per-tick path,
+//! deterministic. Temperatures in °C, currents in A, times in s. **A positive current heats the display.**
+//!
+//! - [`filter`]: [`LowPass`], the first-order sensor filter with exact discretisation.
+//! - [`pid`]: [`Pid`] and [`PidGains`] (serde, for gains files), the paper's controller structure: derivative on
+//!   measurement, output limits, conditional-integration anti-windup, bumpless reset, P/I/D terms for logging.
+//! - [`controller`]: the object-safe [`Controller`] trait with [`ControlInput`], and [`PidController`] (low-pass
+//!   + PID, the paper's Figure 2). The model-based controller implements the same trait.
+//! - [`envelope`]: [`SafetyEnvelope`], the one safety envelope every drive command passes: set-point clamp and
+//!   rate limit, thermal dose (IEC 60601-1 contact-time limits, CEM43), fault detection with latching. The only
+//!   way to a [`DriveCommand`] is [`SafetyEnvelope::gate_drive`].
+//! - [`config`]: [`EnvelopeConfig`] (serde, documented defaults and sources) and the compiled-in absolute limits.
+//! - [`fault`]: [`FaultCode`], stable numeric fault codes.
+//! - [`dose`]: CEM43 and time-at-43 °C bookkeeping.
+//! - [`error`]: [`ControlError`], [`EnvelopeError`].
+//!
+//! One tick of a channel:
+//! ```
+//! use thermode_control::{ControlInput, Controller, EnvelopeConfig, Measurement, PidController, PidGains,
+//!     SafetyEnvelope};
+//! let gains = PidGains { kp_a_per_c: 0.5, ki_a_per_c_s: 0.2, kd_a_s_per_c: 0.0, filter_cutoff_hz: 5.0,
+//!     derivative_filter_s: None };
+//! let mut controller = PidController::new(gains, 2.8)?;
+//! let mut envelope = SafetyEnvelope::new(EnvelopeConfig::default(), 2.8)?;
+//! let m = Measurement { time_s: 0.0, sensor_c: 32.0, hot_side_c: 24.0, sample_seq: 1 };
+//! envelope.observe(&m);
+//! let sp = envelope.shape_setpoint(0.0, 30.0);
+//! let input = ControlInput { time_s: 0.0, dt_s: 1e-3, setpoint_c: sp.setpoint_c,
+//!     setpoint_rate_c_per_s: sp.rate_c_per_s, sensor_c: m.sensor_c, hot_side_c: m.hot_side_c,
+//!     applied_current_a: 0.0 };
+//! let request_a = controller.update(&input).unwrap_or(f64::NAN);
+//! let drive = envelope.gate_drive(0.0, request_a);
+//! assert!(drive.current_a().abs() <= 2.8);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+pub mod config;
+pub mod controller;
+pub mod dose;
+pub mod envelope;
+pub mod error;
+pub mod fault;
+pub mod filter;
+pub mod pid;
+
+pub use config::{EnvelopeConfig, ABSOLUTE_MAX_C, ABSOLUTE_MAX_RATE_C_PER_S, ABSOLUTE_MIN_C};
+pub use controller::{ControlInput, Controller, PidController};
+pub use dose::DoseTracker;
+pub use envelope::{DriveCommand, DriveLimits, Measurement, SafetyEnvelope, SetpointDecision, SetpointLimits};
+pub use error::{ControlError, EnvelopeError};
+pub use fault::FaultCode;
+pub use filter::LowPass;
+pub use pid::{AntiWindup, Pid, PidGains, PidTerms};

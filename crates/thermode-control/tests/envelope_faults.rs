@@ -1,0 +1,592 @@
+//! Every fault of the safety envelope injected at the unit level. Each test asserts the detection time, the safe
+//! state (0 A, fault latched), that the drive stays at 0 A after the cause disappears until the fault is cleared,
+//! that clearing is refused while the cause persists, and that the drive returns after a successful clear.
+//! Also: gating (limit, heating/cooling refused at the limits), set-point shaping, and the thermal dose measured
+//! through the envelope against hand-computed CEM43 values.
+
+use thermode_control::{DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, Measurement, SafetyEnvelope};
+
+const LIMIT_A: f64 = 2.8;
+const DT_S: f64 = 1e-3;
+const REQUEST_A: f64 = 0.5;
+
+/// One channel driven at 1 kHz: every tick takes a sample (unless skipped), shapes a set-point and gates a request.
+struct Rig {
+    env: SafetyEnvelope,
+    tick: u64,
+    seq: u64,
+}
+
+impl Rig {
+    fn new(config: EnvelopeConfig) -> Self {
+        Self {
+            env: SafetyEnvelope::new(config, LIMIT_A).unwrap(),
+            tick: 0,
+            seq: 0,
+        }
+    }
+
+    fn default() -> Self {
+        Self::new(EnvelopeConfig::default())
+    }
+
+    fn now_s(&self) -> f64 {
+        self.tick as f64 * DT_S
+    }
+
+    fn sample(&mut self, sensor_c: f64, hot_side_c: f64) {
+        self.seq += 1;
+        let m = Measurement {
+            time_s: self.now_s(),
+            sensor_c,
+            hot_side_c,
+            sample_seq: self.seq,
+        };
+        self.env.observe(&m);
+    }
+
+    /// One tick without a sample.
+    fn blind(&mut self, request_a: f64) -> DriveCommand {
+        let now_s = self.now_s();
+        let _ = self.env.shape_setpoint(now_s, 33.0);
+        let drive = self.env.gate_drive(now_s, request_a);
+        self.tick += 1;
+        drive
+    }
+
+    /// One tick with a sample.
+    fn step(&mut self, sensor_c: f64, hot_side_c: f64, request_a: f64) -> DriveCommand {
+        self.sample(sensor_c, hot_side_c);
+        self.blind(request_a)
+    }
+
+    /// Healthy ticks for `duration_s` at 33 °C, asserting the request passes unchanged.
+    fn healthy(&mut self, duration_s: f64) {
+        for _ in 0..(duration_s / DT_S).round() as usize {
+            let d = self.step(33.0, 25.0, REQUEST_A);
+            assert_eq!(
+                (d.current_a(), d.fault()),
+                (REQUEST_A, None),
+                "healthy tick at {}",
+                self.now_s()
+            );
+        }
+    }
+
+    /// Runs `f` tick by tick until a fault latches (at most `max_s`); returns the detection time and the command.
+    /// Before detection every command must carry `expect_a` (if given).
+    fn until_fault(
+        &mut self,
+        max_s: f64,
+        expect_a: Option<f64>,
+        mut f: impl FnMut(&mut Rig) -> DriveCommand,
+    ) -> (f64, DriveCommand) {
+        for _ in 0..(max_s / DT_S).round() as usize {
+            let t = self.now_s();
+            let d = f(self);
+            if d.fault().is_some() {
+                return (t, d);
+            }
+            if let Some(want) = expect_a {
+                assert_eq!(d.current_a(), want, "drive before detection at {t}");
+            }
+        }
+        panic!("no fault within {max_s} s");
+    }
+
+    /// The cause is gone: 0 A and latched for 0.1 s of healthy samples, then the clear succeeds and drive returns.
+    fn stays_off_until_cleared(&mut self, code: FaultCode) {
+        for _ in 0..100 {
+            let d = self.step(33.0, 25.0, REQUEST_A);
+            assert_eq!(
+                (d.current_a(), d.fault()),
+                (0.0, Some(code)),
+                "latched at {}",
+                self.now_s()
+            );
+        }
+        assert_eq!(self.env.clear_fault(self.now_s()), Ok(Some(code)));
+        let d = self.step(33.0, 25.0, REQUEST_A);
+        assert_eq!(
+            (d.current_a(), d.fault()),
+            (REQUEST_A, None),
+            "drive returns after clear"
+        );
+    }
+}
+
+fn assert_off(d: &DriveCommand, code: FaultCode) {
+    assert_eq!(d.current_a(), 0.0, "drive must be off on {code}");
+    assert_eq!(d.fault(), Some(code));
+    assert!(d.limited_by().faulted);
+}
+
+/// Instantaneous sensor faults: detected on the very sample that shows them.
+#[test]
+fn sensor_open_short_and_out_of_range_are_detected_on_the_sample() {
+    let cases = [
+        (200.0, FaultCode::SensorOpen),
+        (150.0, FaultCode::SensorOpen),
+        (-242.0, FaultCode::SensorShort),
+        (80.0, FaultCode::SensorOutOfRange),
+        (-10.0, FaultCode::SensorOutOfRange),
+    ];
+    for (reading_c, code) in cases {
+        let mut rig = Rig::default();
+        rig.healthy(0.5);
+        let t_inject = rig.now_s();
+        let (t, d) = rig.until_fault(1.0, Some(REQUEST_A), |r| r.step(reading_c, 25.0, REQUEST_A));
+        assert_eq!(t, t_inject, "{code} detected at {t} s, injected at {t_inject} s");
+        assert_off(&d, code);
+        assert_eq!(
+            rig.env.clear_fault(rig.now_s()),
+            Err(EnvelopeError::NoFreshMeasurement(code))
+        );
+        let _ = rig.step(reading_c, 25.0, REQUEST_A);
+        assert_eq!(
+            rig.env.clear_fault(rig.now_s()),
+            Err(EnvelopeError::FaultPersists(code)),
+            "{reading_c} °C"
+        );
+        rig.stays_off_until_cleared(code);
+    }
+}
+
+#[test]
+fn stale_sensor_is_detected_after_the_timeout() {
+    let mut rig = Rig::default();
+    rig.healthy(0.5);
+    let last_sample_s = rig.now_s() - DT_S;
+    let (t, d) = rig.until_fault(1.0, Some(REQUEST_A), |r| r.blind(REQUEST_A));
+    let timeout_s = EnvelopeConfig::default().stale_timeout_s;
+    let late_s = t - last_sample_s - timeout_s;
+    assert!(
+        late_s > 0.0 && late_s <= DT_S + 1e-12,
+        "stale detected {late_s} s after the timeout"
+    );
+    assert_off(&d, FaultCode::SensorStale);
+    rig.stays_off_until_cleared(FaultCode::SensorStale);
+}
+
+#[test]
+fn a_sensor_that_never_delivers_is_stale_and_drive_is_off_meanwhile() {
+    let mut rig = Rig::default();
+    let d = rig.blind(REQUEST_A);
+    assert_eq!(d.current_a(), 0.0);
+    assert!(d.limited_by().no_measurement && d.fault().is_none());
+    let (t, d) = rig.until_fault(1.0, Some(0.0), |r| r.blind(REQUEST_A));
+    assert!(
+        t > 0.2 && t <= 0.2 + DT_S + 1e-12,
+        "stale without any sample detected at {t} s"
+    );
+    assert_off(&d, FaultCode::SensorStale);
+    assert_eq!(
+        rig.env.clear_fault(rig.now_s()),
+        Err(EnvelopeError::NoFreshMeasurement(FaultCode::SensorStale))
+    );
+    rig.stays_off_until_cleared(FaultCode::SensorStale);
+}
+
+#[test]
+fn implausible_rate_of_change_is_detected_within_one_window() {
+    let window_s = EnvelopeConfig::default().rate_window_s;
+    // A sustained 60 °C/s ramp (threshold 50 °C/s) from 20 °C.
+    let mut rig = Rig::default();
+    for _ in 0..500 {
+        let _ = rig.step(20.0, 25.0, REQUEST_A);
+    }
+    let t0 = rig.now_s();
+    let (t, d) = rig.until_fault(1.0, Some(REQUEST_A), |r| {
+        let sensor_c = 20.0 + 60.0 * (r.now_s() - t0);
+        r.step(sensor_c, 25.0, REQUEST_A)
+    });
+    assert!(
+        t - t0 <= window_s + 2.0 * DT_S,
+        "60 °C/s ramp detected after {} s",
+        t - t0
+    );
+    assert_off(&d, FaultCode::SensorRateImplausible);
+    rig.stays_off_until_cleared(FaultCode::SensorRateImplausible);
+    // A jump of 3 °C between two samples (> 50 °C/s × 0.05 s) is detected on that sample.
+    let mut rig = Rig::default();
+    rig.healthy(0.5);
+    let t_jump = rig.now_s();
+    let (t, d) = rig.until_fault(1.0, Some(REQUEST_A), |r| r.step(36.0, 25.0, REQUEST_A));
+    assert_eq!(t, t_jump);
+    assert_off(&d, FaultCode::SensorRateImplausible);
+}
+
+#[test]
+fn fast_but_plausible_changes_and_sensor_noise_are_not_faults() {
+    let mut rig = Rig::default();
+    // 40 °C/s for 0.3 s (below the 50 °C/s threshold).
+    for k in 0..300 {
+        let d = rig.step(20.0 + 40.0 * k as f64 * DT_S, 25.0, REQUEST_A);
+        assert_eq!(d.fault(), None, "40 °C/s ramp at step {k}");
+    }
+    // ±0.01 °C quantisation noise at 1 kHz for 5 s around the ramp's end (32 °C).
+    for k in 0..5000u64 {
+        let noise_c = 0.01 * ((k * 7 % 3) as f64 - 1.0);
+        let d = rig.step(32.0 + noise_c, 25.0, REQUEST_A);
+        assert_eq!(d.fault(), None, "noise at step {k}");
+    }
+}
+
+#[test]
+fn hot_side_over_temperature_and_implausible_hot_side_sensor() {
+    for (hot_c, code) in [
+        (45.5, FaultCode::HotSideOverTemperature),
+        (-242.0, FaultCode::HotSideSensorImplausible),
+    ] {
+        let mut rig = Rig::default();
+        rig.healthy(0.5);
+        let t_inject = rig.now_s();
+        let (t, d) = rig.until_fault(1.0, Some(REQUEST_A), |r| r.step(33.0, hot_c, REQUEST_A));
+        assert_eq!(t, t_inject, "{code}");
+        assert_off(&d, code);
+        let _ = rig.step(33.0, hot_c, REQUEST_A);
+        assert_eq!(
+            rig.env.clear_fault(rig.now_s()),
+            Err(EnvelopeError::FaultPersists(code))
+        );
+        rig.stays_off_until_cleared(code);
+    }
+}
+
+/// Ramps the reading at 10 °C/s from 33 °C towards `end_c`; the fault comes on the first sample beyond
+/// the limit ± margin.
+#[test]
+fn display_beyond_its_limits_by_the_margin() {
+    // The request points back into range (cooling when hot, heating when cold), so the gate passes it.
+    for (end_c, bound_c, code, request_a) in [
+        (50.0f64, 49.0, FaultCode::DisplayOverTemperature, -REQUEST_A),
+        (10.0, 14.0, FaultCode::DisplayUnderTemperature, REQUEST_A),
+    ] {
+        let mut rig = Rig::default();
+        rig.healthy(0.2);
+        let t0 = rig.now_s();
+        let reading = |t: f64| {
+            let r: f64 = 33.0 + (end_c - 33.0).signum() * 10.0 * (t - t0);
+            if end_c > 33.0 {
+                r.min(end_c)
+            } else {
+                r.max(end_c)
+            }
+        };
+        let (t, d) = rig.until_fault(5.0, Some(request_a), |r| {
+            let now = r.now_s();
+            r.step(reading(now), 25.0, request_a)
+        });
+        let beyond = |c: f64| if end_c > 33.0 { c > bound_c } else { c < bound_c };
+        assert!(
+            beyond(reading(t)) && !beyond(reading(t - DT_S)),
+            "{code} at {} °C",
+            reading(t)
+        );
+        assert_off(&d, code);
+        rig.stays_off_until_cleared(code);
+    }
+}
+
+#[test]
+fn display_sustained_at_48_is_a_fault_after_one_second() {
+    let mut rig = Rig::default();
+    rig.healthy(0.2);
+    for k in 0..1500 {
+        // approach 48 °C at 10 °C/s
+        let c = (33.0 + 10.0 * k as f64 * DT_S).min(47.99);
+        let _ = rig.step(c, 25.0, -REQUEST_A);
+    }
+    let t48 = rig.now_s();
+    let (t, d) = rig.until_fault(3.0, Some(-REQUEST_A), |r| r.step(48.0, 25.0, -REQUEST_A));
+    let late_s = t - t48 - 1.0;
+    assert!(
+        late_s > 0.0 && late_s <= DT_S + 1e-9,
+        "48 °C sustained detected {late_s} s after 1 s"
+    );
+    assert_off(&d, FaultCode::SustainedAtAbsoluteMax);
+    let _ = rig.step(48.0, 25.0, REQUEST_A);
+    let refused = rig.env.clear_fault(rig.now_s());
+    assert_eq!(
+        refused,
+        Err(EnvelopeError::FaultPersists(FaultCode::SustainedAtAbsoluteMax))
+    );
+    rig.stays_off_until_cleared(FaultCode::SustainedAtAbsoluteMax);
+}
+
+#[test]
+fn dose_time_limit_lowers_the_maximum_and_a_hot_display_after_the_grace_is_a_fault() {
+    let config = EnvelopeConfig {
+        max_time_at_or_above_43_s: 2.0,
+        cem43_budget_min: 10.0,
+        ..Default::default()
+    };
+    let mut rig = Rig::new(config);
+    let _ = rig.step(44.0, 25.0, REQUEST_A);
+    let t0 = rig.now_s() - DT_S;
+    // Before the lockout: heating allowed at 44 °C, maximum 48 °C.
+    assert_eq!(rig.env.effective_max_c(), 48.0);
+    let mut t_lock = None;
+    let (t, d) = rig.until_fault(10.0, None, |r| {
+        let d = r.step(44.0, 25.0, REQUEST_A);
+        if r.env.dose_lockout_active() && t_lock.is_none() {
+            t_lock = Some(r.now_s() - DT_S);
+        }
+        if d.fault().is_none() {
+            // Before the lockout heating passes; under it heating at 44 °C ≥ 42.5 °C is refused.
+            let locked = r.env.dose_lockout_active();
+            assert_eq!(d.current_a(), if locked { 0.0 } else { REQUEST_A });
+            assert_eq!(d.limited_by().heating_blocked_at_max, locked);
+        }
+        d
+    });
+    let t_lock = t_lock.expect("lockout engaged");
+    assert!(
+        (t_lock - t0 - 2.0).abs() <= DT_S + 1e-9,
+        "lockout {} s after reaching 44 °C",
+        t_lock - t0
+    );
+    assert_eq!(rig.env.effective_max_c(), 42.5);
+    let late_s = t - t_lock - config.dose_lockout_grace_s;
+    assert!(
+        late_s > 0.0 && late_s <= DT_S + 1e-9,
+        "lockout violation detected {late_s} s after the grace"
+    );
+    assert_off(&d, FaultCode::DoseLockoutViolated);
+    let _ = rig.step(43.0, 25.0, 0.0);
+    let refused = rig.env.clear_fault(rig.now_s());
+    assert_eq!(
+        refused,
+        Err(EnvelopeError::FaultPersists(FaultCode::DoseLockoutViolated))
+    );
+    rig.stays_off_until_cleared(FaultCode::DoseLockoutViolated);
+    assert!(
+        rig.env.dose_lockout_active(),
+        "clearing a fault does not reset the dose"
+    );
+    let mut last = None;
+    for _ in 0..2000 {
+        rig.sample(33.0, 25.0);
+        last = Some(rig.env.shape_setpoint(rig.now_s(), 46.0));
+        rig.tick += 1;
+    }
+    let sp = last.unwrap();
+    assert_eq!(sp.setpoint_c, 42.5, "set-point capped below 43 °C under the lockout");
+    assert!(sp.limited_by.dose_lockout && sp.limited_by.clamped_high);
+}
+
+#[test]
+fn cem43_budget_lowers_the_maximum_at_the_analytic_time() {
+    // 45 °C accrues 0.5^(−2) = 4 CEM43-min per minute: the 1 CEM43-min budget is used after 15 s.
+    let mut rig = Rig::default();
+    let mut t_lock = None;
+    // 18 s: past the lockout, within its 5 s grace.
+    for _ in 0..18_000 {
+        let d = rig.step(45.0, 25.0, -REQUEST_A);
+        assert_eq!(d.fault(), None);
+        if rig.env.dose_lockout_active() && t_lock.is_none() {
+            t_lock = Some(rig.now_s() - DT_S);
+        }
+    }
+    let t_lock = t_lock.expect("CEM43 lockout");
+    assert!(
+        (t_lock - 15.0).abs() <= DT_S + 1e-9,
+        "CEM43 budget used at {t_lock} s, analytic 15 s"
+    );
+    assert!(
+        (rig.env.cem43_min() - 4.0 * 17.999 / 60.0).abs() < 1e-9,
+        "CEM43 {}",
+        rig.env.cem43_min()
+    );
+    assert_eq!(rig.env.effective_max_c(), 42.5);
+    // Cool to 42 °C at 10 °C/s; then heating below the lowered maximum is allowed, at it refused.
+    for k in 1..=300 {
+        let d = rig.step((45.0 - 10.0 * k as f64 * DT_S).max(42.0), 25.0, -REQUEST_A);
+        assert_eq!(d.current_a(), -REQUEST_A);
+    }
+    let d = rig.step(42.0, 25.0, 1.0);
+    assert_eq!(d.current_a(), 1.0, "heating below the lowered maximum is allowed");
+    let d = rig.step(42.5, 25.0, 1.0);
+    assert_eq!(d.current_a(), 0.0);
+    assert!(d.limited_by().heating_blocked_at_max);
+}
+
+#[test]
+fn drive_stuck_at_its_limit_is_a_fault_after_the_configured_time() {
+    let mut rig = Rig::default();
+    rig.healthy(0.1);
+    let t0 = rig.now_s();
+    let mut saw_limit = false;
+    let (t, d) = rig.until_fault(20.0, Some(LIMIT_A), |r| {
+        let d = r.step(33.0, 25.0, 5.0);
+        if d.fault().is_none() {
+            assert!(d.limited_by().clamped_to_limit, "request clamped to the limit");
+            saw_limit = true;
+        }
+        d
+    });
+    assert!(saw_limit);
+    let late_s = t - t0 - 10.0;
+    assert!(
+        late_s > 0.0 && late_s <= DT_S + 1e-9,
+        "stuck drive detected {late_s} s after 10 s"
+    );
+    assert_off(&d, FaultCode::DriveStuckAtLimit);
+    rig.stays_off_until_cleared(FaultCode::DriveStuckAtLimit);
+    // Just below 98 % of the limit for 20 s is not "stuck".
+    let mut rig = Rig::default();
+    for _ in 0..20_000 {
+        let d = rig.step(33.0, 25.0, 0.97 * LIMIT_A);
+        assert_eq!(d.fault(), None);
+    }
+}
+
+#[test]
+fn non_finite_set_point_request_measurement_and_time_latch() {
+    type Inject = fn(&mut Rig) -> DriveCommand;
+    let cases: [(Inject, FaultCode); 9] = [
+        (|r| inject_setpoint(r, f64::NAN), FaultCode::NonFiniteSetpoint),
+        (|r| inject_setpoint(r, f64::INFINITY), FaultCode::NonFiniteSetpoint),
+        (|r| inject_setpoint(r, f64::NEG_INFINITY), FaultCode::NonFiniteSetpoint),
+        (|r| r.step(f64::NAN, 25.0, REQUEST_A), FaultCode::NonFiniteMeasurement),
+        (
+            |r| r.step(33.0, f64::INFINITY, REQUEST_A),
+            FaultCode::NonFiniteMeasurement,
+        ),
+        (|r| r.step(33.0, 25.0, f64::NAN), FaultCode::NonFiniteCommand),
+        (|r| r.step(33.0, 25.0, f64::NEG_INFINITY), FaultCode::NonFiniteCommand),
+        (
+            |r| {
+                r.sample(33.0, 25.0);
+                r.env.gate_drive(f64::NAN, REQUEST_A)
+            },
+            FaultCode::NonFiniteTime,
+        ),
+        (
+            |r| {
+                r.sample(33.0, 25.0);
+                r.env.gate_drive(r.now_s() - 0.5, REQUEST_A)
+            },
+            FaultCode::TimeNotMonotonic,
+        ),
+    ];
+    for (inject, code) in cases {
+        let mut rig = Rig::default();
+        rig.healthy(0.2);
+        let d = inject(&mut rig);
+        assert_off(&d, code);
+        rig.tick += 1;
+        rig.stays_off_until_cleared(code);
+    }
+}
+
+fn inject_setpoint(r: &mut Rig, requested_c: f64) -> DriveCommand {
+    r.sample(33.0, 25.0);
+    let before = r.env.shape_setpoint(r.now_s(), 33.0).setpoint_c;
+    let sp = r.env.shape_setpoint(r.now_s(), requested_c);
+    assert!(sp.limited_by.rejected);
+    assert_eq!(sp.setpoint_c, before, "a rejected set-point holds the previous one");
+    r.env.gate_drive(r.now_s(), REQUEST_A)
+}
+
+#[test]
+fn gating_limits_the_current_and_refuses_heating_at_max_and_cooling_at_min() {
+    let mut rig = Rig::default();
+    let d = rig.step(33.0, 25.0, 9.0);
+    assert_eq!(d.current_a(), LIMIT_A);
+    let d = rig.step(33.0, 25.0, -9.0);
+    assert_eq!(d.current_a(), -LIMIT_A);
+    let mut rig = Rig::default();
+    let _ = rig.step(47.0, 25.0, 0.0);
+    let d = rig.step(47.9, 25.0, 1.0);
+    assert_eq!(d.current_a(), 1.0, "heating below the maximum");
+    let d = rig.step(48.0, 25.0, 1.0);
+    assert_eq!(d.current_a(), 0.0, "no heating at the maximum");
+    assert!(d.limited_by().heating_blocked_at_max);
+    let d = rig.step(48.0, 25.0, -1.0);
+    assert_eq!(d.current_a(), -1.0, "cooling at the maximum is allowed");
+    let mut rig = Rig::default();
+    let _ = rig.step(16.0, 25.0, 0.0);
+    let d = rig.step(15.0, 25.0, -1.0);
+    assert_eq!(d.current_a(), 0.0, "no cooling at the minimum");
+    assert!(d.limited_by().cooling_blocked_at_min);
+    assert_eq!(rig.step(15.0, 25.0, 1.0).current_a(), 1.0);
+}
+
+#[test]
+fn set_point_starts_at_the_display_is_clamped_and_rate_limited() {
+    let mut env = SafetyEnvelope::new(EnvelopeConfig::default(), LIMIT_A).unwrap();
+    env.observe(&Measurement {
+        time_s: 0.0,
+        sensor_c: 30.0,
+        hot_side_c: 25.0,
+        sample_seq: 1,
+    });
+    let sp = env.shape_setpoint(0.0, 45.0);
+    assert_eq!(sp.setpoint_c, 30.0, "first set-point starts at the measured display");
+    assert!(sp.limited_by.rate_limited);
+    let sp = env.shape_setpoint(0.5, 45.0);
+    assert!(
+        (sp.setpoint_c - 35.0).abs() < 1e-12,
+        "10 °C/s for 0.5 s: {}",
+        sp.setpoint_c
+    );
+    assert!((sp.rate_c_per_s - 10.0).abs() < 1e-9);
+    let sp = env.shape_setpoint(10.0, 1e308);
+    assert_eq!(sp.setpoint_c, 48.0);
+    assert!(sp.limited_by.clamped_high);
+    let sp = env.shape_setpoint(20.0, -1e308);
+    assert_eq!(sp.setpoint_c, 15.0);
+    assert!(sp.limited_by.clamped_low);
+    assert_eq!(env.fault(), None, "huge finite requests are clamped, not faults");
+}
+
+#[test]
+fn cem43_through_the_envelope_matches_hand_computed_values() {
+    for (temp_c, want_min, want_43_s) in [(44.0, 2.0, 60.0), (42.0, 0.25, 0.0)] {
+        let config = EnvelopeConfig {
+            cem43_budget_min: 10.0,
+            ..Default::default()
+        };
+        let mut env = SafetyEnvelope::new(config, LIMIT_A).unwrap();
+        for k in 0..=60_000u64 {
+            let m = Measurement {
+                time_s: k as f64 * DT_S,
+                sensor_c: temp_c,
+                hot_side_c: 25.0,
+                sample_seq: k + 1,
+            };
+            env.observe(&m);
+            // repeated samples add nothing
+            env.observe(&m);
+        }
+        let got = env.cem43_min();
+        assert!(
+            (got - want_min).abs() < 1e-9,
+            "60 s at {temp_c} °C: CEM43 {got} vs hand {want_min} min"
+        );
+        let t43 = env.time_at_or_above_43_s();
+        assert!((t43 - want_43_s).abs() < 1e-9, "time at ≥ 43 °C {t43} vs {want_43_s} s");
+        assert_eq!(env.fault(), None);
+    }
+}
+
+#[test]
+fn bad_configuration_and_current_limit_are_errors() {
+    let too_hot = EnvelopeConfig {
+        max_display_c: 50.0,
+        ..Default::default()
+    };
+    assert!(matches!(
+        SafetyEnvelope::new(too_hot, LIMIT_A),
+        Err(EnvelopeError::OutOfRange { .. })
+    ));
+    for limit in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        assert!(
+            SafetyEnvelope::new(EnvelopeConfig::default(), limit).is_err(),
+            "limit {limit}"
+        );
+    }
+    let mut env = SafetyEnvelope::new(EnvelopeConfig::default(), LIMIT_A).unwrap();
+    assert_eq!(env.clear_fault(0.0), Ok(None), "nothing to clear");
+}

@@ -1,0 +1,461 @@
+//! The device file: every parameter of one simulated display channel (Peltier datasheet, plate, hot side, sensor,
+//! drive, water), its defaults with units and sources, reading from TOML and writing a documented TOML file.
+//!
+//! Every key is optional; a file may give only some, the rest keep their defaults. Unknown sections and keys are
+//! errors naming the key and the file; every number is validated (finite, in range), and cross-checks are made (the
+//! current limit may not exceed the module's I_max; the datasheet must be self-consistent, see
+//! [`thermode_model::peltier`]). The defaults describe the paper's hardware (section 3.1: an 8×8×3 mm miniature
+//! Peltier element on a thin water-cooled aluminium box, a PT-100 sensor, water at ambient) as closely as the paper
+//! allows; where the paper is silent the number is an engineering estimate, derived in its source text.
+
+use thermode_model::peltier::{PeltierDatasheet, PeltierModule};
+use thermode_model::ParamError;
+
+/// The Peltier module's datasheet values: [`PeltierDatasheet`] (section `\[peltier\]`).
+pub type PeltierConfig = PeltierDatasheet;
+
+/// The display plate (section `\[plate\]`): what the finger touches.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlateConfig {
+    /// Heat capacity of the display node (plate, cold ceramic, half the thermoelectric legs) [J/K]. Default 0.28.
+    pub heat_capacity_j_k: f64,
+    /// Contact conductance between the skin surface and the plate, 1/R_c [W/(m²·K)]. Default 1000.
+    pub contact_conductance_w_m2k: f64,
+    /// Contact area of the finger on the plate \[m²\]. Default 6.4e-5 (8 × 8 mm).
+    pub area_m2: f64,
+}
+
+/// The hot side (section `[hot_side]`): hot ceramic and the water-cooled aluminium box.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HotSideConfig {
+    /// Heat capacity of the hot node [J/K]. Default 1.7.
+    pub heat_capacity_j_k: f64,
+    /// Conductance from the hot node to the cooling water [W/K]. Default 0.3.
+    pub water_conductance_w_k: f64,
+}
+
+/// The PT-100 sensor in the plate (section `\[sensor\]`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensorConfig {
+    /// First-order lag of the sensor behind the plate temperature \[s\]; 0 = no lag. Default 0.3.
+    pub time_constant_s: f64,
+    /// Standard deviation of the Gaussian measurement noise [°C]; 0 = none. Default 0.02.
+    pub noise_c: f64,
+    /// Quantisation step of the reading [°C]; 0 = none. Default 0.01.
+    pub resolution_c: f64,
+    /// Sampling rate \[Hz\]; the reading is held between samples. Default 100.
+    pub sample_rate_hz: f64,
+}
+
+/// The bipolar current drive (section `\[drive\]`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DriveConfig {
+    /// Largest current magnitude the drive delivers \[A\], at most the module's I_max. Default 2.8.
+    pub current_limit_a: f64,
+}
+
+/// The surroundings (section `\[ambient\]`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AmbientConfig {
+    /// Temperature of the cooling water [°C] (held at ambient by the radiator). Default 23.
+    pub water_c: f64,
+}
+
+/// Everything that describes one simulated display channel (all channels of a display are identical).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct DeviceConfig {
+    /// Peltier module datasheet.
+    pub peltier: PeltierConfig,
+    /// Display plate and finger contact.
+    pub plate: PlateConfig,
+    /// Hot side and water cooling.
+    pub hot_side: HotSideConfig,
+    /// Temperature sensor.
+    pub sensor: SensorConfig,
+    /// Current drive.
+    pub drive: DriveConfig,
+    /// Surroundings.
+    pub ambient: AmbientConfig,
+}
+
+impl Default for PlateConfig {
+    fn default() -> Self {
+        PlateConfig {
+            heat_capacity_j_k: 0.28,
+            contact_conductance_w_m2k: 1000.0,
+            area_m2: 6.4e-5,
+        }
+    }
+}
+
+impl Default for HotSideConfig {
+    fn default() -> Self {
+        HotSideConfig {
+            heat_capacity_j_k: 1.7,
+            water_conductance_w_k: 0.3,
+        }
+    }
+}
+
+impl Default for SensorConfig {
+    fn default() -> Self {
+        SensorConfig {
+            time_constant_s: 0.3,
+            noise_c: 0.02,
+            resolution_c: 0.01,
+            sample_rate_hz: 100.0,
+        }
+    }
+}
+
+impl Default for DriveConfig {
+    fn default() -> Self {
+        DriveConfig { current_limit_a: 2.8 }
+    }
+}
+
+impl Default for AmbientConfig {
+    fn default() -> Self {
+        AmbientConfig { water_c: 23.0 }
+    }
+}
+
+/// What a value must satisfy.
+#[derive(Debug, Clone, Copy)]
+enum Check {
+    /// Finite and > 0.
+    Positive,
+    /// Finite and ≥ 0.
+    NonNegative,
+    /// Finite and strictly between the bounds.
+    Between(f64, f64),
+}
+
+/// One key of the device file: where it lives, how to read and write it, and its documentation.
+struct Field {
+    section: &'static str,
+    key: &'static str,
+    check: Check,
+    get: fn(&DeviceConfig) -> f64,
+    set: fn(&mut DeviceConfig, f64),
+    /// Meaning and unit (first line of the comment).
+    doc: &'static str,
+    /// Where the default comes from.
+    source: &'static str,
+}
+
+/// Sections in file order.
+const SECTIONS: [&str; 6] = ["peltier", "plate", "hot_side", "sensor", "drive", "ambient"];
+
+const MODULE_SOURCE: &str = "model.md §5: a typical single-stage Bi₂Te₃ miniature module of 8 × 8 mm, the size of the \
+     paper's 8 × 8 × 3 mm element (section 3.1; the paper names no part).";
+
+/// Every key of the device file, in file order.
+const FIELDS: [Field; 16] = [
+    Field {
+        section: "peltier",
+        key: "imax_a",
+        check: Check::Positive,
+        get: |c| c.peltier.imax_a,
+        set: |c, v| c.peltier.imax_a = v,
+        doc: "Datasheet maximum current I_max [A] (the current of the largest temperature difference).",
+        source: MODULE_SOURCE,
+    },
+    Field {
+        section: "peltier",
+        key: "vmax_v",
+        check: Check::Positive,
+        get: |c| c.peltier.vmax_v,
+        set: |c, v| c.peltier.vmax_v = v,
+        doc: "Datasheet voltage at I_max and ΔT_max, V_max [V].",
+        source: MODULE_SOURCE,
+    },
+    Field {
+        section: "peltier",
+        key: "qmax_w",
+        check: Check::Positive,
+        get: |c| c.peltier.qmax_w,
+        set: |c, v| c.peltier.qmax_w = v,
+        doc: "Datasheet cooling power at I_max and ΔT = 0, Q_max [W]; checked against the other values (±30 %).",
+        source: MODULE_SOURCE,
+    },
+    Field {
+        section: "peltier",
+        key: "dtmax_k",
+        check: Check::Positive,
+        get: |c| c.peltier.dtmax_k,
+        set: |c, v| c.peltier.dtmax_k = v,
+        doc: "Datasheet largest temperature difference at I_max and zero load, ΔT_max [K].",
+        source: MODULE_SOURCE,
+    },
+    Field {
+        section: "peltier",
+        key: "hot_side_k",
+        check: Check::Positive,
+        get: |c| c.peltier.hot_side_k,
+        set: |c, v| c.peltier.hot_side_k = v,
+        doc: "Hot-side temperature at which the datasheet values are quoted, T_h [K].",
+        source: "25 °C: these values are a 25–27 °C datasheet set (S = V_max/T_h = 6.37 mV/K matches model.md's \
+                 6.4 mV/K; 323 K would give 5.9), and the hot side runs near the 23 °C water, where the derived \
+                 S, R, K are then evaluated.",
+    },
+    Field {
+        section: "plate",
+        key: "heat_capacity_j_k",
+        check: Check::Positive,
+        get: |c| c.plate.heat_capacity_j_k,
+        set: |c, v| c.plate.heat_capacity_j_k = v,
+        doc: "Heat capacity of the display node: plate, cold ceramic, half the thermoelectric legs [J/K].",
+        source: "Estimate (model.md §5: 0.1–0.3): aluminium plate 8 × 8 × 1 mm (ρc = 2702 × 903 J/(m³·K), \
+                 Incropera Table A.1) 0.156 J/K + alumina ceramic 8 × 8 × 0.5 mm (96 % Al₂O₃, 3720 kg/m³, \
+                 880 J/(kg·K)) 0.105 J/K + half of 2 mm Bi₂Te₃ legs at 30 % fill (7740 kg/m³, 154 J/(kg·K)) 0.023 J/K \
+                 = 0.284 J/K.",
+    },
+    Field {
+        section: "plate",
+        key: "contact_conductance_w_m2k",
+        check: Check::Positive,
+        get: |c| c.plate.contact_conductance_w_m2k,
+        set: |c, v| c.plate.contact_conductance_w_m2k = v,
+        doc: "Contact conductance between the skin surface and the plate, 1/R_c [W/(m²·K)]; a finger model whose \
+              receptor node lies below the surface adds its own tissue in series (see thermode_device::finger).",
+        source: "model.md §3: R_c is about 1e-3 m²·K/W for a light touch (the paper's static touch without \
+                 pressure, section 4.2).",
+    },
+    Field {
+        section: "plate",
+        key: "area_m2",
+        check: Check::Positive,
+        get: |c| c.plate.area_m2,
+        set: |c, v| c.plate.area_m2 = v,
+        doc: "Contact area of the finger on the plate [m²].",
+        source: "The 8 × 8 mm face of the paper's element (section 3.1), fully covered by the phalanx pad.",
+    },
+    Field {
+        section: "hot_side",
+        key: "heat_capacity_j_k",
+        check: Check::Positive,
+        get: |c| c.hot_side.heat_capacity_j_k,
+        set: |c, v| c.hot_side.heat_capacity_j_k = v,
+        doc: "Heat capacity of the hot node: hot ceramic, half the legs, the aluminium box and the water in it [J/K].",
+        source: "Estimate (the paper: 'a thin aluminium box', no size): hot ceramic 0.105 + half legs 0.023 + box \
+                 12 × 12 × 5 mm with 0.5 mm walls (236 mm³ aluminium) 0.576 + half of the 484 mm³ of water it holds \
+                 (4.17 MJ/(m³·K); its temperature lies between inlet and wall) 1.009 = 1.71 J/K.",
+    },
+    Field {
+        section: "hot_side",
+        key: "water_conductance_w_k",
+        check: Check::NonNegative,
+        get: |c| c.hot_side.water_conductance_w_k,
+        set: |c, v| c.hot_side.water_conductance_w_k = v,
+        doc: "Conductance from the hot node to the cooling water [W/K]; a pump failure lowers it.",
+        source: "model.md §5 (about 0.3 W/K); check: laminar flow through the box (11 × 4 mm channel, hydraulic \
+                 diameter 5.9 mm, Nu 5–8, so h = 500–800 W/(m²·K)) over about 4 cm² of wetted wall at partial fin \
+                 efficiency gives 0.2–0.3 W/K.",
+    },
+    Field {
+        section: "sensor",
+        key: "time_constant_s",
+        check: Check::NonNegative,
+        get: |c| c.sensor.time_constant_s,
+        set: |c, v| c.sensor.time_constant_s = v,
+        doc: "First-order lag of the PT-100 behind the plate temperature [s]; 0 = none.",
+        source: "model.md §5 (0.2–0.6 s): a thin-film PT-100 chip glued into the 1 mm plate.",
+    },
+    Field {
+        section: "sensor",
+        key: "noise_c",
+        check: Check::NonNegative,
+        get: |c| c.sensor.noise_c,
+        set: |c, v| c.sensor.noise_c = v,
+        doc: "Standard deviation of the Gaussian measurement noise [°C]; 0 = none.",
+        source: "Estimate: two steps of the 0.01 °C resolution (1 mA through a PT-100 gives 3.85 µV per 0.01 °C, \
+                 comparable to amplifier and 16-bit converter noise); the paper needed a low-pass filter against \
+                 sensor noise (section 3.2), so the noise exceeds one step.",
+    },
+    Field {
+        section: "sensor",
+        key: "resolution_c",
+        check: Check::NonNegative,
+        get: |c| c.sensor.resolution_c,
+        set: |c, v| c.sensor.resolution_c = v,
+        doc: "Quantisation step of the reading [°C]; 0 = none.",
+        source: "The paper, section 3: 'a resolution of 0.01 °C'.",
+    },
+    Field {
+        section: "sensor",
+        key: "sample_rate_hz",
+        check: Check::Positive,
+        get: |c| c.sensor.sample_rate_hz,
+        set: |c, v| c.sensor.sample_rate_hz = v,
+        doc: "Sampling rate of the sensor [Hz]; the reading is held between samples.",
+        source: "Estimate: the paper gives none; 100 Hz is a usual rate of a Simulink real-time loop on a thermal \
+                 plant whose fastest time constant is about 0.1 s.",
+    },
+    Field {
+        section: "drive",
+        key: "current_limit_a",
+        check: Check::Positive,
+        get: |c| c.drive.current_limit_a,
+        set: |c, v| c.drive.current_limit_a = v,
+        doc: "Largest current magnitude of the bipolar drive [A]; at most the module's I_max.",
+        source: "The module's I_max: beyond it a module is outside its rating and cools no better.",
+    },
+    Field {
+        section: "ambient",
+        key: "water_c",
+        check: Check::Between(0.0, 100.0),
+        get: |c| c.ambient.water_c,
+        set: |c, v| c.ambient.water_c = v,
+        doc: "Temperature of the cooling water [°C], held at ambient by the radiator and fans.",
+        source: "The paper, section 4.1: mean ambient temperature 23 °C; section 3.1: the water circuit keeps the \
+                 reference side at ambient level.",
+    },
+];
+
+impl DeviceConfig {
+    /// Reads a device file. Every key is optional (missing keys keep their defaults); unknown sections or keys,
+    /// values of the wrong type, and invalid numbers are errors naming the key (`section.key`) and `origin` (usually
+    /// the file name).
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<DeviceConfig, ParamError> {
+        let table: toml::Table = text.parse().map_err(|e: toml::de::Error| ParamError::Syntax {
+            origin: origin.to_string(),
+            message: e.to_string(),
+        })?;
+        let mut config = DeviceConfig::default();
+        for (section, value) in &table {
+            if !SECTIONS.contains(&section.as_str()) {
+                return Err(ParamError::UnknownKey {
+                    origin: origin.to_string(),
+                    key: section.clone(),
+                });
+            }
+            let toml::Value::Table(keys) = value else {
+                return Err(wrong_type(origin, section, "a table", value));
+            };
+            for (key, value) in keys {
+                let full = format!("{section}.{key}");
+                let field = FIELDS
+                    .iter()
+                    .find(|f| f.section == section && f.key == key)
+                    .ok_or_else(|| ParamError::UnknownKey {
+                        origin: origin.to_string(),
+                        key: full.clone(),
+                    })?;
+                let number = match value {
+                    toml::Value::Float(x) => *x,
+                    // Integers are accepted where a number is expected (`sample_rate_hz = 100`).
+                    toml::Value::Integer(n) => *n as f64,
+                    other => return Err(wrong_type(origin, &full, "a number", other)),
+                };
+                (field.set)(&mut config, number);
+            }
+        }
+        config.validate(origin)?;
+        Ok(config)
+    }
+
+    /// Checks every number and the cross-conditions; `origin` names where the values came from.
+    pub fn validate(&self, origin: &str) -> Result<(), ParamError> {
+        for field in &FIELDS {
+            check(origin, field, (field.get)(self))?;
+        }
+        PeltierModule::from_datasheet_at(&self.peltier, origin, "peltier.")?;
+        if self.drive.current_limit_a > self.peltier.imax_a {
+            return Err(ParamError::BadValue {
+                origin: origin.to_string(),
+                key: "drive.current_limit_a".to_string(),
+                value: self.drive.current_limit_a,
+                requirement: format!("must not exceed the module's I_max = {} A", self.peltier.imax_a),
+            });
+        }
+        Ok(())
+    }
+
+    /// Every key of the device file as `section.key`, in file order.
+    pub fn keys() -> Vec<String> {
+        FIELDS.iter().map(|f| format!("{}.{}", f.section, f.key)).collect()
+    }
+
+    /// The Peltier module's lumped parameters (S, R, K) from the datasheet values.
+    pub fn module(&self) -> Result<PeltierModule, ParamError> {
+        PeltierModule::from_datasheet_at(&self.peltier, "device config", "peltier.")
+    }
+
+    /// The whole configuration as a device file: every key, each preceded by a comment with its meaning, unit,
+    /// default and source. [`DeviceConfig::from_toml_str`] reads it back to an equal configuration.
+    pub fn to_toml_string(&self) -> String {
+        let defaults = DeviceConfig::default();
+        let mut out = String::from(HEADER);
+        for section in SECTIONS {
+            out.push_str(&format!("\n[{section}]\n"));
+            for field in FIELDS.iter().filter(|f| f.section == section) {
+                let text = format!(
+                    "{} Default {:?}. Source: {}",
+                    field.doc,
+                    (field.get)(&defaults),
+                    field.source
+                );
+                for line in wrap(&text, 116) {
+                    out.push_str(&format!("# {line}\n"));
+                }
+                out.push_str(&format!("{} = {:?}\n", field.key, (field.get)(self)));
+            }
+        }
+        out
+    }
+}
+
+const HEADER: &str = "\
+# thermode device file: the simulated thermal display, one channel (all channels of a display are identical).
+# Every key is optional: keys left out keep the default named in their comment. Units are in the key names.
+# Written by thermode_device::DeviceConfig::to_toml_string.
+";
+
+fn wrong_type(origin: &str, key: &str, expected: &str, found: &toml::Value) -> ParamError {
+    ParamError::WrongType {
+        origin: origin.to_string(),
+        key: key.to_string(),
+        expected: expected.to_string(),
+        found: format!("{} {}", found.type_str(), found),
+    }
+}
+
+fn check(origin: &str, field: &Field, value: f64) -> Result<(), ParamError> {
+    let (ok, requirement) = match field.check {
+        Check::Positive => (value > 0.0, "must be a finite number greater than zero".to_string()),
+        Check::NonNegative => (value >= 0.0, "must be a finite number not below zero".to_string()),
+        Check::Between(lo, hi) => (
+            value > lo && value < hi,
+            format!("must be a finite number between {lo} and {hi}"),
+        ),
+    };
+    if ok && value.is_finite() {
+        return Ok(());
+    }
+    Err(ParamError::BadValue {
+        origin: origin.to_string(),
+        key: format!("{}.{}", field.section, field.key),
+        value,
+        requirement,
+    })
+}
+
+/// Splits `text` into lines of at most `width` characters at spaces.
+fn wrap(text: &str, width: usize) -> Vec<String> {
+    let mut lines = Vec::new();
+    let mut line = String::new();
+    for word in text.split_whitespace() {
+        if !line.is_empty() && line.chars().count() + 1 + word.chars().count() > width {
+            lines.push(std::mem::take(&mut line));
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line.push_str(word);
+    }
+    if !line.is_empty() {
+        lines.push(line);
+    }
+    lines
+}

@@ -1,0 +1,261 @@
+//! The hardware boundary: the small [`Device`] trait every display (simulated or real) implements, the
+//! [`SimulatedDisplay`] of up to [`MAX_CHANNELS`] independent channels, and the [`RecordingDevice`] wrapper that
+//! records every command (the fake of tests).
+//!
+//! A drive current reaches a device only as a [`DriveCommand`], which only the safety envelope
+//! (`thermode_control::SafetyEnvelope::gate_drive`) can make.
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use thermode_control::fault::FaultCode;
+use thermode_control::{DriveCommand, DriveLimits, Measurement};
+
+use crate::channel::SimulatedChannel;
+use crate::config::DeviceConfig;
+use crate::error::DeviceError;
+use crate::finger::PlateFinger;
+
+/// Most channels of one display: the paper found at most about ten independently resolvable sites per hand.
+pub const MAX_CHANNELS: usize = 10;
+
+/// One reading of a channel's sensors.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reading {
+    /// Display (plate) temperature from the PT-100 [°C]: lagged, noisy, quantised, held between samples; fault
+    /// values when the sensor is open or shorted.
+    pub sensor_c: f64,
+    /// Hot-side temperature from the box sensor [°C].
+    pub hot_side_c: f64,
+    /// When the PT-100 sample was taken \[s\] (device clock: the sum of [`Device::advance`] steps).
+    pub time_s: f64,
+    /// Sequence number of the PT-100 sample; it stops advancing when the sensor is stale.
+    pub sample_seq: u64,
+    /// The current the drive delivers \[A\] (its own measurement).
+    pub current_a: f64,
+}
+
+impl Reading {
+    /// The reading as the safety envelope takes it.
+    pub fn measurement(&self) -> Measurement {
+        Measurement {
+            time_s: self.time_s,
+            sensor_c: self.sensor_c,
+            hot_side_c: self.hot_side_c,
+            sample_seq: self.sample_seq,
+        }
+    }
+}
+
+/// A thermal display: channels that take gated drive commands and give sensor readings.
+pub trait Device {
+    /// Number of channels.
+    fn channel_count(&self) -> usize;
+
+    /// Applies a gated drive command to `channel`; it holds until the next command.
+    fn apply(&mut self, channel: usize, command: &DriveCommand) -> Result<(), DeviceError>;
+
+    /// The newest reading of `channel`.
+    fn read(&mut self, channel: usize) -> Result<Reading, DeviceError>;
+
+    /// Advances the device's physics by `dt_s` \[s\] (a simulated device); a real device, which runs in real time,
+    /// ignores it. A step that is not finite and positive changes nothing.
+    fn advance(&mut self, dt_s: f64);
+}
+
+/// The simulated display: up to [`MAX_CHANNELS`] identical, independent channels, each with its own finger and its
+/// own noise stream (ChaCha8 seeded from one seed, stream = channel index).
+#[derive(Debug, Clone)]
+pub struct SimulatedDisplay<F> {
+    channels: Vec<SimulatedChannel<F>>,
+    commanded_a: Vec<f64>,
+    time_s: f64,
+}
+
+impl<F: PlateFinger> SimulatedDisplay<F> {
+    /// A display with one channel per finger (1 to [`MAX_CHANNELS`]), all described by `config`.
+    pub fn new(config: &DeviceConfig, fingers: Vec<F>, seed: u64) -> Result<Self, DeviceError> {
+        if fingers.is_empty() || fingers.len() > MAX_CHANNELS {
+            return Err(DeviceError::ChannelCount {
+                count: fingers.len(),
+                max: MAX_CHANNELS,
+            });
+        }
+        let mut channels = Vec::with_capacity(fingers.len());
+        for (index, finger) in fingers.into_iter().enumerate() {
+            let mut rng = ChaCha8Rng::seed_from_u64(seed);
+            rng.set_stream(index as u64);
+            channels.push(SimulatedChannel::new(config, finger, rng)?);
+        }
+        let commanded_a = vec![0.0; channels.len()];
+        Ok(SimulatedDisplay {
+            channels,
+            commanded_a,
+            time_s: 0.0,
+        })
+    }
+
+    /// A display of `count` channels, each with the default fingertip of model `F` ([`PlateFinger::fingertip`]).
+    pub fn fingertips(config: &DeviceConfig, count: usize, seed: u64) -> Result<Self, DeviceError> {
+        if count == 0 || count > MAX_CHANNELS {
+            return Err(DeviceError::ChannelCount {
+                count,
+                max: MAX_CHANNELS,
+            });
+        }
+        let fingers = (0..count).map(|_| F::fingertip()).collect::<Result<Vec<F>, _>>()?;
+        SimulatedDisplay::new(config, fingers, seed)
+    }
+
+    /// Channel `index`.
+    pub fn channel(&self, index: usize) -> Result<&SimulatedChannel<F>, DeviceError> {
+        let count = self.channels.len();
+        self.channels
+            .get(index)
+            .ok_or(DeviceError::NoSuchChannel { channel: index, count })
+    }
+
+    /// Channel `index`, mutable (fault injection, initial temperatures, the finger).
+    pub fn channel_mut(&mut self, index: usize) -> Result<&mut SimulatedChannel<F>, DeviceError> {
+        let count = self.channels.len();
+        self.channels
+            .get_mut(index)
+            .ok_or(DeviceError::NoSuchChannel { channel: index, count })
+    }
+
+    /// Device time \[s\]: the sum of the steps taken.
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+}
+
+impl<F: PlateFinger> Device for SimulatedDisplay<F> {
+    fn channel_count(&self) -> usize {
+        self.channels.len()
+    }
+
+    fn apply(&mut self, channel: usize, command: &DriveCommand) -> Result<(), DeviceError> {
+        let count = self.channels.len();
+        let slot = self
+            .commanded_a
+            .get_mut(channel)
+            .ok_or(DeviceError::NoSuchChannel { channel, count })?;
+        let current_a = command.current_a();
+        if !current_a.is_finite() {
+            return Err(DeviceError::BadValue {
+                what: format!("channel {channel} drive current [A]"),
+                value: current_a,
+                requirement: "must be finite".to_string(),
+            });
+        }
+        *slot = current_a;
+        Ok(())
+    }
+
+    fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
+        let ch = self.channel(channel)?;
+        let state = ch.state();
+        Ok(Reading {
+            sensor_c: state.sensor.value_c,
+            hot_side_c: ch.hot_side_reading_c(),
+            time_s: state.sensor.time_s,
+            sample_seq: state.sensor.seq,
+            current_a: state.applied_current_a,
+        })
+    }
+
+    fn advance(&mut self, dt_s: f64) {
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            return;
+        }
+        for (channel, &current_a) in self.channels.iter_mut().zip(&self.commanded_a) {
+            channel.step(dt_s, current_a);
+        }
+        self.time_s += dt_s;
+    }
+}
+
+/// What a [`RecordingDevice`] saw of one command.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RecordedCommand {
+    /// Device time when the command was applied \[s\] (the sum of the steps before it).
+    pub time_s: f64,
+    /// The channel it was for.
+    pub channel: usize,
+    /// The gated current \[A\].
+    pub current_a: f64,
+    /// The envelope's latched fault at that moment, if any.
+    pub fault: Option<FaultCode>,
+    /// Which envelope limits acted on it.
+    pub limited_by: DriveLimits,
+    /// Whether the inner device accepted it.
+    pub accepted: bool,
+}
+
+/// Wraps a device and records every command applied to it (and the time it was applied).
+#[derive(Debug, Clone)]
+pub struct RecordingDevice<D> {
+    inner: D,
+    time_s: f64,
+    commands: Vec<RecordedCommand>,
+}
+
+impl<D: Device> RecordingDevice<D> {
+    /// Starts recording in front of `inner`.
+    pub fn new(inner: D) -> Self {
+        RecordingDevice {
+            inner,
+            time_s: 0.0,
+            commands: Vec::new(),
+        }
+    }
+
+    /// Every command so far, in order.
+    pub fn commands(&self) -> &[RecordedCommand] {
+        &self.commands
+    }
+
+    /// The wrapped device.
+    pub fn inner(&self) -> &D {
+        &self.inner
+    }
+
+    /// The wrapped device, mutable.
+    pub fn inner_mut(&mut self) -> &mut D {
+        &mut self.inner
+    }
+
+    /// Stops recording; returns the device and the record.
+    pub fn into_parts(self) -> (D, Vec<RecordedCommand>) {
+        (self.inner, self.commands)
+    }
+}
+
+impl<D: Device> Device for RecordingDevice<D> {
+    fn channel_count(&self) -> usize {
+        self.inner.channel_count()
+    }
+
+    fn apply(&mut self, channel: usize, command: &DriveCommand) -> Result<(), DeviceError> {
+        let result = self.inner.apply(channel, command);
+        self.commands.push(RecordedCommand {
+            time_s: self.time_s,
+            channel,
+            current_a: command.current_a(),
+            fault: command.fault(),
+            limited_by: command.limited_by(),
+            accepted: result.is_ok(),
+        });
+        result
+    }
+
+    fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
+        self.inner.read(channel)
+    }
+
+    fn advance(&mut self, dt_s: f64) {
+        self.inner.advance(dt_s);
+        if dt_s.is_finite() && dt_s > 0.0 {
+            self.time_s += dt_s;
+        }
+    }
+}

@@ -1,0 +1,60 @@
+//! The finger resting on the plate: which skin model plays it, and how the physical contact conductance maps to
+//! the conductance between that model's receptor node and the plate.
+//!
+//! [`PlateCoupled`] models exchange heat with the plate as `G·(receptor − plate)` per area. Where the receptor node
+//! is the skin surface (the finite-volume finger: its receptor is the surface face temperature) G is the physical
+//! skin-to-plate contact conductance h_c = 1/R_c of the device file. Where it is the centre of the epidermis (the
+//! three-layer Kron model: T1) the outer half of the epidermis lies in series, as in Kron's own contact
+//! conductance 2/(Δx₁/k₁ + Δx_env/k_env): G = 1/(Δx₁/(2k₁) + 1/h_c). [`PlateFinger`] gives that mapping, so both
+//! models feel the same physical contact.
+
+use thermode_model::fv::{FvConfig, FvModel};
+use thermode_model::inverse::PlateCoupled;
+use thermode_model::kron::{KronModel, DEFAULT_AMBIENT_C};
+use thermode_model::{ParamError, Skin};
+
+/// The finger of the simulated display by default: the finite-volume finger (the reference physics). To make the
+/// paper's three-layer finger the default, change this one line to `pub type DefaultFinger = KronModel;`.
+pub type DefaultFinger = FvModel;
+
+/// The default finger: [`DefaultFinger`] for the default fingertip ([`Skin::fingertip`]).
+pub fn default_finger() -> Result<DefaultFinger, ParamError> {
+    DefaultFinger::fingertip()
+}
+
+/// A skin model that can rest on the display plate.
+pub trait PlateFinger: PlateCoupled {
+    /// The conductance between this model's receptor node and the plate [W/(m²·K)] for a physical skin-surface to
+    /// plate contact conductance `surface_contact_w_m2k` [W/(m²·K)].
+    fn receptor_conductance_w_m2k(&self, surface_contact_w_m2k: f64) -> f64;
+
+    /// This model for the default fingertip ([`Skin::fingertip`]), at its steady state in still air at 23 °C.
+    fn fingertip() -> Result<Self, ParamError>
+    where
+        Self: Sized;
+}
+
+impl PlateFinger for KronModel {
+    fn receptor_conductance_w_m2k(&self, surface_contact_w_m2k: f64) -> f64 {
+        let epidermis = &self.skin().layers[0];
+        1.0 / (epidermis.thickness_m / (2.0 * epidermis.conductivity_w_mk) + 1.0 / surface_contact_w_m2k)
+    }
+
+    /// [`KronModel::new`]: the steady state in still air at 23 °C.
+    fn fingertip() -> Result<Self, ParamError> {
+        KronModel::new(&Skin::fingertip())
+    }
+}
+
+impl PlateFinger for FvModel {
+    fn receptor_conductance_w_m2k(&self, surface_contact_w_m2k: f64) -> f64 {
+        surface_contact_w_m2k
+    }
+
+    /// Default grid and scheme, at the steady state in still air at the paper's 23 °C (as the Kron model starts).
+    fn fingertip() -> Result<Self, ParamError> {
+        let mut finger = FvModel::new(&Skin::fingertip(), None, &FvConfig::default())?;
+        finger.set_steady_in_air(DEFAULT_AMBIENT_C)?;
+        Ok(finger)
+    }
+}

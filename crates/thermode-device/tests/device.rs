@@ -1,0 +1,175 @@
+//! The `Device` trait on the simulated display: channel counts, independent channels and noise streams, readings
+//! as the envelope takes them, gated commands from the real safety envelope, and the recording wrapper.
+
+use thermode_control::{EnvelopeConfig, SafetyEnvelope};
+use thermode_device::{Device, DeviceConfig, DeviceError, RecordingDevice, SimulatedDisplay, MAX_CHANNELS};
+use thermode_model::kron::KronModel;
+
+fn display(count: usize) -> SimulatedDisplay<KronModel> {
+    SimulatedDisplay::fingertips(&DeviceConfig::default(), count, 21).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn envelope() -> SafetyEnvelope {
+    SafetyEnvelope::new(EnvelopeConfig::default(), 2.8).unwrap_or_else(|e| panic!("{e}"))
+}
+
+#[test]
+fn channel_counts_are_checked() {
+    for bad in [0, MAX_CHANNELS + 1] {
+        let result = SimulatedDisplay::<KronModel>::fingertips(&DeviceConfig::default(), bad, 1);
+        assert_eq!(
+            result.map(|d| d.channel_count()).err(),
+            Some(DeviceError::ChannelCount { count: bad, max: 10 })
+        );
+    }
+    let mut d = display(MAX_CHANNELS);
+    assert_eq!(d.channel_count(), 10);
+    assert_eq!(
+        d.read(10).err(),
+        Some(DeviceError::NoSuchChannel { channel: 10, count: 10 })
+    );
+    let command = envelope().gate_drive(0.0, 1.0);
+    assert_eq!(
+        d.apply(12, &command).err(),
+        Some(DeviceError::NoSuchChannel { channel: 12, count: 10 })
+    );
+}
+
+#[test]
+fn gated_commands_drive_only_their_channel_and_the_recorder_sees_every_one() {
+    let mut device = RecordingDevice::new(display(3));
+    let mut envelopes = [envelope(), envelope(), envelope()];
+    let dt = 0.01;
+    let mut sent = Vec::new();
+    for n in 0..300 {
+        let now = n as f64 * dt;
+        for (channel, env) in envelopes.iter_mut().enumerate() {
+            let reading = device.read(channel).unwrap_or_else(|e| panic!("{e}"));
+            env.observe(&reading.measurement());
+            // Channel 0 heats, channel 1 cools, channel 2 is asked for nothing.
+            let request = [1.0, -1.0, 0.0][channel];
+            let command = env.gate_drive(now, request);
+            sent.push((now, channel, command.current_a()));
+            device.apply(channel, &command).unwrap_or_else(|e| panic!("{e}"));
+        }
+        device.advance(dt);
+    }
+    let record = device.commands();
+    assert_eq!(record.len(), 900);
+    assert!(record.iter().all(|c| c.accepted && c.fault.is_none()));
+    assert_eq!(
+        (
+            record[0].channel,
+            record[1].channel,
+            record[2].channel,
+            record[3].channel
+        ),
+        (0, 1, 2, 0)
+    );
+    assert!(
+        (record[899].time_s - 2.99).abs() < 1e-9,
+        "time of the last command {}",
+        record[899].time_s
+    );
+    for (c, &(now, channel, current_a)) in record.iter().zip(&sent) {
+        assert_eq!((c.channel, c.current_a), (channel, current_a), "command at {now} s");
+        assert!(
+            (c.time_s - now).abs() < 1e-9,
+            "recorded at {} s, sent at {now} s",
+            c.time_s
+        );
+    }
+    // The envelope passed the requests until the cooled channel reached its 15 °C minimum.
+    assert_eq!(
+        (record[0].current_a, record[1].current_a, record[2].current_a),
+        (1.0, -1.0, 0.0)
+    );
+    let (inner, _) = device.into_parts();
+    let plates: Vec<f64> = (0..3)
+        .map(|i| inner.channel(i).map_or(f64::NAN, |c| c.state().plate_c))
+        .collect();
+    assert!(
+        plates[0] > plates[2] + 1.0 && plates[1] < plates[2] - 1.0,
+        "plates {plates:?}"
+    );
+    let applied: Vec<f64> = (0..3)
+        .map(|i| inner.channel(i).map_or(f64::NAN, |c| c.state().applied_current_a))
+        .collect();
+    let last: Vec<f64> = sent[897..].iter().map(|s| s.2).collect();
+    assert_eq!(applied, last);
+}
+
+#[test]
+fn readings_match_the_channel_and_channels_have_their_own_noise() {
+    let mut d = display(2);
+    for _ in 0..50 {
+        d.advance(0.01);
+    }
+    let r = d.read(0).unwrap_or_else(|e| panic!("{e}"));
+    let state = *d.channel(0).map(|c| c.state()).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(
+        (r.sensor_c, r.time_s, r.sample_seq),
+        (state.sensor.value_c, state.sensor.time_s, state.sensor.seq)
+    );
+    assert!(
+        (r.hot_side_c - state.hot_side_c).abs() <= 0.005 + 1e-12,
+        "hot side {} vs {}",
+        r.hot_side_c,
+        state.hot_side_c
+    );
+    assert!(
+        (r.time_s - 0.5).abs() < 1e-9 && r.sample_seq == 50,
+        "sample {} at {}",
+        r.sample_seq,
+        r.time_s
+    );
+    let m = r.measurement();
+    assert_eq!(
+        (m.time_s, m.sensor_c, m.hot_side_c, m.sample_seq),
+        (r.time_s, r.sensor_c, r.hot_side_c, r.sample_seq)
+    );
+    // Identical channels with identical inputs differ only by their noise streams.
+    let noise = |d: &SimulatedDisplay<KronModel>, i: usize| {
+        d.channel(i)
+            .map_or(f64::NAN, |c| c.state().sensor.value_c - c.sensor().element_c())
+    };
+    let mut differ = 0;
+    for _ in 0..100 {
+        d.advance(0.01);
+        differ += usize::from(noise(&d, 0) != noise(&d, 1));
+        let (a, b) = (
+            d.channel(0).map(|c| c.state().plate_c),
+            d.channel(1).map(|c| c.state().plate_c),
+        );
+        assert_eq!(a, b, "identical channels drifted apart");
+    }
+    assert!(
+        differ > 80,
+        "the channels' noise coincided {} times of 100",
+        100 - differ
+    );
+}
+
+#[test]
+fn a_faulted_envelope_switches_the_drive_off() {
+    let mut d = RecordingDevice::new(display(1));
+    let mut env = envelope();
+    d.inner_mut()
+        .channel_mut(0)
+        .and_then(|c| c.inject(thermode_device::Fault::SensorOpen))
+        .unwrap_or_else(|e| panic!("{e}"));
+    for n in 0..20 {
+        let reading = d.read(0).unwrap_or_else(|e| panic!("{e}"));
+        env.observe(&reading.measurement());
+        let command = env.gate_drive(n as f64 * 0.01, -2.0);
+        d.apply(0, &command).unwrap_or_else(|e| panic!("{e}"));
+        d.advance(0.01);
+    }
+    let last = d
+        .commands()
+        .last()
+        .copied()
+        .unwrap_or_else(|| panic!("no command recorded"));
+    assert!(last.fault.is_some() && last.current_a == 0.0, "last command {last:?}");
+    assert_eq!(d.inner().channel(0).map(|c| c.state().applied_current_a), Ok(0.0));
+}

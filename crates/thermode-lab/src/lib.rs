@@ -1,0 +1,15 @@
+//! thermode-lab: material-identification experiments with a thermal display, and the paper's analysis of them.
+//!
+//! The founding paper (section 4) validates the display objectively, by comparing finger temperature curves for real
+//! and simulated contact (Figure 3), and subjectively, by asking blindfolded participants to identify materials that
+//! are either touched or rendered (Tables 2 and 3, a χ² test, the confusion correlation r = 0.90, Figure 4).
+//!
+//! - [`analysis`]: reads session CSVs (one row per trial, PsychoPy-like) and curve CSVs, computes every number of the
+//!   paper's section 4 ([`analysis::analyze`], [`analysis::analyze_curves`]) and writes JSON, Markdown and HTML
+//!   reports with figures ([`analysis::write_outputs`]).
+//! - [`error`]: the typed error [`LabError`] shared by the lab's modules.
+
+pub mod analysis;
+pub mod error;
+
+pub use error::LabError;

@@ -1,0 +1,583 @@
+//! [`FvModel`]: the finite-volume finger (and optional object) with its state, stepping, steady states,
+//! calibration, energy bookkeeping and the display-inverse interface.
+
+use std::cell::RefCell;
+
+use super::chain::{Arm, Bodies, Side, StepFlows, Work};
+use super::grid::{centres_m, stack_cells, SizeRule, MAX_CELLS};
+use super::{bad, DeepBoundary, FarSide, FvConfig, FvEnvironment, TimeScheme, ORIGIN};
+use crate::error::{require_finite, require_non_negative, ParamError};
+use crate::inverse::PlateCoupled;
+use crate::materials::Material;
+use crate::skin::Skin;
+
+/// Heat that crossed each boundary since the model was built or the ledger reset [J/m²], integrated consistently
+/// with the time-stepping scheme, so that
+/// `Δ skin energy = perfusion + metabolic + deep_in − skin_surface_out` and
+/// `Δ object energy = object_contact_in + object_far_side_in` hold to rounding.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct EnergyLedger {
+    /// Heat brought by perfusion, Σ ω ρ_b c_b Δx (T_art − T) integrated [J/m²] (negative when tissue is above T_art).
+    pub perfusion_j_m2: f64,
+    /// Metabolic heat, Σ q_m Δx integrated [J/m²].
+    pub metabolic_j_m2: f64,
+    /// Heat into the skin through the deep boundary [J/m²] (0 when insulated).
+    pub deep_in_j_m2: f64,
+    /// Heat out of the skin through its surface, to air, plate or object [J/m²].
+    pub skin_surface_out_j_m2: f64,
+    /// Heat into the object through its contact face [J/m²].
+    pub object_contact_in_j_m2: f64,
+    /// Heat into the object through its far side [J/m²] (0 when insulated).
+    pub object_far_side_in_j_m2: f64,
+}
+
+impl EnergyLedger {
+    fn record(&mut self, flows: StepFlows) {
+        self.perfusion_j_m2 += flows.skin.perfusion;
+        self.metabolic_j_m2 += flows.skin.metabolic;
+        self.deep_in_j_m2 += flows.skin.end_in;
+        self.skin_surface_out_j_m2 -= flows.skin.side_in;
+        self.object_contact_in_j_m2 += flows.object.side_in;
+        self.object_far_side_in_j_m2 += flows.object.end_in;
+    }
+}
+
+/// The finite-volume finger, optionally with a touched object. See the [module documentation](super).
+///
+/// A new model is uniform at the arterial temperature, in air at that temperature; set an initial state with
+/// [`set_steady`](Self::set_steady), [`set_steady_in_air`](Self::set_steady_in_air),
+/// [`set_skin_uniform`](Self::set_skin_uniform) or [`calibrate_to_surface`](Self::calibrate_to_surface).
+#[derive(Debug, Clone)]
+pub struct FvModel {
+    skin: Arm,
+    object: Option<Arm>,
+    contact_resistance_m2k_w: f64,
+    air_convection_w_m2k: f64,
+    scheme: TimeScheme,
+    skin_t: Vec<f64>,
+    object_t: Vec<f64>,
+    env: FvEnvironment,
+    ledger: EnergyLedger,
+    perfusion_scale: f64,
+    layer_count: usize,
+    work: RefCell<Work>,
+}
+
+impl FvModel {
+    /// Builds the grid for `skin` and, if given, the touched `object` (its `thickness_m` is the slab thickness).
+    /// Errors if `skin`, `object` or `config` fail their `validate` (non-finite or out-of-range numbers) or the grid
+    /// would have more than [`MAX_CELLS`] cells.
+    pub fn new(skin: &Skin, object: Option<&Material>, config: &FvConfig) -> Result<Self, ParamError> {
+        config.validate()?;
+        skin.validate("skin")?;
+        if let Some(material) = object {
+            material.validate(&format!("material `{}`", material.name))?;
+        }
+        let rule = SizeRule {
+            surface_m: config.surface_cell_m,
+            growth: config.growth,
+            max_m: config.max_cell_m,
+        };
+        let skin_arm = skin_arm(skin, rule, config.deep_boundary)?;
+        let object_arm = match object {
+            Some(material) => Some(object_arm(material, rule, config.far_side, MAX_CELLS - skin_arm.len())?),
+            None => None,
+        };
+        let arterial_c = skin.blood.arterial_c;
+        let object_cells = object_arm.as_ref().map_or(0, Arm::len);
+        Ok(FvModel {
+            skin_t: vec![arterial_c; skin_arm.len()],
+            object_t: vec![arterial_c; object_cells],
+            work: RefCell::new(Work::new(skin_arm.len(), object_cells)),
+            skin: skin_arm,
+            object: object_arm,
+            contact_resistance_m2k_w: config.contact_resistance_m2k_w,
+            air_convection_w_m2k: skin.air_convection_w_m2k,
+            scheme: config.scheme,
+            env: FvEnvironment::Air { ambient_c: arterial_c },
+            ledger: EnergyLedger::default(),
+            perfusion_scale: 1.0,
+            layer_count: skin.layers.len(),
+        })
+    }
+
+    // ----- grid -----
+
+    /// Number of skin cells.
+    pub fn skin_cells(&self) -> usize {
+        self.skin.len()
+    }
+
+    /// Number of object cells (0 without an object).
+    pub fn object_cells(&self) -> usize {
+        self.object.as_ref().map_or(0, Arm::len)
+    }
+
+    /// Depth of every skin cell centre below the skin surface \[m\], surface cell first.
+    pub fn skin_cell_centres_m(&self) -> &[f64] {
+        &self.skin.centre_m
+    }
+
+    /// Width of every skin cell \[m\], surface cell first.
+    pub fn skin_cell_widths_m(&self) -> &[f64] {
+        &self.skin.width_m
+    }
+
+    /// Index of the skin layer every skin cell belongs to (0 = outermost), surface cell first.
+    pub fn skin_cell_layers(&self) -> &[usize] {
+        &self.skin.layer
+    }
+
+    /// Width of every object cell \[m\], contact cell first (empty without object).
+    pub fn object_cell_widths_m(&self) -> &[f64] {
+        self.object.as_ref().map_or(&[], |o| &o.width_m)
+    }
+
+    /// Distance of every object cell centre from the contact face \[m\], contact cell first (empty without object).
+    pub fn object_cell_centres_m(&self) -> &[f64] {
+        self.object.as_ref().map_or(&[], |o| &o.centre_m)
+    }
+
+    // ----- state -----
+
+    /// Temperature of every skin cell \[°C\], surface cell first.
+    pub fn skin_temperatures_c(&self) -> &[f64] {
+        &self.skin_t
+    }
+
+    /// Temperature of every object cell \[°C\], contact cell first (empty without object).
+    pub fn object_temperatures_c(&self) -> &[f64] {
+        &self.object_t
+    }
+
+    /// The environment of the last step (or the one set by an initialiser or [`Self::set_environment`]).
+    pub fn environment(&self) -> FvEnvironment {
+        self.env
+    }
+
+    /// Declares what the surface is connected to without stepping; it decides [`Self::surface_c`] and the fluxes.
+    pub fn set_environment(&mut self, env: FvEnvironment) -> Result<(), ParamError> {
+        env.validate()?;
+        self.env = env;
+        Ok(())
+    }
+
+    /// The factor applied to every layer's perfusion (1 unless calibrated or set).
+    pub fn perfusion_scale(&self) -> f64 {
+        self.perfusion_scale
+    }
+
+    /// Multiplies every layer's `perfusion_per_s` by `scale` (≥ 0), as `Skin::with_perfusion_scaled` would.
+    pub fn set_perfusion_scale(&mut self, scale: f64) -> Result<(), ParamError> {
+        require_non_negative(ORIGIN, "perfusion_scale", scale)?;
+        self.perfusion_scale = scale;
+        self.skin.set_perfusion_scale(scale);
+        self.work.get_mut().invalidate();
+        Ok(())
+    }
+
+    /// Sets every skin cell to `temperature_c` \[°C\].
+    pub fn set_skin_uniform(&mut self, temperature_c: f64) -> Result<(), ParamError> {
+        require_finite(ORIGIN, "temperature_c", temperature_c)?;
+        self.skin_t.iter_mut().for_each(|t| *t = temperature_c);
+        Ok(())
+    }
+
+    /// Touches the object: it becomes uniform at `object_c` \[°C\] and the environment becomes
+    /// [`FvEnvironment::Object`]. Errors if the model has no object or `object_c` is not finite.
+    pub fn touch(&mut self, object_c: f64) -> Result<(), ParamError> {
+        require_finite(ORIGIN, "object_c", object_c)?;
+        if self.object.is_none() {
+            return Err(ParamError::Invalid {
+                origin: ORIGIN.to_string(),
+                message: "cannot touch: the model was built without an object".to_string(),
+            });
+        }
+        self.object_t.iter_mut().for_each(|t| *t = object_c);
+        self.env = FvEnvironment::Object;
+        Ok(())
+    }
+
+    /// Advances the state by `dt_s` \[s\] with the surface in `env`. Never fails and never allocates.
+    ///
+    /// `dt_s` must be finite and positive and `env` valid ([`FvEnvironment::validate`]); other values give
+    /// meaningless (possibly non-finite) temperatures. In [`FvEnvironment::Object`] skin and object are advanced
+    /// together; otherwise the object is left as it is.
+    pub fn step(&mut self, dt_s: f64, env: FvEnvironment) {
+        let side = self.side(env);
+        let bodies = Bodies::new(&self.skin, self.object.as_ref(), side);
+        let contact = matches!(side, Side::Contact { .. });
+        let work = self.work.get_mut();
+        let mut next_skin = std::mem::take(&mut work.next_skin);
+        let mut next_object = std::mem::take(&mut work.next_object);
+        let flows = bodies.advance(
+            self.scheme,
+            dt_s,
+            (&self.skin_t, &self.object_t),
+            (&mut next_skin, &mut next_object),
+            work,
+        );
+        std::mem::swap(&mut self.skin_t, &mut next_skin);
+        if contact {
+            std::mem::swap(&mut self.object_t, &mut next_object);
+        }
+        work.next_skin = next_skin;
+        work.next_object = next_object;
+        self.ledger.record(flows);
+        self.env = env;
+    }
+
+    /// Sets the steady state in `env` (solving the steady tridiagonal system directly). In
+    /// [`FvEnvironment::Object`] skin and object are solved together. Errors if `env` is invalid, there is no object
+    /// to touch, or no steady state exists (nothing holds the temperature: no perfusion, insulated deep boundary, and
+    /// no heat exchange at the surface with a held temperature).
+    pub fn set_steady(&mut self, env: FvEnvironment) -> Result<(), ParamError> {
+        env.validate()?;
+        if env == FvEnvironment::Object && self.object.is_none() {
+            return Err(ParamError::Invalid {
+                origin: ORIGIN.to_string(),
+                message: "no steady state in contact: the model was built without an object".to_string(),
+            });
+        }
+        let side = self.side(env);
+        if !self.grounded(side) {
+            return Err(ParamError::Invalid {
+                origin: ORIGIN.to_string(),
+                message: "no steady state: no perfusion, no held deep or far-side temperature and no heat exchange \
+                          at the surface"
+                    .to_string(),
+            });
+        }
+        let bodies = Bodies::new(&self.skin, self.object.as_ref(), side);
+        let object_len = if matches!(side, Side::Contact { .. }) {
+            self.object_t.len()
+        } else {
+            0
+        };
+        bodies.steady(
+            (&mut self.skin_t, &mut self.object_t[..object_len]),
+            self.work.get_mut(),
+        );
+        self.env = env;
+        Ok(())
+    }
+
+    /// Sets the steady state in air at `ambient_c` \[°C\] (the default initial state of a contact).
+    pub fn set_steady_in_air(&mut self, ambient_c: f64) -> Result<(), ParamError> {
+        self.set_steady(FvEnvironment::Air { ambient_c })
+    }
+
+    /// Calibrates the resting finger: finds the perfusion scale (a factor on every layer's perfusion, bisection to
+    /// 1e-9 °C) whose steady state in air at `ambient_c` has the skin surface at `surface_c` \[°C\], and leaves the
+    /// model in that state. Returns the scale. Errors, leaving the model unchanged, if the surface temperature cannot
+    /// be reached with a scale between 0 and 1e6.
+    pub fn calibrate_to_surface(&mut self, ambient_c: f64, surface_c: f64) -> Result<f64, ParamError> {
+        require_finite(ORIGIN, "ambient_c", ambient_c)?;
+        require_finite(ORIGIN, "surface_c", surface_c)?;
+        let saved = (
+            self.skin_t.clone(),
+            self.object_t.clone(),
+            self.env,
+            self.perfusion_scale,
+        );
+        let result = self.bisect_perfusion(ambient_c, surface_c);
+        if result.is_err() {
+            let (skin_t, object_t, env, scale) = saved;
+            self.skin_t = skin_t;
+            self.object_t = object_t;
+            self.env = env;
+            self.set_perfusion_scale(scale)?;
+        }
+        result
+    }
+
+    fn bisect_perfusion(&mut self, ambient_c: f64, target_c: f64) -> Result<f64, ParamError> {
+        const MAX_SCALE: f64 = 1e6;
+        let at = |model: &mut Self, scale: f64| -> Result<f64, ParamError> {
+            model.set_perfusion_scale(scale)?;
+            model.set_steady_in_air(ambient_c)?;
+            Ok(model.surface_c() - target_c)
+        };
+        let low_miss = at(self, 0.0)?;
+        if low_miss == 0.0 {
+            return Ok(0.0);
+        }
+        let (mut lo, mut hi) = (0.0, 1.0);
+        let mut high_miss = at(self, hi)?;
+        while high_miss != 0.0 && high_miss.signum() == low_miss.signum() {
+            if hi >= MAX_SCALE {
+                let reach = high_miss + target_c;
+                let message = format!(
+                    "must lie between {:.4} °C (no perfusion) and {reach:.4} °C (perfusion ×{MAX_SCALE:e}) for \
+                     this skin in air at {ambient_c} °C",
+                    low_miss + target_c
+                );
+                return Err(bad("surface_c", target_c, &message));
+            }
+            lo = hi;
+            hi *= 2.0;
+            high_miss = at(self, hi)?;
+        }
+        if high_miss == 0.0 {
+            return Ok(hi);
+        }
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            let miss = at(self, mid)?;
+            if miss.abs() < 1e-9 || hi - lo <= 1e-15 * hi {
+                return Ok(mid);
+            }
+            if miss.signum() == high_miss.signum() {
+                hi = mid;
+            } else {
+                lo = mid;
+            }
+        }
+        let mid = 0.5 * (lo + hi);
+        at(self, mid)?;
+        Ok(mid)
+    }
+
+    // ----- observables -----
+
+    /// Skin surface temperature \[°C\] — the temperature the receptors see: the face temperature from flux continuity
+    /// through the surface half cell (and the contact resistance, air film or plate contact) in the current
+    /// environment.
+    pub fn surface_c(&self) -> f64 {
+        let t0 = self.skin_t[0];
+        t0 - self.surface_heat_flux_w_m2() * self.skin.half_resistance()
+    }
+
+    /// Temperature of the object's contact face \[°C\] (the object side of the contact resistance), if there is an
+    /// object.
+    pub fn object_face_c(&self) -> Option<f64> {
+        let object = self.object.as_ref()?;
+        let q = match self.env {
+            FvEnvironment::Object => self.surface_heat_flux_w_m2(),
+            _ => 0.0,
+        };
+        Some(self.object_t[0] + q * object.half_resistance())
+    }
+
+    /// Heat flux out of the skin through its surface at the current state [W/m²] (positive when the skin loses heat).
+    pub fn surface_heat_flux_w_m2(&self) -> f64 {
+        match self.side(self.env) {
+            Side::Fixed { g, temp_c } => g * (self.skin_t[0] - temp_c),
+            Side::Contact { g } => g * (self.skin_t[0] - self.object_t[0]),
+        }
+    }
+
+    /// Heat flux into the object through its contact face at the current state [W/m²] (0 when not in contact).
+    pub fn object_heat_flux_w_m2(&self) -> f64 {
+        match self.side(self.env) {
+            Side::Contact { g } => g * (self.skin_t[0] - self.object_t[0]),
+            Side::Fixed { .. } => 0.0,
+        }
+    }
+
+    /// Heat stored in the skin, Σ ρ c Δx T [J/m²] (relative to 0 °C).
+    pub fn skin_energy_j_m2(&self) -> f64 {
+        self.skin.energy(&self.skin_t)
+    }
+
+    /// Heat stored in the object, Σ ρ c Δx T [J/m²] (relative to 0 °C; 0 without object).
+    pub fn object_energy_j_m2(&self) -> f64 {
+        self.object.as_ref().map_or(0.0, |o| o.energy(&self.object_t))
+    }
+
+    /// Heat that crossed each boundary since the model was built or the ledger was reset.
+    pub fn energy_ledger(&self) -> EnergyLedger {
+        self.ledger
+    }
+
+    /// Zeroes the [`EnergyLedger`].
+    pub fn reset_energy_ledger(&mut self) {
+        self.ledger = EnergyLedger::default();
+    }
+
+    /// Capacity-weighted mean temperature of every skin layer \[°C\], outermost first.
+    pub fn layer_means_c(&self) -> Vec<f64> {
+        let mut heat = vec![0.0; self.layer_count];
+        let mut capacity = vec![0.0; self.layer_count];
+        for ((layer, c), t) in self.skin.layer.iter().zip(&self.skin.capacity).zip(&self.skin_t) {
+            heat[*layer] += c * t;
+            capacity[*layer] += c;
+        }
+        heat.iter().zip(&capacity).map(|(h, c)| h / c).collect()
+    }
+
+    // ----- internals -----
+
+    /// The solver's view of an environment: a conductance from the centre of the surface cell.
+    fn side(&self, env: FvEnvironment) -> Side {
+        let r_half = self.skin.half_resistance();
+        match env {
+            FvEnvironment::Air { ambient_c } => Side::Fixed {
+                g: series(r_half, self.air_convection_w_m2k),
+                temp_c: ambient_c,
+            },
+            FvEnvironment::Plate {
+                conductance_w_m2k,
+                temperature_c,
+            } => Side::Fixed {
+                g: series(r_half, conductance_w_m2k),
+                temp_c: temperature_c,
+            },
+            FvEnvironment::Object => match &self.object {
+                Some(o) => Side::Contact {
+                    g: 1.0 / (r_half + self.contact_resistance_m2k_w + o.half_resistance()),
+                },
+                None => Side::Fixed { g: 0.0, temp_c: 0.0 },
+            },
+        }
+    }
+
+    /// Whether the steady system is non-singular: some path to a held temperature or perfusion.
+    fn grounded(&self, side: Side) -> bool {
+        let skin = self.skin.end_g > 0.0 || self.skin.perfusion.iter().any(|p| *p > 0.0);
+        let surface = match side {
+            Side::Fixed { g, .. } => g > 0.0,
+            Side::Contact { .. } => self.object.as_ref().is_some_and(|o| o.end_g > 0.0),
+        };
+        skin || surface
+    }
+
+    /// The surface temperature after one step on a plate at `plate_c`, written into a scratch state.
+    fn plate_trial(&self, dt_s: f64, conductance_w_m2k: f64, plate_c: f64, work: &mut Work, use_b: bool) -> f64 {
+        let g = series(self.skin.half_resistance(), conductance_w_m2k);
+        let bodies = Bodies::new(&self.skin, None, Side::Fixed { g, temp_c: plate_c });
+        let mut out = std::mem::take(if use_b {
+            &mut work.scratch_b
+        } else {
+            &mut work.scratch_a
+        });
+        bodies.advance(self.scheme, dt_s, (&self.skin_t, &[]), (&mut out, &mut []), work);
+        let surface = out[0] - g * (out[0] - plate_c) * self.skin.half_resistance();
+        if use_b {
+            work.scratch_b = out;
+        } else {
+            work.scratch_a = out;
+        }
+        surface
+    }
+}
+
+impl PlateCoupled for FvModel {
+    /// Exact: the step is linear in the plate temperature, so two trial steps (plate at 0 °C and 1 °C) on scratch
+    /// buffers give offset and slope.
+    fn receptor_affine(&self, dt_s: f64, conductance_w_m2k: f64) -> (f64, f64) {
+        let mut work = self.work.borrow_mut();
+        let at_zero = self.plate_trial(dt_s, conductance_w_m2k, 0.0, &mut work, false);
+        let at_one = self.plate_trial(dt_s, conductance_w_m2k, 1.0, &mut work, true);
+        (at_zero, at_one - at_zero)
+    }
+
+    fn step_on_plate(&mut self, dt_s: f64, conductance_w_m2k: f64, plate_c: f64) {
+        self.step(
+            dt_s,
+            FvEnvironment::Plate {
+                conductance_w_m2k,
+                temperature_c: plate_c,
+            },
+        );
+    }
+
+    fn receptor_c(&self) -> f64 {
+        self.surface_c()
+    }
+}
+
+/// Conductance of a half cell of resistance `r_half` in series with a conductance `g` [W/(m²·K)] (0 stays 0).
+fn series(r_half: f64, g: f64) -> f64 {
+    if g > 0.0 {
+        1.0 / (r_half + 1.0 / g)
+    } else {
+        0.0
+    }
+}
+
+fn skin_arm(skin: &Skin, rule: SizeRule, deep: DeepBoundary) -> Result<Arm, ParamError> {
+    let thicknesses: Vec<f64> = skin.layers.iter().map(|l| l.thickness_m).collect();
+    let (widths, layer) = stack_cells(rule, &thicknesses, MAX_CELLS)?;
+    let blood = skin.blood.density_kg_m3 * skin.blood.specific_heat_j_kgk;
+    let props = |f: &dyn Fn(&crate::skin::SkinLayer) -> f64| -> Vec<f64> {
+        layer.iter().map(|l| f(&skin.layers[*l])).collect()
+    };
+    let conductivity = props(&|l| l.conductivity_w_mk);
+    let volumetric = props(&|l| l.density_kg_m3 * l.specific_heat_j_kgk);
+    let perfusion = props(&|l| l.perfusion_per_s * blood);
+    let metabolic = props(&|l| l.metabolic_w_m3);
+    let end = match deep {
+        DeepBoundary::Insulated => None,
+        DeepBoundary::Core { temperature_c } => Some(temperature_c),
+    };
+    Ok(build_arm(
+        widths,
+        layer,
+        &conductivity,
+        &volumetric,
+        &perfusion,
+        &metabolic,
+        skin.blood.arterial_c,
+        end,
+    ))
+}
+
+fn object_arm(material: &Material, rule: SizeRule, far: FarSide, budget: usize) -> Result<Arm, ParamError> {
+    let (widths, layer) = stack_cells(rule, &[material.thickness_m], budget)?;
+    let n = widths.len();
+    let volumetric = material.density_kg_m3 * material.specific_heat_j_kgk;
+    let end = match far {
+        FarSide::Insulated => None,
+        FarSide::Held { temperature_c } => Some(temperature_c),
+    };
+    let zeros = vec![0.0; n];
+    Ok(build_arm(
+        widths,
+        layer,
+        &vec![material.conductivity_w_mk; n],
+        &vec![volumetric; n],
+        &zeros,
+        &zeros,
+        0.0,
+        end,
+    ))
+}
+
+/// Assembles an arm from per-cell properties: conductivity [W/(m·K)], ρc [J/(m³·K)], ω ρ_b c_b [W/(m³·K)] and
+/// q_m [W/m³]; `end_c` is the held far-end temperature, if any.
+#[allow(clippy::too_many_arguments)]
+fn build_arm(
+    width_m: Vec<f64>,
+    layer: Vec<usize>,
+    conductivity: &[f64],
+    volumetric: &[f64],
+    perfusion: &[f64],
+    metabolic: &[f64],
+    arterial_c: f64,
+    end_c: Option<f64>,
+) -> Arm {
+    let n = width_m.len();
+    let per_area = |v: &[f64]| -> Vec<f64> { v.iter().zip(&width_m).map(|(v, w)| v * w).collect() };
+    let link = (0..n.saturating_sub(1))
+        .map(|i| 1.0 / (0.5 * width_m[i] / conductivity[i] + 0.5 * width_m[i + 1] / conductivity[i + 1]))
+        .collect();
+    let end_g = end_c.map_or(0.0, |_| 2.0 * conductivity[n - 1] / width_m[n - 1]);
+    let mut arm = Arm {
+        centre_m: centres_m(&width_m),
+        capacity: per_area(volumetric),
+        perfusion_base: per_area(perfusion),
+        perfusion: vec![0.0; n],
+        metabolic: per_area(metabolic),
+        source: vec![0.0; n],
+        conductivity: conductivity.to_vec(),
+        link,
+        layer,
+        width_m,
+        arterial_c,
+        end_g,
+        end_c: end_c.unwrap_or(0.0),
+    };
+    arm.set_perfusion_scale(1.0);
+    arm
+}

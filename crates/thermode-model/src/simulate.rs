@@ -1,0 +1,413 @@
+//! One complete contact simulation, as `thermode simulate` runs it: a finger rests in air until t = 0, then touches
+//! an object; the chosen model gives the skin temperature the receptors see, and (for kron and fv) the display
+//! inverse gives the display set-point that would make a finger resting on the display feel the same.
+//!
+//! - `kron`: the paper's three-layer model; the receptor temperature is T1 (epidermis centre). Backward Euler with
+//!   the step `dt_s`.
+//! - `fv`: the finite-volume reference, refined automatically until the surface trajectory changes by less than
+//!   0.005 °C; the receptor temperature is the skin surface. Default contact resistance 1e-3 m²K/W (light touch).
+//! - `semi-infinite`: the paper's model (a), analytic. The skin is homogeneous with the properties of the skin's
+//!   outermost layer; its initial temperature is the resting surface temperature of the finite-volume finger (or the
+//!   given one). Default contact resistance 0 (perfect contact, as model (a) assumes).
+//!
+//! The display set-point is unlimited here (no safety envelope acts in a pure simulation): it is eq. 7 as it is.
+
+use std::str::FromStr;
+
+use crate::error::{require_finite, require_non_negative, require_positive, ParamError};
+use crate::fv::{self, FvConfig, FvEnvironment, FvModel, InitialState};
+use crate::inverse::{DisplayInverse, DEFAULT_DISPLAY_CONDUCTANCE_W_M2K};
+use crate::kron::{self, KronEnvironment, KronModel};
+use crate::materials::Material;
+use crate::semi_infinite;
+use crate::skin::Skin;
+
+const ORIGIN: &str = "simulation";
+
+/// Default contact resistance of the fv model [m²K/W]: a light touch (`model.md` §3; the paper's participants
+/// touched "without exerting pressure").
+pub const FV_DEFAULT_CONTACT_RESISTANCE_M2K_W: f64 = 1e-3;
+
+/// Which skin model runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ModelKind {
+    /// The paper's three-layer model (Kron).
+    Kron,
+    /// The finite-volume reference model.
+    Fv,
+    /// Two semi-infinite bodies (the paper's model (a)), analytic.
+    SemiInfinite,
+}
+
+impl ModelKind {
+    /// The contact resistance used when none is given [m²K/W]: 1e-3 for fv, 0 for the others (kron has none).
+    pub fn default_contact_resistance_m2k_w(self) -> f64 {
+        match self {
+            ModelKind::Fv => FV_DEFAULT_CONTACT_RESISTANCE_M2K_W,
+            ModelKind::Kron | ModelKind::SemiInfinite => 0.0,
+        }
+    }
+}
+
+/// The finger's state at the moment of contact.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Initial {
+    /// The steady state in air at the ambient temperature (default).
+    Steady,
+    /// Every layer at this temperature [°C].
+    Uniform(f64),
+    /// The steady state in air with the perfusion scaled so that the resting surface (receptor) temperature is this
+    /// [°C]: the per-participant calibration (the paper measured each subject's finger temperature).
+    Surface(f64),
+}
+
+impl FromStr for Initial {
+    type Err = ParamError;
+
+    /// Parses `steady`, `uniform:C` or `surface:C`.
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        let bad = |message: &str| ParamError::Invalid {
+            origin: "--initial".into(),
+            message: format!("`{text}`: {message}; expected steady, uniform:C or surface:C"),
+        };
+        let number = |value: &str| {
+            value
+                .trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| bad("not a finite temperature"))
+        };
+        match text.trim().split_once(':') {
+            None if text.trim() == "steady" => Ok(Initial::Steady),
+            Some(("uniform", value)) => number(value).map(Initial::Uniform),
+            Some(("surface", value)) => number(value).map(Initial::Surface),
+            _ => Err(bad("unknown initial state")),
+        }
+    }
+}
+
+/// Everything one simulation needs. Temperatures in °C, times in s.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimulationSpec {
+    /// The model. Default kron.
+    pub model: ModelKind,
+    /// The finger. Default [`Skin::fingertip`].
+    pub skin: Skin,
+    /// The touched object (its thickness is used).
+    pub material: Material,
+    /// Contact duration [s]. Default 90 (the paper's recordings).
+    pub duration_s: f64,
+    /// Output interval and kron time step [s]. Default 0.01.
+    pub dt_s: f64,
+    /// Air temperature [°C]. Default 23 (the paper's room).
+    pub ambient_c: f64,
+    /// Object temperature [°C]. Default: the ambient temperature.
+    pub object_c: f64,
+    /// The finger at the moment of contact. Default [`Initial::Steady`].
+    pub initial: Initial,
+    /// Contact resistance [m²K/W]; `None` takes [`ModelKind::default_contact_resistance_m2k_w`]. Kron has none and
+    /// refuses a non-zero value.
+    pub contact_resistance_m2k_w: Option<f64>,
+    /// Finger–display contact conductance G_d of the display inverse [W/(m²·K)]. Default 800.
+    pub display_conductance_w_m2k: f64,
+}
+
+impl SimulationSpec {
+    /// The defaults above for `material`.
+    pub fn new(model: ModelKind, material: Material) -> Self {
+        SimulationSpec {
+            model,
+            skin: Skin::fingertip(),
+            material,
+            duration_s: 90.0,
+            dt_s: 0.01,
+            ambient_c: 23.0,
+            object_c: 23.0,
+            initial: Initial::Steady,
+            contact_resistance_m2k_w: None,
+            display_conductance_w_m2k: DEFAULT_DISPLAY_CONDUCTANCE_W_M2K,
+        }
+    }
+
+    /// Checks every number and the combination of model and options.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        require_positive(ORIGIN, "duration_s", self.duration_s)?;
+        require_positive(ORIGIN, "dt_s", self.dt_s)?;
+        if self.dt_s > self.duration_s {
+            return Err(invalid(format!(
+                "dt_s = {} is longer than duration_s = {}",
+                self.dt_s, self.duration_s
+            )));
+        }
+        if self.duration_s / self.dt_s > 1e7 {
+            return Err(invalid(
+                "more than 1e7 steps: use a longer dt_s or a shorter duration_s".into(),
+            ));
+        }
+        require_finite(ORIGIN, "ambient_c", self.ambient_c)?;
+        require_finite(ORIGIN, "object_c", self.object_c)?;
+        require_positive(ORIGIN, "display_conductance_w_m2k", self.display_conductance_w_m2k)?;
+        if let Some(r) = self.contact_resistance_m2k_w {
+            require_non_negative(ORIGIN, "contact_resistance_m2k_w", r)?;
+            if self.model == ModelKind::Kron && r != 0.0 {
+                return Err(invalid(
+                    "the kron model has no contact resistance; use --model fv".into(),
+                ));
+            }
+        }
+        self.skin.validate(ORIGIN)?;
+        self.material.validate(ORIGIN)
+    }
+
+    fn contact_resistance(&self) -> f64 {
+        self.contact_resistance_m2k_w
+            .unwrap_or_else(|| self.model.default_contact_resistance_m2k_w())
+    }
+
+    /// Output times: 0, dt, 2dt, … with the last row exactly at the duration.
+    fn times_s(&self) -> Vec<f64> {
+        let intervals = (self.duration_s / self.dt_s - 1e-9).ceil().max(1.0) as usize;
+        (0..=intervals)
+            .map(|k| (k as f64 * self.dt_s).min(self.duration_s))
+            .collect()
+    }
+}
+
+fn invalid(message: String) -> ParamError {
+    ParamError::Invalid {
+        origin: ORIGIN.into(),
+        message,
+    }
+}
+
+/// A simulated trajectory: `time_s` and named columns of equal length, `skin_surface_c` first.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trace {
+    /// Time since contact [s]; the first row (t = 0) is the resting finger just before the touch.
+    pub time_s: Vec<f64>,
+    /// Named columns, units in the names; the first is `skin_surface_c`.
+    pub columns: Vec<(String, Vec<f64>)>,
+    /// A line describing the numerical resolution used (grid, step), for the log.
+    pub resolution: String,
+}
+
+impl Trace {
+    /// The column called `name`, if present.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        self.columns.iter().find(|(n, _)| n == name).map(|(_, v)| v.as_slice())
+    }
+
+    /// The receptor temperature (`skin_surface_c`) at `time_s`, linearly interpolated; `None` outside the run.
+    pub fn skin_surface_at(&self, time_s: f64) -> Option<f64> {
+        let surface = self.column("skin_surface_c")?;
+        let upper = self.time_s.iter().position(|&t| t >= time_s)?;
+        if upper == 0 {
+            return (self.time_s[0] == time_s).then_some(surface[0]);
+        }
+        let (t0, t1) = (self.time_s[upper - 1], self.time_s[upper]);
+        let w = (time_s - t0) / (t1 - t0);
+        Some(surface[upper - 1] + w * (surface[upper] - surface[upper - 1]))
+    }
+}
+
+/// Runs the simulation described by `spec`.
+pub fn simulate(spec: &SimulationSpec) -> Result<Trace, ParamError> {
+    spec.validate()?;
+    match spec.model {
+        ModelKind::Kron => simulate_kron(spec),
+        ModelKind::Fv => simulate_fv(spec),
+        ModelKind::SemiInfinite => simulate_semi_infinite(spec),
+    }
+}
+
+/// The skin the model runs with: calibrated by perfusion when a resting surface temperature is requested.
+fn kron_initial(spec: &SimulationSpec) -> Result<KronModel, ParamError> {
+    let air = KronEnvironment::Air {
+        ambient_c: spec.ambient_c,
+    };
+    let mut model = match spec.initial {
+        Initial::Surface(surface_c) => {
+            KronModel::new(&kron::calibrate_to_surface(&spec.skin, spec.ambient_c, surface_c)?)?
+        }
+        _ => KronModel::new(&spec.skin)?,
+    };
+    match spec.initial {
+        Initial::Uniform(c) => model.set_temperatures_c([c; 3]),
+        Initial::Steady | Initial::Surface(_) => model.settle(&air),
+    }
+    Ok(model)
+}
+
+fn simulate_kron(spec: &SimulationSpec) -> Result<Trace, ParamError> {
+    let mut finger = kron_initial(spec)?;
+    let object = KronEnvironment::touching(&spec.material, spec.object_c);
+    object.validate(ORIGIN)?;
+    let air = KronEnvironment::Air {
+        ambient_c: spec.ambient_c,
+    };
+    let mut display = DisplayInverse::new(finger.clone(), spec.display_conductance_w_m2k)?;
+    let times = spec.times_s();
+    let mut layers: [Vec<f64>; 3] = std::array::from_fn(|_| Vec::with_capacity(times.len()));
+    let mut flux = Vec::with_capacity(times.len());
+    let mut setpoint = Vec::with_capacity(times.len());
+    let mut display_finger = Vec::with_capacity(times.len());
+    let mut record = |finger: &KronModel, env: &KronEnvironment, setpoint_c: f64, on_display_c: f64| {
+        for (column, t) in layers.iter_mut().zip(finger.temperatures_c()) {
+            column.push(t);
+        }
+        flux.push(finger.heat_flux_to_env_w_m2(env));
+        setpoint.push(setpoint_c);
+        display_finger.push(on_display_c);
+    };
+    let resting_setpoint = resting_display_c(finger.temperatures_c()[0], finger.heat_flux_to_env_w_m2(&air), spec);
+    record(&finger, &air, resting_setpoint, display.receptor_c());
+    for pair in times.windows(2) {
+        let h = pair[1] - pair[0];
+        finger.step(h, &object);
+        let setpoint_c = display.setpoint_c(finger.temperatures_c()[0], h);
+        display.advance(h, setpoint_c);
+        record(&finger, &object, setpoint_c, display.receptor_c());
+    }
+    let names = spec.skin.layers.iter().map(|l| format!("{}_c", column_name(&l.name)));
+    let [t1, t2, t3] = layers;
+    let mut columns = vec![("skin_surface_c".to_string(), t1.clone())];
+    columns.extend(names.zip([t1, t2, t3]));
+    columns.push(("heat_flux_w_m2".into(), flux));
+    columns.push(("display_setpoint_c".into(), setpoint));
+    columns.push(("display_finger_c".into(), display_finger));
+    Ok(Trace {
+        time_s: times,
+        columns,
+        resolution: format!("kron, backward Euler, step {} s", spec.dt_s),
+    })
+}
+
+/// The plate temperature that draws the resting heat flux `flux_w_m2` from a finger whose receptor is at
+/// `receptor_c`: the display rendering air.
+fn resting_display_c(receptor_c: f64, flux_w_m2: f64, spec: &SimulationSpec) -> f64 {
+    receptor_c - flux_w_m2 / spec.display_conductance_w_m2k
+}
+
+fn fv_initial(spec: &SimulationSpec) -> InitialState {
+    match spec.initial {
+        Initial::Steady => InitialState::SteadyInAir,
+        Initial::Uniform(temperature_c) => InitialState::Uniform { temperature_c },
+        Initial::Surface(surface_c) => InitialState::RestingSurface { surface_c },
+    }
+}
+
+/// The finite-volume finger alone (no object), prepared as the simulation's finger is before contact.
+fn fv_resting_finger(spec: &SimulationSpec, config: &FvConfig) -> Result<FvModel, ParamError> {
+    let mut finger = FvModel::new(&spec.skin, None, config)?;
+    match spec.initial {
+        Initial::Steady => finger.set_steady_in_air(spec.ambient_c)?,
+        Initial::Uniform(c) => {
+            finger.set_skin_uniform(c)?;
+            finger.set_environment(FvEnvironment::Air {
+                ambient_c: spec.ambient_c,
+            })?;
+        }
+        Initial::Surface(surface_c) => {
+            finger.calibrate_to_surface(spec.ambient_c, surface_c)?;
+        }
+    }
+    Ok(finger)
+}
+
+fn simulate_fv(spec: &SimulationSpec) -> Result<Trace, ParamError> {
+    let base = FvConfig {
+        contact_resistance_m2k_w: spec.contact_resistance(),
+        ..FvConfig::default()
+    };
+    let contact = fv::ContactSpec {
+        ambient_c: spec.ambient_c,
+        object_c: spec.object_c,
+        initial: fv_initial(spec),
+        duration_s: spec.duration_s,
+        output_dt_s: spec.dt_s,
+    };
+    let (run, resolution) =
+        fv::simulate_contact_converged(&spec.skin, &spec.material, &base, &contact, &fv::Refinement::default())?;
+    let config = base.refined(resolution.refinements);
+    let mut display = DisplayInverse::new(fv_resting_finger(spec, &config)?, spec.display_conductance_w_m2k)?;
+    let mut setpoint = Vec::with_capacity(run.time_s.len());
+    let mut display_finger = Vec::with_capacity(run.time_s.len());
+    setpoint.push(resting_display_c(run.surface_c[0], run.heat_flux_w_m2[0], spec));
+    display_finger.push(display.receptor_c());
+    for (k, pair) in run.time_s.windows(2).enumerate() {
+        let h = pair[1] - pair[0];
+        let setpoint_c = display.setpoint_c(run.surface_c[k + 1], h);
+        display.advance(h, setpoint_c);
+        setpoint.push(setpoint_c);
+        display_finger.push(display.receptor_c());
+    }
+    let mut columns = vec![("skin_surface_c".to_string(), run.surface_c.clone())];
+    for (i, layer) in spec.skin.layers.iter().enumerate() {
+        let mean = run.layer_mean_c.iter().map(|row| row[i]).collect();
+        columns.push((format!("{}_mean_c", column_name(&layer.name)), mean));
+    }
+    columns.push(("object_face_c".into(), run.object_face_c.clone()));
+    columns.push(("heat_flux_w_m2".into(), run.heat_flux_w_m2.clone()));
+    columns.push(("display_setpoint_c".into(), setpoint));
+    columns.push(("display_finger_c".into(), display_finger));
+    let resolution = format!(
+        "fv, {} skin + {} object cells, first cell {:.1} µm, step {} s, {} refinements, last change {:.4} °C{}",
+        resolution.skin_cells,
+        resolution.object_cells,
+        resolution.surface_cell_m * 1e6,
+        resolution.step_s,
+        resolution.refinements,
+        resolution.max_change_c,
+        if resolution.converged { "" } else { " (NOT converged)" }
+    );
+    Ok(Trace {
+        time_s: run.time_s,
+        columns,
+        resolution,
+    })
+}
+
+fn simulate_semi_infinite(spec: &SimulationSpec) -> Result<Trace, ParamError> {
+    let outer = &spec.skin.layers[0];
+    let skin_e = crate::units::effusivity(outer.conductivity_w_mk, outer.density_kg_m3, outer.specific_heat_j_kgk);
+    let object_e = spec.material.effusivity();
+    let finger = fv_resting_finger(spec, &FvConfig::default())?;
+    let skin_c = finger.surface_c();
+    let resting_flux = spec.skin.air_convection_w_m2k * (skin_c - spec.ambient_c);
+    let r_c = spec.contact_resistance();
+    let times = spec.times_s();
+    let surface: Vec<f64> = times
+        .iter()
+        .map(|&t| semi_infinite::surface_temperature_c(skin_e, skin_c, object_e, spec.object_c, r_c, t))
+        .collect();
+    let flux = times
+        .iter()
+        .map(|&t| {
+            if t <= 0.0 {
+                resting_flux
+            } else {
+                semi_infinite::surface_heat_flux_w_m2(skin_e, skin_c, object_e, spec.object_c, r_c, t)
+            }
+        })
+        .collect();
+    let columns = vec![("skin_surface_c".to_string(), surface), ("heat_flux_w_m2".into(), flux)];
+    Ok(Trace {
+        time_s: times,
+        columns,
+        resolution: format!("semi-infinite, analytic, skin effusivity {skin_e:.0} (outermost layer), R_c {r_c} m²K/W"),
+    })
+}
+
+/// A layer name as a CSV column stem: lower case, anything but letters and digits as `_`.
+fn column_name(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() {
+                c.to_ascii_lowercase()
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}

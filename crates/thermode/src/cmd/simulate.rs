@@ -1,0 +1,231 @@
+//! `thermode simulate`: a finger rests in air, touches one or more materials at t = 0, and the chosen skin model
+//! gives the receptor temperature (and, for kron and fv, the display set-point of paper eq. 7). Writes a CSV, a plot
+//! like the paper's Figure 3, and prints the temperatures at 1, 5, 10, 30 and 90 s.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use thermode_model::materials::{self, Material};
+use thermode_model::simulate::{simulate, Initial, ModelKind, SimulationSpec, Trace};
+use thermode_model::skin::Skin;
+use thermode_plot::{write_figure, Figure, Panel, Series, SeriesStyle};
+
+use crate::output::{print_stdout, write_atomically};
+
+/// The skin model to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ModelArg {
+    /// The paper's three-layer model (Kron); receptor = epidermis centre.
+    Kron,
+    /// The finite-volume reference (object heat capacity, contact resistance), refined until grid-independent.
+    Fv,
+    /// Two semi-infinite bodies, analytic (the paper's model (a)).
+    SemiInfinite,
+}
+
+impl From<ModelArg> for ModelKind {
+    fn from(arg: ModelArg) -> Self {
+        match arg {
+            ModelArg::Kron => ModelKind::Kron,
+            ModelArg::Fv => ModelKind::Fv,
+            ModelArg::SemiInfinite => ModelKind::SemiInfinite,
+        }
+    }
+}
+
+/// Arguments of `thermode simulate`.
+#[derive(Args, Debug)]
+pub struct SimulateArgs {
+    /// Material from the library (see `thermode materials`); repeat for several; `all-paper` = the paper's five.
+    #[arg(long = "material", value_name = "NAME", required_unless_present = "material_files")]
+    materials: Vec<String>,
+    /// A material file (TOML); repeatable.
+    #[arg(long = "material-file", value_name = "FILE")]
+    material_files: Vec<PathBuf>,
+    /// Skin model.
+    #[arg(long, value_enum, default_value = "kron")]
+    model: ModelArg,
+    /// Skin file (TOML); default: the built-in fingertip.
+    #[arg(long, value_name = "FILE")]
+    skin: Option<PathBuf>,
+    /// Contact duration [s].
+    #[arg(long, value_name = "S", default_value_t = 90.0)]
+    duration: f64,
+    /// Output interval and kron time step [s].
+    #[arg(long, value_name = "S", default_value_t = 0.01)]
+    dt: f64,
+    /// Air temperature [°C].
+    #[arg(long, value_name = "C", default_value_t = 23.0, allow_negative_numbers = true)]
+    ambient: f64,
+    /// Object temperature [°C]; default: the ambient temperature.
+    #[arg(long = "object-temp", value_name = "C", allow_negative_numbers = true)]
+    object_temp: Option<f64>,
+    /// Finger at contact: steady (in air at ambient), uniform:C (every layer at C), surface:C (calibrated so the
+    /// resting surface is at C).
+    #[arg(long, value_name = "STATE", default_value = "steady")]
+    initial: String,
+    /// Contact resistance skin–object [m²K/W]; default 1e-3 for fv (light touch), 0 for semi-infinite; kron has none.
+    #[arg(long = "contact-resistance", value_name = "M2K_W")]
+    contact_resistance: Option<f64>,
+    /// Conductance between the model's receptor node and the display plate for the display inverse [W/m²K].
+    #[arg(long = "display-conductance", value_name = "W_M2K", default_value_t = thermode_model::inverse::DEFAULT_DISPLAY_CONDUCTANCE_W_M2K)]
+    display_conductance: f64,
+    /// Write the trajectory as CSV (one row per step; a `material` column names the material).
+    #[arg(long, value_name = "FILE.csv")]
+    out: Option<PathBuf>,
+    /// Draw skin temperature against time (.svg or .png).
+    #[arg(long, value_name = "FILE")]
+    plot: Option<PathBuf>,
+}
+
+/// Times at which the summary reports the receptor temperature [s].
+const SUMMARY_TIMES_S: [f64; 5] = [1.0, 5.0, 10.0, 30.0, 90.0];
+
+/// Runs `thermode simulate`.
+pub fn run(args: &SimulateArgs) -> Result<()> {
+    let materials = resolve_materials(args)?;
+    let skin = match &args.skin {
+        Some(path) => Skin::from_toml_str(&read(path)?, &path.display().to_string())?,
+        None => Skin::fingertip(),
+    };
+    let initial: Initial = args.initial.parse()?;
+    let mut traces = Vec::with_capacity(materials.len());
+    for material in materials {
+        let spec = SimulationSpec {
+            model: args.model.into(),
+            skin: skin.clone(),
+            duration_s: args.duration,
+            dt_s: args.dt,
+            ambient_c: args.ambient,
+            object_c: args.object_temp.unwrap_or(args.ambient),
+            initial,
+            contact_resistance_m2k_w: args.contact_resistance,
+            display_conductance_w_m2k: args.display_conductance,
+            ..SimulationSpec::new(args.model.into(), material.clone())
+        };
+        let trace = simulate(&spec).with_context(|| format!("simulating {}", material.name))?;
+        eprintln!("{}: {}", material.name, trace.resolution);
+        traces.push((material, trace));
+    }
+    if let Some(path) = &args.out {
+        write_csv(path, &traces)?;
+    }
+    if let Some(path) = &args.plot {
+        write_plot(path, &traces, args.model)?;
+    }
+    print_stdout(&summary(&traces))
+}
+
+fn read(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))
+}
+
+/// The library materials named on the command line (with `all-paper` expanded) followed by the material files.
+fn resolve_materials(args: &SimulateArgs) -> Result<Vec<Material>> {
+    let mut out = Vec::new();
+    for name in &args.materials {
+        if name == "all-paper" {
+            out.extend(materials::paper_materials());
+        } else {
+            out.push(materials::find(name)?);
+        }
+    }
+    for path in &args.material_files {
+        out.push(Material::from_toml_str(&read(path)?, &path.display().to_string())?);
+    }
+    if out.is_empty() {
+        bail!("no material given: use --material NAME or --material-file FILE");
+    }
+    Ok(out)
+}
+
+fn write_csv(path: &Path, traces: &[(Material, Trace)]) -> Result<()> {
+    let (_, first) = &traces[0];
+    let mut header = vec!["time_s".to_string()];
+    header.extend(first.columns.iter().map(|(name, _)| name.clone()));
+    header.push("material".into());
+    write_atomically(path, |sink| {
+        let mut writer = csv::Writer::from_writer(sink);
+        writer.write_record(&header)?;
+        let mut record = Vec::with_capacity(header.len());
+        for (material, trace) in traces {
+            for (row, time_s) in trace.time_s.iter().enumerate() {
+                record.clear();
+                record.push(time_s.to_string());
+                record.extend(trace.columns.iter().map(|(_, values)| values[row].to_string()));
+                record.push(material.name.clone());
+                writer.write_record(&record)?;
+            }
+        }
+        writer.flush()?;
+        Ok(())
+    })
+}
+
+fn write_plot(path: &Path, traces: &[(Material, Trace)], model: ModelArg) -> Result<()> {
+    let mut series = Vec::new();
+    for (index, (material, trace)) in traces.iter().enumerate() {
+        let curve = |name: &str| {
+            let values = trace.column(name).unwrap_or_default();
+            trace
+                .time_s
+                .iter()
+                .copied()
+                .zip(values.iter().copied())
+                .collect::<Vec<_>>()
+        };
+        series.push(Series::new(
+            material.name.as_str(),
+            curve("skin_surface_c"),
+            SeriesStyle::Line,
+            index,
+        ));
+        if traces.len() == 1 && trace.column("display_setpoint_c").is_some() {
+            series.push(Series::new(
+                "display set-point",
+                curve("display_setpoint_c"),
+                SeriesStyle::Dashed,
+                index + 1,
+            ));
+        }
+    }
+    let model_name = model
+        .to_possible_value()
+        .map(|v| v.get_name().to_string())
+        .unwrap_or_default();
+    let panel = Panel {
+        title: format!("Skin temperature on contact ({model_name} model)"),
+        x_label: "time since contact [s]".into(),
+        y_label: "receptor temperature [°C]".into(),
+        series,
+        ..Panel::default()
+    };
+    write_figure(&Figure::single(panel), path).with_context(|| format!("cannot write {}", path.display()))
+}
+
+/// A table of the receptor temperature at the summary times, one row per material.
+fn summary(traces: &[(Material, Trace)]) -> String {
+    let mut out = format!("{:<16} {:>9} {:>8}", "material", "effusivity", "t=0");
+    for t in SUMMARY_TIMES_S {
+        out.push_str(&format!(" {:>8}", format!("{t} s")));
+    }
+    out.push_str("   (receptor temperature, °C)\n");
+    for (material, trace) in traces {
+        let start = trace.skin_surface_at(0.0).unwrap_or(f64::NAN);
+        out.push_str(&format!(
+            "{:<16} {:>9.0} {:>8.2}",
+            material.name,
+            material.effusivity(),
+            start
+        ));
+        for t in SUMMARY_TIMES_S {
+            match trace.skin_surface_at(t) {
+                Some(value) => out.push_str(&format!(" {value:>8.2}")),
+                None => out.push_str(&format!(" {:>8}", "-")),
+            }
+        }
+        out.push('\n');
+    }
+    out
+}
