@@ -93,9 +93,9 @@ pub struct HeatFlows {
 pub struct ChannelState {
     /// Time since the channel started \[s\].
     pub time_s: f64,
-    /// True plate (display) temperature [°C].
+    /// True plate (display) temperature \[°C\].
     pub plate_c: f64,
-    /// True hot-side temperature [°C].
+    /// True hot-side temperature \[°C\].
     pub hot_side_c: f64,
     /// The latest PT-100 sample.
     pub sensor: SensorSample,
@@ -103,7 +103,7 @@ pub struct ChannelState {
     pub commanded_current_a: f64,
     /// Current the drive delivered in the last step \[A\].
     pub applied_current_a: f64,
-    /// The finger's receptor temperature [°C].
+    /// The finger's receptor temperature \[°C\].
     pub receptor_c: f64,
     /// Mean heat flows over the last step.
     pub flows: HeatFlows,
@@ -169,7 +169,7 @@ impl<F: PlateFinger> SimulatedChannel<F> {
         SimulatedChannel::new(config, finger, ChaCha8Rng::seed_from_u64(seed))
     }
 
-    /// Sets the plate and hot-side temperatures [°C]; the sensor element follows the plate. Both must be finite.
+    /// Sets the plate and hot-side temperatures \[°C\]; the sensor element follows the plate. Both must be finite.
     pub fn set_temperatures(&mut self, plate_c: f64, hot_side_c: f64) -> Result<(), DeviceError> {
         for (what, value) in [
             ("plate temperature [°C]", plate_c),
@@ -325,7 +325,7 @@ impl<F: PlateFinger> SimulatedChannel<F> {
         &self.state
     }
 
-    /// The box sensor's reading of the hot side [°C]: the hot-side temperature quantised to the sensor resolution
+    /// The box sensor's reading of the hot side \[°C\]: the hot-side temperature quantised to the sensor resolution
     /// (a second sensor on the box; no lag, no noise, unaffected by PT-100 faults).
     pub fn hot_side_reading_c(&self) -> f64 {
         quantise(self.state.hot_side_c, self.config.sensor.resolution_c)

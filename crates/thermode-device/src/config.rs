@@ -39,9 +39,9 @@ pub struct HotSideConfig {
 pub struct SensorConfig {
     /// First-order lag of the sensor behind the plate temperature \[s\]; 0 = no lag. Default 0.3.
     pub time_constant_s: f64,
-    /// Standard deviation of the Gaussian measurement noise [°C]; 0 = none. Default 0.02.
+    /// Standard deviation of the Gaussian measurement noise \[°C\]; 0 = none. Default 0.02.
     pub noise_c: f64,
-    /// Quantisation step of the reading [°C]; 0 = none. Default 0.01.
+    /// Quantisation step of the reading \[°C\]; 0 = none. Default 0.01.
     pub resolution_c: f64,
     /// Sampling rate \[Hz\]; the reading is held between samples. Default 100.
     pub sample_rate_hz: f64,
@@ -57,7 +57,7 @@ pub struct DriveConfig {
 /// The surroundings (section `\[ambient\]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AmbientConfig {
-    /// Temperature of the cooling water [°C] (held at ambient by the radiator). Default 23.
+    /// Temperature of the cooling water \[°C\] (held at ambient by the radiator). Default 23.
     pub water_c: f64,
 }
 

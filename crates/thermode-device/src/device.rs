@@ -21,10 +21,10 @@ pub const MAX_CHANNELS: usize = 10;
 /// One reading of a channel's sensors.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Reading {
-    /// Display (plate) temperature from the PT-100 [°C]: lagged, noisy, quantised, held between samples; fault
+    /// Display (plate) temperature from the PT-100 \[°C\]: lagged, noisy, quantised, held between samples; fault
     /// values when the sensor is open or shorted.
     pub sensor_c: f64,
-    /// Hot-side temperature from the box sensor [°C].
+    /// Hot-side temperature from the box sensor \[°C\].
     pub hot_side_c: f64,
     /// When the PT-100 sample was taken \[s\] (device clock: the sum of [`Device::advance`] steps).
     pub time_s: f64,

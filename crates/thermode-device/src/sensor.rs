@@ -13,11 +13,11 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::config::SensorConfig;
 
-/// What an open PT-100 reads [°C]: the top of the IEC 60751 range (850 °C, ≈ 390 Ω), where a typical front end
+/// What an open PT-100 reads \[°C\]: the top of the IEC 60751 range (850 °C, ≈ 390 Ω), where a typical front end
 /// saturates when the element's resistance goes to infinity.
 pub const SENSOR_OPEN_READING_C: f64 = 850.0;
 
-/// What a shorted PT-100 reads [°C]: the temperature at which the IEC 60751 (Callendar–Van Dusen) curve of a
+/// What a shorted PT-100 reads \[°C\]: the temperature at which the IEC 60751 (Callendar–Van Dusen) curve of a
 /// PT-100 reaches 0 Ω, about −242 °C.
 pub const SENSOR_SHORT_READING_C: f64 = -242.0;
 
@@ -38,7 +38,7 @@ pub enum SensorCondition {
 /// One sample of the sensor as the acquisition delivers it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SensorSample {
-    /// The reading [°C]: lagged, noisy and quantised, or a fault value.
+    /// The reading \[°C\]: lagged, noisy and quantised, or a fault value.
     pub value_c: f64,
     /// Time of the sample since the sensor started \[s\].
     pub time_s: f64,
@@ -51,7 +51,7 @@ pub struct SensorSample {
 pub struct Pt100 {
     config: SensorConfig,
     sample_period_s: f64,
-    /// Temperature of the sensing element [°C] (the lagged plate temperature).
+    /// Temperature of the sensing element \[°C\] (the lagged plate temperature).
     element_c: f64,
     /// Time since start \[s\].
     time_s: f64,
@@ -63,7 +63,7 @@ pub struct Pt100 {
 }
 
 impl Pt100 {
-    /// A sensor whose element starts at `initial_c` [°C], taking its first sample at time 0. `config` must be valid
+    /// A sensor whose element starts at `initial_c` \[°C\], taking its first sample at time 0. `config` must be valid
     /// (see [`crate::DeviceConfig::validate`]); `rng` supplies the noise (seed it explicitly).
     pub fn new(config: &SensorConfig, initial_c: f64, rng: ChaCha8Rng) -> Self {
         let mut sensor = Pt100 {
@@ -89,7 +89,7 @@ impl Pt100 {
         Pt100::new(config, initial_c, ChaCha8Rng::seed_from_u64(seed))
     }
 
-    /// Advances by `dt_s` \[s\] while the plate temperature goes linearly from `from_c` to `to_c` [°C], taking every
+    /// Advances by `dt_s` \[s\] while the plate temperature goes linearly from `from_c` to `to_c` \[°C\], taking every
     /// sample whose instant falls in the step. A step that is not finite and positive does nothing.
     pub fn advance(&mut self, dt_s: f64, from_c: f64, to_c: f64) {
         if !(dt_s.is_finite() && dt_s > 0.0) {
@@ -158,7 +158,7 @@ impl Pt100 {
         self.latest
     }
 
-    /// Temperature of the sensing element [°C] (the noiseless lagged plate temperature).
+    /// Temperature of the sensing element \[°C\] (the noiseless lagged plate temperature).
     pub fn element_c(&self) -> f64 {
         self.element_c
     }
@@ -178,7 +178,7 @@ impl Pt100 {
         self.condition = condition;
     }
 
-    /// Sets the element temperature [°C] (e.g. when the plant is started at another state).
+    /// Sets the element temperature \[°C\] (e.g. when the plant is started at another state).
     pub fn set_element_c(&mut self, element_c: f64) {
         self.element_c = element_c;
     }

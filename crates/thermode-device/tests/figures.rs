@@ -34,7 +34,7 @@ fn initial_rate<F: PlateFinger + Clone>(ch: &SimulatedChannel<F>, current_a: f64
     (measured, predicted)
 }
 
-/// Time [s] until the plate reaches `target_c` at `current_a` (None within 20 s).
+/// Time \[s\] until the plate reaches `target_c` at `current_a` (None within 20 s).
 fn time_to<F: PlateFinger>(mut ch: SimulatedChannel<F>, current_a: f64, target_c: f64) -> Option<f64> {
     let start = ch.state().time_s;
     for _ in 0..20_000 {
@@ -46,7 +46,7 @@ fn time_to<F: PlateFinger>(mut ch: SimulatedChannel<F>, current_a: f64, target_c
     None
 }
 
-/// Hot-side rise [K] over 90 s of full cooling, and the final hot-side temperature minus the water temperature
+/// Hot-side rise \[K\] over 90 s of full cooling, and the final hot-side temperature minus the water temperature
 /// against q_h/G_w (the hot side's steady state).
 fn hot_side_after_90_s<F: PlateFinger>(mut ch: SimulatedChannel<F>) -> (f64, f64, f64, f64) {
     let start = ch.state().hot_side_c;

@@ -23,10 +23,10 @@ pub trait PlateCoupled {
     /// that T_receptor = offset_c + slope · T_d. `conductance_w_m2k` is G_d [W/(m²·K)]. Does not change the state.
     fn receptor_affine(&self, dt_s: f64, conductance_w_m2k: f64) -> (f64, f64);
 
-    /// Advances the state by one step of `dt_s` \[s\] with the plate at `plate_c` [°C] through `conductance_w_m2k`.
+    /// Advances the state by one step of `dt_s` \[s\] with the plate at `plate_c` \[°C\] through `conductance_w_m2k`.
     fn step_on_plate(&mut self, dt_s: f64, conductance_w_m2k: f64, plate_c: f64);
 
-    /// The current receptor temperature [°C].
+    /// The current receptor temperature \[°C\].
     fn receptor_c(&self) -> f64;
 }
 
@@ -48,8 +48,8 @@ impl<M: PlateCoupled> DisplayInverse<M> {
         })
     }
 
-    /// The display temperature T_d^s [°C] that, held for the next step of `dt_s` \[s\], brings the finger-on-display
-    /// receptor temperature to `target_c` [°C]: the solution of offset + slope · T_d = target. Unlimited: the
+    /// The display temperature T_d^s \[°C\] that, held for the next step of `dt_s` \[s\], brings the finger-on-display
+    /// receptor temperature to `target_c` \[°C\]: the solution of offset + slope · T_d = target. Unlimited: the
     /// caller limits it (safety envelope) and reports the value really applied to [`DisplayInverse::advance`].
     /// Does not change the state. `dt_s` must be a positive finite number; otherwise the result is NaN (no plate
     /// temperature acts in zero time).
@@ -61,7 +61,7 @@ impl<M: PlateCoupled> DisplayInverse<M> {
         (target_c - offset_c) / slope
     }
 
-    /// Continues the finger-on-display model by one step of `dt_s` \[s\] with the plate at `applied_plate_c` [°C], the
+    /// Continues the finger-on-display model by one step of `dt_s` \[s\] with the plate at `applied_plate_c` \[°C\], the
     /// value really applied (after limiting).
     pub fn advance(&mut self, dt_s: f64, applied_plate_c: f64) {
         self.model.step_on_plate(dt_s, self.conductance_w_m2k, applied_plate_c);
@@ -72,7 +72,7 @@ impl<M: PlateCoupled> DisplayInverse<M> {
         &self.model
     }
 
-    /// The finger-on-display receptor temperature now [°C].
+    /// The finger-on-display receptor temperature now \[°C\].
     pub fn receptor_c(&self) -> f64 {
         self.model.receptor_c()
     }

@@ -1,6 +1,6 @@
 //! The paper's three-layer skin model (after Kron, paper eq. 1–6; `model.md` §1), stepped by backward Euler.
 //!
-//! State: T1, T2, T3 [°C], the centre temperatures of epidermis, dermis and subcutis. Per unit area:
+//! State: T1, T2, T3 \[°C\], the centre temperatures of epidermis, dermis and subcutis. Per unit area:
 //!
 //! - capacity `C_n = ρ_n c_n Δx_n` [J/(m²·K)];
 //! - conductance between layer centres `G_ab = 2 / (Δx_a/k_a + Δx_b/k_b)` [W/(m²·K)] (the paper's K, eq. 1);
@@ -34,16 +34,16 @@ use crate::inverse::PlateCoupled;
 use crate::materials::Material;
 use crate::skin::Skin;
 
-/// Ambient temperature [°C] of the paper's experiments (mean 23 °C); the initial state of [`KronModel::new`] is
+/// Ambient temperature \[°C\] of the paper's experiments (mean 23 °C); the initial state of [`KronModel::new`] is
 /// the steady state in air at this temperature.
 pub const DEFAULT_AMBIENT_C: f64 = 23.0;
 
 /// What the epidermis exchanges heat with.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum KronEnvironment {
-    /// Still air at `ambient_c` [°C]; the conductance is the skin's `air_convection_w_m2k`.
+    /// Still air at `ambient_c` \[°C\]; the conductance is the skin's `air_convection_w_m2k`.
     Air {
-        /// Air temperature [°C].
+        /// Air temperature \[°C\].
         ambient_c: f64,
     },
     /// An object held at `temperature_c`, conductance `2/(Δx_1/k_1 + thickness_m/conductivity_w_mk)`.
@@ -52,20 +52,20 @@ pub enum KronEnvironment {
         conductivity_w_mk: f64,
         /// Object thickness Δx_env \[m\].
         thickness_m: f64,
-        /// Object temperature T_env [°C].
+        /// Object temperature T_env \[°C\].
         temperature_c: f64,
     },
     /// A display plate at `temperature_c` through the finger–display contact conductance.
     Plate {
         /// Finger–display contact conductance G_d [W/(m²·K)].
         conductance_w_m2k: f64,
-        /// Plate temperature T_d [°C].
+        /// Plate temperature T_d \[°C\].
         temperature_c: f64,
     },
 }
 
 impl KronEnvironment {
-    /// Touching `material` (its conductivity and thickness) held at `temperature_c` [°C].
+    /// Touching `material` (its conductivity and thickness) held at `temperature_c` \[°C\].
     pub fn touching(material: &Material, temperature_c: f64) -> Self {
         KronEnvironment::Object {
             conductivity_w_mk: material.conductivity_w_mk,
@@ -74,7 +74,7 @@ impl KronEnvironment {
         }
     }
 
-    /// The environment's temperature T_env [°C].
+    /// The environment's temperature T_env \[°C\].
     pub fn temperature_c(&self) -> f64 {
         match *self {
             KronEnvironment::Air { ambient_c } => ambient_c,
@@ -207,12 +207,12 @@ impl KronModel {
         &self.skin
     }
 
-    /// Current temperatures [T1, T2, T3] [°C].
+    /// Current temperatures [T1, T2, T3] \[°C\].
     pub fn temperatures_c(&self) -> [f64; 3] {
         self.temperatures_c
     }
 
-    /// Sets the state [T1, T2, T3] [°C] (e.g. `uniform:C` initial conditions).
+    /// Sets the state [T1, T2, T3] \[°C\] (e.g. `uniform:C` initial conditions).
     pub fn set_temperatures_c(&mut self, temperatures_c: [f64; 3]) {
         self.temperatures_c = temperatures_c;
     }
@@ -270,7 +270,7 @@ impl KronModel {
         self.temperatures_c = a.implicit(self.capacity_j_m2k, dt_s).solve(rhs);
     }
 
-    /// The steady state [T1, T2, T3] [°C] in `env`: the direct solution of `A T + b = 0`. Does not change the state.
+    /// The steady state [T1, T2, T3] \[°C\] in `env`: the direct solution of `A T + b = 0`. Does not change the state.
     pub fn steady_state_c(&self, env: &KronEnvironment) -> [f64; 3] {
         self.steady_state_scaled_c(env, 1.0)
     }
@@ -333,7 +333,7 @@ impl PlateCoupled for KronModel {
 /// measured each subject's initial finger temperature).
 ///
 /// Returns the skin with every layer's perfusion scaled by one factor f such that the steady state of the
-/// three-layer model in still air at `ambient_c` [°C] has T1 = `surface_c` [°C]. T1 rises monotonically with f
+/// three-layer model in still air at `ambient_c` \[°C\] has T1 = `surface_c` \[°C\]. T1 rises monotonically with f
 /// (more arterial heat), from its value without perfusion (f = 0) towards a limit below T_art (f → ∞, perfused
 /// layers at T_art); f is found by bisection on g = f/(1+f) ∈ [0, 1) to machine precision. Errors: non-finite
 /// inputs, a skin the model refuses, no perfused layer, ambient not below T_art, or `surface_c` outside the

@@ -118,7 +118,7 @@ impl PeltierDatasheet {
 pub struct PeltierModule {
     /// Module Seebeck coefficient S [V/K] (all couples in series). Default module: 6.37 mV/K.
     pub seebeck_v_k: f64,
-    /// Electrical resistance R [Ω]. Default module: 0.515 Ω.
+    /// Electrical resistance R \[Ω\]. Default module: 0.515 Ω.
     pub resistance_ohm: f64,
     /// Thermal conductance between the two faces K [W/K]. Default module: 28.0 mW/K.
     pub conductance_w_k: f64,
@@ -138,7 +138,7 @@ pub struct AffineHeat {
 }
 
 impl AffineHeat {
-    /// Evaluates the flow \[W\] at display and hot-side temperatures [°C].
+    /// Evaluates the flow \[W\] at display and hot-side temperatures \[°C\].
     pub fn at(&self, display_c: f64, hot_c: f64) -> f64 {
         self.constant_w + self.display_w_k * display_c + self.hot_w_k * hot_c
     }
@@ -179,7 +179,7 @@ impl PeltierModule {
     }
 
     /// Heat flowing into the display face \[W\] at `current_a` \[A\] (positive heats the display), with the display at
-    /// `display_c` and the hot side at `hot_c` [°C]: S I T_d + ½ I² R + K (T_h − T_d).
+    /// `display_c` and the hot side at `hot_c` \[°C\]: S I T_d + ½ I² R + K (T_h − T_d).
     pub fn heat_into_display_w(&self, current_a: f64, display_c: f64, hot_c: f64) -> f64 {
         let i = current_a;
         self.seebeck_v_k * i * kelvin(display_c)
@@ -204,7 +204,7 @@ impl PeltierModule {
         self.voltage_v(current_a, display_c, hot_c) * current_a
     }
 
-    /// [`PeltierModule::heat_into_display_w`] at `current_a` as an affine function of the face temperatures [°C].
+    /// [`PeltierModule::heat_into_display_w`] at `current_a` as an affine function of the face temperatures \[°C\].
     pub fn display_heat_affine(&self, current_a: f64) -> AffineHeat {
         let (s, i, k) = (self.seebeck_v_k, current_a, self.conductance_w_k);
         AffineHeat {
@@ -214,7 +214,7 @@ impl PeltierModule {
         }
     }
 
-    /// [`PeltierModule::heat_into_hot_side_w`] at `current_a` as an affine function of the face temperatures [°C].
+    /// [`PeltierModule::heat_into_hot_side_w`] at `current_a` as an affine function of the face temperatures \[°C\].
     pub fn hot_heat_affine(&self, current_a: f64) -> AffineHeat {
         let (s, i, k) = (self.seebeck_v_k, current_a, self.conductance_w_k);
         AffineHeat {
@@ -251,7 +251,7 @@ impl PeltierModule {
     }
 
     /// The most heat the module can pull out of the display \[W\] with the current limited to `current_limit_a` \[A\]
-    /// (magnitude), at the given face temperatures [°C]: at the optimum cooling current, or at the limit if that is
+    /// (magnitude), at the given face temperatures \[°C\]: at the optimum cooling current, or at the limit if that is
     /// smaller. Negative when the temperature difference is too large to cool at all.
     pub fn max_cooling_w(&self, current_limit_a: f64, display_c: f64, hot_c: f64) -> f64 {
         let best = self.optimum_cooling_current_a(display_c).max(-current_limit_a.abs());

@@ -9,7 +9,7 @@
 
 use std::f64::consts::PI;
 
-/// Contact temperature of two semi-infinite bodies in perfect contact [°C].
+/// Contact temperature of two semi-infinite bodies in perfect contact \[°C\].
 pub fn interface_temperature_c(
     skin_effusivity: f64,
     skin_initial_c: f64,
@@ -19,7 +19,7 @@ pub fn interface_temperature_c(
     (skin_effusivity * skin_initial_c + object_effusivity * object_initial_c) / (skin_effusivity + object_effusivity)
 }
 
-/// Temperature inside the skin at depth `depth_m` (m) and time `time_s` (s) after perfect contact [°C].
+/// Temperature inside the skin at depth `depth_m` (m) and time `time_s` (s) after perfect contact \[°C\].
 /// `skin_diffusivity_m2_s` is a_s = k/(ρc). At t ≤ 0 the skin is still at its initial temperature.
 pub fn skin_temperature_at_depth_c(
     interface_c: f64,

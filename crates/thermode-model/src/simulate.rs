@@ -54,10 +54,10 @@ impl ModelKind {
 pub enum Initial {
     /// The steady state in air at the ambient temperature (default).
     Steady,
-    /// Every layer at this temperature [°C].
+    /// Every layer at this temperature \[°C\].
     Uniform(f64),
     /// The steady state in air with the perfusion scaled so that the resting surface (receptor) temperature is this
-    /// [°C]: the per-participant calibration (the paper measured each subject's finger temperature).
+    /// \[°C\]: the per-participant calibration (the paper measured each subject's finger temperature).
     Surface(f64),
 }
 
@@ -96,13 +96,13 @@ pub struct SimulationSpec {
     pub skin: Skin,
     /// The touched object (its thickness is used).
     pub material: Material,
-    /// Contact duration [s]. Default 90 (the paper's recordings).
+    /// Contact duration \[s\]. Default 90 (the paper's recordings).
     pub duration_s: f64,
-    /// Output interval and kron time step [s]. Default 0.01.
+    /// Output interval and kron time step \[s\]. Default 0.01.
     pub dt_s: f64,
-    /// Air temperature [°C]. Default 23 (the paper's room).
+    /// Air temperature \[°C\]. Default 23 (the paper's room).
     pub ambient_c: f64,
-    /// Object temperature [°C]. Default: the ambient temperature.
+    /// Object temperature \[°C\]. Default: the ambient temperature.
     pub object_c: f64,
     /// The finger at the moment of contact. Default [`Initial::Steady`].
     pub initial: Initial,
@@ -184,7 +184,7 @@ fn invalid(message: String) -> ParamError {
 /// A simulated trajectory: `time_s` and named columns of equal length, `skin_surface_c` first.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Trace {
-    /// Time since contact [s]; the first row (t = 0) is the resting finger just before the touch.
+    /// Time since contact \[s\]; the first row (t = 0) is the resting finger just before the touch.
     pub time_s: Vec<f64>,
     /// Named columns, units in the names; the first is `skin_surface_c`.
     pub columns: Vec<(String, Vec<f64>)>,

@@ -21,7 +21,7 @@ pub struct SkinLayer {
     pub density_kg_m3: f64,
     /// Specific heat capacity c [J/(kg·K)].
     pub specific_heat_j_kgk: f64,
-    /// Blood perfusion rate ω_b [1/s] (volume of blood per volume of tissue per second, Pennes). Default 0.
+    /// Blood perfusion rate ω_b \[1/s\] (volume of blood per volume of tissue per second, Pennes). Default 0.
     pub perfusion_per_s: f64,
     /// Metabolic heat q_m [W/m³]. Default 0.
     pub metabolic_w_m3: f64,
@@ -30,7 +30,7 @@ pub struct SkinLayer {
 /// Arterial blood (Pennes' bio-heat term).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Blood {
-    /// Arterial blood temperature T_art [°C]; the paper uses 36.8 °C.
+    /// Arterial blood temperature T_art \[°C\]; the paper uses 36.8 °C.
     pub arterial_c: f64,
     /// Blood density ρ_b [kg/m³].
     pub density_kg_m3: f64,
@@ -49,14 +49,14 @@ pub struct Skin {
     pub air_convection_w_m2k: f64,
 }
 
-/// Arterial blood temperature [°C], as in the paper (its refs. [17, 22]).
+/// Arterial blood temperature \[°C\], as in the paper (its refs. [17, 22]).
 pub const ARTERIAL_C: f64 = 36.8;
 
 /// Heat transfer coefficient from a resting finger to still room air, natural convection plus linearised radiation
 /// [W/(m²·K)] (`model.md` §1: about 10 W/m²K; roughly 4–5 convective plus 5–6 radiative at skin temperature).
 pub const AIR_CONVECTION_W_M2K: f64 = 10.0;
 
-/// Perfusion of the default fingertip's subcutis [1/s] (≈ 12.8 ml blood per 100 ml tissue per minute).
+/// Perfusion of the default fingertip's subcutis \[1/s\] (≈ 12.8 ml blood per 100 ml tissue per minute).
 ///
 /// Chosen so that the three-layer (Kron) model of [`Skin::fingertip`] at steady state in still air at 23 °C has an
 /// epidermis temperature T1 of 32.0 °C, a typical fingertip at room temperature. Closed form: the heat lost to air
@@ -70,7 +70,7 @@ impl Skin {
     /// The default fingertip: three layers (epidermis, dermis, subcutis) with perfusion in the deepest layer only,
     /// as in the paper.
     ///
-    /// | layer | Δx \[mm\] | k [W/m·K] | ρ [kg/m³] | c [J/kg·K] | ω [1/s] |
+    /// | layer | Δx \[mm\] | k [W/m·K] | ρ [kg/m³] | c [J/kg·K] | ω \[1/s\] |
     /// |---|---|---|---|---|---|
     /// | epidermis | 0.5 | 0.21 | 1150 | 3600 | 0 |
     /// | dermis | 1.5 | 0.37 | 1116 | 3224 | 0 |

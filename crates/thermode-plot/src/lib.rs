@@ -96,9 +96,9 @@ pub struct Figure {
     pub panels: Vec<Panel>,
     /// Panels per row (at least 1).
     pub columns: usize,
-    /// Width of one panel [px]. Default 800.
+    /// Width of one panel (px). Default 800.
     pub panel_width_px: u32,
-    /// Height of one panel [px]. Default 500.
+    /// Height of one panel (px). Default 500.
     pub panel_height_px: u32,
 }
 

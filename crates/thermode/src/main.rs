@@ -2,6 +2,9 @@
 //!
 //! Every error is printed as one clear message on standard error and ends the program with exit code 2.
 
+// Doc comments here double as `--help` text, where units are written in brackets (`[s]`), not as links.
+#![allow(rustdoc::broken_intra_doc_links)]
+
 mod cmd;
 mod output;
 

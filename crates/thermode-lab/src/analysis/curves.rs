@@ -3,7 +3,7 @@
 //!
 //! Curve CSV columns (header names trimmed, case-insensitive):
 //! - `time_s` — time since contact \[s\], strictly increasing within a curve;
-//! - a temperature [°C], the first present of [`TEMPERATURE_COLUMNS`]: `skin_c`, `skin_surface_c`, `truth_skin_c`,
+//! - a temperature \[°C\], the first present of [`TEMPERATURE_COLUMNS`]: `skin_c`, `skin_surface_c`, `truth_skin_c`,
 //!   `target_skin_c`;
 //! - `material` — a library material name; `condition` — `real` or `simulated`;
 //! - optional `repetition` — rows with the same (file, condition, material, repetition) form one curve; without the
@@ -25,7 +25,7 @@ use super::data::{Condition, CsvTable, MaterialInfo, MaterialResolver};
 use super::stats;
 use crate::error::LabError;
 
-/// Accepted temperature column names [°C], in order of preference.
+/// Accepted temperature column names \[°C\], in order of preference.
 pub const TEMPERATURE_COLUMNS: [&str; 4] = ["skin_c", "skin_surface_c", "truth_skin_c", "target_skin_c"];
 /// Length of the window for the initial slope \[s\]: 2.
 pub const INITIAL_SLOPE_WINDOW_S: f64 = 2.0;
@@ -58,9 +58,9 @@ pub struct MaterialCurves {
     pub real: Option<ConditionCurve>,
     /// The simulated curves, if any.
     pub simulated: Option<ConditionCurve>,
-    /// √(mean over the grid of (simulated − real)²) of the mean curves [°C]; `null` unless both conditions exist.
+    /// √(mean over the grid of (simulated − real)²) of the mean curves \[°C\]; `null` unless both conditions exist.
     pub rms_difference_c: Option<f64>,
-    /// Simulated − real mean temperature at `end_s` [°C]; `null` unless both conditions exist.
+    /// Simulated − real mean temperature at `end_s` \[°C\]; `null` unless both conditions exist.
     pub endpoint_difference_c: Option<f64>,
 }
 
@@ -69,9 +69,9 @@ pub struct MaterialCurves {
 pub struct ConditionCurve {
     /// Number of curves (repetitions) averaged.
     pub repetitions: usize,
-    /// Mean temperature at `start_s` [°C].
+    /// Mean temperature at `start_s` \[°C\].
     pub start_c: f64,
-    /// Mean temperature at `end_s` [°C].
+    /// Mean temperature at `end_s` \[°C\].
     pub endpoint_c: f64,
     /// Least-squares slope over the first [`INITIAL_SLOPE_WINDOW_S`] seconds [°C/s]; `null` with fewer than two
     /// sample times in the window.
