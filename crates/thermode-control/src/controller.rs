@@ -30,6 +30,13 @@ pub struct ControlInput {
     /// The current the envelope actually let through on the previous tick, A (0 at start). Observers and
     /// anti-windup schemes should use this rather than their own previous request.
     pub applied_current_a: f64,
+    /// The receptor temperature of the finger model resting on the display (the display inverse's model), °C;
+    /// `None` when no finger model runs (direct set-point mode on real hardware without a model).
+    pub finger_receptor_c: Option<f64>,
+    /// Conductance from that receptor node to the plate over the contact area, W/K (receptor conductance per area
+    /// times the contact area), so the heat the finger gives the plate is
+    /// `finger_conductance_w_k · (finger_receptor_c − T_plate)`. 0 when unknown.
+    pub finger_conductance_w_k: f64,
 }
 
 /// A display temperature controller: one requested current per tick.
@@ -44,6 +51,13 @@ pub trait Controller {
 
     /// Forgets all internal state (filters, integrators, observers), as after a restart.
     fn reset(&mut self);
+
+    /// The controller's best estimate of the true display (plate) temperature after its last update, °C, if it
+    /// has one (an observer). The pipeline advances the display inverse's finger model with this value — what the
+    /// finger really receives — instead of the set-point; `None` (the paper's way) advances it with the set-point.
+    fn plate_estimate_c(&self) -> Option<f64> {
+        None
+    }
 }
 
 /// The paper's controller: sensor → first-order low-pass → PID (derivative on the filtered measurement).

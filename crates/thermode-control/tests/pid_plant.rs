@@ -66,6 +66,8 @@ fn input(setpoint_c: f64, sensor_c: f64) -> ControlInput {
         sensor_c,
         hot_side_c: 25.0,
         applied_current_a: 0.0,
+        finger_receptor_c: None,
+        finger_conductance_w_k: 0.0,
     }
 }
 

@@ -1,0 +1,325 @@
+//! The stimulus seam: what happens while the finger touches a material, real or rendered.
+//!
+//! The runner asks a [`Stimulus`] to present one material in one condition for the presentation time and gets back
+//! a [`TrialMeasurement`]: the finger temperature at the start and at the end and, if the stimulus has it, the skin
+//! temperature curve. A lab with a display implements [`Stimulus`] over its device (the display/runtime pipeline:
+//! render the material on the Peltier element for a simulated trial, read the finger sensor for a real one).
+//!
+//! Until that pipeline exists, [`ModelStimulus`] stands in for both conditions: it computes the skin surface
+//! temperature of real contact with the finite-volume model of finger and object ([`FvContact`], the physically
+//! true curve of `thermode_model::fv`). Real and simulated trials therefore give the same curve; the name says so.
+
+use std::collections::HashMap;
+
+use serde_json::json;
+use thermode_model::fv::{simulate_contact, ContactSpec, FvConfig, FvModel, InitialState};
+use thermode_model::materials::Material;
+use thermode_model::skin::Skin;
+use thermode_model::ParamError;
+use thiserror::Error;
+
+use crate::analysis::Condition;
+use crate::observer::{standard_normal, trial_rng};
+
+/// Why a stimulus could not be presented or measured.
+#[derive(Debug, Error)]
+pub enum StimulusError {
+    /// The thermal model refused its parameters.
+    #[error("stimulus model: {0}")]
+    Model(#[from] ParamError),
+    /// The device failed (message from the device layer).
+    #[error("stimulus device: {0}")]
+    Device(String),
+    /// The measurement is unusable (non-finite temperature, malformed curve, …).
+    #[error("stimulus measurement: {0}")]
+    BadMeasurement(String),
+    /// A stimulus setting is out of range.
+    #[error("stimulus setting `{key}` = {value}: {requirement}")]
+    BadSetting {
+        /// The setting.
+        key: &'static str,
+        /// The value given.
+        value: f64,
+        /// What is required.
+        requirement: &'static str,
+    },
+}
+
+/// A skin surface temperature curve: `skin_c[i]` at `time_s[i]` seconds after the touch.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SkinCurve {
+    /// Time since the touch \[s\], starting at 0, strictly increasing.
+    pub time_s: Vec<f64>,
+    /// Skin surface temperature \[°C\].
+    pub skin_c: Vec<f64>,
+}
+
+impl SkinCurve {
+    /// Checks: at least two samples, equal lengths, finite values, times strictly increasing from 0.
+    pub fn validate(&self) -> Result<(), StimulusError> {
+        let bad = |m: &str| Err(StimulusError::BadMeasurement(format!("skin curve: {m}")));
+        if self.time_s.len() != self.skin_c.len() {
+            return bad("time and temperature columns differ in length");
+        }
+        if self.time_s.len() < 2 {
+            return bad("fewer than two samples");
+        }
+        if self.time_s.iter().chain(&self.skin_c).any(|v| !v.is_finite()) {
+            return bad("a value is not finite");
+        }
+        if self.time_s[0] != 0.0 || self.time_s.windows(2).any(|w| w[1] <= w[0]) {
+            return bad("times must start at 0 and increase");
+        }
+        Ok(())
+    }
+
+    /// The temperature at `t_s` by linear interpolation (clamped to the curve's ends). Call on a validated curve.
+    pub fn at(&self, t_s: f64) -> f64 {
+        let i = self.time_s.partition_point(|&t| t <= t_s);
+        if i == 0 {
+            return self.skin_c[0];
+        }
+        if i >= self.time_s.len() {
+            return self.skin_c[self.skin_c.len() - 1];
+        }
+        let (t0, t1) = (self.time_s[i - 1], self.time_s[i]);
+        let w = (t_s - t0) / (t1 - t0);
+        self.skin_c[i - 1] + w * (self.skin_c[i] - self.skin_c[i - 1])
+    }
+}
+
+/// What a stimulus reports about one presentation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrialMeasurement {
+    /// Finger (skin surface) temperature just before the touch \[°C\].
+    pub finger_start_c: f64,
+    /// Finger temperature at the end of the presentation \[°C\].
+    pub finger_end_c: f64,
+    /// The skin temperature curve of the presentation, if the stimulus records one.
+    pub curve: Option<SkinCurve>,
+}
+
+impl TrialMeasurement {
+    /// Checks that the temperatures are finite and the curve (if any) is valid.
+    pub fn validate(&self) -> Result<(), StimulusError> {
+        if !(self.finger_start_c.is_finite() && self.finger_end_c.is_finite()) {
+            return Err(StimulusError::BadMeasurement(format!(
+                "finger temperatures {} / {} °C are not finite",
+                self.finger_start_c, self.finger_end_c
+            )));
+        }
+        self.curve.as_ref().map_or(Ok(()), SkinCurve::validate)
+    }
+}
+
+/// One presentation asked of a [`Stimulus`].
+#[derive(Debug, Clone, Copy)]
+pub struct StimulusRequest<'a> {
+    /// The material to present.
+    pub material: &'a Material,
+    /// Real (the experimenter placed the sample) or simulated (render it on the display).
+    pub condition: Condition,
+    /// Presentation time \[s\].
+    pub duration_s: f64,
+    /// 0-based index of the participant in the design.
+    pub participant_index: usize,
+    /// 1-based trial number.
+    pub trial: usize,
+}
+
+/// Presents a material to the finger and measures it. Implementations may take the presentation time themselves
+/// (a device running in real time); the runner waits for whatever remains of it.
+pub trait Stimulus {
+    /// Presents `request.material` in `request.condition` and returns the measurement.
+    fn present(&mut self, request: &StimulusRequest) -> Result<TrialMeasurement, StimulusError>;
+}
+
+/// Real contact of the finger with a material under the finite-volume model (`thermode_model::fv`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FvContact {
+    /// The finger. Default [`Skin::fingertip`].
+    pub skin: Skin,
+    /// Grid and boundaries. Default [`FvConfig::default`] (perfect contact; its surface curve changes by less than
+    /// 0.005 °C when the grid is refined, for the paper's materials over 30 s).
+    pub config: FvConfig,
+    /// Room temperature, which the resting finger is in steady state with \[°C\]. Default 23 (the paper's room).
+    pub ambient_c: f64,
+    /// Temperature of the sample at the touch \[°C\]. Default 23 (samples at room temperature).
+    pub object_c: f64,
+    /// Interval between curve samples \[s\]. Default 0.05.
+    pub output_dt_s: f64,
+}
+
+impl Default for FvContact {
+    fn default() -> Self {
+        FvContact {
+            skin: Skin::fingertip(),
+            config: FvConfig::default(),
+            ambient_c: 23.0,
+            object_c: 23.0,
+            output_dt_s: 0.05,
+        }
+    }
+}
+
+impl FvContact {
+    /// The skin surface curve of touching `material` for `duration_s`, the finger resting at `finger_start_c`
+    /// (perfusion calibrated to it) or, with `None`, in its steady state in air.
+    pub fn curve(
+        &self,
+        material: &Material,
+        finger_start_c: Option<f64>,
+        duration_s: f64,
+    ) -> Result<SkinCurve, ParamError> {
+        let initial = match finger_start_c {
+            None => InitialState::SteadyInAir,
+            Some(surface_c) => InitialState::RestingSurface { surface_c },
+        };
+        let spec = ContactSpec {
+            ambient_c: self.ambient_c,
+            object_c: self.object_c,
+            initial,
+            duration_s,
+            output_dt_s: self.output_dt_s,
+        };
+        let run = simulate_contact(&self.skin, material, &self.config, &spec)?;
+        Ok(SkinCurve {
+            time_s: run.time_s,
+            skin_c: run.surface_c,
+        })
+    }
+
+    /// The resting finger's skin surface temperature: steady state in air at `ambient_c` \[°C\].
+    pub fn resting_surface_c(&self) -> Result<f64, ParamError> {
+        let mut model = FvModel::new(&self.skin, None, &self.config)?;
+        model.set_steady_in_air(self.ambient_c)?;
+        Ok(model.surface_c())
+    }
+}
+
+/// Seed salt of the finger drift of [`ModelStimulus`] (so that it never shares a random stream with the observer).
+const DRIFT_SALT: u64 = 0x6472_6966_7400_0001;
+
+/// The stand-in stimulus: both conditions are real contact under the fv model ([`FvContact`]).
+///
+/// The finger starts each trial at its resting temperature plus, if `finger_drift_sd_c` > 0, a Gaussian offset
+/// drawn per (participant, trial) from a ChaCha8 stream of `seed` — so a resumed session sees the same fingers.
+/// Curves are cached per (material, start temperature).
+#[derive(Debug, Clone)]
+pub struct ModelStimulus {
+    contact: FvContact,
+    finger_drift_sd_c: f64,
+    seed: u64,
+    resting_c: f64,
+    cache: HashMap<(String, u64), SkinCurve>,
+}
+
+impl ModelStimulus {
+    /// A model stimulus; `finger_drift_sd_c` \[°C\] (≥ 0, default choice 0) is the standard deviation of the
+    /// finger's start temperature around its resting value from trial to trial.
+    pub fn new(contact: FvContact, finger_drift_sd_c: f64, seed: u64) -> Result<ModelStimulus, StimulusError> {
+        if !(finger_drift_sd_c.is_finite() && finger_drift_sd_c >= 0.0) {
+            return Err(StimulusError::BadSetting {
+                key: "finger_drift_sd_c",
+                value: finger_drift_sd_c,
+                requirement: "must be a finite number not below 0",
+            });
+        }
+        let resting_c = contact.resting_surface_c()?;
+        Ok(ModelStimulus {
+            contact,
+            finger_drift_sd_c,
+            seed,
+            resting_c,
+            cache: HashMap::new(),
+        })
+    }
+
+    /// The finger's resting surface temperature \[°C\].
+    pub fn resting_c(&self) -> f64 {
+        self.resting_c
+    }
+
+    /// A description for the session sidecar's device configuration.
+    pub fn describe(&self) -> serde_json::Value {
+        json!({
+            "stimulus": "ModelStimulus",
+            "note": "no display hardware: real and simulated trials are both real contact under the \
+                     finite-volume model (thermode_model::fv); finger temperatures are the model's",
+            "ambient_c": self.contact.ambient_c,
+            "object_c": self.contact.object_c,
+            "resting_finger_c": self.resting_c,
+            "finger_drift_sd_c": self.finger_drift_sd_c,
+            "contact_resistance_m2k_w": self.contact.config.contact_resistance_m2k_w,
+            "skin_layers": self.contact.skin.layers.iter().map(|l| l.name.clone()).collect::<Vec<_>>(),
+        })
+    }
+
+    fn start_c(&self, participant_index: usize, trial: usize) -> Option<f64> {
+        if self.finger_drift_sd_c == 0.0 {
+            return None;
+        }
+        let mut rng = trial_rng(self.seed ^ DRIFT_SALT, participant_index, trial);
+        Some(self.resting_c + self.finger_drift_sd_c * standard_normal(&mut rng))
+    }
+}
+
+impl Stimulus for ModelStimulus {
+    fn present(&mut self, request: &StimulusRequest) -> Result<TrialMeasurement, StimulusError> {
+        let start = self.start_c(request.participant_index, request.trial);
+        let key = (request.material.name.clone(), start.unwrap_or(f64::NAN).to_bits());
+        let curve = match self.cache.get(&key) {
+            Some(curve) => curve.clone(),
+            None => {
+                let curve = self.contact.curve(request.material, start, request.duration_s)?;
+                self.cache.insert(key, curve.clone());
+                curve
+            }
+        };
+        Ok(TrialMeasurement {
+            finger_start_c: curve.skin_c[0],
+            finger_end_c: curve.skin_c[curve.skin_c.len() - 1],
+            curve: Some(curve),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn interpolation_is_linear_and_clamped() {
+        let curve = SkinCurve {
+            time_s: vec![0.0, 1.0, 3.0],
+            skin_c: vec![30.0, 28.0, 27.0],
+        };
+        curve.validate().expect("valid");
+        assert_eq!(curve.at(-1.0), 30.0);
+        assert_eq!(curve.at(0.5), 29.0);
+        assert_eq!(curve.at(2.0), 27.5);
+        assert_eq!(curve.at(9.0), 27.0);
+    }
+
+    #[test]
+    fn malformed_curves_are_refused() {
+        let bad = [
+            (vec![0.0], vec![30.0]),
+            (vec![0.0, 1.0], vec![30.0]),
+            (vec![0.0, 0.0], vec![30.0, 29.0]),
+            (vec![0.5, 1.0], vec![30.0, 29.0]),
+            (vec![0.0, 1.0], vec![30.0, f64::NAN]),
+        ];
+        for (time_s, skin_c) in bad {
+            let curve = SkinCurve { time_s, skin_c };
+            assert!(curve.validate().is_err(), "accepted {curve:?}");
+        }
+    }
+
+    #[test]
+    fn drift_must_be_finite_and_not_negative() {
+        for v in [-0.1, f64::NAN, f64::INFINITY] {
+            assert!(ModelStimulus::new(FvContact::default(), v, 1).is_err(), "accepted {v}");
+        }
+    }
+}
