@@ -1,0 +1,635 @@
+//! Session files: one CSV per session and participant, PsychoPy-style, written durably, and its JSON sidecar.
+//!
+//! - `<participant>_<experiment>_<YYYY-MM-DD>.csv`: a header ([`SESSION_COLUMNS`]) and one row per completed trial;
+//!   the session fields (participant, experiment, session date, seed, software version) are repeated on every row.
+//!   The analysis (`thermode lab analyze`) reads it as it is (`participant, condition, presented, identified,
+//!   excluded`; the other columns are kept).
+//! - `<same stem>.json`: the sidecar — the experiment file's whole text, seed, software version, device
+//!   configuration, the participant's condition order and, for each resume, when and with what it was resumed.
+//!
+//! **Durability.** The sidecar and then the CSV header are written atomically (temporary file, `sync_all`, rename,
+//! directory sync). Each trial row is appended with one write and `sync_all`ed before [`SessionFile::append`]
+//! returns, so the runner never starts a trial before the previous one is on disk.
+//!
+//! **Resume.** [`SessionFile::open`] looks in the data folder for a session of the same participant and experiment
+//! (any date; identified by its sidecar, which names both, so underscores in names cannot mix sessions up). It
+//! refuses, with the differing keys, a session recorded with a different design (seed, materials, …). A last line
+//! without its line end is a row torn by a kill mid-write: it is cut off (the file is truncated to the last complete
+//! row). Every complete row must parse and match the planned trial of its position, else the file is reported as
+//! corrupt with its line — a complete row is never dropped silently. The runner then continues at the first missing
+//! trial.
+
+use std::fs::{File, OpenOptions};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::design::{Experiment, ExperimentFile};
+use crate::plan::{ParticipantPlan, PlannedTrial};
+use crate::runner::clock::is_iso_date;
+
+/// Columns of a session CSV, in order.
+pub const SESSION_COLUMNS: [&str; 20] = [
+    "participant",
+    "experiment",
+    "session_date",
+    "seed",
+    "software_version",
+    "trial",
+    "block",
+    "repetition",
+    "condition",
+    "position",
+    "presented",
+    "identified",
+    "response_key",
+    "response_time_s",
+    "presentation_s",
+    "finger_baseline_c",
+    "finger_start_c",
+    "finger_end_c",
+    "excluded",
+    "exclusion_reason",
+];
+
+/// The columns that hold measured durations (they differ between two runs of the same plan).
+pub const TIMING_COLUMNS: [&str; 2] = ["response_time_s", "presentation_s"];
+
+/// The software version written into every row and sidecar.
+pub const SOFTWARE_VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// The `format` field of a sidecar.
+pub const SIDECAR_FORMAT: &str = "thermode-lab session 1";
+
+/// Why a session file could not be created, resumed or written.
+#[derive(Debug, Error)]
+pub enum SessionError {
+    /// A file or folder could not be read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The operating-system error.
+        source: std::io::Error,
+    },
+    /// A sidecar is not valid JSON of the expected shape.
+    #[error("{}: invalid session sidecar: {message}", path.display())]
+    Sidecar {
+        /// The sidecar.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// The existing session belongs to a different plan.
+    #[error("{}: refusing to resume: {message}", file.display())]
+    Mismatch {
+        /// The session file.
+        file: PathBuf,
+        /// What differs.
+        message: String,
+    },
+    /// A complete row does not parse or does not match the plan.
+    #[error("{}:{line}: {message}", file.display())]
+    Corrupt {
+        /// The session CSV.
+        file: PathBuf,
+        /// 1-based line.
+        line: u64,
+        /// What is wrong.
+        message: String,
+    },
+    /// More than one session of the same participant and experiment.
+    #[error("several sessions of this participant and experiment: {}; move all but one away", list(files))]
+    Ambiguous {
+        /// Their CSV files.
+        files: Vec<PathBuf>,
+    },
+    /// A session CSV without its sidecar, so it cannot be checked against the plan.
+    #[error("{}: session file without its sidecar {}; cannot check it against the plan", csv.display(), sidecar.display())]
+    MissingSidecar {
+        /// The CSV.
+        csv: PathBuf,
+        /// The sidecar expected beside it.
+        sidecar: PathBuf,
+    },
+}
+
+fn list(files: &[PathBuf]) -> String {
+    files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> SessionError + '_ {
+    move |source| SessionError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// One completed trial.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrialRecord {
+    /// The planned trial.
+    pub trial: PlannedTrial,
+    /// Library name of the answer.
+    pub identified: String,
+    /// The answer as option number, 1-based.
+    pub response_key: usize,
+    /// Time from the end of the presentation to the answer \[s\].
+    pub response_time_s: f64,
+    /// Measured duration of the presentation \[s\] (real seconds; scaled by the clock's time scale).
+    pub presentation_s: f64,
+    /// The session's finger baseline: the start temperature of its first trial \[°C\].
+    pub finger_baseline_c: f64,
+    /// Finger temperature just before the touch \[°C\].
+    pub finger_start_c: f64,
+    /// Finger temperature at the end of the presentation \[°C\].
+    pub finger_end_c: f64,
+    /// Whether the exclusion rule discarded the trial.
+    pub excluded: bool,
+    /// Why (empty when not excluded).
+    pub exclusion_reason: String,
+    /// Software version that recorded the row.
+    pub software_version: String,
+}
+
+/// A resume of a session, as noted in its sidecar.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ResumeNote {
+    /// Date of the resume (`YYYY-MM-DD`).
+    pub date: String,
+    /// Trials already recorded at the resume.
+    pub recorded_trials: usize,
+    /// Whether a torn last row was cut off.
+    pub removed_torn_row: bool,
+    /// Software version that resumed.
+    pub software_version: String,
+    /// Device configuration at the resume.
+    pub device: serde_json::Value,
+}
+
+/// The sidecar JSON of a session.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Sidecar {
+    /// Always [`SIDECAR_FORMAT`].
+    pub format: String,
+    /// Participant identifier.
+    pub participant: String,
+    /// 0-based index of the participant in the design.
+    pub participant_index: usize,
+    /// Experiment name.
+    pub experiment: String,
+    /// Date the session started (`YYYY-MM-DD`).
+    pub session_date: String,
+    /// The design's seed.
+    pub seed: u64,
+    /// Software name.
+    pub software: String,
+    /// Software version that started the session.
+    pub software_version: String,
+    /// Path of the experiment file as given.
+    pub experiment_file: String,
+    /// The experiment file's whole text.
+    pub experiment_toml: String,
+    /// Device configuration (as passed by the caller).
+    pub device: serde_json::Value,
+    /// File name of the session CSV.
+    pub csv_file: String,
+    /// The CSV's columns.
+    pub columns: Vec<String>,
+    /// The conditions in this participant's order.
+    pub condition_order: Vec<String>,
+    /// Number of planned trials.
+    pub planned_trials: usize,
+    /// Every resume, in order.
+    #[serde(default)]
+    pub resumes: Vec<ResumeNote>,
+}
+
+/// What identifies a session: the experiment, the participant's plan and where the data go.
+#[derive(Debug, Clone, Copy)]
+pub struct SessionSpec<'a> {
+    /// The experiment file.
+    pub experiment: &'a ExperimentFile,
+    /// The participant's plan.
+    pub plan: &'a ParticipantPlan,
+    /// The data folder (created if missing).
+    pub data_dir: &'a Path,
+    /// Today's date (`YYYY-MM-DD`), used for a new session and noted on a resume.
+    pub today: &'a str,
+    /// Device configuration for the sidecar.
+    pub device: &'a serde_json::Value,
+}
+
+/// An open session: its files, the completed trials, and the CSV open for appending.
+#[derive(Debug)]
+pub struct SessionFile {
+    csv_path: PathBuf,
+    sidecar_path: PathBuf,
+    sidecar: Sidecar,
+    records: Vec<TrialRecord>,
+    planned: usize,
+    options: Vec<String>,
+    appender: File,
+    resumed: bool,
+    removed_torn_row: bool,
+}
+
+/// The file stem of a session: `<participant>_<experiment>_<date>`.
+pub fn session_stem(participant: &str, experiment: &str, date: &str) -> String {
+    format!("{participant}_{experiment}_{date}")
+}
+
+impl SessionFile {
+    /// Opens the session of `spec` — resuming the existing one of this participant and experiment if there is one
+    /// (see the module documentation), creating it dated `spec.today` otherwise.
+    pub fn open(spec: &SessionSpec) -> Result<SessionFile, SessionError> {
+        std::fs::create_dir_all(spec.data_dir).map_err(io(spec.data_dir))?;
+        let design = &spec.experiment.experiment;
+        match find_session(spec.data_dir, &spec.plan.id, &design.name)? {
+            Some((sidecar_path, sidecar)) => Self::resume(spec, sidecar_path, sidecar),
+            None => Self::create(spec),
+        }
+    }
+
+    fn create(spec: &SessionSpec) -> Result<SessionFile, SessionError> {
+        let design = &spec.experiment.experiment;
+        let stem = session_stem(&spec.plan.id, &design.name, spec.today);
+        let sidecar = Sidecar {
+            format: SIDECAR_FORMAT.to_string(),
+            participant: spec.plan.id.clone(),
+            participant_index: spec.plan.index,
+            experiment: design.name.clone(),
+            session_date: spec.today.to_string(),
+            seed: design.seed,
+            software: "thermode-lab".to_string(),
+            software_version: SOFTWARE_VERSION.to_string(),
+            experiment_file: spec.experiment.path.display().to_string(),
+            experiment_toml: spec.experiment.text.clone(),
+            device: spec.device.clone(),
+            csv_file: format!("{stem}.csv"),
+            columns: SESSION_COLUMNS.iter().map(|c| c.to_string()).collect(),
+            condition_order: spec.plan.condition_order.iter().map(|c| c.name().to_string()).collect(),
+            planned_trials: spec.plan.trials.len(),
+            resumes: Vec::new(),
+        };
+        let sidecar_path = spec.data_dir.join(format!("{stem}.json"));
+        write_sidecar(&sidecar_path, &sidecar)?;
+        Self::finish_open(spec, sidecar_path, sidecar, false)
+    }
+
+    fn resume(spec: &SessionSpec, sidecar_path: PathBuf, mut sidecar: Sidecar) -> Result<SessionFile, SessionError> {
+        check_same_design(&sidecar_path, &sidecar, &spec.experiment.experiment)?;
+        let mut session = Self::finish_open(spec, sidecar_path, sidecar.clone(), true)?;
+        if !session.is_complete() {
+            sidecar.resumes.push(ResumeNote {
+                date: spec.today.to_string(),
+                recorded_trials: session.records.len(),
+                removed_torn_row: session.removed_torn_row,
+                software_version: SOFTWARE_VERSION.to_string(),
+                device: spec.device.clone(),
+            });
+            write_sidecar(&session.sidecar_path, &sidecar)?;
+            session.sidecar = sidecar;
+        }
+        Ok(session)
+    }
+
+    /// Creates the CSV with its header if it is missing, reads and repairs it otherwise, and opens it for appending.
+    fn finish_open(
+        spec: &SessionSpec,
+        sidecar_path: PathBuf,
+        sidecar: Sidecar,
+        resumed: bool,
+    ) -> Result<SessionFile, SessionError> {
+        let csv_path = sidecar_path.with_file_name(&sidecar.csv_file);
+        let header = format!("{}\n", SESSION_COLUMNS.join(","));
+        if !csv_path.exists() {
+            write_atomically(&csv_path, header.as_bytes())?;
+        }
+        let mut session = SessionFile {
+            appender: OpenOptions::new().append(true).open(&csv_path).map_err(io(&csv_path))?,
+            csv_path,
+            sidecar_path,
+            sidecar,
+            records: Vec::new(),
+            planned: spec.plan.trials.len(),
+            options: spec.experiment.experiment.response_options.clone(),
+            resumed,
+            removed_torn_row: false,
+        };
+        session.read_existing(spec.plan, &header)?;
+        Ok(session)
+    }
+
+    /// Reads the completed rows, cutting off a torn last line, and checks every row against the plan.
+    fn read_existing(&mut self, plan: &ParticipantPlan, header: &str) -> Result<(), SessionError> {
+        let path = self.csv_path.clone();
+        let bytes = std::fs::read(&path).map_err(io(&path))?;
+        if !bytes.starts_with(header.as_bytes()) {
+            return Err(SessionError::Mismatch {
+                file: path,
+                message: "its header is not the session header of this version of thermode".to_string(),
+            });
+        }
+        let complete = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+        if complete < bytes.len() {
+            truncate(&path, complete as u64)?;
+            self.removed_torn_row = true;
+        }
+        let mut reader = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .from_reader(&bytes[..complete]);
+        for (k, record) in reader.records().enumerate() {
+            let line = k as u64 + 2;
+            let corrupt = |message: String| SessionError::Corrupt {
+                file: path.clone(),
+                line,
+                message,
+            };
+            let record = record.map_err(|e| corrupt(e.to_string()))?;
+            let planned = plan
+                .trials
+                .get(k)
+                .ok_or_else(|| corrupt(format!("more rows than the {} planned trials", plan.trials.len())))?;
+            let parsed = self.parse_row(&record, planned).map_err(corrupt)?;
+            if let Some(first) = self.records.first() {
+                if parsed.finger_baseline_c != first.finger_baseline_c {
+                    return Err(corrupt("`finger_baseline_c` differs from the first row's".to_string()));
+                }
+            }
+            self.records.push(parsed);
+        }
+        Ok(())
+    }
+
+    /// Parses one row and checks it against the session and the planned trial.
+    fn parse_row(&self, record: &csv::StringRecord, planned: &PlannedTrial) -> Result<TrialRecord, String> {
+        if record.len() != SESSION_COLUMNS.len() {
+            return Err(format!("{} fields, the header has {}", record.len(), SESSION_COLUMNS.len()));
+        }
+        let field = |name: &str| record.get(column(name)).unwrap_or_default();
+        let expect = |name: &str, want: &str| {
+            let got = field(name);
+            if got == want {
+                Ok(())
+            } else {
+                Err(format!("column `{name}` is `{got}`, expected `{want}` (the session and its plan)"))
+            }
+        };
+        let s = &self.sidecar;
+        expect("participant", &s.participant)?;
+        expect("experiment", &s.experiment)?;
+        expect("session_date", &s.session_date)?;
+        expect("seed", &s.seed.to_string())?;
+        expect("trial", &planned.trial.to_string())?;
+        expect("block", &planned.block.to_string())?;
+        expect("repetition", &planned.repetition.to_string())?;
+        expect("condition", planned.condition.name())?;
+        expect("position", &planned.position.to_string())?;
+        expect("presented", &planned.presented)?;
+        let identified = field("identified").to_string();
+        let key = self.options.iter().position(|o| *o == identified).map(|i| i + 1);
+        let Some(response_key) = key else {
+            return Err(format!("`identified` = `{identified}` is not a response option"));
+        };
+        expect("response_key", &response_key.to_string())?;
+        let excluded = match field("excluded") {
+            "true" => true,
+            "false" => false,
+            other => return Err(format!("`excluded` = `{other}`: expected true or false")),
+        };
+        let number = |name: &str| -> Result<f64, String> {
+            let text = field(name);
+            text.parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| format!("`{name}` = `{text}` is not a finite number"))
+        };
+        Ok(TrialRecord {
+            trial: planned.clone(),
+            identified,
+            response_key,
+            response_time_s: number("response_time_s")?,
+            presentation_s: number("presentation_s")?,
+            finger_baseline_c: number("finger_baseline_c")?,
+            finger_start_c: number("finger_start_c")?,
+            finger_end_c: number("finger_end_c")?,
+            excluded,
+            exclusion_reason: field("exclusion_reason").to_string(),
+            software_version: field("software_version").to_string(),
+        })
+    }
+
+    /// Appends the next trial's row and syncs it to disk. `record.trial` must be the next planned trial.
+    pub fn append(&mut self, record: &TrialRecord) -> Result<(), SessionError> {
+        let next = self.records.len() + 1;
+        if record.trial.trial != next {
+            return Err(SessionError::Mismatch {
+                file: self.csv_path.clone(),
+                message: format!("trial {} given where trial {next} is next", record.trial.trial),
+            });
+        }
+        let bytes = self.row_bytes(record);
+        let path = self.csv_path.clone();
+        self.appender.write_all(&bytes).map_err(io(&path))?;
+        self.appender.sync_all().map_err(io(&path))?;
+        self.records.push(record.clone());
+        Ok(())
+    }
+
+    fn row_bytes(&self, r: &TrialRecord) -> Vec<u8> {
+        let s = &self.sidecar;
+        let fields = [
+            s.participant.clone(),
+            s.experiment.clone(),
+            s.session_date.clone(),
+            s.seed.to_string(),
+            r.software_version.clone(),
+            r.trial.trial.to_string(),
+            r.trial.block.to_string(),
+            r.trial.repetition.to_string(),
+            r.trial.condition.name().to_string(),
+            r.trial.position.to_string(),
+            r.trial.presented.clone(),
+            r.identified.clone(),
+            r.response_key.to_string(),
+            format!("{:.3}", r.response_time_s),
+            format!("{:.3}", r.presentation_s),
+            format!("{:.4}", r.finger_baseline_c),
+            format!("{:.4}", r.finger_start_c),
+            format!("{:.4}", r.finger_end_c),
+            r.excluded.to_string(),
+            r.exclusion_reason.clone(),
+        ];
+        let mut writer = csv::WriterBuilder::new()
+            .terminator(csv::Terminator::Any(b'\n'))
+            .from_writer(Vec::new());
+        // Writing to memory cannot fail; the fields hold no line ends.
+        let _ = writer.write_record(&fields);
+        writer.into_inner().unwrap_or_default()
+    }
+
+    /// The session CSV.
+    pub fn csv_path(&self) -> &Path {
+        &self.csv_path
+    }
+
+    /// The sidecar JSON.
+    pub fn sidecar_path(&self) -> &Path {
+        &self.sidecar_path
+    }
+
+    /// The sidecar as written.
+    pub fn sidecar(&self) -> &Sidecar {
+        &self.sidecar
+    }
+
+    /// The completed trials, in order.
+    pub fn records(&self) -> &[TrialRecord] {
+        &self.records
+    }
+
+    /// Number of planned trials.
+    pub fn planned_trials(&self) -> usize {
+        self.planned
+    }
+
+    /// Whether every planned trial is recorded.
+    pub fn is_complete(&self) -> bool {
+        self.records.len() >= self.planned
+    }
+
+    /// Whether an existing session was opened.
+    pub fn resumed(&self) -> bool {
+        self.resumed
+    }
+
+    /// Whether a torn last row was cut off on opening.
+    pub fn removed_torn_row(&self) -> bool {
+        self.removed_torn_row
+    }
+
+    /// The session's finger baseline (the first trial's start temperature), once there is a first trial.
+    pub fn baseline_c(&self) -> Option<f64> {
+        self.records.first().map(|r| r.finger_baseline_c)
+    }
+}
+
+fn column(name: &str) -> usize {
+    SESSION_COLUMNS.iter().position(|c| *c == name).unwrap_or(usize::MAX)
+}
+
+/// Refuses a session whose sidecar records a different design.
+fn check_same_design(sidecar_path: &Path, sidecar: &Sidecar, design: &Experiment) -> Result<(), SessionError> {
+    let mismatch = |message: String| SessionError::Mismatch {
+        file: sidecar_path.to_path_buf(),
+        message,
+    };
+    if sidecar.format != SIDECAR_FORMAT {
+        return Err(mismatch(format!("sidecar format `{}`, expected `{SIDECAR_FORMAT}`", sidecar.format)));
+    }
+    let recorded = Experiment::from_toml_str(&sidecar.experiment_toml, sidecar_path)
+        .map_err(|e| mismatch(format!("its recorded experiment file is invalid: {e}")))?;
+    let differences = recorded.differences(design);
+    if !differences.is_empty() {
+        return Err(mismatch(format!(
+            "it was recorded with a different design (recorded vs now): {}",
+            differences.join("; ")
+        )));
+    }
+    Ok(())
+}
+
+/// The existing session of `participant` in `experiment` in `data_dir`, if any: (sidecar path, sidecar).
+fn find_session(data_dir: &Path, participant: &str, experiment: &str) -> Result<Option<(PathBuf, Sidecar)>, SessionError> {
+    let prefix = format!("{participant}_{experiment}_");
+    let mut dates: Vec<String> = Vec::new();
+    for entry in std::fs::read_dir(data_dir).map_err(io(data_dir))? {
+        let name = entry.map_err(io(data_dir))?.file_name();
+        let Some(rest) = name.to_str().and_then(|n| n.strip_prefix(&prefix)) else {
+            continue;
+        };
+        let date = rest.strip_suffix(".csv").or_else(|| rest.strip_suffix(".json"));
+        if let Some(date) = date.filter(|d| is_iso_date(d)) {
+            if !dates.iter().any(|d| d == date) {
+                dates.push(date.to_string());
+            }
+        }
+    }
+    dates.sort();
+    let mut found = Vec::new();
+    for date in dates {
+        let stem = session_stem(participant, experiment, &date);
+        let sidecar_path = data_dir.join(format!("{stem}.json"));
+        if !sidecar_path.exists() {
+            return Err(SessionError::MissingSidecar {
+                csv: data_dir.join(format!("{stem}.csv")),
+                sidecar: sidecar_path,
+            });
+        }
+        let sidecar = read_sidecar(&sidecar_path)?;
+        if sidecar.participant == participant && sidecar.experiment == experiment {
+            if sidecar.session_date != date || sidecar.csv_file != format!("{stem}.csv") {
+                return Err(SessionError::Mismatch {
+                    file: sidecar_path,
+                    message: format!("its session date or CSV name does not match its file name {stem}"),
+                });
+            }
+            found.push((sidecar_path, sidecar));
+        }
+    }
+    if found.len() > 1 {
+        let files = found.iter().map(|(p, s)| p.with_file_name(&s.csv_file)).collect();
+        return Err(SessionError::Ambiguous { files });
+    }
+    Ok(found.pop())
+}
+
+fn read_sidecar(path: &Path) -> Result<Sidecar, SessionError> {
+    let text = std::fs::read_to_string(path).map_err(io(path))?;
+    serde_json::from_str(&text).map_err(|e| SessionError::Sidecar {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
+fn write_sidecar(path: &Path, sidecar: &Sidecar) -> Result<(), SessionError> {
+    let text = serde_json::to_string_pretty(sidecar).map_err(|e| SessionError::Sidecar {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    write_atomically(path, format!("{text}\n").as_bytes())
+}
+
+/// Writes `bytes` to `path` through a synced temporary file and a rename, then syncs the folder.
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), SessionError> {
+    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("session");
+    let tmp = path.with_file_name(format!(".{name}.tmp"));
+    let result = (|| {
+        let mut file = File::create(&tmp)?;
+        file.write_all(bytes)?;
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)?;
+        sync_folder(path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.map_err(io(path))
+}
+
+fn truncate(path: &Path, len: u64) -> Result<(), SessionError> {
+    let file = OpenOptions::new().write(true).open(path).map_err(io(path))?;
+    file.set_len(len).map_err(io(path))?;
+    file.sync_all().map_err(io(path))
+}
+
+/// Syncs the folder holding `path` so that a rename survives a crash (a no-op where folders cannot be opened).
+fn sync_folder(path: &Path) -> std::io::Result<()> {
+    match path.parent().map(File::open) {
+        Some(Ok(dir)) => dir.sync_all().or(Ok(())),
+        _ => Ok(()),
+    }
+}
