@@ -18,7 +18,7 @@ use crate::units;
 pub const DEFAULT_THICKNESS_M: f64 = 0.01;
 
 /// Source string of the paper's five materials.
-pub const PAPER_SOURCE: &str = "Table 1 of the paper (Drewing et al., after its ref. [23]), cgs values converted to SI";
+pub const PAPER_SOURCE: &str = "Table 1 of the founding paper (Development and Experimental Evaluation of a Thermal Display, after its ref. [23]), cgs values converted to SI";
 
 const INCROPERA_A1: &str = "Incropera et al., Fundamentals of Heat and Mass Transfer, 7th ed., Table A.1 (300 K)";
 const POLYMER_TYPICAL: &str = "typical values of unfilled grades from supplier data sheets, as collected in the \
