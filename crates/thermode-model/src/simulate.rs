@@ -372,8 +372,10 @@ fn simulate_semi_infinite(spec: &SimulationSpec) -> Result<Trace, ParamError> {
     let outer = &spec.skin.layers[0];
     let skin_e = crate::units::effusivity(outer.conductivity_w_mk, outer.density_kg_m3, outer.specific_heat_j_kgk);
     let object_e = spec.material.effusivity();
-    let finger = fv_resting_finger(spec, &FvConfig::default())?;
-    let skin_c = finger.surface_c();
+    let skin_c = match spec.initial {
+        Initial::Uniform(c) | Initial::Surface(c) => c,
+        Initial::Steady => fv_resting_finger(spec, &FvConfig::default())?.surface_c(),
+    };
     let resting_flux = spec.skin.air_convection_w_m2k * (skin_c - spec.ambient_c);
     let r_c = spec.contact_resistance();
     let times = spec.times_s();

@@ -50,10 +50,10 @@ pub struct SimulateArgs {
     #[arg(long, value_name = "FILE")]
     skin: Option<PathBuf>,
     /// Contact duration [s].
-    #[arg(long, value_name = "S", default_value_t = 90.0)]
+    #[arg(long, value_name = "S", default_value_t = 90.0, allow_negative_numbers = true)]
     duration: f64,
     /// Output interval and kron time step [s].
-    #[arg(long, value_name = "S", default_value_t = 0.01)]
+    #[arg(long, value_name = "S", default_value_t = 0.01, allow_negative_numbers = true)]
     dt: f64,
     /// Air temperature [°C].
     #[arg(long, value_name = "C", default_value_t = 23.0, allow_negative_numbers = true)]
@@ -66,10 +66,10 @@ pub struct SimulateArgs {
     #[arg(long, value_name = "STATE", default_value = "steady")]
     initial: String,
     /// Contact resistance skin–object [m²K/W]; default 1e-3 for fv (light touch), 0 for semi-infinite; kron has none.
-    #[arg(long = "contact-resistance", value_name = "M2K_W")]
+    #[arg(long = "contact-resistance", value_name = "M2K_W", allow_negative_numbers = true)]
     contact_resistance: Option<f64>,
     /// Conductance between the model's receptor node and the display plate for the display inverse [W/m²K].
-    #[arg(long = "display-conductance", value_name = "W_M2K", default_value_t = thermode_model::inverse::DEFAULT_DISPLAY_CONDUCTANCE_W_M2K)]
+    #[arg(long = "display-conductance", value_name = "W_M2K", default_value_t = thermode_model::inverse::DEFAULT_DISPLAY_CONDUCTANCE_W_M2K, allow_negative_numbers = true)]
     display_conductance: f64,
     /// Write the trajectory as CSV (one row per step; a `material` column names the material).
     #[arg(long, value_name = "FILE.csv")]
