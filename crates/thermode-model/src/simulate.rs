@@ -413,3 +413,87 @@ fn column_name(name: &str) -> String {
         })
         .collect()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::materials::find;
+
+    fn spec(model: ModelKind, name: &str) -> SimulationSpec {
+        SimulationSpec::new(model, find(name).unwrap_or_else(|e| panic!("{e}")))
+    }
+
+    #[test]
+    fn initial_states_parse_and_bad_ones_are_refused() {
+        assert_eq!("steady".parse::<Initial>(), Ok(Initial::Steady));
+        assert_eq!("uniform:30.5".parse::<Initial>(), Ok(Initial::Uniform(30.5)));
+        assert_eq!("surface:31".parse::<Initial>(), Ok(Initial::Surface(31.0)));
+        for bad in ["warm", "uniform:", "uniform:NaN", "surface:inf", "steady:3", ""] {
+            assert!(bad.parse::<Initial>().is_err(), "`{bad}` was accepted");
+        }
+    }
+
+    #[test]
+    fn the_last_row_is_exactly_the_duration() {
+        let mut s = spec(ModelKind::Kron, "wood");
+        s.duration_s = 1.0;
+        s.dt_s = 0.3;
+        let trace = simulate(&s).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(trace.time_s, vec![0.0, 0.3, 0.6, 0.8999999999999999, 1.0]);
+        for (name, values) in &trace.columns {
+            assert_eq!(values.len(), trace.time_s.len(), "column {name}");
+        }
+    }
+
+    #[test]
+    fn surface_calibration_starts_every_model_at_the_requested_temperature() {
+        for model in [ModelKind::Kron, ModelKind::Fv, ModelKind::SemiInfinite] {
+            let mut s = spec(model, "stone");
+            s.duration_s = 0.05;
+            s.initial = Initial::Surface(30.0);
+            let trace = simulate(&s).unwrap_or_else(|e| panic!("{model:?}: {e}"));
+            let start = trace.skin_surface_at(0.0).unwrap_or(f64::NAN);
+            assert!(
+                (start - 30.0).abs() < 1e-5,
+                "{model:?}: resting surface {start}, requested 30"
+            );
+        }
+    }
+
+    #[test]
+    fn kron_trace_equals_stepping_the_model_by_hand() {
+        let mut s = spec(ModelKind::Kron, "steel");
+        s.duration_s = 2.0;
+        s.dt_s = 0.05;
+        let trace = simulate(&s).unwrap_or_else(|e| panic!("{e}"));
+        let mut model = KronModel::new(&Skin::fingertip()).unwrap_or_else(|e| panic!("{e}"));
+        model.settle(&KronEnvironment::Air { ambient_c: 23.0 });
+        let env = KronEnvironment::touching(&s.material, 23.0);
+        for _ in 0..40 {
+            model.step(0.05, &env);
+        }
+        let got = *trace
+            .column("skin_surface_c")
+            .and_then(|c| c.last())
+            .unwrap_or(&f64::NAN);
+        let want = model.temperatures_c()[0];
+        assert!((got - want).abs() < 1e-12, "trace {got}, by hand {want}");
+    }
+
+    #[test]
+    fn invalid_specs_are_errors() {
+        let mut s = spec(ModelKind::Fv, "cork");
+        s.dt_s = 0.0;
+        assert!(simulate(&s).is_err());
+        let mut s = spec(ModelKind::Fv, "cork");
+        s.contact_resistance_m2k_w = Some(-1e-3);
+        assert!(simulate(&s).is_err());
+        let mut s = spec(ModelKind::Kron, "cork");
+        s.ambient_c = f64::INFINITY;
+        assert!(simulate(&s).is_err());
+        let mut s = spec(ModelKind::Kron, "cork");
+        s.dt_s = 2.0;
+        s.duration_s = 1.0;
+        assert!(simulate(&s).is_err());
+    }
+}
