@@ -21,8 +21,7 @@
 
 use std::path::{Path, PathBuf};
 
-use thermode_model::materials::{find, Material};
-use thermode_model::ParamError;
+use thermode_model::materials::find;
 use thiserror::Error;
 
 use crate::analysis::Condition;
@@ -31,12 +30,12 @@ use crate::analysis::Condition;
 #[derive(Debug, Error)]
 pub enum DesignError {
     /// The file could not be read.
-    #[error("{}: {source}", file.display())]
+    #[error("{}: {error}", file.display())]
     Io {
         /// The experiment file.
         file: PathBuf,
-        /// The operating-system error.
-        source: std::io::Error,
+        /// The operating-system error (part of the message, so not chained as a source).
+        error: std::io::Error,
     },
     /// The text is not valid TOML (the message gives line and column).
     #[error("{}: invalid TOML: {message}", file.display())]
@@ -137,9 +136,9 @@ pub struct ExperimentFile {
 impl ExperimentFile {
     /// Reads and validates the experiment file at `path`.
     pub fn load(path: &Path) -> Result<ExperimentFile, DesignError> {
-        let text = std::fs::read_to_string(path).map_err(|source| DesignError::Io {
+        let text = std::fs::read_to_string(path).map_err(|error| DesignError::Io {
             file: path.to_path_buf(),
-            source,
+            error,
         })?;
         let experiment = Experiment::from_toml_str(&text, path)?;
         Ok(ExperimentFile {
@@ -164,7 +163,9 @@ impl Experiment {
         if materials.len() < 2 {
             return Err(keys.bad("materials", "needs at least 2 materials".to_string()));
         }
-        let participants = keys.count("participants", MAX_PARTICIPANTS)?.ok_or_else(|| keys.missing("participants"))?;
+        let participants = keys
+            .count("participants", MAX_PARTICIPANTS)?
+            .ok_or_else(|| keys.missing("participants"))?;
         let response_options = match keys.materials("response_options")? {
             Some(options) => check_options(&keys, options, &materials)?,
             None => materials.clone(),
@@ -201,11 +202,6 @@ impl Experiment {
         self.participant_ids.iter().position(|p| p == id)
     }
 
-    /// The library material called `name` (one of [`Experiment::materials`]).
-    pub fn material(&self, name: &str) -> Result<Material, ParamError> {
-        find(name)
-    }
-
     /// The keys whose values differ between `self` and `other`, as `key: self vs other` lines (empty if equal).
     pub fn differences(&self, other: &Experiment) -> Vec<String> {
         let mut out = Vec::new();
@@ -218,10 +214,26 @@ impl Experiment {
         compare("materials", self.materials.join(","), other.materials.join(","));
         let conditions = |e: &Experiment| e.conditions.iter().map(|c| c.name()).collect::<Vec<_>>().join(",");
         compare("conditions", conditions(self), conditions(other));
-        compare("participant_ids", self.participant_ids.join(","), other.participant_ids.join(","));
-        compare("repetitions", self.repetitions.to_string(), other.repetitions.to_string());
-        compare("presentation_s", self.presentation_s.to_string(), other.presentation_s.to_string());
-        compare("response_options", self.response_options.join(","), other.response_options.join(","));
+        compare(
+            "participant_ids",
+            self.participant_ids.join(","),
+            other.participant_ids.join(","),
+        );
+        compare(
+            "repetitions",
+            self.repetitions.to_string(),
+            other.repetitions.to_string(),
+        );
+        compare(
+            "presentation_s",
+            self.presentation_s.to_string(),
+            other.presentation_s.to_string(),
+        );
+        compare(
+            "response_options",
+            self.response_options.join(","),
+            other.response_options.join(","),
+        );
         compare(
             "exclusion_max_drift_c",
             self.exclusion_max_drift_c.to_string(),
@@ -386,7 +398,10 @@ impl Keys<'_> {
         if value.is_finite() && value > 0.0 && value <= max {
             Ok(Some(value))
         } else {
-            Err(self.bad(key, format!("{value} is out of range: must be a finite number above 0 and at most {max}")))
+            Err(self.bad(
+                key,
+                format!("{value} is out of range: must be a finite number above 0 and at most {max}"),
+            ))
         }
     }
 
@@ -417,7 +432,11 @@ impl Keys<'_> {
 }
 
 fn first_duplicate(items: &[String]) -> Option<&String> {
-    items.iter().enumerate().find(|(i, s)| items[..*i].contains(s)).map(|(_, s)| s)
+    items
+        .iter()
+        .enumerate()
+        .find(|(i, s)| items[..*i].contains(s))
+        .map(|(_, s)| s)
 }
 
 #[cfg(test)]
@@ -461,20 +480,44 @@ mod tests {
             (format!("{MINIMAL}colour = 1\n"), "unknown key `colour`"),
             (MINIMAL.replace("seed = 7\n", ""), "missing key `seed`"),
             (MINIMAL.replace("seed = 7", "seed = -1"), "`seed`"),
-            (MINIMAL.replace("participants = 3", "participants = 0"), "`participants`"),
-            (MINIMAL.replace("participants = 3", "participants = \"3\""), "`participants`"),
-            (MINIMAL.replace("\"wood\"", "\"unobtainium\""), "`materials`: unknown material"),
+            (
+                MINIMAL.replace("participants = 3", "participants = 0"),
+                "`participants`",
+            ),
+            (
+                MINIMAL.replace("participants = 3", "participants = \"3\""),
+                "`participants`",
+            ),
+            (
+                MINIMAL.replace("\"wood\"", "\"unobtainium\""),
+                "`materials`: unknown material",
+            ),
             (MINIMAL.replace("\"wood\"", "\"aluminum\""), "more than once"),
             (MINIMAL.replace("\"t\"", "\"a b\""), "`name`"),
             (format!("{MINIMAL}presentation_s = nan\n"), "`presentation_s`"),
             (format!("{MINIMAL}presentation_s = -3\n"), "`presentation_s`"),
-            (format!("{MINIMAL}exclusion_max_drift_c = inf\n"), "`exclusion_max_drift_c`"),
+            (
+                format!("{MINIMAL}exclusion_max_drift_c = inf\n"),
+                "`exclusion_max_drift_c`",
+            ),
             (format!("{MINIMAL}conditions = [\"real\", \"fake\"]\n"), "`fake`"),
-            (format!("{MINIMAL}conditions = [\"real\", \"Real\"]\n"), "more than once"),
+            (
+                format!("{MINIMAL}conditions = [\"real\", \"Real\"]\n"),
+                "more than once",
+            ),
             (format!("{MINIMAL}conditions = []\n"), "`conditions`"),
-            (format!("{MINIMAL}response_options = [\"wood\"]\n"), "`response_options`"),
-            (format!("{MINIMAL}participant_ids = [\"a\", \"b\"]\n"), "`participant_ids`"),
-            (format!("{MINIMAL}participant_ids = [\"a\", \"b\", \"c d\"]\n"), "`participant_ids`"),
+            (
+                format!("{MINIMAL}response_options = [\"wood\"]\n"),
+                "`response_options`",
+            ),
+            (
+                format!("{MINIMAL}participant_ids = [\"a\", \"b\"]\n"),
+                "`participant_ids`",
+            ),
+            (
+                format!("{MINIMAL}participant_ids = [\"a\", \"b\", \"c d\"]\n"),
+                "`participant_ids`",
+            ),
             ("name = \n".to_string(), "invalid TOML"),
         ];
         for (text, want) in cases {

@@ -9,12 +9,12 @@ use thiserror::Error;
 #[derive(Debug, Error)]
 pub enum LabError {
     /// A file could not be read or written.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {error}", path.display())]
     Io {
         /// The file or folder concerned.
         path: PathBuf,
-        /// The operating-system error.
-        source: std::io::Error,
+        /// The operating-system error (in the message, not repeated as a source).
+        error: std::io::Error,
     },
     /// The CSV reader failed (e.g. invalid UTF-8); `line` is 1-based where the reader knows it.
     #[error("{}{}: {message}", file.display(), at_line(*line))]
@@ -139,10 +139,10 @@ fn at_line(line: Option<u64>) -> String {
 
 impl LabError {
     /// Wraps an I/O error with the path it concerns.
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+    pub fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
         LabError::Io {
             path: path.into(),
-            source,
+            error,
         }
     }
 }

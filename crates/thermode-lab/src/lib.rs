@@ -8,8 +8,16 @@
 //!   paper's section 4 ([`analysis::analyze`], [`analysis::analyze_curves`]) and writes JSON, Markdown and HTML
 //!   reports with figures ([`analysis::write_outputs`]).
 //! - [`error`]: the typed error [`LabError`] shared by the lab's modules.
+//! - [`design`]: experiment files (TOML); [`plan`]: the counterbalanced trial plan (Williams designs);
+//!   [`session`]: durable session CSVs and sidecars; [`runner`]: the trial runner and its stimulus, clock, console
+//!   and responder seams; [`observer`]: the simulated observer.
 
 pub mod analysis;
+pub mod design;
 pub mod error;
+pub mod observer;
+pub mod plan;
+pub mod runner;
+pub mod session;
 
 pub use error::LabError;

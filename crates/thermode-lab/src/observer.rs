@@ -16,9 +16,11 @@
 //! **Calibration.** [`SimulatedObserver::calibrate`] searches the noise scale (bisection with common random numbers:
 //! a fixed seeded sample of noise vectors, scaled) at which real contact is identified as often as in the paper,
 //! 66 % over five options ([`PAPER_REAL_IDENTIFICATION_RATE`]). For the paper's five materials over 30 s the
-//! calibrated value is about 0.08 ([`PAPER_CALIBRATED_NOISE_SD`]): an 8 % perceptual error. Aluminium/steel and
-//! wood/rubber are the pairs confused: wood and rubber have almost the same effusivity and their curves differ by a
-//! few hundredths of a degree, so no observer tells them apart better than by chance.
+//! calibrated value is 0.0981 ([`PAPER_CALIBRATED_NOISE_SD`]), i.e. a perceptual error of about 10 % on each cue;
+//! on 10 000 fresh trials the observer then identifies real contact 65.9 % of the time. Aluminium/steel and
+//! wood/rubber are the pairs confused (stone is identified 93 % of the time): wood and rubber have almost the same
+//! effusivity and their curves differ by a few hundredths of a degree, so no observer tells them apart much better
+//! than by chance.
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -31,7 +33,7 @@ use crate::runner::stimulus::{FvContact, SkinCurve, StimulusError};
 pub const PAPER_REAL_IDENTIFICATION_RATE: f64 = 0.66;
 /// The noise scale [`SimulatedObserver::calibrate`] finds for the paper's five materials, 30 s presentations, the
 /// default [`FvContact`], 4000 samples per option and seed 1 (documented; the tests recompute it).
-pub const PAPER_CALIBRATED_NOISE_SD: f64 = 0.0797;
+pub const PAPER_CALIBRATED_NOISE_SD: f64 = 0.0981;
 /// Window of the initial cooling rate \[s\].
 pub const INITIAL_WINDOW_S: f64 = 2.0;
 /// Perception scale of the cooling rate \[°C/s\] (the smallest detectable rate of change, `model.md` §6).
@@ -163,7 +165,9 @@ impl SimulatedObserver {
         let mut references = Vec::with_capacity(options.len());
         for name in options {
             let material = find(name)?;
-            let curve = contact.curve(&material, None, presentation_s).map_err(StimulusError::from)?;
+            let curve = contact
+                .curve(&material, None, presentation_s)
+                .map_err(StimulusError::from)?;
             references.push(CurveFeatures::of(&curve)?);
         }
         Ok(SimulatedObserver::new(options.to_vec(), references, seed))
@@ -209,7 +213,12 @@ impl SimulatedObserver {
     }
 
     /// The answer to trial `trial` of participant `participant_index`, with the noise of that trial's own stream.
-    pub fn identify_trial(&self, curve: &SkinCurve, participant_index: usize, trial: usize) -> Result<usize, ObserverError> {
+    pub fn identify_trial(
+        &self,
+        curve: &SkinCurve,
+        participant_index: usize,
+        trial: usize,
+    ) -> Result<usize, ObserverError> {
         let features = CurveFeatures::of(curve)?;
         let mut rng = trial_rng(self.seed ^ OBSERVER_SALT, participant_index, trial);
         Ok(self.identify(&features, &mut rng))
@@ -333,10 +342,17 @@ mod tests {
     #[test]
     fn features_of_a_linear_curve_are_its_slope_and_total_drop() {
         let f = CurveFeatures::of(&linear_curve(0.25, 30.0)).expect("valid curve");
-        assert!((f.initial_cooling_rate_c_s - 0.25).abs() < 1e-12, "rate {}", f.initial_cooling_rate_c_s);
+        assert!(
+            (f.initial_cooling_rate_c_s - 0.25).abs() < 1e-12,
+            "rate {}",
+            f.initial_cooling_rate_c_s
+        );
         assert!((f.end_drop_c - 7.5).abs() < 1e-9, "drop {}", f.end_drop_c);
         let p = f.perceived();
-        assert!((p[0] - 2.5f64.asinh()).abs() < 1e-12 && (p[1] - 75f64.asinh()).abs() < 1e-9, "{p:?}");
+        assert!(
+            (p[0] - 2.5f64.asinh()).abs() < 1e-12 && (p[1] - 75f64.asinh()).abs() < 1e-9,
+            "{p:?}"
+        );
     }
 
     #[test]
@@ -358,7 +374,10 @@ mod tests {
         assert!(mean.abs() < 0.011, "mean {mean} vs 0");
         assert!((var - 1.0).abs() < 0.016, "variance {var} vs 1");
         let within_one = xs.iter().filter(|x| x.abs() < 1.0).count() as f64 / n as f64;
-        assert!((within_one - 0.682_689).abs() < 0.006, "P(|z|<1) {within_one} vs 0.6827");
+        assert!(
+            (within_one - 0.682_689).abs() < 0.006,
+            "P(|z|<1) {within_one} vs 0.6827"
+        );
     }
 
     #[test]
@@ -387,8 +406,15 @@ mod tests {
         // Φ(0.2 / 0.2) = Φ(1) = 0.841345; standard error 0.0018.
         assert!((rate - 0.841_345).abs() < 0.01, "rate {rate} vs Φ(1) = 0.8413");
         let calibration = observer.calibrate(0.841_345, 20_000, 5).expect("reachable");
-        assert!((calibration.noise_sd - 0.2).abs() < 0.01, "σ {} vs 0.2", calibration.noise_sd);
-        assert!(matches!(observer.calibrate(0.4, 100, 5), Err(ObserverError::Unreachable { .. })));
+        assert!(
+            (calibration.noise_sd - 0.2).abs() < 0.01,
+            "σ {} vs 0.2",
+            calibration.noise_sd
+        );
+        assert!(matches!(
+            observer.calibrate(0.4, 100, 5),
+            Err(ObserverError::Unreachable { .. })
+        ));
         assert!(observer.calibrate(1.5, 100, 5).is_err());
         assert!(observer.set_noise_sd(f64::NAN).is_err());
     }

@@ -264,13 +264,17 @@ mod tests {
             for row in &rows {
                 let mut sorted = row.clone();
                 sorted.sort_unstable();
-                assert_eq!(sorted, (0..n).collect::<Vec<_>>(), "n = {n}: row {row:?} is not a permutation");
+                assert_eq!(
+                    sorted,
+                    (0..n).collect::<Vec<_>>(),
+                    "n = {n}: row {row:?} is not a permutation"
+                );
             }
             let counts = successions(&rows, n);
-            for a in 0..n {
-                for b in 0..n {
+            for (a, row) in counts.iter().enumerate() {
+                for (b, &count) in row.iter().enumerate() {
                     let want = if a == b { 0 } else { per_cell };
-                    assert_eq!(counts[a][b], want, "n = {n}: {b} follows {a} {} times", counts[a][b]);
+                    assert_eq!(count, want, "n = {n}: {b} follows {a} {count} times");
                 }
             }
         }

@@ -12,7 +12,8 @@
 //! returns, so the runner never starts a trial before the previous one is on disk.
 //!
 //! **Resume.** [`SessionFile::open`] looks in the data folder for a session of the same participant and experiment
-//! (any date; identified by its sidecar, which names both, so underscores in names cannot mix sessions up). It
+//! (any date; identified by its sidecar, which names both, so underscores in names cannot mix sessions up; a new
+//! session whose file name is taken by another session is refused, never written over). It
 //! refuses, with the differing keys, a session recorded with a different design (seed, materials, …). A last line
 //! without its line end is a row torn by a kill mid-write: it is cut off (the file is truncated to the last complete
 //! row). Every complete row must parse and match the planned trial of its position, else the file is reported as
@@ -67,12 +68,12 @@ pub const SIDECAR_FORMAT: &str = "thermode-lab session 1";
 #[derive(Debug, Error)]
 pub enum SessionError {
     /// A file or folder could not be read or written.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {error}", path.display())]
     Io {
         /// The file or folder.
         path: PathBuf,
-        /// The operating-system error.
-        source: std::io::Error,
+        /// The operating-system error (part of the message, so not chained as a source).
+        error: std::io::Error,
     },
     /// A sidecar is not valid JSON of the expected shape.
     #[error("{}: invalid session sidecar: {message}", path.display())]
@@ -101,10 +102,20 @@ pub enum SessionError {
         message: String,
     },
     /// More than one session of the same participant and experiment.
-    #[error("several sessions of this participant and experiment: {}; move all but one away", list(files))]
+    #[error(
+        "several sessions of this participant and experiment: {}; move all but one away",
+        list(files)
+    )]
     Ambiguous {
         /// Their CSV files.
         files: Vec<PathBuf>,
+    },
+    /// A new session's file name is taken by another session (e.g. participant `a_b` of experiment `c` and
+    /// participant `a` of experiment `b_c` on the same day).
+    #[error("{}: already exists and belongs to another session; use another data folder", file.display())]
+    Collision {
+        /// The existing file.
+        file: PathBuf,
     },
     /// A session CSV without its sidecar, so it cannot be checked against the plan.
     #[error("{}: session file without its sidecar {}; cannot check it against the plan", csv.display(), sidecar.display())]
@@ -117,13 +128,17 @@ pub enum SessionError {
 }
 
 fn list(files: &[PathBuf]) -> String {
-    files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", ")
+    files
+        .iter()
+        .map(|f| f.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 fn io(path: &Path) -> impl FnOnce(std::io::Error) -> SessionError + '_ {
-    move |source| SessionError::Io {
+    move |error| SessionError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     }
 }
 
@@ -275,6 +290,11 @@ impl SessionFile {
             resumes: Vec::new(),
         };
         let sidecar_path = spec.data_dir.join(format!("{stem}.json"));
+        for taken in [&sidecar_path, &spec.data_dir.join(&sidecar.csv_file)] {
+            if taken.exists() {
+                return Err(SessionError::Collision { file: taken.clone() });
+            }
+        }
         write_sidecar(&sidecar_path, &sidecar)?;
         Self::finish_open(spec, sidecar_path, sidecar, false)
     }
@@ -367,7 +387,11 @@ impl SessionFile {
     /// Parses one row and checks it against the session and the planned trial.
     fn parse_row(&self, record: &csv::StringRecord, planned: &PlannedTrial) -> Result<TrialRecord, String> {
         if record.len() != SESSION_COLUMNS.len() {
-            return Err(format!("{} fields, the header has {}", record.len(), SESSION_COLUMNS.len()));
+            return Err(format!(
+                "{} fields, the header has {}",
+                record.len(),
+                SESSION_COLUMNS.len()
+            ));
         }
         let field = |name: &str| record.get(column(name)).unwrap_or_default();
         let expect = |name: &str, want: &str| {
@@ -375,7 +399,9 @@ impl SessionFile {
             if got == want {
                 Ok(())
             } else {
-                Err(format!("column `{name}` is `{got}`, expected `{want}` (the session and its plan)"))
+                Err(format!(
+                    "column `{name}` is `{got}`, expected `{want}` (the session and its plan)"
+                ))
             }
         };
         let s = &self.sidecar;
@@ -528,7 +554,10 @@ fn check_same_design(sidecar_path: &Path, sidecar: &Sidecar, design: &Experiment
         message,
     };
     if sidecar.format != SIDECAR_FORMAT {
-        return Err(mismatch(format!("sidecar format `{}`, expected `{SIDECAR_FORMAT}`", sidecar.format)));
+        return Err(mismatch(format!(
+            "sidecar format `{}`, expected `{SIDECAR_FORMAT}`",
+            sidecar.format
+        )));
     }
     let recorded = Experiment::from_toml_str(&sidecar.experiment_toml, sidecar_path)
         .map_err(|e| mismatch(format!("its recorded experiment file is invalid: {e}")))?;
@@ -543,7 +572,11 @@ fn check_same_design(sidecar_path: &Path, sidecar: &Sidecar, design: &Experiment
 }
 
 /// The existing session of `participant` in `experiment` in `data_dir`, if any: (sidecar path, sidecar).
-fn find_session(data_dir: &Path, participant: &str, experiment: &str) -> Result<Option<(PathBuf, Sidecar)>, SessionError> {
+fn find_session(
+    data_dir: &Path,
+    participant: &str,
+    experiment: &str,
+) -> Result<Option<(PathBuf, Sidecar)>, SessionError> {
     let prefix = format!("{participant}_{experiment}_");
     let mut dates: Vec<String> = Vec::new();
     for entry in std::fs::read_dir(data_dir).map_err(io(data_dir))? {

@@ -30,8 +30,8 @@ pub enum PlotError {
     #[error("drawing failed: {0}")]
     Drawing(String),
     /// The file could not be written.
-    #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: {error}")]
+    Io { path: PathBuf, error: std::io::Error },
 }
 
 /// How one series is drawn.
@@ -172,10 +172,10 @@ pub fn svg_string(figure: &Figure) -> Result<String, PlotError> {
     Ok(text)
 }
 
-fn io(path: &Path, source: std::io::Error) -> PlotError {
+fn io(path: &Path, error: std::io::Error) -> PlotError {
     PlotError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     }
 }
 

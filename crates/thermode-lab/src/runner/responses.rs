@@ -45,7 +45,13 @@ pub fn parse_answer(text: &str, options: &[String]) -> Result<usize, String> {
         let name = find(text).ok()?.name;
         options.iter().position(|o| *o == name)
     });
-    by_name.ok_or_else(|| format!("`{text}` is not an option: answer 1-{} or a name ({})", options.len(), options.join(", ")))
+    by_name.ok_or_else(|| {
+        format!(
+            "`{text}` is not an option: answer 1-{} or a name ({})",
+            options.len(),
+            options.join(", ")
+        )
+    })
 }
 
 /// The experimenter types the participant's answer; a bad answer is asked again.
@@ -54,7 +60,12 @@ pub struct InteractiveResponder;
 
 impl Responder for InteractiveResponder {
     fn respond(&mut self, query: &ResponseQuery, console: &mut dyn Console) -> Result<usize, RunError> {
-        let menu: Vec<String> = query.options.iter().enumerate().map(|(i, o)| format!("{} {o}", i + 1)).collect();
+        let menu: Vec<String> = query
+            .options
+            .iter()
+            .enumerate()
+            .map(|(i, o)| format!("{} {o}", i + 1))
+            .collect();
         let prompt = format!("Answer [{}]: ", menu.join(", "));
         loop {
             let Some(line) = console.ask(&prompt).map_err(RunError::Console)? else {
@@ -92,7 +103,12 @@ impl ScriptedResponses {
     }
 
     /// Like [`ScriptedResponses::load`] on text already read; `file` names it in errors.
-    pub fn from_text(text: &str, file: &Path, options: &[String], trials: usize) -> Result<ScriptedResponses, RunError> {
+    pub fn from_text(
+        text: &str,
+        file: &Path,
+        options: &[String],
+        trials: usize,
+    ) -> Result<ScriptedResponses, RunError> {
         let error = |line: Option<usize>, message: String| RunError::Responses {
             file: file.to_path_buf(),
             line,
@@ -101,10 +117,17 @@ impl ScriptedResponses {
         let raw = answer_lines(text).map_err(|(line, m)| error(line, m))?;
         let answers: Vec<(usize, usize)> = raw
             .into_iter()
-            .map(|(line, answer)| parse_answer(&answer, options).map(|a| (line, a)).map_err(|m| error(Some(line), m)))
+            .map(|(line, answer)| {
+                parse_answer(&answer, options)
+                    .map(|a| (line, a))
+                    .map_err(|m| error(Some(line), m))
+            })
             .collect::<Result<_, _>>()?;
         if answers.len() != trials {
-            return Err(error(None, format!("has {} answers for {trials} trials", answers.len())));
+            return Err(error(
+                None,
+                format!("has {} answers for {trials} trials", answers.len()),
+            ));
         }
         Ok(ScriptedResponses {
             file: file.to_path_buf(),
@@ -113,8 +136,11 @@ impl ScriptedResponses {
     }
 }
 
+/// A problem in a responses file: (1-based line if known, message).
+type LineError = (Option<usize>, String);
+
 /// The answer lines of a responses file: (1-based line, text).
-fn answer_lines(text: &str) -> Result<Vec<(usize, String)>, (Option<usize>, String)> {
+fn answer_lines(text: &str) -> Result<Vec<(usize, String)>, LineError> {
     let lines: Vec<(usize, &str)> = text
         .lines()
         .enumerate()
@@ -146,14 +172,14 @@ fn answer_lines(text: &str) -> Result<Vec<(usize, String)>, (Option<usize>, Stri
 
 impl Responder for ScriptedResponses {
     fn respond(&mut self, query: &ResponseQuery, _console: &mut dyn Console) -> Result<usize, RunError> {
-        let &(line, answer) = self
-            .answers
-            .get(query.trial.trial.wrapping_sub(1))
-            .ok_or_else(|| RunError::Responses {
-                file: self.file.clone(),
-                line: None,
-                message: format!("no answer for trial {}", query.trial.trial),
-            })?;
+        let &(line, answer) =
+            self.answers
+                .get(query.trial.trial.wrapping_sub(1))
+                .ok_or_else(|| RunError::Responses {
+                    file: self.file.clone(),
+                    line: None,
+                    message: format!("no answer for trial {}", query.trial.trial),
+                })?;
         if answer >= query.options.len() {
             return Err(RunError::Responses {
                 file: self.file.clone(),
@@ -174,7 +200,11 @@ impl Responder for SimulatedObserver {
                 requirement: "the observer's references must be the experiment's response options, in order",
             }));
         }
-        let curve = query.measurement.curve.as_ref().ok_or(crate::observer::ObserverError::NoCurve)?;
+        let curve = query
+            .measurement
+            .curve
+            .as_ref()
+            .ok_or(crate::observer::ObserverError::NoCurve)?;
         Ok(self.identify_trial(curve, query.participant_index, query.trial.trial)?)
     }
 }
@@ -214,11 +244,17 @@ mod tests {
     fn bad_files_name_file_and_line() {
         let o = options();
         let f = Path::new("r.txt");
-        let err = ScriptedResponses::from_text("1\nstone\n", f, &o, 2).expect_err("stone").to_string();
+        let err = ScriptedResponses::from_text("1\nstone\n", f, &o, 2)
+            .expect_err("stone")
+            .to_string();
         assert!(err.starts_with("r.txt:2:") && err.contains("stone"), "{err}");
-        let err = ScriptedResponses::from_text("1\n2\n", f, &o, 3).expect_err("count").to_string();
+        let err = ScriptedResponses::from_text("1\n2\n", f, &o, 3)
+            .expect_err("count")
+            .to_string();
         assert!(err.contains("2 answers for 3 trials"), "{err}");
-        let err = ScriptedResponses::from_text("a,b\n1,2\n", f, &o, 1).expect_err("column").to_string();
+        let err = ScriptedResponses::from_text("a,b\n1,2\n", f, &o, 1)
+            .expect_err("column")
+            .to_string();
         assert!(err.contains("identified"), "{err}");
     }
 }

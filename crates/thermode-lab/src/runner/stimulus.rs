@@ -204,14 +204,14 @@ const DRIFT_SALT: u64 = 0x6472_6966_7400_0001;
 ///
 /// The finger starts each trial at its resting temperature plus, if `finger_drift_sd_c` > 0, a Gaussian offset
 /// drawn per (participant, trial) from a ChaCha8 stream of `seed` — so a resumed session sees the same fingers.
-/// Curves are cached per (material, start temperature).
+/// Curves are cached per (material, start temperature, duration).
 #[derive(Debug, Clone)]
 pub struct ModelStimulus {
     contact: FvContact,
     finger_drift_sd_c: f64,
     seed: u64,
     resting_c: f64,
-    cache: HashMap<(String, u64), SkinCurve>,
+    cache: HashMap<(String, u64, u64), SkinCurve>,
 }
 
 impl ModelStimulus {
@@ -267,7 +267,11 @@ impl ModelStimulus {
 impl Stimulus for ModelStimulus {
     fn present(&mut self, request: &StimulusRequest) -> Result<TrialMeasurement, StimulusError> {
         let start = self.start_c(request.participant_index, request.trial);
-        let key = (request.material.name.clone(), start.unwrap_or(f64::NAN).to_bits());
+        let key = (
+            request.material.name.clone(),
+            start.unwrap_or(f64::NAN).to_bits(),
+            request.duration_s.to_bits(),
+        );
         let curve = match self.cache.get(&key) {
             Some(curve) => curve.clone(),
             None => {

@@ -1,0 +1,49 @@
+//! `thermode lab plan`: the counterbalanced trial list of an experiment file, as CSV (one row per participant and
+//! trial, the seed on every row). Same file → bit-identical plan. See `thermode_lab::plan` for the construction
+//! (alternating condition order, Williams designs for the material order, seeded labels and row order).
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::Args;
+use thermode_lab::design::ExperimentFile;
+use thermode_lab::plan::make_plan;
+
+use crate::output::{print_stdout, write_atomically};
+
+/// Arguments of `thermode lab plan`.
+#[derive(Args, Debug)]
+pub struct LabPlanArgs {
+    /// Experiment file (TOML: name, materials, conditions, participants, repetitions, presentation_s,
+    /// response_options, exclusion_max_drift_c, seed).
+    #[arg(long)]
+    experiment: PathBuf,
+    /// Write the plan CSV to this file (atomically) and print a summary, instead of printing the CSV.
+    #[arg(long)]
+    out: Option<PathBuf>,
+}
+
+/// Runs `thermode lab plan`.
+pub fn run(args: &LabPlanArgs) -> Result<()> {
+    let file = ExperimentFile::load(&args.experiment)?;
+    let plan = make_plan(&file.experiment);
+    let csv = plan.to_csv_string();
+    let Some(out) = &args.out else {
+        return print_stdout(&csv);
+    };
+    write_atomically(out, |w: &mut dyn Write| Ok(w.write_all(csv.as_bytes())?))?;
+    let orders: Vec<String> = plan
+        .first_condition_counts()
+        .iter()
+        .map(|(c, n)| format!("{n} {}-first", c.name()))
+        .collect();
+    print_stdout(&format!(
+        "{}: {} participants × {} trials, seed {}; {}\n",
+        out.display(),
+        plan.participants.len(),
+        file.experiment.trials_per_participant(),
+        plan.seed,
+        orders.join(", ")
+    ))
+}
