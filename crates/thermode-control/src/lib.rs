@@ -9,6 +9,10 @@
 //!   measurement, output limits, conditional-integration anti-windup, bumpless reset, P/I/D terms for logging.
 //! - [`controller`]: the object-safe [`Controller`] trait with [`ControlInput`], and [`PidController`] (low-pass
 //!   + PID, the paper's Figure 2). The model-based controller implements the same trait.
+//! - [`model_controller`]: [`ModelController`] (`model`), thermode's own controller: a Kalman observer of the true
+//!   plate ([`observer`]: [`PlateObserver`] on a [`PlantModel`] filled from the device file) and the plate's heat
+//!   balance inverted through the Peltier equations, driving the most useful current when a set-point is
+//!   infeasible, with nothing to wind up.
 //! - [`envelope`]: [`SafetyEnvelope`], the one safety envelope every drive command passes: set-point clamp and
 //!   rate limit, thermal dose (IEC 60601-1 contact-time limits, CEM43), fault detection with latching. The only
 //!   way to a [`DriveCommand`] is [`SafetyEnvelope::gate_drive`].
@@ -44,6 +48,8 @@ pub mod envelope;
 pub mod error;
 pub mod fault;
 pub mod filter;
+pub mod model_controller;
+pub mod observer;
 pub mod pid;
 
 pub use config::{EnvelopeConfig, ABSOLUTE_MAX_C, ABSOLUTE_MAX_RATE_C_PER_S, ABSOLUTE_MIN_C};
@@ -53,4 +59,6 @@ pub use envelope::{DriveCommand, DriveLimits, Measurement, SafetyEnvelope, Setpo
 pub use error::{ControlError, EnvelopeError};
 pub use fault::FaultCode;
 pub use filter::LowPass;
+pub use model_controller::{ModelController, ModelDesign, ModelTerms};
+pub use observer::{Finger, ObserverDesign, PlantModel, PlateEstimate, PlateObserver};
 pub use pid::{AntiWindup, Pid, PidGains, PidTerms};

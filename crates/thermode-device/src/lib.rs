@@ -38,9 +38,12 @@
 pub mod channel;
 pub mod config;
 pub mod device;
+pub mod emulator;
 pub mod error;
 pub mod finger;
+pub mod protocol;
 pub mod sensor;
+pub mod serial;
 
 pub use channel::{ChannelState, Fault, HeatFlows, Polarity, SimulatedChannel, MAX_SUBSTEP_S};
 pub use config::DeviceConfig;

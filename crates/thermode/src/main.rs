@@ -22,6 +22,14 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Run the daemon: the display rendered in real time, the contact API (WebSocket, HTTP, OSC) and the dashboard.
+    Serve(cmd::serve::ServeArgs),
+    /// Like `serve`, plus a short scripted sequence of touches so a newcomer sees it work.
+    Demo(cmd::demo::DemoArgs),
+    /// Measure control-loop jitter and touch-to-drive latency (figures only; build with --release).
+    Bench(cmd::bench::BenchArgs),
+    /// Run the device side of the serial protocol on a pseudo-terminal (prints its path) with the simulated display.
+    Emulate(cmd::emulate::EmulateArgs),
     /// List the built-in material library (the paper's Table 1 and common materials).
     Materials(cmd::materials::MaterialsArgs),
     /// Simulate a finger touching a material with one of the skin models and write the curve (CSV) and a plot.
@@ -29,20 +37,36 @@ enum Command {
     /// Experiments: plan, run and analyse material-identification studies.
     #[command(subcommand)]
     Lab(LabCommand),
+    /// Render touches on the simulated display (renderer, inverse, controller, safety envelope) next to the truth.
+    Render(cmd::render::RenderArgs),
+    /// Tune the paper's PID (gains and sensor filter) for a display; writes a gains file.
+    Tune(cmd::tune::TuneArgs),
 }
 
 #[derive(Subcommand, Debug)]
 enum LabCommand {
     /// Analyse session CSVs the way the paper did (rates, ratio table, χ², confusion correlation, figures).
     Analyze(cmd::lab_analyze::LabAnalyzeArgs),
+    /// Write the counterbalanced trial plan of an experiment file (CSV, one row per participant and trial).
+    Plan(cmd::lab_plan::LabPlanArgs),
+    /// Run or resume one participant's session (terminal prompts; durable session CSV and JSON sidecar).
+    Run(cmd::lab_run::LabRunArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
+        Command::Serve(args) => cmd::serve::run(args),
+        Command::Demo(args) => cmd::demo::run(args),
+        Command::Bench(args) => cmd::bench::run(args),
+        Command::Emulate(args) => cmd::emulate::run(args),
         Command::Materials(args) => cmd::materials::run(args),
         Command::Simulate(args) => cmd::simulate::run(args),
         Command::Lab(LabCommand::Analyze(args)) => cmd::lab_analyze::run(args),
+        Command::Lab(LabCommand::Plan(args)) => cmd::lab_plan::run(args),
+        Command::Lab(LabCommand::Run(args)) => cmd::lab_run::run(args),
+        Command::Render(args) => cmd::render::run(args),
+        Command::Tune(args) => cmd::tune::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

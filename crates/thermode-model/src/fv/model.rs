@@ -198,6 +198,44 @@ impl FvModel {
         Ok(())
     }
 
+    /// Replaces the touched object by `object` (or removes it with `None`) while keeping the skin — its grid, its
+    /// temperatures, perfusion scale and environment — as it is: the finger that lets go of one object and touches
+    /// another keeps its own temperature field (a renderer whose virtual material changes during contact).
+    ///
+    /// The new object is built as [`FvModel::new`] would build it from `config`: its cells follow `config`'s
+    /// cell-width rule, its far side is `config.far_side`, and `config.contact_resistance_m2k_w` becomes the
+    /// contact resistance. The skin-side settings of `config` (deep boundary, scheme) are not used. The new object
+    /// starts uniform at the arterial temperature; call [`FvModel::touch`] to set its temperature. The energy
+    /// ledger keeps its totals, so its object terms no longer balance the new object's energy: reset it if you
+    /// check balances across a replacement. Allocates (this is not a per-step operation). Errors, leaving the
+    /// model unchanged, if `config` or the material fail their `validate` or the grid would exceed [`MAX_CELLS`].
+    pub fn replace_object(&mut self, object: Option<&Material>, config: &FvConfig) -> Result<(), ParamError> {
+        config.validate()?;
+        let arm = match object {
+            Some(material) => {
+                material.validate(&format!("material `{}`", material.name))?;
+                let rule = SizeRule {
+                    surface_m: config.surface_cell_m,
+                    growth: config.growth,
+                    max_m: config.max_cell_m,
+                };
+                Some(object_arm(
+                    material,
+                    rule,
+                    config.far_side,
+                    MAX_CELLS - self.skin.len(),
+                )?)
+            }
+            None => None,
+        };
+        let object_cells = arm.as_ref().map_or(0, Arm::len);
+        self.object = arm;
+        self.object_t = vec![self.skin.arterial_c; object_cells];
+        self.contact_resistance_m2k_w = config.contact_resistance_m2k_w;
+        self.work = RefCell::new(Work::new(self.skin.len(), object_cells));
+        Ok(())
+    }
+
     /// Advances the state by `dt_s` \[s\] with the surface in `env`. Never fails and never allocates.
     ///
     /// `dt_s` must be finite and positive and `env` valid ([`FvEnvironment::validate`]); other values give

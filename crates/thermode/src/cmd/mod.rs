@@ -1,5 +1,13 @@
 //! One module per subcommand; each exposes its clap `Args` struct and a `run` function.
 
+pub mod bench;
+pub mod demo;
+pub mod emulate;
 pub mod lab_analyze;
+pub mod lab_plan;
+pub mod lab_run;
 pub mod materials;
+pub mod render;
+pub mod serve;
 pub mod simulate;
+pub mod tune;

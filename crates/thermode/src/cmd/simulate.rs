@@ -201,7 +201,7 @@ fn write_plot(path: &Path, traces: &[(Material, Trace)], model: ModelArg) -> Res
         series,
         ..Panel::default()
     };
-    write_figure(&Figure::single(panel), path).with_context(|| format!("cannot write {}", path.display()))
+    Ok(write_figure(&Figure::single(panel), path)?)
 }
 
 /// A table of the receptor temperature at the summary times, one row per material.

@@ -1,0 +1,500 @@
+//! The display's plant model ([`PlantModel`], filled from the device file) and a Kalman filter on it
+//! ([`PlateObserver`]) that estimates the true plate temperature from the lagging, noisy, quantised PT-100.
+//!
+//! # Model (the simulated display's node equations, `model.md` §5)
+//! With the plate at T_p, the hot side at T_h, the PT-100 element at T_s, the current I (positive heats the plate),
+//! the finger model's receptor at T_r with conductance G_f to the plate, and an unknown heat d into the plate:
+//! - `C_p dT_p/dt = q_d(I, T_p, T_h) + G_f (T_r − T_p) + d`
+//! - `C_h dT_h/dt = q_h(I, T_p, T_h) − G_w (T_h − T_w)`
+//! - `τ dT_s/dt = T_p − T_s` (τ includes the mean age of the held sample, see below)
+//! - `dd/dt = w` (a random walk: the finger's heat the finger model gets wrong, and any other mismatch)
+//!
+//! q_d and q_h are the Peltier flows of [`PeltierModule`]; the plate has no other losses (as in the simulated
+//! device: its free edges lose under 0.3 mW/K to air). d makes the observer offset-free: whatever heat the model
+//! misses (a finger 20 % off the model, a wrong contact conductance) shows up as a persistent difference between
+//! predicted and measured sensor and is learnt, so the estimate converges to the true plate temperature.
+//!
+//! # Discretisation (matches the plant)
+//! At a fixed current the Peltier flows are affine in (T_p, T_h), so plate and hot side are advanced together by
+//! backward Euler with end-of-step finger receptor, hot-side coupling and current — the scheme of the simulated
+//! plant (identical to it when a tick is one plant substep; the first-order difference over a 10 ms tick is far
+//! below the sensor noise, the plate's slowest time constant being seconds). The PT-100 is advanced with the exact
+//! first-order-lag response to a plate temperature that changes linearly over the step.
+//! The result is a linear map `x₁ = F x₀ + c` of the state `x = [T_p, T_h, T_s, d]`, on which the Kalman filter
+//! propagates its covariance `P₁ = F P₀ Fᵀ + Q`.
+//!
+//! # Measurements
+//! The PT-100 reading `y_s = T_s + v_s` with variance `σ² + Δ²/12` (noise plus uniform quantisation error) and the
+//! hot-side reading `y_h = T_h + v_h` with variance `Δ²/12`, both processed each tick as sequential scalar updates.
+//! The PT-100 is sampled at `f_s` and held between samples; when the controller runs faster than that, the same
+//! sample is seen `1/(f_s dt)` times, so its variance is scaled by that factor (the information per sample period
+//! is then that of one sample). The hold delays the reading by the sample's mean age, `(T_sample − dt)/2` when the
+//! controller ticks faster than the sensor samples (0 at the sample rate), which is added to the sensor's time
+//! constant.
+//!
+//! # Noise intensities (derived from the device, no tuning per display)
+//! [`ObserverDesign`] holds three dimensionless fractions, the same for every display; the heat they scale is
+//! `Q_ref`, the module's cooling capacity at the drive limit with both faces at the water temperature.
+//! - Unknown heat d: a random walk of intensity `(drift · Q_ref)²` W²/s; starting variance `(initial · Q_ref)²`.
+//! - Plate and hot-side heat: white noise of `heat_noise · Q_ref` RMS over one sample period (the finger's heat
+//!   varies within a step; the linear model is exact otherwise).
+//!
+//! The filter is time-varying (the current changes F every tick) and costs a few hundred flops per tick; it never
+//! allocates.
+
+use thermode_model::peltier::PeltierModule;
+
+use crate::error::ControlError;
+use crate::filter::check_finite;
+
+/// Number of observer states: plate, hot side, sensor element, unknown heat.
+pub const OBSERVER_STATES: usize = 4;
+
+/// The observer's noise model as dimensionless fractions of the module's reference heat flow
+/// ([`PlantModel::reference_heat_w`]); the same for every display (no tuning per display). Defaults in the field
+/// docs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObserverDesign {
+    /// Random-walk intensity of the unknown plate heat d, as a fraction of the reference heat per √s. Default 0.003
+    /// (10 mW/√s for the default module). A finger off the model misses about 0.1 W during a contact transient,
+    /// which builds up over a second or more. Measured rendering aluminium in closed loop on the 1.5 s lagging
+    /// display (largest estimate error in the first 10 s after the touch with the finger's contact conductance
+    /// halved or doubled; steady RMS estimate error after 10 s): 0.002 → 0.18 °C, 0.011 °C; 0.003 → 0.16 °C,
+    /// 0.013 °C; 0.01 → 0.13 °C, 0.022 °C; 0.05 doubles the steady error again. The default trades a little speed
+    /// after a grossly wrong contact for a steady estimate.
+    pub disturbance_drift_per_sqrt_s: f64,
+    /// Standard deviation of the unknown heat at start, as a fraction of the reference heat. Default 0.1.
+    pub disturbance_initial_fraction: f64,
+    /// RMS of the white heat noise on the plate and hot-side nodes over one sensor sample period, as a fraction of
+    /// the reference heat. Default 0.002 (7 mW for the default module).
+    pub plant_heat_noise_fraction: f64,
+}
+
+impl Default for ObserverDesign {
+    fn default() -> Self {
+        Self {
+            disturbance_drift_per_sqrt_s: 0.003,
+            disturbance_initial_fraction: 0.1,
+            plant_heat_noise_fraction: 0.002,
+        }
+    }
+}
+
+impl ObserverDesign {
+    /// Checks that every fraction is finite and ≥ 0.
+    pub fn validate(&self) -> Result<(), ControlError> {
+        non_negative("disturbance_drift_per_sqrt_s", self.disturbance_drift_per_sqrt_s)?;
+        non_negative("disturbance_initial_fraction", self.disturbance_initial_fraction)?;
+        non_negative("plant_heat_noise_fraction", self.plant_heat_noise_fraction)
+    }
+}
+
+/// Smallest standard deviation assigned to a reading, °C: 1e-4 (keeps the filter well posed for a noiseless,
+/// unquantised sensor).
+pub const READING_FLOOR_C: f64 = 1e-4;
+
+/// Standard deviation of the plate estimate at start, °C: 0.5 (the plate may not be in equilibrium with the
+/// sensor when the controller starts).
+pub const INITIAL_PLATE_SD_C: f64 = 0.5;
+
+const TP: usize = 0;
+const TH: usize = 1;
+const TS: usize = 2;
+const DIST: usize = 3;
+
+type Matrix = [[f64; OBSERVER_STATES]; OBSERVER_STATES];
+type Vector = [f64; OBSERVER_STATES];
+
+/// What the model-based controller knows about the display: the device file's numbers. All temperatures in °C.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlantModel {
+    /// The Peltier module (S, R, K) from the datasheet (`DeviceConfig::module`). Default module: 6.37 mV/K,
+    /// 0.515 Ω, 28.0 mW/K.
+    pub module: PeltierModule,
+    /// Heat capacity of the display node (plate, cold ceramic, half the legs), J/K (> 0). Device default 0.28.
+    pub plate_heat_capacity_j_k: f64,
+    /// Heat capacity of the hot node (hot ceramic, half the legs, box and water in it), J/K (> 0). Device
+    /// default 1.7.
+    pub hot_heat_capacity_j_k: f64,
+    /// Conductance from the hot node to the cooling water, W/K (≥ 0). Device default 0.3.
+    pub water_conductance_w_k: f64,
+    /// Temperature of the cooling water, °C. Device default 23.
+    pub water_c: f64,
+    /// First-order lag of the PT-100 behind the plate, s (≥ 0; 0 = none). Device default 0.3.
+    pub sensor_time_constant_s: f64,
+    /// Standard deviation of the PT-100's noise, °C (≥ 0). Device default 0.02.
+    pub sensor_noise_c: f64,
+    /// Quantisation step of the PT-100 and hot-side readings, °C (≥ 0; 0 = none). Device default 0.01.
+    pub sensor_resolution_c: f64,
+    /// Sampling rate of the PT-100, Hz (> 0); the reading is held between samples. Device default 100.
+    pub sensor_sample_rate_hz: f64,
+    /// Largest current magnitude of the drive, A (> 0). Device default 2.8.
+    pub current_limit_a: f64,
+}
+
+fn positive(name: &'static str, value: f64) -> Result<(), ControlError> {
+    check_finite(name, value)?;
+    if value > 0.0 {
+        Ok(())
+    } else {
+        Err(ControlError::OutOfRange {
+            name,
+            value,
+            requirement: "must be > 0",
+        })
+    }
+}
+
+fn non_negative(name: &'static str, value: f64) -> Result<(), ControlError> {
+    check_finite(name, value)?;
+    if value >= 0.0 {
+        Ok(())
+    } else {
+        Err(ControlError::OutOfRange {
+            name,
+            value,
+            requirement: "must be >= 0",
+        })
+    }
+}
+
+impl PlantModel {
+    /// Checks every number: finite; capacities, module parameters, sample rate and current limit > 0; water
+    /// conductance, sensor lag, noise and resolution ≥ 0; the water between −50 and 100 °C.
+    pub fn validate(&self) -> Result<(), ControlError> {
+        positive("module.seebeck_v_k", self.module.seebeck_v_k)?;
+        positive("module.resistance_ohm", self.module.resistance_ohm)?;
+        positive("module.conductance_w_k", self.module.conductance_w_k)?;
+        positive("plate_heat_capacity_j_k", self.plate_heat_capacity_j_k)?;
+        positive("hot_heat_capacity_j_k", self.hot_heat_capacity_j_k)?;
+        non_negative("water_conductance_w_k", self.water_conductance_w_k)?;
+        check_finite("water_c", self.water_c)?;
+        if !(-50.0..=100.0).contains(&self.water_c) {
+            return Err(ControlError::OutOfRange {
+                name: "water_c",
+                value: self.water_c,
+                requirement: "must lie between -50 and 100 °C",
+            });
+        }
+        non_negative("sensor_time_constant_s", self.sensor_time_constant_s)?;
+        non_negative("sensor_noise_c", self.sensor_noise_c)?;
+        non_negative("sensor_resolution_c", self.sensor_resolution_c)?;
+        positive("sensor_sample_rate_hz", self.sensor_sample_rate_hz)?;
+        positive("current_limit_a", self.current_limit_a)
+    }
+
+    /// The sensor's sample period, s.
+    pub fn sample_period_s(&self) -> f64 {
+        1.0 / self.sensor_sample_rate_hz
+    }
+
+    /// The lag the observer gives the sensor for ticks of `dt_s`, s: its time constant plus the mean age of the
+    /// held sample, `max(0, T_sample − dt)/2` (a controller ticking at the sample rate reads each sample as it is
+    /// taken; one ticking n times faster reads it at ages 0, dt, …, T_sample − dt).
+    pub fn effective_sensor_lag_s(&self, dt_s: f64) -> f64 {
+        self.sensor_time_constant_s + 0.5 * (self.sample_period_s() - dt_s).max(0.0)
+    }
+
+    /// Variance of one PT-100 reading, °C²: noise² + resolution²/12 + floor².
+    pub fn sensor_variance_c2(&self) -> f64 {
+        self.sensor_noise_c.powi(2) + self.sensor_resolution_c.powi(2) / 12.0 + READING_FLOOR_C.powi(2)
+    }
+
+    /// Variance of one hot-side reading, °C²: resolution²/12 + floor².
+    pub fn hot_side_variance_c2(&self) -> f64 {
+        self.sensor_resolution_c.powi(2) / 12.0 + READING_FLOOR_C.powi(2)
+    }
+
+    /// The reference heat flow of the noise model, W: the module's cooling capacity at the drive limit with both
+    /// faces at the water temperature (3.4 W for the default display); at least 1 mW.
+    pub fn reference_heat_w(&self) -> f64 {
+        self.module
+            .max_cooling_w(self.current_limit_a, self.water_c, self.water_c)
+            .max(1e-3)
+    }
+
+    /// The most useful cooling current at a plate temperature, A (negative): the optimum cooling current of the
+    /// module or the drive limit, whichever is smaller in magnitude. More cooling current than this warms the plate
+    /// or is not available.
+    pub fn most_useful_cooling_a(&self, plate_c: f64) -> f64 {
+        // Never positive (an absurd plate estimate, e.g. from a broken sensor, must not turn "cooling" into heating)
+        // and never NaN-poisoned into a panic: max/min instead of clamp.
+        self.module
+            .optimum_cooling_current_a(plate_c)
+            .max(-self.current_limit_a)
+            .min(0.0)
+    }
+
+    /// Plate and hot side after one backward-Euler step of `dt_s` from (`plate_c`, `hot_c`) at `current_a`, with the
+    /// finger heat `g_f (receptor_c − T_p)` and the extra heat `extra_w` into the plate. Returns the end temperatures
+    /// and the 2×2 map M⁻¹·diag(C/dt) of the start temperatures into them (for the observer's Jacobian) and M⁻¹e₁
+    /// (the end temperatures' sensitivity to `extra_w`).
+    fn plate_hot_step(&self, dt_s: f64, current_a: f64, start: [f64; 2], finger: Finger, extra_w: f64) -> NodeStep {
+        let qd = self.module.display_heat_affine(current_a);
+        let qh = self.module.hot_heat_affine(current_a);
+        let cp = self.plate_heat_capacity_j_k / dt_s;
+        let ch = self.hot_heat_capacity_j_k / dt_s;
+        let gw = self.water_conductance_w_k;
+        let (a11, a12) = (cp - qd.display_w_k + finger.conductance_w_k, -qd.hot_w_k);
+        let (a21, a22) = (-qh.display_w_k, ch - qh.hot_w_k + gw);
+        let r1 = cp * start[0] + qd.constant_w + finger.conductance_w_k * finger.receptor_c + extra_w;
+        let r2 = ch * start[1] + qh.constant_w + gw * self.water_c;
+        let det = a11 * a22 - a12 * a21;
+        let inv = [[a22 / det, -a12 / det], [-a21 / det, a11 / det]];
+        NodeStep {
+            end: [inv[0][0] * r1 + inv[0][1] * r2, inv[1][0] * r1 + inv[1][1] * r2],
+            start_map: [[inv[0][0] * cp, inv[0][1] * ch], [inv[1][0] * cp, inv[1][1] * ch]],
+            heat_map: [inv[0][0], inv[1][0]],
+        }
+    }
+}
+
+/// The finger as the plate sees it: heat `conductance_w_k · (receptor_c − T_p)` into the plate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Finger {
+    /// The finger model's receptor temperature, °C.
+    pub receptor_c: f64,
+    /// Conductance from the receptor to the plate, W/K (≥ 0; 0 = no finger or unknown).
+    pub conductance_w_k: f64,
+}
+
+impl Finger {
+    /// No finger (or none known): no heat.
+    pub const NONE: Finger = Finger {
+        receptor_c: 0.0,
+        conductance_w_k: 0.0,
+    };
+}
+
+/// One backward-Euler step of the plate and hot-side nodes.
+struct NodeStep {
+    end: [f64; 2],
+    start_map: [[f64; 2]; 2],
+    heat_map: [f64; 2],
+}
+
+/// The observer's estimate after an update. Temperatures in °C.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlateEstimate {
+    /// True plate (display) temperature, °C.
+    pub plate_c: f64,
+    /// Hot-side temperature, °C.
+    pub hot_side_c: f64,
+    /// Temperature of the PT-100 element (the lagged plate), °C.
+    pub sensor_element_c: f64,
+    /// Unknown heat into the plate the model misses, W.
+    pub disturbance_w: f64,
+    /// Standard deviation of the plate estimate, °C.
+    pub plate_sd_c: f64,
+}
+
+/// One tick's data for the observer.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObserverTick {
+    /// Time since the previous tick, s (> 0).
+    pub dt_s: f64,
+    /// Current applied over that interval, A (positive heats).
+    pub applied_current_a: f64,
+    /// The finger at the end of the interval.
+    pub finger: Finger,
+    /// The PT-100 reading now, °C.
+    pub sensor_c: f64,
+    /// The hot-side reading now, °C.
+    pub hot_side_c: f64,
+}
+
+impl ObserverTick {
+    fn validate(&self) -> Result<(), ControlError> {
+        positive("dt_s", self.dt_s)?;
+        check_finite("applied_current_a", self.applied_current_a)?;
+        check_finite("finger_receptor_c", self.finger.receptor_c)?;
+        non_negative("finger_conductance_w_k", self.finger.conductance_w_k)?;
+        check_finite("sensor_c", self.sensor_c)?;
+        check_finite("hot_side_c", self.hot_side_c)
+    }
+}
+
+/// Kalman filter on `[T_p, T_h, T_s, d]`; see the module documentation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlateObserver {
+    plant: PlantModel,
+    design: ObserverDesign,
+    x: Vector,
+    p: Matrix,
+    started: bool,
+}
+
+impl PlateObserver {
+    /// An observer of `plant` (validated here) with the default [`ObserverDesign`]. It starts on its first
+    /// [`PlateObserver::update`].
+    pub fn new(plant: PlantModel) -> Result<Self, ControlError> {
+        Self::with_design(plant, ObserverDesign::default())
+    }
+
+    /// An observer of `plant` with the noise model `design` (both validated here).
+    pub fn with_design(plant: PlantModel, design: ObserverDesign) -> Result<Self, ControlError> {
+        plant.validate()?;
+        design.validate()?;
+        Ok(Self {
+            plant,
+            design,
+            x: [0.0; OBSERVER_STATES],
+            p: [[0.0; OBSERVER_STATES]; OBSERVER_STATES],
+            started: false,
+        })
+    }
+
+    /// The plant model.
+    pub fn plant(&self) -> &PlantModel {
+        &self.plant
+    }
+
+    /// The noise model.
+    pub fn design(&self) -> &ObserverDesign {
+        &self.design
+    }
+
+    /// Forgets everything; the next update starts afresh.
+    pub fn reset(&mut self) {
+        self.x = [0.0; OBSERVER_STATES];
+        self.p = [[0.0; OBSERVER_STATES]; OBSERVER_STATES];
+        self.started = false;
+    }
+
+    /// The estimate (`None` before the first update).
+    pub fn estimate(&self) -> Option<PlateEstimate> {
+        self.started.then(|| PlateEstimate {
+            plate_c: self.x[TP],
+            hot_side_c: self.x[TH],
+            sensor_element_c: self.x[TS],
+            disturbance_w: self.x[DIST],
+            plate_sd_c: self.p[TP][TP].max(0.0).sqrt(),
+        })
+    }
+
+    /// One tick: predicts over `tick.dt_s` with the applied current and the finger, then corrects with both
+    /// readings. The first call initialises the estimate from the readings (plate = sensor, no unknown heat).
+    /// Invalid input (non-finite, `dt_s` ≤ 0, negative conductance) is an error and changes nothing.
+    pub fn update(&mut self, tick: &ObserverTick) -> Result<PlateEstimate, ControlError> {
+        tick.validate()?;
+        if self.started {
+            self.predict(tick);
+            self.correct(TS, tick.sensor_c, self.plant.sensor_variance_c2(), tick.dt_s);
+            self.correct(TH, tick.hot_side_c, self.plant.hot_side_variance_c2(), tick.dt_s);
+        } else {
+            self.start(tick.sensor_c, tick.hot_side_c);
+        }
+        self.estimate().ok_or(ControlError::NotFinite {
+            name: "observer state",
+            value: f64::NAN,
+        })
+    }
+
+    /// The plate temperature one step of `dt_s` ahead at `current_a` with `finger`, from the current estimate, °C
+    /// (`None` before the first update). Does not change the state.
+    pub fn predict_plate_c(&self, dt_s: f64, current_a: f64, finger: Finger) -> Option<f64> {
+        self.started.then(|| {
+            let step = self
+                .plant
+                .plate_hot_step(dt_s, current_a, [self.x[TP], self.x[TH]], finger, self.x[DIST]);
+            step.end[0]
+        })
+    }
+
+    fn start(&mut self, sensor_c: f64, hot_side_c: f64) {
+        let q_ref = self.plant.reference_heat_w();
+        self.x = [sensor_c, hot_side_c, sensor_c, 0.0];
+        self.p = [[0.0; OBSERVER_STATES]; OBSERVER_STATES];
+        self.p[TP][TP] = INITIAL_PLATE_SD_C.powi(2);
+        self.p[TH][TH] = self.plant.hot_side_variance_c2();
+        self.p[TS][TS] = self.plant.sensor_variance_c2();
+        self.p[DIST][DIST] = (self.design.disturbance_initial_fraction * q_ref).powi(2);
+        self.started = true;
+    }
+
+    /// The linear one-step map `x₁ = F x₀ + c` (returned as F and x₁) at the tick's current and finger.
+    fn transition(&self, tick: &ObserverTick) -> (Matrix, Vector) {
+        let dt = tick.dt_s;
+        let step = self.plant.plate_hot_step(
+            dt,
+            tick.applied_current_a,
+            [self.x[TP], self.x[TH]],
+            tick.finger,
+            self.x[DIST],
+        );
+        // Exact lag for an input linear over the step: T_s1 = e T_s0 + (1 − β) T_p1 + (β − e) T_p0.
+        let tau = self.plant.effective_sensor_lag_s(dt);
+        let decay = (-dt / tau).exp();
+        let beta = tau / dt * (1.0 - decay);
+        let (w1, w0) = (1.0 - beta, beta - decay);
+        let mut f = [[0.0; OBSERVER_STATES]; OBSERVER_STATES];
+        for (row, node) in [(TP, 0), (TH, 1)] {
+            f[row][TP] = step.start_map[node][0];
+            f[row][TH] = step.start_map[node][1];
+            f[row][DIST] = step.heat_map[node];
+        }
+        for col in [TP, TH, DIST] {
+            f[TS][col] = w1 * f[TP][col];
+        }
+        f[TS][TP] += w0;
+        f[TS][TS] = decay;
+        f[DIST][DIST] = 1.0;
+        let sensor = decay * self.x[TS] + w1 * step.end[0] + w0 * self.x[TP];
+        (f, [step.end[0], step.end[1], sensor, self.x[DIST]])
+    }
+
+    fn predict(&mut self, tick: &ObserverTick) {
+        let (f, x1) = self.transition(tick);
+        let p = &self.p;
+        let fp: Matrix =
+            std::array::from_fn(|i| std::array::from_fn(|j| (0..OBSERVER_STATES).map(|k| f[i][k] * p[k][j]).sum()));
+        self.p =
+            std::array::from_fn(|i| std::array::from_fn(|j| (0..OBSERVER_STATES).map(|k| fp[i][k] * f[j][k]).sum()));
+        let q = self.process_noise(tick.dt_s);
+        for (i, qi) in q.iter().enumerate() {
+            self.p[i][i] += qi;
+        }
+        self.x = x1;
+    }
+
+    /// Diagonal process noise over a step of `dt_s`: heat noise on plate and hot side, random walk of d.
+    fn process_noise(&self, dt_s: f64) -> Vector {
+        let q_ref = self.plant.reference_heat_w();
+        // White heat of RMS a over one sample period has intensity a²·T_sample [W²·s]; over dt it adds
+        // a²·T_sample·dt / C² to a node's variance.
+        let heat = (self.design.plant_heat_noise_fraction * q_ref).powi(2) * self.plant.sample_period_s() * dt_s;
+        [
+            heat / self.plant.plate_heat_capacity_j_k.powi(2),
+            heat / self.plant.hot_heat_capacity_j_k.powi(2),
+            0.0,
+            (self.design.disturbance_drift_per_sqrt_s * q_ref).powi(2) * dt_s,
+        ]
+    }
+
+    /// Scalar Kalman update with a reading of state `index` of variance `variance` per sample; a reading held
+    /// over several ticks counts as one sample per sample period.
+    fn correct(&mut self, index: usize, reading: f64, variance: f64, dt_s: f64) {
+        let repeats = (self.plant.sample_period_s() / dt_s).max(1.0);
+        let r = variance * repeats;
+        let s = self.p[index][index] + r;
+        let gain: Vector = std::array::from_fn(|i| self.p[i][index] / s);
+        let innovation = reading - self.x[index];
+        for (x, k) in self.x.iter_mut().zip(gain) {
+            *x += k * innovation;
+        }
+        let row = self.p[index];
+        for (i, k) in gain.iter().enumerate() {
+            for (j, pj) in row.iter().enumerate() {
+                self.p[i][j] -= k * pj;
+            }
+        }
+        // Keep P symmetric against rounding.
+        for i in 0..OBSERVER_STATES {
+            for j in (i + 1)..OBSERVER_STATES {
+                let m = 0.5 * (self.p[i][j] + self.p[j][i]);
+                self.p[i][j] = m;
+                self.p[j][i] = m;
+            }
+        }
+    }
+}

@@ -1,0 +1,682 @@
+//! [`SerialDevice`]: a real display (or the emulator) behind a serial port, speaking the device protocol
+//! ([`crate::protocol`], `docs/protocol.md`), as a [`Device`].
+//!
+//! - **Open** (`serial:PATH`): the port in raw mode at [`SerialConfig::baud_rate`], then the handshake: `Hello`
+//!   until the device answers `Identify`, then `ClearFault` until a report shows the drives released, all within
+//!   [`SerialConfig::handshake_timeout_s`].
+//! - **Reading**: a small background thread reads the port (short read timeouts), decodes frames and keeps the
+//!   newest state of every channel behind a mutex held for microseconds; [`Device::read`] only copies it, so the
+//!   control loop never waits for the port. A reading's `sample_seq` advances only when the device reports a new
+//!   sample (so the envelope's stale-sensor check works through the link), and its `time_s` is the host
+//!   [`Clock`] time the sample was taken (arrival time minus the sample's age; never decreasing).
+//! - **Errors** ([`DeviceError::Link`]): no report for longer than [`SerialConfig::link_timeout_s`] (the device
+//!   stopped answering), a port that fails or vanishes, or drives latched off by the device (after its watchdog
+//!   expired or a restart). The caller's envelope then sees no fresh samples and faults the channel.
+//! - **Driving**: [`Device::apply`] takes only envelope-gated [`DriveCommand`]s, in mA. One `Drive` frame for all
+//!   channels goes out when every channel has been applied (a control round), at most once per
+//!   [`SerialConfig::drive_interval_s`] — except that switching a channel off is sent at once. When nothing was
+//!   sent for a quarter of the device's watchdog period, a `Heartbeat` goes out from `read` or `apply`, so the
+//!   watchdog stays fed exactly as long as the control loop calls the device. Drives latched off by the device are
+//!   released (`ClearFault`) only once the host commands 0 A on every channel.
+//! - **Dropping** the device sends `AllOff`.
+
+use std::io::{self, Read, Write};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use thermode_control::DriveCommand;
+
+use crate::device::{Device, Reading, MAX_CHANNELS};
+use crate::error::DeviceError;
+use crate::protocol::{
+    encode_frame, to_milliamps, ChannelFaults, Clock, DeviceMessage, DriveFrame, Frame, HostMessage, Identify,
+    LinkCounters, NackCode, SensorReport, StreamDecoder, DEFAULT_BAUD_RATE, DELIMITER,
+};
+
+/// The prefix of a serial device specification: `serial:PATH`.
+pub const SERIAL_PREFIX: &str = "serial:";
+
+/// The port path of a `serial:PATH` specification (None if `spec` is not one or the path is empty).
+pub fn serial_path(spec: &str) -> Option<&str> {
+    spec.strip_prefix(SERIAL_PREFIX).filter(|path| !path.is_empty())
+}
+
+/// Settings of the host side of a serial link.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SerialConfig {
+    /// Baud rate \[bit/s\]. Default [`DEFAULT_BAUD_RATE`] (115200).
+    pub baud_rate: u32,
+    /// Longest time for the handshake (`Hello` → `Identify`, `ClearFault` → released) \[s\], wall clock, in
+    /// (0, 60]. Default 3 (boards that reset when the port opens take 1–2 s to boot; `Hello` is repeated every
+    /// 0.2 s meanwhile).
+    pub handshake_timeout_s: f64,
+    /// Longest time without a sensor report before [`Device::read`] fails \[s\], in (0, 10]. Default 0.1 (ten
+    /// report intervals at 100 Hz; the envelope's stale-sensor timeout is 0.2 s).
+    pub link_timeout_s: f64,
+    /// Shortest interval between two `Drive` frames \[s\], in \[0, 1\] (switching off is never delayed). Default
+    /// 0.005 (at most 200 frames/s: 32 bytes each for ten channels, 6.4 kB/s of the 11.5 kB/s of 115200 baud).
+    pub drive_interval_s: f64,
+    /// Longest time a write may wait for the port \[s\], in (0, 1]; a write that cannot finish fails the link.
+    /// Default 0.05.
+    pub write_timeout_s: f64,
+    /// Read timeout of the background reader \[s\], in (0, 0.1]; also how long dropping the device may wait for it.
+    /// Default 0.005.
+    pub read_poll_s: f64,
+}
+
+impl Default for SerialConfig {
+    fn default() -> Self {
+        SerialConfig {
+            baud_rate: DEFAULT_BAUD_RATE,
+            handshake_timeout_s: 3.0,
+            link_timeout_s: 0.1,
+            drive_interval_s: 0.005,
+            write_timeout_s: 0.05,
+            read_poll_s: 0.005,
+        }
+    }
+}
+
+impl SerialConfig {
+    /// `Ok` if every setting is in its range.
+    pub fn validate(&self) -> Result<(), DeviceError> {
+        let checks = [
+            ("handshake_timeout_s", self.handshake_timeout_s, false, 60.0),
+            ("link_timeout_s", self.link_timeout_s, false, 10.0),
+            ("drive_interval_s", self.drive_interval_s, true, 1.0),
+            ("write_timeout_s", self.write_timeout_s, false, 1.0),
+            ("read_poll_s", self.read_poll_s, false, 0.1),
+        ];
+        for (what, value, zero_ok, max) in checks {
+            let above_min = if zero_ok { value >= 0.0 } else { value > 0.0 };
+            if !(above_min && value <= max) {
+                return Err(DeviceError::BadValue {
+                    what: format!("serial {what} [s]"),
+                    value,
+                    requirement: format!("must lie in {}0, {max}]", if zero_ok { "[" } else { "(" }),
+                });
+            }
+        }
+        if self.baud_rate == 0 {
+            return Err(DeviceError::BadValue {
+                what: "serial baud_rate [bit/s]".to_string(),
+                value: 0.0,
+                requirement: "must be positive".to_string(),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The newest sensor report and when it arrived.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReportSnapshot {
+    /// The device's sequence number of the report frame.
+    pub seq: u16,
+    /// The report.
+    pub report: SensorReport,
+    /// Host clock time of its arrival \[s\].
+    pub received_s: f64,
+}
+
+/// What the host side has seen and done on the link.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SerialStats {
+    /// Received bytes and frames, dropped frames by reason, device sequence gaps (lost frames).
+    pub rx: LinkCounters,
+    /// Sensor reports taken.
+    pub reports: u64,
+    /// Reports refused because their channel count differs from the device's.
+    pub report_mismatches: u64,
+    /// Acks received.
+    pub acks: u64,
+    /// Nacks received.
+    pub nacks: u64,
+    /// The latest Nack: (refused host seq, code).
+    pub last_nack: Option<(u16, NackCode)>,
+    /// Frames sent.
+    pub frames_sent: u64,
+    /// `Drive` frames sent.
+    pub drive_frames: u64,
+    /// `Heartbeat` frames sent.
+    pub heartbeats: u64,
+    /// `ClearFault` frames sent.
+    pub clear_faults: u64,
+}
+
+/// The host's view of one channel, built from the reports.
+#[derive(Debug, Clone, Copy, Default)]
+struct Track {
+    /// The last report's 16-bit sample sequence number, once a report has been seen.
+    seq16: Option<u16>,
+    sample_seq: u64,
+    time_s: f64,
+    sensor_c: f64,
+    hot_side_c: f64,
+    current_a: f64,
+    faults: ChannelFaults,
+}
+
+impl Track {
+    fn update(&mut self, report: &crate::protocol::ChannelReport, received_s: f64) {
+        let sample_time_s = received_s - f64::from(report.sample_age_ms) * 1e-3;
+        match self.seq16 {
+            None => {
+                self.sample_seq = u64::from(report.sample_seq);
+                self.time_s = sample_time_s;
+                self.sensor_c = report.sensor_c();
+            }
+            Some(last) if last != report.sample_seq => {
+                self.sample_seq += u64::from(report.sample_seq.wrapping_sub(last));
+                self.time_s = self.time_s.max(sample_time_s);
+                self.sensor_c = report.sensor_c();
+            }
+            Some(_) => {}
+        }
+        self.seq16 = Some(report.sample_seq);
+        self.hot_side_c = report.hot_side_c();
+        self.current_a = report.applied_a();
+        self.faults = report.faults;
+    }
+}
+
+/// State shared between the reader thread and the device.
+#[derive(Debug, Default)]
+struct Shared {
+    identify: Option<Identify>,
+    tracks: [Track; MAX_CHANNELS],
+    last_report: Option<ReportSnapshot>,
+    stats: SerialStats,
+    /// Set when the port failed; permanent.
+    error: Option<String>,
+}
+
+impl Shared {
+    fn take(&mut self, frame: Frame<DeviceMessage>, received_s: f64) {
+        match frame.message {
+            DeviceMessage::Identify(identify) => self.identify = Some(identify),
+            DeviceMessage::SensorReport(report) => self.take_report(frame.seq, report, received_s),
+            DeviceMessage::Ack { .. } => self.stats.acks += 1,
+            DeviceMessage::Nack { seq, code } => {
+                self.stats.nacks += 1;
+                self.stats.last_nack = Some((seq, code));
+            }
+        }
+    }
+
+    fn take_report(&mut self, seq: u16, report: SensorReport, received_s: f64) {
+        let Some(identify) = self.identify else {
+            return;
+        };
+        if report.channels().len() != identify.channel_count as usize {
+            self.stats.report_mismatches += 1;
+            return;
+        }
+        for (track, channel) in self.tracks.iter_mut().zip(report.channels()) {
+            track.update(channel, received_s);
+        }
+        self.stats.reports += 1;
+        self.last_report = Some(ReportSnapshot {
+            seq,
+            report,
+            received_s,
+        });
+    }
+}
+
+/// The reader thread: decodes everything the port delivers into `shared` until `stop` or a port error.
+fn read_port(mut port: Box<dyn Read + Send>, shared: Arc<Mutex<Shared>>, stop: Arc<AtomicBool>, clock: Arc<dyn Clock>) {
+    let mut decoder = StreamDecoder::<DeviceMessage>::new();
+    let mut buf = [0u8; 1024];
+    while !stop.load(Ordering::SeqCst) {
+        let failure = match port.read(&mut buf) {
+            Ok(0) => Some("the serial port reached its end (closed)".to_string()),
+            Ok(n) => {
+                let received_s = clock.now_s();
+                let Ok(mut state) = shared.lock() else {
+                    return;
+                };
+                decoder.feed(&buf[..n], |result| {
+                    if let Ok(frame) = result {
+                        state.take(frame, received_s);
+                    }
+                });
+                state.stats.rx = *decoder.counters();
+                None
+            }
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                std::thread::sleep(Duration::from_millis(1));
+                None
+            }
+            Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::Interrupted) => None,
+            Err(e) => Some(format!("serial port read failed: {e}")),
+        };
+        if let Some(message) = failure {
+            if let Ok(mut state) = shared.lock() {
+                state.error = Some(message);
+            }
+            return;
+        }
+    }
+}
+
+/// A display behind a serial port. See the module documentation.
+pub struct SerialDevice {
+    name: String,
+    writer: Box<dyn Write + Send>,
+    shared: Arc<Mutex<Shared>>,
+    stop: Arc<AtomicBool>,
+    reader: Option<JoinHandle<()>>,
+    join_reader: bool,
+    clock: Arc<dyn Clock>,
+    config: SerialConfig,
+    identify: Identify,
+    tx_seq: u16,
+    out: Vec<u8>,
+    pending_ma: [i16; MAX_CHANNELS],
+    sent_ma: [i16; MAX_CHANNELS],
+    /// Channels applied since the last drive frame (bit per channel).
+    round: u16,
+    dirty: bool,
+    last_drive_s: f64,
+    last_sent_s: f64,
+    last_clear_s: f64,
+    tx: SerialStats,
+    failed: Option<String>,
+}
+
+impl std::fmt::Debug for SerialDevice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SerialDevice")
+            .field("name", &self.name)
+            .field("identify", &self.identify)
+            .field("config", &self.config)
+            .field("failed", &self.failed)
+            .finish_non_exhaustive()
+    }
+}
+
+impl SerialDevice {
+    /// Opens the serial port at `path` (raw, 8N1, `config.baud_rate`) and performs the handshake. Reading times
+    /// are on `clock`: give it the clock of the control loop.
+    pub fn open(path: &str, config: &SerialConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
+        config.validate()?;
+        let link = |what: &str, e: serialport::Error| DeviceError::Link(format!("{what} {path}: {e}"));
+        let port = serialport::new(path, config.baud_rate)
+            .timeout(Duration::from_secs_f64(config.read_poll_s))
+            .open()
+            .map_err(|e| link("cannot open serial port", e))?;
+        let _ = port.clear(serialport::ClearBuffer::Input);
+        let mut writer = port.try_clone().map_err(|e| link("cannot share serial port", e))?;
+        writer
+            .set_timeout(Duration::from_secs_f64(config.write_timeout_s))
+            .map_err(|e| link("cannot set the write timeout of", e))?;
+        SerialDevice::start(path, Box::new(port), Box::new(writer), config, clock, true)
+    }
+
+    /// As [`SerialDevice::open`] for a `serial:PATH` specification.
+    pub fn open_spec(spec: &str, config: &SerialConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
+        let path = serial_path(spec)
+            .ok_or_else(|| DeviceError::Link(format!("'{spec}' is not a serial device (serial:PATH)")))?;
+        SerialDevice::open(path, config, clock)
+    }
+
+    /// A device over any byte streams (e.g. a socket or an in-memory pipe), named `name` in messages. `reader`
+    /// should return within about [`SerialConfig::read_poll_s`] (a read timeout, or `WouldBlock`); the reader thread
+    /// is not waited for when the device is dropped.
+    pub fn from_streams(
+        name: &str,
+        reader: Box<dyn Read + Send>,
+        writer: Box<dyn Write + Send>,
+        config: &SerialConfig,
+        clock: Arc<dyn Clock>,
+    ) -> Result<Self, DeviceError> {
+        config.validate()?;
+        SerialDevice::start(name, reader, writer, config, clock, false)
+    }
+
+    fn start(
+        name: &str,
+        reader: Box<dyn Read + Send>,
+        writer: Box<dyn Write + Send>,
+        config: &SerialConfig,
+        clock: Arc<dyn Clock>,
+        join_reader: bool,
+    ) -> Result<Self, DeviceError> {
+        let shared = Arc::new(Mutex::new(Shared::default()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let thread = {
+            let (shared, stop, clock) = (Arc::clone(&shared), Arc::clone(&stop), Arc::clone(&clock));
+            std::thread::Builder::new()
+                .name("thermode-serial-reader".to_string())
+                .spawn(move || read_port(reader, shared, stop, clock))
+                .map_err(|e| DeviceError::Link(format!("cannot start the serial reader: {e}")))?
+        };
+        let mut device = SerialDevice {
+            name: name.to_string(),
+            writer,
+            shared,
+            stop,
+            reader: Some(thread),
+            join_reader,
+            clock,
+            config: *config,
+            identify: Identify {
+                channel_count: 0,
+                firmware: Default::default(),
+                current_limit_ma: 0,
+                watchdog_ms: 0,
+                report_interval_ms: 0,
+            },
+            tx_seq: 0,
+            out: Vec::with_capacity(crate::protocol::MAX_ENCODED_LEN + 1),
+            pending_ma: [0; MAX_CHANNELS],
+            sent_ma: [0; MAX_CHANNELS],
+            round: 0,
+            dirty: false,
+            last_drive_s: f64::NEG_INFINITY,
+            last_sent_s: f64::NEG_INFINITY,
+            last_clear_s: f64::NEG_INFINITY,
+            tx: SerialStats::default(),
+            failed: None,
+        };
+        device.handshake()?;
+        Ok(device)
+    }
+
+    /// `Hello` until `Identify`, then `ClearFault` until a report shows the drives released.
+    fn handshake(&mut self) -> Result<(), DeviceError> {
+        let deadline = Instant::now() + Duration::from_secs_f64(self.config.handshake_timeout_s);
+        self.write_raw(&[DELIMITER])?;
+        let identify = self.retry_until(deadline, HostMessage::Hello, |s| s.identify)?;
+        let Some(identify) = identify else {
+            let nack = self.lock()?.stats.last_nack;
+            let hint = match nack {
+                Some((_, NackCode::UnsupportedVersion)) => " (it speaks another protocol version)",
+                _ => "",
+            };
+            return Err(DeviceError::Link(format!(
+                "{}: no Identify answer to Hello within {} s{hint}",
+                self.name, self.config.handshake_timeout_s
+            )));
+        };
+        self.identify = identify;
+        let released = self.retry_until(deadline, HostMessage::ClearFault, |s| {
+            s.last_report.filter(|r| !r.report.flags.latched()).map(|_| ())
+        })?;
+        if released.is_none() {
+            return Err(DeviceError::Link(format!(
+                "{}: no unlatched sensor report within {} s of the handshake",
+                self.name, self.config.handshake_timeout_s
+            )));
+        }
+        Ok(())
+    }
+
+    /// Sends `message` every 0.2 s until `done` finds what it waits for in the shared state, or `deadline`.
+    fn retry_until<T>(
+        &mut self,
+        deadline: Instant,
+        message: HostMessage,
+        done: impl Fn(&Shared) -> Option<T>,
+    ) -> Result<Option<T>, DeviceError> {
+        let mut next_send = Instant::now();
+        while Instant::now() < deadline {
+            {
+                let state = self.lock()?;
+                if let Some(error) = &state.error {
+                    return Err(DeviceError::Link(format!("{}: {error}", self.name)));
+                }
+                if let Some(found) = done(&state) {
+                    return Ok(Some(found));
+                }
+            }
+            if Instant::now() >= next_send {
+                if message == HostMessage::ClearFault {
+                    self.tx.clear_faults += 1;
+                }
+                self.send(&message)?;
+                next_send = Instant::now() + Duration::from_millis(200);
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        Ok(None)
+    }
+
+    /// What the device said about itself.
+    pub fn identify(&self) -> Identify {
+        self.identify
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &SerialConfig {
+        &self.config
+    }
+
+    /// The clock reading times are on.
+    pub fn clock(&self) -> &Arc<dyn Clock> {
+        &self.clock
+    }
+
+    /// What has been seen and done on the link so far.
+    pub fn stats(&self) -> SerialStats {
+        let mut stats = self.lock().map(|s| s.stats).unwrap_or_default();
+        stats.frames_sent = self.tx.frames_sent;
+        stats.drive_frames = self.tx.drive_frames;
+        stats.heartbeats = self.tx.heartbeats;
+        stats.clear_faults = self.tx.clear_faults;
+        stats
+    }
+
+    /// The newest sensor report, if any.
+    pub fn last_report(&self) -> Option<ReportSnapshot> {
+        self.lock().ok().and_then(|s| s.last_report)
+    }
+
+    /// The fault bits of `channel` in the newest report.
+    pub fn channel_faults(&self, channel: usize) -> Result<ChannelFaults, DeviceError> {
+        self.check_channel(channel)?;
+        Ok(self.lock()?.tracks[channel].faults)
+    }
+
+    /// Sends a `Heartbeat` now.
+    pub fn heartbeat(&mut self) -> Result<(), DeviceError> {
+        self.tx.heartbeats += 1;
+        self.send(&HostMessage::Heartbeat)
+    }
+
+    /// Switches every drive off now (`AllOff`); the held commands become 0 A.
+    pub fn all_off(&mut self) -> Result<(), DeviceError> {
+        self.pending_ma = [0; MAX_CHANNELS];
+        self.sent_ma = [0; MAX_CHANNELS];
+        self.dirty = false;
+        self.send(&HostMessage::AllOff)
+    }
+
+    fn lock(&self) -> Result<MutexGuard<'_, Shared>, DeviceError> {
+        self.shared
+            .lock()
+            .map_err(|_| DeviceError::Link(format!("{}: the serial reader failed", self.name)))
+    }
+
+    fn check_channel(&self, channel: usize) -> Result<(), DeviceError> {
+        let count = self.channel_count();
+        if channel < count {
+            Ok(())
+        } else {
+            Err(DeviceError::NoSuchChannel { channel, count })
+        }
+    }
+
+    fn check_failed(&self) -> Result<(), DeviceError> {
+        match &self.failed {
+            Some(error) => Err(DeviceError::Link(error.clone())),
+            None => Ok(()),
+        }
+    }
+
+    /// Encodes and writes one frame.
+    fn send(&mut self, message: &HostMessage) -> Result<(), DeviceError> {
+        self.check_failed()?;
+        self.out.clear();
+        encode_frame(self.tx_seq, message, &mut self.out)
+            .map_err(|e| DeviceError::Link(format!("{}: cannot encode a frame: {e}", self.name)))?;
+        self.tx_seq = self.tx_seq.wrapping_add(1);
+        let out = std::mem::take(&mut self.out);
+        let result = self.write_raw(&out);
+        self.out = out;
+        result?;
+        self.tx.frames_sent += 1;
+        self.last_sent_s = self.clock.now_s();
+        Ok(())
+    }
+
+    fn write_raw(&mut self, bytes: &[u8]) -> Result<(), DeviceError> {
+        let result = self.writer.write_all(bytes).and_then(|()| self.writer.flush());
+        result.map_err(|e| {
+            let message = format!("{}: serial port write failed: {e}", self.name);
+            self.failed = Some(message.clone());
+            DeviceError::Link(message)
+        })
+    }
+
+    /// Sends the held currents of every channel as one `Drive` frame, releasing a device latch first when every
+    /// channel is at 0 A. Unless `force`, waits for the drive interval (the currents stay pending).
+    fn flush_drive(&mut self, force: bool) -> Result<(), DeviceError> {
+        self.round = 0;
+        let now = self.clock.now_s();
+        if !force && now - self.last_drive_s < self.config.drive_interval_s {
+            self.dirty = true;
+            return Ok(());
+        }
+        self.release_latch_if_off(now)?;
+        let count = self.channel_count();
+        let drive = DriveFrame::new(0, &self.pending_ma[..count])
+            .map_err(|e| DeviceError::Link(format!("{}: {e}", self.name)))?;
+        self.send(&HostMessage::Drive(drive))?;
+        self.tx.drive_frames += 1;
+        self.sent_ma = self.pending_ma;
+        self.dirty = false;
+        self.last_drive_s = now;
+        Ok(())
+    }
+
+    /// Sends `ClearFault` (at most every 0.1 s) when the device reports its drives latched and the host holds 0 A on
+    /// every channel.
+    fn release_latch_if_off(&mut self, now: f64) -> Result<(), DeviceError> {
+        let latched = self.lock()?.last_report.is_some_and(|r| r.report.flags.latched());
+        if latched && self.pending_ma.iter().all(|&ma| ma == 0) && now - self.last_clear_s >= 0.1 {
+            self.tx.clear_faults += 1;
+            self.last_clear_s = now;
+            self.send(&HostMessage::ClearFault)?;
+        }
+        Ok(())
+    }
+
+    /// Keeps the watchdog fed: a pending drive or a heartbeat when nothing went out for a quarter period.
+    fn keep_alive(&mut self) -> Result<(), DeviceError> {
+        let now = self.clock.now_s();
+        let quarter_s = f64::from(self.identify.watchdog_ms) * 1e-3 / 4.0;
+        if self.dirty && now - self.last_drive_s >= self.config.drive_interval_s {
+            return self.flush_drive(true);
+        }
+        if now - self.last_sent_s >= quarter_s {
+            self.release_latch_if_off(now)?;
+            return self.heartbeat();
+        }
+        Ok(())
+    }
+
+    /// The reading of `channel` from the shared state, or why there is none.
+    fn reading(&self, channel: usize) -> Result<Reading, DeviceError> {
+        let now = self.clock.now_s();
+        let state = self.lock()?;
+        if let Some(error) = &state.error {
+            return Err(DeviceError::Link(format!("{}: {error}", self.name)));
+        }
+        let Some(last) = state.last_report else {
+            return Err(DeviceError::Link(format!("{}: no sensor report yet", self.name)));
+        };
+        let silent_s = now - last.received_s;
+        if silent_s > self.config.link_timeout_s {
+            return Err(DeviceError::Link(format!(
+                "{}: no sensor report for {silent_s:.3} s (link timeout {} s)",
+                self.name, self.config.link_timeout_s
+            )));
+        }
+        if last.report.flags.latched() {
+            let why = if last.report.flags.watchdog_expired() {
+                "its watchdog expired"
+            } else {
+                "it restarted"
+            };
+            return Err(DeviceError::Link(format!(
+                "{}: the device latched its drives off ({why}); they are released once every channel is commanded 0 A",
+                self.name
+            )));
+        }
+        let track = &state.tracks[channel];
+        Ok(Reading {
+            sensor_c: track.sensor_c,
+            hot_side_c: track.hot_side_c,
+            time_s: track.time_s,
+            sample_seq: track.sample_seq,
+            current_a: track.current_a,
+        })
+    }
+}
+
+impl Device for SerialDevice {
+    fn channel_count(&self) -> usize {
+        self.identify.channel_count as usize
+    }
+
+    fn apply(&mut self, channel: usize, command: &DriveCommand) -> Result<(), DeviceError> {
+        self.check_channel(channel)?;
+        let current_a = command.current_a();
+        let ma = to_milliamps(current_a).ok_or_else(|| DeviceError::BadValue {
+            what: format!("channel {channel} drive current [A]"),
+            value: current_a,
+            requirement: "must be finite and within ±32.767 A".to_string(),
+        })?;
+        self.check_failed()?;
+        let bit = 1u16 << channel;
+        if self.round & bit != 0 {
+            // The channel comes round again before every channel was applied: a new control round began.
+            self.flush_drive(false)?;
+        }
+        self.pending_ma[channel] = ma;
+        self.round |= bit;
+        let switching_off = ma == 0 && self.sent_ma[channel] != 0;
+        let round_complete = self.round.count_ones() as usize == self.channel_count();
+        if switching_off || round_complete {
+            self.flush_drive(switching_off)?;
+        }
+        self.keep_alive()
+    }
+
+    fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
+        self.check_channel(channel)?;
+        self.keep_alive()?;
+        self.reading(channel)
+    }
+
+    /// A real device runs in real time: nothing to do.
+    fn advance(&mut self, _dt_s: f64) {}
+}
+
+impl Drop for SerialDevice {
+    fn drop(&mut self) {
+        if self.failed.is_none() {
+            let _ = self.send(&HostMessage::AllOff);
+        }
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(thread) = self.reader.take() {
+            if self.join_reader {
+                let _ = thread.join();
+            }
+        }
+    }
+}

@@ -1,0 +1,113 @@
+//! Criterion bench: channel-steps per second of the full pipeline — renderer, display inverse, controller, safety
+//! envelope and the simulated plant — for the kron and fv renderers and both controllers, at a 1 ms tick (the
+//! plant advanced once per tick), the finger touching aluminium. The plant's finger is the finite-volume finger
+//! (the reference physics, as `thermode render` uses it) and, for the cheapest configuration, the paper's Kron
+//! finger. The pipeline alone (without the plant) is measured too, to show where the time goes.
+
+use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
+use thermode_device::{default_finger, Device, DeviceConfig, PlateFinger, SimulatedDisplay};
+use thermode_model::kron::KronModel;
+use thermode_render::{ChannelPipeline, ControllerKind, PipelineConfig, RendererKind, ShippedDisplay, Stimulus};
+
+const STEPS: u64 = 1000;
+const DT_S: f64 = 1e-3;
+
+fn pipeline(renderer: RendererKind, controller: ControllerKind) -> ChannelPipeline {
+    let mut config = PipelineConfig::new(DeviceConfig::default(), controller);
+    config.renderer = renderer;
+    let mut pipeline = ChannelPipeline::new(&config).unwrap_or_else(|e| panic!("{e}"));
+    let aluminium = thermode_model::materials::find("aluminium").unwrap_or_else(|e| panic!("{e}"));
+    pipeline
+        .set_stimulus(Stimulus::Touch {
+            material: aluminium,
+            object_c: 23.0,
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+    pipeline
+}
+
+fn plant<F: PlateFinger>(finger: F) -> SimulatedDisplay<F> {
+    let mut plant = SimulatedDisplay::new(&DeviceConfig::default(), vec![finger], 1).unwrap_or_else(|e| panic!("{e}"));
+    plant
+        .channel_mut(0)
+        .and_then(|c| c.set_temperatures(31.9, 23.0))
+        .unwrap_or_else(|e| panic!("{e}"));
+    plant.advance(0.01);
+    plant
+}
+
+fn controllers() -> [(&'static str, ControllerKind); 2] {
+    let gains = ShippedDisplay::Default.gains().unwrap_or_else(|e| panic!("{e}"));
+    [("pid", ControllerKind::Pid(gains)), ("model", ControllerKind::Model)]
+}
+
+fn full_loop<F: PlateFinger>(
+    c: &mut Criterion,
+    name: &str,
+    renderer: RendererKind,
+    controller: ControllerKind,
+    finger: F,
+) {
+    let mut pipeline = pipeline(renderer, controller);
+    let mut plant = plant(finger);
+    let mut now_s = plant.time_s();
+    let mut group = c.benchmark_group("pipeline_and_plant");
+    group.throughput(Throughput::Elements(STEPS));
+    group.bench_function(name, |b| {
+        b.iter(|| {
+            for _ in 0..STEPS {
+                let Ok(reading) = plant.read(0) else { return };
+                let (drive, telemetry) = pipeline.tick(now_s, DT_S, &reading);
+                let _ = plant.apply(0, &drive);
+                plant.advance(DT_S);
+                now_s += DT_S;
+                black_box(telemetry.skin_c);
+            }
+        });
+    });
+    group.finish();
+}
+
+fn pipeline_only(c: &mut Criterion, name: &str, renderer: RendererKind, controller: ControllerKind) {
+    let mut pipeline = pipeline(renderer, controller);
+    let mut plant = plant(default_finger().unwrap_or_else(|e| panic!("{e}")));
+    let mut now_s = plant.time_s();
+    let mut reading = plant.read(0).unwrap_or_else(|e| panic!("{e}"));
+    let mut group = c.benchmark_group("pipeline_only");
+    group.throughput(Throughput::Elements(STEPS));
+    group.bench_function(name, |b| {
+        b.iter(|| {
+            for _ in 0..STEPS {
+                // A fresh sample every tick (the plant is not stepped here).
+                reading.time_s = now_s;
+                reading.sample_seq += 1;
+                let (drive, telemetry) = pipeline.tick(now_s, DT_S, &reading);
+                now_s += DT_S;
+                black_box((drive.current_a(), telemetry.skin_c));
+            }
+        });
+    });
+    group.finish();
+}
+
+fn benches(c: &mut Criterion) {
+    for (controller_name, controller) in controllers() {
+        for (renderer_name, renderer) in [("kron", RendererKind::Kron), ("fv", RendererKind::Fv)] {
+            let name = format!("{renderer_name}_renderer_{controller_name}_fv_plant");
+            let finger = default_finger().unwrap_or_else(|e| panic!("{e}"));
+            full_loop(c, &name, renderer, controller, finger);
+            pipeline_only(
+                c,
+                &format!("{renderer_name}_renderer_{controller_name}"),
+                renderer,
+                controller,
+            );
+        }
+        let finger = <KronModel as PlateFinger>::fingertip().unwrap_or_else(|e| panic!("{e}"));
+        let name = format!("kron_renderer_{controller_name}_kron_plant");
+        full_loop(c, &name, RendererKind::Kron, controller, finger);
+    }
+}
+
+criterion_group!(pipeline_benches, benches);
+criterion_main!(pipeline_benches);

@@ -1,0 +1,176 @@
+//! The renderer: the controller's model of the finger touching the virtual world, stepped live, whose receptor
+//! temperature is the target the display must make the real finger feel.
+//!
+//! - [`RendererKind::Fv`] (default): the finite-volume finger and object (`model.md` §3) with a light-touch contact
+//!   resistance (default [`LIGHT_TOUCH_RESISTANCE_M2K_W`]); the object has its heat capacity, so effusivity counts.
+//!   The receptor is the skin surface.
+//! - [`RendererKind::Kron`]: the paper's three-layer model (eq. 1–6); the object is held at its temperature and only
+//!   its conductivity and thickness count. The receptor is the epidermis centre T1.
+//!
+//! The finger starts at its steady state in still air at the ambient temperature. A touch puts it on a fresh object
+//! (uniform at the object temperature) and keeps the finger's own temperature field; a release returns it to air;
+//! a change of material during contact is a new touch of the new material. Stepping never allocates.
+
+use thermode_model::fv::{FvConfig, FvEnvironment, FvModel};
+use thermode_model::kron::{KronEnvironment, KronModel};
+use thermode_model::{Material, ParamError, Skin};
+
+/// Contact resistance between skin and a touched object for a light touch [m²K/W]: 1e-3 (`model.md` §3; the
+/// paper's participants touched "without exerting pressure").
+pub const LIGHT_TOUCH_RESISTANCE_M2K_W: f64 = 1e-3;
+
+/// Which finger model renders (and, through the display inverse, which model runs on the display).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RendererKind {
+    /// The paper's three-layer model (Kron).
+    Kron,
+    /// The finite-volume reference (default; physics-true).
+    #[default]
+    Fv,
+}
+
+impl RendererKind {
+    /// The name used on the command line and in files: `kron` or `fv`.
+    pub fn name(self) -> &'static str {
+        match self {
+            RendererKind::Kron => "kron",
+            RendererKind::Fv => "fv",
+        }
+    }
+}
+
+/// The finite-volume grid of renderer and display inverse: [`FvConfig::default`] with the light-touch contact
+/// resistance `contact_resistance_m2k_w` [m²K/W].
+pub fn fv_config(contact_resistance_m2k_w: f64) -> FvConfig {
+    FvConfig {
+        contact_resistance_m2k_w,
+        ..FvConfig::default()
+    }
+}
+
+/// A finger model touching the virtual world, stepped live.
+#[derive(Debug, Clone)]
+// One per channel, stepped every tick: the size difference costs nothing, a box would cost an indirection.
+#[allow(clippy::large_enum_variant)]
+pub enum Renderer {
+    /// The three-layer model and what its epidermis exchanges heat with.
+    Kron {
+        /// The model.
+        model: KronModel,
+        /// Air or the touched object.
+        env: KronEnvironment,
+        /// Air temperature \[°C\].
+        ambient_c: f64,
+    },
+    /// The finite-volume finger (with the touched object once touched).
+    Fv {
+        /// The model.
+        model: FvModel,
+        /// Air or the object.
+        env: FvEnvironment,
+        /// The grid and contact resistance used for every touched object.
+        config: FvConfig,
+        /// Air temperature \[°C\].
+        ambient_c: f64,
+        /// The material of the object the model holds now (`None` before the first touch).
+        material: Option<Material>,
+    },
+}
+
+impl Renderer {
+    /// A renderer of `kind` for `skin`, at rest in still air at `ambient_c` \[°C\]; the fv renderer uses `config`
+    /// (grid, contact resistance) for every object it touches.
+    pub fn new(kind: RendererKind, skin: &Skin, ambient_c: f64, config: &FvConfig) -> Result<Self, ParamError> {
+        let air_kron = KronEnvironment::Air { ambient_c };
+        air_kron.validate("renderer")?;
+        match kind {
+            RendererKind::Kron => {
+                let mut model = KronModel::new(skin)?;
+                model.settle(&air_kron);
+                Ok(Renderer::Kron {
+                    model,
+                    env: air_kron,
+                    ambient_c,
+                })
+            }
+            RendererKind::Fv => {
+                let mut model = FvModel::new(skin, None, config)?;
+                model.set_steady_in_air(ambient_c)?;
+                Ok(Renderer::Fv {
+                    model,
+                    env: FvEnvironment::Air { ambient_c },
+                    config: config.clone(),
+                    ambient_c,
+                    material: None,
+                })
+            }
+        }
+    }
+
+    /// The finger lets go: from now on it is in still air at the ambient temperature.
+    pub fn release(&mut self) {
+        match self {
+            Renderer::Kron { env, ambient_c, .. } => *env = KronEnvironment::Air { ambient_c: *ambient_c },
+            Renderer::Fv { env, ambient_c, .. } => *env = FvEnvironment::Air { ambient_c: *ambient_c },
+        }
+    }
+
+    /// The finger touches a fresh object of `material` at `object_c` \[°C\], keeping its own temperature field.
+    /// Errors leave the renderer unchanged (a material the model refuses, an object grid that is too large).
+    pub fn touch(&mut self, material: &Material, object_c: f64) -> Result<(), ParamError> {
+        match self {
+            Renderer::Kron { env, .. } => {
+                let touched = KronEnvironment::touching(material, object_c);
+                touched.validate(&format!("material `{}`", material.name))?;
+                *env = touched;
+            }
+            Renderer::Fv {
+                model,
+                env,
+                config,
+                material: held,
+                ..
+            } => {
+                if held.as_ref() != Some(material) {
+                    model.replace_object(Some(material), config)?;
+                    *held = Some(material.clone());
+                }
+                model.touch(object_c)?;
+                *env = FvEnvironment::Object;
+            }
+        }
+        Ok(())
+    }
+
+    /// Advances the finger by `dt_s` \[s\] (finite and positive; the caller checks). Never allocates.
+    pub fn step(&mut self, dt_s: f64) {
+        match self {
+            Renderer::Kron { model, env, .. } => model.step(dt_s, env),
+            Renderer::Fv { model, env, .. } => model.step(dt_s, *env),
+        }
+    }
+
+    /// The receptor temperature now \[°C\]: the target skin temperature.
+    pub fn receptor_c(&self) -> f64 {
+        match self {
+            Renderer::Kron { model, .. } => model.temperatures_c()[0],
+            Renderer::Fv { model, .. } => model.surface_c(),
+        }
+    }
+
+    /// Whether the finger touches an object.
+    pub fn in_contact(&self) -> bool {
+        match self {
+            Renderer::Kron { env, .. } => matches!(env, KronEnvironment::Object { .. }),
+            Renderer::Fv { env, .. } => *env == FvEnvironment::Object,
+        }
+    }
+
+    /// Which model renders.
+    pub fn kind(&self) -> RendererKind {
+        match self {
+            Renderer::Kron { .. } => RendererKind::Kron,
+            Renderer::Fv { .. } => RendererKind::Fv,
+        }
+    }
+}

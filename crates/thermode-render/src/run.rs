@@ -1,0 +1,459 @@
+//! Offline rendering against the simulated display, as `thermode render` runs it: one channel pipeline drives a
+//! [`SimulatedDisplay`] with a simulated finger resting on it, next to the ground truth (that finger touching the
+//! real material), and every tick is recorded.
+//!
+//! # The run
+//! - The simulated finger ([`RenderSpec::finger_skin`], default the fingertip) is the finite-volume finger — the
+//!   reference physics — resting on the plate; its contact conductance is the device file's unless
+//!   [`RenderSpec::finger_contact_w_m2k`] overrides it (real fingers press differently than the model assumes).
+//! - Before the run the finger is at its steady state in still air and the plate at the temperature that draws
+//!   exactly the heat still air would (`receptor − q_air/G`): the display has been rendering air when the finger is
+//!   put on it. The hot side starts at the water temperature. The plant is then stepped one sensor sample period at
+//!   0 A so that the first reading is a fresh sample of that state (otherwise the envelope would see the plate jump
+//!   from the water temperature, an implausible rate).
+//! - The display renders air for [`RenderSpec::pre_contact_s`], the finger touches the object at t = 0 and lets go
+//!   at [`RenderSpec::release_at_s`] if given. One tick every 1/[`RenderSpec::rate_hz`] s.
+//! - After each tick the plant is advanced by the tick in equal substeps of at most [`RenderSpec::plant_substep_s`]
+//!   (default [`PLANT_SUBSTEP_S`]), the gated drive held. The plant's backward Euler is first order; measured on
+//!   the default display (aluminium, fv renderer, 100 Hz, pid and model alike) with a noiseless, unquantised
+//!   sensor, the largest deviation of the skin trajectory from a 0.25 ms reference is 0.023 °C at 10 ms, 0.0115 at
+//!   5 ms, 0.0043 at 2 ms and 0.0018 at 1 ms, and the RMS skin error over 90 s changes by 4.6e-4 °C (0.2 %)
+//!   between 2 ms and 0.25 ms. 2 ms keeps the plant's error below half the sensor's 0.01 °C resolution at five
+//!   substeps per tick (test `plant_substep_convergence` in `tests/run.rs`). With the real, noisy and quantised
+//!   sensor a high-gain PID's trajectory differs by about 0.01 °C whatever the substep: a slightly different plate
+//!   flips a quantised reading, and the loop's response to that dominates.
+//! - Truth: the simulated finger touching the real material under the reference fv physics (light-touch contact
+//!   resistance [`LIGHT_TOUCH_RESISTANCE_M2K_W`]), stepped with the same steps as the renderer. With the default
+//!   finger and the fv renderer it is the renderer's target itself.
+//! - Rows are recorded after each tick and plant step: `time_s` is the end of the tick's interval relative to the
+//!   contact (0 at contact, negative before); temperatures are those at that time; current and set-point are those
+//!   held over the interval.
+//!
+//! Deterministic: the only randomness is the sensor noise, seeded by [`RenderSpec::seed`] and the material's name
+//! ([`noise_seed`]).
+
+use std::io::Write;
+
+use thermode_control::FaultCode;
+use thermode_device::{Device, DeviceConfig, SimulatedDisplay};
+use thermode_model::fv::{FvConfig, FvModel};
+use thermode_model::{Material, Skin};
+
+use crate::error::{require_in, require_positive, RenderError};
+use crate::pipeline::{ChannelPipeline, PipelineConfig, Telemetry};
+use crate::renderer::{fv_config, Renderer, RendererKind, LIGHT_TOUCH_RESISTANCE_M2K_W};
+use crate::stimulus::Stimulus;
+use crate::summary::{actuator_limit, summarise, Summary};
+
+/// Default largest plant substep \[s\]: 2 ms (see the module documentation for the measured effect).
+pub const PLANT_SUBSTEP_S: f64 = 0.002;
+/// Default tick rate \[Hz\]: 100, the PT-100's sample rate (a faster tick sees the same held sample again).
+pub const DEFAULT_RATE_HZ: f64 = 100.0;
+/// Default contact duration \[s\]: 90, the paper's recordings (section 4.1).
+pub const DEFAULT_DURATION_S: f64 = 90.0;
+/// Default time the finger rests on the display rendering air before the touch \[s\]: 5.
+pub const DEFAULT_PRE_CONTACT_S: f64 = 5.0;
+/// Default seed of the sensor noise.
+pub const DEFAULT_SEED: u64 = 1;
+/// Longest run accepted (pre-contact plus contact) \[s\]: one hour.
+pub const MAX_RUN_S: f64 = 3600.0;
+
+/// The simulated display of a run: one channel with the finite-volume finger.
+pub type Plant = SimulatedDisplay<FvModel>;
+
+/// Everything one offline render needs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RenderSpec {
+    /// The channel pipeline (device, renderer, controller, envelope, the controller's finger model, ambient).
+    pub pipeline: PipelineConfig,
+    /// The simulated finger's own skin. Default [`Skin::fingertip`] (then it matches the controller's model).
+    pub finger_skin: Skin,
+    /// The simulated finger's skin-to-plate contact conductance [W/(m²·K)]; `None` = the device file's.
+    pub finger_contact_w_m2k: Option<f64>,
+    /// The touched material.
+    pub material: Material,
+    /// Object temperature at the touch \[°C\]; `None` = the ambient temperature (the paper's objects lay in the room).
+    pub object_c: Option<f64>,
+    /// Recorded time after the touch \[s\]. Default [`DEFAULT_DURATION_S`].
+    pub duration_s: f64,
+    /// Time the finger rests on the display rendering air before the touch \[s\] (≥ 0). Default
+    /// [`DEFAULT_PRE_CONTACT_S`].
+    pub pre_contact_s: f64,
+    /// Time after the touch at which the finger lets go \[s\]; `None` = never.
+    pub release_at_s: Option<f64>,
+    /// Tick rate of the pipeline \[Hz\]. Default [`DEFAULT_RATE_HZ`].
+    pub rate_hz: f64,
+    /// Largest plant substep \[s\]. Default [`PLANT_SUBSTEP_S`].
+    pub plant_substep_s: f64,
+    /// Seed of the sensor noise (combined with the material's name, see [`noise_seed`]). Default [`DEFAULT_SEED`].
+    pub seed: u64,
+}
+
+impl RenderSpec {
+    /// The defaults above for `pipeline` and `material`.
+    pub fn new(pipeline: PipelineConfig, material: Material) -> Self {
+        RenderSpec {
+            pipeline,
+            finger_skin: Skin::fingertip(),
+            finger_contact_w_m2k: None,
+            material,
+            object_c: None,
+            duration_s: DEFAULT_DURATION_S,
+            pre_contact_s: DEFAULT_PRE_CONTACT_S,
+            release_at_s: None,
+            rate_hz: DEFAULT_RATE_HZ,
+            plant_substep_s: PLANT_SUBSTEP_S,
+            seed: DEFAULT_SEED,
+        }
+    }
+
+    /// Checks every number of the run (the pipeline, models and device check their own when built).
+    pub fn validate(&self) -> Result<(), RenderError> {
+        self.pipeline.validate()?;
+        self.finger_skin.validate("finger skin")?;
+        self.material.validate(&format!("material `{}`", self.material.name))?;
+        if let Some(g) = self.finger_contact_w_m2k {
+            require_positive("finger contact conductance [W/(m²·K)]", g)?;
+        }
+        if let Some(c) = self.object_c {
+            require_in(
+                "object temperature [°C]",
+                c,
+                crate::stimulus::MIN_OBJECT_C,
+                crate::stimulus::MAX_OBJECT_C,
+            )?;
+        }
+        require_positive("duration [s]", self.duration_s)?;
+        require_in("pre-contact time [s]", self.pre_contact_s, 0.0, MAX_RUN_S)?;
+        require_in("duration [s]", self.duration_s + self.pre_contact_s, 0.0, MAX_RUN_S)?;
+        if let Some(r) = self.release_at_s {
+            require_in("release time [s]", r, 0.0, self.duration_s)?;
+        }
+        require_in("tick rate [Hz]", self.rate_hz, 1.0, 100_000.0)?;
+        require_in("plant substep [s]", self.plant_substep_s, 1e-6, 0.01)?;
+        if (self.duration_s * self.rate_hz).round() < 1.0 {
+            return Err(RenderError::BadValue {
+                what: "duration [s]".into(),
+                value: self.duration_s,
+                requirement: "must last at least one tick".into(),
+            });
+        }
+        Ok(())
+    }
+
+    /// The tick length \[s\].
+    pub fn tick_s(&self) -> f64 {
+        1.0 / self.rate_hz
+    }
+
+    /// The object temperature at the touch \[°C\].
+    pub fn object_temperature_c(&self) -> f64 {
+        self.object_c.unwrap_or(self.pipeline.ambient_c)
+    }
+
+    /// Ticks before the touch, ticks of contact, and the tick of the release (if any).
+    pub(crate) fn tick_counts(&self) -> (usize, usize, Option<usize>) {
+        let ticks = |s: f64| (s * self.rate_hz).round() as usize;
+        let release = self.release_at_s.map(|r| ticks(r).max(1));
+        (ticks(self.pre_contact_s), ticks(self.duration_s).max(1), release)
+    }
+
+    /// Plant substeps per tick.
+    pub(crate) fn substeps(&self) -> usize {
+        ((self.tick_s() / self.plant_substep_s) - 1e-9).ceil().max(1.0) as usize
+    }
+
+    /// The device as the plant sees it: the device file with the simulated finger's contact conductance.
+    pub fn plant_device(&self) -> DeviceConfig {
+        let mut device = self.pipeline.device;
+        if let Some(g) = self.finger_contact_w_m2k {
+            device.plate.contact_conductance_w_m2k = g;
+        }
+        device
+    }
+}
+
+/// One column per recorded quantity, one row per tick.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Trajectory {
+    /// Time since the touch at the end of the tick \[s\] (0 at contact, negative before).
+    pub time_s: Vec<f64>,
+    /// Ground truth: the simulated finger touching the real material \[°C\].
+    pub truth_skin_c: Vec<f64>,
+    /// The renderer's target \[°C\].
+    pub target_skin_c: Vec<f64>,
+    /// The simulated finger's receptor on the display \[°C\].
+    pub skin_c: Vec<f64>,
+    /// The pipeline's finger model on the display (what it believes the finger feels) \[°C\].
+    pub model_skin_c: Vec<f64>,
+    /// The set-point the inverse asked for, before the envelope \[°C\].
+    pub requested_setpoint_c: Vec<f64>,
+    /// The set-point after the envelope \[°C\].
+    pub display_setpoint_c: Vec<f64>,
+    /// The true plate temperature \[°C\].
+    pub display_c: Vec<f64>,
+    /// The PT-100 reading \[°C\].
+    pub sensor_c: Vec<f64>,
+    /// The gated drive current \[A\].
+    pub current_a: Vec<f64>,
+    /// The true hot-side temperature \[°C\].
+    pub hot_side_c: Vec<f64>,
+    /// Whether the rendered finger touched the object.
+    pub contact: Vec<bool>,
+    /// The latched fault, if any.
+    pub fault: Vec<Option<FaultCode>>,
+}
+
+impl Trajectory {
+    fn with_capacity(rows: usize) -> Self {
+        let v = || Vec::with_capacity(rows);
+        Trajectory {
+            time_s: v(),
+            truth_skin_c: v(),
+            target_skin_c: v(),
+            skin_c: v(),
+            model_skin_c: v(),
+            requested_setpoint_c: v(),
+            display_setpoint_c: v(),
+            display_c: v(),
+            sensor_c: v(),
+            current_a: v(),
+            hot_side_c: v(),
+            contact: Vec::with_capacity(rows),
+            fault: Vec::with_capacity(rows),
+        }
+    }
+
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.time_s.len()
+    }
+
+    /// Whether there are no rows.
+    pub fn is_empty(&self) -> bool {
+        self.time_s.is_empty()
+    }
+
+    fn record(&mut self, time_s: f64, truth_c: f64, telemetry: &Telemetry, plant: &Plant) {
+        let Ok(channel) = plant.channel(0) else {
+            return;
+        };
+        let state = channel.state();
+        self.time_s.push(time_s);
+        self.truth_skin_c.push(truth_c);
+        self.target_skin_c.push(telemetry.target_skin_c);
+        self.skin_c.push(state.receptor_c);
+        self.model_skin_c.push(telemetry.skin_c);
+        self.requested_setpoint_c.push(telemetry.requested_setpoint_c);
+        self.display_setpoint_c.push(telemetry.display_setpoint_c);
+        self.display_c.push(state.plate_c);
+        self.sensor_c.push(state.sensor.value_c);
+        self.current_a.push(state.applied_current_a);
+        self.hot_side_c.push(state.hot_side_c);
+        self.contact.push(telemetry.contact);
+        self.fault.push(telemetry.fault);
+    }
+}
+
+/// The state at the moment of touch.
+#[derive(Debug, Clone)]
+pub struct ContactState {
+    /// The renderer's target at the touch \[°C\] (T0 of the lag).
+    pub target_c: f64,
+    /// The simulated finger's receptor at the touch \[°C\].
+    pub skin_c: f64,
+    /// The plant at the touch (for the actuator-limit run).
+    pub plant: Plant,
+}
+
+/// One offline render: its spec, its trajectory and its summary.
+#[derive(Debug, Clone)]
+pub struct RenderRun {
+    /// What was run.
+    pub spec: RenderSpec,
+    /// Every tick.
+    pub trajectory: Trajectory,
+    /// The metrics of the paper's Figure 3.
+    pub summary: Summary,
+}
+
+/// The seed of a run's sensor noise: `seed` XOR the 64-bit FNV-1a hash of the material's name. Each material gets
+/// its own noise realisation (five materials rendered with one seed are five independent draws, so a tuner cannot
+/// profit from one lucky realisation shared by all), and a material's run is the same alone or among others.
+pub fn noise_seed(seed: u64, material: &str) -> u64 {
+    let hash = material.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    });
+    seed ^ hash
+}
+
+/// The simulated display of `spec` at rest: the finger steady in air, the plate at the air-rendering temperature,
+/// the hot side at the water temperature, one sample period stepped at 0 A (see the module documentation).
+pub fn resting_plant(spec: &RenderSpec) -> Result<Plant, RenderError> {
+    let device = spec.plant_device();
+    let mut finger = FvModel::new(&spec.finger_skin, None, &FvConfig::default())?;
+    finger.set_steady_in_air(spec.pipeline.ambient_c)?;
+    let contact = device.plate.contact_conductance_w_m2k;
+    let plate_c = finger.surface_c() - finger.surface_heat_flux_w_m2() / contact;
+    let mut plant = SimulatedDisplay::new(&device, vec![finger], noise_seed(spec.seed, &spec.material.name))?;
+    plant
+        .channel_mut(0)?
+        .set_temperatures(plate_c, device.ambient.water_c)?;
+    plant.advance(1.0 / device.sensor.sample_rate_hz);
+    Ok(plant)
+}
+
+/// The ground truth of `spec`: the simulated finger with the real material under the reference physics, at rest
+/// in air (an fv renderer of the finger's skin with the light-touch contact resistance).
+pub fn truth_renderer(spec: &RenderSpec) -> Result<Renderer, RenderError> {
+    let grid = fv_config(LIGHT_TOUCH_RESISTANCE_M2K_W);
+    Ok(Renderer::new(
+        RendererKind::Fv,
+        &spec.finger_skin,
+        spec.pipeline.ambient_c,
+        &grid,
+    )?)
+}
+
+/// Runs `spec` with the controller its pipeline names.
+pub fn render(spec: &RenderSpec) -> Result<RenderRun, RenderError> {
+    spec.validate()?;
+    let pipeline = ChannelPipeline::new(&spec.pipeline)?;
+    render_with(spec, pipeline)
+}
+
+/// Runs every spec, in parallel threads (one per spec); results in the order of `specs`. The first error is
+/// returned.
+pub fn render_all(specs: &[RenderSpec]) -> Result<Vec<RenderRun>, RenderError> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = specs.iter().map(|spec| scope.spawn(move || render(spec))).collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join()
+                    .unwrap_or_else(|_| Err(RenderError::Invalid("a render thread panicked".into())))
+            })
+            .collect()
+    })
+}
+
+/// Runs `spec` with a pipeline of the caller's (e.g. with a custom controller).
+pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<RenderRun, RenderError> {
+    spec.validate()?;
+    let mut plant = resting_plant(spec)?;
+    let mut truth = truth_renderer(spec)?;
+    let (pre, contact_ticks, release) = spec.tick_counts();
+    let dt = spec.tick_s();
+    let start_s = plant.time_s();
+    let mut trajectory = Trajectory::with_capacity(pre + contact_ticks);
+    let mut at_contact = None;
+    let touch = Stimulus::Touch {
+        material: spec.material.clone(),
+        object_c: spec.object_temperature_c(),
+    };
+    for k in 0..pre + contact_ticks {
+        if k == pre {
+            pipeline.set_stimulus(touch.clone())?;
+            truth.touch(&spec.material, spec.object_temperature_c())?;
+            at_contact = Some(ContactState {
+                target_c: pipeline.renderer().receptor_c(),
+                skin_c: plant.channel(0)?.state().receptor_c,
+                plant: plant.clone(),
+            });
+        }
+        if release.is_some_and(|r| k == pre + r) {
+            pipeline.set_stimulus(Stimulus::Air)?;
+            truth.release();
+        }
+        let telemetry = tick(&mut pipeline, &mut plant, start_s + k as f64 * dt, dt, spec.substeps())?;
+        truth.step(dt);
+        let time_s = (k + 1) as f64 * dt - pre as f64 * dt;
+        trajectory.record(time_s, truth.receptor_c(), &telemetry, &plant);
+    }
+    let contact = at_contact.ok_or_else(|| RenderError::Invalid("the run never reached the touch".into()))?;
+    let limit = actuator_limit(spec, &trajectory, &contact)?;
+    let summary = summarise(spec, pipeline.controller().name(), &trajectory, &contact, limit);
+    Ok(RenderRun {
+        spec: spec.clone(),
+        trajectory,
+        summary,
+    })
+}
+
+/// One tick of the pipeline on the plant's newest reading, then the plant advanced by `dt` in `substeps` equal
+/// substeps with the gated drive.
+pub fn tick(
+    pipeline: &mut ChannelPipeline,
+    plant: &mut Plant,
+    now_s: f64,
+    dt: f64,
+    substeps: usize,
+) -> Result<Telemetry, RenderError> {
+    let reading = plant.read(0)?;
+    let (drive, telemetry) = pipeline.tick(now_s, dt, &reading);
+    plant.apply(0, &drive)?;
+    let h = dt / substeps as f64;
+    for _ in 0..substeps {
+        plant.advance(h);
+    }
+    Ok(telemetry)
+}
+
+/// The CSV columns, in order.
+pub const CSV_HEADER: [&str; 17] = [
+    "time_s",
+    "truth_skin_c",
+    "target_skin_c",
+    "skin_c",
+    "model_skin_c",
+    "display_setpoint_c",
+    "requested_setpoint_c",
+    "display_c",
+    "sensor_c",
+    "current_a",
+    "hot_side_c",
+    "contact",
+    "fault",
+    "material",
+    "controller",
+    "renderer",
+    "fault_description",
+];
+
+/// Writes the runs as one CSV (header first, then every run's rows in order). Numbers in Rust's shortest
+/// round-trip form; `fault` is the numeric fault code (empty without fault); `contact` is 0 or 1.
+pub fn write_csv(runs: &[RenderRun], sink: &mut dyn Write) -> Result<(), csv::Error> {
+    let mut writer = csv::Writer::from_writer(sink);
+    writer.write_record(CSV_HEADER)?;
+    let mut record: Vec<String> = Vec::with_capacity(CSV_HEADER.len());
+    for run in runs {
+        let t = &run.trajectory;
+        for row in 0..t.len() {
+            record.clear();
+            for column in [
+                &t.time_s,
+                &t.truth_skin_c,
+                &t.target_skin_c,
+                &t.skin_c,
+                &t.model_skin_c,
+                &t.display_setpoint_c,
+                &t.requested_setpoint_c,
+                &t.display_c,
+                &t.sensor_c,
+                &t.current_a,
+                &t.hot_side_c,
+            ] {
+                record.push(column[row].to_string());
+            }
+            record.push(u8::from(t.contact[row]).to_string());
+            record.push(t.fault[row].map_or(String::new(), |f| f.code().to_string()));
+            record.push(run.spec.material.name.clone());
+            record.push(run.summary.controller.clone());
+            record.push(run.spec.pipeline.renderer.name().to_string());
+            record.push(t.fault[row].map_or(String::new(), |f| f.description().to_string()));
+            writer.write_record(&record)?;
+        }
+    }
+    writer.flush()?;
+    Ok(())
+}

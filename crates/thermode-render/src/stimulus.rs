@@ -1,0 +1,108 @@
+//! What a channel is asked to display: air, the touch of a virtual object, or a direct display temperature
+//! (psychophysics), and the checks every stimulus passes before the pipeline accepts it.
+
+use thermode_control::{ABSOLUTE_MAX_C, ABSOLUTE_MAX_RATE_C_PER_S, ABSOLUTE_MIN_C};
+use thermode_model::Material;
+
+use crate::error::{require_in, RenderError};
+
+/// Coldest virtual object a stimulus may name \[°C\]: −50 (frozen goods well below a freezer's −18 °C). The safety
+/// envelope, not this range, limits what the display shows.
+pub const MIN_OBJECT_C: f64 = -50.0;
+/// Hottest virtual object a stimulus may name \[°C\]: 150 (beyond boiling water and a hot pan handle).
+pub const MAX_OBJECT_C: f64 = 150.0;
+
+/// What the display renders.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Stimulus {
+    /// The finger touches nothing: the display renders still air at the pipeline's ambient temperature (the
+    /// default at start).
+    Air,
+    /// The finger touches a fresh object of `material` (its thickness is used) that is uniform at `object_c`.
+    /// Every `Touch` starts a new contact with a fresh object, also when the finger already touches one.
+    Touch {
+        /// The touched material (validated: finite, positive properties).
+        material: Material,
+        /// Temperature of the object at the moment of touch \[°C\], in [[`MIN_OBJECT_C`], [`MAX_OBJECT_C`]].
+        object_c: f64,
+    },
+    /// Psychophysics: the display set-point goes to `temp_c` at `rate_c_s`, bypassing the renderer (still through
+    /// the safety envelope, which may clamp and slow it further).
+    Direct {
+        /// Display temperature to approach \[°C\], within the compiled-in absolute limits
+        /// [[`ABSOLUTE_MIN_C`], [`ABSOLUTE_MAX_C`]].
+        temp_c: f64,
+        /// Rate of approach \[°C/s\], in (0, [`ABSOLUTE_MAX_RATE_C_PER_S`]].
+        rate_c_s: f64,
+    },
+}
+
+impl Stimulus {
+    /// Checks every number of the stimulus (see the variants); NaN and out-of-range values are errors, never
+    /// clamped.
+    pub fn validate(&self) -> Result<(), RenderError> {
+        match self {
+            Stimulus::Air => Ok(()),
+            Stimulus::Touch { material, object_c } => {
+                material.validate(&format!("stimulus material `{}`", material.name))?;
+                require_in("object temperature [°C]", *object_c, MIN_OBJECT_C, MAX_OBJECT_C).map(drop)
+            }
+            Stimulus::Direct { temp_c, rate_c_s } => {
+                require_in(
+                    "direct display temperature [°C]",
+                    *temp_c,
+                    ABSOLUTE_MIN_C,
+                    ABSOLUTE_MAX_C,
+                )?;
+                let rate = require_in("direct rate [°C/s]", *rate_c_s, 0.0, ABSOLUTE_MAX_RATE_C_PER_S)?;
+                if rate > 0.0 {
+                    Ok(())
+                } else {
+                    Err(RenderError::BadValue {
+                        what: "direct rate [°C/s]".to_string(),
+                        value: rate,
+                        requirement: "must be greater than zero".to_string(),
+                    })
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nan_and_out_of_range_stimuli_are_refused() {
+        let aluminium = thermode_model::materials::find("aluminium").unwrap_or_else(|e| panic!("{e}"));
+        let touch = |object_c| Stimulus::Touch {
+            material: aluminium.clone(),
+            object_c,
+        };
+        assert!(touch(23.0).validate().is_ok());
+        for bad in [f64::NAN, f64::INFINITY, -51.0, 151.0] {
+            assert!(touch(bad).validate().is_err(), "object at {bad} °C accepted");
+        }
+        let mut broken = aluminium.clone();
+        broken.density_kg_m3 = f64::NAN;
+        let stimulus = Stimulus::Touch {
+            material: broken,
+            object_c: 23.0,
+        };
+        assert!(stimulus.validate().is_err(), "material with NaN density accepted");
+        let direct = |temp_c, rate_c_s| Stimulus::Direct { temp_c, rate_c_s };
+        assert!(direct(30.0, 2.0).validate().is_ok());
+        for (t, r) in [
+            (f64::NAN, 1.0),
+            (30.0, f64::NAN),
+            (9.0, 1.0),
+            (49.0, 1.0),
+            (30.0, 0.0),
+            (30.0, 21.0),
+        ] {
+            assert!(direct(t, r).validate().is_err(), "direct {t} °C at {r} °C/s accepted");
+        }
+        assert!(Stimulus::Air.validate().is_ok());
+    }
+}

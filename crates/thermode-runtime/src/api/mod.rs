@@ -1,0 +1,296 @@
+//! The network side: HTTP routes (`/` dashboard, `/api/status`, `/api/materials`, `/api/ws`), the access check
+//! in front of every route, and the state the handlers share. It talks to the control loop only through the
+//! bounded command queue and the published snapshot.
+
+pub mod access;
+pub mod limit;
+pub mod protocol;
+pub mod ws;
+
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+
+use axum::extract::{Request, State};
+use axum::http::{header, HeaderValue, StatusCode};
+use axum::middleware::{self, Next};
+use axum::response::{Html, IntoResponse, Response};
+use axum::routing::get;
+use axum::{Json, Router};
+use serde_json::{json, Value};
+
+use crate::command::CommandSender;
+use crate::snapshot::{Mode, Shared};
+use access::Access;
+use protocol::{ApiError, ErrorCode, RequestLimits};
+
+/// The dashboard page (one static file, inline script, hand-drawn canvas plots).
+pub const DASHBOARD_HTML: &str = include_str!("../dashboard.html");
+
+/// Limits of the network side.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NetLimits {
+    /// Frames or messages larger than this close the connection (the protocol's hard limit) \[bytes\]. Default
+    /// 65536. Messages up to it but above [`RequestLimits::max_message_bytes`] get a `too_large` error.
+    pub hard_message_bytes: usize,
+    /// Sustained requests per second per WebSocket connection. Default 50.
+    pub requests_per_s: f64,
+    /// Requests a connection may send at once. Default 100.
+    pub burst: f64,
+    /// Most simultaneous WebSocket connections. Default 32.
+    pub max_connections: usize,
+    /// Longest wait for the control loop's answer \[s\]. Default 1.
+    pub reply_timeout_s: f64,
+    /// A connection from which nothing (not even a pong) arrives for this long is closed \[s\]. Default 20.
+    pub idle_timeout_s: f64,
+    /// Interval of the server's pings \[s\]. Default 5.
+    pub ping_interval_s: f64,
+    /// A send that cannot complete for this long closes the connection (a client that stopped reading) \[s\].
+    /// Default 5.
+    pub send_timeout_s: f64,
+    /// Sustained OSC messages per second (all senders together). Default 200.
+    pub osc_messages_per_s: f64,
+    /// OSC burst. Default 400.
+    pub osc_burst: f64,
+}
+
+impl Default for NetLimits {
+    fn default() -> Self {
+        NetLimits {
+            hard_message_bytes: 64 * 1024,
+            requests_per_s: 50.0,
+            burst: 100.0,
+            max_connections: 32,
+            reply_timeout_s: 1.0,
+            idle_timeout_s: 20.0,
+            ping_interval_s: 5.0,
+            send_timeout_s: 5.0,
+            osc_messages_per_s: 200.0,
+            osc_burst: 400.0,
+        }
+    }
+}
+
+impl NetLimits {
+    /// Every duration finite and positive (at most a day), every rate and count positive.
+    pub fn validate(&self) -> Result<(), crate::error::RuntimeError> {
+        let durations = [
+            ("reply_timeout_s", self.reply_timeout_s),
+            ("idle_timeout_s", self.idle_timeout_s),
+            ("ping_interval_s", self.ping_interval_s),
+            ("send_timeout_s", self.send_timeout_s),
+        ];
+        let rates = [
+            ("requests_per_s", self.requests_per_s),
+            ("burst", self.burst),
+            ("osc_messages_per_s", self.osc_messages_per_s),
+            ("osc_burst", self.osc_burst),
+        ];
+        for (name, value) in durations {
+            if !(value.is_finite() && value > 0.0 && value <= 86_400.0) {
+                return Err(crate::error::RuntimeError::Config(format!(
+                    "{name} = {value} s must lie in (0, 86400]"
+                )));
+            }
+        }
+        for (name, value) in rates {
+            if !(value.is_finite() && value >= 1.0) {
+                return Err(crate::error::RuntimeError::Config(format!(
+                    "{name} = {value} must be finite and ≥ 1"
+                )));
+            }
+        }
+        if self.max_connections == 0 || self.hard_message_bytes < 1024 {
+            return Err(crate::error::RuntimeError::Config(
+                "max_connections must be ≥ 1 and hard_message_bytes ≥ 1024".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Counters of the OSC listener.
+#[derive(Debug, Default)]
+pub struct OscCounters {
+    /// Datagrams received.
+    pub packets: AtomicU64,
+    /// Messages applied.
+    pub applied: AtomicU64,
+    /// Datagrams that are not valid OSC (ignored).
+    pub malformed: AtomicU64,
+    /// Valid OSC messages refused (unknown address, channel or material, bad value, queue full).
+    pub refused: AtomicU64,
+    /// Messages dropped by the rate limit.
+    pub rate_limited: AtomicU64,
+    /// The last refusal, for the status page.
+    pub last_error: Mutex<Option<String>>,
+}
+
+/// Facts about the daemon shown by `/api/status`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Info {
+    /// The device, e.g. `sim` or `serial:/dev/ttyACM0`.
+    pub device: String,
+    /// A name per channel (e.g. the fingers), or empty.
+    pub channel_names: Vec<String>,
+    /// The OSC port, when OSC listens.
+    pub osc_port: Option<u16>,
+    /// The session recording, if any.
+    pub recording: Option<String>,
+}
+
+/// State shared by the handlers.
+#[derive(Debug)]
+pub struct App {
+    pub(crate) commands: CommandSender,
+    pub(crate) shared: Arc<Shared>,
+    pub(crate) limits: RequestLimits,
+    pub(crate) net: NetLimits,
+    pub(crate) access: Access,
+    pub(crate) info: Info,
+    pub(crate) osc: Arc<OscCounters>,
+    pub(crate) recorded_rows: Option<Arc<AtomicU64>>,
+    pub(crate) clients: AtomicUsize,
+    pub(crate) next_client: AtomicU64,
+}
+
+/// The router with every route behind the access check.
+pub fn router(app: Arc<App>) -> Router {
+    Router::new()
+        .route("/", get(dashboard))
+        .route("/api/status", get(status))
+        .route("/api/materials", get(materials))
+        .route("/api/ws", get(ws::upgrade))
+        .fallback(not_found)
+        .layer(middleware::from_fn_with_state(app.clone(), check_access))
+        .with_state(app)
+}
+
+/// An error as an HTTP response with a JSON body.
+pub(crate) fn error_response(status: StatusCode, error: &ApiError) -> Response {
+    (status, Json(error.to_json(&Value::Null))).into_response()
+}
+
+async fn check_access(State(app): State<Arc<App>>, request: Request, next: Next) -> Response {
+    match app.access.check(request.headers(), request.uri().query()) {
+        Ok(()) => next.run(request).await,
+        Err(e) if e.code == ErrorCode::Unauthorized => {
+            let mut response = error_response(StatusCode::UNAUTHORIZED, &e);
+            response
+                .headers_mut()
+                .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+            response
+        }
+        Err(e) => error_response(StatusCode::FORBIDDEN, &e),
+    }
+}
+
+async fn dashboard() -> Response {
+    let mut response = Html(DASHBOARD_HTML).into_response();
+    let headers = response.headers_mut();
+    headers.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    headers.insert(header::X_FRAME_OPTIONS, HeaderValue::from_static("DENY"));
+    headers.insert(
+        header::CONTENT_SECURITY_POLICY,
+        HeaderValue::from_static(
+            "default-src 'none'; script-src 'unsafe-inline'; style-src 'unsafe-inline'; connect-src 'self'; \
+             img-src 'self' data:; frame-ancestors 'none'",
+        ),
+    );
+    response
+}
+
+async fn status(State(app): State<Arc<App>>) -> Json<Value> {
+    Json(status_json(&app))
+}
+
+async fn materials() -> Json<Value> {
+    Json(protocol::materials_json())
+}
+
+async fn not_found() -> Response {
+    let e = ApiError::new(
+        ErrorCode::UnknownType,
+        "no such route; see /, /api/status, /api/materials, /api/ws",
+    );
+    error_response(StatusCode::NOT_FOUND, &e)
+}
+
+/// The daemon's status (the `/api/status` body and the WebSocket `status` reply without `type` and `id`).
+pub fn status_json(app: &App) -> Value {
+    let snapshot = app.shared.snapshot();
+    let name = |i: usize| app.info.channel_names.get(i).map(String::as_str);
+    let channels: Vec<Value> = snapshot
+        .channels
+        .iter()
+        .map(|c| protocol::channel_status(c, name(c.channel)))
+        .collect();
+    let contacts: Vec<Value> = snapshot
+        .channels
+        .iter()
+        .filter(|c| c.mode != Mode::Air)
+        .map(|c| json!({"channel": c.channel, "material": &*c.label, "mode": c.mode, "owner": c.owner}))
+        .collect();
+    let faults: Vec<Value> = snapshot
+        .channels
+        .iter()
+        .filter_map(|c| c.telemetry.fault.map(|f| (c.channel, f)))
+        .map(|(channel, f)| json!({"channel": channel, "fault": f.code(), "description": f.description()}))
+        .collect();
+    let s = &snapshot.stats;
+    let osc = &app.osc;
+    let count = |a: &AtomicU64| a.load(Ordering::Relaxed);
+    let osc_last_error = osc.last_error.lock().map(|e| e.clone()).unwrap_or(None);
+    json!({
+        "version": env!("CARGO_PKG_VERSION"),
+        "device": app.info.device,
+        "running": snapshot.running,
+        "time_s": snapshot.time_s,
+        "tick": snapshot.tick,
+        "channel_count": snapshot.channels.len(),
+        "channels": channels,
+        "contacts": contacts,
+        "faults": faults,
+        "loop": {
+            "rate_hz": s.rate_hz,
+            "period_s": s.period_s,
+            "period_p50_s": s.period.p50_s,
+            "period_p99_s": s.period.p99_s,
+            "period_max_s": s.period.max_s,
+            "work_p50_s": s.work.p50_s,
+            "work_p99_s": s.work.p99_s,
+            "work_max_s": s.work.max_s,
+            "window_ticks": s.period.count,
+            "missed_deadlines": s.missed_deadlines,
+            "ticks": s.ticks,
+            "skipped_publishes": app.shared.skipped_publishes(),
+        },
+        "commands": {"applied": snapshot.commands_applied, "refused": snapshot.commands_refused},
+        "device_errors": snapshot.device_errors,
+        "clients": app.clients.load(Ordering::Relaxed),
+        "auth": {"token_required": app.access.token_required()},
+        "limits": {
+            "max_message_bytes": app.limits.max_message_bytes,
+            "requests_per_s": app.net.requests_per_s,
+            "burst": app.net.burst,
+            "max_subscribe_hz": app.limits.max_subscribe_hz,
+            "setpoint_min_c": app.limits.setpoint_min_c,
+            "setpoint_max_c": app.limits.setpoint_max_c,
+            "max_rate_c_s": app.limits.max_rate_c_s,
+        },
+        "osc": {
+            "enabled": app.info.osc_port.is_some(),
+            "port": app.info.osc_port,
+            "packets": count(&osc.packets),
+            "applied": count(&osc.applied),
+            "malformed": count(&osc.malformed),
+            "refused": count(&osc.refused),
+            "rate_limited": count(&osc.rate_limited),
+            "last_error": osc_last_error,
+        },
+        "recording": app.info.recording.as_ref().map(|path| json!({
+            "path": path,
+            "rows": app.recorded_rows.as_ref().map_or(0, |r| r.load(Ordering::Relaxed)),
+            "dropped_ticks": app.shared.dropped_records(),
+        })),
+    })
+}

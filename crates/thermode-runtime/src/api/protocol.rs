@@ -1,0 +1,681 @@
+//! The contact API's messages: parsing and validating a request (every check happens here, before anything
+//! reaches the control loop), the stable error codes, and the JSON of replies, telemetry and status.
+//!
+//! A request is a JSON object with `type` and `id` (a string of at most 128 characters or a number; replies
+//! carry it back unchanged). Unknown fields are refused (`unknown_field`), so a misspelt key never goes unnoticed.
+
+use std::sync::Arc;
+
+use serde_json::{json, Map, Value};
+use thermode_model::materials::{self, Material, DEFAULT_THICKNESS_M};
+
+use crate::snapshot::{ChannelStatus, Mode, Snapshot};
+
+/// Stable error codes of the API (they never change meaning).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorCode {
+    /// The message is not valid JSON, not an object, or a binary frame.
+    BadJson,
+    /// `type` names no request.
+    UnknownType,
+    /// A required field is missing.
+    MissingField,
+    /// A field the request does not have.
+    UnknownField,
+    /// A field has the wrong type or a value out of range (NaN, huge, negative…).
+    BadValue,
+    /// The channel does not exist.
+    UnknownChannel,
+    /// The material is not in the library.
+    UnknownMaterial,
+    /// The message exceeds the size limit.
+    TooLarge,
+    /// The connection sends faster than its rate limit.
+    RateLimited,
+    /// Missing or wrong token.
+    Unauthorized,
+    /// The request's Host or Origin is not allowed (another web site, DNS rebinding).
+    Forbidden,
+    /// The channel has a latched safety fault; its drive is off.
+    DeviceFault,
+    /// The control loop is overloaded or did not answer in time; nothing changed.
+    Busy,
+    /// Too many WebSocket connections.
+    TooManyConnections,
+}
+
+impl ErrorCode {
+    /// The code as it appears in messages.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ErrorCode::BadJson => "bad_json",
+            ErrorCode::UnknownType => "unknown_type",
+            ErrorCode::MissingField => "missing_field",
+            ErrorCode::UnknownField => "unknown_field",
+            ErrorCode::BadValue => "bad_value",
+            ErrorCode::UnknownChannel => "unknown_channel",
+            ErrorCode::UnknownMaterial => "unknown_material",
+            ErrorCode::TooLarge => "too_large",
+            ErrorCode::RateLimited => "rate_limited",
+            ErrorCode::Unauthorized => "unauthorized",
+            ErrorCode::Forbidden => "forbidden",
+            ErrorCode::DeviceFault => "device_fault",
+            ErrorCode::Busy => "busy",
+            ErrorCode::TooManyConnections => "too_many_connections",
+        }
+    }
+}
+
+/// An error reply's code and message.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ApiError {
+    /// The stable code.
+    pub code: ErrorCode,
+    /// A human-readable explanation.
+    pub message: String,
+}
+
+impl ApiError {
+    /// An error with `code` and `message`.
+    pub fn new(code: ErrorCode, message: impl Into<String>) -> Self {
+        ApiError {
+            code,
+            message: message.into(),
+        }
+    }
+
+    /// The error as a message: `{"type": "error", "id", "code", "message"}`.
+    pub fn to_json(&self, id: &Value) -> Value {
+        json!({"type": "error", "id": id, "code": self.code.as_str(), "message": self.message})
+    }
+}
+
+/// Limits every request is checked against.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RequestLimits {
+    /// Number of channels.
+    pub channel_count: usize,
+    /// Largest accepted message \[bytes\]. Default 16384.
+    pub max_message_bytes: usize,
+    /// Lowest direct-mode temperature \[°C\] (the envelope's minimum, default 15).
+    pub setpoint_min_c: f64,
+    /// Highest direct-mode temperature \[°C\] (the envelope's maximum, default 48).
+    pub setpoint_max_c: f64,
+    /// Fastest direct-mode ramp \[°C/s\] (the envelope's rate limit, default 10).
+    pub max_rate_c_s: f64,
+    /// Fastest telemetry subscription \[Hz\] (at most the loop rate; default 100).
+    pub max_subscribe_hz: f64,
+    /// Object temperature when a touch gives none \[°C\] (default 23, room temperature).
+    pub default_object_c: f64,
+}
+
+/// Range of object temperatures a touch may give \[°C\].
+pub const OBJECT_TEMP_RANGE_C: (f64, f64) = (0.0, 70.0);
+/// Largest accepted thermal conductivity \[W/(m·K)\] (diamond is about 2200).
+pub const MAX_CONDUCTIVITY_W_MK: f64 = 5000.0;
+/// Largest accepted density \[kg/m³\] (osmium is about 22 600).
+pub const MAX_DENSITY_KG_M3: f64 = 25_000.0;
+/// Largest accepted specific heat \[J/(kg·K)\] (hydrogen gas is about 14 300).
+pub const MAX_SPECIFIC_HEAT_J_KGK: f64 = 20_000.0;
+/// Largest accepted object thickness \[m\].
+pub const MAX_THICKNESS_M: f64 = 1.0;
+/// Slowest telemetry subscription \[Hz\] (one message every 100 s).
+pub const MIN_SUBSCRIBE_HZ: f64 = 0.01;
+/// Longest accepted `id` string \[characters\].
+pub const MAX_ID_CHARS: usize = 128;
+/// Longest accepted name (material or custom label) \[characters\].
+pub const MAX_NAME_CHARS: usize = 64;
+
+/// A validated request.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Request {
+    /// Touch a material on a channel.
+    Touch {
+        /// Channel (from 0).
+        channel: usize,
+        /// The material (validated).
+        material: Material,
+        /// Object temperature \[°C\].
+        object_c: f64,
+        /// The contact label.
+        label: Arc<str>,
+    },
+    /// Release a channel.
+    Release {
+        /// Channel (from 0).
+        channel: usize,
+    },
+    /// Direct mode.
+    Setpoint {
+        /// Channel (from 0).
+        channel: usize,
+        /// Target display temperature \[°C\].
+        temp_c: f64,
+        /// Ramp rate \[°C/s\].
+        rate_c_s: f64,
+    },
+    /// Clear a channel's latched fault.
+    ClearFault {
+        /// Channel (from 0).
+        channel: usize,
+    },
+    /// Release every channel and hold every drive at 0 A.
+    StopAll,
+    /// Telemetry at `rate_hz`.
+    Subscribe {
+        /// Messages per second \[Hz\].
+        rate_hz: f64,
+    },
+    /// No more telemetry.
+    Unsubscribe,
+    /// The daemon's status.
+    Status,
+}
+
+/// Parses and validates one text message. Returns the `id` to answer with (null when there is none or it is
+/// invalid) and the request or the error.
+pub fn parse(text: &str, limits: &RequestLimits) -> (Value, Result<Request, ApiError>) {
+    if text.len() > limits.max_message_bytes {
+        let message = format!(
+            "message of {} bytes exceeds the limit of {} bytes",
+            text.len(),
+            limits.max_message_bytes
+        );
+        return (Value::Null, Err(ApiError::new(ErrorCode::TooLarge, message)));
+    }
+    let value: Value = match serde_json::from_str(text) {
+        Ok(value) => value,
+        Err(e) => {
+            return (
+                Value::Null,
+                Err(ApiError::new(ErrorCode::BadJson, format!("not valid JSON: {e}"))),
+            )
+        }
+    };
+    let Value::Object(map) = value else {
+        return (
+            Value::Null,
+            Err(ApiError::new(ErrorCode::BadJson, "a message must be a JSON object")),
+        );
+    };
+    let id = match request_id(&map) {
+        Ok(id) => id,
+        Err(e) => return (Value::Null, Err(e)),
+    };
+    let request = parse_object(&map, limits);
+    (id, request)
+}
+
+fn request_id(map: &Map<String, Value>) -> Result<Value, ApiError> {
+    match map.get("id") {
+        None => Err(ApiError::new(ErrorCode::MissingField, "every request needs an `id`")),
+        Some(Value::String(s)) if s.chars().count() <= MAX_ID_CHARS => Ok(Value::String(s.clone())),
+        Some(Value::Number(n)) => Ok(Value::Number(n.clone())),
+        Some(_) => Err(ApiError::new(
+            ErrorCode::BadValue,
+            format!("`id` must be a number or a string of at most {MAX_ID_CHARS} characters"),
+        )),
+    }
+}
+
+fn parse_object(map: &Map<String, Value>, limits: &RequestLimits) -> Result<Request, ApiError> {
+    let fields = Fields { map };
+    let kind = fields.string("type")?;
+    match kind {
+        "touch" => parse_touch(&fields, limits),
+        "release" => {
+            fields.only(&["channel"])?;
+            Ok(Request::Release {
+                channel: fields.channel(limits.channel_count)?,
+            })
+        }
+        "setpoint" => parse_setpoint(&fields, limits),
+        "clear_fault" => {
+            fields.only(&["channel"])?;
+            Ok(Request::ClearFault {
+                channel: fields.channel(limits.channel_count)?,
+            })
+        }
+        "stop_all" => fields.only(&[]).map(|()| Request::StopAll),
+        "subscribe" => {
+            fields.only(&["rate_hz"])?;
+            let rate_hz = fields.number("rate_hz")?;
+            check_range("rate_hz", rate_hz, MIN_SUBSCRIBE_HZ, limits.max_subscribe_hz, "Hz")?;
+            Ok(Request::Subscribe { rate_hz })
+        }
+        "unsubscribe" => fields.only(&[]).map(|()| Request::Unsubscribe),
+        "status" => fields.only(&[]).map(|()| Request::Status),
+        other => Err(ApiError::new(
+            ErrorCode::UnknownType,
+            format!(
+                "unknown request type {:?}; known: touch, release, setpoint, clear_fault, stop_all, subscribe, unsubscribe, status",
+                truncate(other)
+            ),
+        )),
+    }
+}
+
+fn parse_touch(fields: &Fields, limits: &RequestLimits) -> Result<Request, ApiError> {
+    fields.only(&["channel", "material", "properties", "object_temp_c"])?;
+    let channel = fields.channel(limits.channel_count)?;
+    let material = match (fields.map.get("material"), fields.map.get("properties")) {
+        (Some(_), Some(_)) => {
+            return Err(ApiError::new(
+                ErrorCode::BadValue,
+                "give either `material` or `properties`, not both",
+            ))
+        }
+        (None, None) => {
+            return Err(ApiError::new(
+                ErrorCode::MissingField,
+                "touch needs `material` (a library name) or `properties`",
+            ))
+        }
+        (Some(_), None) => material_by_name(fields.string("material")?)?,
+        (None, Some(properties)) => material_from_properties(properties)?,
+    };
+    let object_c = match fields.map.get("object_temp_c") {
+        None => limits.default_object_c,
+        Some(_) => object_temperature(fields.number("object_temp_c")?)?,
+    };
+    let label = Arc::from(material.name.as_str());
+    Ok(Request::Touch {
+        channel,
+        material,
+        object_c,
+        label,
+    })
+}
+
+fn parse_setpoint(fields: &Fields, limits: &RequestLimits) -> Result<Request, ApiError> {
+    fields.only(&["channel", "temp_c", "rate_c_s"])?;
+    let channel = fields.channel(limits.channel_count)?;
+    let temp_c = fields.number("temp_c")?;
+    let rate_c_s = fields.number("rate_c_s")?;
+    check_setpoint(temp_c, rate_c_s, limits)?;
+    Ok(Request::Setpoint {
+        channel,
+        temp_c,
+        rate_c_s,
+    })
+}
+
+/// A direct-mode request: `temp_c` \[°C\] within the envelope's range, `rate_c_s` \[°C/s\] above 0 and at most its
+/// rate limit.
+pub fn check_setpoint(temp_c: f64, rate_c_s: f64, limits: &RequestLimits) -> Result<(), ApiError> {
+    check_range("temp_c", temp_c, limits.setpoint_min_c, limits.setpoint_max_c, "°C")?;
+    check_range("rate_c_s", rate_c_s, f64::MIN_POSITIVE, limits.max_rate_c_s, "°C/s")
+}
+
+/// A library material by name (case-insensitive, aliases as in `thermode materials`).
+pub fn material_by_name(name: &str) -> Result<Material, ApiError> {
+    if name.chars().count() > MAX_NAME_CHARS {
+        return Err(ApiError::new(
+            ErrorCode::UnknownMaterial,
+            format!("material name longer than {MAX_NAME_CHARS} characters"),
+        ));
+    }
+    materials::find(name).map_err(|e| ApiError::new(ErrorCode::UnknownMaterial, e.to_string()))
+}
+
+/// A channel number from a signed integer: `unknown_channel` outside `0..count`.
+pub fn channel_index(channel: i64, count: usize) -> Result<usize, ApiError> {
+    match usize::try_from(channel) {
+        Ok(c) if c < count => Ok(c),
+        _ => Err(ApiError::new(
+            ErrorCode::UnknownChannel,
+            format!(
+                "channel {channel} does not exist (channels 0 to {})",
+                count.saturating_sub(1)
+            ),
+        )),
+    }
+}
+
+/// An object temperature within [`OBJECT_TEMP_RANGE_C`].
+pub fn object_temperature(object_c: f64) -> Result<f64, ApiError> {
+    check_range(
+        "object_temp_c",
+        object_c,
+        OBJECT_TEMP_RANGE_C.0,
+        OBJECT_TEMP_RANGE_C.1,
+        "°C",
+    )?;
+    Ok(object_c)
+}
+
+fn material_from_properties(value: &Value) -> Result<Material, ApiError> {
+    let Value::Object(map) = value else {
+        return Err(ApiError::new(ErrorCode::BadValue, "`properties` must be an object"));
+    };
+    let fields = Fields { map };
+    fields.only(&[
+        "name",
+        "conductivity_w_mk",
+        "density_kg_m3",
+        "specific_heat_j_kgk",
+        "thickness_m",
+    ])?;
+    let name = match map.get("name") {
+        None => "custom".to_string(),
+        Some(_) => label(fields.string("name")?)?,
+    };
+    let positive = |key: &'static str, max: f64, unit: &str| -> Result<f64, ApiError> {
+        let value = fields.number(key)?;
+        check_range(key, value, f64::MIN_POSITIVE, max, unit)?;
+        Ok(value)
+    };
+    let thickness_m = match map.get("thickness_m") {
+        None => DEFAULT_THICKNESS_M,
+        Some(_) => positive("thickness_m", MAX_THICKNESS_M, "m")?,
+    };
+    let material = Material {
+        name,
+        conductivity_w_mk: positive("conductivity_w_mk", MAX_CONDUCTIVITY_W_MK, "W/(m·K)")?,
+        density_kg_m3: positive("density_kg_m3", MAX_DENSITY_KG_M3, "kg/m³")?,
+        specific_heat_j_kgk: positive("specific_heat_j_kgk", MAX_SPECIFIC_HEAT_J_KGK, "J/(kg·K)")?,
+        thickness_m,
+        source: "contact API properties".to_string(),
+    };
+    material
+        .validate("properties")
+        .map_err(|e| ApiError::new(ErrorCode::BadValue, e.to_string()))?;
+    Ok(material)
+}
+
+/// A custom material's label: 1 to 64 of `A–Z a–z 0–9 _ - .`.
+fn label(name: &str) -> Result<String, ApiError> {
+    let ok = !name.is_empty()
+        && name.chars().count() <= MAX_NAME_CHARS
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || "_-.".contains(c));
+    if ok {
+        Ok(name.to_string())
+    } else {
+        Err(ApiError::new(
+            ErrorCode::BadValue,
+            format!("`name` must be 1 to {MAX_NAME_CHARS} of A-Z a-z 0-9 _ - ."),
+        ))
+    }
+}
+
+fn check_range(key: &str, value: f64, min: f64, max: f64, unit: &str) -> Result<(), ApiError> {
+    if value.is_finite() && value >= min && value <= max {
+        return Ok(());
+    }
+    let low = if min == f64::MIN_POSITIVE {
+        "above 0".to_string()
+    } else {
+        format!("from {min}")
+    };
+    Err(ApiError::new(
+        ErrorCode::BadValue,
+        format!("`{key}` = {value} {unit} is out of range: it must be {low} to {max} {unit}"),
+    ))
+}
+
+/// At most 40 characters of a client's string, for messages.
+fn truncate(text: &str) -> String {
+    text.chars().take(40).collect()
+}
+
+/// Typed access to a request's fields.
+struct Fields<'a> {
+    map: &'a Map<String, Value>,
+}
+
+impl Fields<'_> {
+    /// Refuses fields other than `type`, `id` and `allowed`.
+    fn only(&self, allowed: &[&str]) -> Result<(), ApiError> {
+        let unknown = self
+            .map
+            .keys()
+            .find(|k| !matches!(k.as_str(), "type" | "id") && !allowed.contains(&k.as_str()));
+        match unknown {
+            Some(key) => Err(ApiError::new(
+                ErrorCode::UnknownField,
+                format!("unknown field {:?}", truncate(key)),
+            )),
+            None => Ok(()),
+        }
+    }
+
+    fn get(&self, key: &str) -> Result<&Value, ApiError> {
+        self.map
+            .get(key)
+            .ok_or_else(|| ApiError::new(ErrorCode::MissingField, format!("missing field `{key}`")))
+    }
+
+    fn string(&self, key: &str) -> Result<&str, ApiError> {
+        self.get(key)?
+            .as_str()
+            .ok_or_else(|| ApiError::new(ErrorCode::BadValue, format!("`{key}` must be a string")))
+    }
+
+    fn number(&self, key: &str) -> Result<f64, ApiError> {
+        self.get(key)?
+            .as_f64()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| ApiError::new(ErrorCode::BadValue, format!("`{key}` must be a finite number")))
+    }
+
+    fn channel(&self, count: usize) -> Result<usize, ApiError> {
+        let value = self.get("channel")?;
+        let channel = value.as_i64().ok_or_else(|| {
+            ApiError::new(
+                ErrorCode::BadValue,
+                format!("`channel` must be an integer, not {value}"),
+            )
+        })?;
+        channel_index(channel, count)
+    }
+}
+
+/// A successful reply: `{"type": "ok", "id", "request": <type>, ...extra}`.
+pub fn ok_reply(id: &Value, request: &str, extra: Value) -> Value {
+    let mut reply = json!({"type": "ok", "id": id, "request": request});
+    if let (Value::Object(reply), Value::Object(extra)) = (&mut reply, extra) {
+        reply.extend(extra);
+    }
+    reply
+}
+
+/// The fault of a channel as a number: the stable code, 0 for none.
+fn fault_code(status: &ChannelStatus) -> u16 {
+    status.telemetry.fault.map_or(0, |f| f.code())
+}
+
+/// One channel's telemetry object (the `render` CSV names).
+pub fn channel_telemetry(status: &ChannelStatus) -> Value {
+    let t = &status.telemetry;
+    json!({
+        "channel": status.channel,
+        "contact": status.mode == Mode::Touch,
+        "material": (status.mode == Mode::Touch).then_some(&*status.label),
+        "mode": status.mode,
+        "target_skin_c": finite(t.target_skin_c),
+        "skin_c": finite(t.skin_c),
+        "display_setpoint_c": finite(t.display_setpoint_c),
+        "sensor_c": finite(t.sensor_c),
+        "current_a": finite(t.current_a),
+        "hot_side_c": finite(t.hot_side_c),
+        "fault": fault_code(status),
+    })
+}
+
+/// A number, or null when it is not finite (JSON has no NaN).
+fn finite(value: f64) -> Value {
+    if value.is_finite() {
+        json!(value)
+    } else {
+        Value::Null
+    }
+}
+
+/// A telemetry message.
+pub fn telemetry_message(snapshot: &Snapshot) -> Value {
+    let channels: Vec<Value> = snapshot.channels.iter().map(channel_telemetry).collect();
+    json!({"type": "telemetry", "time_s": snapshot.time_s, "tick": snapshot.tick, "channels": channels})
+}
+
+/// One channel's status: its telemetry plus mode, fault text, owner and pending release.
+pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> Value {
+    let mut value = channel_telemetry(status);
+    let extra = json!({
+        "name": name,
+        "fault_description": status.telemetry.fault.map(|f| f.description()),
+        "object_temp_c": status.object_c,
+        "direct_temp_c": status.direct.map(|d| d.0),
+        "direct_rate_c_s": status.direct.map(|d| d.1),
+        "held_off": status.held_off,
+        "owner": status.owner,
+        "release_at_s": status.release_at_s,
+        "link_ok": status.link_ok,
+        "engine_failed": status.engine_failed,
+    });
+    if let (Value::Object(value), Value::Object(extra)) = (&mut value, extra) {
+        value.extend(extra);
+    }
+    value
+}
+
+/// The library as JSON: the fields of `thermode materials --format json`.
+pub fn materials_json() -> Value {
+    let rows: Vec<Value> = materials::library()
+        .iter()
+        .map(|m| {
+            json!({
+                "name": m.name,
+                "conductivity_w_mk": m.conductivity_w_mk,
+                "density_kg_m3": m.density_kg_m3,
+                "specific_heat_j_kgk": m.specific_heat_j_kgk,
+                "effusivity": m.effusivity(),
+                "diffusivity_m2_s": m.diffusivity_m2_s(),
+                "thickness_m": m.thickness_m,
+                "source": m.source,
+            })
+        })
+        .collect();
+    Value::Array(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits() -> RequestLimits {
+        RequestLimits {
+            channel_count: 5,
+            max_message_bytes: 16 * 1024,
+            setpoint_min_c: 15.0,
+            setpoint_max_c: 48.0,
+            max_rate_c_s: 10.0,
+            max_subscribe_hz: 100.0,
+            default_object_c: 23.0,
+        }
+    }
+
+    fn code_of(text: &str) -> Option<&'static str> {
+        parse(text, &limits()).1.err().map(|e| e.code.as_str())
+    }
+
+    #[test]
+    fn a_touch_by_name_and_by_properties() {
+        let (id, touch) = parse(
+            r#"{"type":"touch","id":7,"channel":1,"material":"Aluminum","object_temp_c":30}"#,
+            &limits(),
+        );
+        assert_eq!(id, json!(7));
+        match touch {
+            Ok(Request::Touch {
+                channel: 1,
+                material,
+                object_c,
+                ..
+            }) => {
+                assert_eq!(material.name, "aluminium");
+                assert_eq!(object_c, 30.0);
+            }
+            other => panic!("got {other:?}"),
+        }
+        let (_, custom) = parse(
+            r#"{"type":"touch","id":"a","channel":0,"properties":{"conductivity_w_mk":0.2,
+                "density_kg_m3":1200,"specific_heat_j_kgk":1500}}"#,
+            &limits(),
+        );
+        match custom {
+            Ok(Request::Touch { material, label, .. }) => {
+                assert_eq!((material.thickness_m, &*label), (DEFAULT_THICKNESS_M, "custom"));
+            }
+            other => panic!("got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn every_kind_of_bad_input_has_its_code() {
+        let cases = [
+            ("{", "bad_json"),
+            ("[1,2]", "bad_json"),
+            (r#"{"type":"touch"}"#, "missing_field"),
+            (r#"{"type":"fly","id":1}"#, "unknown_type"),
+            (r#"{"type":"touch","id":1,"channel":0}"#, "missing_field"),
+            (
+                r#"{"type":"touch","id":1,"channel":5,"material":"wood"}"#,
+                "unknown_channel",
+            ),
+            (
+                r#"{"type":"touch","id":1,"channel":-1,"material":"wood"}"#,
+                "unknown_channel",
+            ),
+            (
+                r#"{"type":"touch","id":1,"channel":0.5,"material":"wood"}"#,
+                "bad_value",
+            ),
+            (
+                r#"{"type":"touch","id":1,"channel":"0","material":"wood"}"#,
+                "bad_value",
+            ),
+            (
+                r#"{"type":"touch","id":1,"channel":0,"material":"unobtainium"}"#,
+                "unknown_material",
+            ),
+            (
+                r#"{"type":"touch","id":1,"channel":0,"material":"wood","object_temp_c":1e300}"#,
+                "bad_value",
+            ),
+            (
+                r#"{"type":"touch","id":1,"channel":0,"material":"wood","object_temp_c":1e999}"#,
+                "bad_json",
+            ),
+            (
+                r#"{"type":"touch","id":1,"channel":0,"material":"wood","extra":1}"#,
+                "unknown_field",
+            ),
+            (
+                r#"{"type":"setpoint","id":1,"channel":0,"temp_c":60,"rate_c_s":1}"#,
+                "bad_value",
+            ),
+            (
+                r#"{"type":"setpoint","id":1,"channel":0,"temp_c":30,"rate_c_s":0}"#,
+                "bad_value",
+            ),
+            (r#"{"type":"subscribe","id":1,"rate_hz":1000}"#, "bad_value"),
+            (r#"{"type":"subscribe","id":1,"rate_hz":1e-300}"#, "bad_value"),
+            (r#"{"type":"release","id":{"x":1},"channel":0}"#, "bad_value"),
+        ];
+        for (text, want) in cases {
+            assert_eq!(code_of(text), Some(want), "{text}");
+        }
+        let big = format!(r#"{{"type":"status","id":1,"pad":"{}"}}"#, "x".repeat(20_000));
+        assert_eq!(code_of(&big), Some("too_large"));
+        let props = r#"{"type":"touch","id":1,"channel":0,"properties":{"conductivity_w_mk":-1,
+            "density_kg_m3":1,"specific_heat_j_kgk":1}}"#;
+        assert_eq!(code_of(props), Some("bad_value"));
+    }
+
+    #[test]
+    fn ids_are_echoed_even_with_errors() {
+        let (id, result) = parse(r#"{"type":"fly","id":"abc"}"#, &limits());
+        assert_eq!(id, json!("abc"));
+        assert!(result.is_err());
+    }
+}

@@ -1,0 +1,354 @@
+//! `thermode bench`: the loop's timing at a given rate and channel count, and the latency from a `touch` message
+//! sent over the WebSocket to the drive command that carries it, in loop periods. Figures only: nothing here
+//! asserts anything about speed.
+//!
+//! The daemon runs as `thermode serve` would (real clock, loopback, the given device and engines); a tap on the
+//! per-tick records gives every tick's wake time and every channel's contact and drive.
+//! - *Period deviation*: |measured wake-to-wake period − nominal period| over the run.
+//! - *Lateness*: wake time − deadline.
+//! - *Touch latency*: a WebSocket client touches aluminium on one channel after another (and releases it again). For
+//!   each touch, counted in ticks after the last tick that began before the message was sent: the first tick
+//!   whose drive command is computed with the touch (`applied`, 1 = the very next tick), and the first tick whose
+//!   drive current differs from the pre-touch current by more than [`DRIVE_CHANGE_A`] (`drive_changed`); and the
+//!   time from sending to the start of that tick, in periods.
+
+use std::sync::mpsc::{sync_channel, Receiver};
+use std::sync::Arc;
+use std::time::Duration;
+
+use futures_util::{SinkExt, StreamExt};
+use serde::Serialize;
+use thermode_device::Device;
+use tokio_tungstenite::tungstenite::Message;
+
+use crate::clock::{Clock, MonotonicClock};
+use crate::control_loop::LoopConfig;
+use crate::daemon::{Daemon, DaemonConfig, ServerConfig};
+use crate::engine::EngineFactory;
+use crate::error::RuntimeError;
+use crate::snapshot::TickRecord;
+
+/// A drive change larger than this marks the touch's effect on the drive \[A\].
+pub const DRIVE_CHANGE_A: f64 = 0.05;
+
+/// What to measure.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BenchConfig {
+    /// Loop rate \[Hz\]. Default 1000.
+    pub rate_hz: f64,
+    /// Length of the measured run \[s\]. Default 10.
+    pub duration_s: f64,
+    /// Interval between touches (each is released half-way) \[s\]. Default 0.5.
+    pub touch_interval_s: f64,
+}
+
+impl Default for BenchConfig {
+    fn default() -> Self {
+        BenchConfig {
+            rate_hz: 1000.0,
+            duration_s: 10.0,
+            touch_interval_s: 0.5,
+        }
+    }
+}
+
+/// Percentiles of a sample.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct Spread {
+    /// Samples.
+    pub count: usize,
+    /// Smallest.
+    pub min: f64,
+    /// Median.
+    pub p50: f64,
+    /// 99th percentile (nearest rank).
+    pub p99: f64,
+    /// Largest.
+    pub max: f64,
+}
+
+impl Spread {
+    /// The spread of `values` (NaN ignored; all zero when empty).
+    pub fn of(values: &[f64]) -> Spread {
+        let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+        if v.is_empty() {
+            return Spread::default();
+        }
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        let rank = |p: f64| v[((p * n as f64).ceil() as usize).clamp(1, n) - 1];
+        Spread {
+            count: n,
+            min: v[0],
+            p50: rank(0.5),
+            p99: rank(0.99),
+            max: v[n - 1],
+        }
+    }
+}
+
+/// The figures.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BenchReport {
+    /// Loop rate \[Hz\].
+    pub rate_hz: f64,
+    /// Channels.
+    pub channels: usize,
+    /// Measured run \[s\].
+    pub duration_s: f64,
+    /// Ticks run.
+    pub ticks: u64,
+    /// Deadlines missed (no tick of their own).
+    pub missed_deadlines: u64,
+    /// Tick records the tap could not take.
+    pub dropped_records: u64,
+    /// |period − nominal| \[s\].
+    pub period_deviation_s: Spread,
+    /// Wake time − deadline \[s\].
+    pub lateness_s: Spread,
+    /// Work per tick (every channel: read, render, control, envelope, apply) \[s\], from the loop's own window.
+    pub work_p50_s: f64,
+    /// 99th percentile of the work per tick \[s\].
+    pub work_p99_s: f64,
+    /// Largest work per tick \[s\].
+    pub work_max_s: f64,
+    /// Touch → first tick computing with it \[ticks\].
+    pub touch_applied_ticks: Spread,
+    /// Touch → first drive change above [`DRIVE_CHANGE_A`] \[ticks\].
+    pub touch_drive_changed_ticks: Spread,
+    /// Touch sent → start of the tick that changed the drive \[periods\].
+    pub touch_drive_changed_periods: Spread,
+}
+
+impl std::fmt::Display for BenchReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let us = |s: &Spread| {
+            format!(
+                "p50 {:8.1} µs   p99 {:8.1} µs   max {:8.1} µs",
+                s.p50 * 1e6,
+                s.p99 * 1e6,
+                s.max * 1e6
+            )
+        };
+        let ticks = |s: &Spread| {
+            format!(
+                "min {:5.2}   p50 {:5.2}   max {:5.2}   (n = {})",
+                s.min, s.p50, s.max, s.count
+            )
+        };
+        writeln!(
+            f,
+            "loop: {} Hz, {} channels, {:.1} s: {} ticks, {} missed deadlines, {} dropped records",
+            self.rate_hz, self.channels, self.duration_s, self.ticks, self.missed_deadlines, self.dropped_records
+        )?;
+        writeln!(f, "  period deviation  {}", us(&self.period_deviation_s))?;
+        writeln!(f, "  wake lateness     {}", us(&self.lateness_s))?;
+        writeln!(
+            f,
+            "  work per tick     p50 {:8.1} µs   p99 {:8.1} µs   max {:8.1} µs",
+            self.work_p50_s * 1e6,
+            self.work_p99_s * 1e6,
+            self.work_max_s * 1e6
+        )?;
+        writeln!(f, "touch over WebSocket → drive, in loop periods:")?;
+        writeln!(f, "  applied (ticks)         {}", ticks(&self.touch_applied_ticks))?;
+        writeln!(
+            f,
+            "  drive changed (ticks)   {}",
+            ticks(&self.touch_drive_changed_ticks)
+        )?;
+        write!(
+            f,
+            "  drive changed (periods) {}",
+            ticks(&self.touch_drive_changed_periods)
+        )
+    }
+}
+
+/// A touch sent by the bench client.
+#[derive(Debug, Clone, Copy)]
+struct Sent {
+    channel: usize,
+    at_s: f64,
+}
+
+/// One tick as the bench keeps it.
+struct Row {
+    woke_s: f64,
+    deadline_s: f64,
+    air: [bool; thermode_device::MAX_CHANNELS],
+    current_a: [f64; thermode_device::MAX_CHANNELS],
+}
+
+/// Runs the bench on `device` with `engines`.
+pub fn run(
+    config: &BenchConfig,
+    device: Box<dyn Device + Send>,
+    engines: EngineFactory,
+) -> Result<BenchReport, RuntimeError> {
+    let interval_ok = config.touch_interval_s.is_finite() && (0.01..=60.0).contains(&config.touch_interval_s);
+    if !(config.duration_s.is_finite() && (0.1..=3600.0).contains(&config.duration_s) && interval_ok) {
+        return Err(RuntimeError::Config(
+            "bench duration must lie in 0.1..=3600 s and the touch interval in 0.01..=60 s".into(),
+        ));
+    }
+    let channels = device.channel_count();
+    let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
+    let (tap, records) = sync_channel::<TickRecord>(1 << 16);
+    let collector = std::thread::spawn(move || collect(records));
+    let daemon_config = DaemonConfig {
+        loop_config: LoopConfig {
+            rate_hz: config.rate_hz,
+            ..LoopConfig::default()
+        },
+        server: ServerConfig {
+            port: 0,
+            osc_port: None,
+            ..ServerConfig::default()
+        },
+        device_label: "bench".into(),
+        ..DaemonConfig::default()
+    };
+    let daemon = Daemon::start_with_taps(daemon_config, device, engines, clock.clone(), vec![tap])?;
+    let sent = drive_client(&daemon, config, channels, clock.as_ref());
+    let snapshot = daemon.snapshot();
+    let dropped_records = daemon.dropped_records();
+    daemon.shutdown()?;
+    let rows = collector
+        .join()
+        .map_err(|_| RuntimeError::Config("bench collector panicked".into()))?;
+    let sent = sent?;
+    let stats = snapshot.map(|s| s.stats).unwrap_or_default();
+    let mut report = report(config, channels, &rows, &sent, stats);
+    report.dropped_records = dropped_records;
+    Ok(report)
+}
+
+fn collect(records: Receiver<TickRecord>) -> Vec<Row> {
+    let mut rows = Vec::with_capacity(1 << 16);
+    while let Ok(record) = records.recv() {
+        let mut row = Row {
+            woke_s: record.woke_s,
+            deadline_s: record.time_s,
+            air: [true; thermode_device::MAX_CHANNELS],
+            current_a: [0.0; thermode_device::MAX_CHANNELS],
+        };
+        for (i, r) in record.channels().iter().enumerate() {
+            row.air[i] = r.mode == crate::snapshot::Mode::Air;
+            row.current_a[i] = r.telemetry.current_a;
+        }
+        rows.push(row);
+    }
+    rows
+}
+
+/// Touches and releases over a WebSocket for the run's duration; returns when each touch was sent.
+fn drive_client(
+    daemon: &Daemon,
+    config: &BenchConfig,
+    channels: usize,
+    clock: &dyn Clock,
+) -> Result<Vec<Sent>, RuntimeError> {
+    let io = |e: std::io::Error| RuntimeError::Io {
+        context: "bench client".into(),
+        source: e,
+    };
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(io)?;
+    let url = format!("ws://{}/api/ws", daemon.http_addr());
+    runtime.block_on(async {
+        let (mut ws, _) = tokio_tungstenite::connect_async(url.as_str())
+            .await
+            .map_err(|e| io(std::io::Error::other(e.to_string())))?;
+        tokio::time::sleep(Duration::from_millis(500)).await; // settle
+        let start_s = clock.now_s();
+        let mut sent = Vec::new();
+        let mut k = 0usize;
+        while clock.now_s() - start_s < config.duration_s {
+            let channel = k % channels;
+            for (kind, extra) in [("touch", r#","material":"aluminium""#), ("release", "")] {
+                let text = format!(r#"{{"type":"{kind}","id":{k},"channel":{channel}{extra}}}"#);
+                let at_s = clock.now_s();
+                ws.send(Message::Text(text.into()))
+                    .await
+                    .map_err(|e| io(std::io::Error::other(e.to_string())))?;
+                let _reply = ws.next().await;
+                if kind == "touch" {
+                    sent.push(Sent { channel, at_s });
+                }
+                tokio::time::sleep(Duration::from_secs_f64(config.touch_interval_s / 2.0)).await;
+            }
+            k += 1;
+        }
+        let _ = ws.close(None).await;
+        Ok(sent)
+    })
+}
+
+fn report(
+    config: &BenchConfig,
+    channels: usize,
+    rows: &[Row],
+    sent: &[Sent],
+    stats: crate::snapshot::LoopStats,
+) -> BenchReport {
+    let period_s = 1.0 / config.rate_hz;
+    let deviations: Vec<f64> = rows
+        .windows(2)
+        .map(|w| ((w[1].woke_s - w[0].woke_s) - period_s).abs())
+        .collect();
+    let lateness: Vec<f64> = rows.iter().map(|r| r.woke_s - r.deadline_s).collect();
+    let mut applied = Vec::new();
+    let mut changed = Vec::new();
+    let mut changed_periods = Vec::new();
+    for touch in sent {
+        let Some(before) = rows.iter().rposition(|r| r.woke_s < touch.at_s) else {
+            continue;
+        };
+        let ch = touch.channel;
+        let base_a = rows[before].current_a[ch];
+        let after = &rows[before + 1..];
+        if let Some(k) = after.iter().position(|r| !r.air[ch]) {
+            applied.push((k + 1) as f64);
+        }
+        if let Some(k) = after
+            .iter()
+            .position(|r| (r.current_a[ch] - base_a).abs() > DRIVE_CHANGE_A)
+        {
+            changed.push((k + 1) as f64);
+            changed_periods.push((after[k].woke_s - touch.at_s) / period_s);
+        }
+    }
+    let first = rows.first().map_or(0.0, |r| r.woke_s);
+    let last = rows.last().map_or(0.0, |r| r.woke_s);
+    BenchReport {
+        rate_hz: config.rate_hz,
+        channels,
+        duration_s: last - first,
+        ticks: stats.ticks,
+        missed_deadlines: stats.missed_deadlines,
+        dropped_records: 0,
+        period_deviation_s: Spread::of(&deviations),
+        lateness_s: Spread::of(&lateness),
+        work_p50_s: stats.work.p50_s,
+        work_p99_s: stats.work.p99_s,
+        work_max_s: stats.work.max_s,
+        touch_applied_ticks: Spread::of(&applied),
+        touch_drive_changed_ticks: Spread::of(&changed),
+        touch_drive_changed_periods: Spread::of(&changed_periods),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spread_of_a_known_sample() {
+        let s = Spread::of(&[3.0, 1.0, 2.0, f64::NAN]);
+        assert_eq!((s.count, s.min, s.p50, s.max), (3, 1.0, 2.0, 3.0));
+        assert_eq!(Spread::of(&[]), Spread::default());
+    }
+}

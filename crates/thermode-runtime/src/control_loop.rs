@@ -1,0 +1,690 @@
+//! The control loop: one std thread that ticks every channel at a fixed rate on an injected [`Clock`].
+//!
+//! Loop time is the clock's time at each tick's deadline, so a real device stamping its readings with the same clock
+//! (see [`crate::clock::DeviceClock`]) and the envelope agree. Per tick, in order: the device's physics advance to the
+//! tick's time (simulated devices); queued commands are
+//! applied (at most [`MAX_COMMANDS_PER_TICK`]); contacts of disconnected clients whose grace period is over are
+//! released; each channel is read, its engine ticks (renderer → controller → safety envelope) and the gated drive
+//! is applied; the snapshot is published (`try_lock`, never waiting) and a [`TickRecord`] goes to the recorder
+//! queue (never waiting; a full queue drops and counts the record).
+//!
+//! No allocation and no async on this path: statuses, statistics windows and records are pre-allocated or on the
+//! stack; a new contact's name arrives already allocated inside its command.
+//!
+//! Stop-all releases every channel (the display renders air) and, in addition, holds that channel's drive at 0 A
+//! until the channel's next command: "stop" makes the display passive, not merely neutral. A channel whose device
+//! read fails also gets 0 A for that tick. When the loop stops, every channel gets 0 A.
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{sync_channel, SyncSender, TryRecvError, TrySendError};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+
+use thermode_control::{EnvelopeConfig, FaultCode, SafetyEnvelope};
+use thermode_device::{Device, Reading, MAX_CHANNELS};
+
+use crate::clock::Clock;
+use crate::command::{Applied, Command, CommandError, CommandReceiver, CommandSender, Owner, Reply, Request};
+use crate::engine::{ChannelEngine, EngineError, EngineFactory, Stimulus};
+use crate::error::RuntimeError;
+use crate::snapshot::{ChannelStatus, LoopStats, Mode, RecordRow, Shared, Snapshot, TickRecord};
+use crate::stats::Window;
+use crate::ticker::{Tick, Ticker};
+
+/// Highest loop rate \[Hz\].
+pub const MAX_RATE_HZ: f64 = 1000.0;
+/// Lowest loop rate \[Hz\].
+pub const MIN_RATE_HZ: f64 = 1.0;
+/// Most commands applied in one tick; the rest wait for the next tick.
+pub const MAX_COMMANDS_PER_TICK: usize = 64;
+/// Longest loop-statistics window \[ticks\] (10 s at 1 kHz).
+pub const MAX_STATS_WINDOW_TICKS: usize = 10_000;
+/// The fault reported for a channel whose engine failed (panicked): its drive request can no longer be computed.
+pub const ENGINE_FAILED: FaultCode = FaultCode::NonFiniteCommand;
+/// Attempts to take the snapshot lock per tick before the publish is skipped.
+const PUBLISH_ATTEMPTS: usize = 4;
+/// Loop time between refreshes of the published statistics \[s\].
+const STATS_REFRESH_S: f64 = 1.0;
+
+/// Settings of the control loop.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoopConfig {
+    /// Tick rate \[Hz\]. Default 100; range [`MIN_RATE_HZ`]..=[`MAX_RATE_HZ`].
+    pub rate_hz: f64,
+    /// Grace period after a WebSocket client disconnects before its contacts are released \[s\]. Default 2;
+    /// range 0..=60.
+    pub release_after_disconnect_s: f64,
+    /// Capacity of the command queue \[commands\]. Default 1024; at least 1.
+    pub command_queue_len: usize,
+    /// Length of the loop-statistics window \[s\]. Default 10; the window holds at most
+    /// [`MAX_STATS_WINDOW_TICKS`] ticks.
+    pub stats_window_s: f64,
+}
+
+impl Default for LoopConfig {
+    fn default() -> Self {
+        LoopConfig {
+            rate_hz: 100.0,
+            release_after_disconnect_s: 2.0,
+            command_queue_len: 1024,
+            stats_window_s: 10.0,
+        }
+    }
+}
+
+impl LoopConfig {
+    /// Checks every field.
+    pub fn validate(&self) -> Result<(), RuntimeError> {
+        if !(self.rate_hz.is_finite() && (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&self.rate_hz)) {
+            return Err(RuntimeError::Config(format!(
+                "loop rate {} Hz must lie in {MIN_RATE_HZ}..={MAX_RATE_HZ} Hz",
+                self.rate_hz
+            )));
+        }
+        let grace = self.release_after_disconnect_s;
+        if !(grace.is_finite() && (0.0..=60.0).contains(&grace)) {
+            return Err(RuntimeError::Config(format!(
+                "release-after-disconnect {grace} s must lie in 0..=60 s"
+            )));
+        }
+        if self.command_queue_len == 0 {
+            return Err(RuntimeError::Config("command queue length must be at least 1".into()));
+        }
+        if !(self.stats_window_s.is_finite() && self.stats_window_s > 0.0) {
+            return Err(RuntimeError::Config(format!(
+                "statistics window {} s must be finite and positive",
+                self.stats_window_s
+            )));
+        }
+        Ok(())
+    }
+
+    /// The period \[s\].
+    pub fn period_s(&self) -> f64 {
+        1.0 / self.rate_hz
+    }
+
+    fn stats_window_ticks(&self) -> usize {
+        ((self.stats_window_s * self.rate_hz).ceil() as usize).clamp(1, MAX_STATS_WINDOW_TICKS)
+    }
+}
+
+/// A running control loop: its command queue, its published state, and its thread.
+#[derive(Debug)]
+pub struct LoopHandle {
+    commands: CommandSender,
+    shared: Arc<Shared>,
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+    channel_count: usize,
+    config: LoopConfig,
+}
+
+impl LoopHandle {
+    /// Starts the loop on its own thread. `engines` builds one engine per device channel on that thread. Each of
+    /// `feeds` receives a [`TickRecord`] per tick (the recorder, the bench); the loop never waits for them. Returns once the
+    /// engines are built (their error, if any, is returned).
+    pub fn spawn(
+        config: LoopConfig,
+        device: Box<dyn Device + Send>,
+        engines: EngineFactory,
+        clock: Arc<dyn Clock>,
+        feeds: Vec<SyncSender<TickRecord>>,
+    ) -> Result<LoopHandle, RuntimeError> {
+        config.validate()?;
+        let count = device.channel_count();
+        if count == 0 || count > MAX_CHANNELS {
+            return Err(RuntimeError::Config(format!(
+                "a device of {count} channels (1 to {MAX_CHANNELS})"
+            )));
+        }
+        let (queue, receiver) = sync_channel(config.command_queue_len);
+        let (ready, started) = sync_channel::<Result<Arc<Shared>, RuntimeError>>(1);
+        let stop = Arc::new(AtomicBool::new(false));
+        let thread = {
+            let (stop, config) = (stop.clone(), config.clone());
+            std::thread::Builder::new()
+                .name("thermode-loop".into())
+                .spawn(move || {
+                    let built = engines(count)
+                        .map_err(|e| RuntimeError::Config(format!("cannot build the channel engines: {e}")))
+                        .and_then(|engines| ControlLoop::new(&config, device, engines, receiver, feeds));
+                    let control = match built {
+                        Ok(control) => control,
+                        Err(e) => {
+                            let _ = ready.send(Err(e));
+                            return;
+                        }
+                    };
+                    let ticker = match Ticker::new(config.period_s(), clock.now_s()) {
+                        Ok(ticker) => ticker,
+                        Err(e) => {
+                            let _ = ready.send(Err(e));
+                            return;
+                        }
+                    };
+                    let _ = ready.send(Ok(control.shared.clone()));
+                    control.run(clock.as_ref(), ticker, &stop);
+                })
+                .map_err(|source| RuntimeError::Io {
+                    context: "cannot start the control-loop thread".into(),
+                    source,
+                })?
+        };
+        let shared = match started.recv() {
+            Ok(result) => result?,
+            Err(_) => {
+                return Err(RuntimeError::Config(
+                    "the control-loop thread ended while starting".into(),
+                ))
+            }
+        };
+        Ok(LoopHandle {
+            commands: CommandSender::new(queue),
+            shared,
+            stop,
+            thread: Some(thread),
+            channel_count: count,
+            config,
+        })
+    }
+
+    /// A sender for the command queue.
+    pub fn commands(&self) -> CommandSender {
+        self.commands.clone()
+    }
+
+    /// The published state.
+    pub fn shared(&self) -> Arc<Shared> {
+        self.shared.clone()
+    }
+
+    /// A copy of the newest snapshot.
+    pub fn snapshot(&self) -> Snapshot {
+        self.shared.snapshot()
+    }
+
+    /// Number of channels.
+    pub fn channel_count(&self) -> usize {
+        self.channel_count
+    }
+
+    /// The loop's configuration.
+    pub fn config(&self) -> &LoopConfig {
+        &self.config
+    }
+
+    /// Stops the loop (every drive goes to 0 A) and waits for its thread.
+    pub fn stop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+impl Drop for LoopHandle {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+/// Per-channel state the loop owns.
+struct Slot {
+    engine: Box<dyn ChannelEngine>,
+    /// An envelope used only to make 0 A commands (stop-all hold, failed reads, shutdown).
+    off_gate: SafetyEnvelope,
+    reading: Reading,
+    /// The engine panicked once: it is never called again and the channel's drive stays at 0 A.
+    failed: bool,
+}
+
+/// Counters published with the snapshot.
+#[derive(Debug, Default, Clone, Copy)]
+struct Counters {
+    applied: u64,
+    refused: u64,
+    device_errors: u64,
+}
+
+struct ControlLoop {
+    device: Box<dyn Device + Send>,
+    slots: Vec<Slot>,
+    status: Vec<ChannelStatus>,
+    commands: CommandReceiver,
+    shared: Arc<Shared>,
+    feeds: Vec<SyncSender<TickRecord>>,
+    /// Answers of this tick's commands, sent after the publish.
+    answers: Vec<(tokio::sync::oneshot::Sender<Reply>, Reply)>,
+    periods: Window,
+    work: Window,
+    stats: LoopStats,
+    counters: Counters,
+    release_after_s: f64,
+    air: Arc<str>,
+    direct: Arc<str>,
+    last_woke_s: Option<f64>,
+    next_stats_s: f64,
+    time_s: f64,
+    started: bool,
+}
+
+/// A reading that is not one: before the first successful read (the envelope refuses it as non-finite).
+const NO_READING: Reading = Reading {
+    sensor_c: f64::NAN,
+    hot_side_c: f64::NAN,
+    time_s: 0.0,
+    sample_seq: 0,
+    current_a: 0.0,
+};
+
+impl ControlLoop {
+    fn new(
+        config: &LoopConfig,
+        device: Box<dyn Device + Send>,
+        engines: Vec<Box<dyn ChannelEngine>>,
+        commands: CommandReceiver,
+        feeds: Vec<SyncSender<TickRecord>>,
+    ) -> Result<Self, RuntimeError> {
+        if engines.len() != device.channel_count() {
+            return Err(RuntimeError::Config(format!(
+                "{} engines for a device of {} channels",
+                engines.len(),
+                device.channel_count()
+            )));
+        }
+        let air: Arc<str> = Arc::from("air");
+        let mut slots = Vec::with_capacity(engines.len());
+        for engine in engines {
+            let off_gate = SafetyEnvelope::new(EnvelopeConfig::default(), 1.0)
+                .map_err(|e| RuntimeError::Config(format!("off gate: {e}")))?;
+            slots.push(Slot {
+                engine,
+                off_gate,
+                reading: NO_READING,
+                failed: false,
+            });
+        }
+        let status: Vec<ChannelStatus> = (0..slots.len()).map(|channel| air_status(channel, &air)).collect();
+        let stats = LoopStats {
+            rate_hz: config.rate_hz,
+            period_s: config.period_s(),
+            ..LoopStats::default()
+        };
+        let shared = Arc::new(Shared::new(Snapshot {
+            tick: 0,
+            time_s: 0.0,
+            channels: status.clone(),
+            stats,
+            commands_applied: 0,
+            commands_refused: 0,
+            device_errors: 0,
+            running: true,
+        }));
+        let window = config.stats_window_ticks();
+        Ok(ControlLoop {
+            device,
+            slots,
+            status,
+            commands,
+            shared,
+            feeds,
+            answers: Vec::with_capacity(MAX_COMMANDS_PER_TICK),
+            periods: Window::new(window),
+            work: Window::new(window),
+            stats,
+            counters: Counters::default(),
+            release_after_s: config.release_after_disconnect_s,
+            air,
+            direct: Arc::from("direct"),
+            last_woke_s: None,
+            next_stats_s: STATS_REFRESH_S,
+            time_s: 0.0,
+            started: false,
+        })
+    }
+
+    fn run(mut self, clock: &dyn Clock, mut ticker: Ticker, stop: &AtomicBool) {
+        while let Some(tick) = ticker.wait(clock, stop) {
+            self.step(&tick, tick.scheduled_s);
+            let done_s = clock.now_s();
+            self.account(&tick, done_s, ticker.missed_total());
+            self.publish(tick.index);
+            for (reply, answer) in self.answers.drain(..) {
+                let _ = reply.send(answer);
+            }
+        }
+        self.shutdown();
+    }
+
+    /// One tick at loop time `time_s`.
+    fn step(&mut self, tick: &Tick, time_s: f64) {
+        // A simulated device's clock starts at 0: the first tick brings it to the loop's time (the clock's), so
+        // readings and the envelope share one time base; later ticks advance it by their interval.
+        let advance_s = if self.started { tick.dt_s } else { time_s };
+        self.device.advance(advance_s);
+        self.started = true;
+        self.time_s = time_s;
+        self.drain_commands(tick.index);
+        self.expire_leases();
+        for channel in 0..self.slots.len() {
+            self.tick_channel(channel, tick.dt_s);
+        }
+        self.feed_record(tick);
+    }
+
+    fn tick_channel(&mut self, channel: usize, dt_s: f64) {
+        let time_s = self.time_s;
+        let link_ok = match self.device.read(channel) {
+            Ok(reading) => {
+                self.slots[channel].reading = reading;
+                true
+            }
+            Err(_) => {
+                self.counters.device_errors += 1;
+                false
+            }
+        };
+        let slot = &mut self.slots[channel];
+        let status = &mut self.status[channel];
+        let ticked = if slot.failed {
+            None
+        } else {
+            let (engine, reading) = (&mut slot.engine, &slot.reading);
+            catch_unwind(AssertUnwindSafe(|| engine.tick(time_s, dt_s, reading))).ok()
+        };
+        let (command, mut telemetry) = match ticked {
+            Some((command, telemetry)) => (Some(command), telemetry),
+            None => {
+                // The engine panicked (a bug): this channel is off for the rest of the session.
+                slot.failed = true;
+                let mut telemetry = status.telemetry;
+                (telemetry.time_s, telemetry.fault) = (time_s, Some(ENGINE_FAILED));
+                (None, telemetry)
+            }
+        };
+        let result = match command {
+            Some(command) if !status.held_off && link_ok => self.device.apply(channel, &command),
+            _ => {
+                telemetry.current_a = 0.0;
+                let off = slot.off_gate.gate_drive(time_s, 0.0);
+                self.device.apply(channel, &off)
+            }
+        };
+        if result.is_err() {
+            self.counters.device_errors += 1;
+        }
+        status.link_ok = link_ok;
+        status.engine_failed = slot.failed;
+        status.telemetry = telemetry;
+    }
+
+    fn drain_commands(&mut self, tick: u64) {
+        for _ in 0..MAX_COMMANDS_PER_TICK {
+            let request = match self.commands.try_recv() {
+                Ok(request) => request,
+                Err(TryRecvError::Empty | TryRecvError::Disconnected) => return,
+            };
+            let Request { command, reply } = request;
+            let answer = self.apply(command, tick);
+            match answer {
+                Ok(_) => self.counters.applied += 1,
+                Err(_) => self.counters.refused += 1,
+            }
+            if let Some(reply) = reply {
+                // Answered after this tick's snapshot is published, so a client that got "ok" sees the change in
+                // the status. Capacity MAX_COMMANDS_PER_TICK is reserved: no allocation.
+                self.answers.push((reply, answer));
+            }
+        }
+    }
+
+    fn apply(&mut self, command: Command, tick: u64) -> Reply {
+        let applied = Applied {
+            tick,
+            time_s: self.time_s,
+        };
+        match command {
+            Command::Touch {
+                channel,
+                material,
+                object_c,
+                label,
+                owner,
+            } => {
+                self.usable(channel)?;
+                self.set(channel, Stimulus::Touch { material, object_c })?;
+                let status = &mut self.status[channel];
+                (status.label, status.mode, status.object_c, status.direct) =
+                    (label, Mode::Touch, Some(object_c), None);
+                claim(status, owner);
+            }
+            Command::Setpoint {
+                channel,
+                temp_c,
+                rate_c_s,
+                owner,
+            } => {
+                self.usable(channel)?;
+                self.set(channel, Stimulus::Direct { temp_c, rate_c_s })?;
+                let status = &mut self.status[channel];
+                (status.label, status.mode, status.object_c) = (self.direct.clone(), Mode::Direct, None);
+                status.direct = Some((temp_c, rate_c_s));
+                claim(status, owner);
+            }
+            Command::Release { channel } => {
+                self.exists(channel)?;
+                self.release(channel);
+            }
+            Command::ClearFault { channel } => {
+                self.exists(channel)?;
+                let time_s = self.time_s;
+                let slot = &mut self.slots[channel];
+                if slot.failed {
+                    return Err(CommandError::FaultPersists {
+                        channel,
+                        message: "the channel's engine failed; restart the daemon".into(),
+                    });
+                }
+                let engine = &mut slot.engine;
+                let cleared = catch_unwind(AssertUnwindSafe(|| engine.clear_fault(time_s)))
+                    .unwrap_or_else(|_| Err(EngineError("the engine failed while clearing".into())));
+                cleared.map_err(|e| CommandError::FaultPersists { channel, message: e.0 })?;
+                self.status[channel].telemetry.fault = None;
+            }
+            Command::StopAll => {
+                for channel in 0..self.slots.len() {
+                    self.release(channel);
+                    self.status[channel].held_off = true;
+                }
+            }
+            Command::ClientGone { client } => {
+                let at_s = self.time_s + self.release_after_s;
+                for status in &mut self.status {
+                    if status.owner == Owner::Client(client) && status.mode != Mode::Air {
+                        status.release_at_s = Some(at_s);
+                    }
+                }
+            }
+        }
+        Ok(applied)
+    }
+
+    fn exists(&self, channel: usize) -> Result<(), CommandError> {
+        let count = self.slots.len();
+        if channel < count {
+            Ok(())
+        } else {
+            Err(CommandError::UnknownChannel { channel, count })
+        }
+    }
+
+    /// The channel exists and has no latched fault.
+    fn usable(&self, channel: usize) -> Result<(), CommandError> {
+        self.exists(channel)?;
+        if self.slots[channel].failed {
+            return Err(CommandError::Faulted {
+                channel,
+                fault: ENGINE_FAILED,
+            });
+        }
+        match self.status[channel].telemetry.fault {
+            Some(fault) => Err(CommandError::Faulted { channel, fault }),
+            None => Ok(()),
+        }
+    }
+
+    fn set(&mut self, channel: usize, stimulus: Stimulus) -> Result<(), CommandError> {
+        let slot = &mut self.slots[channel];
+        let engine = &mut slot.engine;
+        match catch_unwind(AssertUnwindSafe(|| engine.set_stimulus(stimulus))) {
+            Ok(result) => result.map_err(|e| CommandError::Rejected { channel, message: e.0 }),
+            Err(_) => {
+                slot.failed = true;
+                Err(CommandError::Faulted {
+                    channel,
+                    fault: ENGINE_FAILED,
+                })
+            }
+        }
+    }
+
+    /// Air on `channel`; clears the stop-all hold (a release is a command too).
+    fn release(&mut self, channel: usize) {
+        // An engine must always accept air; if one ever refused, the drive below is still held at 0 A.
+        let slot = &mut self.slots[channel];
+        let engine = &mut slot.engine;
+        let accepted = !slot.failed
+            && matches!(
+                catch_unwind(AssertUnwindSafe(|| engine.set_stimulus(Stimulus::Air))),
+                Ok(Ok(()))
+            );
+        let status = &mut self.status[channel];
+        let label = self.air.clone();
+        (status.label, status.mode, status.object_c, status.direct) = (label, Mode::Air, None, None);
+        (status.owner, status.release_at_s, status.held_off) = (Owner::Nobody, None, !accepted);
+    }
+
+    fn expire_leases(&mut self) {
+        for channel in 0..self.status.len() {
+            if self.status[channel].release_at_s.is_some_and(|at| self.time_s >= at) {
+                self.release(channel);
+            }
+        }
+    }
+
+    fn feed_record(&mut self, tick: &Tick) {
+        if self.feeds.is_empty() {
+            return;
+        }
+        let record = TickRecord {
+            tick: tick.index,
+            time_s: self.time_s,
+            woke_s: tick.woke_s,
+            len: self.status.len(),
+            rows: std::array::from_fn(|i| match self.status.get(i) {
+                Some(s) => RecordRow {
+                    label: s.label.clone(),
+                    mode: s.mode,
+                    telemetry: s.telemetry,
+                },
+                None => RecordRow {
+                    label: self.air.clone(),
+                    mode: Mode::Air,
+                    telemetry: crate::snapshot::EMPTY_TELEMETRY,
+                },
+            }),
+        };
+        let mut closed = None;
+        for (index, feed) in self.feeds.iter().enumerate() {
+            match feed.try_send(record.clone()) {
+                Ok(()) => {}
+                Err(TrySendError::Full(_)) => {
+                    self.shared.dropped_records.fetch_add(1, Ordering::Relaxed);
+                }
+                Err(TrySendError::Disconnected(_)) => closed = Some(index),
+            }
+        }
+        if let Some(index) = closed {
+            // Happens once per feed in a session (a consumer that went away); not a per-tick cost.
+            self.feeds.swap_remove(index);
+        }
+    }
+
+    /// Timing bookkeeping after a tick's work is done at clock time `done_s`.
+    fn account(&mut self, tick: &Tick, done_s: f64, missed_total: u64) {
+        if let Some(last) = self.last_woke_s {
+            self.periods.record(tick.woke_s - last);
+        }
+        self.last_woke_s = Some(tick.woke_s);
+        self.work.record(done_s - tick.woke_s);
+        self.stats.ticks += 1;
+        self.stats.missed_deadlines = missed_total;
+        if self.time_s >= self.next_stats_s {
+            self.stats.period = self.periods.summary();
+            self.stats.work = self.work.summary();
+            self.next_stats_s = self.time_s + STATS_REFRESH_S;
+        }
+    }
+
+    /// Publishes the snapshot; a reader holds the lock only while copying it, so a few yields suffice. Never
+    /// waits on the lock: after [`PUBLISH_ATTEMPTS`] the publish is skipped (and counted) until the next tick.
+    fn publish(&self, tick: u64) {
+        for _ in 0..PUBLISH_ATTEMPTS {
+            if self.shared.try_publish(|snapshot| self.write(snapshot, tick, true)) {
+                return;
+            }
+            std::thread::yield_now();
+        }
+        self.shared.skipped_publishes.fetch_add(1, Ordering::Relaxed);
+    }
+
+    fn write(&self, snapshot: &mut Snapshot, tick: u64, running: bool) {
+        snapshot.tick = tick;
+        snapshot.time_s = self.time_s;
+        snapshot.channels.clone_from(&self.status);
+        snapshot.stats = self.stats;
+        snapshot.commands_applied = self.counters.applied;
+        snapshot.commands_refused = self.counters.refused;
+        snapshot.device_errors = self.counters.device_errors;
+        snapshot.running = running;
+    }
+
+    /// Every drive to 0 A; the final snapshot says the loop stopped.
+    fn shutdown(&mut self) {
+        let time_s = self.time_s;
+        for (channel, slot) in self.slots.iter_mut().enumerate() {
+            let off = slot.off_gate.gate_drive(time_s, 0.0);
+            let _ = self.device.apply(channel, &off);
+            self.status[channel].telemetry.current_a = 0.0;
+        }
+        let tick = self.stats.ticks;
+        self.shared
+            .publish(|snapshot| self.write(snapshot, tick.saturating_sub(1), false));
+    }
+}
+
+/// The status of a channel in air, nobody's, drive free.
+fn air_status(channel: usize, air: &Arc<str>) -> ChannelStatus {
+    ChannelStatus {
+        channel,
+        label: air.clone(),
+        mode: Mode::Air,
+        object_c: None,
+        direct: None,
+        held_off: false,
+        owner: Owner::Nobody,
+        release_at_s: None,
+        link_ok: true,
+        engine_failed: false,
+        telemetry: crate::snapshot::EMPTY_TELEMETRY,
+    }
+}
+
+/// A new stimulus on a channel: it belongs to `owner`, any pending release and the stop-all hold end.
+fn claim(status: &mut ChannelStatus, owner: Owner) {
+    status.owner = owner;
+    status.release_at_s = None;
+    status.held_off = false;
+}

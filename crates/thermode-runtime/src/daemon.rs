@@ -1,0 +1,370 @@
+//! The daemon: the control loop, the optional recorder, and the network side (HTTP + WebSocket on one port, OSC
+//! on another), started together by [`Daemon::start`] and stopped by [`Daemon::shutdown`].
+//!
+//! Security rules applied here, before anything listens: a non-loopback bind address needs a token
+//! ([`RuntimeError::InsecureBind`] otherwise), and OSC, which cannot carry a token, listens only on loopback binds.
+
+use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener, UdpSocket};
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, AtomicUsize};
+use std::sync::Arc;
+use std::time::Duration;
+
+use thermode_control::EnvelopeConfig;
+use thermode_device::Device;
+
+use crate::api::access::Access;
+use crate::api::protocol::RequestLimits;
+use crate::api::{router, App, Info, NetLimits, OscCounters};
+use crate::clock::Clock;
+use crate::command::CommandSender;
+use crate::control_loop::{LoopConfig, LoopHandle};
+use crate::engine::EngineFactory;
+use crate::error::RuntimeError;
+use crate::recorder::Recorder;
+use crate::snapshot::Snapshot;
+
+/// Default HTTP/WebSocket port.
+pub const DEFAULT_PORT: u16 = 8765;
+/// Default OSC (UDP) port.
+pub const DEFAULT_OSC_PORT: u16 = 9000;
+/// Longest accepted token \[characters\].
+pub const MAX_TOKEN_CHARS: usize = 256;
+
+/// Settings of the network side.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ServerConfig {
+    /// Address to listen on. Default 127.0.0.1 (loopback). Any other address requires `token`.
+    pub bind: IpAddr,
+    /// HTTP/WebSocket port; 0 picks a free one. Default [`DEFAULT_PORT`].
+    pub port: u16,
+    /// OSC port (0 picks a free one), or `None` for no OSC. Default `Some(`[`DEFAULT_OSC_PORT`]`)`. Ignored (OSC
+    /// off) on a non-loopback bind.
+    pub osc_port: Option<u16>,
+    /// The shared secret every request must present; required on non-loopback binds. Printable ASCII without
+    /// spaces, 1 to 256 characters. Default none.
+    pub token: Option<String>,
+    /// Web origins (e.g. `https://app.example`) allowed to connect besides the daemon's own pages. Default none.
+    pub allowed_origins: Vec<String>,
+    /// Network limits.
+    pub net: NetLimits,
+    /// Largest message answered with a reply \[bytes\]; larger ones get `too_large`. Default 16384.
+    pub max_message_bytes: usize,
+    /// Fastest telemetry subscription \[Hz\]; also at most the loop rate. Default 100.
+    pub max_subscribe_hz: f64,
+    /// Object temperature of a touch that gives none \[°C\]. Default 23.
+    pub default_object_c: f64,
+    /// The envelope the channels use (its range and rate limit bound direct-mode requests). Default
+    /// `EnvelopeConfig::default()`.
+    pub envelope: EnvelopeConfig,
+}
+
+impl Default for ServerConfig {
+    fn default() -> Self {
+        ServerConfig {
+            bind: IpAddr::V4(Ipv4Addr::LOCALHOST),
+            port: DEFAULT_PORT,
+            osc_port: Some(DEFAULT_OSC_PORT),
+            token: None,
+            allowed_origins: Vec::new(),
+            net: NetLimits::default(),
+            max_message_bytes: 16 * 1024,
+            max_subscribe_hz: 100.0,
+            default_object_c: 23.0,
+            envelope: EnvelopeConfig::default(),
+        }
+    }
+}
+
+impl ServerConfig {
+    /// Refuses an insecure or malformed configuration (see the module documentation).
+    pub fn validate(&self) -> Result<(), RuntimeError> {
+        if let Some(token) = &self.token {
+            let printable = token.chars().all(|c| c.is_ascii_graphic());
+            if token.is_empty() || token.len() > MAX_TOKEN_CHARS || !printable {
+                return Err(RuntimeError::Config(format!(
+                    "the token must be 1 to {MAX_TOKEN_CHARS} printable ASCII characters without spaces"
+                )));
+            }
+        } else if !self.bind.is_loopback() {
+            return Err(RuntimeError::InsecureBind {
+                addr: self.bind.to_string(),
+            });
+        }
+        self.net.validate()?;
+        if self.max_message_bytes == 0 || self.max_message_bytes > self.net.hard_message_bytes {
+            return Err(RuntimeError::Config(format!(
+                "message limit {} bytes must lie in 1..={} bytes",
+                self.max_message_bytes, self.net.hard_message_bytes
+            )));
+        }
+        let o = self.default_object_c;
+        if !(o.is_finite()
+            && (crate::api::protocol::OBJECT_TEMP_RANGE_C.0..=crate::api::protocol::OBJECT_TEMP_RANGE_C.1).contains(&o))
+        {
+            return Err(RuntimeError::Config(format!(
+                "default object temperature {o} °C is out of range"
+            )));
+        }
+        self.envelope
+            .validate()
+            .map_err(|e| RuntimeError::Config(format!("envelope: {e}")))
+    }
+
+    /// Whether OSC will listen.
+    pub fn osc_enabled(&self) -> bool {
+        self.osc_port.is_some() && self.bind.is_loopback()
+    }
+}
+
+/// Everything [`Daemon::start`] needs besides the device, the engines and the clock.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct DaemonConfig {
+    /// The control loop.
+    pub loop_config: LoopConfig,
+    /// The network side.
+    pub server: ServerConfig,
+    /// Directory for the session CSV, if recording.
+    pub record_dir: Option<PathBuf>,
+    /// The device as shown in `/api/status` (e.g. `sim`).
+    pub device_label: String,
+    /// A name per channel (e.g. the fingers), or empty.
+    pub channel_names: Vec<String>,
+}
+
+/// A running daemon.
+#[derive(Debug)]
+pub struct Daemon {
+    runtime: Option<tokio::runtime::Runtime>,
+    control: Option<LoopHandle>,
+    recorder: Option<Recorder>,
+    http_addr: SocketAddr,
+    osc_addr: Option<SocketAddr>,
+    token: Option<String>,
+}
+
+impl Daemon {
+    /// Checks the configuration, binds the sockets, and starts the loop, the recorder and the network side.
+    pub fn start(
+        config: DaemonConfig,
+        device: Box<dyn Device + Send>,
+        engines: EngineFactory,
+        clock: Arc<dyn Clock>,
+    ) -> Result<Daemon, RuntimeError> {
+        Daemon::start_with_taps(config, device, engines, clock, Vec::new())
+    }
+
+    /// As [`Daemon::start`], with extra consumers of the per-tick records (the bench).
+    pub fn start_with_taps(
+        config: DaemonConfig,
+        device: Box<dyn Device + Send>,
+        engines: EngineFactory,
+        clock: Arc<dyn Clock>,
+        mut taps: Vec<std::sync::mpsc::SyncSender<crate::snapshot::TickRecord>>,
+    ) -> Result<Daemon, RuntimeError> {
+        let server = &config.server;
+        server.validate()?;
+        config.loop_config.validate()?;
+        let http = bind_tcp(SocketAddr::new(server.bind, server.port))?;
+        let http_addr = local_addr(&http, server.bind)?;
+        let osc = match server.osc_port.filter(|_| server.osc_enabled()) {
+            Some(port) => Some(bind_udp(SocketAddr::new(server.bind, port))?),
+            None => None,
+        };
+        let osc_addr = osc
+            .as_ref()
+            .map(|s| s.local_addr())
+            .transpose()
+            .map_err(|source| RuntimeError::Io {
+                context: "OSC socket".into(),
+                source,
+            })?;
+        let recorder = match &config.record_dir {
+            Some(dir) => {
+                let (recorder, feed) = Recorder::start(dir)?;
+                taps.push(feed);
+                Some(recorder)
+            }
+            None => None,
+        };
+        let control = LoopHandle::spawn(config.loop_config.clone(), device, engines, clock, taps)?;
+        let app = Arc::new(App {
+            commands: control.commands(),
+            shared: control.shared(),
+            limits: request_limits(&config, control.channel_count()),
+            net: server.net.clone(),
+            access: Access::new(server.token.clone(), http_addr.port(), server.allowed_origins.clone()),
+            info: Info {
+                device: config.device_label.clone(),
+                channel_names: config.channel_names.clone(),
+                osc_port: osc_addr.map(|a| a.port()),
+                recording: recorder.as_ref().map(|r| r.path().display().to_string()),
+            },
+            osc: Arc::new(OscCounters::default()),
+            recorded_rows: recorder.as_ref().map(Recorder::rows_counter),
+            clients: AtomicUsize::new(0),
+            next_client: AtomicU64::new(1),
+        });
+        let runtime = start_network(app, http, osc)?;
+        Ok(Daemon {
+            runtime: Some(runtime),
+            control: Some(control),
+            recorder,
+            http_addr,
+            osc_addr,
+            token: server.token.clone(),
+        })
+    }
+
+    /// The HTTP/WebSocket address actually bound.
+    pub fn http_addr(&self) -> SocketAddr {
+        self.http_addr
+    }
+
+    /// The OSC address, when OSC listens.
+    pub fn osc_addr(&self) -> Option<SocketAddr> {
+        self.osc_addr
+    }
+
+    /// The dashboard URL (with `?token=` when a token is set, so the printed link just works).
+    pub fn dashboard_url(&self) -> String {
+        let host = match self.http_addr.ip() {
+            ip if ip.is_unspecified() => "127.0.0.1".to_string(),
+            IpAddr::V6(ip) => format!("[{ip}]"),
+            IpAddr::V4(ip) => ip.to_string(),
+        };
+        let query = self
+            .token
+            .as_ref()
+            .map_or(String::new(), |t| format!("?token={}", query_escape(t)));
+        format!("http://{host}:{}/{query}", self.http_addr.port())
+    }
+
+    /// The session CSV, when recording.
+    pub fn recording_path(&self) -> Option<PathBuf> {
+        self.recorder.as_ref().map(|r| r.path().to_path_buf())
+    }
+
+    /// A sender for the loop's command queue (the demo script uses it).
+    pub fn commands(&self) -> Option<CommandSender> {
+        self.control.as_ref().map(LoopHandle::commands)
+    }
+
+    /// A copy of the loop's newest snapshot.
+    pub fn snapshot(&self) -> Option<Snapshot> {
+        self.control.as_ref().map(LoopHandle::snapshot)
+    }
+
+    /// Tick records the recorder or a tap could not take (their queue was full).
+    pub fn dropped_records(&self) -> u64 {
+        self.control.as_ref().map_or(0, |c| c.shared().dropped_records())
+    }
+
+    /// Stops the network side, then the loop (every drive to 0 A), then the recorder (flushed and synced).
+    /// Returns the rows recorded, if recording.
+    pub fn shutdown(mut self) -> Result<Option<u64>, RuntimeError> {
+        self.stop_parts()
+    }
+
+    fn stop_parts(&mut self) -> Result<Option<u64>, RuntimeError> {
+        if let Some(runtime) = self.runtime.take() {
+            runtime.shutdown_timeout(Duration::from_millis(500));
+        }
+        if let Some(mut control) = self.control.take() {
+            control.stop();
+        }
+        self.recorder.take().map(Recorder::finish).transpose()
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        let _ = self.stop_parts();
+    }
+}
+
+fn request_limits(config: &DaemonConfig, channel_count: usize) -> RequestLimits {
+    let server = &config.server;
+    RequestLimits {
+        channel_count,
+        max_message_bytes: server.max_message_bytes,
+        setpoint_min_c: server.envelope.min_display_c,
+        setpoint_max_c: server.envelope.max_display_c,
+        max_rate_c_s: server.envelope.max_setpoint_rate_c_per_s,
+        max_subscribe_hz: server.max_subscribe_hz.min(config.loop_config.rate_hz),
+        default_object_c: server.default_object_c,
+    }
+}
+
+fn bind_tcp(addr: SocketAddr) -> Result<TcpListener, RuntimeError> {
+    let listener = TcpListener::bind(addr).map_err(|source| RuntimeError::Bind {
+        addr: addr.to_string(),
+        source,
+    })?;
+    listener.set_nonblocking(true).map_err(|source| RuntimeError::Bind {
+        addr: addr.to_string(),
+        source,
+    })?;
+    Ok(listener)
+}
+
+fn bind_udp(addr: SocketAddr) -> Result<UdpSocket, RuntimeError> {
+    let socket = UdpSocket::bind(addr).map_err(|source| RuntimeError::Bind {
+        addr: format!("{addr} (OSC)"),
+        source,
+    })?;
+    socket.set_nonblocking(true).map_err(|source| RuntimeError::Bind {
+        addr: format!("{addr} (OSC)"),
+        source,
+    })?;
+    Ok(socket)
+}
+
+fn local_addr(listener: &TcpListener, bind: IpAddr) -> Result<SocketAddr, RuntimeError> {
+    listener.local_addr().map_err(|source| RuntimeError::Bind {
+        addr: bind.to_string(),
+        source,
+    })
+}
+
+/// The tokio runtime of the network side, serving HTTP/WebSocket and OSC.
+fn start_network(
+    app: Arc<App>,
+    http: TcpListener,
+    osc: Option<UdpSocket>,
+) -> Result<tokio::runtime::Runtime, RuntimeError> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .thread_name("thermode-net")
+        .enable_all()
+        .build()
+        .map_err(|source| RuntimeError::Io {
+            context: "cannot start the network runtime".into(),
+            source,
+        })?;
+    let io_error = |source| RuntimeError::Io {
+        context: "cannot register the listening sockets".into(),
+        source,
+    };
+    let _entered = runtime.enter();
+    let http = tokio::net::TcpListener::from_std(http).map_err(io_error)?;
+    let osc = osc.map(tokio::net::UdpSocket::from_std).transpose().map_err(io_error)?;
+    let routes = router(app.clone());
+    runtime.spawn(async move {
+        let _ = axum::serve(http, routes).await;
+    });
+    if let Some(socket) = osc {
+        runtime.spawn(crate::osc::serve(socket, app));
+    }
+    Ok(runtime)
+}
+
+/// Percent-escapes everything but unreserved characters.
+fn query_escape(text: &str) -> String {
+    text.bytes()
+        .map(|b| match b {
+            b'A'..=b'Z' | b'a'..=b'z' | b'0'..=b'9' | b'-' | b'_' | b'.' | b'~' => (b as char).to_string(),
+            _ => format!("%{b:02X}"),
+        })
+        .collect()
+}

@@ -1,0 +1,170 @@
+//! What the control loop drives per channel: the [`ChannelEngine`] trait (stimulus in; reading in, gated drive
+//! command and telemetry out), implemented by the render pipeline (`thermode_render::ChannelPipeline`: renderer →
+//! display inverse → controller → safety envelope) and by [`TrackingEngine`], a deliberately simple engine for
+//! tests of the runtime (it is not a thermal renderer). [`Stimulus`] and [`Telemetry`] are the pipeline's.
+//!
+//! Every drive an engine returns is a `thermode_control::DriveCommand`, which only a safety envelope can make, so an
+//! engine cannot bypass the envelope.
+
+use thermode_control::{DriveCommand, EnvelopeConfig, FaultCode, SafetyEnvelope};
+use thermode_device::Reading;
+use thermode_render::ChannelPipeline;
+use thiserror::Error;
+
+pub use thermode_render::{Stimulus, Telemetry};
+
+/// Why an engine refused a stimulus.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("{0}")]
+pub struct EngineError(pub String);
+
+/// One channel's renderer + controller + safety envelope, as the loop sees it.
+pub trait ChannelEngine {
+    /// Changes what the channel renders from the next tick on. Invalid stimuli are refused and change nothing.
+    fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), EngineError>;
+
+    /// One tick at loop time `now_s` \[s\], `dt_s` \[s\] after the previous one, with the channel's newest reading:
+    /// the gated drive command to apply and the telemetry of this tick. Never fails: bad numbers latch a fault and
+    /// give a 0 A command.
+    fn tick(&mut self, now_s: f64, dt_s: f64, reading: &Reading) -> (DriveCommand, Telemetry);
+
+    /// Clears the latched safety fault at `now_s` \[s\] if its cause is gone; returns the cleared fault (`None`
+    /// if none was latched). Refused while the cause persists.
+    fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, EngineError>;
+}
+
+/// Builds a channel's engines on the loop thread (engines need not be `Send`): called once with the device's
+/// channel count, it returns one engine per channel.
+pub type EngineFactory = Box<dyn FnOnce(usize) -> Result<Vec<Box<dyn ChannelEngine>>, EngineError> + Send>;
+
+impl ChannelEngine for ChannelPipeline {
+    fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), EngineError> {
+        ChannelPipeline::set_stimulus(self, stimulus).map_err(|e| EngineError(e.to_string()))
+    }
+
+    fn tick(&mut self, now_s: f64, dt_s: f64, reading: &Reading) -> (DriveCommand, Telemetry) {
+        ChannelPipeline::tick(self, now_s, dt_s, reading)
+    }
+
+    fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, EngineError> {
+        ChannelPipeline::clear_fault(self, now_s).map_err(|e| EngineError(e.to_string()))
+    }
+}
+
+/// Skin effusivity used by [`TrackingEngine`]'s contact temperature \[W·s^½/(m²·K)\] (a typical fingertip value).
+const TRACKING_SKIN_EFFUSIVITY: f64 = 1100.0;
+
+/// A test engine: the target is the contact temperature of two semi-infinite bodies (skin at `rest_c`, object at
+/// its temperature), the set-point equals the target (or ramps in direct mode), and a proportional controller
+/// behind a real [`SafetyEnvelope`] drives the display.
+#[derive(Debug, Clone)]
+pub struct TrackingEngine {
+    rest_c: f64,
+    gain_a_per_c: f64,
+    stimulus: Stimulus,
+    direct_c: Option<f64>,
+    envelope: SafetyEnvelope,
+}
+
+impl TrackingEngine {
+    /// A test engine: resting skin `rest_c` \[°C\] (default use 32), proportional gain `gain_a_per_c` \[A/°C\],
+    /// drive limit `current_limit_a` \[A\], default envelope.
+    pub fn new(rest_c: f64, gain_a_per_c: f64, current_limit_a: f64) -> Result<Self, EngineError> {
+        if !(rest_c.is_finite() && gain_a_per_c.is_finite() && gain_a_per_c >= 0.0) {
+            return Err(EngineError(format!(
+                "rest {rest_c} °C and gain {gain_a_per_c} A/°C must be finite (gain ≥ 0)"
+            )));
+        }
+        let envelope =
+            SafetyEnvelope::new(EnvelopeConfig::default(), current_limit_a).map_err(|e| EngineError(e.to_string()))?;
+        Ok(TrackingEngine {
+            rest_c,
+            gain_a_per_c,
+            stimulus: Stimulus::Air,
+            direct_c: None,
+            envelope,
+        })
+    }
+
+    fn target_c(&self) -> f64 {
+        match &self.stimulus {
+            Stimulus::Air => self.rest_c,
+            Stimulus::Touch { material, object_c } => {
+                let e_object = material.effusivity();
+                (TRACKING_SKIN_EFFUSIVITY * self.rest_c + e_object * object_c) / (TRACKING_SKIN_EFFUSIVITY + e_object)
+            }
+            Stimulus::Direct { temp_c, .. } => *temp_c,
+        }
+    }
+
+    fn requested_setpoint_c(&mut self, dt_s: f64) -> f64 {
+        let Stimulus::Direct { temp_c, rate_c_s } = self.stimulus else {
+            self.direct_c = None;
+            return self.target_c();
+        };
+        let from_c = self.direct_c.unwrap_or(self.rest_c);
+        let step_c = rate_c_s * dt_s.max(0.0);
+        let next_c = from_c + (temp_c - from_c).clamp(-step_c, step_c);
+        self.direct_c = Some(next_c);
+        next_c
+    }
+}
+
+impl ChannelEngine for TrackingEngine {
+    fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), EngineError> {
+        stimulus.validate().map_err(|e| EngineError(e.to_string()))?;
+        self.stimulus = stimulus;
+        Ok(())
+    }
+
+    fn tick(&mut self, now_s: f64, dt_s: f64, reading: &Reading) -> (DriveCommand, Telemetry) {
+        self.envelope.observe(&reading.measurement());
+        let requested_c = self.requested_setpoint_c(dt_s);
+        let shaped = self.envelope.shape_setpoint(now_s, requested_c);
+        let request_a = self.gain_a_per_c * (shaped.setpoint_c - reading.sensor_c);
+        let command = self.envelope.gate_drive(now_s, request_a);
+        let telemetry = Telemetry {
+            time_s: now_s,
+            contact: matches!(self.stimulus, Stimulus::Touch { .. }),
+            target_skin_c: self.target_c(),
+            skin_c: reading.sensor_c,
+            requested_setpoint_c: requested_c,
+            display_setpoint_c: shaped.setpoint_c,
+            sensor_c: reading.sensor_c,
+            hot_side_c: reading.hot_side_c,
+            requested_current_a: request_a,
+            current_a: command.current_a(),
+            fault: command.fault(),
+        };
+        (command, telemetry)
+    }
+
+    fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, EngineError> {
+        self.envelope.clear_fault(now_s).map_err(|e| EngineError(e.to_string()))
+    }
+}
+
+/// An [`EngineFactory`] of one render pipeline per channel, all built from `config`.
+pub fn pipeline_engines(config: thermode_render::PipelineConfig) -> EngineFactory {
+    Box::new(move |count| {
+        (0..count)
+            .map(|_| {
+                ChannelPipeline::new(&config)
+                    .map(|p| Box::new(p) as Box<dyn ChannelEngine>)
+                    .map_err(|e| EngineError(e.to_string()))
+            })
+            .collect()
+    })
+}
+
+/// An [`EngineFactory`] of [`TrackingEngine`]s (tests): resting skin `rest_c` \[°C\], gain \[A/°C\], drive limit \[A\].
+pub fn tracking_engines(rest_c: f64, gain_a_per_c: f64, current_limit_a: f64) -> EngineFactory {
+    Box::new(move |count| {
+        (0..count)
+            .map(|_| {
+                TrackingEngine::new(rest_c, gain_a_per_c, current_limit_a)
+                    .map(|e| Box::new(e) as Box<dyn ChannelEngine>)
+            })
+            .collect()
+    })
+}

@@ -1,0 +1,42 @@
+//! Typed errors of the runtime: refused configurations (including an insecure bind), device failures at start-up,
+//! and I/O errors of the listeners and the recorder.
+
+use thermode_device::DeviceError;
+use thiserror::Error;
+
+/// Why the runtime could not start (or a part of it failed).
+#[derive(Debug, Error)]
+pub enum RuntimeError {
+    /// A configuration value is out of range or inconsistent.
+    #[error("invalid runtime configuration: {0}")]
+    Config(String),
+    /// Binding a non-loopback address without a token is refused (a stranger on the network could heat a finger).
+    #[error(
+        "refusing to listen on {addr} without --token: a non-loopback address is reachable from the network, and \
+         anyone who can reach it could drive the display. Give --token SECRET (clients then present it), or bind \
+         127.0.0.1"
+    )]
+    InsecureBind {
+        /// The address asked for.
+        addr: String,
+    },
+    /// The device refused an operation at start-up.
+    #[error("device: {0}")]
+    Device(#[from] DeviceError),
+    /// A socket could not be bound.
+    #[error("cannot listen on {addr}: {source}")]
+    Bind {
+        /// The address.
+        addr: String,
+        /// The operating system's reason.
+        source: std::io::Error,
+    },
+    /// Another I/O failure (recording directory, thread start).
+    #[error("{context}: {source}")]
+    Io {
+        /// What was being done.
+        context: String,
+        /// The operating system's reason.
+        source: std::io::Error,
+    },
+}

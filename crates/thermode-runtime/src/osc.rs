@@ -1,0 +1,367 @@
+//! OSC over UDP, for game engines (Unity, Unreal) and audio-visual tools: a small decoder of OSC 1.0 packets
+//! (messages and bundles; argument types `s i f d h T F N`) and the listener that maps addresses to commands.
+//!
+//! Addresses (channels from 0):
+//! - `/thermode/channel/<i>/touch s [f]` — touch the named material, optionally at an object temperature \[°C\];
+//! - `/thermode/channel/<i>/setpoint f f` — direct mode: temperature \[°C\] and rate \[°C/s\];
+//! - `/thermode/channel/<i>/release` — release (arguments ignored, so a button's `1.0` works);
+//! - `/thermode/stop` (or `/thermode/stop_all`) — stop all.
+//!
+//! Same validation as the WebSocket API. OSC has no replies and no authentication: malformed datagrams are
+//! ignored and counted, refused messages are counted (the last reason is in `/api/status`). OSC listens only when
+//! the daemon is bound to a loopback address.
+
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+
+use tokio::net::UdpSocket;
+
+use crate::api::limit::TokenBucket;
+use crate::api::protocol::{self, ApiError, ErrorCode};
+use crate::api::App;
+use crate::command::{Command, Owner};
+
+/// Largest datagram read \[bytes\]; longer ones are truncated and so malformed.
+pub const MAX_PACKET_BYTES: usize = 8192;
+/// Deepest nesting of bundles accepted.
+const MAX_BUNDLE_DEPTH: usize = 4;
+/// Most messages taken from one datagram.
+const MAX_MESSAGES_PER_PACKET: usize = 64;
+
+/// One OSC argument.
+#[derive(Debug, Clone, PartialEq)]
+pub enum OscArg {
+    /// `s` string (also `S` symbol).
+    Str(String),
+    /// `i` 32-bit integer.
+    Int(i32),
+    /// `h` 64-bit integer.
+    Long(i64),
+    /// `f` 32-bit float.
+    Float(f32),
+    /// `d` 64-bit float.
+    Double(f64),
+    /// `T`/`F` booleans and `N` nil.
+    Other,
+}
+
+impl OscArg {
+    /// The argument as a number, if it is one.
+    pub fn as_f64(&self) -> Option<f64> {
+        match *self {
+            OscArg::Int(v) => Some(f64::from(v)),
+            OscArg::Long(v) => Some(v as f64),
+            OscArg::Float(v) => Some(f64::from(v)),
+            OscArg::Double(v) => Some(v),
+            OscArg::Str(_) | OscArg::Other => None,
+        }
+    }
+}
+
+/// One OSC message.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OscMessage {
+    /// The address pattern, e.g. `/thermode/stop`.
+    pub address: String,
+    /// The arguments.
+    pub args: Vec<OscArg>,
+}
+
+/// Why a datagram is not OSC.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Malformed(pub &'static str);
+
+/// Decodes a datagram into its messages (bundles flattened, time tags ignored: messages act at once).
+pub fn decode(packet: &[u8]) -> Result<Vec<OscMessage>, Malformed> {
+    let mut out = Vec::new();
+    decode_into(packet, 0, &mut out)?;
+    Ok(out)
+}
+
+fn decode_into(packet: &[u8], depth: usize, out: &mut Vec<OscMessage>) -> Result<(), Malformed> {
+    if packet.starts_with(b"#bundle\0") {
+        if depth >= MAX_BUNDLE_DEPTH {
+            return Err(Malformed("bundles nested too deeply"));
+        }
+        let mut rest = packet.get(16..).ok_or(Malformed("bundle shorter than its header"))?;
+        while !rest.is_empty() {
+            let size = read_i32(&mut rest)?;
+            let size = usize::try_from(size).map_err(|_| Malformed("negative bundle element size"))?;
+            if size % 4 != 0 || size > rest.len() {
+                return Err(Malformed("bad bundle element size"));
+            }
+            let (element, tail) = rest.split_at(size);
+            decode_into(element, depth + 1, out)?;
+            rest = tail;
+        }
+        return Ok(());
+    }
+    if out.len() >= MAX_MESSAGES_PER_PACKET {
+        return Err(Malformed("too many messages in one datagram"));
+    }
+    out.push(decode_message(packet)?);
+    Ok(())
+}
+
+fn decode_message(packet: &[u8]) -> Result<OscMessage, Malformed> {
+    let mut rest = packet;
+    let address = read_string(&mut rest)?;
+    if !address.starts_with('/') {
+        return Err(Malformed("address must start with '/'"));
+    }
+    if rest.is_empty() {
+        return Ok(OscMessage { address, args: vec![] });
+    }
+    let tags = read_string(&mut rest)?;
+    let tags = tags
+        .strip_prefix(',')
+        .ok_or(Malformed("type tags must start with ','"))?;
+    let mut args = Vec::with_capacity(tags.len());
+    for tag in tags.chars() {
+        args.push(match tag {
+            's' | 'S' => OscArg::Str(read_string(&mut rest)?),
+            'i' => OscArg::Int(read_i32(&mut rest)?),
+            'f' => OscArg::Float(f32::from_bits(read_i32(&mut rest)? as u32)),
+            'h' => OscArg::Long(i64::from_be_bytes(take::<8>(&mut rest)?)),
+            'd' => OscArg::Double(f64::from_be_bytes(take::<8>(&mut rest)?)),
+            'T' | 'F' | 'N' | 'I' => OscArg::Other,
+            _ => return Err(Malformed("unsupported argument type")),
+        });
+    }
+    if !rest.is_empty() {
+        return Err(Malformed("bytes after the last argument"));
+    }
+    Ok(OscMessage { address, args })
+}
+
+fn take<const N: usize>(rest: &mut &[u8]) -> Result<[u8; N], Malformed> {
+    let (head, tail) = rest
+        .split_at_checked(N)
+        .ok_or(Malformed("packet ends inside an argument"))?;
+    *rest = tail;
+    head.try_into().map_err(|_| Malformed("packet ends inside an argument"))
+}
+
+fn read_i32(rest: &mut &[u8]) -> Result<i32, Malformed> {
+    Ok(i32::from_be_bytes(take::<4>(rest)?))
+}
+
+/// A NUL-terminated string padded to a multiple of 4 bytes.
+fn read_string(rest: &mut &[u8]) -> Result<String, Malformed> {
+    let end = rest
+        .iter()
+        .position(|&b| b == 0)
+        .ok_or(Malformed("unterminated string"))?;
+    let padded = (end / 4 + 1) * 4;
+    if padded > rest.len() {
+        return Err(Malformed("string padding runs past the packet"));
+    }
+    let text = std::str::from_utf8(&rest[..end]).map_err(|_| Malformed("string is not UTF-8"))?;
+    let text = text.to_string();
+    *rest = &rest[padded..];
+    Ok(text)
+}
+
+/// What an OSC message asks for.
+fn to_command(message: &OscMessage, app: &App) -> Result<Command, ApiError> {
+    let parts: Vec<&str> = message.address.split('/').collect();
+    match parts.as_slice() {
+        ["", "thermode", "stop" | "stop_all"] => Ok(Command::StopAll),
+        ["", "thermode", "channel", index, action] => {
+            let index: i64 = index
+                .parse()
+                .map_err(|_| ApiError::new(ErrorCode::UnknownChannel, format!("channel {index:?} is not a number")))?;
+            let channel = protocol::channel_index(index, app.limits.channel_count)?;
+            channel_command(channel, action, &message.args, app)
+        }
+        _ => Err(ApiError::new(
+            ErrorCode::UnknownType,
+            format!("unknown OSC address {:?}", message.address),
+        )),
+    }
+}
+
+fn channel_command(channel: usize, action: &str, args: &[OscArg], app: &App) -> Result<Command, ApiError> {
+    let number = |i: usize, what: &str| {
+        args.get(i)
+            .and_then(OscArg::as_f64)
+            .ok_or_else(|| ApiError::new(ErrorCode::BadValue, format!("argument {i} ({what}) must be a number")))
+    };
+    match action {
+        "touch" => {
+            let Some(OscArg::Str(name)) = args.first() else {
+                return Err(ApiError::new(
+                    ErrorCode::MissingField,
+                    "touch needs the material name (s)",
+                ));
+            };
+            let material = protocol::material_by_name(name)?;
+            let object_c = match args.get(1) {
+                None => app.limits.default_object_c,
+                Some(_) => protocol::object_temperature(number(1, "object temperature")?)?,
+            };
+            let label = Arc::from(material.name.as_str());
+            Ok(Command::Touch {
+                channel,
+                material,
+                object_c,
+                label,
+                owner: Owner::Osc,
+            })
+        }
+        "setpoint" => {
+            let (temp_c, rate_c_s) = (number(0, "temperature")?, number(1, "rate")?);
+            protocol::check_setpoint(temp_c, rate_c_s, &app.limits)?;
+            Ok(Command::Setpoint {
+                channel,
+                temp_c,
+                rate_c_s,
+                owner: Owner::Osc,
+            })
+        }
+        "release" => Ok(Command::Release { channel }),
+        _ => Err(ApiError::new(
+            ErrorCode::UnknownType,
+            format!("unknown OSC action {action:?}"),
+        )),
+    }
+}
+
+/// Receives datagrams until the runtime stops.
+pub async fn serve(socket: UdpSocket, app: Arc<App>) {
+    let mut buffer = vec![0u8; MAX_PACKET_BYTES];
+    let mut bucket = TokenBucket::new(app.net.osc_messages_per_s, app.net.osc_burst);
+    let origin = tokio::time::Instant::now();
+    loop {
+        let Ok((len, _from)) = socket.recv_from(&mut buffer).await else {
+            continue;
+        };
+        let counters = &app.osc;
+        counters.packets.fetch_add(1, Ordering::Relaxed);
+        let messages = match decode(&buffer[..len]) {
+            Ok(messages) if len < MAX_PACKET_BYTES => messages,
+            _ => {
+                counters.malformed.fetch_add(1, Ordering::Relaxed);
+                continue;
+            }
+        };
+        for message in &messages {
+            if !bucket.take(origin.elapsed().as_secs_f64()) {
+                counters.rate_limited.fetch_add(1, Ordering::Relaxed);
+                continue;
+            }
+            let result = to_command(message, &app).and_then(|command| {
+                app.commands
+                    .send(command)
+                    .map_err(|e| ApiError::new(ErrorCode::Busy, e.to_string()))
+            });
+            match result {
+                Ok(()) => counters.applied.fetch_add(1, Ordering::Relaxed),
+                Err(e) => {
+                    if let Ok(mut last) = counters.last_error.lock() {
+                        *last = Some(format!("{} {}: {}", message.address, e.code.as_str(), e.message));
+                    }
+                    counters.refused.fetch_add(1, Ordering::Relaxed)
+                }
+            };
+        }
+    }
+}
+
+/// Encodes a message (for tests and examples): string, int and float arguments.
+pub fn encode(address: &str, args: &[OscArg]) -> Vec<u8> {
+    let mut out = Vec::new();
+    push_string(&mut out, address);
+    let mut tags = String::from(",");
+    for arg in args {
+        tags.push(match arg {
+            OscArg::Str(_) => 's',
+            OscArg::Int(_) => 'i',
+            OscArg::Long(_) => 'h',
+            OscArg::Float(_) => 'f',
+            OscArg::Double(_) => 'd',
+            OscArg::Other => 'N',
+        });
+    }
+    push_string(&mut out, &tags);
+    for arg in args {
+        match arg {
+            OscArg::Str(s) => push_string(&mut out, s),
+            OscArg::Int(v) => out.extend_from_slice(&v.to_be_bytes()),
+            OscArg::Long(v) => out.extend_from_slice(&v.to_be_bytes()),
+            OscArg::Float(v) => out.extend_from_slice(&v.to_be_bytes()),
+            OscArg::Double(v) => out.extend_from_slice(&v.to_be_bytes()),
+            OscArg::Other => {}
+        }
+    }
+    out
+}
+
+fn push_string(out: &mut Vec<u8>, text: &str) {
+    out.extend_from_slice(text.as_bytes());
+    let pad = 4 - text.len() % 4;
+    out.extend(std::iter::repeat_n(0u8, pad));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn messages_round_trip() {
+        let args = vec![OscArg::Str("wood".into()), OscArg::Float(25.5), OscArg::Int(-3)];
+        let packet = encode("/thermode/channel/2/touch", &args);
+        assert_eq!(packet.len() % 4, 0);
+        let decoded = decode(&packet).expect("valid");
+        assert_eq!(
+            decoded,
+            vec![OscMessage {
+                address: "/thermode/channel/2/touch".into(),
+                args
+            }]
+        );
+    }
+
+    #[test]
+    fn bundles_are_flattened() {
+        let a = encode("/thermode/stop", &[]);
+        let b = encode("/thermode/channel/0/release", &[OscArg::Float(1.0)]);
+        let mut bundle = b"#bundle\0".to_vec();
+        bundle.extend_from_slice(&[0, 0, 0, 0, 0, 0, 0, 1]);
+        for m in [&a, &b] {
+            bundle.extend_from_slice(&(m.len() as i32).to_be_bytes());
+            bundle.extend_from_slice(m);
+        }
+        let decoded = decode(&bundle).expect("valid bundle");
+        assert_eq!(decoded.len(), 2);
+        assert_eq!(decoded[1].address, "/thermode/channel/0/release");
+    }
+
+    #[test]
+    fn garbage_is_malformed_not_a_panic() {
+        let good = encode("/thermode/channel/1/touch", &[OscArg::Str("aluminium".into())]);
+        for cut in 0..good.len() {
+            let _ = decode(&good[..cut]);
+        }
+        let cases: [&[u8]; 7] = [
+            b"",
+            b"abc\0",
+            b"/x",
+            b"/x\0\0,q\0\0",
+            b"/x\0\0,i\0\0\0\0",
+            b"#bundle\0\0\0\0\0\0\0\0\0\xff\xff\xff\xff",
+            b"/x\0\0,s\0\0\xff\xfe\0\0",
+        ];
+        for case in cases {
+            assert!(decode(case).is_err(), "{case:?} decoded");
+        }
+        let mut deep = encode("/thermode/stop", &[]);
+        for _ in 0..6 {
+            let mut bundle = b"#bundle\0\0\0\0\0\0\0\0\0".to_vec();
+            bundle.extend_from_slice(&(deep.len() as i32).to_be_bytes());
+            bundle.extend_from_slice(&deep);
+            deep = bundle;
+        }
+        assert_eq!(decode(&deep), Err(Malformed("bundles nested too deeply")));
+    }
+}

@@ -1,0 +1,61 @@
+//! `thermode bench`: control-loop jitter at a given rate and channel count (default 1 kHz, 10 channels of the full
+//! render pipeline on the simulated display) and the latency from a WebSocket `touch` to the drive command, in loop
+//! periods. Prints figures; asserts nothing. Build with `--release` for meaningful numbers.
+
+use std::sync::Arc;
+
+use anyhow::Result;
+use clap::{Args, ValueEnum};
+use thermode_runtime::bench::{self, BenchConfig};
+use thermode_runtime::{Clock, MonotonicClock};
+
+use super::serve::{build_display, DisplayArgs};
+use crate::output::print_stdout;
+
+/// Output format of `thermode bench`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum BenchFormat {
+    /// Human-readable lines.
+    Text,
+    /// One JSON object.
+    Json,
+}
+
+/// Arguments of `thermode bench`.
+#[derive(Args, Debug, Clone)]
+pub struct BenchArgs {
+    #[command(flatten)]
+    pub display: DisplayArgs,
+    /// Control-loop rate [Hz].
+    #[arg(long, value_name = "HZ", default_value_t = 1000.0)]
+    pub rate: f64,
+    /// Length of the measured run [s].
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    pub duration: f64,
+    /// Output format.
+    #[arg(long, value_enum, default_value = "text")]
+    pub format: BenchFormat,
+}
+
+/// Runs `thermode bench`.
+pub fn run(args: &BenchArgs) -> Result<()> {
+    let mut display_args = args.display.clone();
+    display_args.channels = Some(display_args.channels.unwrap_or(10));
+    let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
+    let display = build_display(&display_args, &clock)?;
+    eprintln!(
+        "bench: {} at {} Hz for {} s …",
+        display.description, args.rate, args.duration
+    );
+    let config = BenchConfig {
+        rate_hz: args.rate,
+        duration_s: args.duration,
+        ..BenchConfig::default()
+    };
+    let report = bench::run(&config, display.device, display.engines)?;
+    let text = match args.format {
+        BenchFormat::Text => format!("{report}\n"),
+        BenchFormat::Json => serde_json::to_string_pretty(&report)? + "\n",
+    };
+    print_stdout(&text)
+}

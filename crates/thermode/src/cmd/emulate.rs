@@ -1,0 +1,80 @@
+//! `thermode emulate`: runs the device side of the serial protocol (`docs/protocol.md`) on a pseudo-terminal, with
+//! the simulated display behind it, so the real hardware path (`--device serial:PATH`) works without hardware.
+//!
+//! The first line on standard output is the path the host opens (e.g. `/dev/pts/7`), flushed at once; the
+//! emulator then runs in real time (1 kHz firmware tick, reports every `--report-ms`) until the process is ended.
+//! Link faults can be injected for tests of the host: corrupted bytes and dropped frames.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use thermode_device::emulator::{Emulator, EmulatorConfig, LinkFaults, PtyEmulator, RunEnd};
+use thermode_device::protocol::MonotonicClock;
+use thermode_device::{DefaultFinger, DeviceConfig, SimulatedDisplay};
+
+/// Arguments of `thermode emulate`.
+#[derive(Args, Debug)]
+pub struct EmulateArgs {
+    /// Number of channels (fingers), 1 to 10.
+    #[arg(long, value_name = "N", default_value_t = 5)]
+    channels: usize,
+    /// Device file (TOML); default: the built-in default display.
+    #[arg(long, value_name = "FILE")]
+    device: Option<PathBuf>,
+    /// Seed of the sensor noise and of the injected link faults.
+    #[arg(long, value_name = "S", default_value_t = 0)]
+    seed: u64,
+    /// Watchdog period [ms] (10 to 60000): drives go off when the host sends nothing valid for longer.
+    #[arg(long = "watchdog-ms", value_name = "MS", default_value_t = 250)]
+    watchdog_ms: u16,
+    /// Interval between sensor reports [ms] (1 to 1000).
+    #[arg(long = "report-ms", value_name = "MS", default_value_t = 10)]
+    report_ms: u16,
+    /// Fault injection: probability that a sent byte is corrupted, 0 to 1.
+    #[arg(long = "corrupt-rate", value_name = "P", default_value_t = 0.0)]
+    corrupt_rate: f64,
+    /// Fault injection: probability that a sent frame is dropped, 0 to 1.
+    #[arg(long = "drop-rate", value_name = "P", default_value_t = 0.0)]
+    drop_rate: f64,
+}
+
+/// Runs `thermode emulate`.
+pub fn run(args: &EmulateArgs) -> Result<()> {
+    let device = match &args.device {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+            DeviceConfig::from_toml_str(&text, &path.display().to_string())?
+        }
+        None => DeviceConfig::default(),
+    };
+    let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device, args.channels, args.seed)?;
+    let config = EmulatorConfig {
+        watchdog_ms: args.watchdog_ms,
+        report_interval_ms: args.report_ms,
+        fault_seed: args.seed,
+        ..EmulatorConfig::default()
+    };
+    let mut emulator = Emulator::new(display, config)?;
+    emulator.set_link_faults(LinkFaults {
+        corrupt_byte_rate: args.corrupt_rate,
+        drop_frame_rate: args.drop_rate,
+        mute: false,
+    })?;
+    let pty = PtyEmulator::spawn(emulator, Arc::new(MonotonicClock::new()))?;
+    let mut stdout = std::io::stdout().lock();
+    writeln!(stdout, "{}", pty.path()).and_then(|()| stdout.flush())?;
+    drop(stdout);
+    eprintln!(
+        "thermode emulate: {} channels, watchdog {} ms, a report every {} ms; connect with --device serial:{}",
+        args.channels,
+        args.watchdog_ms,
+        args.report_ms,
+        pty.path()
+    );
+    match pty.wait()? {
+        RunEnd::Stopped | RunEnd::PortClosed | RunEnd::HostClosed => Ok(()),
+    }
+}

@@ -1,0 +1,275 @@
+//! `thermode render`: renders the touch of one or more materials on the simulated display — renderer, display
+//! inverse, controller, safety envelope, plant — next to the ground truth, and writes the trajectory (CSV), the
+//! paper's Figure 3 for the simulated system (plot) and the summary metrics (text or JSON).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use thermode_control::PidGains;
+use thermode_device::DeviceConfig;
+use thermode_model::materials::{self, Material};
+use thermode_model::Skin;
+use thermode_plot::write_figure;
+use thermode_render::controllers::{gains_from_toml_str, GainsSource};
+use thermode_render::figure::figure3;
+use thermode_render::pipeline::RENDER_MAX_RATE_C_PER_S;
+use thermode_render::run::{render_all, write_csv, DEFAULT_DURATION_S, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ};
+use thermode_render::summary::summary_table;
+use thermode_render::{gains_for_device, ControllerKind, PipelineConfig, RenderSpec, RendererKind};
+
+use crate::output::{print_stdout, write_atomically};
+
+/// The controller(s) to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ControllerArg {
+    /// The paper's PID on the low-pass filtered sensor (tuned gains).
+    Pid,
+    /// thermode's model-based controller (observer, Peltier feedforward).
+    Model,
+    /// Both, one after the other (one panel each in the plot).
+    Both,
+}
+
+/// The renderer (and display-inverse finger model).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RendererArg {
+    /// The paper's three-layer model (Kron).
+    Kron,
+    /// The finite-volume reference (physics-true).
+    Fv,
+}
+
+impl From<RendererArg> for RendererKind {
+    fn from(arg: RendererArg) -> Self {
+        match arg {
+            RendererArg::Kron => RendererKind::Kron,
+            RendererArg::Fv => RendererKind::Fv,
+        }
+    }
+}
+
+/// Format of the summary.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FormatArg {
+    /// Aligned text table.
+    Text,
+    /// A JSON array, one object per run.
+    Json,
+}
+
+/// Arguments of `thermode render`.
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// Material from the library (see `thermode materials`); repeatable; `all-paper` = the paper's five.
+    #[arg(long = "material", value_name = "NAME", required = true)]
+    materials: Vec<String>,
+    /// Controller.
+    #[arg(long, value_enum, default_value = "model")]
+    controller: ControllerArg,
+    /// Renderer: the finger model that computes the target and runs on the display.
+    #[arg(long, value_enum, default_value = "fv")]
+    model: RendererArg,
+    /// Device file (TOML); default: the built-in default display.
+    #[arg(long, value_name = "FILE")]
+    device: Option<PathBuf>,
+    /// PID gains file (TOML); default: the tuned gains of the shipped display that matches the device.
+    #[arg(long = "pid-gains", value_name = "FILE")]
+    pid_gains: Option<PathBuf>,
+    /// Skin file of the simulated finger (TOML); default: the built-in fingertip (the controller's own model).
+    #[arg(long = "finger-skin", value_name = "FILE")]
+    finger_skin: Option<PathBuf>,
+    /// Contact conductance between the simulated finger and the plate [W/m²K]; default: the device file's.
+    #[arg(long = "finger-contact", value_name = "W_M2K", allow_negative_numbers = true)]
+    finger_contact: Option<f64>,
+    /// Object temperature at the touch [°C]; default: the ambient 23 °C.
+    #[arg(long = "object-temp", value_name = "C", allow_negative_numbers = true)]
+    object_temp: Option<f64>,
+    /// Recorded time after the touch [s].
+    #[arg(long, value_name = "S", default_value_t = DEFAULT_DURATION_S, allow_negative_numbers = true)]
+    duration: f64,
+    /// Time the finger rests on the display rendering air before the touch [s].
+    #[arg(long = "pre-contact", value_name = "S", default_value_t = DEFAULT_PRE_CONTACT_S, allow_negative_numbers = true)]
+    pre_contact: f64,
+    /// Time after the touch at which the finger lets go [s]; default: never.
+    #[arg(long = "release-at", value_name = "S", allow_negative_numbers = true)]
+    release_at: Option<f64>,
+    /// Tick rate of the pipeline [Hz].
+    #[arg(long, value_name = "HZ", default_value_t = DEFAULT_RATE_HZ, allow_negative_numbers = true)]
+    rate: f64,
+    /// Set-point rate limit of the safety envelope [°C/s] (at most 20).
+    #[arg(long = "max-rate", value_name = "C_PER_S", default_value_t = RENDER_MAX_RATE_C_PER_S, allow_negative_numbers = true)]
+    max_rate: f64,
+    /// Seed of the simulated sensor noise.
+    #[arg(long, value_name = "N", default_value_t = thermode_render::run::DEFAULT_SEED)]
+    seed: u64,
+    /// Write every tick of every run as CSV.
+    #[arg(long, value_name = "FILE.csv")]
+    out: Option<PathBuf>,
+    /// Draw the paper's Figure 3 for the simulated system (.svg or .png).
+    #[arg(long, value_name = "FILE")]
+    plot: Option<PathBuf>,
+    /// Print the summary metrics (also printed when neither --out nor --plot is given).
+    #[arg(long)]
+    summary: bool,
+    /// Format of the summary.
+    #[arg(long, value_enum, default_value = "text")]
+    format: FormatArg,
+}
+
+/// Runs `thermode render`.
+pub fn run(args: &RenderArgs) -> Result<()> {
+    let specs = specs(args)?;
+    let runs = render_all(&specs).context("rendering")?;
+    for run in &runs {
+        if let Some(fault) = &run.summary.first_fault {
+            eprintln!(
+                "{} ({}): fault {fault} at t = {:.2} s; the drive was switched off",
+                run.summary.material,
+                run.summary.controller,
+                run.summary.first_fault_time_s.unwrap_or(f64::NAN)
+            );
+        }
+    }
+    if let Some(path) = &args.out {
+        write_atomically(path, |sink| write_csv(&runs, sink).map_err(anyhow::Error::from))?;
+    }
+    if let Some(path) = &args.plot {
+        write_figure(&figure3(&runs), path).with_context(|| format!("cannot write {}", path.display()))?;
+    }
+    if args.summary || (args.out.is_none() && args.plot.is_none()) {
+        let summaries: Vec<_> = runs.iter().map(|r| r.summary.clone()).collect();
+        let text = match args.format {
+            FormatArg::Text => summary_table(&summaries),
+            FormatArg::Json => serde_json::to_string_pretty(&summaries)? + "\n",
+        };
+        print_stdout(&text)?;
+    }
+    Ok(())
+}
+
+fn read(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))
+}
+
+/// The materials named on the command line, `all-paper` expanded.
+fn resolve_materials(names: &[String]) -> Result<Vec<Material>> {
+    let mut out = Vec::new();
+    for name in names {
+        if name == "all-paper" {
+            out.extend(materials::paper_materials());
+        } else {
+            out.push(materials::find(name)?);
+        }
+    }
+    if out.is_empty() {
+        bail!("no material given: use --material NAME");
+    }
+    Ok(out)
+}
+
+fn device(args: &RenderArgs) -> Result<DeviceConfig> {
+    match &args.device {
+        Some(path) => Ok(DeviceConfig::from_toml_str(&read(path)?, &path.display().to_string())?),
+        None => Ok(DeviceConfig::default()),
+    }
+}
+
+fn pid_gains(args: &RenderArgs, device: &DeviceConfig) -> Result<PidGains> {
+    if let Some(path) = &args.pid_gains {
+        return Ok(gains_from_toml_str(&read(path)?, &path.display().to_string())?);
+    }
+    let (gains, source) = gains_for_device(device)?;
+    if source == GainsSource::DefaultFallback && args.controller != ControllerArg::Model {
+        eprintln!(
+            "note: the device matches no shipped display; pid uses the default display's tuned gains \
+             (run `thermode tune --device FILE --out GAINS.toml` and pass --pid-gains GAINS.toml)"
+        );
+    }
+    Ok(gains)
+}
+
+/// One render spec per controller and material, controllers outermost.
+fn specs(args: &RenderArgs) -> Result<Vec<RenderSpec>> {
+    let materials = resolve_materials(&args.materials)?;
+    let device = device(args)?;
+    let gains = pid_gains(args, &device)?;
+    let finger_skin = match &args.finger_skin {
+        Some(path) => Skin::from_toml_str(&read(path)?, &path.display().to_string())?,
+        None => Skin::fingertip(),
+    };
+    let controllers = match args.controller {
+        ControllerArg::Pid => vec![ControllerKind::Pid(gains)],
+        ControllerArg::Model => vec![ControllerKind::Model],
+        ControllerArg::Both => vec![ControllerKind::Pid(gains), ControllerKind::Model],
+    };
+    let mut specs = Vec::new();
+    for controller in controllers {
+        for material in &materials {
+            let mut pipeline = PipelineConfig::new(device, controller);
+            pipeline.renderer = args.model.into();
+            pipeline.envelope.max_setpoint_rate_c_per_s = args.max_rate;
+            let mut spec = RenderSpec::new(pipeline, material.clone());
+            spec.finger_skin = finger_skin.clone();
+            spec.finger_contact_w_m2k = args.finger_contact;
+            spec.object_c = args.object_temp;
+            spec.duration_s = args.duration;
+            spec.pre_contact_s = args.pre_contact;
+            spec.release_at_s = args.release_at;
+            spec.rate_hz = args.rate;
+            spec.seed = args.seed;
+            spec.validate()?;
+            specs.push(spec);
+        }
+    }
+    Ok(specs)
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: RenderArgs,
+    }
+
+    fn parse(args: &[&str]) -> RenderArgs {
+        let mut full = vec!["render"];
+        full.extend_from_slice(args);
+        Cli::try_parse_from(full).unwrap_or_else(|e| panic!("{e}")).args
+    }
+
+    #[test]
+    fn all_paper_with_both_controllers_gives_ten_specs_in_order() {
+        let args = parse(&["--material", "all-paper", "--controller", "both", "--duration", "2"]);
+        let specs = specs(&args).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(specs.len(), 10);
+        assert_eq!(specs[0].pipeline.controller.name(), "pid");
+        assert_eq!(specs[9].pipeline.controller.name(), "model");
+        assert_eq!(specs[4].material.name, "rubber");
+        assert_eq!(
+            specs[0].pipeline.envelope.max_setpoint_rate_c_per_s,
+            RENDER_MAX_RATE_C_PER_S
+        );
+    }
+
+    #[test]
+    fn bad_input_is_a_clear_error() {
+        let err = |args: &[&str]| match specs(&parse(args)) {
+            Ok(_) => panic!("{args:?} accepted"),
+            Err(e) => format!("{e:#}"),
+        };
+        assert!(err(&["--material", "unobtainium"]).contains("unknown material"));
+        assert!(err(&["--material", "wood", "--duration", "NaN"]).contains("duration"));
+        assert!(err(&["--material", "wood", "--finger-contact", "-5"]).contains("contact"));
+        assert!(err(&["--material", "wood", "--pre-contact", "-1"]).contains("pre-contact"));
+        assert!(err(&["--material", "wood", "--rate", "0"]).contains("rate"));
+        assert!(err(&["--material", "wood", "--max-rate", "50"]).contains("max_setpoint_rate"));
+        assert!(err(&["--material", "wood", "--release-at", "100"]).contains("release"));
+        assert!(err(&["--material", "wood", "--device", "/nonexistent/device.toml"]).contains("cannot read"));
+    }
+}

@@ -1,0 +1,260 @@
+//! `thermode serve`: the daemon — a display (the simulated five-finger display by default, or a real one over
+//! `serial:PATH`) rendered in real time by the control loop, driven through the contact API (WebSocket, HTTP, OSC)
+//! and watched on the live dashboard. Also the display set-up shared by `thermode demo` and `thermode bench`.
+
+use std::net::IpAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, ValueEnum};
+use thermode_device::serial::{serial_path, SerialConfig, SerialDevice};
+use thermode_device::{DefaultFinger, Device, DeviceConfig, SimulatedDisplay, MAX_CHANNELS};
+use thermode_render::{gains_for_device, ControllerKind, PipelineConfig};
+use thermode_runtime::clock::DeviceClock;
+use thermode_runtime::engine::pipeline_engines;
+use thermode_runtime::{Clock, Daemon, DaemonConfig, EngineFactory, LoopConfig, MonotonicClock, ServerConfig};
+
+/// The controller of every channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ControllerArg {
+    /// thermode's model-based controller (observer, Peltier feedforward).
+    Model,
+    /// The paper's PID with the tuned gains of the display.
+    Pid,
+}
+
+/// How the display is set up (shared by serve, demo and bench).
+#[derive(Args, Debug, Clone)]
+pub struct DisplayArgs {
+    /// The display: `sim` (the simulated display) or `serial:PATH` (a real display or `thermode emulate`).
+    #[arg(long, value_name = "sim|serial:PATH", default_value = "sim")]
+    pub device: String,
+    /// Device file (TOML) describing the display's hardware; default: the built-in default display.
+    #[arg(long = "device-file", value_name = "FILE")]
+    pub device_file: Option<PathBuf>,
+    /// Number of channels (fingers) of the simulated display, 1 to 10 [default: 5; a serial device reports its own].
+    #[arg(long, value_name = "N")]
+    pub channels: Option<usize>,
+    /// Controller of every channel.
+    #[arg(long, value_enum, default_value = "model")]
+    pub controller: ControllerArg,
+    /// Seed of the simulated sensor noise.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// Arguments of `thermode serve`.
+#[derive(Args, Debug, Clone)]
+pub struct ServeArgs {
+    #[command(flatten)]
+    pub display: DisplayArgs,
+    /// Control-loop rate [Hz], 1 to 1000.
+    #[arg(long, value_name = "HZ", default_value_t = 100.0)]
+    pub rate: f64,
+    /// Address to listen on. Anything but loopback requires --token.
+    #[arg(long, value_name = "ADDR", default_value = "127.0.0.1")]
+    pub bind: IpAddr,
+    /// HTTP/WebSocket port (0 picks a free one).
+    #[arg(long, value_name = "P", default_value_t = thermode_runtime::DEFAULT_PORT)]
+    pub port: u16,
+    /// OSC (UDP) port (0 picks a free one). OSC listens on loopback binds only.
+    #[arg(long = "osc-port", value_name = "P", default_value_t = thermode_runtime::DEFAULT_OSC_PORT)]
+    pub osc_port: u16,
+    /// Do not listen for OSC.
+    #[arg(long = "no-osc")]
+    pub no_osc: bool,
+    /// Shared secret every client must present (`Authorization: Bearer T` or `?token=T`); required off loopback.
+    #[arg(long, value_name = "T")]
+    pub token: Option<String>,
+    /// A web origin (e.g. `https://app.example`) allowed to open the WebSocket; repeatable.
+    #[arg(long = "allow-origin", value_name = "ORIGIN")]
+    pub allow_origin: Vec<String>,
+    /// Write one CSV per session (one row per tick per channel) into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub record: Option<PathBuf>,
+    /// Release a disconnected client's contacts after this grace period [s].
+    #[arg(long = "release-after", value_name = "S", default_value_t = 2.0)]
+    pub release_after: f64,
+    /// Stop after this many seconds (default: run until interrupted).
+    #[arg(long, value_name = "S")]
+    pub duration: Option<f64>,
+}
+
+/// A display ready for the loop.
+pub struct Display {
+    /// The device.
+    pub device: Box<dyn Device + Send>,
+    /// One pipeline per channel.
+    pub engines: EngineFactory,
+    /// `sim` or `serial:PATH`.
+    pub label: String,
+    /// Finger names.
+    pub names: Vec<String>,
+    /// Human description for the start-up banner.
+    pub description: String,
+}
+
+/// Finger names for five (one hand) or ten (two hands) channels.
+fn finger_names(count: usize) -> Vec<String> {
+    const HAND: [&str; 5] = ["thumb", "index", "middle", "ring", "little"];
+    match count {
+        5 => HAND.iter().map(|s| s.to_string()).collect(),
+        10 => ["left", "right"]
+            .iter()
+            .flat_map(|side| HAND.iter().map(move |f| format!("{side} {f}")))
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// Builds the device and the pipelines from the arguments; `clock` stamps a serial device's readings.
+pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Display> {
+    let device_config = match &args.device_file {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+            DeviceConfig::from_toml_str(&text, &path.display().to_string())?
+        }
+        None => DeviceConfig::default(),
+    };
+    let controller = match args.controller {
+        ControllerArg::Model => ControllerKind::Model,
+        ControllerArg::Pid => ControllerKind::Pid(gains_for_device(&device_config)?.0),
+    };
+    let pipeline = PipelineConfig::new(device_config, controller);
+    pipeline.validate()?;
+    let (device, label): (Box<dyn Device + Send>, String) = if args.device == "sim" {
+        let count = args.channels.unwrap_or(5);
+        if count == 0 || count > MAX_CHANNELS {
+            bail!("--channels must be 1 to {MAX_CHANNELS}, not {count}");
+        }
+        let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device_config, count, args.seed)?;
+        (Box::new(display), "sim".to_string())
+    } else if serial_path(&args.device).is_some() {
+        let device_clock = Arc::new(DeviceClock(clock.clone()));
+        let serial = SerialDevice::open_spec(&args.device, &SerialConfig::default(), device_clock)
+            .with_context(|| format!("cannot open {}", args.device))?;
+        if let Some(n) = args.channels.filter(|&n| n != serial.channel_count()) {
+            bail!(
+                "--channels {n}, but {} has {} channels",
+                args.device,
+                serial.channel_count()
+            );
+        }
+        (Box::new(serial), args.device.clone())
+    } else {
+        bail!("--device must be `sim` or `serial:PATH`, not {:?}", args.device);
+    };
+    let count = device.channel_count();
+    let names = finger_names(count);
+    let what = if label == "sim" {
+        "simulated display".to_string()
+    } else {
+        format!("display on {label}")
+    };
+    let fingers = if names.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", names.join(", "))
+    };
+    let plural = if count == 1 { "" } else { "s" };
+    let description = format!(
+        "{what}, {count} channel{plural}{fingers}, {} controller",
+        pipeline.controller.name()
+    );
+    Ok(Display {
+        device,
+        engines: pipeline_engines(pipeline),
+        label,
+        names,
+        description,
+    })
+}
+
+/// Starts the daemon of `args` and prints where it listens.
+pub fn start(args: &ServeArgs) -> Result<Daemon> {
+    let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
+    let server = ServerConfig {
+        bind: args.bind,
+        port: args.port,
+        osc_port: (!args.no_osc).then_some(args.osc_port),
+        token: args.token.clone(),
+        allowed_origins: args.allow_origin.clone(),
+        ..ServerConfig::default()
+    };
+    // Refuse an insecure bind before touching any hardware.
+    server.validate()?;
+    let display = build_display(&args.display, &clock)?;
+    let config = DaemonConfig {
+        loop_config: LoopConfig {
+            rate_hz: args.rate,
+            release_after_disconnect_s: args.release_after,
+            ..LoopConfig::default()
+        },
+        server,
+        record_dir: args.record.clone(),
+        device_label: display.label,
+        channel_names: display.names.clone(),
+    };
+    let daemon = Daemon::start(config, display.device, display.engines, clock)?;
+    print_banner(&daemon, &display.description, args);
+    Ok(daemon)
+}
+
+fn print_banner(daemon: &Daemon, description: &str, args: &ServeArgs) {
+    let addr = daemon.http_addr();
+    println!("thermode serve: {description}, {} Hz", args.rate);
+    println!("  dashboard  {}", daemon.dashboard_url());
+    println!("  WebSocket  ws://{addr}/api/ws");
+    match daemon.osc_addr() {
+        Some(osc) => println!("  OSC        udp://{osc}"),
+        None if args.no_osc => println!("  OSC        off"),
+        None => println!("  OSC        off (OSC has no authentication: it listens on loopback binds only)"),
+    }
+    if let Some(path) = daemon.recording_path() {
+        println!("  recording  {}", path.display());
+    }
+    if args.token.is_some() {
+        println!("  clients must present the token (Authorization: Bearer … or ?token=…)");
+    }
+    match args.duration {
+        Some(s) => println!("running for {s} s"),
+        None => println!("press Ctrl-C to stop"),
+    }
+}
+
+/// Runs until `duration_s` has passed (forever without one), calling `every_100ms` in between.
+pub fn run_for(duration_s: Option<f64>, mut every_100ms: impl FnMut(f64)) -> Result<()> {
+    if let Some(d) = duration_s {
+        if !(d.is_finite() && d >= 0.0) {
+            bail!("--duration must be a finite number of seconds ≥ 0, not {d}");
+        }
+    }
+    let start = Instant::now();
+    loop {
+        let elapsed_s = start.elapsed().as_secs_f64();
+        if duration_s.is_some_and(|d| elapsed_s >= d) {
+            return Ok(());
+        }
+        every_100ms(elapsed_s);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
+
+/// Stops the daemon and reports the recording.
+pub fn finish(daemon: Daemon) -> Result<()> {
+    let path = daemon.recording_path();
+    let rows = daemon.shutdown()?;
+    if let (Some(path), Some(rows)) = (path, rows) {
+        println!("recorded {rows} rows to {}", path.display());
+    }
+    Ok(())
+}
+
+/// Runs `thermode serve`.
+pub fn run(args: &ServeArgs) -> Result<()> {
+    let daemon = start(args)?;
+    run_for(args.duration, |_| {})?;
+    finish(daemon)
+}
