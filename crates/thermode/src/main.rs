@@ -26,31 +26,31 @@ enum Command {
     Serve(cmd::serve::ServeArgs),
     /// Like `serve`, plus a short scripted sequence of touches so a newcomer sees it work.
     Demo(cmd::demo::DemoArgs),
-    /// Measure control-loop jitter and touch-to-drive latency (figures only; build with --release).
-    Bench(cmd::bench::BenchArgs),
-    /// Run the device side of the serial protocol on a pseudo-terminal (prints its path) with the simulated display.
-    Emulate(cmd::emulate::EmulateArgs),
     /// List the built-in material library (the paper's Table 1 and common materials).
     Materials(cmd::materials::MaterialsArgs),
     /// Simulate a finger touching a material with one of the skin models and write the curve (CSV) and a plot.
     Simulate(cmd::simulate::SimulateArgs),
-    /// Experiments: plan, run and analyse material-identification studies.
-    #[command(subcommand)]
-    Lab(LabCommand),
     /// Render touches on the simulated display (renderer, inverse, controller, safety envelope) next to the truth.
     Render(cmd::render::RenderArgs),
     /// Tune the paper's PID (gains and sensor filter) for a display; writes a gains file.
     Tune(cmd::tune::TuneArgs),
+    /// Experiments: plan, run and analyse material-identification studies.
+    #[command(subcommand)]
+    Lab(LabCommand),
+    /// Run the device side of the serial protocol on a pseudo-terminal (prints its path) with the simulated display.
+    Emulate(cmd::emulate::EmulateArgs),
+    /// Measure control-loop jitter and touch-to-drive latency (figures only; build with --release).
+    Bench(cmd::bench::BenchArgs),
 }
 
 #[derive(Subcommand, Debug)]
 enum LabCommand {
-    /// Analyse session CSVs the way the paper did (rates, ratio table, χ², confusion correlation, figures).
-    Analyze(cmd::lab_analyze::LabAnalyzeArgs),
     /// Write the counterbalanced trial plan of an experiment file (CSV, one row per participant and trial).
     Plan(cmd::lab_plan::LabPlanArgs),
     /// Run or resume one participant's session (terminal prompts; durable session CSV and JSON sidecar).
     Run(cmd::lab_run::LabRunArgs),
+    /// Analyse session CSVs the way the paper did (rates, ratio table, χ², confusion correlation, figures).
+    Analyze(cmd::lab_analyze::LabAnalyzeArgs),
 }
 
 fn main() -> ExitCode {

@@ -221,3 +221,97 @@ fn bad_input_gets_a_clear_message_and_exit_code_2() {
         "conductivity_cal_cm_s_c",
     );
 }
+
+#[test]
+fn render_summary_json_reports_the_judged_metrics_and_the_csv_has_the_documented_columns() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("render.csv");
+    let out = path.to_str().expect("path");
+    let text = expect_success(&[
+        "render",
+        "--material",
+        "stone",
+        "--duration",
+        "3",
+        "--pre-contact",
+        "1",
+        "--summary",
+        "--format",
+        "json",
+        "--out",
+        out,
+    ]);
+    let summary: serde_json::Value = serde_json::from_str(&text).expect("json summary");
+    let row = &summary[0];
+    assert_eq!(row["material"], "stone");
+    for key in [
+        "rms_skin_0_5_c",
+        "rms_truth_0_90_c",
+        "rms_display_tracking_c",
+        "overshoot_c",
+        "lag_s",
+        "actuator_limit_lag_s",
+    ] {
+        assert!(
+            row[key].as_f64().is_some_and(f64::is_finite),
+            "summary {key} = {}",
+            row[key]
+        );
+    }
+    // Physics: no controller beats the ideal one that drives the most useful current (one 10 ms tick of slack).
+    let (lag, limit) = (
+        row["lag_s"].as_f64().unwrap_or(f64::NAN),
+        row["actuator_limit_lag_s"].as_f64().unwrap_or(f64::NAN),
+    );
+    assert!(lag >= limit - 0.011, "lag {lag} s beats the actuator limit {limit} s");
+    let (header, rows) = read_csv(&path);
+    for name in [
+        "time_s",
+        "truth_skin_c",
+        "target_skin_c",
+        "skin_c",
+        "display_setpoint_c",
+        "display_c",
+        "sensor_c",
+        "current_a",
+        "hot_side_c",
+        "fault",
+    ] {
+        assert!(header.iter().any(|h| h == name), "render CSV lacks {name}: {header:?}");
+    }
+    let time = column(&header, &rows, "time_s");
+    assert!(
+        time[0] < 0.0 && time.iter().any(|&t| t == 0.0),
+        "time_s must be negative before contact and 0 at contact"
+    );
+    // Default finger and fv renderer: truth and target coincide.
+    let truth = column(&header, &rows, "truth_skin_c");
+    let target = column(&header, &rows, "target_skin_c");
+    for (row, (a, b)) in truth.iter().zip(&target).enumerate() {
+        assert!((a - b).abs() < 1e-9, "row {row}: truth {a}, target {b}");
+    }
+    expect_error(&["render", "--material", "unobtainium"], "unknown material");
+}
+
+#[test]
+fn serve_refuses_a_network_bind_without_a_token() {
+    expect_error(&["serve", "--bind", "0.0.0.0"], "--token");
+}
+
+#[test]
+fn emulate_prints_the_pseudo_terminal_path_first() {
+    use std::io::{BufRead, BufReader};
+    let mut child = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args(["emulate", "--channels", "2"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("spawn emulate");
+    let mut first = String::new();
+    let read = BufReader::new(child.stdout.take().expect("stdout")).read_line(&mut first);
+    let _ = child.kill();
+    let _ = child.wait();
+    read.expect("read first line");
+    let path = first.trim();
+    assert!(path.starts_with("/dev/"), "first line is not a device path: `{path}`");
+}
