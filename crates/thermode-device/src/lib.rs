@@ -10,6 +10,9 @@
 //!   injection ([`Fault`]).
 //! - [`DeviceConfig`]: the device file (TOML); every key optional, documented with unit, default and source. The
 //!   files in `devices/` are the default display, a weakly cooled one and one with a lagging sensor.
+//! - [`protocol`]: the binary host–device protocol (COBS frames, CRC-32, sequence numbers, watchdog; specified in
+//!   `docs/protocol.md`); [`serial`]: [`serial::SerialDevice`], the real hardware path over a serial port;
+//!   [`emulator`]: the device side running the simulated display, for `thermode emulate` and end-to-end tests.
 //!
 //! Temperatures in °C at the interfaces, currents in A (**positive current heats the display**), times in s.
 //! Deterministic: the only randomness is the sensor noise, from ChaCha8 with an explicit seed.
