@@ -281,7 +281,7 @@ fn render_summary_json_reports_the_judged_metrics_and_the_csv_has_the_documented
     }
     let time = column(&header, &rows, "time_s");
     assert!(
-        time[0] < 0.0 && time.iter().any(|&t| t == 0.0),
+        time[0] < 0.0 && time.contains(&0.0),
         "time_s must be negative before contact and 0 at contact"
     );
     // Default finger and fv renderer: truth and target coincide.

@@ -5,9 +5,15 @@
 //! temperature curve. A lab with a display implements [`Stimulus`] over its device (the display/runtime pipeline:
 //! render the material on the Peltier element for a simulated trial, read the finger sensor for a real one).
 //!
-//! Until that pipeline exists, [`ModelStimulus`] stands in for both conditions: it computes the skin surface
-//! temperature of real contact with the finite-volume model of finger and object ([`FvContact`], the physically
-//! true curve of `thermode_model::fv`). Real and simulated trials therefore give the same curve; the name says so.
+//! Two stimuli without hardware ship here:
+//! - [`DisplayStimulus`] (the default of `thermode lab run`): every material is rendered offline on the simulated
+//!   display of `thermode_render::run` (renderer → display inverse → controller → safety envelope → Peltier plant
+//!   with a simulated finger resting on it). A `real` trial is that finger touching the real material (the render's
+//!   ground truth); a `simulated` trial is the same finger on the display rendering the material. The two differ
+//!   where the display cannot follow (it lags at the touch, the paper's first flaw).
+//! - [`ModelStimulus`] stands in for both conditions with real contact under the finite-volume model of finger and
+//!   object ([`FvContact`], the physically true curve of `thermode_model::fv`). Real and simulated trials give the
+//!   same curve; the name says so.
 
 use std::collections::HashMap;
 
@@ -18,6 +24,9 @@ use thermode_model::skin::Skin;
 use thermode_model::ParamError;
 use thiserror::Error;
 
+use thermode_render::run::{render, render_all, RenderRun, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ};
+use thermode_render::{ControllerKind, PipelineConfig, RenderError, RenderSpec};
+
 use crate::analysis::Condition;
 use crate::observer::{standard_normal, trial_rng};
 
@@ -27,6 +36,9 @@ pub enum StimulusError {
     /// The thermal model refused its parameters.
     #[error("stimulus model: {0}")]
     Model(#[from] ParamError),
+    /// The simulated display refused its settings or could not render.
+    #[error("stimulus display: {0}")]
+    Render(#[from] RenderError),
     /// The device failed (message from the device layer).
     #[error("stimulus device: {0}")]
     Device(String),
@@ -279,6 +291,262 @@ impl Stimulus for ModelStimulus {
                 self.cache.insert(key, curve.clone());
                 curve
             }
+        };
+        Ok(TrialMeasurement {
+            finger_start_c: curve.skin_c[0],
+            finger_end_c: curve.skin_c[curve.skin_c.len() - 1],
+            curve: Some(curve),
+        })
+    }
+}
+
+/// Seed salt of the finger drift of [`DisplayStimulus`] (its own stream, apart from the observer's and the sensor's).
+const DISPLAY_DRIFT_SALT: u64 = 0x6472_6966_7400_0002;
+
+/// How [`DisplayStimulus`] renders: the display's pipeline and the timing of the offline render.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DisplaySetup {
+    /// The display's pipeline: device file, controller (`model` or `pid`), renderer, safety envelope, the
+    /// controller's finger model and the room temperature. Default: see [`PipelineConfig::new`] (fv renderer,
+    /// fingertip, 23 °C, the rendering envelope).
+    pub pipeline: PipelineConfig,
+    /// Time the finger rests on the display rendering air before the touch \[s\], at least one tick. Default
+    /// [`DEFAULT_PRE_CONTACT_S`] (5).
+    pub pre_contact_s: f64,
+    /// Tick rate of the pipeline \[Hz\]. Default [`DEFAULT_RATE_HZ`] (100, the PT-100's sample rate).
+    pub rate_hz: f64,
+}
+
+impl DisplaySetup {
+    /// The defaults above for the display `pipeline`.
+    pub fn new(pipeline: PipelineConfig) -> DisplaySetup {
+        DisplaySetup {
+            pipeline,
+            pre_contact_s: DEFAULT_PRE_CONTACT_S,
+            rate_hz: DEFAULT_RATE_HZ,
+        }
+    }
+
+    /// The default display (built-in device file) with `controller`.
+    pub fn default_display(controller: ControllerKind) -> DisplaySetup {
+        DisplaySetup::new(PipelineConfig::new(
+            thermode_device::DeviceConfig::default(),
+            controller,
+        ))
+    }
+
+    /// The render of touching `material` for `duration_s`, sensor noise seeded by `seed` (and the material's name).
+    pub fn spec(&self, material: &Material, duration_s: f64, seed: u64) -> RenderSpec {
+        let mut spec = RenderSpec::new(self.pipeline.clone(), material.clone());
+        spec.duration_s = duration_s;
+        spec.pre_contact_s = self.pre_contact_s;
+        spec.rate_hz = self.rate_hz;
+        spec.seed = seed;
+        spec
+    }
+
+    fn validate(&self) -> Result<(), StimulusError> {
+        self.pipeline.validate()?;
+        let ticks = self.pre_contact_s * self.rate_hz;
+        if !(ticks.is_finite() && ticks.round() >= 1.0) {
+            return Err(StimulusError::BadSetting {
+                key: "pre_contact_s",
+                value: self.pre_contact_s,
+                requirement: "must last at least one tick of the pipeline (the curve starts at the touch)",
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Both curves of one material from one render: `real` is the finger touching the real material (the render's
+/// ground truth `truth_skin_c`), `simulated` the finger on the display (`skin_c`). Time 0 is the touch; the first
+/// sample is the finger just before it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DisplayCurves {
+    /// The finger touching the real material.
+    pub real: SkinCurve,
+    /// The finger on the display rendering the material.
+    pub simulated: SkinCurve,
+}
+
+impl DisplayCurves {
+    /// The curve of `condition`.
+    pub fn of(&self, condition: Condition) -> &SkinCurve {
+        match condition {
+            Condition::Real => &self.real,
+            Condition::Simulated => &self.simulated,
+        }
+    }
+
+    /// The curves of a render: its rows from the touch on. A display fault is an error (the drive was switched
+    /// off; the finger did not feel the material).
+    pub fn from_run(run: &RenderRun) -> Result<DisplayCurves, StimulusError> {
+        if let Some(fault) = &run.summary.first_fault {
+            return Err(StimulusError::Device(format!(
+                "the simulated display faulted rendering {}: {fault} at t = {:.2} s (drive switched off)",
+                run.spec.material.name,
+                run.summary.first_fault_time_s.unwrap_or(f64::NAN)
+            )));
+        }
+        let t = &run.trajectory;
+        let half_tick_s = 0.5 / run.spec.rate_hz;
+        let first = t.time_s.iter().position(|&time| time > -half_tick_s).ok_or_else(|| {
+            StimulusError::BadMeasurement(format!(
+                "the render of {} has no row after the touch",
+                run.spec.material.name
+            ))
+        })?;
+        if first == 0 {
+            return Err(StimulusError::BadMeasurement(format!(
+                "the render of {} has no row before the touch",
+                run.spec.material.name
+            )));
+        }
+        let t0 = t.time_s[first];
+        let time_s: Vec<f64> = t.time_s[first..].iter().map(|&time| time - t0).collect();
+        let curves = DisplayCurves {
+            real: SkinCurve {
+                time_s: time_s.clone(),
+                skin_c: t.truth_skin_c[first..].to_vec(),
+            },
+            simulated: SkinCurve {
+                time_s,
+                skin_c: t.skin_c[first..].to_vec(),
+            },
+        };
+        curves.real.validate()?;
+        curves.simulated.validate()?;
+        Ok(curves)
+    }
+}
+
+/// The display stimulus: every material rendered offline on the simulated display (`thermode_render::run`), see the
+/// module documentation. A `real` trial gives [`DisplayCurves::real`], a `simulated` trial
+/// [`DisplayCurves::simulated`].
+///
+/// Deterministic: the only randomness of a render is the display's sensor noise, seeded by `seed` and the
+/// material's name. A curve does not depend on the trial, so one render per (material, presentation time) serves
+/// both conditions and is cached.
+///
+/// **Finger drift.** With `finger_drift_sd_c` > 0 each trial's finger is offset from its resting curve by a
+/// Gaussian amount drawn per (participant, trial) from a ChaCha8 stream of `seed` (a resumed session sees the same
+/// fingers); the whole curve is shifted by it. This is a first-order model: a finger δ warmer would also drop by
+/// about δ / (T_finger − T_object) more (≈ 5 % for δ = 0.5 °C), which is not rendered. The offset moves the finger
+/// start temperature, which is what the exclusion rule looks at.
+#[derive(Debug, Clone)]
+pub struct DisplayStimulus {
+    setup: DisplaySetup,
+    finger_drift_sd_c: f64,
+    seed: u64,
+    cache: HashMap<(String, u64), DisplayCurves>,
+}
+
+impl DisplayStimulus {
+    /// A display stimulus; `finger_drift_sd_c` \[°C\] (≥ 0; 0 = every trial starts at rest) as for
+    /// [`ModelStimulus`]; `seed` seeds the sensor noise and the drift.
+    pub fn new(setup: DisplaySetup, finger_drift_sd_c: f64, seed: u64) -> Result<DisplayStimulus, StimulusError> {
+        if !(finger_drift_sd_c.is_finite() && finger_drift_sd_c >= 0.0) {
+            return Err(StimulusError::BadSetting {
+                key: "finger_drift_sd_c",
+                value: finger_drift_sd_c,
+                requirement: "must be a finite number not below 0",
+            });
+        }
+        setup.validate()?;
+        Ok(DisplayStimulus {
+            setup,
+            finger_drift_sd_c,
+            seed,
+            cache: HashMap::new(),
+        })
+    }
+
+    /// The setup.
+    pub fn setup(&self) -> &DisplaySetup {
+        &self.setup
+    }
+
+    /// Renders every material of `materials` not yet cached for `duration_s` \[s\], in parallel (one thread each).
+    pub fn prepare(&mut self, materials: &[Material], duration_s: f64) -> Result<(), StimulusError> {
+        let mut missing: Vec<&Material> = Vec::new();
+        for m in materials {
+            if !self.cache.contains_key(&key(m, duration_s)) && !missing.iter().any(|x| x.name == m.name) {
+                missing.push(m);
+            }
+        }
+        let specs: Vec<RenderSpec> = missing
+            .iter()
+            .map(|m| self.setup.spec(m, duration_s, self.seed))
+            .collect();
+        for run in render_all(&specs)? {
+            let curves = DisplayCurves::from_run(&run)?;
+            self.cache.insert(key(&run.spec.material, duration_s), curves);
+        }
+        Ok(())
+    }
+
+    /// Both curves of touching `material` for `duration_s` \[s\] (rendered once, then cached).
+    pub fn curves(&mut self, material: &Material, duration_s: f64) -> Result<&DisplayCurves, StimulusError> {
+        let k = key(material, duration_s);
+        if !self.cache.contains_key(&k) {
+            let run = render(&self.setup.spec(material, duration_s, self.seed))?;
+            self.cache.insert(k.clone(), DisplayCurves::from_run(&run)?);
+        }
+        self.cache
+            .get(&k)
+            .ok_or_else(|| StimulusError::BadMeasurement("the rendered curve was not cached".to_string()))
+    }
+
+    /// A description for the session sidecar's device configuration: the device file (TOML), the controller, the
+    /// renderer and every setting of the render.
+    pub fn describe(&self) -> serde_json::Value {
+        let p = &self.setup.pipeline;
+        let pid_gains = match &p.controller {
+            ControllerKind::Pid(gains) => serde_json::to_value(gains).unwrap_or(serde_json::Value::Null),
+            ControllerKind::Model => serde_json::Value::Null,
+        };
+        json!({
+            "stimulus": "DisplayStimulus",
+            "note": "no display hardware: each material is rendered offline on the simulated display \
+                     (thermode_render::run); a real trial is the simulated finger touching the real material \
+                     (the render's ground truth), a simulated trial the same finger on the display",
+            "controller": p.controller.name(),
+            "pid_gains": pid_gains,
+            "renderer": p.renderer.name(),
+            "ambient_c": p.ambient_c,
+            "contact_resistance_m2k_w": p.contact_resistance_m2k_w,
+            "envelope": format!("{:?}", p.envelope),
+            "skin_layers": p.skin.layers.iter().map(|l| l.name.clone()).collect::<Vec<_>>(),
+            "pre_contact_s": self.setup.pre_contact_s,
+            "rate_hz": self.setup.rate_hz,
+            "sensor_noise_seed": self.seed,
+            "finger_drift_sd_c": self.finger_drift_sd_c,
+            "device_toml": p.device.to_toml_string(),
+        })
+    }
+
+    fn drift_c(&self, participant_index: usize, trial: usize) -> f64 {
+        if self.finger_drift_sd_c == 0.0 {
+            return 0.0;
+        }
+        let mut rng = trial_rng(self.seed ^ DISPLAY_DRIFT_SALT, participant_index, trial);
+        self.finger_drift_sd_c * standard_normal(&mut rng)
+    }
+}
+
+/// The cache key of a render: material name and presentation time.
+fn key(material: &Material, duration_s: f64) -> (String, u64) {
+    (material.name.clone(), duration_s.to_bits())
+}
+
+impl Stimulus for DisplayStimulus {
+    fn present(&mut self, request: &StimulusRequest) -> Result<TrialMeasurement, StimulusError> {
+        let drift_c = self.drift_c(request.participant_index, request.trial);
+        let base = self.curves(request.material, request.duration_s)?.of(request.condition);
+        let curve = SkinCurve {
+            time_s: base.time_s.clone(),
+            skin_c: base.skin_c.iter().map(|c| c + drift_c).collect(),
         };
         Ok(TrialMeasurement {
             finger_start_c: curve.skin_c[0],

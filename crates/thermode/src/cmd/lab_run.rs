@@ -3,20 +3,51 @@
 //! session where it stopped. Answers come from the keyboard, from `--responses FILE` or from the simulated
 //! observer (`--observer`).
 //!
-//! The stimulus is `ModelStimulus` (no display hardware yet): both conditions are real contact under the fv model,
-//! and the finger temperatures are the model's. `--time-scale` scales the waits (0 skips them, for demos).
+//! The stimulus (no display hardware yet) is, by default, `display`: every material rendered offline on the
+//! simulated display (`thermode_render`) with the controller (`--controller model|pid`) and device file
+//! (`--device FILE`) given — a real trial is the simulated finger touching the real material, a simulated trial the
+//! same finger on the display. `--stimulus model` is the older stand-in: both conditions are real contact under the
+//! fv model. The finger temperatures are the simulation's. `--time-scale` scales the waits (0 skips them, for
+//! demos).
+//!
+//! The simulated observer's references are real contact under the same stimulus (its `real` curves), so that its
+//! calibration to the paper's 66 % holds for the real trials it will see.
 
 use std::path::PathBuf;
 
-use anyhow::{anyhow, Result};
-use clap::Args;
+use anyhow::{anyhow, bail, Context, Result};
+use clap::{Args, ValueEnum};
 use serde_json::json;
-use thermode_lab::design::ExperimentFile;
-use thermode_lab::observer::{SimulatedObserver, PAPER_REAL_IDENTIFICATION_RATE};
+use thermode_device::DeviceConfig;
+use thermode_lab::design::{Experiment, ExperimentFile};
+use thermode_lab::observer::{CurveFeatures, SimulatedObserver, PAPER_REAL_IDENTIFICATION_RATE};
+use thermode_lab::runner::stimulus::{DisplaySetup, DisplayStimulus};
 use thermode_lab::runner::{
-    participant_plan, FvContact, InteractiveResponder, ModelStimulus, Responder, Runner, ScriptedResponses,
+    participant_plan, FvContact, InteractiveResponder, ModelStimulus, Responder, Runner, ScriptedResponses, Stimulus,
     SystemClock, TerminalConsole,
 };
+use thermode_model::materials::{find, Material};
+use thermode_render::controllers::GainsSource;
+use thermode_render::{gains_for_device, ControllerKind, PipelineConfig};
+
+/// What presents the materials.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum StimulusArg {
+    /// The simulated display: real trials are the finger on the real material, simulated trials the finger on the
+    /// display rendering it.
+    Display,
+    /// Real contact under the fv model for both conditions (no display in the loop).
+    Model,
+}
+
+/// The display's controller.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LabControllerArg {
+    /// thermode's model-based controller (observer, Peltier feedforward).
+    Model,
+    /// The paper's PID (the tuned gains of the shipped display that matches the device).
+    Pid,
+}
 
 /// Noise draws per option when calibrating the simulated observer.
 const CALIBRATION_SAMPLES: usize = 4000;
@@ -48,6 +79,15 @@ pub struct LabRunArgs {
     /// Standard deviation of the model finger's start temperature from trial to trial [°C] (0 = always at rest).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     finger_drift_sd_c: f64,
+    /// What presents the materials.
+    #[arg(long, value_enum, default_value = "display")]
+    stimulus: StimulusArg,
+    /// The display's controller (with `--stimulus display`; default model).
+    #[arg(long, value_enum)]
+    controller: Option<LabControllerArg>,
+    /// The display's device file (TOML; with `--stimulus display`); default: the built-in default display.
+    #[arg(long, value_name = "FILE")]
+    device: Option<PathBuf>,
 }
 
 /// Runs `thermode lab run`.
@@ -61,11 +101,9 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
         )
     })?;
     let design = &experiment.experiment;
-    let contact = FvContact::default();
-    let mut stimulus = ModelStimulus::new(contact.clone(), args.finger_drift_sd_c, design.seed)?;
+    let (mut stimulus, references, description) = stimulus(args, design)?;
     let (mut responder, answers): (Box<dyn Responder>, String) = if args.observer {
-        let mut observer =
-            SimulatedObserver::from_model(&design.response_options, &contact, design.presentation_s, design.seed)?;
+        let mut observer = SimulatedObserver::new(design.response_options.clone(), references, design.seed);
         let calibration = observer.calibrate(PAPER_REAL_IDENTIFICATION_RATE, CALIBRATION_SAMPLES, CALIBRATION_SEED)?;
         println!(
             "simulated observer: perceptual noise {:.4} (real contact identified {:.1} % on the calibration sample)",
@@ -83,7 +121,7 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
         (Box::new(InteractiveResponder), "keyboard".to_string())
     };
     let device = json!({
-        "stimulus": stimulus.describe(),
+        "stimulus": description,
         "answers": answers,
         "time_scale": args.time_scale,
     });
@@ -94,7 +132,7 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
         participant: &args.participant,
         data_dir: &args.data_dir,
         device,
-        stimulus: &mut stimulus,
+        stimulus: stimulus.as_mut(),
         responder: responder.as_mut(),
         clock: &mut clock,
         console: &mut console,
@@ -102,4 +140,90 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
     }
     .run()?;
     Ok(())
+}
+
+/// The stimulus of `args`, the observer's references (features of real contact with each response option under
+/// it) and its description for the sidecar.
+fn stimulus(
+    args: &LabRunArgs,
+    design: &Experiment,
+) -> Result<(Box<dyn Stimulus>, Vec<CurveFeatures>, serde_json::Value)> {
+    let options: Vec<Material> = design
+        .response_options
+        .iter()
+        .map(|name| find(name))
+        .collect::<Result<_, _>>()?;
+    match args.stimulus {
+        StimulusArg::Model => {
+            if args.controller.is_some() || args.device.is_some() {
+                bail!("--controller and --device choose the display; they need --stimulus display");
+            }
+            let contact = FvContact::default();
+            let stimulus = ModelStimulus::new(contact.clone(), args.finger_drift_sd_c, design.seed)?;
+            let mut references = Vec::with_capacity(options.len());
+            for material in &options {
+                references.push(CurveFeatures::of(&contact.curve(
+                    material,
+                    None,
+                    design.presentation_s,
+                )?)?);
+            }
+            let description = stimulus.describe();
+            Ok((Box::new(stimulus), references, description))
+        }
+        StimulusArg::Display => {
+            let device = display_device(args)?;
+            let setup = DisplaySetup::new(PipelineConfig::new(device, controller(args, &device)?));
+            let mut stimulus = DisplayStimulus::new(setup, args.finger_drift_sd_c, design.seed)?;
+            let mut materials: Vec<Material> = design.materials.iter().map(|n| find(n)).collect::<Result<_, _>>()?;
+            materials.extend(options.iter().cloned());
+            println!(
+                "rendering {} material(s) on the simulated display ({} controller)…",
+                design.materials.len(),
+                stimulus.setup().pipeline.controller.name()
+            );
+            stimulus.prepare(&materials, design.presentation_s)?;
+            let mut references = Vec::with_capacity(options.len());
+            for material in &options {
+                references.push(CurveFeatures::of(
+                    &stimulus.curves(material, design.presentation_s)?.real,
+                )?);
+            }
+            let mut description = stimulus.describe();
+            description["device_file"] = match &args.device {
+                Some(path) => json!(path.display().to_string()),
+                None => json!("built-in default display"),
+            };
+            Ok((Box::new(stimulus), references, description))
+        }
+    }
+}
+
+/// The device file of `--device`, or the built-in default display.
+fn display_device(args: &LabRunArgs) -> Result<DeviceConfig> {
+    match &args.device {
+        Some(path) => {
+            let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+            Ok(DeviceConfig::from_toml_str(&text, &path.display().to_string())?)
+        }
+        None => Ok(DeviceConfig::default()),
+    }
+}
+
+/// The display's controller: `model` (default), or `pid` with the tuned gains of the shipped display that matches
+/// `device`.
+fn controller(args: &LabRunArgs, device: &DeviceConfig) -> Result<ControllerKind> {
+    match args.controller.unwrap_or(LabControllerArg::Model) {
+        LabControllerArg::Model => Ok(ControllerKind::Model),
+        LabControllerArg::Pid => {
+            let (gains, source) = gains_for_device(device)?;
+            if source == GainsSource::DefaultFallback {
+                eprintln!(
+                    "note: the device matches no shipped display; pid uses the default display's tuned gains \
+                     (run `thermode tune --device FILE --out GAINS.toml` for its own)"
+                );
+            }
+            Ok(ControllerKind::Pid(gains))
+        }
+    }
 }
