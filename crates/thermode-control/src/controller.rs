@@ -58,6 +58,14 @@ pub trait Controller {
     fn plate_estimate_c(&self) -> Option<f64> {
         None
     }
+
+    /// The heat into the plate that the controller has learned its model misses, W (positive warms the plate),
+    /// after its last update, if it learns one (an observer's unknown-heat state); `None` (the default) otherwise.
+    /// With the display rendering air before a touch, it tells how much more heat the real finger gives the plate
+    /// than the finger model does, which the pipeline can use to calibrate its finger model to this finger.
+    fn unknown_heat_w(&self) -> Option<f64> {
+        None
+    }
 }
 
 /// The paper's controller: sensor → first-order low-pass → PID (derivative on the filtered measurement).

@@ -272,4 +272,10 @@ impl Controller for ModelController {
     fn plate_estimate_c(&self) -> Option<f64> {
         self.terms.map(|t| t.predicted_plate_c)
     }
+
+    /// The observer's unknown heat after the last update, W ([`PlateEstimate::disturbance_w`]); `None` before the
+    /// first tick.
+    fn unknown_heat_w(&self) -> Option<f64> {
+        self.terms.map(|t| t.estimate.disturbance_w)
+    }
 }

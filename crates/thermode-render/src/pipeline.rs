@@ -5,8 +5,16 @@
 //! 1. `envelope.observe(reading)`: fault checks and thermal dose on the newest measurement.
 //! 2. The renderer (the controller's finger model touching the virtual world) steps to now + dt; its receptor is
 //!    the target. In direct mode the renderer idles in air and the requested set-point is the direct ramp instead.
-//! 3. The display inverse gives the display set-point that brings the finger model on the display to the target at
-//!    now + dt (unlimited).
+//! 3. The display inverse gives the display set-point that, held over the request horizon
+//!    H = max(dt, 1/sensor sample rate) ([`ChannelPipeline::request_horizon_s`]), brings the finger model on the
+//!    display to the target (unlimited). The finger model itself still advances by dt (step 7): the request is
+//!    recomputed every tick from the model's present state, a receding horizon of which only the first dt is used.
+//!    Why not one tick: at a high tick rate a one-tick request is a steep set-point that asks the receptor to
+//!    close its whole error in 1 ms, swings far beyond the plate and turns back too late; measured on the default
+//!    display, model controller, aluminium, the overshoot below the target was 0.13–0.15 °C at 1000 Hz and
+//!    0.06–0.07 °C at 200 Hz with a one-tick request. The sensor delivers no new information faster than its
+//!    sample period, so a request over one sample period asks for nothing the loop could correct sooner. At the
+//!    default 100 Hz (tick = sample period) nothing changes.
 //!    3a. If the controller reports a plate estimate (an observer), the request is limited to a band of
 //!    [`FEASIBLE_BAND_C`] around the plate temperature it expects now, so the envelope's rate limiter never winds up
 //!    far from a plate that cannot follow (the paper's PID has no estimate and gets the request unchanged).
@@ -17,6 +25,9 @@
 //! 7. The finger model on the display advances with what the finger really receives: the controller's plate
 //!    estimate if it has one (an observer), else the shaped set-point (the paper's way).
 //!
+//! Before the first touch, while the display renders air, the controller's learned unknown heat is averaged; at
+//! the first touch it calibrates the finger models to the real finger ([`PipelineConfig::calibrate_finger_at_touch`]).
+//!
 //! A time step that is not finite and positive skips steps 2–5 and requests NaN from the envelope, which latches
 //! [`thermode_control::FaultCode::NonFiniteCommand`] (as for any controller error) and switches the drive off.
 //! Every other broken number (NaN from a model, a sensor fault) latches its fault in the envelope as well.
@@ -26,6 +37,8 @@ use thermode_control::{
     ABSOLUTE_MAX_RATE_C_PER_S,
 };
 use thermode_device::{DeviceConfig, Reading};
+use thermode_model::fv::{FvConfig, FvModel};
+use thermode_model::kron::calibrate_to_surface;
 use thermode_model::{Material, Skin};
 
 use crate::controllers::{build_controller, ControllerKind};
@@ -85,6 +98,11 @@ pub struct PipelineConfig {
     /// Contact resistance between skin and virtual object of the fv renderer [m²K/W], ≥ 0. Default
     /// [`LIGHT_TOUCH_RESISTANCE_M2K_W`] (1e-3, light touch). The kron renderer has none.
     pub contact_resistance_m2k_w: f64,
+    /// Whether a touch from air calibrates the finger models (renderer and display inverse) to the resting surface
+    /// temperature of the real finger, as the controller's learned unknown heat tells it
+    /// ([`ChannelPipeline::set_stimulus`]). Default true; without a controller that learns an unknown heat
+    /// ([`Controller::unknown_heat_w`], e.g. the paper's PID) nothing is calibrated.
+    pub calibrate_finger_at_touch: bool,
 }
 
 impl PipelineConfig {
@@ -98,6 +116,7 @@ impl PipelineConfig {
             skin: Skin::fingertip(),
             ambient_c: 23.0,
             contact_resistance_m2k_w: LIGHT_TOUCH_RESISTANCE_M2K_W,
+            calibrate_finger_at_touch: true,
         }
     }
 
@@ -173,6 +192,76 @@ pub struct ChannelPipeline {
     applied_current_a: f64,
     /// The last shaped set-point [°C].
     last_setpoint_c: Option<f64>,
+    /// Shortest request horizon \[s\]: one sensor sample period (see the module documentation, step 3).
+    min_request_horizon_s: f64,
+    /// What the finger models are built from, for the calibration at the first touch (`None`: no calibration, or
+    /// done).
+    calibration: Option<FingerModels>,
+    /// The controller's unknown heat averaged over the rest before the first touch.
+    rest_heat: RestHeat,
+    /// How much warmer the calibrated display finger model is than the one the controller's unknown heat was
+    /// learned against \[°C\]; subtracted from the receptor temperature given to the controller (0 uncalibrated).
+    receptor_offset_c: f64,
+}
+
+/// Time the finger must rest on the display before the controller's unknown heat is averaged \[s\]: 1. The model
+/// controller's observer starts with no unknown heat and an uncertainty of a tenth of its reference heat; measured
+/// on the default display its estimate settles within 0.75 s (0.15 W at 0.25 s, 0.003 W at 0.75 s with the default
+/// finger).
+pub const REST_SETTLE_S: f64 = 1.0;
+
+/// Time constant of the average of the unknown heat over the rest \[s\]: 1. Measured on the default display with the
+/// default finger, the observer's estimate fluctuates by about ±3 mW (±0.05 °C of receptor temperature) from tick
+/// to tick; the average over about a second halves that and still follows the real finger, which settles on the
+/// display within seconds.
+pub const REST_AVERAGE_S: f64 = 1.0;
+
+/// The controller's unknown heat averaged over the rest before the first touch: exponentially weighted mean and
+/// variance with time constant [`REST_AVERAGE_S`], from [`REST_SETTLE_S`] of rest on.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct RestHeat {
+    /// Rest so far \[s\].
+    rested_s: f64,
+    /// Weighted mean \[W\] and variance \[W²\] (`None` before the first averaged sample).
+    moments: Option<(f64, f64)>,
+}
+
+impl RestHeat {
+    /// Adds one tick of `dt_s` \[s\] with the controller's unknown heat `heat_w` \[W\] (none or non-finite: nothing).
+    fn add(&mut self, dt_s: f64, heat_w: Option<f64>) {
+        self.rested_s += dt_s;
+        let Some(d) = heat_w.filter(|d| d.is_finite()) else {
+            return;
+        };
+        if self.rested_s < REST_SETTLE_S {
+            return;
+        }
+        let alpha = 1.0 - (-dt_s / REST_AVERAGE_S).exp();
+        self.moments = Some(match self.moments {
+            None => (d, 0.0),
+            Some((mean, var)) => {
+                let delta = d - mean;
+                (mean + alpha * delta, (1.0 - alpha) * (var + alpha * delta * delta))
+            }
+        });
+    }
+
+    /// The mean \[W\] if it differs from zero by more than twice the fluctuation of the samples (standard
+    /// deviation) and at least one average time was averaged; else `None`.
+    fn significant_w(&self) -> Option<f64> {
+        let (mean, var) = self.moments?;
+        (self.rested_s >= REST_SETTLE_S + REST_AVERAGE_S && mean.abs() > 2.0 * var.sqrt()).then_some(mean)
+    }
+}
+
+/// What the renderer and the display finger are built from.
+#[derive(Debug, Clone)]
+struct FingerModels {
+    kind: RendererKind,
+    skin: Skin,
+    ambient_c: f64,
+    contact_w_m2k: f64,
+    grid: FvConfig,
 }
 
 impl std::fmt::Debug for ChannelPipeline {
@@ -214,6 +303,16 @@ impl ChannelPipeline {
             finger_conductance_w_k,
             applied_current_a: 0.0,
             last_setpoint_c: None,
+            min_request_horizon_s: 1.0 / config.device.sensor.sample_rate_hz,
+            calibration: config.calibrate_finger_at_touch.then(|| FingerModels {
+                kind: config.renderer,
+                skin: config.skin.clone(),
+                ambient_c: config.ambient_c,
+                contact_w_m2k,
+                grid,
+            }),
+            rest_heat: RestHeat::default(),
+            receptor_offset_c: 0.0,
         })
     }
 
@@ -247,9 +346,38 @@ impl ChannelPipeline {
     }
 
     fn touch(&mut self, material: &Material, object_c: f64) -> Result<(), RenderError> {
+        if self.mode == Mode::Render && !self.renderer.in_contact() {
+            self.calibrate();
+        }
+        self.calibration = None;
         self.renderer.touch(material, object_c)?;
         self.mode = Mode::Render;
         Ok(())
+    }
+
+    /// Calibrates the finger models to the real finger's resting surface at its first touch from air (once; see
+    /// [`PipelineConfig::calibrate_finger_at_touch`]). The controller's learned unknown heat d, averaged over the
+    /// rest ([`RestHeat`]), is the heat the real finger gives the plate beyond the finger model's,
+    /// G·(T_real − T_model) with G the receptor-to-plate conductance over the contact area, so the real receptor
+    /// rests at T_model + d/G. The skin's perfusion is scaled so that its steady state in air has that receptor
+    /// temperature (the paper measured each participant's resting finger; `calibrate_to_surface`), and renderer and
+    /// display finger restart from that steady state, so the target is computed for this finger. The controller's
+    /// unknown heat already holds d, so the receptor given to the controller is lowered by the calibration's shift:
+    /// the heat it expects from the finger stays continuous. Nothing changes when the average is not
+    /// distinguishable from its own fluctuation ([`RestHeat::significant_w`]: a finger that matches the model
+    /// keeps the model), or when no perfusion reaches the surface temperature.
+    fn calibrate(&mut self) {
+        let (Some(models), Some(heat_w)) = (&self.calibration, self.rest_heat.significant_w()) else {
+            return;
+        };
+        let model_c = self.display.receptor_c();
+        let real_c = model_c + heat_w / self.finger_conductance_w_k;
+        let Some((renderer, display)) = models.calibrated(real_c) else {
+            return;
+        };
+        self.receptor_offset_c = display.receptor_c() - model_c;
+        self.renderer = renderer;
+        self.display = display;
     }
 
     /// One tick at `now_s` \[s\] (the envelope's clock: the same clock as the readings' `time_s`) for the interval
@@ -266,6 +394,9 @@ impl ChannelPipeline {
         let decision = self.envelope.shape_setpoint(now_s, self.feasible(requested_c, dt_s));
         self.last_setpoint_c = Some(decision.setpoint_c);
         let request_a = self.control(now_s, dt_s, reading, &decision);
+        if self.calibration.is_some() && self.mode == Mode::Render && !self.renderer.in_contact() {
+            self.rest_heat.add(dt_s, self.controller.unknown_heat_w());
+        }
         let drive = self.envelope.gate_drive(now_s, request_a);
         self.applied_current_a = drive.current_a();
         let plate_c = self
@@ -296,7 +427,10 @@ impl ChannelPipeline {
         match &mut self.mode {
             Mode::Render => {
                 let target_c = self.renderer.receptor_c();
-                (target_c, self.display.setpoint_c(target_c, dt_s))
+                (
+                    target_c,
+                    self.display.setpoint_c(target_c, self.request_horizon_s(dt_s)),
+                )
             }
             Mode::Direct {
                 temp_c,
@@ -310,6 +444,12 @@ impl ChannelPipeline {
                 (f64::NAN, next_c)
             }
         }
+    }
+
+    /// The horizon over which the display inverse computes the request for a tick of `dt_s` \[s\]:
+    /// max(dt, 1/sensor sample rate) \[s\] (see the module documentation, step 3).
+    pub fn request_horizon_s(&self, dt_s: f64) -> f64 {
+        dt_s.max(self.min_request_horizon_s)
     }
 
     /// The request limited to [`FEASIBLE_BAND_C`] (or two ticks of the envelope's rate limit, if more) around the
@@ -339,7 +479,7 @@ impl ChannelPipeline {
             sensor_c: reading.sensor_c,
             hot_side_c: reading.hot_side_c,
             applied_current_a: self.applied_current_a,
-            finger_receptor_c: Some(self.display.receptor_c()),
+            finger_receptor_c: Some(self.display.receptor_c() - self.receptor_offset_c),
             finger_conductance_w_k: self.finger_conductance_w_k,
         };
         self.controller.update(&input).unwrap_or(f64::NAN)
@@ -398,8 +538,35 @@ impl ChannelPipeline {
         self.finger_conductance_w_k
     }
 
+    /// The shift of the finger model's receptor by the last calibration \[°C\] (0 if never calibrated); see
+    /// [`PipelineConfig::calibrate_finger_at_touch`].
+    pub fn calibration_shift_c(&self) -> f64 {
+        self.receptor_offset_c
+    }
+
     /// Whether the channel is in direct mode.
     pub fn is_direct(&self) -> bool {
         matches!(self.mode, Mode::Direct { .. })
+    }
+}
+
+impl FingerModels {
+    /// Renderer and display finger at rest in air, with the skin's perfusion scaled so that the receptor rests at
+    /// `receptor_c` \[°C\]; `None` if no perfusion reaches it or the models refuse it.
+    fn calibrated(&self, receptor_c: f64) -> Option<(Renderer, DisplayFinger)> {
+        if !receptor_c.is_finite() {
+            return None;
+        }
+        let skin = match self.kind {
+            RendererKind::Kron => calibrate_to_surface(&self.skin, self.ambient_c, receptor_c).ok()?,
+            RendererKind::Fv => {
+                let mut model = FvModel::new(&self.skin, None, &self.grid).ok()?;
+                let scale = model.calibrate_to_surface(self.ambient_c, receptor_c).ok()?;
+                self.skin.with_perfusion_scaled(scale)
+            }
+        };
+        let renderer = Renderer::new(self.kind, &skin, self.ambient_c, &self.grid).ok()?;
+        let display = DisplayFinger::new(self.kind, &skin, self.ambient_c, self.contact_w_m2k, &self.grid).ok()?;
+        Some((renderer, display))
     }
 }

@@ -24,7 +24,9 @@
 //!   flips a quantised reading, and the loop's response to that dominates.
 //! - Truth: the simulated finger touching the real material under the reference fv physics (light-touch contact
 //!   resistance [`LIGHT_TOUCH_RESISTANCE_M2K_W`]), stepped with the same steps as the renderer. With the default
-//!   finger and the fv renderer it is the renderer's target itself.
+//!   finger and the fv renderer it is the renderer's target itself (the pipeline's calibration at the touch,
+//!   [`PipelineConfig::calibrate_finger_at_touch`], leaves a finger that matches the model as it is; a different
+//!   finger gets a target computed for it, while the truth is that finger's own contact).
 //! - Rows are recorded after each tick and plant step: `time_s` is the end of the tick's interval relative to the
 //!   contact (0 at contact, negative before); temperatures are those at that time; current and set-point are those
 //!   held over the interval.

@@ -9,8 +9,12 @@
 //! - RMS display tracking: true plate minus the shaped set-point held over the tick, over 0 < t ≤ 90 s.
 //! - Direction: T0 is the target at the touch; the target drops (cooling) if T0 − min target ≥ max target − T0,
 //!   otherwise it rises (heating). The drop (or rise) Δ is that larger difference.
-//! - Overshoot: the largest excursion of the skin beyond the target in that direction after the touch,
-//!   max(target − skin) for cooling (max(skin − target) for heating), and at least 0.
+//! - Overshoot: the largest excursion of the skin beyond the target in that direction during the contact,
+//!   max(target − skin) for cooling (max(skin − target) for heating) over the rows after the touch whose tick
+//!   rendered the contact (`Trajectory::contact`), and at least 0. After a release (`RenderSpec::release_at_s`)
+//!   the target warms back towards the resting skin faster than any display can warm the finger (the plate warms
+//!   slower than it cools at the drive limit), so the skin trails below the target: that warming lag is the
+//!   displayed finger being *late*, not driven past its target, and is not counted (it shows in the RMS errors).
 //! - Lag at half of the target's drop: the half level is T0 − Δ/2 (T0 + Δ/2 rising); the lag is the time the skin
 //!   first reaches it minus the time the target first reaches it, both interpolated linearly between rows (the
 //!   skin's curve starts at its own value at the touch). Undefined (None) if Δ < [`MIN_DROP_C`] or a curve never
@@ -66,7 +70,8 @@ pub struct Summary {
     pub rms_truth_0_90_c: Option<f64>,
     /// RMS of true plate − shaped set-point over 0 < t ≤ 90 s.
     pub rms_display_tracking_c: Option<f64>,
-    /// Largest excursion of the skin beyond the target after the touch (below it for cooling), ≥ 0.
+    /// Largest excursion of the skin beyond the target during the contact (below it for cooling), ≥ 0; rows after a
+    /// release do not count (see the module documentation).
     pub overshoot_c: f64,
     /// Whether the target drops (true) or rises.
     pub cooling: bool,
@@ -247,6 +252,19 @@ pub fn actuator_limit(
     Ok(result)
 }
 
+/// The overshoot of `t` (see the module documentation) in the direction `sign` (+1 cooling, −1 heating) \[°C\]:
+/// the largest `sign · (target − skin)` over the contact rows after the touch, at least 0.
+pub fn overshoot_c(t: &Trajectory, sign: f64) -> f64 {
+    t.time_s
+        .iter()
+        .zip(&t.contact)
+        .zip(t.target_skin_c.iter().zip(&t.skin_c))
+        .filter(|((time, contact), _)| **time > TIME_SLACK_S && **contact)
+        .map(|(_, (target, skin))| sign * (target - skin))
+        .filter(|d| d.is_finite())
+        .fold(0.0, f64::max)
+}
+
 /// The summary of a run (see the module documentation); `limit` from [`actuator_limit`].
 pub fn summarise(
     spec: &RenderSpec,
@@ -261,14 +279,7 @@ pub fn summarise(
         .then(|| crossing_time(&t.time_s, &t.skin_c, contact.skin_c, half.level_c, half.cooling))
         .flatten();
     let sign = if half.cooling { 1.0 } else { -1.0 };
-    let overshoot_c = t
-        .time_s
-        .iter()
-        .zip(t.target_skin_c.iter().zip(&t.skin_c))
-        .filter(|(time, _)| **time > TIME_SLACK_S)
-        .map(|(_, (target, skin))| sign * (target - skin))
-        .filter(|d| d.is_finite())
-        .fold(0.0, f64::max);
+    let overshoot_c = overshoot_c(t, sign);
     let first_fault = t.fault.iter().position(Option::is_some);
     Summary {
         material: spec.material.name.clone(),
@@ -337,7 +348,7 @@ pub fn summary_table(summaries: &[Summary]) -> String {
     out.push_str(
         "(°C and s; rms = root mean square of skin − target over 0–5, 5–90, 0–90 s after contact; floor = rms0-90 of \
          an ideal controller at the actuator limit; rmsTruth, rmsDisp = of skin − truth and of plate − set-point over \
-         0–90 s; overshoot = largest skin excursion beyond the target; lag = skin minus target time at half of the \
+         0–90 s; overshoot = largest skin excursion beyond the target during contact; lag = skin minus target time at half of the \
          target's drop; limit = the same for the ideal controller; ratio = lag/limit)\n",
     );
     out

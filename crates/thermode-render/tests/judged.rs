@@ -14,19 +14,21 @@
 //!    see the report);
 //! 5. with a simulated finger whose skin parameters (every layer's thickness, conductivity, density, specific heat
 //!    and perfusion) are all 20 % below or above the controller's model, the model is no worse than pid against the
-//!    ground truth (mean over the materials). Holds at ×0.8; fails by 0.5 % at ×1.2 (documented at that test).
+//!    ground truth (mean over the materials), thanks to the calibration of the finger model at the touch, which is
+//!    checked on its own;
+//! 6. the overshoot holds at the runtime's tick rates (200 and 1000 Hz), and counts only the contact, not the
+//!    warming lag after a release.
 //!
-//! Each test renders 10–30 contacts of 95 s (about 5 s for all in the test profile). The one known failure is
-//! `#[ignore]`d with its reason; `cargo test -p thermode-render -- --ignored` runs it.
+//! Each test renders 2–30 contacts of up to 95 s (a few seconds for all in the test profile).
 
 mod common;
 
 use std::sync::OnceLock;
 
-use common::{pid, spec};
+use common::{pid, spec, Loop};
 use thermode_model::Skin;
-use thermode_render::run::render_all;
-use thermode_render::{ControllerKind, RenderRun, ShippedDisplay, Summary};
+use thermode_render::run::{render_all, Trajectory};
+use thermode_render::{ControllerKind, RenderRun, RenderSpec, ShippedDisplay, Stimulus, Summary};
 
 const PAPER: [&str; 5] = ["aluminium", "steel", "stone", "wood", "rubber"];
 
@@ -183,12 +185,119 @@ fn with_a_finger_20_percent_below_the_model_model_is_no_worse_than_pid_against_t
     finger_check(0.8);
 }
 
-/// Known failure (see the report): with a finger that delivers more heat than the model (×1.2), the paper's PID
-/// lets the plate warm with that heat — its finite loop gain acts like the real material's surface, which warms
-/// under the extra heat — while the model controller's observer learns the heat and holds the plate on the
-/// set-point. Measured 0.7014 °C (model) against 0.6982 °C (pid), the same at seeds 1–4.
+/// With a finger that delivers more heat than the model (×1.2), the paper's PID lets the plate warm with that heat
+/// (its finite loop gain acts like the real material's surface, which warms under the extra heat), while the model
+/// controller's observer learns the heat and holds the plate on the set-point. Without the calibration at the touch
+/// the model lost by 0.5 % (0.7014 °C against pid's 0.6982, seeds 1–4 alike); with it (the rest's learned heat
+/// tells how much warmer this finger is, and the target is computed for it) it wins, 0.6044 against 0.6982
+/// (×0.8: 0.8578 against 0.9559, before 0.9512).
 #[test]
-#[ignore = "known failure: model 0.7014 °C vs pid 0.6982 °C against the truth (see the doc comment)"]
 fn with_a_finger_20_percent_above_the_model_model_is_no_worse_than_pid_against_the_truth() {
     finger_check(1.2);
+}
+
+/// The runtime ticks the pipeline at up to 1 kHz. The display inverse then requests over one sensor sample period
+/// rather than one tick (`ChannelPipeline::request_horizon_s`); with a one-tick request the overshoot was 0.13–0.14
+/// °C at 1000 Hz and 0.06–0.07 °C at 200 Hz, with it 0.008–0.016 and 0.009–0.020 (measured, seed 1).
+#[test]
+fn model_overshoot_stays_below_a_tenth_of_a_degree_at_200_and_1000_hz_on_the_default_display() {
+    let specs: Vec<_> = [200.0, 1000.0]
+        .into_iter()
+        .flat_map(|rate_hz| {
+            PAPER.map(|m| {
+                let mut s = spec(ShippedDisplay::Default, ControllerKind::Model, m);
+                s.rate_hz = rate_hz;
+                s
+            })
+        })
+        .collect();
+    for run in render_all(&specs).unwrap_or_else(|e| panic!("{e}")) {
+        let (s, rate_hz) = (&run.summary, run.spec.rate_hz);
+        eprintln!("{rate_hz} Hz {}: overshoot {:.4} °C", s.material, s.overshoot_c);
+        assert!(
+            s.overshoot_c < 0.1,
+            "{rate_hz} Hz {}: overshoot {} °C",
+            s.material,
+            s.overshoot_c
+        );
+        assert_eq!(s.first_fault, None, "{rate_hz} Hz {}: fault", s.material);
+    }
+}
+
+/// After a release the target warms back faster than the display can warm the finger; that lag is not driven past
+/// the target and must not count as overshoot. With a release at 10 s the overshoot is exactly that of the same
+/// run (same seed, identical rows until the release) over its first 10 s, while the skin trails the warming target
+/// after the release by far more than the 0.1 °C bound (so counting it would break the judged property).
+#[test]
+fn overshoot_counts_the_contact_only_not_the_warming_after_a_release() {
+    let release_at_s = 10.0;
+    let held = {
+        let mut s = spec(ShippedDisplay::Default, ControllerKind::Model, "aluminium");
+        s.duration_s = 30.0;
+        s
+    };
+    let released = RenderSpec {
+        release_at_s: Some(release_at_s),
+        ..held.clone()
+    };
+    let runs = render_all(&[held, released]).unwrap_or_else(|e| panic!("{e}"));
+    let (held, released) = (&runs[0].trajectory, &runs[1].trajectory);
+    let below = |t: &Trajectory, after_release: bool| {
+        (0..t.len())
+            .filter(|&i| t.time_s[i] > 0.0 && (t.time_s[i] > release_at_s + 1e-9) == after_release)
+            .map(|i| t.target_skin_c[i] - t.skin_c[i])
+            .fold(0.0, f64::max)
+    };
+    let want = below(held, false);
+    let trailing = below(released, true);
+    let got = runs[1].summary.overshoot_c;
+    eprintln!(
+        "overshoot with release {got:.4} °C, contact part of the held run {want:.4} °C, trailing {trailing:.4} °C"
+    );
+    assert_eq!(
+        got, want,
+        "overshoot with release {got} vs the held run's first {release_at_s} s {want}"
+    );
+    assert!(trailing > 0.1, "skin trails the warming target by {trailing} °C only");
+    assert!(got < 0.1, "overshoot {got} °C");
+}
+
+/// The calibration at the touch (`PipelineConfig::calibrate_finger_at_touch`): after the 5 s rest, the model
+/// controller's learned unknown heat shifts the finger model's receptor to the real finger's receptor on the
+/// display at the touch (the plant's true state), for the ×0.8 and ×1.2 fingers to within 0.05 °C and a quarter of
+/// the gap the uncalibrated model leaves (the learned heat fluctuates by about ±3 mW, ±0.05 °C, from tick to tick;
+/// its average over the last second trails the real finger, which still settles on the display), and
+/// leaves the model exactly as it is for the default finger (its learned heat is noise, which the gate refuses).
+/// pid learns no heat: never calibrated. The real finger's own resting temperature in air differs from the model's
+/// by more (−1.15 °C at ×0.8): while the display renders air for the model finger, its plate holds the real finger
+/// near the model's resting surface (800 W/(m²·K) to the plate against 10 to air), and the display can only
+/// render a touch from where the finger really is.
+#[test]
+fn the_touch_calibrates_the_finger_model_to_the_real_finger_and_only_to_a_different_one() {
+    for factor in [1.0, 0.8, 1.2] {
+        for controller in [pid(ShippedDisplay::Default), ControllerKind::Model] {
+            let mut s = spec(ShippedDisplay::Default, controller, "wood");
+            s.finger_skin = finger(factor);
+            let mut lp = Loop::new(&s);
+            lp.run((s.pre_contact_s * s.rate_hz).round() as usize);
+            let model_c = lp.pipeline.display_finger().receptor_c();
+            let real_c = lp.plant.channel(0).unwrap_or_else(|e| panic!("{e}")).state().receptor_c;
+            let touch = Stimulus::Touch {
+                material: s.material.clone(),
+                object_c: s.object_temperature_c(),
+            };
+            lp.pipeline.set_stimulus(touch).unwrap_or_else(|e| panic!("{e}"));
+            let (shift_c, want_c) = (lp.pipeline.calibration_shift_c(), real_c - model_c);
+            let name = lp.pipeline.controller().name();
+            eprintln!("finger ×{factor} {name}: calibration shift {shift_c:.4} °C, real minus model {want_c:.4}");
+            if factor == 1.0 || name == "pid" {
+                assert_eq!(shift_c, 0.0, "×{factor} {name}: shift {shift_c} °C");
+            } else {
+                assert!(
+                    (shift_c - want_c).abs() < 0.05 && (shift_c - want_c).abs() < 0.25 * want_c.abs(),
+                    "×{factor}: calibration shift {shift_c} vs real minus model receptor {want_c} °C"
+                );
+            }
+        }
+    }
 }
