@@ -5,7 +5,7 @@
 //! reads the wall clock itself.
 
 use std::sync::{Arc, Condvar, Mutex};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Longest a [`ManualClock`] sleeper waits in real time before it returns to let the loop look at its stop flag \[s\].
 const MANUAL_POLL_S: f64 = 0.02;
@@ -20,32 +20,17 @@ pub trait Clock: Send + Sync {
     fn sleep_until(&self, deadline_s: f64);
 }
 
-/// Real monotonic time from `std::time::Instant`.
-#[derive(Debug, Clone, Copy)]
-pub struct MonotonicClock {
-    origin: Instant,
-}
-
-impl MonotonicClock {
-    /// A clock whose origin is now.
-    pub fn new() -> Self {
-        MonotonicClock { origin: Instant::now() }
-    }
-}
-
-impl Default for MonotonicClock {
-    fn default() -> Self {
-        MonotonicClock::new()
-    }
-}
+/// Real monotonic time from `std::time::Instant`: the device layer's clock, so the loop and a serial device share one
+/// implementation.
+pub use thermode_device::protocol::MonotonicClock;
 
 impl Clock for MonotonicClock {
     fn now_s(&self) -> f64 {
-        self.origin.elapsed().as_secs_f64()
+        thermode_device::protocol::Clock::now_s(self)
     }
 
     fn sleep_until(&self, deadline_s: f64) {
-        let remaining_s = deadline_s - self.now_s();
+        let remaining_s = deadline_s - Clock::now_s(self);
         if remaining_s > 0.0 && remaining_s.is_finite() {
             std::thread::sleep(Duration::try_from_secs_f64(remaining_s).unwrap_or(Duration::MAX));
         }
