@@ -352,11 +352,11 @@ fn simulate_fv(spec: &SimulationSpec) -> Result<Trace, ParamError> {
     columns.push(("display_setpoint_c".into(), setpoint));
     columns.push(("display_finger_c".into(), display_finger));
     let resolution = format!(
-        "fv, {} skin + {} object cells, first cell {:.1} µm, step {} s, {} refinements, last change {:.4} °C{}",
+        "fv, {} skin + {} object cells, first cell {:.1} µm, step {:.4} ms, {} refinements, last change {:.4} °C{}",
         resolution.skin_cells,
         resolution.object_cells,
         resolution.surface_cell_m * 1e6,
-        resolution.step_s,
+        resolution.step_s * 1e3,
         resolution.refinements,
         resolution.max_change_c,
         if resolution.converged { "" } else { " (NOT converged)" }
