@@ -28,6 +28,15 @@ pub trait PlateFinger: PlateCoupled {
     /// plate contact conductance `surface_contact_w_m2k` [W/(m²·K)].
     fn receptor_conductance_w_m2k(&self, surface_contact_w_m2k: f64) -> f64;
 
+    /// The skin temperature at `depth_m` \[m\] below the skin surface \[°C\], for comparing this finger with a
+    /// model whose receptor lies at another depth (the Kron renderer's T1 at the epidermis centre). Default: the
+    /// receptor temperature whatever the depth (a model with a single node per layer has no finer read-out); the
+    /// finite-volume finger interpolates its cells ([`FvModel::skin_temperature_at_depth_c`]).
+    fn temperature_at_depth_c(&self, depth_m: f64) -> f64 {
+        let _ = depth_m;
+        self.receptor_c()
+    }
+
     /// This model for the default fingertip ([`Skin::fingertip`]), at its steady state in still air at 23 °C.
     fn fingertip() -> Result<Self, ParamError>
     where
@@ -49,6 +58,11 @@ impl PlateFinger for KronModel {
 impl PlateFinger for FvModel {
     fn receptor_conductance_w_m2k(&self, surface_contact_w_m2k: f64) -> f64 {
         surface_contact_w_m2k
+    }
+
+    /// [`FvModel::skin_temperature_at_depth_c`]: the surface at depth 0, linear between cell centres.
+    fn temperature_at_depth_c(&self, depth_m: f64) -> f64 {
+        self.skin_temperature_at_depth_c(depth_m)
     }
 
     /// Default grid and scheme, at the steady state in still air at the paper's 23 °C (as the Kron model starts).

@@ -37,6 +37,16 @@ impl RendererKind {
             RendererKind::Fv => "fv",
         }
     }
+
+    /// Where this kind's receptor lies below the skin surface of `skin` \[m\]: half the first layer's
+    /// thickness for the kron renderer (T1, the centre of the epidermis, Δx₁/2), 0 (the surface) for the fv
+    /// renderer. Fingers compared with this kind's target are read at this depth.
+    pub fn receptor_depth_m(self, skin: &Skin) -> f64 {
+        match self {
+            RendererKind::Kron => skin.layers.first().map_or(0.0, |epidermis| 0.5 * epidermis.thickness_m),
+            RendererKind::Fv => 0.0,
+        }
+    }
 }
 
 /// The finite-volume grid of renderer and display inverse: [`FvConfig::default`] with the light-touch contact
@@ -155,6 +165,16 @@ impl Renderer {
         match self {
             Renderer::Kron { model, .. } => model.temperatures_c()[0],
             Renderer::Fv { model, .. } => model.surface_c(),
+        }
+    }
+
+    /// The skin temperature at `depth_m` \[m\] below the surface \[°C\]: for the fv renderer
+    /// [`FvModel::skin_temperature_at_depth_c`] (the surface at depth 0, [`Self::receptor_c`]); the three-layer
+    /// model has one node per layer, so the kron renderer reads its receptor T1 whatever the depth.
+    pub fn skin_temperature_at_depth_c(&self, depth_m: f64) -> f64 {
+        match self {
+            Renderer::Kron { .. } => self.receptor_c(),
+            Renderer::Fv { model, .. } => model.skin_temperature_at_depth_c(depth_m),
         }
     }
 

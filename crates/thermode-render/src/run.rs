@@ -27,6 +27,16 @@
 //!   finger and the fv renderer it is the renderer's target itself (the pipeline's calibration at the touch,
 //!   [`PipelineConfig::calibrate_finger_at_touch`], leaves a finger that matches the model as it is; a different
 //!   finger gets a target computed for it, while the truth is that finger's own contact).
+//! - Receptor depth: the target is the renderer's receptor — the skin surface for the fv renderer, the epidermis
+//!   centre T1 (depth Δx₁/2) for the kron renderer — so the simulated finger on the display (`skin_c`) and the
+//!   truth (`truth_skin_c`) are read at that same depth ([`RenderSpec::receptor_depth_m`]): at the surface for fv
+//!   (the finger's receptor, bit for bit as before), and for kron at half the first layer of the *simulated
+//!   finger's* skin ([`RenderSpec::finger_skin`]), interpolated between its finite-volume cells
+//!   ([`FvModel::skin_temperature_at_depth_c`]). It is that skin's because the receptor is a place in the real
+//!   finger (its own epidermis centre), and the truth is the same finger; with the default finger it is the
+//!   renderer's own Δx₁/2. Comparing Kron's T1 with a surface temperature would count the gradient across half
+//!   the epidermis as error (on aluminium several °C at the touch). The kron target remains Kron's model: what is
+//!   left of truth − target is its known limit (an object held at its temperature, without heat capacity).
 //! - Rows are recorded after each tick and plant step: `time_s` is the end of the tick's interval relative to the
 //!   contact (0 at contact, negative before); temperatures are those at that time; current and set-point are those
 //!   held over the interval.
@@ -37,7 +47,7 @@
 use std::io::Write;
 
 use thermode_control::FaultCode;
-use thermode_device::{Device, DeviceConfig, SimulatedDisplay};
+use thermode_device::{Device, DeviceConfig, PlateFinger, SimulatedChannel, SimulatedDisplay};
 use thermode_model::fv::{FvConfig, FvModel};
 use thermode_model::{Material, Skin};
 
@@ -165,6 +175,14 @@ impl RenderSpec {
         ((self.tick_s() / self.plant_substep_s) - 1e-9).ceil().max(1.0) as usize
     }
 
+    /// Depth below the skin surface at which the simulated finger (`skin_c`) and the truth (`truth_skin_c`) are
+    /// read \[m\]: the renderer's receptor depth in the simulated finger's own skin
+    /// ([`RendererKind::receptor_depth_m`] of [`RenderSpec::finger_skin`]): half its epidermis (Kron's T1) for the
+    /// kron renderer, 0 (the surface) for the fv renderer. See the module documentation.
+    pub fn receptor_depth_m(&self) -> f64 {
+        self.pipeline.renderer.receptor_depth_m(&self.finger_skin)
+    }
+
     /// The device as the plant sees it: the device file with the simulated finger's contact conductance.
     pub fn plant_device(&self) -> DeviceConfig {
         let mut device = self.pipeline.device;
@@ -180,11 +198,13 @@ impl RenderSpec {
 pub struct Trajectory {
     /// Time since the touch at the end of the tick \[s\] (0 at contact, negative before).
     pub time_s: Vec<f64>,
-    /// Ground truth: the simulated finger touching the real material \[°C\].
+    /// Ground truth: the simulated finger touching the real material, at the receptor depth
+    /// ([`RenderSpec::receptor_depth_m`]: surface for fv, epidermis centre for kron) \[°C\].
     pub truth_skin_c: Vec<f64>,
-    /// The renderer's target \[°C\].
+    /// The renderer's target: its receptor (fv: the skin surface; kron: T1, the epidermis centre) \[°C\].
     pub target_skin_c: Vec<f64>,
-    /// The simulated finger's receptor on the display \[°C\].
+    /// The simulated finger on the display at the receptor depth ([`RenderSpec::receptor_depth_m`]: surface for
+    /// fv, epidermis centre for kron) \[°C\].
     pub skin_c: Vec<f64>,
     /// The pipeline's finger model on the display (what it believes the finger feels) \[°C\].
     pub model_skin_c: Vec<f64>,
@@ -236,7 +256,7 @@ impl Trajectory {
         self.time_s.is_empty()
     }
 
-    fn record(&mut self, time_s: f64, truth_c: f64, telemetry: &Telemetry, plant: &Plant) {
+    fn record(&mut self, time_s: f64, truth_c: f64, telemetry: &Telemetry, plant: &Plant, depth_m: f64) {
         let Ok(channel) = plant.channel(0) else {
             return;
         };
@@ -244,7 +264,7 @@ impl Trajectory {
         self.time_s.push(time_s);
         self.truth_skin_c.push(truth_c);
         self.target_skin_c.push(telemetry.target_skin_c);
-        self.skin_c.push(state.receptor_c);
+        self.skin_c.push(finger_at_depth_c(channel, depth_m));
         self.model_skin_c.push(telemetry.skin_c);
         self.requested_setpoint_c.push(telemetry.requested_setpoint_c);
         self.display_setpoint_c.push(telemetry.display_setpoint_c);
@@ -262,7 +282,7 @@ impl Trajectory {
 pub struct ContactState {
     /// The renderer's target at the touch \[°C\] (T0 of the lag).
     pub target_c: f64,
-    /// The simulated finger's receptor at the touch \[°C\].
+    /// The simulated finger at the receptor depth at the touch \[°C\] ([`RenderSpec::receptor_depth_m`]).
     pub skin_c: f64,
     /// The plant at the touch (for the actuator-limit run).
     pub plant: Plant,
@@ -346,6 +366,7 @@ pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<R
     let mut truth = truth_renderer(spec)?;
     let (pre, contact_ticks, release) = spec.tick_counts();
     let dt = spec.tick_s();
+    let depth_m = spec.receptor_depth_m();
     let start_s = plant.time_s();
     let mut trajectory = Trajectory::with_capacity(pre + contact_ticks);
     let mut at_contact = None;
@@ -359,7 +380,7 @@ pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<R
             truth.touch(&spec.material, spec.object_temperature_c())?;
             at_contact = Some(ContactState {
                 target_c: pipeline.renderer().receptor_c(),
-                skin_c: plant.channel(0)?.state().receptor_c,
+                skin_c: finger_at_depth_c(plant.channel(0)?, depth_m),
                 plant: plant.clone(),
             });
         }
@@ -370,7 +391,8 @@ pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<R
         let telemetry = tick(&mut pipeline, &mut plant, start_s + k as f64 * dt, dt, spec.substeps())?;
         truth.step(dt);
         let time_s = (k + 1) as f64 * dt - pre as f64 * dt;
-        trajectory.record(time_s, truth.receptor_c(), &telemetry, &plant);
+        let truth_c = truth_at_depth_c(&truth, depth_m);
+        trajectory.record(time_s, truth_c, &telemetry, &plant, depth_m);
     }
     let contact = at_contact.ok_or_else(|| RenderError::Invalid("the run never reached the touch".into()))?;
     let limit = actuator_limit(spec, &trajectory, &contact)?;
@@ -380,6 +402,26 @@ pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<R
         trajectory,
         summary,
     })
+}
+
+/// The simulated finger's skin at `depth_m` \[m\] below its surface \[°C\]: its receptor (the surface) at depth 0
+/// — exactly the channel state's `receptor_c` — otherwise [`PlateFinger::temperature_at_depth_c`].
+pub fn finger_at_depth_c(channel: &SimulatedChannel<FvModel>, depth_m: f64) -> f64 {
+    if depth_m == 0.0 {
+        channel.state().receptor_c
+    } else {
+        channel.finger().temperature_at_depth_c(depth_m)
+    }
+}
+
+/// The truth at `depth_m` \[m\] below the skin surface \[°C\]: its receptor (the surface) at depth 0, otherwise
+/// [`Renderer::skin_temperature_at_depth_c`].
+fn truth_at_depth_c(truth: &Renderer, depth_m: f64) -> f64 {
+    if depth_m == 0.0 {
+        truth.receptor_c()
+    } else {
+        truth.skin_temperature_at_depth_c(depth_m)
+    }
 }
 
 /// One tick of the pipeline on the plant's newest reading, then the plant advanced by `dt` in `substeps` equal
@@ -424,6 +466,11 @@ pub const CSV_HEADER: [&str; 17] = [
 
 /// Writes the runs as one CSV (header first, then every run's rows in order). Numbers in Rust's shortest
 /// round-trip form; `fault` is the numeric fault code (empty without fault); `contact` is 0 or 1.
+/// The columns are the [`Trajectory`] fields of the same names. `target_skin_c` is the renderer's receptor, and
+/// `skin_c` (the simulated finger on the display) and `truth_skin_c` (that finger touching the real material) are
+/// read at the same depth: the skin surface with `renderer` = `fv`, the centre of the finger's epidermis (Kron's
+/// T1, depth Δx₁/2) with `renderer` = `kron` ([`RenderSpec::receptor_depth_m`]). `model_skin_c` is the
+/// pipeline's own display-finger model at its receptor (the same node as the target).
 pub fn write_csv(runs: &[RenderRun], sink: &mut dyn Write) -> Result<(), csv::Error> {
     let mut writer = csv::Writer::from_writer(sink);
     writer.write_record(CSV_HEADER)?;

@@ -4,6 +4,9 @@
 //! half-way (the slow initial drop) next to what the actuator allows at all.
 //!
 //! # Definitions (t = time since the touch; rows after the touch are those with t > 0)
+//! - Skin and truth are read where the renderer's target lives ([`RenderSpec::receptor_depth_m`]): at the skin
+//!   surface for the fv renderer, at the centre of the simulated finger's epidermis (Kron's T1) for the kron
+//!   renderer, in the simulated finger on the display, in the truth and in the actuator-limit run alike.
 //! - RMS skin error: √(mean of (skin − target)²) over the rows with 0 < t ≤ 5 s, 5 < t ≤ 90 s, and 0 < t ≤ 90 s.
 //! - RMS against the truth: the same for skin − truth over 0 < t ≤ 90 s.
 //! - RMS display tracking: true plate minus the shaped set-point held over the tick, over 0 < t ≤ 90 s.
@@ -213,6 +216,7 @@ pub fn actuator_limit(
     let limit_a = channel.config().drive.current_limit_a;
     let module = *channel.module();
     let substeps = spec.substeps();
+    let depth_m = spec.receptor_depth_m();
     let h = spec.tick_s() / substeps as f64;
     let sign = if half.cooling { 1.0 } else { -1.0 };
     let window = trajectory
@@ -233,7 +237,7 @@ pub fn actuator_limit(
             };
             channel.step(h, current_a);
         }
-        let skin_c = channel.state().receptor_c;
+        let skin_c = crate::run::finger_at_depth_c(channel, depth_m);
         if result.lag_s.is_none() && sign * (half.level_c - skin_c) >= 0.0 {
             let skin_time_s = interpolate(previous, (t, skin_c), half.level_c);
             result.lag_s = half.target_time_s.map(|target_s| (skin_time_s - target_s).max(0.0));

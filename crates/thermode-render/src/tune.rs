@@ -191,6 +191,8 @@ pub fn evaluate(prepared: &Prepared, gains: &PidGains) -> Result<f64, RenderErro
 
 fn evaluate_ticks(prepared: &Ticks, mut plant: Plant, gains: &PidGains) -> Result<f64, RenderError> {
     let spec = &prepared.spec;
+    // The skin is read where the renderer's receptor sits (kron: the epidermis centre), as `render` does.
+    let depth_m = spec.receptor_depth_m();
     let cfg = &spec.pipeline;
     let limit_a = cfg.device.drive.current_limit_a;
     let mut controller = PidController::new(*gains, limit_a)?;
@@ -233,7 +235,7 @@ fn evaluate_ticks(prepared: &Ticks, mut plant: Plant, gains: &PidGains) -> Resul
         }
         let time_s = (k + 1) as f64 * dt - prepared.pre_ticks as f64 * dt;
         if time_s > 1e-9 && time_s <= FULL_WINDOW_S + 1e-9 {
-            let error_c = plant.channel(0)?.state().receptor_c - prepared.target_c[k];
+            let error_c = crate::run::finger_at_depth_c(plant.channel(0)?, depth_m) - prepared.target_c[k];
             sum += error_c * error_c;
             count += 1;
         }

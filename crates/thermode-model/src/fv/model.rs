@@ -386,6 +386,46 @@ impl FvModel {
         t0 - self.surface_heat_flux_w_m2() * self.skin.half_resistance()
     }
 
+    /// Skin temperature at `depth_m` \[m\] below the surface \[°C\]: the surface face value ([`Self::surface_c`]) at
+    /// depth 0, linear between the surface and the centre of the surface cell and between neighbouring cell centres,
+    /// and from the centre of the deepest cell to the bottom face (the held core temperature with
+    /// [`DeepBoundary::Core`](super::DeepBoundary::Core), the deepest cell's own temperature when insulated).
+    /// Between two centres the line follows the flux: the gradient in each half is the heat flux between the two
+    /// cells over that cell's conductivity, so across a layer boundary the profile kinks as steady conduction does;
+    /// inside a layer it is plain linear interpolation. Its job includes clamping: a depth below 0 reads the
+    /// surface, one beyond the skin's thickness the bottom face. A NaN depth gives NaN. Never allocates.
+    pub fn skin_temperature_at_depth_c(&self, depth_m: f64) -> f64 {
+        if depth_m.is_nan() {
+            return f64::NAN;
+        }
+        let centres = &self.skin.centre_m;
+        let last = centres.len() - 1;
+        let thickness_m = centres[last] + 0.5 * self.skin.width_m[last];
+        let depth_m = depth_m.clamp(0.0, thickness_m);
+        if depth_m <= centres[0] {
+            let surface_c = self.surface_c();
+            return surface_c + (self.skin_t[0] - surface_c) * depth_m / centres[0];
+        }
+        if depth_m >= centres[last] {
+            let bottom_c = if self.skin.end_g > 0.0 {
+                self.skin.end_c
+            } else {
+                self.skin_t[last]
+            };
+            let half_m = thickness_m - centres[last];
+            return self.skin_t[last] + (bottom_c - self.skin_t[last]) * (depth_m - centres[last]) / half_m;
+        }
+        // The cell pair whose centres enclose the depth: i = number of centres at or above it, minus one.
+        let i = centres.partition_point(|c| *c <= depth_m) - 1;
+        let flux_w_m2 = self.skin.link[i] * (self.skin_t[i] - self.skin_t[i + 1]);
+        let face_m = centres[i] + 0.5 * self.skin.width_m[i];
+        if depth_m <= face_m {
+            self.skin_t[i] - flux_w_m2 * (depth_m - centres[i]) / self.skin.conductivity[i]
+        } else {
+            self.skin_t[i + 1] + flux_w_m2 * (centres[i + 1] - depth_m) / self.skin.conductivity[i + 1]
+        }
+    }
+
     /// Temperature of the object's contact face \[°C\] (the object side of the contact resistance), if there is an
     /// object.
     pub fn object_face_c(&self) -> Option<f64> {

@@ -34,9 +34,9 @@ pub enum ControllerArg {
 /// The renderer (and display-inverse finger model).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum RendererArg {
-    /// The paper's three-layer model (Kron).
+    /// The paper's three-layer model (Kron); receptor at the epidermis centre (T1).
     Kron,
-    /// The finite-volume reference (physics-true).
+    /// The finite-volume reference (physics-true); receptor at the skin surface.
     Fv,
 }
 
@@ -67,7 +67,9 @@ pub struct RenderArgs {
     /// Controller.
     #[arg(long, value_enum, default_value = "model")]
     controller: ControllerArg,
-    /// Renderer: the finger model that computes the target and runs on the display.
+    /// Renderer: the finger model that computes the target and runs on the display. The target is its receptor
+    /// (fv: the skin surface; kron: T1, the centre of the epidermis), and the simulated finger (`skin_c`) and the
+    /// truth (`truth_skin_c`) are read at that same depth in the simulated finger's skin.
     #[arg(long, value_enum, default_value = "fv")]
     model: RendererArg,
     /// Device file (TOML); default: the built-in default display.
