@@ -153,9 +153,6 @@ pub(crate) struct Work {
     pivot0: (f64, f64),
     /// The matrix the cached elimination belongs to: κ, θh, side conductance, contact flag (as bits).
     key: Option<[u64; 4]>,
-    /// Scratch output states of the skin for [`crate::inverse::PlateCoupled::receptor_affine`].
-    pub scratch_a: Vec<f64>,
-    pub scratch_b: Vec<f64>,
     /// The next state, swapped with the model's state after a step.
     pub next_skin: Vec<f64>,
     pub next_object: Vec<f64>,
@@ -174,8 +171,6 @@ impl Work {
             stage_object: o(),
             pivot0: (0.0, 0.0),
             key: None,
-            scratch_a: s(),
-            scratch_b: s(),
             next_skin: s(),
             next_object: o(),
         }
@@ -203,7 +198,8 @@ pub(crate) struct StepFlows {
 }
 
 impl StepFlows {
-    fn add_scaled(&mut self, other: StepFlows, weight: f64) {
+    /// self += weight · other, field by field.
+    pub fn add_scaled(&mut self, other: StepFlows, weight: f64) {
         self.skin.add_scaled(other.skin, weight);
         self.object.add_scaled(other.object, weight);
     }

@@ -1,5 +1,11 @@
 //! [`FvModel`]: the finite-volume finger (and optional object) with its state, stepping, steady states,
 //! calibration, energy bookkeeping and the display-inverse interface.
+//!
+//! The display inverse uses that a step on a plate is linear: the next skin state is
+//! `M⁻¹(C·T + h·b₀) + T_d·s`, where the sensitivity `s` (every cell's response to a unit plate temperature) depends
+//! only on the step, the conductance, the scheme and the grid. `s` is cached per (step, conductance), so
+//! [`PlateCoupled::receptor_affine`] costs one step (the offset, plate at 0 °C), and a
+//! [`PlateCoupled::step_on_plate`] right after it with the same step and conductance costs no solve at all.
 
 use std::cell::RefCell;
 
@@ -61,6 +67,62 @@ pub struct FvModel {
     perfusion_scale: f64,
     layer_count: usize,
     work: RefCell<Work>,
+    plate: RefCell<PlateCache>,
+}
+
+/// The display-inverse cache: the plate sensitivity for one (step, conductance) and the offset step from the current
+/// state. Preallocated; refilling it never allocates.
+#[derive(Debug, Clone)]
+struct PlateCache {
+    /// (`dt_s`, `conductance_w_m2k`) as bits, that the sensitivity belongs to; `None` when nothing is cached.
+    key: Option<[u64; 2]>,
+    /// Response of every skin cell to a unit plate temperature over one step [K/K].
+    sensitivity: Vec<f64>,
+    /// Heat flows of the step per degree of plate temperature [J/(m²·K)].
+    flow_slope: StepFlows,
+    /// Receptor weights: `surface = cell_weight · T₀(next) + plate_weight · T_d` [1].
+    cell_weight: f64,
+    plate_weight: f64,
+    /// The step from the current state with the plate at 0 °C \[°C\], valid while `offset_key == key`.
+    offset: Vec<f64>,
+    /// Heat flows of that offset step [J/m²].
+    offset_flows: StepFlows,
+    /// The key the offset step was made with; `None` when the state or the matrix changed since.
+    offset_key: Option<[u64; 2]>,
+    /// All zeros: the state the sensitivity is measured from.
+    zeros: Vec<f64>,
+}
+
+impl PlateCache {
+    fn new(skin_cells: usize) -> Self {
+        PlateCache {
+            key: None,
+            sensitivity: vec![0.0; skin_cells],
+            flow_slope: StepFlows::default(),
+            cell_weight: 0.0,
+            plate_weight: 0.0,
+            offset: vec![0.0; skin_cells],
+            offset_flows: StepFlows::default(),
+            offset_key: None,
+            zeros: vec![0.0; skin_cells],
+        }
+    }
+
+    /// Forgets everything (after a change of the matrix).
+    fn invalidate(&mut self) {
+        self.key = None;
+        self.offset_key = None;
+    }
+
+    /// Forgets the offset step (after a change of the state).
+    fn forget_offset(&mut self) {
+        self.offset_key = None;
+    }
+}
+
+/// The display-inverse cache key of a step of `dt_s` on a plate through `conductance_w_m2k`.
+fn plate_key(dt_s: f64, conductance_w_m2k: f64) -> [u64; 2] {
+    [dt_s.to_bits(), conductance_w_m2k.to_bits()]
 }
 
 impl FvModel {
@@ -89,6 +151,7 @@ impl FvModel {
             skin_t: vec![arterial_c; skin_arm.len()],
             object_t: vec![arterial_c; object_cells],
             work: RefCell::new(Work::new(skin_arm.len(), object_cells)),
+            plate: RefCell::new(PlateCache::new(skin_arm.len())),
             skin: skin_arm,
             object: object_arm,
             contact_resistance_m2k_w: config.contact_resistance_m2k_w,
@@ -173,6 +236,7 @@ impl FvModel {
         self.perfusion_scale = scale;
         self.skin.set_perfusion_scale(scale);
         self.work.get_mut().invalidate();
+        self.plate.get_mut().invalidate();
         Ok(())
     }
 
@@ -180,6 +244,7 @@ impl FvModel {
     pub fn set_skin_uniform(&mut self, temperature_c: f64) -> Result<(), ParamError> {
         require_finite(ORIGIN, "temperature_c", temperature_c)?;
         self.skin_t.iter_mut().for_each(|t| *t = temperature_c);
+        self.plate.get_mut().forget_offset();
         Ok(())
     }
 
@@ -233,6 +298,7 @@ impl FvModel {
         self.object_t = vec![self.skin.arterial_c; object_cells];
         self.contact_resistance_m2k_w = config.contact_resistance_m2k_w;
         self.work = RefCell::new(Work::new(self.skin.len(), object_cells));
+        self.plate.get_mut().invalidate();
         Ok(())
     }
 
@@ -263,6 +329,7 @@ impl FvModel {
         work.next_object = next_object;
         self.ledger.record(flows);
         self.env = env;
+        self.plate.get_mut().forget_offset();
     }
 
     /// Sets the steady state in `env` (solving the steady tridiagonal system directly). In
@@ -297,6 +364,7 @@ impl FvModel {
             self.work.get_mut(),
         );
         self.env = env;
+        self.plate.get_mut().forget_offset();
         Ok(())
     }
 
@@ -324,6 +392,7 @@ impl FvModel {
             self.skin_t = skin_t;
             self.object_t = object_t;
             self.env = env;
+            self.plate.get_mut().forget_offset();
             self.set_perfusion_scale(scale)?;
         }
         result
@@ -520,44 +589,83 @@ impl FvModel {
         skin || surface
     }
 
-    /// The surface temperature after one step on a plate at `plate_c`, written into a scratch state.
-    fn plate_trial(&self, dt_s: f64, conductance_w_m2k: f64, plate_c: f64, work: &mut Work, use_b: bool) -> f64 {
+    /// Makes the display-inverse cache hold the sensitivity for (`dt_s`, `conductance_w_m2k`) and the offset step
+    /// from the current state; returns the receptor temperature after one step as `(offset_c, slope)`.
+    fn plate_offset(&self, dt_s: f64, conductance_w_m2k: f64) -> (f64, f64) {
+        let key = plate_key(dt_s, conductance_w_m2k);
+        let mut work = self.work.borrow_mut();
+        let cache = &mut *self.plate.borrow_mut();
         let g = series(self.skin.half_resistance(), conductance_w_m2k);
-        let bodies = Bodies::new(&self.skin, None, Side::Fixed { g, temp_c: plate_c });
-        let mut out = std::mem::take(if use_b {
-            &mut work.scratch_b
-        } else {
-            &mut work.scratch_a
-        });
-        bodies.advance(self.scheme, dt_s, (&self.skin_t, &[]), (&mut out, &mut []), work);
-        let surface = out[0] - g * (out[0] - plate_c) * self.skin.half_resistance();
-        if use_b {
-            work.scratch_b = out;
-        } else {
-            work.scratch_a = out;
+        let on_plate = |plate_c: f64| Bodies::new(&self.skin, None, Side::Fixed { g, temp_c: plate_c });
+        if cache.key != Some(key) {
+            self.fill_sensitivity(cache, g, dt_s, &mut work);
+            cache.key = Some(key);
         }
-        surface
+        if cache.offset_key != Some(key) {
+            let (state, offset) = (&self.skin_t, &mut cache.offset);
+            cache.offset_flows = on_plate(0.0).advance(self.scheme, dt_s, (state, &[]), (offset, &mut []), &mut work);
+            cache.offset_key = Some(key);
+        }
+        (
+            cache.cell_weight * cache.offset[0],
+            cache.cell_weight * cache.sensitivity[0] + cache.plate_weight,
+        )
+    }
+
+    /// The response to a unit plate temperature, as the difference of two steps from the zero state (plate at 1 °C
+    /// and at 0 °C: the sources cancel, and from zero the two steps are small, so the difference keeps full
+    /// precision), and the receptor weights. Uses the offset buffer as scratch (the caller invalidates it).
+    fn fill_sensitivity(&self, cache: &mut PlateCache, g: f64, dt_s: f64, work: &mut Work) {
+        let step = |plate_c: f64, out: &mut [f64], work: &mut Work| {
+            let bodies = Bodies::new(&self.skin, None, Side::Fixed { g, temp_c: plate_c });
+            bodies.advance(self.scheme, dt_s, (&cache.zeros, &[]), (out, &mut []), work)
+        };
+        let mut flow_slope = step(1.0, &mut cache.sensitivity, work);
+        flow_slope.add_scaled(step(0.0, &mut cache.offset, work), -1.0);
+        for (s, base) in cache.sensitivity.iter_mut().zip(&cache.offset) {
+            *s -= base;
+        }
+        cache.flow_slope = flow_slope;
+        cache.offset_key = None;
+        // surface = T₀ − g (T₀ − T_d) r_half (flux continuity through the surface half cell).
+        let plate_weight = g * self.skin.half_resistance();
+        cache.cell_weight = 1.0 - plate_weight;
+        cache.plate_weight = plate_weight;
     }
 }
 
 impl PlateCoupled for FvModel {
-    /// Exact: the step is linear in the plate temperature, so two trial steps (plate at 0 °C and 1 °C) on scratch
-    /// buffers give offset and slope.
+    /// Exact: the step is linear in the plate temperature. The sensitivity to the plate temperature is cached per
+    /// (`dt_s`, `conductance_w_m2k`), so this costs one step on scratch buffers (the offset, plate at 0 °C), which a
+    /// following [`step_on_plate`](PlateCoupled::step_on_plate) with the same step and conductance reuses.
     fn receptor_affine(&self, dt_s: f64, conductance_w_m2k: f64) -> (f64, f64) {
-        let mut work = self.work.borrow_mut();
-        let at_zero = self.plate_trial(dt_s, conductance_w_m2k, 0.0, &mut work, false);
-        let at_one = self.plate_trial(dt_s, conductance_w_m2k, 1.0, &mut work, true);
-        (at_zero, at_one - at_zero)
+        self.plate_offset(dt_s, conductance_w_m2k)
     }
 
+    /// Equal to [`FvModel::step`] in [`FvEnvironment::Plate`] to rounding (state and energy ledger). Right after
+    /// [`receptor_affine`](PlateCoupled::receptor_affine) with the same step and conductance (and no change of state
+    /// in between) it is the cached offset step plus `plate_c` times the cached sensitivity, without solving;
+    /// otherwise it is that plain step (so a caller whose inverse horizon differs from its step, as a renderer
+    /// requesting over the sensor period, costs two steps per tick and never refills the cache).
     fn step_on_plate(&mut self, dt_s: f64, conductance_w_m2k: f64, plate_c: f64) {
-        self.step(
-            dt_s,
-            FvEnvironment::Plate {
-                conductance_w_m2k,
-                temperature_c: plate_c,
-            },
-        );
+        let env = FvEnvironment::Plate {
+            conductance_w_m2k,
+            temperature_c: plate_c,
+        };
+        let cache = self.plate.get_mut();
+        if cache.offset_key != Some(plate_key(dt_s, conductance_w_m2k)) {
+            self.step(dt_s, env);
+            return;
+        }
+        let response = cache.offset.iter().zip(&cache.sensitivity);
+        for (t, (offset, sensitivity)) in self.skin_t.iter_mut().zip(response) {
+            *t = offset + plate_c * sensitivity;
+        }
+        let mut flows = cache.offset_flows;
+        flows.add_scaled(cache.flow_slope, plate_c);
+        cache.forget_offset();
+        self.ledger.record(flows);
+        self.env = env;
     }
 
     fn receptor_c(&self) -> f64 {
@@ -658,4 +766,185 @@ fn build_arm(
     };
     arm.set_perfusion_scale(1.0);
     arm
+}
+
+#[cfg(test)]
+mod plate_cache_tests {
+    //! The cached display-inverse step against the plain step in a plate environment (the computation before
+    //! caching), and the invalidation of the cache.
+
+    use super::*;
+
+    /// A fingertip with perfusion and metabolic heat in every layer, held at a core temperature below, in its steady
+    /// state in air: every source term of the step is active.
+    fn busy_finger(scheme: TimeScheme) -> FvModel {
+        let mut skin = Skin::fingertip();
+        for (i, layer) in skin.layers.iter_mut().enumerate() {
+            layer.perfusion_per_s = 0.001 * (i + 1) as f64;
+            layer.metabolic_w_m3 = 400.0 * (i + 1) as f64;
+        }
+        let config = FvConfig {
+            deep_boundary: DeepBoundary::Core { temperature_c: 36.0 },
+            scheme,
+            ..FvConfig::default()
+        };
+        let mut model = FvModel::new(&skin, None, &config).unwrap();
+        model.set_steady_in_air(23.0).unwrap();
+        model
+    }
+
+    fn plate(conductance_w_m2k: f64, temperature_c: f64) -> FvEnvironment {
+        FvEnvironment::Plate {
+            conductance_w_m2k,
+            temperature_c,
+        }
+    }
+
+    /// Largest difference over all skin cells [K].
+    fn max_cell_difference(a: &FvModel, b: &FvModel) -> f64 {
+        let pairs = a.skin_temperatures_c().iter().zip(b.skin_temperatures_c());
+        pairs.map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+    }
+
+    /// Largest difference of the ledger entries relative to the largest entry.
+    fn ledger_difference(a: EnergyLedger, b: EnergyLedger) -> f64 {
+        let fields = |l: EnergyLedger| {
+            [
+                l.perfusion_j_m2,
+                l.metabolic_j_m2,
+                l.deep_in_j_m2,
+                l.skin_surface_out_j_m2,
+            ]
+        };
+        let (fa, fb) = (fields(a), fields(b));
+        let scale = fb.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+        fa.iter().zip(&fb).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max) / scale
+    }
+
+    /// Runs 200 display-inverse ticks (affine, then the step) beside plain plate steps, with the plate temperature,
+    /// and per `schedule` the step and conductance, changing every tick; returns the worst cell and ledger difference
+    /// and the worst miss of the affine prediction of the receptor temperature.
+    fn run_beside(scheme: TimeScheme, schedule: impl Fn(usize) -> (f64, f64)) -> (f64, f64, f64) {
+        let mut cached = busy_finger(scheme);
+        let mut plain = cached.clone();
+        let (mut cells, mut ledger, mut predicted) = (0.0f64, 0.0f64, 0.0f64);
+        for tick in 0..200 {
+            let (dt_s, conductance) = schedule(tick);
+            let plate_c = 30.0 + 12.0 * (tick as f64 * 0.37).sin();
+            let (offset, slope) = cached.receptor_affine(dt_s, conductance);
+            cached.step_on_plate(dt_s, conductance, plate_c);
+            plain.step(dt_s, plate(conductance, plate_c));
+            cells = cells.max(max_cell_difference(&cached, &plain));
+            ledger = ledger.max(ledger_difference(cached.energy_ledger(), plain.energy_ledger()));
+            predicted = predicted.max((offset + slope * plate_c - plain.surface_c()).abs());
+            assert_eq!(cached.environment(), plain.environment());
+        }
+        (cells, ledger, predicted)
+    }
+
+    #[test]
+    fn cached_plate_steps_equal_plain_plate_steps() {
+        for scheme in [TimeScheme::TrBdf2, TimeScheme::BackwardEuler] {
+            let (cells, ledger, predicted) = run_beside(scheme, |_| (0.01, 2000.0));
+            println!("{scheme:?}: cells {cells:.1e} K, ledger {ledger:.1e} relative, prediction {predicted:.1e} K");
+            assert!(
+                cells <= 1e-12,
+                "{scheme:?}: cached vs plain cell temperatures differ by {cells} K"
+            );
+            assert!(
+                ledger <= 1e-12,
+                "{scheme:?}: cached vs plain ledger differs by {ledger} (relative)"
+            );
+            assert!(
+                predicted <= 1e-12,
+                "{scheme:?}: affine prediction vs plain step {predicted} K"
+            );
+        }
+    }
+
+    #[test]
+    fn changing_step_or_conductance_recomputes_the_sensitivity() {
+        // The step and the conductance change often enough that a stale sensitivity (its effect is of the order of
+        // the plate temperature times the change of the response, ≫ 1e-12 K) would show.
+        let schedule = |tick: usize| {
+            let dt_s = if (tick / 3).is_multiple_of(2) { 0.01 } else { 0.025 };
+            let conductance = if (tick / 5).is_multiple_of(2) { 2000.0 } else { 800.0 };
+            (dt_s, conductance)
+        };
+        for scheme in [TimeScheme::TrBdf2, TimeScheme::BackwardEuler] {
+            let (cells, ledger, predicted) = run_beside(scheme, schedule);
+            println!("{scheme:?}: cells {cells:.1e} K, ledger {ledger:.1e} relative, prediction {predicted:.1e} K");
+            assert!(
+                cells <= 1e-12,
+                "{scheme:?}: cached vs plain cell temperatures differ by {cells} K"
+            );
+            assert!(
+                ledger <= 1e-12,
+                "{scheme:?}: cached vs plain ledger differs by {ledger} (relative)"
+            );
+            assert!(
+                predicted <= 1e-12,
+                "{scheme:?}: affine prediction vs plain step {predicted} K"
+            );
+        }
+    }
+
+    #[test]
+    fn cache_keys_follow_step_and_conductance() {
+        let mut model = busy_finger(TimeScheme::TrBdf2);
+        model.receptor_affine(0.01, 2000.0);
+        let key = |m: &FvModel| (m.plate.borrow().key, m.plate.borrow().offset_key);
+        assert_eq!(
+            key(&model),
+            (Some(plate_key(0.01, 2000.0)), Some(plate_key(0.01, 2000.0)))
+        );
+        let slope_at = |m: &FvModel, dt_s: f64, g: f64| m.receptor_affine(dt_s, g).1;
+        let first = slope_at(&model, 0.01, 2000.0);
+        let other_step = slope_at(&model, 0.02, 2000.0);
+        assert_eq!(key(&model).0, Some(plate_key(0.02, 2000.0)));
+        let other_conductance = slope_at(&model, 0.02, 800.0);
+        assert_eq!(key(&model).0, Some(plate_key(0.02, 800.0)));
+        assert!(
+            other_step > first && other_conductance < other_step,
+            "slopes: {first} at 0.01 s, {other_step} at 0.02 s, {other_conductance} at 0.02 s and 800 W/(m²K)"
+        );
+        model.step_on_plate(0.02, 800.0, 30.0);
+        assert_eq!(
+            key(&model),
+            (Some(plate_key(0.02, 800.0)), None),
+            "the step used up the offset"
+        );
+        // An inverse over a longer horizon than the step (a renderer requesting over the sensor period): the step
+        // is a plain step and leaves the sensitivity of the horizon cached.
+        model.receptor_affine(0.02, 800.0);
+        let mut plain = model.clone();
+        model.step_on_plate(0.001, 800.0, 30.0);
+        plain.step(0.001, plate(800.0, 30.0));
+        assert_eq!(key(&model), (Some(plate_key(0.02, 800.0)), None));
+        assert_eq!(model.skin_temperatures_c(), plain.skin_temperatures_c());
+    }
+
+    #[test]
+    fn changes_of_state_or_matrix_between_affine_and_step_are_seen() {
+        type Change = fn(&mut FvModel);
+        let changes: [(&str, Change); 4] = [
+            ("set_skin_uniform", |m| m.set_skin_uniform(31.0).unwrap()),
+            ("set_perfusion_scale", |m| m.set_perfusion_scale(3.0).unwrap()),
+            ("set_steady", |m| m.set_steady(plate(1500.0, 28.0)).unwrap()),
+            ("step", |m| m.step(0.01, plate(2000.0, 40.0))),
+        ];
+        for (name, change) in changes {
+            let mut cached = busy_finger(TimeScheme::TrBdf2);
+            cached.receptor_affine(0.01, 2000.0);
+            change(&mut cached);
+            let mut plain = cached.clone();
+            cached.step_on_plate(0.01, 2000.0, 20.0);
+            plain.step(0.01, plate(2000.0, 20.0));
+            let difference = max_cell_difference(&cached, &plain);
+            assert!(
+                difference <= 1e-12,
+                "{name}: cached vs plain step differ by {difference} K"
+            );
+        }
+    }
 }
