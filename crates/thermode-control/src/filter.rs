@@ -92,18 +92,32 @@ pub(crate) fn check_finite(name: &'static str, value: f64) -> Result<(), Control
     }
 }
 
-/// `Ok(())` if the time step is finite and strictly positive.
-pub(crate) fn check_dt(dt_s: f64) -> Result<(), ControlError> {
-    check_finite("dt_s", dt_s)?;
-    if dt_s > 0.0 {
+/// `Ok(())` if `value` is finite and strictly positive.
+pub(crate) fn positive(name: &'static str, value: f64) -> Result<(), ControlError> {
+    in_range(name, value, value > 0.0, "must be > 0")
+}
+
+/// `Ok(())` if `value` is finite and not negative.
+pub(crate) fn non_negative(name: &'static str, value: f64) -> Result<(), ControlError> {
+    in_range(name, value, value >= 0.0, "must be >= 0")
+}
+
+fn in_range(name: &'static str, value: f64, ok: bool, requirement: &'static str) -> Result<(), ControlError> {
+    check_finite(name, value)?;
+    if ok {
         Ok(())
     } else {
         Err(ControlError::OutOfRange {
-            name: "dt_s",
-            value: dt_s,
-            requirement: "must be > 0",
+            name,
+            value,
+            requirement,
         })
     }
+}
+
+/// `Ok(())` if the time step is finite and strictly positive.
+pub(crate) fn check_dt(dt_s: f64) -> Result<(), ControlError> {
+    positive("dt_s", dt_s)
 }
 
 #[cfg(test)]

@@ -45,7 +45,7 @@
 use thermode_model::peltier::PeltierModule;
 
 use crate::error::ControlError;
-use crate::filter::check_finite;
+use crate::filter::{check_finite, non_negative, positive};
 
 /// Number of observer states: plate, hot side, sensor element, unknown heat.
 pub const OBSERVER_STATES: usize = 4;
@@ -130,32 +130,6 @@ pub struct PlantModel {
     pub sensor_sample_rate_hz: f64,
     /// Largest current magnitude of the drive, A (> 0). Device default 2.8.
     pub current_limit_a: f64,
-}
-
-fn positive(name: &'static str, value: f64) -> Result<(), ControlError> {
-    check_finite(name, value)?;
-    if value > 0.0 {
-        Ok(())
-    } else {
-        Err(ControlError::OutOfRange {
-            name,
-            value,
-            requirement: "must be > 0",
-        })
-    }
-}
-
-fn non_negative(name: &'static str, value: f64) -> Result<(), ControlError> {
-    check_finite(name, value)?;
-    if value >= 0.0 {
-        Ok(())
-    } else {
-        Err(ControlError::OutOfRange {
-            name,
-            value,
-            requirement: "must be >= 0",
-        })
-    }
 }
 
 impl PlantModel {

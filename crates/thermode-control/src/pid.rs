@@ -18,7 +18,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::error::ControlError;
-use crate::filter::{check_dt, check_finite};
+use crate::filter::{check_dt, check_finite, non_negative};
 
 /// PID gains and the sensor filter cut-off, as saved to / loaded from a gains TOML file. Units: current in A,
 /// temperature in °C (kelvin-sized), time in s. Unknown keys are refused.
@@ -49,19 +49,6 @@ impl PidGains {
             non_negative("derivative_filter_s", tf)?;
         }
         crate::filter::LowPass::new(self.filter_cutoff_hz).map(|_| ())
-    }
-}
-
-fn non_negative(name: &'static str, value: f64) -> Result<(), ControlError> {
-    check_finite(name, value)?;
-    if value >= 0.0 {
-        Ok(())
-    } else {
-        Err(ControlError::OutOfRange {
-            name,
-            value,
-            requirement: "must be >= 0",
-        })
     }
 }
 

@@ -842,10 +842,11 @@ mod plate_cache_tests {
         (cells, ledger, predicted)
     }
 
-    #[test]
-    fn cached_plate_steps_equal_plain_plate_steps() {
+    /// Runs [`run_beside`] for both schemes with `schedule` (tick → (dt, conductance)) and requires the cached path
+    /// to equal the plain one to 1e-12 in the cells, the ledger and the affine prediction.
+    fn assert_cached_equals_plain(schedule: impl Fn(usize) -> (f64, f64) + Copy) {
         for scheme in [TimeScheme::TrBdf2, TimeScheme::BackwardEuler] {
-            let (cells, ledger, predicted) = run_beside(scheme, |_| (0.01, 2000.0));
+            let (cells, ledger, predicted) = run_beside(scheme, schedule);
             println!("{scheme:?}: cells {cells:.1e} K, ledger {ledger:.1e} relative, prediction {predicted:.1e} K");
             assert!(
                 cells <= 1e-12,
@@ -863,6 +864,11 @@ mod plate_cache_tests {
     }
 
     #[test]
+    fn cached_plate_steps_equal_plain_plate_steps() {
+        assert_cached_equals_plain(|_| (0.01, 2000.0));
+    }
+
+    #[test]
     fn changing_step_or_conductance_recomputes_the_sensitivity() {
         // The step and the conductance change often enough that a stale sensitivity (its effect is of the order of
         // the plate temperature times the change of the response, ≫ 1e-12 K) would show.
@@ -871,22 +877,7 @@ mod plate_cache_tests {
             let conductance = if (tick / 5).is_multiple_of(2) { 2000.0 } else { 800.0 };
             (dt_s, conductance)
         };
-        for scheme in [TimeScheme::TrBdf2, TimeScheme::BackwardEuler] {
-            let (cells, ledger, predicted) = run_beside(scheme, schedule);
-            println!("{scheme:?}: cells {cells:.1e} K, ledger {ledger:.1e} relative, prediction {predicted:.1e} K");
-            assert!(
-                cells <= 1e-12,
-                "{scheme:?}: cached vs plain cell temperatures differ by {cells} K"
-            );
-            assert!(
-                ledger <= 1e-12,
-                "{scheme:?}: cached vs plain ledger differs by {ledger} (relative)"
-            );
-            assert!(
-                predicted <= 1e-12,
-                "{scheme:?}: affine prediction vs plain step {predicted} K"
-            );
-        }
+        assert_cached_equals_plain(schedule);
     }
 
     #[test]
