@@ -1,5 +1,6 @@
-//! thermode-control: everything between the renderer's display set-point and the drive current of one thermal
-//! display channel — controllers, filters and the safety envelope.
+//! thermode-control: the controllers between the renderer's display set-point and the drive request of one thermal
+//! display channel — filters, the paper's PID, observers and the model-based controller. Every request they make
+//! passes the safety envelope of `thermode-safety` before it reaches a drive.
 //!
 //! Pure library: no I/O, no clock (time comes in as `now_s`/`dt_s`), no allocation on the per-tick path,
 //! deterministic. Temperatures in °C, currents in A, times in s. **A positive current heats the display.**
@@ -13,18 +14,12 @@
 //!   plate ([`observer`]: [`PlateObserver`] on a [`PlantModel`] filled from the device file) and the plate's heat
 //!   balance inverted through the Peltier equations, driving the most useful current when a set-point is
 //!   infeasible, with nothing to wind up.
-//! - [`envelope`]: [`SafetyEnvelope`], the one safety envelope every drive command passes: set-point clamp and
-//!   rate limit, thermal dose (IEC 60601-1 contact-time limits, CEM43), fault detection with latching. The only
-//!   way to a [`DriveCommand`] is [`SafetyEnvelope::gate_drive`].
-//! - [`config`]: [`EnvelopeConfig`] (serde, documented defaults and sources) and the compiled-in absolute limits.
-//! - [`fault`]: [`FaultCode`], stable numeric fault codes.
-//! - [`dose`]: CEM43 and time-at-43 °C bookkeeping.
-//! - [`error`]: [`ControlError`], [`EnvelopeError`].
+//! - [`error`]: [`ControlError`].
 //!
 //! One tick of a channel:
 //! ```
-//! use thermode_control::{ControlInput, Controller, EnvelopeConfig, Measurement, PidController, PidGains,
-//!     SafetyEnvelope};
+//! use thermode_control::{ControlInput, Controller, PidController, PidGains};
+//! use thermode_safety::{EnvelopeConfig, Measurement, SafetyEnvelope};
 //! let gains = PidGains { kp_a_per_c: 0.5, ki_a_per_c_s: 0.2, kd_a_s_per_c: 0.0, filter_cutoff_hz: 5.0,
 //!     derivative_filter_s: None };
 //! let mut controller = PidController::new(gains, 2.8)?;
@@ -41,23 +36,15 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-pub mod config;
 pub mod controller;
-pub mod dose;
-pub mod envelope;
 pub mod error;
-pub mod fault;
 pub mod filter;
 pub mod model_controller;
 pub mod observer;
 pub mod pid;
 
-pub use config::{EnvelopeConfig, ABSOLUTE_MAX_C, ABSOLUTE_MAX_RATE_C_PER_S, ABSOLUTE_MIN_C};
 pub use controller::{ControlInput, Controller, PidController};
-pub use dose::DoseTracker;
-pub use envelope::{DriveCommand, DriveLimits, Measurement, SafetyEnvelope, SetpointDecision, SetpointLimits};
-pub use error::{ControlError, EnvelopeError};
-pub use fault::FaultCode;
+pub use error::ControlError;
 pub use filter::LowPass;
 pub use model_controller::{ModelController, ModelDesign, ModelTerms};
 pub use observer::{Finger, ObserverDesign, PlantModel, PlateEstimate, PlateObserver};

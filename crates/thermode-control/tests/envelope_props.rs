@@ -8,9 +8,8 @@
 //! targets and bounds the plant temperature by the one-tick overshoot the gate allows.
 
 use proptest::prelude::*;
-use thermode_control::{
-    ControlInput, Controller, EnvelopeConfig, Measurement, PidController, PidGains, SafetyEnvelope,
-};
+use thermode_control::{ControlInput, Controller, PidController, PidGains};
+use thermode_safety::{EnvelopeConfig, Measurement, SafetyEnvelope};
 
 const LIMIT_A: f64 = 2.8;
 

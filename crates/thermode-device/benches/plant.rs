@@ -1,5 +1,6 @@
 //! Criterion bench: channel-steps per second of the simulated plant (Peltier, plate, hot side, PT-100, finger),
 //! with the paper's Kron finger and with the default finite-volume finger, at a 1 ms step.
+#![allow(missing_docs)] // criterion_main! generates an undocumented `main`
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use thermode_device::{DeviceConfig, PlateFinger, SimulatedChannel};

@@ -3,12 +3,12 @@
 //! records every command (the fake of tests).
 //!
 //! A drive current reaches a device only as a [`DriveCommand`], which only the safety envelope
-//! (`thermode_control::SafetyEnvelope::gate_drive`) can make.
+//! (`thermode_safety::SafetyEnvelope::gate_drive`, or `DriveCommand::off`) can make.
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use thermode_control::fault::FaultCode;
-use thermode_control::{DriveCommand, DriveLimits, Measurement};
+use thermode_safety::fault::FaultCode;
+use thermode_safety::{DriveCommand, DriveLimits, Measurement};
 
 use crate::channel::SimulatedChannel;
 use crate::config::DeviceConfig;
@@ -57,9 +57,11 @@ pub trait Device {
     /// The newest reading of `channel`.
     fn read(&mut self, channel: usize) -> Result<Reading, DeviceError>;
 
-    /// Advances the device's physics by `dt_s` \[s\] (a simulated device); a real device, which runs in real time,
-    /// ignores it. A step that is not finite and positive changes nothing.
-    fn advance(&mut self, dt_s: f64);
+    /// The start of a control tick at loop time `now_s` \[s\]: the device does the work it owes each tick. A
+    /// simulated display advances its physics to `now_s`; a polled link sends its per-tick requests; a device with a
+    /// link thread of its own has nothing to do. A time that is not finite or not later than the previous one
+    /// changes nothing.
+    fn poll(&mut self, now_s: f64);
 }
 
 /// The simulated display: up to [`MAX_CHANNELS`] identical, independent channels, each with its own finger and its
@@ -126,6 +128,19 @@ impl<F: PlateFinger> SimulatedDisplay<F> {
     pub fn time_s(&self) -> f64 {
         self.time_s
     }
+
+    /// Advances every channel's physics by `dt_s` \[s\] with the currents last applied (offline runs step the
+    /// display this way; a control loop calls [`Device::poll`]). A step that is not finite and positive changes
+    /// nothing.
+    pub fn advance(&mut self, dt_s: f64) {
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            return;
+        }
+        for (channel, &current_a) in self.channels.iter_mut().zip(&self.commanded_a) {
+            channel.step(dt_s, current_a);
+        }
+        self.time_s += dt_s;
+    }
 }
 
 impl<F: PlateFinger> Device for SimulatedDisplay<F> {
@@ -163,21 +178,15 @@ impl<F: PlateFinger> Device for SimulatedDisplay<F> {
         })
     }
 
-    fn advance(&mut self, dt_s: f64) {
-        if !(dt_s.is_finite() && dt_s > 0.0) {
-            return;
-        }
-        for (channel, &current_a) in self.channels.iter_mut().zip(&self.commanded_a) {
-            channel.step(dt_s, current_a);
-        }
-        self.time_s += dt_s;
+    fn poll(&mut self, now_s: f64) {
+        self.advance(now_s - self.time_s);
     }
 }
 
 /// What a [`RecordingDevice`] saw of one command.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RecordedCommand {
-    /// Device time when the command was applied \[s\] (the sum of the steps before it).
+    /// Loop time of the last [`Device::poll`] before the command \[s\].
     pub time_s: f64,
     /// The channel it was for.
     pub channel: usize,
@@ -252,10 +261,10 @@ impl<D: Device> Device for RecordingDevice<D> {
         self.inner.read(channel)
     }
 
-    fn advance(&mut self, dt_s: f64) {
-        self.inner.advance(dt_s);
-        if dt_s.is_finite() && dt_s > 0.0 {
-            self.time_s += dt_s;
+    fn poll(&mut self, now_s: f64) {
+        self.inner.poll(now_s);
+        if now_s.is_finite() && now_s > self.time_s {
+            self.time_s = now_s;
         }
     }
 }

@@ -1,7 +1,7 @@
 //! thermode-device: the hardware boundary and the simulated thermal display (the embedded default device).
 //!
-//! - [`Device`]: the small trait every display implements (apply a gated `DriveCommand`, read the sensors, advance
-//!   the simulated physics); [`SimulatedDisplay`] (up to [`MAX_CHANNELS`] channels) and [`RecordingDevice`] (records
+//! - [`Device`]: the small trait every display implements (apply a gated `DriveCommand`, read the sensors, do its
+//!   per-tick work at the loop's time); [`SimulatedDisplay`] (up to [`MAX_CHANNELS`] channels) and [`RecordingDevice`] (records
 //!   every command).
 //! - [`SimulatedChannel`]: one channel's physics (`model.md` §5): a Peltier module from datasheet values
 //!   ([`thermode_model::peltier`]), the display plate, the hot side on the water-cooled aluminium box, the PT-100
@@ -10,16 +10,16 @@
 //!   injection ([`Fault`]).
 //! - [`DeviceConfig`]: the device file (TOML); every key optional, documented with unit, default and source. The
 //!   files in `devices/` are the default display, a weakly cooled one and one with a lagging sensor.
-//! - [`protocol`]: the binary host–device protocol (COBS frames, CRC-32, sequence numbers, watchdog; specified in
-//!   `docs/protocol.md`); [`serial`]: [`serial::SerialDevice`], the real hardware path over a serial port;
-//!   [`emulator`]: the device side running the simulated display, for `thermode emulate` and end-to-end tests.
+//!
+//! Real displays connect through `thermode-link` (wire protocols, serial hosts, emulators), which implements
+//! [`Device`] for each.
 //!
 //! Temperatures in °C at the interfaces, currents in A (**positive current heats the display**), times in s.
 //! Deterministic: the only randomness is the sensor noise, from ChaCha8 with an explicit seed.
 //!
 //! One second of one channel, every drive through the safety envelope:
 //! ```
-//! use thermode_control::{EnvelopeConfig, SafetyEnvelope};
+//! use thermode_safety::{EnvelopeConfig, SafetyEnvelope};
 //! use thermode_device::{Device, DeviceConfig, SimulatedDisplay};
 //! use thermode_model::kron::KronModel;
 //!
@@ -31,7 +31,7 @@
 //!     envelope.observe(&reading.measurement());
 //!     let command = envelope.gate_drive(n as f64 * 1e-3, 1.0); // ask for 1 A of heating
 //!     display.apply(0, &command)?;
-//!     display.advance(1e-3);
+//!     display.poll((n + 1) as f64 * 1e-3);
 //! }
 //! let state = display.channel(0)?.state();
 //! assert!(state.plate_c > 23.0 && state.applied_current_a == 1.0);
@@ -41,12 +41,9 @@
 pub mod channel;
 pub mod config;
 pub mod device;
-pub mod emulator;
 pub mod error;
 pub mod finger;
-pub mod protocol;
 pub mod sensor;
-pub mod serial;
 
 pub use channel::{ChannelState, Fault, HeatFlows, Polarity, SimulatedChannel, MAX_SUBSTEP_S};
 pub use config::DeviceConfig;

@@ -1,9 +1,9 @@
 //! The `Device` trait on the simulated display: channel counts, independent channels and noise streams, readings
 //! as the envelope takes them, gated commands from the real safety envelope, and the recording wrapper.
 
-use thermode_control::{EnvelopeConfig, SafetyEnvelope};
 use thermode_device::{Device, DeviceConfig, DeviceError, RecordingDevice, SimulatedDisplay, MAX_CHANNELS};
 use thermode_model::kron::KronModel;
+use thermode_safety::{EnvelopeConfig, SafetyEnvelope};
 
 fn display(count: usize) -> SimulatedDisplay<KronModel> {
     SimulatedDisplay::fingertips(&DeviceConfig::default(), count, 21).unwrap_or_else(|e| panic!("{e}"))
@@ -52,7 +52,7 @@ fn gated_commands_drive_only_their_channel_and_the_recorder_sees_every_one() {
             sent.push((now, channel, command.current_a()));
             device.apply(channel, &command).unwrap_or_else(|e| panic!("{e}"));
         }
-        device.advance(dt);
+        device.poll((n + 1) as f64 * dt);
     }
     let record = device.commands();
     assert_eq!(record.len(), 900);
@@ -163,7 +163,7 @@ fn a_faulted_envelope_switches_the_drive_off() {
         env.observe(&reading.measurement());
         let command = env.gate_drive(n as f64 * 0.01, -2.0);
         d.apply(0, &command).unwrap_or_else(|e| panic!("{e}"));
-        d.advance(0.01);
+        d.poll((n + 1) as f64 * 0.01);
     }
     let last = d
         .commands()

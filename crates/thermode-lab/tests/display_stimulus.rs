@@ -12,7 +12,7 @@ use thermode_lab::observer::{CurveFeatures, SimulatedObserver};
 use thermode_lab::runner::stimulus::{DisplayCurves, DisplaySetup, DisplayStimulus};
 use thermode_lab::runner::{FakeClock, FvContact, QuietConsole, Runner, Stimulus, StimulusError, StimulusRequest};
 use thermode_model::materials::{find, Material};
-use thermode_render::ControllerKind;
+use thermode_pipeline::ControllerKind;
 
 /// Presentation time of the curve tests \[s\] (shorter than the paper's 30 s; the lag is over within 2 s).
 const DURATION_S: f64 = 10.0;
@@ -141,7 +141,9 @@ fn present_gives_the_condition_curve_and_caches_it() {
 #[test]
 fn the_pid_controller_renders_too_and_differently() {
     let material = aluminium();
-    let pid_gains = thermode_render::ShippedDisplay::Default.gains().expect("shipped gains");
+    let pid_gains = thermode_pipeline::ShippedDisplay::Default
+        .gains()
+        .expect("shipped gains");
     let setup = DisplaySetup::default_display(ControllerKind::Pid(pid_gains));
     let mut pid = DisplayStimulus::new(setup, 0.0, 1).expect("valid");
     let p = curves(&mut pid, &material);

@@ -1,6 +1,7 @@
 //! Criterion benchmarks of the finite-volume model: steps per second on the default grid with the fingertip in
 //! contact with aluminium (1 cm, R_c = 1e-3), for both schemes and for the display-inverse pair
 //! (`receptor_affine` + `step_on_plate`), and the time of one grid-converged 90 s contact simulation.
+#![allow(missing_docs)] // criterion_main! generates an undocumented `main`
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use thermode_model::fv::{

@@ -1,5 +1,6 @@
 //! Criterion benchmarks of the three-layer (Kron) model: backward-Euler steps per second in air and in contact, and
 //! display-inverse set-point + advance pairs per second.
+#![allow(missing_docs)] // criterion_main! generates an undocumented `main`
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use thermode_model::inverse::{DisplayInverse, DEFAULT_DISPLAY_CONDUCTANCE_W_M2K};

@@ -8,42 +8,78 @@ use thiserror::Error;
 pub enum ParamError {
     /// The text is not valid TOML, or a value has the wrong type.
     #[error("{origin}: {message}")]
-    Syntax { origin: String, message: String },
+    Syntax {
+        /// Where the parameters came from (file name, `"built-in"`, `"command line"`).
+        origin: String,
+        /// What was wrong.
+        message: String,
+    },
     /// A key that the file format does not know.
     #[error("{origin}: unknown key `{key}`")]
-    UnknownKey { origin: String, key: String },
+    UnknownKey {
+        /// Where the parameters came from (file name, `"built-in"`, `"command line"`).
+        origin: String,
+        /// The key.
+        key: String,
+    },
     /// A required key is absent.
     #[error("{origin}: missing key `{key}`")]
-    MissingKey { origin: String, key: String },
+    MissingKey {
+        /// Where the parameters came from (file name, `"built-in"`, `"command line"`).
+        origin: String,
+        /// The key.
+        key: String,
+    },
     /// Both the SI and the cgs spelling of one quantity were given.
     #[error("{origin}: both `{si_key}` and `{cgs_key}` given; give exactly one")]
     BothSpellings {
+        /// Where the parameters came from (file name, `"built-in"`, `"command line"`).
         origin: String,
+        /// The SI spelling given.
         si_key: String,
+        /// The cgs spelling given.
         cgs_key: String,
     },
     /// A key holds a value of the wrong type (a string where a number belongs, …).
     #[error("{origin}: `{key}` must be {expected}, found {found}")]
     WrongType {
+        /// Where the parameters came from (file name, `"built-in"`, `"command line"`).
         origin: String,
+        /// The key.
         key: String,
+        /// The type the key needs.
         expected: String,
+        /// The type found.
         found: String,
     },
     /// A number that must be finite and inside a range is not.
     #[error("{origin}: `{key}` = {value} is invalid: {requirement}")]
     BadValue {
+        /// Where the parameters came from (file name, `"built-in"`, `"command line"`).
         origin: String,
+        /// The key.
         key: String,
+        /// The offending value.
         value: f64,
+        /// What the value must satisfy.
         requirement: String,
     },
     /// A structural problem (wrong number of layers, empty name, …).
     #[error("{origin}: {message}")]
-    Invalid { origin: String, message: String },
+    Invalid {
+        /// Where the parameters came from (file name, `"built-in"`, `"command line"`).
+        origin: String,
+        /// What was wrong.
+        message: String,
+    },
     /// A material name that is not in the library; `close` lists the nearest known names.
     #[error("unknown material `{name}`{}", suggest(close))]
-    UnknownMaterial { name: String, close: Vec<String> },
+    UnknownMaterial {
+        /// The name asked for.
+        name: String,
+        /// The nearest known names.
+        close: Vec<String>,
+    },
 }
 
 fn suggest(close: &[String]) -> String {

@@ -12,6 +12,7 @@
 //! - [`semi_infinite`]: the analytic model of two semi-infinite bodies (the paper's model (a)), with and without
 //!   contact resistance.
 //! - [`peltier`]: Peltier module physics (from datasheet values) and its inverse, for the plant and for feedforward.
+//! - [`params`]: the one parameter vocabulary: [`params::Rule`], [`params::Range`] and [`params::BadValue`].
 //! - [`simulate`]: one complete contact simulation with any of the three models, as `thermode simulate` runs it.
 
 pub mod error;
@@ -19,6 +20,7 @@ pub mod fv;
 pub mod inverse;
 pub mod kron;
 pub mod materials;
+pub mod params;
 pub mod peltier;
 pub mod semi_infinite;
 pub mod simulate;
@@ -29,4 +31,5 @@ pub use error::ParamError;
 pub use inverse::{DisplayInverse, PlateCoupled};
 pub use kron::{KronEnvironment, KronModel};
 pub use materials::Material;
+pub use params::{BadValue, Range, Rule};
 pub use skin::{Blood, Skin, SkinLayer};

@@ -22,7 +22,10 @@ static REGISTER_FONT: Once = Once::new();
 pub enum PlotError {
     /// The file name does not end in `.svg` or `.png`.
     #[error("{path}: plots are written as .svg or .png")]
-    UnsupportedFormat { path: PathBuf },
+    UnsupportedFormat {
+        /// The file asked for.
+        path: PathBuf,
+    },
     /// The figure has no panel, or a panel has no finite point to draw.
     #[error("nothing to plot: {0}")]
     Empty(String),
@@ -31,7 +34,12 @@ pub enum PlotError {
     Drawing(String),
     /// The file could not be written.
     #[error("{path}: {error}")]
-    Io { path: PathBuf, error: std::io::Error },
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The file system's error.
+        error: std::io::Error,
+    },
 }
 
 /// How one series is drawn.
@@ -44,7 +52,10 @@ pub enum SeriesStyle {
     /// A filled circle at each point.
     Points,
     /// A bar from y = 0 to each point, `width` in x units, centred on x.
-    Bars { width: f64 },
+    Bars {
+        /// Bar width in x units.
+        width: f64,
+    },
 }
 
 /// One labelled data series.

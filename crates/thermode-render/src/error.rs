@@ -1,15 +1,19 @@
-//! Typed errors of the render crate: refused parameters (skin, material, device, controller, envelope), refused
-//! stimuli, gains files and tuner settings. Nothing on the per-tick path returns an error: a tick cannot fail (a
-//! broken input latches a fault in the safety envelope instead).
+//! Typed errors of the render crate: everything the pipeline refuses, and what only offline runs, summaries and the
+//! tuner can refuse.
 
-use thermode_control::{ControlError, EnvelopeError};
+use thermode_control::ControlError;
 use thermode_device::DeviceError;
 use thermode_model::ParamError;
+use thermode_pipeline::PipelineError;
+use thermode_safety::EnvelopeError;
 use thiserror::Error;
 
 /// Why the render crate refused something.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum RenderError {
+    /// The pipeline refused its configuration or a stimulus, or a run setting is out of range.
+    #[error(transparent)]
+    Pipeline(#[from] PipelineError),
     /// A model parameter (skin, material, grid, contact) was refused.
     #[error(transparent)]
     Param(#[from] ParamError),
@@ -22,51 +26,7 @@ pub enum RenderError {
     /// The simulated display refused a parameter.
     #[error("simulated display: {0}")]
     Device(#[from] DeviceError),
-    /// A number (stimulus, run setting) that must be finite and in a range is not.
-    #[error("{what} = {value} is invalid: {requirement}")]
-    BadValue {
-        /// What the number is, with its unit.
-        what: String,
-        /// The offending value.
-        value: f64,
-        /// What it must satisfy.
-        requirement: String,
-    },
-    /// A gains file could not be read.
-    #[error("{origin}: {message}")]
-    GainsFile {
-        /// Where the text came from (file name, or "built-in").
-        origin: String,
-        /// What was wrong.
-        message: String,
-    },
     /// Something that is not a single number was refused (an empty material list, …).
     #[error("{0}")]
     Invalid(String),
-}
-
-/// `Ok(value)` if `value` is finite and within `[min, max]`, else [`RenderError::BadValue`] naming `what`.
-pub(crate) fn require_in(what: &str, value: f64, min: f64, max: f64) -> Result<f64, RenderError> {
-    if value.is_finite() && value >= min && value <= max {
-        Ok(value)
-    } else {
-        Err(RenderError::BadValue {
-            what: what.to_string(),
-            value,
-            requirement: format!("must be a finite number in [{min}, {max}]"),
-        })
-    }
-}
-
-/// `Ok(value)` if `value` is finite and strictly positive, else [`RenderError::BadValue`] naming `what`.
-pub(crate) fn require_positive(what: &str, value: f64) -> Result<f64, RenderError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(value)
-    } else {
-        Err(RenderError::BadValue {
-            what: what.to_string(),
-            value,
-            requirement: "must be a finite number greater than zero".to_string(),
-        })
-    }
 }

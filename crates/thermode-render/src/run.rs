@@ -46,16 +46,18 @@
 
 use std::io::Write;
 
-use thermode_control::FaultCode;
 use thermode_device::{Device, DeviceConfig, PlateFinger, SimulatedChannel, SimulatedDisplay};
 use thermode_model::fv::{FvConfig, FvModel};
 use thermode_model::{Material, Skin};
+use thermode_safety::FaultCode;
 
-use crate::error::{require_in, require_positive, RenderError};
-use crate::pipeline::{ChannelPipeline, PipelineConfig, Telemetry};
-use crate::renderer::{fv_config, Renderer, RendererKind, LIGHT_TOUCH_RESISTANCE_M2K_W};
-use crate::stimulus::Stimulus;
+use thermode_pipeline::error::{require_in, require_positive};
+
+use crate::error::RenderError;
 use crate::summary::{actuator_limit, summarise, Summary};
+use thermode_pipeline::pipeline::{ChannelPipeline, PipelineConfig, Telemetry};
+use thermode_pipeline::renderer::{fv_config, Renderer, RendererKind, LIGHT_TOUCH_RESISTANCE_M2K_W};
+use thermode_pipeline::stimulus::Stimulus;
 
 /// Default largest plant substep \[s\]: 2 ms (see the module documentation for the measured effect).
 pub const PLANT_SUBSTEP_S: f64 = 0.002;
@@ -131,8 +133,8 @@ impl RenderSpec {
             require_in(
                 "object temperature [°C]",
                 c,
-                crate::stimulus::MIN_OBJECT_C,
-                crate::stimulus::MAX_OBJECT_C,
+                thermode_pipeline::stimulus::MIN_OBJECT_C,
+                thermode_pipeline::stimulus::MAX_OBJECT_C,
             )?;
         }
         require_positive("duration [s]", self.duration_s)?;
@@ -144,11 +146,11 @@ impl RenderSpec {
         require_in("tick rate [Hz]", self.rate_hz, 1.0, 100_000.0)?;
         require_in("plant substep [s]", self.plant_substep_s, 1e-6, 0.01)?;
         if (self.duration_s * self.rate_hz).round() < 1.0 {
-            return Err(RenderError::BadValue {
+            return Err(RenderError::Pipeline(thermode_pipeline::PipelineError::BadValue {
                 what: "duration [s]".into(),
                 value: self.duration_s,
                 requirement: "must last at least one tick".into(),
-            });
+            }));
         }
         Ok(())
     }

@@ -38,20 +38,21 @@
 
 use std::thread;
 
-use thermode_control::{ControlInput, Controller, EnvelopeConfig, PidController, PidGains, SafetyEnvelope};
+use thermode_control::{ControlInput, Controller, PidController, PidGains};
 use thermode_device::{Device, DeviceConfig};
 use thermode_model::materials::paper_materials;
 use thermode_model::peltier::KELVIN_OFFSET;
 use thermode_model::Material;
+use thermode_safety::{EnvelopeConfig, SafetyEnvelope};
 
-use crate::controllers::ControllerKind;
-use crate::display::DisplayFinger;
 use crate::error::RenderError;
 use crate::nelder_mead::{minimise_with_restarts, Minimum, NelderMead};
-use crate::pipeline::{render_envelope, PipelineConfig};
-use crate::renderer::{fv_config, Renderer, RendererKind};
 use crate::run::{resting_plant, Plant, RenderSpec};
 use crate::summary::FULL_WINDOW_S;
+use thermode_pipeline::controllers::ControllerKind;
+use thermode_pipeline::display::DisplayFinger;
+use thermode_pipeline::pipeline::{render_envelope, PipelineConfig};
+use thermode_pipeline::renderer::{fv_config, Renderer, RendererKind};
 
 /// Search bounds of (k_p [A/°C], k_i [A/(°C·s)], k_d [A·s/°C], f_c \[Hz\]); f_c is further capped at half the tick
 /// rate (a filter beyond the Nyquist frequency of the loop filters nothing).

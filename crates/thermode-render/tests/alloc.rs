@@ -2,6 +2,7 @@
 //! thousands of ticks of every renderer and controller, in air, in contact, after a material change, in direct mode,
 //! on a refused time step and under a latched fault. (The plant, which is not part of the tick, is stepped outside
 //! the counted region.)
+#![allow(unsafe_code)] // a counting global allocator needs `unsafe impl GlobalAlloc`
 
 mod common;
 
@@ -10,7 +11,7 @@ use std::cell::Cell;
 
 use common::{material, spec, Loop};
 use thermode_device::Device;
-use thermode_render::{ControllerKind, RendererKind, ShippedDisplay, Stimulus};
+use thermode_pipeline::{ControllerKind, RendererKind, ShippedDisplay, Stimulus};
 
 struct Counting;
 

@@ -14,9 +14,10 @@
 mod common;
 
 use common::{material, spec, Loop, Tick};
-use thermode_control::FaultCode;
 use thermode_device::{Fault, Polarity};
-use thermode_render::{ControllerKind, RenderSpec, ShippedDisplay, Stimulus};
+use thermode_pipeline::{ControllerKind, ShippedDisplay, Stimulus};
+use thermode_render::RenderSpec;
+use thermode_safety::FaultCode;
 
 const TICK_S: f64 = 0.01;
 

@@ -27,8 +27,9 @@ use std::sync::OnceLock;
 
 use common::{pid, spec, Loop};
 use thermode_model::Skin;
+use thermode_pipeline::{ControllerKind, ShippedDisplay, Stimulus};
 use thermode_render::run::{render_all, Trajectory};
-use thermode_render::{ControllerKind, RenderRun, RenderSpec, ShippedDisplay, Stimulus, Summary};
+use thermode_render::{RenderRun, RenderSpec, Summary};
 
 const PAPER: [&str; 5] = ["aluminium", "steel", "stone", "wood", "rubber"];
 

@@ -6,8 +6,9 @@
 mod common;
 
 use common::{pid, spec};
+use thermode_pipeline::{ControllerKind, RendererKind, ShippedDisplay};
 use thermode_render::run::render;
-use thermode_render::{ControllerKind, RenderSpec, RendererKind, ShippedDisplay};
+use thermode_render::RenderSpec;
 
 /// A 10 s kron render of aluminium on the default display with `controller`.
 fn kron_aluminium(controller: ControllerKind) -> RenderSpec {

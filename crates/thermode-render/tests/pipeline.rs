@@ -11,7 +11,7 @@ use thermode_device::PlateFinger;
 use thermode_model::fv::{FvConfig, FvModel};
 use thermode_model::kron::{KronEnvironment, KronModel};
 use thermode_model::Skin;
-use thermode_render::{ControllerKind, RendererKind, ShippedDisplay, Stimulus};
+use thermode_pipeline::{ControllerKind, RendererKind, ShippedDisplay, Stimulus};
 
 fn controllers() -> [ControllerKind; 2] {
     [common::pid(ShippedDisplay::Default), ControllerKind::Model]

@@ -11,7 +11,7 @@ mod common;
 use common::{material, Loop};
 use proptest::prelude::*;
 use thermode_model::Material;
-use thermode_render::{ControllerKind, RendererKind, ShippedDisplay, Stimulus};
+use thermode_pipeline::{ControllerKind, RendererKind, ShippedDisplay, Stimulus};
 
 /// A number from a hostile mix: ordinary values, extremes, and non-finite values.
 fn hostile(ordinary: std::ops::Range<f64>) -> impl Strategy<Value = f64> {

@@ -11,8 +11,9 @@ use common::{material, pid, spec};
 use thermode_model::fv::{simulate_contact, ContactSpec, FvConfig, InitialState};
 use thermode_model::simulate::{simulate, ModelKind, SimulationSpec};
 use thermode_model::Skin;
+use thermode_pipeline::{ControllerKind, RendererKind, ShippedDisplay, LIGHT_TOUCH_RESISTANCE_M2K_W};
 use thermode_render::run::{render_all, write_csv};
-use thermode_render::{render, tune, ControllerKind, RendererKind, ShippedDisplay, LIGHT_TOUCH_RESISTANCE_M2K_W};
+use thermode_render::{render, tune};
 
 const PAPER: [&str; 5] = ["aluminium", "steel", "stone", "wood", "rubber"];
 

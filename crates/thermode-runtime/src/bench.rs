@@ -21,12 +21,12 @@ use serde::Serialize;
 use thermode_device::Device;
 use tokio_tungstenite::tungstenite::Message;
 
-use crate::clock::{Clock, MonotonicClock};
 use crate::control_loop::LoopConfig;
 use crate::daemon::{Daemon, DaemonConfig, ServerConfig};
 use crate::engine::EngineFactory;
 use crate::error::RuntimeError;
 use crate::snapshot::TickRecord;
+use thermode_platform::{Clock, MonotonicClock};
 
 /// A drive change larger than this marks the touch's effect on the drive \[A\].
 pub const DRIVE_CHANGE_A: f64 = 0.05;

@@ -6,8 +6,8 @@ use std::sync::mpsc::{Receiver, SyncSender, TrySendError};
 use std::sync::Arc;
 
 use serde::Serialize;
-use thermode_control::FaultCode;
 use thermode_model::materials::Material;
+use thermode_safety::FaultCode;
 use thiserror::Error;
 use tokio::sync::oneshot;
 

@@ -1,7 +1,7 @@
 //! The control loop: one std thread that ticks every channel at a fixed rate on an injected [`Clock`].
 //!
 //! Loop time is the clock's time at each tick's deadline, so a real device stamping its readings with the same clock
-//! (see [`crate::clock::DeviceClock`]) and the envelope agree. Per tick, in order: the device's physics advance to the
+//! (a serial device is handed the loop's clock) and the envelope agree. Per tick, in order: the device's physics advance to the
 //! tick's time (simulated devices); queued commands are
 //! applied (at most [`MAX_COMMANDS_PER_TICK`]); contacts of disconnected clients whose grace period is over are
 //! released; each channel is read, its engine ticks (renderer → controller → safety envelope) and the gated drive
@@ -21,16 +21,16 @@ use std::sync::mpsc::{sync_channel, SyncSender, TryRecvError, TrySendError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
-use thermode_control::{EnvelopeConfig, FaultCode, SafetyEnvelope};
 use thermode_device::{Device, Reading, MAX_CHANNELS};
+use thermode_safety::{DriveCommand, FaultCode};
 
-use crate::clock::Clock;
 use crate::command::{Applied, Command, CommandError, CommandReceiver, CommandSender, Owner, Reply, Request};
 use crate::engine::{ChannelEngine, EngineError, EngineFactory, Stimulus};
 use crate::error::RuntimeError;
 use crate::snapshot::{ChannelStatus, LoopStats, Mode, RecordRow, Shared, Snapshot, TickRecord};
 use crate::stats::Window;
-use crate::ticker::{Tick, Ticker};
+use thermode_platform::Clock;
+use thermode_platform::{Tick, Ticker};
 
 /// Highest loop rate \[Hz\].
 pub const MAX_RATE_HZ: f64 = 1000.0;
@@ -153,14 +153,14 @@ impl LoopHandle {
                     let control = match built {
                         Ok(control) => control,
                         Err(e) => {
-                            let _ = ready.send(Err(e));
+                            let _ = ready.send(Err(RuntimeError::Config(e.to_string())));
                             return;
                         }
                     };
                     let ticker = match Ticker::new(config.period_s(), clock.now_s()) {
                         Ok(ticker) => ticker,
                         Err(e) => {
-                            let _ = ready.send(Err(e));
+                            let _ = ready.send(Err(RuntimeError::Config(e.to_string())));
                             return;
                         }
                     };
@@ -233,8 +233,6 @@ impl Drop for LoopHandle {
 /// Per-channel state the loop owns.
 struct Slot {
     engine: Box<dyn ChannelEngine>,
-    /// An envelope used only to make 0 A commands (stop-all hold, failed reads, shutdown).
-    off_gate: SafetyEnvelope,
     reading: Reading,
     /// The engine panicked once: it is never called again and the channel's drive stays at 0 A.
     failed: bool,
@@ -267,7 +265,6 @@ struct ControlLoop {
     last_woke_s: Option<f64>,
     next_stats_s: f64,
     time_s: f64,
-    started: bool,
 }
 
 /// A reading that is not one: before the first successful read (the envelope refuses it as non-finite).
@@ -297,11 +294,8 @@ impl ControlLoop {
         let air: Arc<str> = Arc::from("air");
         let mut slots = Vec::with_capacity(engines.len());
         for engine in engines {
-            let off_gate = SafetyEnvelope::new(EnvelopeConfig::default(), 1.0)
-                .map_err(|e| RuntimeError::Config(format!("off gate: {e}")))?;
             slots.push(Slot {
                 engine,
-                off_gate,
                 reading: NO_READING,
                 failed: false,
             });
@@ -341,7 +335,6 @@ impl ControlLoop {
             last_woke_s: None,
             next_stats_s: STATS_REFRESH_S,
             time_s: 0.0,
-            started: false,
         })
     }
 
@@ -360,11 +353,9 @@ impl ControlLoop {
 
     /// One tick at loop time `time_s`.
     fn step(&mut self, tick: &Tick, time_s: f64) {
-        // A simulated device's clock starts at 0: the first tick brings it to the loop's time (the clock's), so
-        // readings and the envelope share one time base; later ticks advance it by their interval.
-        let advance_s = if self.started { tick.dt_s } else { time_s };
-        self.device.advance(advance_s);
-        self.started = true;
+        // A simulated device's clock starts at 0: each tick brings it to the loop's time (the clock's), so readings
+        // and the envelope share one time base.
+        self.device.poll(time_s);
         self.time_s = time_s;
         self.drain_commands(tick.index);
         self.expire_leases();
@@ -408,8 +399,7 @@ impl ControlLoop {
             Some(command) if !status.held_off && link_ok => self.device.apply(channel, &command),
             _ => {
                 telemetry.current_a = 0.0;
-                let off = slot.off_gate.gate_drive(time_s, 0.0);
-                self.device.apply(channel, &off)
+                self.device.apply(channel, &DriveCommand::off())
             }
         };
         if result.is_err() {
@@ -653,10 +643,8 @@ impl ControlLoop {
 
     /// Every drive to 0 A; the final snapshot says the loop stopped.
     fn shutdown(&mut self) {
-        let time_s = self.time_s;
-        for (channel, slot) in self.slots.iter_mut().enumerate() {
-            let off = slot.off_gate.gate_drive(time_s, 0.0);
-            let _ = self.device.apply(channel, &off);
+        for channel in 0..self.slots.len() {
+            let _ = self.device.apply(channel, &DriveCommand::off());
             self.status[channel].telemetry.current_a = 0.0;
         }
         let tick = self.stats.ticks;

@@ -10,19 +10,19 @@ use std::sync::atomic::{AtomicU64, AtomicUsize};
 use std::sync::Arc;
 use std::time::Duration;
 
-use thermode_control::EnvelopeConfig;
 use thermode_device::Device;
+use thermode_safety::EnvelopeConfig;
 
 use crate::api::access::Access;
 use crate::api::protocol::RequestLimits;
 use crate::api::{router, App, Info, NetLimits, OscCounters};
-use crate::clock::Clock;
 use crate::command::CommandSender;
 use crate::control_loop::{LoopConfig, LoopHandle};
 use crate::engine::EngineFactory;
 use crate::error::RuntimeError;
 use crate::recorder::Recorder;
 use crate::snapshot::Snapshot;
+use thermode_platform::Clock;
 
 /// Default HTTP/WebSocket port.
 pub const DEFAULT_PORT: u16 = 8765;

@@ -1,17 +1,17 @@
 //! What the control loop drives per channel: the [`ChannelEngine`] trait (stimulus in; reading in, gated drive
-//! command and telemetry out), implemented by the render pipeline (`thermode_render::ChannelPipeline`: renderer →
+//! command and telemetry out), implemented by the render pipeline (`thermode_pipeline::ChannelPipeline`: renderer →
 //! display inverse → controller → safety envelope) and by [`TrackingEngine`], a deliberately simple engine for
 //! tests of the runtime (it is not a thermal renderer). [`Stimulus`] and [`Telemetry`] are the pipeline's.
 //!
-//! Every drive an engine returns is a `thermode_control::DriveCommand`, which only a safety envelope can make, so an
+//! Every drive an engine returns is a `thermode_safety::DriveCommand`, which only a safety envelope can make, so an
 //! engine cannot bypass the envelope.
 
-use thermode_control::{DriveCommand, EnvelopeConfig, FaultCode, SafetyEnvelope};
 use thermode_device::Reading;
-use thermode_render::ChannelPipeline;
+use thermode_pipeline::ChannelPipeline;
+use thermode_safety::{DriveCommand, EnvelopeConfig, FaultCode, SafetyEnvelope};
 use thiserror::Error;
 
-pub use thermode_render::{Stimulus, Telemetry};
+pub use thermode_pipeline::{Stimulus, Telemetry};
 
 /// Why an engine refused a stimulus.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -145,7 +145,7 @@ impl ChannelEngine for TrackingEngine {
 }
 
 /// An [`EngineFactory`] of one render pipeline per channel, all built from `config`.
-pub fn pipeline_engines(config: thermode_render::PipelineConfig) -> EngineFactory {
+pub fn pipeline_engines(config: thermode_pipeline::PipelineConfig) -> EngineFactory {
     Box::new(move |count| {
         (0..count)
             .map(|_| {

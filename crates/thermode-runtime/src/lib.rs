@@ -1,7 +1,7 @@
 //! thermode-runtime: the real-time side of thermode — what `thermode serve` runs.
 //!
 //! - [`control_loop`]: the fixed-rate control loop on its own std thread ([`LoopHandle`]), with an injected
-//!   [`Clock`] ([`MonotonicClock`], [`ManualClock`]), a drift-free [`Ticker`], no allocation and no async per
+//!   `thermode_platform::Clock` (`MonotonicClock`, `ManualClock`) and drift-free `Ticker`, no allocation and no async per
 //!   tick, missed-deadline counting and period statistics ([`stats`]).
 //! - [`engine`]: the [`ChannelEngine`] trait the loop drives per channel (renderer → controller → safety envelope);
 //!   every drive it returns is a gated `DriveCommand`.
@@ -15,13 +15,14 @@
 //! The network side talks to the loop only through the bounded queue and the snapshot. The protocol is documented
 //! in `docs/api.md`, the threat model in `docs/security.md`.
 //!
-//! A loop on a manual clock, driven by hand (tests do this; the daemon uses [`MonotonicClock`] and the render
+//! A loop on a manual clock, driven by hand (tests do this; the daemon uses `MonotonicClock` and the render
 //! pipelines):
 //! ```
 //! use std::sync::Arc;
 //! use thermode_device::{DefaultFinger, DeviceConfig, SimulatedDisplay};
 //! use thermode_runtime::engine::tracking_engines;
-//! use thermode_runtime::{Command, LoopConfig, LoopHandle, ManualClock};
+//! use thermode_platform::ManualClock;
+//! use thermode_runtime::{Command, LoopConfig, LoopHandle};
 //!
 //! let display = SimulatedDisplay::<DefaultFinger>::fingertips(&DeviceConfig::default(), 2, 1)?;
 //! let clock = Arc::new(ManualClock::new());
@@ -37,7 +38,6 @@
 
 pub mod api;
 pub mod bench;
-pub mod clock;
 pub mod command;
 pub mod control_loop;
 pub mod daemon;
@@ -47,13 +47,10 @@ pub mod osc;
 pub mod recorder;
 pub mod snapshot;
 pub mod stats;
-pub mod ticker;
 
-pub use clock::{Clock, ManualClock, MonotonicClock};
 pub use command::{Applied, Command, CommandError, CommandSender, Owner};
 pub use control_loop::{LoopConfig, LoopHandle, MAX_RATE_HZ};
 pub use daemon::{Daemon, DaemonConfig, ServerConfig, DEFAULT_OSC_PORT, DEFAULT_PORT};
 pub use engine::{ChannelEngine, EngineError, EngineFactory, Stimulus, Telemetry, TrackingEngine};
 pub use error::RuntimeError;
 pub use snapshot::{ChannelStatus, LoopStats, Mode, Snapshot, TickRecord};
-pub use ticker::{Tick, Ticker};

@@ -8,13 +8,12 @@ mod common;
 use std::sync::{Arc, Mutex};
 
 use common::{pipelines, trackers, SpyDevice, SpyLog};
-use thermode_control::{EnvelopeConfig, FaultCode};
 use thermode_device::{DeviceConfig, Fault};
 use thermode_model::materials;
+use thermode_platform::{Clock, ManualClock};
 use thermode_runtime::command::Reply;
-use thermode_runtime::{
-    Clock, Command, CommandError, EngineFactory, LoopConfig, LoopHandle, ManualClock, Mode, Owner, Snapshot,
-};
+use thermode_runtime::{Command, CommandError, EngineFactory, LoopConfig, LoopHandle, Mode, Owner, Snapshot};
+use thermode_safety::{EnvelopeConfig, FaultCode};
 
 const PERIOD_S: f64 = 0.01;
 
@@ -340,7 +339,7 @@ impl thermode_runtime::ChannelEngine for Booby {
         now_s: f64,
         dt_s: f64,
         reading: &thermode_device::Reading,
-    ) -> (thermode_control::DriveCommand, thermode_runtime::Telemetry) {
+    ) -> (thermode_safety::DriveCommand, thermode_runtime::Telemetry) {
         assert!(!self.armed, "booby trap");
         self.inner.tick(now_s, dt_s, reading)
     }

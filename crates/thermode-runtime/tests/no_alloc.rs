@@ -2,6 +2,7 @@
 //! loop's thread (marked by the engine factory, which runs there) while it ticks five render pipelines on the
 //! simulated display with a recorder feed attached, through several statistics refreshes. Commands are not per-tick
 //! work and are left out.
+#![allow(unsafe_code)] // a counting global allocator needs `unsafe impl GlobalAlloc`
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
@@ -11,9 +12,10 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use thermode_device::{DefaultFinger, DeviceConfig, SimulatedDisplay};
-use thermode_render::{ControllerKind, PipelineConfig};
+use thermode_pipeline::{ControllerKind, PipelineConfig};
+use thermode_platform::ManualClock;
 use thermode_runtime::engine::pipeline_engines;
-use thermode_runtime::{EngineFactory, LoopConfig, LoopHandle, ManualClock, TickRecord};
+use thermode_runtime::{EngineFactory, LoopConfig, LoopHandle, TickRecord};
 
 thread_local! {
     static ON_LOOP_THREAD: Cell<bool> = const { Cell::new(false) };

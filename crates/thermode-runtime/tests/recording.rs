@@ -8,8 +8,9 @@ use std::sync::Arc;
 
 use common::{trackers, SpyDevice};
 use thermode_model::materials;
+use thermode_platform::{Clock, ManualClock};
 use thermode_runtime::recorder::{Recorder, CSV_HEADER};
-use thermode_runtime::{Clock, Command, LoopConfig, LoopHandle, ManualClock, Owner};
+use thermode_runtime::{Command, LoopConfig, LoopHandle, Owner};
 
 const PERIOD_S: f64 = 0.01;
 

@@ -8,8 +8,9 @@ use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::sync::Arc;
 
 use common::{ask, client_runtime, http_get, start, test_config, trackers, SpyDevice};
+use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::api::NetLimits;
-use thermode_runtime::{Clock, Daemon, MonotonicClock, RuntimeError, ServerConfig, DEFAULT_OSC_PORT, DEFAULT_PORT};
+use thermode_runtime::{Daemon, RuntimeError, ServerConfig, DEFAULT_OSC_PORT, DEFAULT_PORT};
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 use tokio_tungstenite::tungstenite::http::HeaderValue;
 

@@ -9,25 +9,21 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use common::{ask, channel, client_runtime, get_json, pipelines, test_config, ws_connect};
-use thermode_device::emulator::{Emulator, EmulatorConfig, PtyEmulator};
-use thermode_device::serial::{SerialConfig, SerialDevice};
 use thermode_device::{DefaultFinger, DeviceConfig, SimulatedDisplay};
-use thermode_runtime::clock::DeviceClock;
-use thermode_runtime::{Clock, Daemon, MonotonicClock};
+use thermode_link::emulator::{Emulator, EmulatorConfig, PtyEmulator};
+use thermode_link::serial::{SerialConfig, SerialDevice};
+use thermode_platform::{Clock, MonotonicClock};
+use thermode_runtime::Daemon;
 
 #[test]
 fn the_daemon_renders_through_the_serial_protocol_and_survives_a_vanished_port() {
     let display = SimulatedDisplay::<DefaultFinger>::fingertips(&DeviceConfig::default(), 3, 11).expect("display");
     let emulator = Emulator::new(display, EmulatorConfig::default()).expect("emulator");
-    let device_clock = Arc::new(thermode_device::protocol::MonotonicClock::new());
+    let device_clock = Arc::new(MonotonicClock::new());
     let pty = PtyEmulator::spawn(emulator, device_clock).expect("pseudo-terminal");
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
-    let serial = SerialDevice::open(
-        pty.path(),
-        &SerialConfig::default(),
-        Arc::new(DeviceClock(clock.clone())),
-    )
-    .expect("handshake with the emulator");
+    let serial =
+        SerialDevice::open(pty.path(), &SerialConfig::default(), clock.clone()).expect("handshake with the emulator");
     let mut config = test_config();
     config.device_label = format!("serial:{}", pty.path());
     let daemon = Daemon::start(config, Box::new(serial), pipelines(), clock).expect("daemon");

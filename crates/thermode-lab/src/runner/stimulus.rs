@@ -24,8 +24,9 @@ use thermode_model::skin::Skin;
 use thermode_model::ParamError;
 use thiserror::Error;
 
+use thermode_pipeline::{ControllerKind, PipelineConfig};
 use thermode_render::run::{render, render_all, RenderRun, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ};
-use thermode_render::{ControllerKind, PipelineConfig, RenderError, RenderSpec};
+use thermode_render::{RenderError, RenderSpec};
 
 use crate::analysis::Condition;
 use crate::observer::{standard_normal, trial_rng};
@@ -346,7 +347,7 @@ impl DisplaySetup {
     }
 
     fn validate(&self) -> Result<(), StimulusError> {
-        self.pipeline.validate()?;
+        self.pipeline.validate().map_err(RenderError::from)?;
         let ticks = self.pre_contact_s * self.rate_hz;
         if !(ticks.is_finite() && ticks.round() >= 1.0) {
             return Err(StimulusError::BadSetting {

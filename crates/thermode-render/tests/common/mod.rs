@@ -3,12 +3,13 @@
 
 #![allow(dead_code)]
 
-use thermode_control::FaultCode;
 use thermode_device::{Device, DeviceConfig, Reading};
 use thermode_model::materials;
 use thermode_model::Material;
+use thermode_pipeline::{ChannelPipeline, ControllerKind, PipelineConfig, ShippedDisplay, Telemetry};
 use thermode_render::run::{resting_plant, Plant};
-use thermode_render::{ChannelPipeline, ControllerKind, PipelineConfig, RenderSpec, ShippedDisplay, Telemetry};
+use thermode_render::RenderSpec;
+use thermode_safety::FaultCode;
 
 /// A material of the library.
 pub fn material(name: &str) -> Material {

@@ -12,11 +12,12 @@ use std::time::{Duration, Instant};
 
 use futures_util::{SinkExt, StreamExt};
 use serde_json::Value;
-use thermode_control::DriveCommand;
 use thermode_device::{DefaultFinger, Device, DeviceConfig, DeviceError, Fault, Reading, SimulatedDisplay};
-use thermode_render::{gains_for_device, ControllerKind, PipelineConfig};
+use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
+use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::engine::{pipeline_engines, tracking_engines};
-use thermode_runtime::{Clock, Daemon, DaemonConfig, EngineFactory, MonotonicClock, ServerConfig};
+use thermode_runtime::{Daemon, DaemonConfig, EngineFactory, ServerConfig};
+use thermode_safety::DriveCommand;
 use tokio::net::TcpStream as TokioTcpStream;
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};
@@ -111,7 +112,7 @@ impl Device for SpyDevice {
         self.inner.read(channel)
     }
 
-    fn advance(&mut self, dt_s: f64) {
+    fn poll(&mut self, now_s: f64) {
         {
             let mut control = self.control.lock().expect("spy control");
             for (channel, fault) in control.inject.drain(..) {
@@ -125,10 +126,8 @@ impl Device for SpyDevice {
                 self.inner.channel_mut(channel).expect("channel").clear_faults();
             }
         }
-        self.inner.advance(dt_s);
-        if dt_s.is_finite() && dt_s > 0.0 {
-            self.time_s += dt_s;
-        }
+        self.inner.poll(now_s);
+        self.time_s = self.inner.time_s();
         let mut log = self.log.lock().expect("spy log");
         for channel in 0..self.inner.channel_count() {
             let plate_c = self.inner.channel(channel).expect("channel").state().plate_c;

@@ -6,8 +6,8 @@ use std::sync::Arc;
 
 use anyhow::Result;
 use clap::{Args, ValueEnum};
+use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::bench::{self, BenchConfig};
-use thermode_runtime::{Clock, MonotonicClock};
 
 use super::serve::{build_display, DisplayArgs};
 use crate::output::print_stdout;

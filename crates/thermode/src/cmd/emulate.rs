@@ -11,9 +11,9 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use thermode_device::emulator::{Emulator, EmulatorConfig, LinkFaults, PtyEmulator, RunEnd};
-use thermode_device::protocol::MonotonicClock;
 use thermode_device::{DefaultFinger, DeviceConfig, SimulatedDisplay};
+use thermode_link::emulator::{Emulator, EmulatorConfig, LinkFaults, PtyEmulator, RunEnd};
+use thermode_platform::MonotonicClock;
 
 /// Arguments of `thermode emulate`.
 #[derive(Args, Debug)]

@@ -27,8 +27,8 @@ use thermode_lab::runner::{
     SystemClock, TerminalConsole,
 };
 use thermode_model::materials::{find, Material};
-use thermode_render::controllers::GainsSource;
-use thermode_render::{gains_for_device, ControllerKind, PipelineConfig};
+use thermode_pipeline::controllers::GainsSource;
+use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 
 /// What presents the materials.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

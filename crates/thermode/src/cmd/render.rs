@@ -10,13 +10,14 @@ use thermode_control::PidGains;
 use thermode_device::DeviceConfig;
 use thermode_model::materials::{self, Material};
 use thermode_model::Skin;
+use thermode_pipeline::controllers::{gains_from_toml_str, GainsSource};
+use thermode_pipeline::pipeline::RENDER_MAX_RATE_C_PER_S;
+use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, RendererKind};
 use thermode_plot::write_figure;
-use thermode_render::controllers::{gains_from_toml_str, GainsSource};
 use thermode_render::figure::figure3;
-use thermode_render::pipeline::RENDER_MAX_RATE_C_PER_S;
 use thermode_render::run::{render_all, write_csv, DEFAULT_DURATION_S, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ};
 use thermode_render::summary::summary_table;
-use thermode_render::{gains_for_device, ControllerKind, PipelineConfig, RenderSpec, RendererKind};
+use thermode_render::RenderSpec;
 
 use crate::output::{print_stdout, write_atomically};
 

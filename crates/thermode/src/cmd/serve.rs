@@ -9,12 +9,12 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
-use thermode_device::serial::{serial_path, SerialConfig, SerialDevice};
 use thermode_device::{DefaultFinger, Device, DeviceConfig, SimulatedDisplay, MAX_CHANNELS};
-use thermode_render::{gains_for_device, ControllerKind, PipelineConfig};
-use thermode_runtime::clock::DeviceClock;
+use thermode_link::serial::{serial_path, SerialConfig, SerialDevice};
+use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
+use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::engine::pipeline_engines;
-use thermode_runtime::{Clock, Daemon, DaemonConfig, EngineFactory, LoopConfig, MonotonicClock, ServerConfig};
+use thermode_runtime::{Daemon, DaemonConfig, EngineFactory, LoopConfig, ServerConfig};
 
 /// The controller of every channel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -132,8 +132,7 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Displ
         let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device_config, count, args.seed)?;
         (Box::new(display), "sim".to_string())
     } else if serial_path(&args.device).is_some() {
-        let device_clock = Arc::new(DeviceClock(clock.clone()));
-        let serial = SerialDevice::open_spec(&args.device, &SerialConfig::default(), device_clock)
+        let serial = SerialDevice::open_spec(&args.device, &SerialConfig::default(), clock.clone())
             .with_context(|| format!("cannot open {}", args.device))?;
         if let Some(n) = args.channels.filter(|&n| n != serial.channel_count()) {
             bail!(

@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::Args;
 use thermode_device::DeviceConfig;
-use thermode_render::controllers::gains_to_toml_string;
+use thermode_pipeline::controllers::gains_to_toml_string;
 use thermode_render::tune::{tune_with_progress, TuneResult, TuneSpec};
 
 use crate::cmd::render::RendererArg;

@@ -3,11 +3,12 @@
 //! plant advanced once per tick), the finger touching aluminium. The plant's finger is the finite-volume finger
 //! (the reference physics, as `thermode render` uses it) and, for the cheapest configuration, the paper's Kron
 //! finger. The pipeline alone (without the plant) is measured too, to show where the time goes.
+#![allow(missing_docs)] // criterion_main! generates an undocumented `main`
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use thermode_device::{default_finger, Device, DeviceConfig, PlateFinger, SimulatedDisplay};
 use thermode_model::kron::KronModel;
-use thermode_render::{ChannelPipeline, ControllerKind, PipelineConfig, RendererKind, ShippedDisplay, Stimulus};
+use thermode_pipeline::{ChannelPipeline, ControllerKind, PipelineConfig, RendererKind, ShippedDisplay, Stimulus};
 
 const STEPS: u64 = 1000;
 const DT_S: f64 = 1e-3;

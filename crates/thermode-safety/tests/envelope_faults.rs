@@ -4,7 +4,7 @@
 //! Also: gating (limit, heating/cooling refused at the limits), set-point shaping, and the thermal dose measured
 //! through the envelope against hand-computed CEM43 values.
 
-use thermode_control::{DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, Measurement, SafetyEnvelope};
+use thermode_safety::{DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, Measurement, SafetyEnvelope};
 
 const LIMIT_A: f64 = 2.8;
 const DT_S: f64 = 1e-3;

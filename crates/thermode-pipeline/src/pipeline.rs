@@ -29,21 +29,21 @@
 //! the first touch it calibrates the finger models to the real finger ([`PipelineConfig::calibrate_finger_at_touch`]).
 //!
 //! A time step that is not finite and positive skips steps 2–5 and requests NaN from the envelope, which latches
-//! [`thermode_control::FaultCode::NonFiniteCommand`] (as for any controller error) and switches the drive off.
+//! [`thermode_safety::FaultCode::NonFiniteCommand`] (as for any controller error) and switches the drive off.
 //! Every other broken number (NaN from a model, a sensor fault) latches its fault in the envelope as well.
 
-use thermode_control::{
-    ControlInput, Controller, DriveCommand, EnvelopeConfig, FaultCode, SafetyEnvelope, SetpointDecision,
-    ABSOLUTE_MAX_RATE_C_PER_S,
-};
+use thermode_control::{ControlInput, Controller};
 use thermode_device::{DeviceConfig, Reading};
 use thermode_model::fv::{FvConfig, FvModel};
 use thermode_model::kron::calibrate_to_surface;
 use thermode_model::{Material, Skin};
+use thermode_safety::{
+    DriveCommand, EnvelopeConfig, FaultCode, SafetyEnvelope, SetpointDecision, ABSOLUTE_MAX_RATE_C_PER_S,
+};
 
 use crate::controllers::{build_controller, ControllerKind};
 use crate::display::DisplayFinger;
-use crate::error::{require_in, RenderError};
+use crate::error::{require_in, PipelineError};
 use crate::renderer::{fv_config, Renderer, RendererKind, LIGHT_TOUCH_RESISTANCE_M2K_W};
 use crate::stimulus::Stimulus;
 
@@ -122,7 +122,7 @@ impl PipelineConfig {
 
     /// Checks the numbers the pipeline itself adds (the models, device, envelope and controller check theirs when
     /// the pipeline is built).
-    pub fn validate(&self) -> Result<(), RenderError> {
+    pub fn validate(&self) -> Result<(), PipelineError> {
         require_in("ambient temperature [°C]", self.ambient_c, MIN_AMBIENT_C, MAX_AMBIENT_C)?;
         require_in(
             "contact resistance [m²K/W]",
@@ -278,7 +278,7 @@ impl std::fmt::Debug for ChannelPipeline {
 impl ChannelPipeline {
     /// Builds the pipeline of `config`: the controller it names, everything at rest (the finger in air, the display
     /// rendering air).
-    pub fn new(config: &PipelineConfig) -> Result<Self, RenderError> {
+    pub fn new(config: &PipelineConfig) -> Result<Self, PipelineError> {
         config.validate()?;
         let controller = build_controller(&config.controller, &config.device)?;
         ChannelPipeline::with_controller(config, controller)
@@ -286,7 +286,7 @@ impl ChannelPipeline {
 
     /// As [`ChannelPipeline::new`] with a controller of the caller's (`config.controller` is not used). The
     /// controller's output should respect the device's drive limit; the envelope enforces it anyway.
-    pub fn with_controller(config: &PipelineConfig, controller: Box<dyn Controller>) -> Result<Self, RenderError> {
+    pub fn with_controller(config: &PipelineConfig, controller: Box<dyn Controller>) -> Result<Self, PipelineError> {
         config.validate()?;
         let grid = fv_config(config.contact_resistance_m2k_w);
         let renderer = Renderer::new(config.renderer, &config.skin, config.ambient_c, &grid)?;
@@ -319,7 +319,7 @@ impl ChannelPipeline {
     /// Changes what the channel displays, at any time: air (release), a touch of a fresh object (also a change of
     /// material during contact), or a direct temperature. Validated first ([`Stimulus::validate`]); an error
     /// leaves the pipeline unchanged. Not a per-tick operation: a new material may allocate its grid.
-    pub fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), RenderError> {
+    pub fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), PipelineError> {
         stimulus.validate()?;
         match stimulus {
             Stimulus::Air => {
@@ -345,7 +345,7 @@ impl ChannelPipeline {
         Ok(())
     }
 
-    fn touch(&mut self, material: &Material, object_c: f64) -> Result<(), RenderError> {
+    fn touch(&mut self, material: &Material, object_c: f64) -> Result<(), PipelineError> {
         if self.mode == Mode::Render && !self.renderer.in_contact() {
             self.calibrate();
         }
@@ -504,7 +504,7 @@ impl ChannelPipeline {
 
     /// Clears the envelope's latched fault at `now_s` (see [`SafetyEnvelope::clear_fault`]) and resets the
     /// controller, so it restarts from the present readings. Returns the cleared fault.
-    pub fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, RenderError> {
+    pub fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, PipelineError> {
         let cleared = self.envelope.clear_fault(now_s)?;
         if cleared.is_some() {
             self.controller.reset();

@@ -31,16 +31,17 @@ use std::time::Duration;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use thermode_platform::Clock;
 use thiserror::Error;
 
-use crate::device::{Device, SimulatedDisplay, MAX_CHANNELS};
-use crate::error::DeviceError;
-use crate::finger::PlateFinger;
 use crate::protocol::{
-    encode_frame, to_centi_c, to_milli_c, ChannelFaults, ChannelReport, Clock, DecodeError, DeviceMessage, DriveFrame,
+    encode_frame, to_centi_c, to_milli_c, ChannelFaults, ChannelReport, DecodeError, DeviceMessage, DriveFrame,
     FirmwareVersion, Frame, HostMessage, Identify, LinkCounters, NackCode, ReportFlags, SensorReport, StreamDecoder,
     DEFAULT_REPORT_INTERVAL_MS, DEFAULT_WATCHDOG_MS, SENSOR_OPEN_THRESHOLD_C, SENSOR_SHORT_THRESHOLD_C,
 };
+use thermode_device::DeviceError;
+use thermode_device::PlateFinger;
+use thermode_device::{Device, SimulatedDisplay, MAX_CHANNELS};
 
 /// The firmware version the emulator announces: 0.1.0.
 pub const EMULATOR_FIRMWARE: FirmwareVersion = FirmwareVersion {

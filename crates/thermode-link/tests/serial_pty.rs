@@ -12,12 +12,13 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use thermode_control::{EnvelopeConfig, SafetyEnvelope};
-use thermode_device::emulator::{Emulator, EmulatorConfig, EmulatorStatus, LinkFaults, PtyEmulator, SentLog};
-use thermode_device::protocol::{Clock, DeviceMessage, MonotonicClock};
-use thermode_device::serial::{serial_path, SerialConfig, SerialDevice};
 use thermode_device::{Device, DeviceConfig, DeviceError, Reading, SimulatedDisplay};
+use thermode_link::emulator::{Emulator, EmulatorConfig, EmulatorStatus, LinkFaults, PtyEmulator, SentLog};
+use thermode_link::protocol::DeviceMessage;
+use thermode_link::serial::{serial_path, SerialConfig, SerialDevice};
 use thermode_model::kron::KronModel;
+use thermode_platform::{Clock, MonotonicClock};
+use thermode_safety::{EnvelopeConfig, SafetyEnvelope};
 
 const WATCHDOG_S: f64 = 0.25;
 const TICK_S: f64 = 1e-3;
@@ -492,7 +493,7 @@ fn bad_paths_and_settings_are_errors() {
 #[test]
 fn runs_over_a_socket_pair_and_switches_off_on_drop() {
     use std::os::unix::net::UnixStream;
-    use thermode_device::emulator::{EmulatorControl, RunEnd};
+    use thermode_link::emulator::{EmulatorControl, RunEnd};
 
     let (mut device_end, host_end) = UnixStream::pair().unwrap_or_else(|e| panic!("socket pair: {e}"));
     device_end

@@ -12,14 +12,12 @@
 //!   within its watchdog period ([`DEFAULT_WATCHDOG_MS`] by default, announced in `Identify`); the host must send a
 //!   frame at least every third of that period. A device also starts latched after power-up; `ClearFault`
 //!   releases the latch.
-//! - **Time** ([`clock`]): both ends run on an injected monotonic [`Clock`].
+//! - **Time**: both ends run on an injected monotonic `thermode_platform::Clock`.
 
-pub mod clock;
 pub mod codec;
 pub mod frame;
 pub mod message;
 
-pub use clock::{Clock, ManualClock, MonotonicClock};
 pub use codec::{
     decode_payload, encode_frame, DecodeError, LinkCounters, StreamDecoder, WireMessage, HEADER_LEN, PROTOCOL_VERSION,
 };

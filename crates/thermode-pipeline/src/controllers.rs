@@ -8,7 +8,7 @@
 use thermode_control::{Controller, ModelController, PidController, PidGains, PlantModel};
 use thermode_device::{DeviceConfig, DEFAULT_DEVICE_TOML, LAGGING_SENSOR_DEVICE_TOML, WEAK_COOLING_DEVICE_TOML};
 
-use crate::error::RenderError;
+use crate::error::PipelineError;
 
 /// Tuned PID gains of the default display (`gains/default.toml`, written by `thermode tune`).
 pub const DEFAULT_GAINS_TOML: &str = include_str!("../gains/default.toml");
@@ -55,7 +55,7 @@ impl ShippedDisplay {
     }
 
     /// The device configuration.
-    pub fn device(self) -> Result<DeviceConfig, RenderError> {
+    pub fn device(self) -> Result<DeviceConfig, PipelineError> {
         Ok(DeviceConfig::from_toml_str(
             self.device_toml(),
             &format!("devices/{}.toml", self.name()),
@@ -72,7 +72,7 @@ impl ShippedDisplay {
     }
 
     /// The tuned gains.
-    pub fn gains(self) -> Result<PidGains, RenderError> {
+    pub fn gains(self) -> Result<PidGains, PipelineError> {
         gains_from_toml_str(self.gains_toml(), &format!("gains/{}.toml (built-in)", self.name()))
     }
 
@@ -85,12 +85,12 @@ impl ShippedDisplay {
 }
 
 /// Reads a gains file (TOML of [`PidGains`]) and validates it; `origin` names the file in errors.
-pub fn gains_from_toml_str(text: &str, origin: &str) -> Result<PidGains, RenderError> {
-    let gains: PidGains = toml::from_str(text).map_err(|e| RenderError::GainsFile {
+pub fn gains_from_toml_str(text: &str, origin: &str) -> Result<PidGains, PipelineError> {
+    let gains: PidGains = toml::from_str(text).map_err(|e| PipelineError::GainsFile {
         origin: origin.to_string(),
         message: e.to_string(),
     })?;
-    gains.validate().map_err(|e| RenderError::GainsFile {
+    gains.validate().map_err(|e| PipelineError::GainsFile {
         origin: origin.to_string(),
         message: e.to_string(),
     })?;
@@ -129,7 +129,7 @@ pub enum GainsSource {
 }
 
 /// The tuned gains for `device`: those of the shipped display it matches, else the default display's.
-pub fn gains_for_device(device: &DeviceConfig) -> Result<(PidGains, GainsSource), RenderError> {
+pub fn gains_for_device(device: &DeviceConfig) -> Result<(PidGains, GainsSource), PipelineError> {
     match ShippedDisplay::matching(device) {
         Some(shipped) => Ok((shipped.gains()?, GainsSource::Shipped(shipped))),
         None => Ok((ShippedDisplay::Default.gains()?, GainsSource::DefaultFallback)),
@@ -157,7 +157,7 @@ impl ControllerKind {
 
 /// The model controller's plant model from a device file: the module's S, R, K from the datasheet, the plate and
 /// hot-side capacities, the water, the sensor and the drive limit.
-pub fn plant_model(device: &DeviceConfig) -> Result<PlantModel, RenderError> {
+pub fn plant_model(device: &DeviceConfig) -> Result<PlantModel, PipelineError> {
     let plant = PlantModel {
         module: device.module()?,
         plate_heat_capacity_j_k: device.plate.heat_capacity_j_k,
@@ -175,7 +175,7 @@ pub fn plant_model(device: &DeviceConfig) -> Result<PlantModel, RenderError> {
 }
 
 /// Builds the controller `kind` for `device` (output limited to the device's drive limit).
-pub fn build_controller(kind: &ControllerKind, device: &DeviceConfig) -> Result<Box<dyn Controller>, RenderError> {
+pub fn build_controller(kind: &ControllerKind, device: &DeviceConfig) -> Result<Box<dyn Controller>, PipelineError> {
     match kind {
         ControllerKind::Pid(gains) => Ok(Box::new(PidController::new(*gains, device.drive.current_limit_a)?)),
         ControllerKind::Model => Ok(Box::new(ModelController::new(plant_model(device)?)?)),
@@ -228,7 +228,10 @@ mod tests {
             "kp_a_per_c = 1.0\nki_a_per_c_s = 0.0\nkd_a_s_per_c = 0.0\nfilter_cutoff_hz = 5.0\nextra = 1\n",
         ] {
             assert!(
-                matches!(gains_from_toml_str(bad, "bad.toml"), Err(RenderError::GainsFile { .. })),
+                matches!(
+                    gains_from_toml_str(bad, "bad.toml"),
+                    Err(PipelineError::GainsFile { .. })
+                ),
                 "accepted {bad}"
             );
         }

@@ -1,10 +1,10 @@
 //! What a channel is asked to display: air, the touch of a virtual object, or a direct display temperature
 //! (psychophysics), and the checks every stimulus passes before the pipeline accepts it.
 
-use thermode_control::{ABSOLUTE_MAX_C, ABSOLUTE_MAX_RATE_C_PER_S, ABSOLUTE_MIN_C};
 use thermode_model::Material;
+use thermode_safety::{ABSOLUTE_MAX_C, ABSOLUTE_MAX_RATE_C_PER_S, ABSOLUTE_MIN_C};
 
-use crate::error::{require_in, RenderError};
+use crate::error::{require_in, PipelineError};
 
 /// Coldest virtual object a stimulus may name \[°C\]: −50 (frozen goods well below a freezer's −18 °C). The safety
 /// envelope, not this range, limits what the display shows.
@@ -40,7 +40,7 @@ pub enum Stimulus {
 impl Stimulus {
     /// Checks every number of the stimulus (see the variants); NaN and out-of-range values are errors, never
     /// clamped.
-    pub fn validate(&self) -> Result<(), RenderError> {
+    pub fn validate(&self) -> Result<(), PipelineError> {
         match self {
             Stimulus::Air => Ok(()),
             Stimulus::Touch { material, object_c } => {
@@ -58,7 +58,7 @@ impl Stimulus {
                 if rate > 0.0 {
                     Ok(())
                 } else {
-                    Err(RenderError::BadValue {
+                    Err(PipelineError::BadValue {
                         what: "direct rate [°C/s]".to_string(),
                         value: rate,
                         requirement: "must be greater than zero".to_string(),

@@ -26,14 +26,15 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use thermode_control::DriveCommand;
+use thermode_platform::Clock;
+use thermode_safety::DriveCommand;
 
-use crate::device::{Device, Reading, MAX_CHANNELS};
-use crate::error::DeviceError;
 use crate::protocol::{
-    encode_frame, to_milliamps, ChannelFaults, Clock, DeviceMessage, DriveFrame, Frame, HostMessage, Identify,
-    LinkCounters, NackCode, SensorReport, StreamDecoder, DEFAULT_BAUD_RATE, DELIMITER,
+    encode_frame, to_milliamps, ChannelFaults, DeviceMessage, DriveFrame, Frame, HostMessage, Identify, LinkCounters,
+    NackCode, SensorReport, StreamDecoder, DEFAULT_BAUD_RATE, DELIMITER,
 };
+use thermode_device::DeviceError;
+use thermode_device::{Device, Reading, MAX_CHANNELS};
 
 /// The prefix of a serial device specification: `serial:PATH`.
 pub const SERIAL_PREFIX: &str = "serial:";
@@ -664,7 +665,7 @@ impl Device for SerialDevice {
     }
 
     /// A real device runs in real time: nothing to do.
-    fn advance(&mut self, _dt_s: f64) {}
+    fn poll(&mut self, _now_s: f64) {}
 }
 
 impl Drop for SerialDevice {

@@ -22,7 +22,7 @@ use super::message::{
     ChannelFaults, ChannelReport, DeviceMessage, DriveFrame, FirmwareVersion, Frame, HostMessage, Identify, NackCode,
     ReportFlags, SensorReport,
 };
-use crate::device::MAX_CHANNELS;
+use thermode_device::MAX_CHANNELS;
 
 /// The protocol version this crate speaks.
 pub const PROTOCOL_VERSION: u8 = 1;

@@ -1,5 +1,6 @@
 //! The safety envelope of one display channel. Every drive command passes through it: it is the only way to a
-//! [`DriveCommand`] (its fields are private and it has no public constructor, no `Clone`, no `Deserialize`).
+//! [`DriveCommand`] other than [`DriveCommand::off`] (its fields are private, and it has no other public
+//! constructor, no `Clone`, no `Deserialize`).
 //!
 //! Per tick the runtime calls, in this order:
 //! 1. [`SafetyEnvelope::observe`] with the newest [`Measurement`] (fault checks, thermal-dose accumulation);
@@ -95,6 +96,16 @@ pub struct DriveCommand {
 }
 
 impl DriveCommand {
+    /// 0 A: the one command that needs no envelope, because switching a drive off is always safe (a stop, a failed
+    /// read, a shutdown). It carries no fault and no limits.
+    pub fn off() -> Self {
+        DriveCommand {
+            current_a: 0.0,
+            fault: None,
+            limited_by: DriveLimits::default(),
+        }
+    }
+
     /// The current to apply, A (positive heats the display; 0 when faulted).
     pub fn current_a(&self) -> f64 {
         self.current_a

@@ -6,7 +6,7 @@
 
 use thiserror::Error;
 
-use crate::device::MAX_CHANNELS;
+use thermode_device::MAX_CHANNELS;
 
 /// Why a message could not be built.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]

@@ -8,15 +8,16 @@ use std::sync::Arc;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use thermode_device::emulator::{
+use thermode_device::{DeviceConfig, Fault, Polarity, SimulatedDisplay};
+use thermode_link::emulator::{
     Emulator, EmulatorConfig, EmulatorControl, EmulatorError, LinkFaults, RunEnd, SentLog, EMULATOR_FIRMWARE,
 };
-use thermode_device::protocol::{
-    encode_frame, to_milli_c, write_frame, ChannelFaults, Clock, DeviceMessage, DriveFrame, Frame, HostMessage,
-    LinkCounters, ManualClock, NackCode, ReportFlags, SensorReport, StreamDecoder,
+use thermode_link::protocol::{
+    encode_frame, to_milli_c, write_frame, ChannelFaults, DeviceMessage, DriveFrame, Frame, HostMessage, LinkCounters,
+    NackCode, ReportFlags, SensorReport, StreamDecoder,
 };
-use thermode_device::{DeviceConfig, Fault, Polarity, SimulatedDisplay};
 use thermode_model::kron::KronModel;
+use thermode_platform::{Clock, ManualClock};
 
 const TICK_S: f64 = 1e-3;
 const WATCHDOG_S: f64 = 0.25;
@@ -589,7 +590,7 @@ fn settings_are_validated() {
 /// An in-memory port for [`Emulator::run`]: each read hands over the next scripted chunk and moves the manual
 /// clock by a millisecond; what the emulator writes is kept.
 struct ScriptedPort {
-    clock: ManualClock,
+    clock: Arc<ManualClock>,
     script: Vec<Vec<u8>>,
     reads: usize,
     written: Vec<u8>,
@@ -612,7 +613,7 @@ enum End {
 
 impl Read for ScriptedPort {
     fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
-        self.clock.advance_s(TICK_S);
+        self.clock.advance(TICK_S);
         self.reads += 1;
         if let Some(chunk) = self.script.get(self.reads - 1) {
             buf[..chunk.len()].copy_from_slice(chunk);
@@ -657,7 +658,7 @@ fn scripted(end: End) -> (ScriptedPort, Arc<EmulatorControl>) {
     }
     let control = EmulatorControl::new();
     let port = ScriptedPort {
-        clock: ManualClock::new(),
+        clock: Arc::new(ManualClock::new()),
         script,
         reads: 0,
         written: Vec::new(),
@@ -672,7 +673,7 @@ fn runs_over_an_in_memory_port_on_a_manual_clock() {
     let (mut port, control) = scripted(End::Stop);
     let mut emu = emulator(1, EmulatorConfig::default());
     let clock = port.clock.clone();
-    let end = emu.run(&mut port, &clock, &control);
+    let end = emu.run(&mut port, clock.as_ref(), &control);
     assert_eq!(end, Ok(RunEnd::Stopped));
     let status = control.status().unwrap_or_else(|| panic!("no status published"));
     assert!(
@@ -710,13 +711,13 @@ fn a_failing_port_ends_the_run_with_an_error() {
     let mut emu = emulator(1, EmulatorConfig::default());
     let clock = port.clock.clone();
     assert!(matches!(
-        emu.run(&mut port, &clock, &control),
+        emu.run(&mut port, clock.as_ref(), &control),
         Err(EmulatorError::Io(_))
     ));
     let (mut port, control) = scripted(End::Eof);
-    assert_eq!(emu.run(&mut port, &clock, &control), Ok(RunEnd::HostClosed));
+    assert_eq!(emu.run(&mut port, clock.as_ref(), &control), Ok(RunEnd::HostClosed));
     let (mut port, _) = scripted(End::Gone);
-    assert_eq!(emu.run(&mut port, &clock, &control), Ok(RunEnd::HostClosed));
+    assert_eq!(emu.run(&mut port, clock.as_ref(), &control), Ok(RunEnd::HostClosed));
     control.close_port();
-    assert_eq!(emu.run(&mut port, &clock, &control), Ok(RunEnd::PortClosed));
+    assert_eq!(emu.run(&mut port, clock.as_ref(), &control), Ok(RunEnd::PortClosed));
 }

@@ -1,0 +1,15 @@
+//! thermode-link: the links between thermode and real thermal displays. Every link implements
+//! `thermode_device::Device`, so the control loop drives a real display exactly as it drives the simulated one, and
+//! every drive it sends is an envelope-gated `thermode_safety::DriveCommand`.
+//!
+//! - [`protocol`]: thermode's own binary host–device protocol (COBS frames, CRC-32, sequence numbers, watchdog;
+//!   specified in `docs/protocol.md`).
+//! - [`serial`]: [`serial::SerialDevice`], a display behind a serial port speaking that protocol (`serial:PATH`).
+//! - [`emulator`]: the device side of the protocol running the simulated display on a pseudo-terminal, for
+//!   `thermode emulate` and end-to-end tests without hardware.
+//!
+//! Time comes from an injected `thermode_platform::Clock` on both ends.
+
+pub mod emulator;
+pub mod protocol;
+pub mod serial;

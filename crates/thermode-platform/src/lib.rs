@@ -1,0 +1,16 @@
+//! thermode-platform: what thermode takes from the machine it runs on, in one place.
+//!
+//! - [`time`]: the one [`Clock`] trait with [`MonotonicClock`] (real time) and [`ManualClock`] (tests: time moves
+//!   only when told to, or jumps to every deadline it is asked to sleep until), the drift-free fixed-rate
+//!   [`Ticker`], and the civil (UTC calendar) date and time of day.
+//! - [`fs`]: the one atomic file writer: a temporary file beside the target, synced, renamed over it, and the
+//!   folder synced; a target that is not a regular file (a device, a FIFO) is written in place, never replaced.
+//!
+//! The link to a display, the daemon's control loop and the lab's trial runner all take their time from a
+//! `&dyn Clock`, so a recorded run can be replayed on a [`ManualClock`] bit for bit.
+
+pub mod fs;
+pub mod time;
+
+pub use fs::{write_atomically, write_bytes_atomically, WriteError};
+pub use time::{civil_date, civil_from_days, utc_stamp, Clock, ManualClock, MonotonicClock, Tick, Ticker, TickerError};

@@ -1,0 +1,37 @@
+//! thermode-safety: the one safety envelope every drive command of a thermal display channel passes.
+//!
+//! Pure library: no I/O, no clock (time comes in as `now_s`), no allocation on the per-tick path, deterministic.
+//! Temperatures in °C, currents in A, times in s. **A positive current heats the display.**
+//!
+//! - [`envelope`]: [`SafetyEnvelope`]: set-point clamp and rate limit, thermal dose (IEC 60601-1 contact-time
+//!   limits, CEM43), fault detection with latching. [`Measurement`] goes in, a [`DriveCommand`] comes out: the only
+//!   ways to one are [`SafetyEnvelope::gate_drive`] and [`DriveCommand::off`].
+//! - [`config`]: [`EnvelopeConfig`] (serde, documented defaults and sources) and the compiled-in absolute limits.
+//! - [`fault`]: [`FaultCode`], stable numeric fault codes.
+//! - [`dose`]: CEM43 and time-at-43 °C bookkeeping.
+//! - [`error`]: [`EnvelopeError`].
+//!
+//! One tick of a channel (the controller in the middle is any of `thermode-control`'s):
+//! ```
+//! use thermode_safety::{EnvelopeConfig, Measurement, SafetyEnvelope};
+//! let mut envelope = SafetyEnvelope::new(EnvelopeConfig::default(), 2.8)?;
+//! let m = Measurement { time_s: 0.0, sensor_c: 32.0, hot_side_c: 24.0, sample_seq: 1 };
+//! envelope.observe(&m);
+//! let shaped = envelope.shape_setpoint(0.0, 30.0);
+//! let request_a = 0.5 * (shaped.setpoint_c - m.sensor_c); // a proportional controller
+//! let drive = envelope.gate_drive(0.0, request_a);
+//! assert!(drive.current_a() < 0.0 && drive.current_a().abs() <= 2.8);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+pub mod config;
+pub mod dose;
+pub mod envelope;
+pub mod error;
+pub mod fault;
+
+pub use config::{EnvelopeConfig, ABSOLUTE_MAX_C, ABSOLUTE_MAX_RATE_C_PER_S, ABSOLUTE_MIN_C};
+pub use dose::DoseTracker;
+pub use envelope::{DriveCommand, DriveLimits, Measurement, SafetyEnvelope, SetpointDecision, SetpointLimits};
+pub use error::EnvelopeError;
+pub use fault::FaultCode;
