@@ -21,10 +21,10 @@
 
 use std::path::{Path, PathBuf};
 
+use serde::Serialize;
+
 use thermode_model::materials::find;
 use thiserror::Error;
-
-use crate::analysis::Condition;
 
 /// Why an experiment file was refused. Every variant names the file.
 #[derive(Debug, Error)]
@@ -542,5 +542,37 @@ mod tests {
         assert!(!is_valid_identifier("a/b"));
         assert!(!is_valid_identifier("é"));
         assert!(!is_valid_identifier(&"x".repeat(65)));
+    }
+}
+
+/// The two conditions of the paper's experiment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Condition {
+    /// A real sample was touched.
+    Real,
+    /// The material was rendered by the thermal display.
+    Simulated,
+}
+
+impl Condition {
+    /// Both conditions, real first.
+    pub const ALL: [Condition; 2] = [Condition::Real, Condition::Simulated];
+
+    /// Parses `real` / `simulated` (trimmed, any case).
+    pub fn parse(text: &str) -> Option<Condition> {
+        match text.trim().to_ascii_lowercase().as_str() {
+            "real" => Some(Condition::Real),
+            "simulated" => Some(Condition::Simulated),
+            _ => None,
+        }
+    }
+
+    /// `real` or `simulated`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Condition::Real => "real",
+            Condition::Simulated => "simulated",
+        }
     }
 }

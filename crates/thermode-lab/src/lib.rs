@@ -10,12 +10,12 @@
 //! - [`error`]: the typed error [`LabError`] shared by the lab's modules.
 //! - [`design`]: experiment files (TOML); [`plan`]: the counterbalanced trial plan (Williams designs);
 //!   [`session`]: durable session CSVs and sidecars; [`runner`]: the trial runner and its stimulus, clock, console
-//!   and responder seams; [`observer`]: the simulated observer.
+//!   and responder seams; [`participant`]: the simulated participant.
 
 pub mod analysis;
 pub mod design;
 pub mod error;
-pub mod observer;
+pub mod participant;
 pub mod plan;
 pub mod runner;
 pub mod session;

@@ -27,7 +27,7 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::analysis::Condition;
+use crate::design::Condition;
 use crate::design::Experiment;
 
 /// One planned trial of one participant.

@@ -25,11 +25,11 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
+use thermode_platform::{parse_iso_date, write_bytes_atomically};
 use thiserror::Error;
 
 use crate::design::{Experiment, ExperimentFile};
 use crate::plan::{ParticipantPlan, PlannedTrial};
-use crate::runner::clock::is_iso_date;
 
 /// Columns of a session CSV, in order.
 pub const SESSION_COLUMNS: [&str; 20] = [
@@ -585,7 +585,7 @@ fn find_session(
             continue;
         };
         let date = rest.strip_suffix(".csv").or_else(|| rest.strip_suffix(".json"));
-        if let Some(date) = date.filter(|d| is_iso_date(d)) {
+        if let Some(date) = date.filter(|d| parse_iso_date(d).is_some()) {
             if !dates.iter().any(|d| d == date) {
                 dates.push(date.to_string());
             }
@@ -636,33 +636,13 @@ fn write_sidecar(path: &Path, sidecar: &Sidecar) -> Result<(), SessionError> {
     write_atomically(path, format!("{text}\n").as_bytes())
 }
 
-/// Writes `bytes` to `path` through a synced temporary file and a rename, then syncs the folder.
+/// Writes `bytes` to `path` atomically (`thermode_platform::write_bytes_atomically`).
 fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), SessionError> {
-    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("session");
-    let tmp = path.with_file_name(format!(".{name}.tmp"));
-    let result = (|| {
-        let mut file = File::create(&tmp)?;
-        file.write_all(bytes)?;
-        file.sync_all()?;
-        std::fs::rename(&tmp, path)?;
-        sync_folder(path)
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result.map_err(io(path))
+    write_bytes_atomically(path, bytes).map_err(io(path))
 }
 
 fn truncate(path: &Path, len: u64) -> Result<(), SessionError> {
     let file = OpenOptions::new().write(true).open(path).map_err(io(path))?;
     file.set_len(len).map_err(io(path))?;
     file.sync_all().map_err(io(path))
-}
-
-/// Syncs the folder holding `path` so that a rename survives a crash (a no-op where folders cannot be opened).
-fn sync_folder(path: &Path) -> std::io::Result<()> {
-    match path.parent().map(File::open) {
-        Some(Ok(dir)) => dir.sync_all().or(Ok(())),
-        _ => Ok(()),
-    }
 }

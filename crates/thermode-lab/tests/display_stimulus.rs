@@ -1,18 +1,25 @@
 //! Integration tests of [`DisplayStimulus`]: the simulated condition is the finger on the simulated display and lags
 //! real contact at the touch (the actuator cannot cool the plate as fast as a real material draws heat) but follows
 //! it afterwards; both curves start at the resting finger; renders are deterministic (seeded sensor noise) and
-//! cached; the finger drift is seeded per trial; bad settings are refused; and a scripted simulated-observer session
+//! cached; the finger drift is seeded per trial; bad settings are refused; and a scripted simulated-participant session
 //! over a small design runs end to end and is read back by the analysis.
 
 use std::path::Path;
 
-use thermode_lab::analysis::{self, Condition};
+use thermode_lab::analysis;
+use thermode_lab::design::Condition;
 use thermode_lab::design::ExperimentFile;
-use thermode_lab::observer::{CurveFeatures, SimulatedObserver};
+use thermode_lab::participant::{CurveFeatures, SimulatedParticipant};
 use thermode_lab::runner::stimulus::{DisplayCurves, DisplaySetup, DisplayStimulus};
-use thermode_lab::runner::{FakeClock, FvContact, QuietConsole, Runner, Stimulus, StimulusError, StimulusRequest};
+use thermode_lab::runner::{FvContact, QuietConsole, Runner, Stimulus, StimulusError, StimulusRequest};
 use thermode_model::materials::{find, Material};
 use thermode_pipeline::ControllerKind;
+use thermode_platform::{parse_iso_date, ManualClock};
+
+/// A jumping manual clock (every wait passes at once) whose wall clock starts on `date` (`YYYY-MM-DD`).
+fn dated_clock(date: &str) -> ManualClock {
+    ManualClock::jumping().with_unix_origin_s(parse_iso_date(date).expect("a valid date"))
+}
 
 /// Presentation time of the curve tests \[s\] (shorter than the paper's 30 s; the lag is over within 2 s).
 const DURATION_S: f64 = 10.0;
@@ -221,7 +228,7 @@ fn small(dir: &Path) -> ExperimentFile {
 }
 
 #[test]
-fn a_scripted_observer_session_runs_end_to_end_on_the_display() {
+fn a_scripted_simulated_participant_session_runs_end_to_end_on_the_display() {
     let dir = tempfile::tempdir().expect("temp dir");
     let exp = small(dir.path());
     let design = &exp.experiment;
@@ -233,9 +240,9 @@ fn a_scripted_observer_session_runs_end_to_end_on_the_display() {
         .map(|m| CurveFeatures::of(&stimulus.curves(m, design.presentation_s).expect("cached").real))
         .collect::<Result<Vec<_>, _>>()
         .expect("features");
-    // No perceptual noise: the observer answers the nearest reference. Real trials are the references themselves,
+    // No perceptual noise: the simulated participant answers the nearest reference. Real trials are the references themselves,
     // so every one must be identified; aluminium, stone and wood differ by far more than the display's lag.
-    let mut observer = SimulatedObserver::new(design.response_options.clone(), references, design.seed);
+    let mut simulated = SimulatedParticipant::new(design.response_options.clone(), references, design.seed);
     let mut files = Vec::new();
     for id in &design.participant_ids {
         let summary = Runner {
@@ -244,8 +251,9 @@ fn a_scripted_observer_session_runs_end_to_end_on_the_display() {
             data_dir: dir.path(),
             device: stimulus.describe(),
             stimulus: &mut stimulus,
-            responder: &mut observer,
-            clock: &mut FakeClock::new("2024-05-01"),
+            responder: &mut simulated,
+            clock: &dated_clock("2024-05-01"),
+            time_scale: 1.0,
             console: &mut QuietConsole,
             interactive: false,
         }
@@ -265,9 +273,9 @@ fn a_scripted_observer_session_runs_end_to_end_on_the_display() {
     assert_eq!((result.participants, result.trials), (2, 12));
     let real = result.rates.real.rate.expect("rate");
     let simulated = result.rates.simulated.rate.expect("rate");
-    assert_eq!(real, 1.0, "noiseless observer on real contact");
+    assert_eq!(real, 1.0, "noiseless simulated on real contact");
     assert_eq!(
         simulated, 1.0,
-        "noiseless observer on three well-separated rendered materials"
+        "noiseless simulated on three well-separated rendered materials"
     );
 }

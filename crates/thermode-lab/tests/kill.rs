@@ -1,5 +1,5 @@
 //! The kill test: the runner, in a child process (this test binary re-run on its ignored `child_session` test),
-//! runs a scripted session — model stimulus with a drifting finger, the calibrated simulated observer, a small
+//! runs a scripted session — model stimulus with a drifting finger, the calibrated simulated participant, a small
 //! nonzero time scale — and is killed with SIGKILL at seeded random moments, then resumed, several times. In the
 //! end every planned trial must be in the session file exactly once, in order, identical to an uninterrupted run's
 //! rows except the timing columns; after every kill the file's complete rows must be a prefix of those rows and never
@@ -12,9 +12,10 @@ use std::time::{Duration, Instant};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use thermode_lab::design::ExperimentFile;
-use thermode_lab::observer::{SimulatedObserver, PAPER_REAL_IDENTIFICATION_RATE};
-use thermode_lab::runner::{Clock, FakeClock, FvContact, ModelStimulus, QuietConsole, Runner, SystemClock};
+use thermode_lab::participant::{SimulatedParticipant, PAPER_REAL_IDENTIFICATION_RATE};
+use thermode_lab::runner::{FvContact, ModelStimulus, QuietConsole, Runner};
 use thermode_lab::session::TIMING_COLUMNS;
+use thermode_platform::{parse_iso_date, Clock, ManualClock, MonotonicClock};
 
 const CHILD_ENV: &str = "THERMODE_LAB_KILL_CHILD_DIR";
 const DATE: &str = "2024-05-01";
@@ -23,30 +24,31 @@ const TIME_SCALE: f64 = 0.004;
 const DESIGN: &str = "name = \"kill\"\nmaterials = [\"aluminium\", \"steel\", \"stone\", \"wood\", \"rubber\"]\n\
                       participants = 1\nrepetitions = 2\nseed = 77\nexclusion_max_drift_c = 0.5\n";
 
-/// The system clock (scaled waits) on a fixed date, so that the child's session file has a known name.
-struct FixedDateClock(SystemClock);
+/// The machine's clock on a fixed date, so that the child's session file has a known name.
+#[derive(Debug)]
+struct FixedDateClock(MonotonicClock);
 
 impl Clock for FixedDateClock {
     fn now_s(&self) -> f64 {
         self.0.now_s()
     }
-    fn wait_s(&mut self, duration_s: f64) {
-        self.0.wait_s(duration_s);
+    fn sleep_until(&self, deadline_s: f64) {
+        self.0.sleep_until(deadline_s);
     }
-    fn today(&self) -> String {
-        DATE.to_string()
+    fn unix_time_s(&self) -> f64 {
+        parse_iso_date(DATE).expect("a valid date") + self.0.now_s()
     }
 }
 
-/// Runs the whole session of participant P01 in `dir` with `clock`.
-fn run_session(dir: &Path, clock: &mut dyn Clock) {
+/// Runs the whole session of participant P01 in `dir` with `clock`, waits scaled by `time_scale`.
+fn run_session(dir: &Path, clock: &dyn Clock, time_scale: f64) {
     let experiment = ExperimentFile::load(&dir.join("kill.toml")).expect("valid design");
     let seed = experiment.experiment.seed;
     let contact = FvContact::default();
     let mut stimulus = ModelStimulus::new(contact.clone(), 0.3, seed).expect("model");
     let options = &experiment.experiment.response_options;
-    let mut observer = SimulatedObserver::from_model(options, &contact, 30.0, seed).expect("references");
-    observer
+    let mut simulated = SimulatedParticipant::from_model(options, &contact, 30.0, seed).expect("references");
+    simulated
         .calibrate(PAPER_REAL_IDENTIFICATION_RATE, 1000, 1)
         .expect("reachable");
     Runner {
@@ -55,8 +57,9 @@ fn run_session(dir: &Path, clock: &mut dyn Clock) {
         data_dir: &dir.join("data"),
         device: stimulus.describe(),
         stimulus: &mut stimulus,
-        responder: &mut observer,
+        responder: &mut simulated,
         clock,
+        time_scale,
         console: &mut QuietConsole,
         interactive: false,
     }
@@ -68,8 +71,7 @@ fn run_session(dir: &Path, clock: &mut dyn Clock) {
 #[ignore = "child process of runner_survives_random_kills"]
 fn child_session() {
     let dir = PathBuf::from(std::env::var(CHILD_ENV).expect("run by runner_survives_random_kills"));
-    let mut clock = FixedDateClock(SystemClock::new(TIME_SCALE).expect("valid scale"));
-    run_session(&dir, &mut clock);
+    run_session(&dir, &FixedDateClock(MonotonicClock::new()), TIME_SCALE);
 }
 
 fn spawn_child(dir: &Path) -> Child {
@@ -144,7 +146,8 @@ fn runner_survives_random_kills() {
     for d in [dir.path(), reference_dir.path()] {
         std::fs::write(d.join("kill.toml"), DESIGN).expect("write design");
     }
-    run_session(reference_dir.path(), &mut FakeClock::new(DATE));
+    let reference_clock = ManualClock::jumping().with_unix_origin_s(parse_iso_date(DATE).expect("a valid date"));
+    run_session(reference_dir.path(), &reference_clock, 1.0);
     let csv_name = format!("P01_kill_{DATE}.csv");
     let reference = complete_rows(&reference_dir.path().join("data").join(&csv_name));
     assert_eq!(reference.len(), 20);

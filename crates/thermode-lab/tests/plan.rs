@@ -6,7 +6,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use thermode_lab::analysis::Condition;
+use thermode_lab::design::Condition;
 use thermode_lab::design::{Experiment, ExperimentFile};
 use thermode_lab::plan::{make_plan, Plan, PLAN_COLUMNS};
 

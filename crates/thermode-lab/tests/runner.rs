@@ -1,23 +1,30 @@
-//! Integration tests of the runner, the session files and the simulated observer: scripted and interactive
+//! Integration tests of the runner, the session files and the simulated participant: scripted and interactive
 //! sessions with a fake clock, the CSV and sidecar contents, resume after a failure and after a torn row, refusal of
-//! a different plan, the exclusion rule, bad input, the observer's calibration against the paper's 66 %, and a full
-//! simulated-observer run of the paper's design read back by the analysis.
+//! a different plan, the exclusion rule, bad input, the simulated participant's calibration against the paper's 66 %, and a full
+//! simulated-participant run of the paper's design read back by the analysis.
 
 use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
-use thermode_lab::analysis::{self, Condition};
+use thermode_lab::analysis;
+use thermode_lab::design::Condition;
 use thermode_lab::design::ExperimentFile;
-use thermode_lab::observer::{
-    CurveFeatures, SimulatedObserver, PAPER_CALIBRATED_NOISE_SD, PAPER_REAL_IDENTIFICATION_RATE,
+use thermode_lab::participant::{
+    CurveFeatures, SimulatedParticipant, PAPER_CALIBRATED_NOISE_SD, PAPER_REAL_IDENTIFICATION_RATE,
 };
 use thermode_lab::plan::make_plan;
 use thermode_lab::runner::{
-    FakeClock, FvContact, InteractiveResponder, ModelStimulus, QuietConsole, RunError, Runner, ScriptedResponses,
-    SessionSummary, Stimulus, StimulusError, StimulusRequest, TerminalConsole, TrialMeasurement,
+    FvContact, InteractiveResponder, ModelStimulus, QuietConsole, RunError, Runner, ScriptedResponses, SessionSummary,
+    Stimulus, StimulusError, StimulusRequest, TerminalConsole, TrialMeasurement,
 };
 use thermode_lab::session::{SessionError, SESSION_COLUMNS, SOFTWARE_VERSION, TIMING_COLUMNS};
 use thermode_model::materials::find;
+use thermode_platform::{parse_iso_date, ManualClock};
+
+/// A jumping manual clock (every wait passes at once) whose wall clock starts on `date` (`YYYY-MM-DD`).
+fn dated_clock(date: &str) -> ManualClock {
+    ManualClock::jumping().with_unix_origin_s(parse_iso_date(date).expect("a valid date"))
+}
 
 const DATE: &str = "2024-05-01";
 
@@ -88,7 +95,8 @@ fn run_scripted(
         device: serde_json::json!({"device": "test"}),
         stimulus,
         responder: &mut responder,
-        clock: &mut FakeClock::new(date),
+        clock: &dated_clock(date),
+        time_scale: 1.0,
         console: &mut QuietConsole,
         interactive: false,
     }
@@ -353,7 +361,8 @@ fn interactive_sessions_prompt_and_ask_again_after_a_bad_answer() {
         device: serde_json::Value::Null,
         stimulus: &mut steady(),
         responder: &mut InteractiveResponder,
-        clock: &mut FakeClock::new(DATE),
+        clock: &dated_clock(DATE),
+        time_scale: 1.0,
         console: &mut console,
         interactive: true,
     }
@@ -382,7 +391,8 @@ fn an_interactive_session_whose_input_ends_keeps_the_completed_trials() {
         device: serde_json::Value::Null,
         stimulus: &mut steady(),
         responder: &mut InteractiveResponder,
-        clock: &mut FakeClock::new(DATE),
+        clock: &dated_clock(DATE),
+        time_scale: 1.0,
         console: &mut console,
         interactive: true,
     }
@@ -397,11 +407,11 @@ fn paper_options() -> Vec<String> {
 }
 
 #[test]
-fn the_calibrated_observer_identifies_real_contact_as_often_as_the_papers_participants() {
+fn the_calibrated_simulated_participant_identifies_real_contact_as_often_as_the_papers_participants() {
     let options = paper_options();
     let contact = FvContact::default();
-    let mut observer = SimulatedObserver::from_model(&options, &contact, 30.0, 3).expect("references");
-    let calibration = observer
+    let mut simulated = SimulatedParticipant::from_model(&options, &contact, 30.0, 3).expect("references");
+    let calibration = simulated
         .calibrate(PAPER_REAL_IDENTIFICATION_RATE, 4000, 1)
         .expect("reachable");
     assert!(
@@ -431,7 +441,7 @@ fn the_calibrated_observer_identifies_real_contact_as_often_as_the_papers_partic
             .expect("curve");
         let curve = m.curve.expect("the model stimulus records curves");
         for k in 0..per_material {
-            let answer = observer.identify_trial(&curve, 1000 + k, i + 1).expect("features");
+            let answer = simulated.identify_trial(&curve, 1000 + k, i + 1).expect("features");
             confusion[i][answer] += 1;
         }
     }
@@ -459,16 +469,16 @@ fn the_calibrated_observer_identifies_real_contact_as_often_as_the_papers_partic
 }
 
 #[test]
-fn observer_limits_noise_free_and_very_noisy() {
+fn simulated_participant_limits_noise_free_and_very_noisy() {
     let options = paper_options();
-    let mut observer = SimulatedObserver::from_model(&options, &FvContact::default(), 30.0, 3).expect("references");
+    let mut simulated = SimulatedParticipant::from_model(&options, &FvContact::default(), 30.0, 3).expect("references");
     // No noise: every reference is identified as itself.
-    for (i, reference) in observer.references().iter().enumerate() {
+    for (i, reference) in simulated.references().iter().enumerate() {
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(1);
-        assert_eq!(observer.identify(reference, &mut rng), i, "{}", options[i]);
+        assert_eq!(simulated.identify(reference, &mut rng), i, "{}", options[i]);
     }
     // Wood and rubber: almost the same effusivity, so almost the same curve (a few hundredths of a degree).
-    let f: Vec<&CurveFeatures> = observer.references().iter().collect();
+    let f: Vec<&CurveFeatures> = simulated.references().iter().collect();
     assert!(
         (f[3].end_drop_c - f[4].end_drop_c).abs() < 0.1,
         "{:?} vs {:?}",
@@ -476,27 +486,27 @@ fn observer_limits_noise_free_and_very_noisy() {
         f[4]
     );
     // Huge noise: chance level, 1/5.
-    observer.set_noise_sd(100.0).expect("valid");
+    simulated.set_noise_sd(100.0).expect("valid");
     let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(2);
     let n = 4000;
     let correct = (0..n)
         .map(|k| k % 5)
-        .filter(|&i| observer.identify(&observer.references()[i].clone(), &mut rng) == i)
+        .filter(|&i| simulated.identify(&simulated.references()[i].clone(), &mut rng) == i)
         .count();
     let rate = correct as f64 / n as f64;
     assert!((rate - 0.2).abs() < 0.03, "rate {rate} vs chance 0.2");
 }
 
-/// The paper's design run with the calibrated observer for every participant (the demo of the issue).
+/// The paper's design run with the calibrated simulated for every participant (the demo of the issue).
 #[test]
-fn a_simulated_observer_run_of_the_paper_design_analyses_like_the_paper() {
+fn a_simulated_participant_run_of_the_paper_design_analyses_like_the_paper() {
     let dir = tempfile::tempdir().expect("temp dir");
     let exp = paper();
     let contact = FvContact::default();
     let mut stimulus = ModelStimulus::new(contact.clone(), 0.0, exp.experiment.seed).expect("model");
     let options = &exp.experiment.response_options;
-    let mut observer = SimulatedObserver::from_model(options, &contact, 30.0, exp.experiment.seed).expect("refs");
-    observer
+    let mut simulated = SimulatedParticipant::from_model(options, &contact, 30.0, exp.experiment.seed).expect("refs");
+    simulated
         .calibrate(PAPER_REAL_IDENTIFICATION_RATE, 4000, 1)
         .expect("reachable");
     let mut files: Vec<PathBuf> = Vec::new();
@@ -507,8 +517,9 @@ fn a_simulated_observer_run_of_the_paper_design_analyses_like_the_paper() {
             data_dir: dir.path(),
             device: stimulus.describe(),
             stimulus: &mut stimulus,
-            responder: &mut observer,
-            clock: &mut FakeClock::new(DATE),
+            responder: &mut simulated,
+            clock: &dated_clock(DATE),
+            time_scale: 1.0,
             console: &mut QuietConsole,
             interactive: false,
         }
@@ -522,11 +533,11 @@ fn a_simulated_observer_run_of_the_paper_design_analyses_like_the_paper() {
         (15, 300, 0)
     );
     let real = result.rates.real.rate.expect("rate");
-    let simulated = result.rates.simulated.rate.expect("rate");
+    let simulated_rate = result.rates.simulated.rate.expect("rate");
     // 150 trials per condition: standard error √(0.66·0.34/150) ≈ 0.039; 3 standard errors.
     assert!((real - 0.66).abs() < 0.12, "real rate {real}");
-    assert!((simulated - 0.66).abs() < 0.12, "simulated rate {simulated}");
-    // Re-running the same design gives the same data (observer and stimulus are seeded per trial).
+    assert!((simulated_rate - 0.66).abs() < 0.12, "simulated rate {simulated_rate}");
+    // Re-running the same design gives the same data (simulated and stimulus are seeded per trial).
     let again = tempfile::tempdir().expect("temp dir");
     let summary = Runner {
         experiment: &exp,
@@ -534,8 +545,9 @@ fn a_simulated_observer_run_of_the_paper_design_analyses_like_the_paper() {
         data_dir: again.path(),
         device: stimulus.describe(),
         stimulus: &mut stimulus,
-        responder: &mut observer,
-        clock: &mut FakeClock::new(DATE),
+        responder: &mut simulated,
+        clock: &dated_clock(DATE),
+        time_scale: 1.0,
         console: &mut QuietConsole,
         interactive: false,
     }

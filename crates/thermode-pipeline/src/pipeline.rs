@@ -179,21 +179,55 @@ enum Mode {
     },
 }
 
-/// One display channel: renderer, display inverse, controller and safety envelope. See the module documentation.
-pub struct ChannelPipeline {
+/// The set-point stage of a tick (steps 2, 3 and 7 of the module documentation): the renderer and the finger model
+/// on the display with its inverse, or the direct ramp. It turns the virtual world into a requested display
+/// set-point and follows what the finger really receives.
+#[derive(Debug, Clone)]
+pub struct SetpointStage {
     renderer: Renderer,
     display: DisplayFinger,
-    controller: Box<dyn Controller>,
-    envelope: SafetyEnvelope,
     mode: Mode,
-    /// Receptor-to-plate conductance of the finger model over the contact area [W/K].
-    finger_conductance_w_k: f64,
-    /// The current the envelope let through on the previous tick \[A\].
-    applied_current_a: f64,
-    /// The last shaped set-point [°C].
-    last_setpoint_c: Option<f64>,
     /// Shortest request horizon \[s\]: one sensor sample period (see the module documentation, step 3).
     min_request_horizon_s: f64,
+}
+
+/// The drive stage of a tick (steps 1, 3a, 4, 5 and 6): safety envelope and controller. It turns a requested
+/// set-point and the newest reading into a gated drive.
+pub struct DriveStage {
+    controller: Box<dyn Controller>,
+    envelope: SafetyEnvelope,
+    /// The current the envelope let through on the previous tick \[A\].
+    applied_current_a: f64,
+}
+
+/// What the finger model tells the controller: its receptor and its conductance to the plate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FingerInput {
+    /// The finger model's receptor temperature at the start of the tick \[°C\].
+    pub receptor_c: f64,
+    /// Receptor-to-plate conductance of the finger model over the contact area [W/K].
+    pub conductance_w_k: f64,
+}
+
+/// What the drive stage did in one tick.
+#[derive(Debug, PartialEq)]
+pub struct DriveOutcome {
+    /// The set-point after the envelope.
+    pub decision: SetpointDecision,
+    /// The controller's request \[A\] (NaN if it refused its input).
+    pub requested_current_a: f64,
+    /// The gated drive.
+    pub drive: DriveCommand,
+}
+
+/// One display channel: renderer, display inverse, controller and safety envelope. See the module documentation.
+pub struct ChannelPipeline {
+    setpoint: SetpointStage,
+    drive: DriveStage,
+    /// Receptor-to-plate conductance of the finger model over the contact area [W/K].
+    finger_conductance_w_k: f64,
+    /// The last shaped set-point [°C].
+    last_setpoint_c: Option<f64>,
     /// What the finger models are built from, for the calibration at the first touch (`None`: no calibration, or
     /// done).
     calibration: Option<FingerModels>,
@@ -267,170 +301,45 @@ struct FingerModels {
 impl std::fmt::Debug for ChannelPipeline {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ChannelPipeline")
-            .field("renderer", &self.renderer.kind())
+            .field("renderer", &self.setpoint.renderer.kind())
+            .field("controller", &self.drive.controller.name())
+            .field("mode", &self.setpoint.mode)
+            .field("fault", &self.drive.envelope.fault())
+            .finish_non_exhaustive()
+    }
+}
+
+impl std::fmt::Debug for DriveStage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DriveStage")
             .field("controller", &self.controller.name())
-            .field("mode", &self.mode)
             .field("fault", &self.envelope.fault())
             .finish_non_exhaustive()
     }
 }
 
-impl ChannelPipeline {
-    /// Builds the pipeline of `config`: the controller it names, everything at rest (the finger in air, the display
-    /// rendering air).
+impl SetpointStage {
+    /// The renderer and display finger of `config` at rest in air, rendering air.
     pub fn new(config: &PipelineConfig) -> Result<Self, PipelineError> {
-        config.validate()?;
-        let controller = build_controller(&config.controller, &config.device)?;
-        ChannelPipeline::with_controller(config, controller)
-    }
-
-    /// As [`ChannelPipeline::new`] with a controller of the caller's (`config.controller` is not used). The
-    /// controller's output should respect the device's drive limit; the envelope enforces it anyway.
-    pub fn with_controller(config: &PipelineConfig, controller: Box<dyn Controller>) -> Result<Self, PipelineError> {
-        config.validate()?;
         let grid = fv_config(config.contact_resistance_m2k_w);
-        let renderer = Renderer::new(config.renderer, &config.skin, config.ambient_c, &grid)?;
         let contact_w_m2k = config.device.plate.contact_conductance_w_m2k;
-        let display = DisplayFinger::new(config.renderer, &config.skin, config.ambient_c, contact_w_m2k, &grid)?;
-        let envelope = SafetyEnvelope::new(config.envelope, config.device.drive.current_limit_a)?;
-        let finger_conductance_w_k = display.receptor_conductance_w_m2k() * config.device.plate.area_m2;
-        Ok(ChannelPipeline {
-            renderer,
-            display,
-            controller,
-            envelope,
+        Ok(SetpointStage {
+            renderer: Renderer::new(config.renderer, &config.skin, config.ambient_c, &grid)?,
+            display: DisplayFinger::new(config.renderer, &config.skin, config.ambient_c, contact_w_m2k, &grid)?,
             mode: Mode::Render,
-            finger_conductance_w_k,
-            applied_current_a: 0.0,
-            last_setpoint_c: None,
             min_request_horizon_s: 1.0 / config.device.sensor.sample_rate_hz,
-            calibration: config.calibrate_finger_at_touch.then(|| FingerModels {
-                kind: config.renderer,
-                skin: config.skin.clone(),
-                ambient_c: config.ambient_c,
-                contact_w_m2k,
-                grid,
-            }),
-            rest_heat: RestHeat::default(),
-            receptor_offset_c: 0.0,
         })
     }
 
-    /// Changes what the channel displays, at any time: air (release), a touch of a fresh object (also a change of
-    /// material during contact), or a direct temperature. Validated first ([`Stimulus::validate`]); an error
-    /// leaves the pipeline unchanged. Not a per-tick operation: a new material may allocate its grid.
-    pub fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), PipelineError> {
-        stimulus.validate()?;
-        match stimulus {
-            Stimulus::Air => {
-                self.renderer.release();
-                self.mode = Mode::Render;
-            }
-            Stimulus::Touch { material, object_c } => {
-                self.touch(&material, object_c)?;
-            }
-            Stimulus::Direct { temp_c, rate_c_s } => {
-                let ramp_c = match self.mode {
-                    Mode::Direct { ramp_c, .. } => ramp_c,
-                    Mode::Render => self.last_setpoint_c,
-                };
-                self.renderer.release();
-                self.mode = Mode::Direct {
-                    temp_c,
-                    rate_c_s,
-                    ramp_c,
-                };
-            }
-        }
-        Ok(())
-    }
-
-    fn touch(&mut self, material: &Material, object_c: f64) -> Result<(), PipelineError> {
-        if self.mode == Mode::Render && !self.renderer.in_contact() {
-            self.calibrate();
-        }
-        self.calibration = None;
-        self.renderer.touch(material, object_c)?;
-        self.mode = Mode::Render;
-        Ok(())
-    }
-
-    /// Calibrates the finger models to the real finger's resting surface at its first touch from air (once; see
-    /// [`PipelineConfig::calibrate_finger_at_touch`]). The controller's learned unknown heat d, averaged over the
-    /// rest ([`RestHeat`]), is the heat the real finger gives the plate beyond the finger model's,
-    /// G·(T_real − T_model) with G the receptor-to-plate conductance over the contact area, so the real receptor
-    /// rests at T_model + d/G. The skin's perfusion is scaled so that its steady state in air has that receptor
-    /// temperature (the paper measured each participant's resting finger; `calibrate_to_surface`), and renderer and
-    /// display finger restart from that steady state, so the target is computed for this finger. The controller's
-    /// unknown heat already holds d, so the receptor given to the controller is lowered by the calibration's shift:
-    /// the heat it expects from the finger stays continuous. Nothing changes when the average is not
-    /// distinguishable from its own fluctuation ([`RestHeat::significant_w`]: a finger that matches the model
-    /// keeps the model), or when no perfusion reaches the surface temperature.
-    fn calibrate(&mut self) {
-        let (Some(models), Some(heat_w)) = (&self.calibration, self.rest_heat.significant_w()) else {
-            return;
-        };
-        let model_c = self.display.receptor_c();
-        let real_c = model_c + heat_w / self.finger_conductance_w_k;
-        let Some((renderer, display)) = models.calibrated(real_c) else {
-            return;
-        };
-        self.receptor_offset_c = display.receptor_c() - model_c;
-        self.renderer = renderer;
-        self.display = display;
-    }
-
-    /// One tick at `now_s` \[s\] (the envelope's clock: the same clock as the readings' `time_s`) for the interval
-    /// `dt_s` \[s\] until the next tick, with the newest `reading`. Returns the gated drive to apply until the next
-    /// tick and what happened. Never allocates, never panics.
-    pub fn tick(&mut self, now_s: f64, dt_s: f64, reading: &Reading) -> (DriveCommand, Telemetry) {
-        self.envelope.observe(&reading.measurement());
-        if !(dt_s.is_finite() && dt_s > 0.0) {
-            let drive = self.envelope.gate_drive(now_s, f64::NAN);
-            let telemetry = self.refused_tick(now_s, reading, &drive);
-            return (drive, telemetry);
-        }
-        let (target_c, requested_c) = self.request(dt_s);
-        let decision = self.envelope.shape_setpoint(now_s, self.feasible(requested_c, dt_s));
-        self.last_setpoint_c = Some(decision.setpoint_c);
-        let request_a = self.control(now_s, dt_s, reading, &decision);
-        if self.calibration.is_some() && self.mode == Mode::Render && !self.renderer.in_contact() {
-            self.rest_heat.add(dt_s, self.controller.unknown_heat_w());
-        }
-        let drive = self.envelope.gate_drive(now_s, request_a);
-        self.applied_current_a = drive.current_a();
-        let plate_c = self
-            .controller
-            .plate_estimate_c()
-            .filter(|p| p.is_finite())
-            .unwrap_or(decision.setpoint_c);
-        self.display.advance(dt_s, plate_c);
-        let telemetry = Telemetry {
-            time_s: now_s,
-            contact: self.mode == Mode::Render && self.renderer.in_contact(),
-            target_skin_c: target_c,
-            skin_c: self.display.receptor_c(),
-            requested_setpoint_c: requested_c,
-            display_setpoint_c: decision.setpoint_c,
-            sensor_c: reading.sensor_c,
-            hot_side_c: reading.hot_side_c,
-            requested_current_a: request_a,
-            current_a: drive.current_a(),
-            fault: drive.fault(),
-        };
-        (drive, telemetry)
-    }
-
-    /// Steps the renderer (or the direct ramp) by `dt_s`: (target, requested set-point).
-    fn request(&mut self, dt_s: f64) -> (f64, f64) {
+    /// Steps the renderer (or the direct ramp) by `dt_s` \[s\]: (target \[°C\], requested set-point \[°C\]). The
+    /// request holds over [`SetpointStage::request_horizon_s`] (step 3).
+    pub fn request(&mut self, dt_s: f64) -> (f64, f64) {
         self.renderer.step(dt_s);
         match &mut self.mode {
             Mode::Render => {
                 let target_c = self.renderer.receptor_c();
-                (
-                    target_c,
-                    self.display.setpoint_c(target_c, self.request_horizon_s(dt_s)),
-                )
+                let horizon_s = dt_s.max(self.min_request_horizon_s);
+                (target_c, self.display.setpoint_c(target_c, horizon_s))
             }
             Mode::Direct {
                 temp_c,
@@ -452,6 +361,103 @@ impl ChannelPipeline {
         dt_s.max(self.min_request_horizon_s)
     }
 
+    /// Step 7: the finger model on the display advances by `dt_s` \[s\] with the plate at `plate_c` \[°C\].
+    pub fn follow(&mut self, dt_s: f64, plate_c: f64) {
+        self.display.advance(dt_s, plate_c);
+    }
+
+    /// The finger model's receptor \[°C\].
+    pub fn receptor_c(&self) -> f64 {
+        self.display.receptor_c()
+    }
+
+    /// Whether the renderer is in contact with a virtual object (false in air and in direct mode).
+    pub fn in_contact(&self) -> bool {
+        self.mode == Mode::Render && self.renderer.in_contact()
+    }
+
+    /// The renderer touches `material` at `object_c` \[°C\] (render mode).
+    pub fn touch(&mut self, material: &Material, object_c: f64) -> Result<(), PipelineError> {
+        self.renderer.touch(material, object_c)?;
+        self.mode = Mode::Render;
+        Ok(())
+    }
+
+    /// The renderer renders air (render mode).
+    pub fn release(&mut self) {
+        self.renderer.release();
+        self.mode = Mode::Render;
+    }
+
+    /// Direct mode: a ramp to `temp_c` \[°C\] at `rate_c_s` \[°C/s\], continuing from where the display stands (the
+    /// ramp's position, or `last_setpoint_c` \[°C\] when coming from render mode).
+    fn direct(&mut self, temp_c: f64, rate_c_s: f64, last_setpoint_c: Option<f64>) {
+        let ramp_c = match self.mode {
+            Mode::Direct { ramp_c, .. } => ramp_c,
+            Mode::Render => last_setpoint_c,
+        };
+        self.renderer.release();
+        self.mode = Mode::Direct {
+            temp_c,
+            rate_c_s,
+            ramp_c,
+        };
+    }
+}
+
+impl DriveStage {
+    /// The envelope of `config` around `controller`, nothing observed yet.
+    pub fn new(config: &PipelineConfig, controller: Box<dyn Controller>) -> Result<Self, PipelineError> {
+        Ok(DriveStage {
+            controller,
+            envelope: SafetyEnvelope::new(config.envelope, config.device.drive.current_limit_a)?,
+            applied_current_a: 0.0,
+        })
+    }
+
+    /// Step 1: the envelope observes the newest reading (fault checks, thermal dose).
+    pub fn observe(&mut self, reading: &Reading) {
+        self.envelope.observe(&reading.measurement());
+    }
+
+    /// Steps 3a–6 at `now_s` for a tick of `dt_s` \[s\]: the request limited to the feasible band, shaped by the
+    /// envelope, the controller's request on the shaped set-point with `finger` and `reading`, and the gated drive.
+    pub fn drive(
+        &mut self,
+        now_s: f64,
+        dt_s: f64,
+        reading: &Reading,
+        requested_c: f64,
+        finger: FingerInput,
+    ) -> DriveOutcome {
+        let decision = self.envelope.shape_setpoint(now_s, self.feasible(requested_c, dt_s));
+        let input = ControlInput {
+            time_s: now_s,
+            dt_s,
+            setpoint_c: decision.setpoint_c,
+            setpoint_rate_c_per_s: decision.rate_c_per_s,
+            sensor_c: reading.sensor_c,
+            hot_side_c: reading.hot_side_c,
+            applied_current_a: self.applied_current_a,
+            finger_receptor_c: Some(finger.receptor_c),
+            finger_conductance_w_k: finger.conductance_w_k,
+        };
+        let requested_current_a = self.controller.update(&input).unwrap_or(f64::NAN);
+        let drive = self.refuse_or_gate(now_s, requested_current_a);
+        DriveOutcome {
+            decision,
+            requested_current_a,
+            drive,
+        }
+    }
+
+    /// Step 6 alone: the envelope gates `request_a` \[A\] (NaN latches a fault and switches the drive off).
+    pub fn refuse_or_gate(&mut self, now_s: f64, request_a: f64) -> DriveCommand {
+        let drive = self.envelope.gate_drive(now_s, request_a);
+        self.applied_current_a = drive.current_a();
+        drive
+    }
+
     /// The request limited to [`FEASIBLE_BAND_C`] (or two ticks of the envelope's rate limit, if more) around the
     /// plate temperature the controller expects now, when it has an estimate. Without the band a set-point the
     /// plate cannot follow runs away from it inside the envelope's rate limiter (which shapes from its own last
@@ -469,29 +475,156 @@ impl ChannelPipeline {
         }
     }
 
-    /// The controller's request for this tick (NaN if it refused its input).
-    fn control(&mut self, now_s: f64, dt_s: f64, reading: &Reading, decision: &SetpointDecision) -> f64 {
-        let input = ControlInput {
-            time_s: now_s,
-            dt_s,
-            setpoint_c: decision.setpoint_c,
-            setpoint_rate_c_per_s: decision.rate_c_per_s,
-            sensor_c: reading.sensor_c,
-            hot_side_c: reading.hot_side_c,
-            applied_current_a: self.applied_current_a,
-            finger_receptor_c: Some(self.display.receptor_c() - self.receptor_offset_c),
-            finger_conductance_w_k: self.finger_conductance_w_k,
-        };
-        self.controller.update(&input).unwrap_or(f64::NAN)
+    /// Where step 7 puts the plate \[°C\]: the controller's estimate if it has one (an observer), else the shaped
+    /// set-point (the paper's way).
+    pub fn plate_for_finger_c(&self, decision: &SetpointDecision) -> f64 {
+        self.controller
+            .plate_estimate_c()
+            .filter(|p| p.is_finite())
+            .unwrap_or(decision.setpoint_c)
     }
 
-    fn refused_tick(&mut self, now_s: f64, reading: &Reading, drive: &DriveCommand) -> Telemetry {
-        self.applied_current_a = drive.current_a();
+    /// The safety envelope.
+    pub fn envelope(&self) -> &SafetyEnvelope {
+        &self.envelope
+    }
+
+    /// The controller.
+    pub fn controller(&self) -> &dyn Controller {
+        self.controller.as_ref()
+    }
+}
+
+impl ChannelPipeline {
+    /// Builds the pipeline of `config`: the controller it names, everything at rest (the finger in air, the display
+    /// rendering air).
+    pub fn new(config: &PipelineConfig) -> Result<Self, PipelineError> {
+        config.validate()?;
+        let controller = build_controller(&config.controller, &config.device)?;
+        ChannelPipeline::with_controller(config, controller)
+    }
+
+    /// As [`ChannelPipeline::new`] with a controller of the caller's (`config.controller` is not used). The
+    /// controller's output should respect the device's drive limit; the envelope enforces it anyway.
+    pub fn with_controller(config: &PipelineConfig, controller: Box<dyn Controller>) -> Result<Self, PipelineError> {
+        config.validate()?;
+        let setpoint = SetpointStage::new(config)?;
+        let drive = DriveStage::new(config, controller)?;
+        let finger_conductance_w_k = setpoint.display.receptor_conductance_w_m2k() * config.device.plate.area_m2;
+        Ok(ChannelPipeline {
+            setpoint,
+            drive,
+            finger_conductance_w_k,
+            last_setpoint_c: None,
+            calibration: config.calibrate_finger_at_touch.then(|| FingerModels {
+                kind: config.renderer,
+                skin: config.skin.clone(),
+                ambient_c: config.ambient_c,
+                contact_w_m2k: config.device.plate.contact_conductance_w_m2k,
+                grid: fv_config(config.contact_resistance_m2k_w),
+            }),
+            rest_heat: RestHeat::default(),
+            receptor_offset_c: 0.0,
+        })
+    }
+
+    /// Changes what the channel displays, at any time: air (release), a touch of a fresh object (also a change of
+    /// material during contact), or a direct temperature. Validated first ([`Stimulus::validate`]); an error
+    /// leaves the pipeline unchanged. Not a per-tick operation: a new material may allocate its grid.
+    pub fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), PipelineError> {
+        stimulus.validate()?;
+        match stimulus {
+            Stimulus::Air => self.setpoint.release(),
+            Stimulus::Touch { material, object_c } => self.touch(&material, object_c)?,
+            Stimulus::Direct { temp_c, rate_c_s } => self.setpoint.direct(temp_c, rate_c_s, self.last_setpoint_c),
+        }
+        Ok(())
+    }
+
+    fn touch(&mut self, material: &Material, object_c: f64) -> Result<(), PipelineError> {
+        if self.setpoint.mode == Mode::Render && !self.setpoint.renderer.in_contact() {
+            self.calibrate();
+        }
+        self.calibration = None;
+        self.setpoint.touch(material, object_c)
+    }
+
+    /// Calibrates the finger models to the real finger's resting surface at its first touch from air (once; see
+    /// [`PipelineConfig::calibrate_finger_at_touch`]). The controller's learned unknown heat d, averaged over the
+    /// rest ([`RestHeat`]), is the heat the real finger gives the plate beyond the finger model's,
+    /// G·(T_real − T_model) with G the receptor-to-plate conductance over the contact area, so the real receptor
+    /// rests at T_model + d/G. The skin's perfusion is scaled so that its steady state in air has that receptor
+    /// temperature (the paper measured each participant's resting finger; `calibrate_to_surface`), and renderer and
+    /// display finger restart from that steady state, so the target is computed for this finger. The controller's
+    /// unknown heat already holds d, so the receptor given to the controller is lowered by the calibration's shift:
+    /// the heat it expects from the finger stays continuous. Nothing changes when the average is not
+    /// distinguishable from its own fluctuation ([`RestHeat::significant_w`]: a finger that matches the model
+    /// keeps the model), or when no perfusion reaches the surface temperature.
+    fn calibrate(&mut self) {
+        let (Some(models), Some(heat_w)) = (&self.calibration, self.rest_heat.significant_w()) else {
+            return;
+        };
+        let model_c = self.setpoint.receptor_c();
+        let real_c = model_c + heat_w / self.finger_conductance_w_k;
+        let Some((renderer, display)) = models.calibrated(real_c) else {
+            return;
+        };
+        self.receptor_offset_c = display.receptor_c() - model_c;
+        self.setpoint.renderer = renderer;
+        self.setpoint.display = display;
+    }
+
+    /// One tick at `now_s` \[s\] (the envelope's clock: the same clock as the readings' `time_s`) for the interval
+    /// `dt_s` \[s\] until the next tick, with the newest `reading`. Returns the gated drive to apply until the next
+    /// tick and what happened. Never allocates, never panics.
+    pub fn tick(&mut self, now_s: f64, dt_s: f64, reading: &Reading) -> (DriveCommand, Telemetry) {
+        self.drive.observe(reading);
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            let drive = self.drive.refuse_or_gate(now_s, f64::NAN);
+            let telemetry = self.refused_tick(now_s, reading, &drive);
+            return (drive, telemetry);
+        }
+        let (target_c, requested_c) = self.setpoint.request(dt_s);
+        let finger = FingerInput {
+            receptor_c: self.setpoint.receptor_c() - self.receptor_offset_c,
+            conductance_w_k: self.finger_conductance_w_k,
+        };
+        let outcome = self.drive.drive(now_s, dt_s, reading, requested_c, finger);
+        self.last_setpoint_c = Some(outcome.decision.setpoint_c);
+        if self.calibration.is_some() && self.setpoint.mode == Mode::Render && !self.setpoint.renderer.in_contact() {
+            self.rest_heat.add(dt_s, self.drive.controller.unknown_heat_w());
+        }
+        let plate_c = self.drive.plate_for_finger_c(&outcome.decision);
+        self.setpoint.follow(dt_s, plate_c);
+        let drive = outcome.drive;
+        let telemetry = Telemetry {
+            time_s: now_s,
+            contact: self.setpoint.in_contact(),
+            target_skin_c: target_c,
+            skin_c: self.setpoint.receptor_c(),
+            requested_setpoint_c: requested_c,
+            display_setpoint_c: outcome.decision.setpoint_c,
+            sensor_c: reading.sensor_c,
+            hot_side_c: reading.hot_side_c,
+            requested_current_a: outcome.requested_current_a,
+            current_a: drive.current_a(),
+            fault: drive.fault(),
+        };
+        (drive, telemetry)
+    }
+
+    /// The horizon over which the display inverse computes the request for a tick of `dt_s` \[s\] (see
+    /// [`SetpointStage::request_horizon_s`]).
+    pub fn request_horizon_s(&self, dt_s: f64) -> f64 {
+        self.setpoint.request_horizon_s(dt_s)
+    }
+
+    fn refused_tick(&self, now_s: f64, reading: &Reading, drive: &DriveCommand) -> Telemetry {
         Telemetry {
             time_s: now_s,
-            contact: self.mode == Mode::Render && self.renderer.in_contact(),
+            contact: self.setpoint.in_contact(),
             target_skin_c: f64::NAN,
-            skin_c: self.display.receptor_c(),
+            skin_c: self.setpoint.receptor_c(),
             requested_setpoint_c: f64::NAN,
             display_setpoint_c: self.last_setpoint_c.unwrap_or(f64::NAN),
             sensor_c: reading.sensor_c,
@@ -505,32 +638,32 @@ impl ChannelPipeline {
     /// Clears the envelope's latched fault at `now_s` (see [`SafetyEnvelope::clear_fault`]) and resets the
     /// controller, so it restarts from the present readings. Returns the cleared fault.
     pub fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, PipelineError> {
-        let cleared = self.envelope.clear_fault(now_s)?;
+        let cleared = self.drive.envelope.clear_fault(now_s)?;
         if cleared.is_some() {
-            self.controller.reset();
-            self.applied_current_a = 0.0;
+            self.drive.controller.reset();
+            self.drive.applied_current_a = 0.0;
         }
         Ok(cleared)
     }
 
     /// The safety envelope (fault, thermal dose, limits).
     pub fn envelope(&self) -> &SafetyEnvelope {
-        &self.envelope
+        self.drive.envelope()
     }
 
     /// The controller.
     pub fn controller(&self) -> &dyn Controller {
-        self.controller.as_ref()
+        self.drive.controller()
     }
 
     /// The renderer.
     pub fn renderer(&self) -> &Renderer {
-        &self.renderer
+        &self.setpoint.renderer
     }
 
     /// The finger model on the display and its inverse.
     pub fn display_finger(&self) -> &DisplayFinger {
-        &self.display
+        &self.setpoint.display
     }
 
     /// The finger model's receptor-to-plate conductance over the contact area [W/K], as given to the controller.
@@ -546,7 +679,7 @@ impl ChannelPipeline {
 
     /// Whether the channel is in direct mode.
     pub fn is_direct(&self) -> bool {
-        matches!(self.mode, Mode::Direct { .. })
+        matches!(self.setpoint.mode, Mode::Direct { .. })
     }
 }
 

@@ -13,4 +13,7 @@ pub mod fs;
 pub mod time;
 
 pub use fs::{write_atomically, write_bytes_atomically, WriteError};
-pub use time::{civil_date, civil_from_days, utc_stamp, Clock, ManualClock, MonotonicClock, Tick, Ticker, TickerError};
+pub use time::{
+    civil_date, civil_from_days, days_from_civil, parse_iso_date, utc_stamp, Clock, ManualClock, MonotonicClock, Tick,
+    Ticker, TickerError,
+};

@@ -172,6 +172,42 @@ pub fn civil_from_days(days: i64) -> (i64, u32, u32) {
     (year, month, day)
 }
 
+/// Days since 1970-01-01 of the proleptic Gregorian date (`year`, `month` 1–12, `day` 1–31) (H. Hinnant's
+/// `days_from_civil`, the inverse of [`civil_from_days`]).
+pub fn days_from_civil(year: i64, month: u32, day: u32) -> i64 {
+    let y = if month <= 2 { year - 1 } else { year };
+    let era = y.div_euclid(400);
+    let yoe = y.rem_euclid(400);
+    let m = i64::from(month);
+    let doy = (153 * (if m > 2 { m - 3 } else { m + 9 }) + 2) / 5 + i64::from(day) - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    era * 146_097 + doe - 719_468
+}
+
+/// The start of an ISO `YYYY-MM-DD` date, 00:00 UTC, in s since 1970-01-01 UTC; `None` unless `text` is such a date
+/// (month 1–12, day 1 to the month's length).
+pub fn parse_iso_date(text: &str) -> Option<f64> {
+    let b = text.as_bytes();
+    let shaped = b.len() == 10
+        && b.iter().enumerate().all(|(i, &c)| {
+            if i == 4 || i == 7 {
+                c == b'-'
+            } else {
+                c.is_ascii_digit()
+            }
+        });
+    if !shaped {
+        return None;
+    }
+    let (year, month, day) = (
+        text[..4].parse().ok()?,
+        text[5..7].parse().ok()?,
+        text[8..].parse().ok()?,
+    );
+    let days = days_from_civil(year, month, day);
+    (civil_from_days(days) == (year, month, day)).then_some(days as f64 * 86_400.0)
+}
+
 /// The UTC date of `unix_s` \[s since 1970-01-01 UTC\] as ISO `YYYY-MM-DD`.
 pub fn civil_date(unix_s: f64) -> String {
     let (year, month, day) = civil_from_days((unix_s / 86_400.0).floor() as i64);
@@ -368,6 +404,14 @@ mod tests {
             assert_eq!(civil_date(days as f64 * 86_400.0 + 3600.0), date, "day {days}");
         }
         assert_eq!(utc_stamp(19_723.0 * 86_400.0 + 3661.5), "20240101-010101");
+        for days in [-800_000, -1, 0, 59, 11_016, 19_723, 800_000] {
+            let (y, m, d) = civil_from_days(days);
+            assert_eq!(days_from_civil(y, m, d), days, "{y}-{m}-{d}");
+        }
+        assert_eq!(parse_iso_date("2000-02-29"), Some(11_016.0 * 86_400.0));
+        for bad in ["2001-02-29", "2024-13-01", "2024-5-01", "2024-05-00", "not a date"] {
+            assert_eq!(parse_iso_date(bad), None, "{bad}");
+        }
     }
 
     #[test]

@@ -11,6 +11,7 @@ use std::sync::Once;
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use thermode_platform::WriteError;
 use thiserror::Error;
 
 /// The embedded font (DejaVu Sans, Bitstream Vera licence).
@@ -158,7 +159,7 @@ pub fn write_figure(figure: &Figure, path: &Path) -> Result<(), PlotError> {
         Some("svg") => {
             let text = svg_string(figure)?;
             write_atomically(path, |tmp| {
-                std::fs::write(tmp, text.as_bytes()).map_err(|source| io(tmp, source))
+                std::fs::write(tmp, text.as_bytes()).map_err(|source| io(path, source))
             })
         }
         Some("png") => write_atomically(path, |tmp| {
@@ -190,22 +191,13 @@ fn io(path: &Path, error: std::io::Error) -> PlotError {
     }
 }
 
-/// Writes through a temporary file beside `path` (same extension, so the PNG encoder sees it), then renames.
+/// Writes `path` through the one atomic writer (`thermode_platform::write_atomically`: a temporary file with the
+/// same extension, so the PNG encoder sees it, synced and renamed); errors name `path`, never the temporary file.
 fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<(), PlotError>) -> Result<(), PlotError> {
-    let file_name = path.file_name().and_then(|n| n.to_str()).unwrap_or("figure");
-    let tmp = path.with_file_name(format!(".{file_name}.{}.tmp.{}", std::process::id(), ext_of(path)));
-    let result = write(&tmp).and_then(|()| std::fs::rename(&tmp, path).map_err(|source| io(path, source)));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
-}
-
-fn ext_of(path: &Path) -> String {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase()
+    thermode_platform::write_atomically(path, write).map_err(|e| match e {
+        WriteError::Fill(e) => e,
+        WriteError::Io { path, source } => PlotError::Io { path, error: source },
+    })
 }
 
 fn draw_figure<DB: DrawingBackend>(figure: &Figure, root: &DrawingArea<DB, Shift>) -> Result<(), PlotError> {

@@ -9,9 +9,10 @@
 //!   depends on the measurements only through the first one (the envelope anchors its first set-point there),
 //!   and through the thermal-dose lockout, which the cold paper materials never reach; every evaluation checks
 //!   that its envelope shapes exactly the stored set-points and refuses the gains otherwise.
-//! - An evaluation ([`evaluate`]) then runs only the envelope, the PID and the plant, exactly as
-//!   [`crate::run::render`] does (same plant start, same order of operations, same seed): its RMS equals the
-//!   render's bit for bit (tested).
+//! - An evaluation ([`evaluate`]) then runs only the pipeline's drive stage (`DriveStage`: envelope and PID) and
+//!   the plant; the set-point stage (`SetpointStage`) ran once in [`prepare`]. Both are the stages
+//!   `ChannelPipeline::tick` is composed of, so the order of operations is written once: the RMS equals
+//!   [`crate::run::render`]'s bit for bit (same plant start, same seed; tested).
 //! - The five materials run in parallel threads (`std::thread::scope`).
 //!
 //! # Search
@@ -38,7 +39,7 @@
 
 use std::thread;
 
-use thermode_control::{ControlInput, Controller, PidController, PidGains};
+use thermode_control::{PidController, PidGains};
 use thermode_device::{Device, DeviceConfig};
 use thermode_model::materials::paper_materials;
 use thermode_model::peltier::KELVIN_OFFSET;
@@ -50,9 +51,9 @@ use crate::nelder_mead::{minimise_with_restarts, Minimum, NelderMead};
 use crate::run::{resting_plant, Plant, RenderSpec};
 use crate::summary::FULL_WINDOW_S;
 use thermode_pipeline::controllers::ControllerKind;
-use thermode_pipeline::display::DisplayFinger;
-use thermode_pipeline::pipeline::{render_envelope, PipelineConfig};
-use thermode_pipeline::renderer::{fv_config, Renderer, RendererKind};
+use thermode_pipeline::pipeline::{render_envelope, DriveStage, FingerInput, PipelineConfig, SetpointStage};
+use thermode_pipeline::renderer::RendererKind;
+use thermode_pipeline::ChannelPipeline;
 
 /// Search bounds of (k_p [A/°C], k_i [A/(°C·s)], k_d [A·s/°C], f_c \[Hz\]); f_c is further capped at half the tick
 /// rate (a filter beyond the Nyquist frequency of the loop filters nothing).
@@ -143,10 +144,7 @@ pub struct Ticks {
 pub fn prepare(spec: &RenderSpec) -> Result<Prepared, RenderError> {
     spec.validate()?;
     let cfg = &spec.pipeline;
-    let grid = fv_config(cfg.contact_resistance_m2k_w);
-    let mut renderer = Renderer::new(cfg.renderer, &cfg.skin, cfg.ambient_c, &grid)?;
-    let contact = cfg.device.plate.contact_conductance_w_m2k;
-    let mut display = DisplayFinger::new(cfg.renderer, &cfg.skin, cfg.ambient_c, contact, &grid)?;
+    let mut stage = SetpointStage::new(cfg)?;
     let mut shaper = SafetyEnvelope::new(cfg.envelope, cfg.device.drive.current_limit_a)?;
     let mut plant = resting_plant(spec)?;
     shaper.observe(&plant.read(0)?.measurement());
@@ -160,22 +158,20 @@ pub fn prepare(spec: &RenderSpec) -> Result<Prepared, RenderError> {
         requested_c: Vec::with_capacity(ticks),
         shaped_c: Vec::with_capacity(ticks),
         receptor_c: Vec::with_capacity(ticks),
-        finger_conductance_w_k: display.receptor_conductance_w_m2k() * cfg.device.plate.area_m2,
+        finger_conductance_w_k: ChannelPipeline::new(cfg)?.finger_conductance_w_k(),
         pre_ticks: pre,
     };
     for k in 0..ticks {
         if k == pre {
-            renderer.touch(&spec.material, spec.object_temperature_c())?;
+            stage.touch(&spec.material, spec.object_temperature_c())?;
         }
         if release.is_some_and(|r| k == pre + r) {
-            renderer.release();
+            stage.release();
         }
-        renderer.step(dt);
-        let target_c = renderer.receptor_c();
-        let requested_c = display.setpoint_c(target_c, dt);
+        let (target_c, requested_c) = stage.request(dt);
         let shaped_c = shaper.shape_setpoint(start_s + k as f64 * dt, requested_c).setpoint_c;
-        prepared.receptor_c.push(display.receptor_c());
-        display.advance(dt, shaped_c);
+        prepared.receptor_c.push(stage.receptor_c());
+        stage.follow(dt, shaped_c);
         prepared.target_c.push(target_c);
         prepared.requested_c.push(requested_c);
         prepared.shaped_c.push(shaped_c);
@@ -196,41 +192,30 @@ fn evaluate_ticks(prepared: &Ticks, mut plant: Plant, gains: &PidGains) -> Resul
     let depth_m = spec.receptor_depth_m();
     let cfg = &spec.pipeline;
     let limit_a = cfg.device.drive.current_limit_a;
-    let mut controller = PidController::new(*gains, limit_a)?;
-    let mut envelope = SafetyEnvelope::new(cfg.envelope, limit_a)?;
+    let controller = PidController::new(*gains, limit_a)?;
+    let mut stage = DriveStage::new(cfg, Box::new(controller))?;
     let dt = spec.tick_s();
     let substeps = spec.substeps();
     let h = dt / substeps as f64;
     let start_s = plant.time_s();
-    let mut applied_a = 0.0;
     let (mut sum, mut count) = (0.0, 0usize);
     for k in 0..prepared.target_c.len() {
         let now_s = start_s + k as f64 * dt;
         let reading = plant.read(0)?;
-        envelope.observe(&reading.measurement());
-        let decision = envelope.shape_setpoint(now_s, prepared.requested_c[k]);
-        if decision.setpoint_c.to_bits() != prepared.shaped_c[k].to_bits() {
+        stage.observe(&reading);
+        let finger = FingerInput {
+            receptor_c: prepared.receptor_c[k],
+            conductance_w_k: prepared.finger_conductance_w_k,
+        };
+        let outcome = stage.drive(now_s, dt, &reading, prepared.requested_c[k], finger);
+        if outcome.decision.setpoint_c.to_bits() != prepared.shaped_c[k].to_bits() {
             return Err(RenderError::Invalid(format!(
                 "tuner: the envelope shaped {} °C where {} °C was prepared (tick {k}); the gain-independent \
                  shortcut does not hold",
-                decision.setpoint_c, prepared.shaped_c[k]
+                outcome.decision.setpoint_c, prepared.shaped_c[k]
             )));
         }
-        let input = ControlInput {
-            time_s: now_s,
-            dt_s: dt,
-            setpoint_c: decision.setpoint_c,
-            setpoint_rate_c_per_s: decision.rate_c_per_s,
-            sensor_c: reading.sensor_c,
-            hot_side_c: reading.hot_side_c,
-            applied_current_a: applied_a,
-            finger_receptor_c: Some(prepared.receptor_c[k]),
-            finger_conductance_w_k: prepared.finger_conductance_w_k,
-        };
-        let request_a = controller.update(&input).unwrap_or(f64::NAN);
-        let drive = envelope.gate_drive(now_s, request_a);
-        applied_a = drive.current_a();
-        plant.apply(0, &drive)?;
+        plant.apply(0, &outcome.drive)?;
         for _ in 0..substeps {
             plant.advance(h);
         }

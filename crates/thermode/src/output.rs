@@ -1,38 +1,28 @@
-//! Writing files the CLI produces: atomically (temporary file beside the target, then rename), so that an error
+//! Writing files the CLI produces through the one atomic writer (`thermode_platform::write_atomically`: temporary
+//! file beside the target, synced, renamed, folder synced; a device or FIFO is written in place), so that an error
 //! never leaves half a file behind, and printing to standard output without panicking on a closed pipe.
 
-use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::Path;
 
 use anyhow::{Context, Result};
+use thermode_platform::WriteError;
 
-/// The temporary path used while `path` is being written.
-fn temporary_path(path: &Path) -> PathBuf {
-    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("output");
-    path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
-}
-
-/// Writes the bytes produced by `fill` to `path` atomically.
+/// Writes the bytes produced by `fill` to `path` atomically; errors name `path`.
 pub fn write_atomically(path: &Path, fill: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
-    let tmp = temporary_path(path);
-    let result = (|| {
-        let file = std::fs::File::create(&tmp).with_context(|| format!("cannot write {}", path.display()))?;
-        let mut writer = std::io::BufWriter::new(file);
+    let fill_file = |tmp: &Path| -> Result<()> {
+        let file = File::options().write(true).create(true).truncate(true).open(tmp)?;
+        let mut writer = BufWriter::new(file);
         fill(&mut writer)?;
-        let file = writer
-            .into_inner()
-            .map_err(|e| e.into_error())
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        file.sync_all()
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        std::fs::rename(&tmp, path).with_context(|| format!("cannot write {}", path.display()))
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
+        writer.flush()?;
+        Ok(())
+    };
+    thermode_platform::write_atomically(path, fill_file).or_else(|e| match e {
+        WriteError::Fill(e) => Err(e).with_context(|| format!("cannot write {}", path.display())),
+        WriteError::Io { source, .. } => Err(source).with_context(|| format!("cannot write {}", path.display())),
+    })
 }
-
 /// Prints `text` to standard output; a closed pipe (e.g. `| head`) ends quietly instead of panicking.
 pub fn print_stdout(text: &str) -> Result<()> {
     let mut stdout = std::io::stdout().lock();

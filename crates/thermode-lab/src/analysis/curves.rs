@@ -21,8 +21,9 @@ use std::path::PathBuf;
 
 use serde::Serialize;
 
-use super::data::{Condition, CsvTable, MaterialInfo, MaterialResolver};
+use super::data::{CsvTable, MaterialInfo, MaterialResolver};
 use super::stats;
+use crate::design::Condition;
 use crate::error::LabError;
 
 /// Accepted temperature column names \[°C\], in order of preference.

@@ -20,39 +20,8 @@ use thermode_model::materials::find;
 use thermode_model::units::{conductivity_to_cgs, specific_heat_to_cgs};
 use thermode_model::ParamError;
 
+use crate::design::Condition;
 use crate::error::LabError;
-
-/// The two conditions of the paper's experiment.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Condition {
-    /// A real sample was touched.
-    Real,
-    /// The material was rendered by the thermal display.
-    Simulated,
-}
-
-impl Condition {
-    /// Both conditions, real first.
-    pub const ALL: [Condition; 2] = [Condition::Real, Condition::Simulated];
-
-    /// Parses `real` / `simulated` (trimmed, any case).
-    pub fn parse(text: &str) -> Option<Condition> {
-        match text.trim().to_ascii_lowercase().as_str() {
-            "real" => Some(Condition::Real),
-            "simulated" => Some(Condition::Simulated),
-            _ => None,
-        }
-    }
-
-    /// `real` or `simulated`.
-    pub fn name(self) -> &'static str {
-        match self {
-            Condition::Real => "real",
-            Condition::Simulated => "simulated",
-        }
-    }
-}
 
 /// A response option: a library material with the two properties of the paper's Figure 4 in the paper's units.
 #[derive(Debug, Clone, PartialEq, Serialize)]

@@ -27,7 +27,7 @@ use std::path::PathBuf;
 use serde::Serialize;
 
 pub use curves::{analyze_curves, CurveAnalysis};
-pub use data::{read_sessions, Condition, MaterialInfo, Sessions, Trial};
+pub use data::{read_sessions, MaterialInfo, Sessions, Trial};
 pub use figure4::Figure4;
 pub use report::{write_outputs, ReportFormat};
 pub use tables::{ChiSquareReport, ConditionPair, ConditionRates, Confusion, Correlation, RatioTable};

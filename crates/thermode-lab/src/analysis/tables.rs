@@ -3,8 +3,9 @@
 
 use serde::Serialize;
 
-use super::data::{Condition, MaterialInfo, Sessions};
+use super::data::{MaterialInfo, Sessions};
 use super::stats;
+use crate::design::Condition;
 
 /// One value per condition.
 #[derive(Debug, Clone, PartialEq, Serialize)]

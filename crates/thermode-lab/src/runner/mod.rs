@@ -1,5 +1,5 @@
 //! The durable trial runner (`thermode lab run`): walks one participant through the planned trials, presents each
-//! material through a [`Stimulus`], times the presentation with a [`Clock`], takes the answer from a
+//! material through a [`Stimulus`], times the presentation with a `thermode_platform::Clock`, takes the answer from a
 //! [`Responder`], applies the exclusion rule and appends each trial to the session file before the next begins.
 //!
 //! Per trial: show the progress (`trial 7/20, simulated, present: aluminium`); for a real trial ask the experimenter
@@ -14,7 +14,6 @@
 //! **Resume**: the same call after a crash or Ctrl-C continues at the first missing trial (see [`crate::session`]);
 //! nothing needs to be caught, since every completed trial is already on disk.
 
-pub mod clock;
 pub mod console;
 pub mod responses;
 pub mod stimulus;
@@ -22,16 +21,16 @@ pub mod stimulus;
 use std::path::{Path, PathBuf};
 
 use thermode_model::materials::{find, Material};
+use thermode_platform::{civil_date, Clock};
 use thiserror::Error;
 
-pub use clock::{Clock, FakeClock, SystemClock};
 pub use console::{Console, QuietConsole, TerminalConsole};
 pub use responses::{parse_answer, InteractiveResponder, Responder, ResponseQuery, ScriptedResponses};
 pub use stimulus::{FvContact, ModelStimulus, SkinCurve, Stimulus, StimulusError, StimulusRequest, TrialMeasurement};
 
-use crate::analysis::Condition;
+use crate::design::Condition;
 use crate::design::{is_valid_identifier, DesignError, ExperimentFile};
-use crate::observer::ObserverError;
+use crate::participant::ParticipantError;
 use crate::plan::{make_plan, ParticipantPlan, PlannedTrial};
 use crate::session::{SessionError, SessionFile, SessionSpec, TrialRecord, SOFTWARE_VERSION};
 
@@ -47,9 +46,9 @@ pub enum RunError {
     /// The stimulus failed.
     #[error(transparent)]
     Stimulus(#[from] StimulusError),
-    /// The simulated observer failed.
+    /// The simulated participant failed.
     #[error(transparent)]
-    Observer(#[from] ObserverError),
+    Participant(#[from] ParticipantError),
     /// A participant identifier outside `[A-Za-z0-9_-]`.
     #[error("participant `{0}`: identifiers are 1 to 64 characters from A-Z, a-z, 0-9, `_` and `-`")]
     BadParticipant(String),
@@ -98,8 +97,10 @@ pub struct Runner<'a> {
     pub stimulus: &'a mut dyn Stimulus,
     /// Gives the answers.
     pub responder: &'a mut dyn Responder,
-    /// Times the presentations and dates the session.
-    pub clock: &'a mut dyn Clock,
+    /// Times the presentations and dates the session (UTC date of its wall clock).
+    pub clock: &'a dyn Clock,
+    /// Multiplies every wait: 1 = real time, 0 = no waiting (finite, not negative).
+    pub time_scale: f64,
     /// Talks to the experimenter.
     pub console: &'a mut dyn Console,
     /// Whether to wait for the experimenter (Enter) before each real trial; false in scripted mode.
@@ -149,10 +150,22 @@ pub fn participant_plan(experiment: &ExperimentFile, participant: &str) -> Resul
 }
 
 impl Runner<'_> {
+    /// Waits `duration_s` \[s\] of presentation time: `duration_s × time_scale` on the clock.
+    fn wait_s(&self, duration_s: f64) {
+        let scaled_s = duration_s * self.time_scale;
+        if !(scaled_s.is_finite() && scaled_s > 0.0) {
+            return;
+        }
+        let deadline_s = self.clock.now_s() + scaled_s;
+        while self.clock.now_s() < deadline_s {
+            self.clock.sleep_until(deadline_s);
+        }
+    }
+
     /// Runs (or resumes) the session to its end.
     pub fn run(mut self) -> Result<SessionSummary, RunError> {
         let plan = participant_plan(self.experiment, self.participant)?;
-        let today = self.clock.today();
+        let today = civil_date(self.clock.unix_time_s());
         let mut session = SessionFile::open(&SessionSpec {
             experiment: self.experiment,
             plan: &plan,
@@ -257,7 +270,7 @@ impl Runner<'_> {
         measurement.validate()?;
         let elapsed_s = self.clock.now_s() - start_s;
         if elapsed_s < design.presentation_s {
-            self.clock.wait_s(design.presentation_s - elapsed_s);
+            self.wait_s(design.presentation_s - elapsed_s);
         }
         let presentation_s = self.clock.now_s() - start_s;
         let options = &design.response_options;

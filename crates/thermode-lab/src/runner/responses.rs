@@ -1,5 +1,5 @@
 //! Where the participant's answers come from: the experimenter typing them ([`InteractiveResponder`]), a file of
-//! answers ([`ScriptedResponses`]) or the simulated observer ([`SimulatedObserver`]).
+//! answers ([`ScriptedResponses`]) or the simulated participant ([`SimulatedParticipant`]).
 //!
 //! An answer is an option number 1..n (the order of the design's `response_options`) or an option's name (any
 //! case; library aliases such as `aluminum` accepted).
@@ -11,7 +11,7 @@ use thermode_model::materials::find;
 use super::console::Console;
 use super::stimulus::TrialMeasurement;
 use super::RunError;
-use crate::observer::SimulatedObserver;
+use crate::participant::SimulatedParticipant;
 use crate::plan::PlannedTrial;
 
 /// What a responder is asked for one trial.
@@ -191,20 +191,23 @@ impl Responder for ScriptedResponses {
     }
 }
 
-impl Responder for SimulatedObserver {
+impl Responder for SimulatedParticipant {
     fn respond(&mut self, query: &ResponseQuery, _console: &mut dyn Console) -> Result<usize, RunError> {
         if self.options() != query.options {
-            return Err(RunError::Observer(crate::observer::ObserverError::BadSetting {
-                key: "options",
-                value: self.options().len() as f64,
-                requirement: "the observer's references must be the experiment's response options, in order",
-            }));
+            return Err(RunError::Participant(
+                crate::participant::ParticipantError::BadSetting {
+                    key: "options",
+                    value: self.options().len() as f64,
+                    requirement:
+                        "the simulated participant's references must be the experiment's response options, in order",
+                },
+            ));
         }
         let curve = query
             .measurement
             .curve
             .as_ref()
-            .ok_or(crate::observer::ObserverError::NoCurve)?;
+            .ok_or(crate::participant::ParticipantError::NoCurve)?;
         Ok(self.identify_trial(curve, query.participant_index, query.trial.trial)?)
     }
 }

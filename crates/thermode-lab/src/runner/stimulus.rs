@@ -28,8 +28,8 @@ use thermode_pipeline::{ControllerKind, PipelineConfig};
 use thermode_render::run::{render, render_all, RenderRun, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ};
 use thermode_render::{RenderError, RenderSpec};
 
-use crate::analysis::Condition;
-use crate::observer::{standard_normal, trial_rng};
+use crate::design::Condition;
+use crate::participant::{standard_normal, trial_rng};
 
 /// Why a stimulus could not be presented or measured.
 #[derive(Debug, Error)]
@@ -210,7 +210,7 @@ impl FvContact {
     }
 }
 
-/// Seed salt of the finger drift of [`ModelStimulus`] (so that it never shares a random stream with the observer).
+/// Seed salt of the finger drift of [`ModelStimulus`] (so that it never shares a random stream with the simulated participant).
 const DRIFT_SALT: u64 = 0x6472_6966_7400_0001;
 
 /// The stand-in stimulus: both conditions are real contact under the fv model ([`FvContact`]).
@@ -301,7 +301,7 @@ impl Stimulus for ModelStimulus {
     }
 }
 
-/// Seed salt of the finger drift of [`DisplayStimulus`] (its own stream, apart from the observer's and the sensor's).
+/// Seed salt of the finger drift of [`DisplayStimulus`] (its own stream, apart from the simulated participant's and the sensor's).
 const DISPLAY_DRIFT_SALT: u64 = 0x6472_6966_7400_0002;
 
 /// How [`DisplayStimulus`] renders: the display's pipeline and the timing of the offline render.

@@ -1,7 +1,7 @@
 //! `thermode lab run`: walks one participant through the planned trials (experimenter-facing, line-based prompts on
 //! standard input and output), writes the session CSV and its sidecar in the data folder, and resumes an interrupted
-//! session where it stopped. Answers come from the keyboard, from `--responses FILE` or from the simulated
-//! observer (`--observer`).
+//! session where it stopped. Answers come from the keyboard, from `--responses FILE` or from the
+//! simulated participant (`--simulated-participant`).
 //!
 //! The stimulus (no display hardware yet) is, by default, `display`: every material rendered offline on the
 //! simulated display (`thermode_render`) with the controller (`--controller model|pid`) and device file
@@ -10,25 +10,26 @@
 //! fv model. The finger temperatures are the simulation's. `--time-scale` scales the waits (0 skips them, for
 //! demos).
 //!
-//! The simulated observer's references are real contact under the same stimulus (its `real` curves), so that its
+//! The simulated participant's references are real contact under the same stimulus (its `real` curves), so that its
 //! calibration to the paper's 66 % holds for the real trials it will see.
 
 use std::path::PathBuf;
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use thermode_device::DeviceConfig;
 use thermode_lab::design::{Experiment, ExperimentFile};
-use thermode_lab::observer::{CurveFeatures, SimulatedObserver, PAPER_REAL_IDENTIFICATION_RATE};
+use thermode_lab::participant::{CurveFeatures, SimulatedParticipant, PAPER_REAL_IDENTIFICATION_RATE};
 use thermode_lab::runner::stimulus::{DisplaySetup, DisplayStimulus};
 use thermode_lab::runner::{
     participant_plan, FvContact, InteractiveResponder, ModelStimulus, Responder, Runner, ScriptedResponses, Stimulus,
-    SystemClock, TerminalConsole,
+    TerminalConsole,
 };
 use thermode_model::materials::{find, Material};
 use thermode_pipeline::controllers::GainsSource;
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
+use thermode_platform::MonotonicClock;
 
 /// What presents the materials.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -49,9 +50,9 @@ pub enum LabControllerArg {
     Pid,
 }
 
-/// Noise draws per option when calibrating the simulated observer.
+/// Noise draws per option when calibrating the simulated participant.
 const CALIBRATION_SAMPLES: usize = 4000;
-/// Seed of the observer calibration (fixed, so that the calibrated noise is the documented one).
+/// Seed of the simulated participant calibration (fixed, so that the calibrated noise is the documented one).
 const CALIBRATION_SEED: u64 = 1;
 
 /// Arguments of `thermode lab run`.
@@ -68,11 +69,11 @@ pub struct LabRunArgs {
     data_dir: PathBuf,
     /// Scripted answers: one per trial in order (an option number or name per line, or a CSV with an `identified`
     /// column).
-    #[arg(long, conflicts_with = "observer")]
+    #[arg(long, conflicts_with = "simulated_participant")]
     responses: Option<PathBuf>,
-    /// Let the simulated observer answer (calibrated to the paper's 66 % real identification rate).
-    #[arg(long)]
-    observer: bool,
+    /// Let the simulated participant answer (calibrated to the paper's 66 % real identification rate).
+    #[arg(long, alias = "observer")]
+    simulated_participant: bool,
     /// Multiplies every wait (1 = real time, 0 = no waiting).
     #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     time_scale: f64,
@@ -94,25 +95,26 @@ pub struct LabRunArgs {
 pub fn run(args: &LabRunArgs) -> Result<()> {
     let experiment = ExperimentFile::load(&args.experiment)?;
     participant_plan(&experiment, &args.participant)?;
-    let mut clock = SystemClock::new(args.time_scale).ok_or_else(|| {
-        anyhow!(
+    if !(args.time_scale.is_finite() && args.time_scale >= 0.0) {
+        bail!(
             "--time-scale {}: must be a finite number of at least 0",
             args.time_scale
-        )
-    })?;
+        );
+    }
+    let clock = MonotonicClock::new();
     let design = &experiment.experiment;
     let (mut stimulus, references, description) = stimulus(args, design)?;
-    let (mut responder, answers): (Box<dyn Responder>, String) = if args.observer {
-        let mut observer = SimulatedObserver::new(design.response_options.clone(), references, design.seed);
-        let calibration = observer.calibrate(PAPER_REAL_IDENTIFICATION_RATE, CALIBRATION_SAMPLES, CALIBRATION_SEED)?;
+    let (mut responder, answers): (Box<dyn Responder>, String) = if args.simulated_participant {
+        let mut simulated = SimulatedParticipant::new(design.response_options.clone(), references, design.seed);
+        let calibration = simulated.calibrate(PAPER_REAL_IDENTIFICATION_RATE, CALIBRATION_SAMPLES, CALIBRATION_SEED)?;
         println!(
-            "simulated observer: perceptual noise {:.4} (real contact identified {:.1} % on the calibration sample)",
+            "simulated participant: perceptual noise {:.4} (real contact identified {:.1} % on the calibration sample)",
             calibration.noise_sd,
             100.0 * calibration.rate
         );
         (
-            Box::new(observer),
-            format!("simulated observer, noise {:.4}", calibration.noise_sd),
+            Box::new(simulated),
+            format!("simulated participant, noise {:.4}", calibration.noise_sd),
         )
     } else if let Some(path) = &args.responses {
         let scripted = ScriptedResponses::load(path, &design.response_options, design.trials_per_participant())?;
@@ -125,7 +127,7 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
         "answers": answers,
         "time_scale": args.time_scale,
     });
-    let interactive = !args.observer && args.responses.is_none();
+    let interactive = !args.simulated_participant && args.responses.is_none();
     let mut console = TerminalConsole::new(std::io::stdin().lock(), std::io::stdout());
     Runner {
         experiment: &experiment,
@@ -134,7 +136,8 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
         device,
         stimulus: stimulus.as_mut(),
         responder: responder.as_mut(),
-        clock: &mut clock,
+        clock: &clock,
+        time_scale: args.time_scale,
         console: &mut console,
         interactive,
     }
@@ -142,7 +145,7 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
     Ok(())
 }
 
-/// The stimulus of `args`, the observer's references (features of real contact with each response option under
+/// The stimulus of `args`, the simulated participant's references (features of real contact with each response option under
 /// it) and its description for the sidecar.
 fn stimulus(
     args: &LabRunArgs,

@@ -1,25 +1,25 @@
-//! The simulated observer (beyond the paper): identifies a material from the skin temperature curve of a trial,
+//! The simulated participant (beyond the paper): identifies a material from the skin temperature curve of a trial,
 //! so that a lab can check its design and the effect sizes to expect before recruiting anyone.
 //!
-//! **Features.** From a curve the observer takes the two cues the paper's discussion of Figure 3 names: the
+//! **Features.** From a curve the simulated participant takes the two cues the paper's discussion of Figure 3 names: the
 //! initial cooling rate, `(T(0) − T(2 s)) / 2 s` \[°C/s\], and the drop at the end of the presentation,
 //! `T(0) − T(end)` \[°C\]. It perceives each through `asinh(x / x₀)` with x₀ = 0.1 °C/s and 0.1 °C, the smallest
 //! detectable rate of change (`model.md` §6): linear near zero and logarithmic (Weber-like) above, so the same
 //! noise means the same relative error for a fast and a slow material, and warming (negative values) is handled.
 //!
 //! **Decision.** Every response option has a reference: the features of real contact with it under the
-//! finite-volume model ([`FvContact`]), computed once. The observer adds Gaussian perceptual noise of standard
+//! finite-volume model ([`FvContact`]), computed once. The simulated adds Gaussian perceptual noise of standard
 //! deviation `noise_sd` (in perceived units, on each feature independently) to the trial's features and answers
 //! the option whose reference is nearest (Euclidean). The noise of each trial comes from its own ChaCha8 stream
 //! (seed, participant, trial), so a resumed session gives the same answers.
 //!
-//! **Calibration.** [`SimulatedObserver::calibrate`] searches the noise scale (bisection with common random numbers:
+//! **Calibration.** [`SimulatedParticipant::calibrate`] searches the noise scale (bisection with common random numbers:
 //! a fixed seeded sample of noise vectors, scaled) at which real contact is identified as often as in the paper,
 //! 66 % over five options ([`PAPER_REAL_IDENTIFICATION_RATE`]). For the paper's five materials over 30 s the
 //! calibrated value is 0.0981 ([`PAPER_CALIBRATED_NOISE_SD`]), i.e. a perceptual error of about 10 % on each cue;
-//! on 10 000 fresh trials the observer then identifies real contact 65.9 % of the time. Aluminium/steel and
+//! on 10 000 fresh trials the simulated participant then identifies real contact 65.9 % of the time. Aluminium/steel and
 //! wood/rubber are the pairs confused (stone is identified 93 % of the time): wood and rubber have almost the same
-//! effusivity and their curves differ by a few hundredths of a degree, so no observer tells them apart much better
+//! effusivity and their curves differ by a few hundredths of a degree, so no simulated tells them apart much better
 //! than by chance.
 
 use rand::{Rng, SeedableRng};
@@ -31,7 +31,7 @@ use crate::runner::stimulus::{FvContact, SkinCurve, StimulusError};
 
 /// The paper's rate of correct identification of real materials (section 4.2 a: 66 %, five options).
 pub const PAPER_REAL_IDENTIFICATION_RATE: f64 = 0.66;
-/// The noise scale [`SimulatedObserver::calibrate`] finds for the paper's five materials, 30 s presentations, the
+/// The noise scale [`SimulatedParticipant::calibrate`] finds for the paper's five materials, 30 s presentations, the
 /// default [`FvContact`], 4000 samples per option and seed 1 (documented; the tests recompute it).
 pub const PAPER_CALIBRATED_NOISE_SD: f64 = 0.0981;
 /// Window of the initial cooling rate \[s\].
@@ -40,29 +40,29 @@ pub const INITIAL_WINDOW_S: f64 = 2.0;
 pub const RATE_SCALE_C_S: f64 = 0.1;
 /// Perception scale of the temperature drop \[°C\].
 pub const DROP_SCALE_C: f64 = 0.1;
-/// Seed salt of the observer's per-trial noise streams.
+/// Seed salt of the simulated participant's per-trial noise streams.
 const OBSERVER_SALT: u64 = 0x6f62_7365_7276_0001;
 
-/// Why the observer could not be built, calibrated or used.
+/// Why the simulated participant could not be built, calibrated or used.
 #[derive(Debug, Error)]
-pub enum ObserverError {
+pub enum ParticipantError {
     /// The reference curves could not be computed.
-    #[error("observer: {0}")]
+    #[error("simulated: {0}")]
     Stimulus(#[from] StimulusError),
     /// A response option is not a library material.
-    #[error("observer: {0}")]
+    #[error("simulated: {0}")]
     Material(#[from] thermode_model::ParamError),
     /// The trial has no skin curve to judge.
-    #[error("observer: the stimulus recorded no skin temperature curve; the simulated observer needs one")]
+    #[error("simulated: the stimulus recorded no skin temperature curve; the simulated participant needs one")]
     NoCurve,
     /// A curve is too short for the features.
-    #[error("observer: the curve lasts {duration_s} s; the features need at least {INITIAL_WINDOW_S} s")]
+    #[error("simulated: the curve lasts {duration_s} s; the features need at least {INITIAL_WINDOW_S} s")]
     ShortCurve {
         /// Duration of the curve \[s\].
         duration_s: f64,
     },
     /// A setting is out of range.
-    #[error("observer: `{key}` = {value}: {requirement}")]
+    #[error("simulated: `{key}` = {value}: {requirement}")]
     BadSetting {
         /// The setting.
         key: &'static str,
@@ -73,7 +73,7 @@ pub enum ObserverError {
     },
     /// The target identification rate cannot be reached with these options.
     #[error(
-        "observer: a rate of {target} cannot be reached: with these options the rate stays between {lowest:.3} \
+        "simulated: a rate of {target} cannot be reached: with these options the rate stays between {lowest:.3} \
          (the most noise tried) and {highest:.3} (almost no noise); physically indistinguishable options limit it"
     )]
     Unreachable {
@@ -97,11 +97,11 @@ pub struct CurveFeatures {
 
 impl CurveFeatures {
     /// The features of `curve` (validated here).
-    pub fn of(curve: &SkinCurve) -> Result<CurveFeatures, ObserverError> {
+    pub fn of(curve: &SkinCurve) -> Result<CurveFeatures, ParticipantError> {
         curve.validate()?;
         let end_s = curve.time_s[curve.time_s.len() - 1];
         if end_s < INITIAL_WINDOW_S {
-            return Err(ObserverError::ShortCurve { duration_s: end_s });
+            return Err(ParticipantError::ShortCurve { duration_s: end_s });
         }
         let t0 = curve.skin_c[0];
         Ok(CurveFeatures {
@@ -119,7 +119,7 @@ impl CurveFeatures {
     }
 }
 
-/// The result of [`SimulatedObserver::calibrate`].
+/// The result of [`SimulatedParticipant::calibrate`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NoiseCalibration {
     /// The noise scale found (perceived units).
@@ -130,9 +130,9 @@ pub struct NoiseCalibration {
     pub highest_rate: f64,
 }
 
-/// The simulated observer (see the module documentation).
+/// The simulated participant (see the module documentation).
 #[derive(Debug, Clone, PartialEq)]
-pub struct SimulatedObserver {
+pub struct SimulatedParticipant {
     options: Vec<String>,
     references: Vec<CurveFeatures>,
     perceived: Vec<[f64; 2]>,
@@ -140,12 +140,12 @@ pub struct SimulatedObserver {
     seed: u64,
 }
 
-impl SimulatedObserver {
-    /// An observer whose references are the given features, one per option, without noise until
+impl SimulatedParticipant {
+    /// An simulated whose references are the given features, one per option, without noise until
     /// [`calibrate`](Self::calibrate) or [`set_noise_sd`](Self::set_noise_sd); `seed` seeds the per-trial noise.
-    pub fn new(options: Vec<String>, references: Vec<CurveFeatures>, seed: u64) -> SimulatedObserver {
+    pub fn new(options: Vec<String>, references: Vec<CurveFeatures>, seed: u64) -> SimulatedParticipant {
         let perceived = references.iter().map(CurveFeatures::perceived).collect();
-        SimulatedObserver {
+        SimulatedParticipant {
             options,
             references,
             perceived,
@@ -154,14 +154,14 @@ impl SimulatedObserver {
         }
     }
 
-    /// An observer whose references are real contact with each option (library names) under `contact` for
+    /// An simulated whose references are real contact with each option (library names) under `contact` for
     /// `presentation_s` seconds.
     pub fn from_model(
         options: &[String],
         contact: &FvContact,
         presentation_s: f64,
         seed: u64,
-    ) -> Result<SimulatedObserver, ObserverError> {
+    ) -> Result<SimulatedParticipant, ParticipantError> {
         let mut references = Vec::with_capacity(options.len());
         for name in options {
             let material = find(name)?;
@@ -170,7 +170,7 @@ impl SimulatedObserver {
                 .map_err(StimulusError::from)?;
             references.push(CurveFeatures::of(&curve)?);
         }
-        Ok(SimulatedObserver::new(options.to_vec(), references, seed))
+        Ok(SimulatedParticipant::new(options.to_vec(), references, seed))
     }
 
     /// The response options, in key order.
@@ -189,9 +189,9 @@ impl SimulatedObserver {
     }
 
     /// Sets the noise scale (finite, ≥ 0).
-    pub fn set_noise_sd(&mut self, noise_sd: f64) -> Result<(), ObserverError> {
+    pub fn set_noise_sd(&mut self, noise_sd: f64) -> Result<(), ParticipantError> {
         if !(noise_sd.is_finite() && noise_sd >= 0.0) {
-            return Err(ObserverError::BadSetting {
+            return Err(ParticipantError::BadSetting {
                 key: "noise_sd",
                 value: noise_sd,
                 requirement: "must be a finite number not below 0",
@@ -218,7 +218,7 @@ impl SimulatedObserver {
         curve: &SkinCurve,
         participant_index: usize,
         trial: usize,
-    ) -> Result<usize, ObserverError> {
+    ) -> Result<usize, ParticipantError> {
         let features = CurveFeatures::of(curve)?;
         let mut rng = trial_rng(self.seed ^ OBSERVER_SALT, participant_index, trial);
         Ok(self.identify(&features, &mut rng))
@@ -258,16 +258,16 @@ impl SimulatedObserver {
         target_rate: f64,
         samples_per_option: usize,
         seed: u64,
-    ) -> Result<NoiseCalibration, ObserverError> {
+    ) -> Result<NoiseCalibration, ParticipantError> {
         if !(target_rate.is_finite() && target_rate > 0.0 && target_rate < 1.0) {
-            return Err(ObserverError::BadSetting {
+            return Err(ParticipantError::BadSetting {
                 key: "target_rate",
                 value: target_rate,
                 requirement: "must be between 0 and 1",
             });
         }
         if samples_per_option == 0 {
-            return Err(ObserverError::BadSetting {
+            return Err(ParticipantError::BadSetting {
                 key: "samples_per_option",
                 value: 0.0,
                 requirement: "must be at least 1",
@@ -283,7 +283,7 @@ impl SimulatedObserver {
             .collect();
         let (mut lo, mut hi) = (1e-9, 1e-2);
         let highest_rate = self.rate_with(lo, &draws);
-        let unreachable = |lowest: f64| ObserverError::Unreachable {
+        let unreachable = |lowest: f64| ParticipantError::Unreachable {
             target: target_rate,
             highest: highest_rate,
             lowest,
@@ -359,7 +359,7 @@ mod tests {
     fn short_curves_are_refused() {
         assert!(matches!(
             CurveFeatures::of(&linear_curve(0.25, 1.0)),
-            Err(ObserverError::ShortCurve { .. })
+            Err(ParticipantError::ShortCurve { .. })
         ));
     }
 
@@ -397,25 +397,25 @@ mod tests {
             initial_cooling_rate_c_s: RATE_SCALE_C_S * rate.sinh(),
             end_drop_c: DROP_SCALE_C * 3f64.sinh(),
         };
-        let mut observer = SimulatedObserver::new(vec!["a".into(), "b".into()], vec![f(2.0), f(2.4)], 9);
-        observer.set_noise_sd(0.2).expect("valid");
+        let mut simulated = SimulatedParticipant::new(vec!["a".into(), "b".into()], vec![f(2.0), f(2.4)], 9);
+        simulated.set_noise_sd(0.2).expect("valid");
         let mut rng = ChaCha8Rng::seed_from_u64(11);
         let n = 40_000;
-        let correct = (0..n).filter(|_| observer.identify(&f(2.0), &mut rng) == 0).count();
+        let correct = (0..n).filter(|_| simulated.identify(&f(2.0), &mut rng) == 0).count();
         let rate = correct as f64 / n as f64;
         // Φ(0.2 / 0.2) = Φ(1) = 0.841345; standard error 0.0018.
         assert!((rate - 0.841_345).abs() < 0.01, "rate {rate} vs Φ(1) = 0.8413");
-        let calibration = observer.calibrate(0.841_345, 20_000, 5).expect("reachable");
+        let calibration = simulated.calibrate(0.841_345, 20_000, 5).expect("reachable");
         assert!(
             (calibration.noise_sd - 0.2).abs() < 0.01,
             "σ {} vs 0.2",
             calibration.noise_sd
         );
         assert!(matches!(
-            observer.calibrate(0.4, 100, 5),
-            Err(ObserverError::Unreachable { .. })
+            simulated.calibrate(0.4, 100, 5),
+            Err(ParticipantError::Unreachable { .. })
         ));
-        assert!(observer.calibrate(1.5, 100, 5).is_err());
-        assert!(observer.set_noise_sd(f64::NAN).is_err());
+        assert!(simulated.calibrate(1.5, 100, 5).is_err());
+        assert!(simulated.set_noise_sd(f64::NAN).is_err());
     }
 }
