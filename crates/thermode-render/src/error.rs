@@ -1,5 +1,5 @@
-//! Typed errors of the render crate: everything the pipeline refuses, and what only offline runs, summaries and the
-//! tuner can refuse.
+//! Typed errors of the render crate: everything the pipeline refuses (a parameter, a controller or envelope setting,
+//! the simulated display, a stimulus), and what only offline runs, summaries and the tuner can refuse.
 
 use thermode_control::ControlError;
 use thermode_device::DeviceError;
@@ -11,22 +11,24 @@ use thiserror::Error;
 /// Why the render crate refused something.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum RenderError {
-    /// The pipeline refused its configuration or a stimulus, or a run setting is out of range.
+    /// A parameter, a controller or envelope setting, the simulated display or a stimulus was refused, or a run
+    /// setting is out of range.
     #[error(transparent)]
     Pipeline(#[from] PipelineError),
-    /// A model parameter (skin, material, grid, contact) was refused.
-    #[error(transparent)]
-    Param(#[from] ParamError),
-    /// A controller parameter (gains, limits) was refused.
-    #[error("controller: {0}")]
-    Control(#[from] ControlError),
-    /// The safety-envelope configuration was refused.
-    #[error("safety envelope: {0}")]
-    Envelope(#[from] EnvelopeError),
-    /// The simulated display refused a parameter.
-    #[error("simulated display: {0}")]
-    Device(#[from] DeviceError),
     /// Something that is not a single number was refused (an empty material list, …).
     #[error("{0}")]
     Invalid(String),
 }
+
+/// The pipeline's sources of errors convert through [`PipelineError`], so `?` works on each of them.
+macro_rules! through_pipeline {
+    ($($source:ty),*) => {$(
+        impl From<$source> for RenderError {
+            fn from(error: $source) -> Self {
+                RenderError::Pipeline(PipelineError::from(error))
+            }
+        }
+    )*};
+}
+
+through_pipeline!(ParamError, ControlError, EnvelopeError, DeviceError);

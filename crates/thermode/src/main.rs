@@ -7,6 +7,7 @@
 
 mod cmd;
 mod output;
+mod resolve;
 
 use std::process::ExitCode;
 

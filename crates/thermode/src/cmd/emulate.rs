@@ -9,11 +9,13 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
-use thermode_device::{DefaultFinger, DeviceConfig, SimulatedDisplay};
+use thermode_device::{DefaultFinger, SimulatedDisplay};
 use thermode_link::emulator::{Emulator, EmulatorConfig, LinkFaults, PtyEmulator, RunEnd};
 use thermode_platform::MonotonicClock;
+
+use crate::resolve;
 
 /// Arguments of `thermode emulate`.
 #[derive(Args, Debug)]
@@ -23,7 +25,7 @@ pub struct EmulateArgs {
     channels: usize,
     /// Device file (TOML); default: the built-in default display.
     #[arg(long, value_name = "FILE")]
-    device: Option<PathBuf>,
+    device_file: Option<PathBuf>,
     /// Seed of the sensor noise and of the injected link faults.
     #[arg(long, value_name = "S", default_value_t = 0)]
     seed: u64,
@@ -43,13 +45,7 @@ pub struct EmulateArgs {
 
 /// Runs `thermode emulate`.
 pub fn run(args: &EmulateArgs) -> Result<()> {
-    let device = match &args.device {
-        Some(path) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-            DeviceConfig::from_toml_str(&text, &path.display().to_string())?
-        }
-        None => DeviceConfig::default(),
-    };
+    let device = resolve::device_config(args.device_file.as_deref())?;
     let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device, args.channels, args.seed)?;
     let config = EmulatorConfig {
         watchdog_ms: args.watchdog_ms,

@@ -15,7 +15,7 @@
 
 use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use thermode_device::DeviceConfig;
@@ -30,6 +30,8 @@ use thermode_model::materials::{find, Material};
 use thermode_pipeline::controllers::GainsSource;
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::MonotonicClock;
+
+use crate::resolve;
 
 /// What presents the materials.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -88,7 +90,7 @@ pub struct LabRunArgs {
     controller: Option<LabControllerArg>,
     /// The display's device file (TOML; with `--stimulus display`); default: the built-in default display.
     #[arg(long, value_name = "FILE")]
-    device: Option<PathBuf>,
+    device_file: Option<PathBuf>,
 }
 
 /// Runs `thermode lab run`.
@@ -158,8 +160,8 @@ fn stimulus(
         .collect::<Result<_, _>>()?;
     match args.stimulus {
         StimulusArg::Model => {
-            if args.controller.is_some() || args.device.is_some() {
-                bail!("--controller and --device choose the display; they need --stimulus display");
+            if args.controller.is_some() || args.device_file.is_some() {
+                bail!("--controller and --device-file choose the display; they need --stimulus display");
             }
             let contact = FvContact::default();
             let stimulus = ModelStimulus::new(contact.clone(), args.finger_drift_sd_c, design.seed)?;
@@ -175,7 +177,7 @@ fn stimulus(
             Ok((Box::new(stimulus), references, description))
         }
         StimulusArg::Display => {
-            let device = display_device(args)?;
+            let device = resolve::device_config(args.device_file.as_deref())?;
             let setup = DisplaySetup::new(PipelineConfig::new(device, controller(args, &device)?));
             let mut stimulus = DisplayStimulus::new(setup, args.finger_drift_sd_c, design.seed)?;
             let mut materials: Vec<Material> = design.materials.iter().map(|n| find(n)).collect::<Result<_, _>>()?;
@@ -193,23 +195,12 @@ fn stimulus(
                 )?);
             }
             let mut description = stimulus.describe();
-            description["device_file"] = match &args.device {
+            description["device_file"] = match &args.device_file {
                 Some(path) => json!(path.display().to_string()),
                 None => json!("built-in default display"),
             };
             Ok((Box::new(stimulus), references, description))
         }
-    }
-}
-
-/// The device file of `--device`, or the built-in default display.
-fn display_device(args: &LabRunArgs) -> Result<DeviceConfig> {
-    match &args.device {
-        Some(path) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-            Ok(DeviceConfig::from_toml_str(&text, &path.display().to_string())?)
-        }
-        None => Ok(DeviceConfig::default()),
     }
 }
 
@@ -223,7 +214,7 @@ fn controller(args: &LabRunArgs, device: &DeviceConfig) -> Result<ControllerKind
             if source == GainsSource::DefaultFallback {
                 eprintln!(
                     "note: the device matches no shipped display; pid uses the default display's tuned gains \
-                     (run `thermode tune --device FILE --out GAINS.toml` for its own)"
+                     (run `thermode tune --device-file FILE --out GAINS.toml` for its own)"
                 );
             }
             Ok(ControllerKind::Pid(gains))

@@ -2,15 +2,13 @@
 //! inverse, controller, safety envelope, plant — next to the ground truth, and writes the trajectory (CSV), the
 //! paper's Figure 3 for the simulated system (plot) and the summary metrics (text or JSON).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 use thermode_control::PidGains;
 use thermode_device::DeviceConfig;
-use thermode_model::materials::{self, Material};
-use thermode_model::Skin;
-use thermode_pipeline::controllers::{gains_from_toml_str, GainsSource};
+use thermode_pipeline::controllers::GainsSource;
 use thermode_pipeline::pipeline::RENDER_MAX_RATE_C_PER_S;
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, RendererKind};
 use thermode_plot::write_figure;
@@ -20,6 +18,7 @@ use thermode_render::summary::summary_table;
 use thermode_render::RenderSpec;
 
 use crate::output::{print_stdout, write_atomically};
+use crate::resolve;
 
 /// The controller(s) to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -75,7 +74,7 @@ pub struct RenderArgs {
     model: RendererArg,
     /// Device file (TOML); default: the built-in default display.
     #[arg(long, value_name = "FILE")]
-    device: Option<PathBuf>,
+    device_file: Option<PathBuf>,
     /// PID gains file (TOML); default: the tuned gains of the shipped display that matches the device.
     #[arg(long = "pid-gains", value_name = "FILE")]
     pid_gains: Option<PathBuf>,
@@ -151,42 +150,15 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     Ok(())
 }
 
-fn read(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))
-}
-
-/// The materials named on the command line, `all-paper` expanded.
-fn resolve_materials(names: &[String]) -> Result<Vec<Material>> {
-    let mut out = Vec::new();
-    for name in names {
-        if name == "all-paper" {
-            out.extend(materials::paper_materials());
-        } else {
-            out.push(materials::find(name)?);
-        }
-    }
-    if out.is_empty() {
-        bail!("no material given: use --material NAME");
-    }
-    Ok(out)
-}
-
-fn device(args: &RenderArgs) -> Result<DeviceConfig> {
-    match &args.device {
-        Some(path) => Ok(DeviceConfig::from_toml_str(&read(path)?, &path.display().to_string())?),
-        None => Ok(DeviceConfig::default()),
-    }
-}
-
 fn pid_gains(args: &RenderArgs, device: &DeviceConfig) -> Result<PidGains> {
     if let Some(path) = &args.pid_gains {
-        return Ok(gains_from_toml_str(&read(path)?, &path.display().to_string())?);
+        return resolve::gains(path);
     }
     let (gains, source) = gains_for_device(device)?;
     if source == GainsSource::DefaultFallback && args.controller != ControllerArg::Model {
         eprintln!(
             "note: the device matches no shipped display; pid uses the default display's tuned gains \
-             (run `thermode tune --device FILE --out GAINS.toml` and pass --pid-gains GAINS.toml)"
+             (run `thermode tune --device-file FILE --out GAINS.toml` and pass --pid-gains GAINS.toml)"
         );
     }
     Ok(gains)
@@ -194,13 +166,10 @@ fn pid_gains(args: &RenderArgs, device: &DeviceConfig) -> Result<PidGains> {
 
 /// One render spec per controller and material, controllers outermost.
 fn specs(args: &RenderArgs) -> Result<Vec<RenderSpec>> {
-    let materials = resolve_materials(&args.materials)?;
-    let device = device(args)?;
+    let materials = resolve::materials(&args.materials, &[])?;
+    let device = resolve::device_config(args.device_file.as_deref())?;
     let gains = pid_gains(args, &device)?;
-    let finger_skin = match &args.finger_skin {
-        Some(path) => Skin::from_toml_str(&read(path)?, &path.display().to_string())?,
-        None => Skin::fingertip(),
-    };
+    let finger_skin = resolve::skin(args.finger_skin.as_deref())?;
     let controllers = match args.controller {
         ControllerArg::Pid => vec![ControllerKind::Pid(gains)],
         ControllerArg::Model => vec![ControllerKind::Model],
@@ -273,6 +242,6 @@ mod tests {
         assert!(err(&["--material", "wood", "--rate", "0"]).contains("rate"));
         assert!(err(&["--material", "wood", "--max-rate", "50"]).contains("max_setpoint_rate"));
         assert!(err(&["--material", "wood", "--release-at", "100"]).contains("release"));
-        assert!(err(&["--material", "wood", "--device", "/nonexistent/device.toml"]).contains("cannot read"));
+        assert!(err(&["--material", "wood", "--device-file", "/nonexistent/device.toml"]).contains("cannot read"));
     }
 }

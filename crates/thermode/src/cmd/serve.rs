@@ -9,12 +9,14 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
-use thermode_device::{DefaultFinger, Device, DeviceConfig, SimulatedDisplay, MAX_CHANNELS};
+use thermode_device::{DefaultFinger, Device, SimulatedDisplay, MAX_CHANNELS};
 use thermode_link::serial::{serial_path, SerialConfig, SerialDevice};
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::engine::pipeline_engines;
 use thermode_runtime::{Daemon, DaemonConfig, EngineFactory, LoopConfig, ServerConfig};
+
+use crate::resolve;
 
 /// The controller of every channel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -111,13 +113,7 @@ fn finger_names(count: usize) -> Vec<String> {
 
 /// Builds the device and the pipelines from the arguments; `clock` stamps a serial device's readings.
 pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Display> {
-    let device_config = match &args.device_file {
-        Some(path) => {
-            let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-            DeviceConfig::from_toml_str(&text, &path.display().to_string())?
-        }
-        None => DeviceConfig::default(),
-    };
+    let device_config = resolve::device_config(args.device_file.as_deref())?;
     let controller = match args.controller {
         ControllerArg::Model => ControllerKind::Model,
         ControllerArg::Pid => ControllerKind::Pid(gains_for_device(&device_config)?.0),

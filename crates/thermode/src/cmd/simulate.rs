@@ -4,14 +4,14 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
-use thermode_model::materials::{self, Material};
+use thermode_model::materials::Material;
 use thermode_model::simulate::{simulate, Initial, ModelKind, SimulationSpec, Trace};
-use thermode_model::skin::Skin;
 use thermode_plot::{write_figure, Figure, Panel, Series, SeriesStyle};
 
 use crate::output::{print_stdout, write_atomically};
+use crate::resolve;
 
 /// The skin model to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -84,11 +84,8 @@ const SUMMARY_TIMES_S: [f64; 5] = [1.0, 5.0, 10.0, 30.0, 90.0];
 
 /// Runs `thermode simulate`.
 pub fn run(args: &SimulateArgs) -> Result<()> {
-    let materials = resolve_materials(args)?;
-    let skin = match &args.skin {
-        Some(path) => Skin::from_toml_str(&read(path)?, &path.display().to_string())?,
-        None => Skin::fingertip(),
-    };
+    let materials = resolve::materials(&args.materials, &args.material_files)?;
+    let skin = resolve::skin(args.skin.as_deref())?;
     let initial: Initial = args.initial.parse()?;
     let mut traces = Vec::with_capacity(materials.len());
     for material in materials {
@@ -115,29 +112,6 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         write_plot(path, &traces, args.model)?;
     }
     print_stdout(&summary(&traces))
-}
-
-fn read(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))
-}
-
-/// The library materials named on the command line (with `all-paper` expanded) followed by the material files.
-fn resolve_materials(args: &SimulateArgs) -> Result<Vec<Material>> {
-    let mut out = Vec::new();
-    for name in &args.materials {
-        if name == "all-paper" {
-            out.extend(materials::paper_materials());
-        } else {
-            out.push(materials::find(name)?);
-        }
-    }
-    for path in &args.material_files {
-        out.push(Material::from_toml_str(&read(path)?, &path.display().to_string())?);
-    }
-    if out.is_empty() {
-        bail!("no material given: use --material NAME or --material-file FILE");
-    }
-    Ok(out)
 }
 
 fn write_csv(path: &Path, traces: &[(Material, Trace)]) -> Result<()> {

@@ -1,24 +1,24 @@
 //! `thermode tune`: finds the PID gains and sensor-filter cut-off of the paper's controller structure that minimise
 //! the mean RMS skin error over the paper's five materials on one display, and writes them as a gains file.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
-use thermode_device::DeviceConfig;
 use thermode_pipeline::controllers::gains_to_toml_string;
 use thermode_render::tune::{tune_with_progress, TuneResult, TuneSpec};
 
 use crate::cmd::render::RendererArg;
 use crate::output::{print_stdout, write_atomically};
+use crate::resolve;
 
 /// Arguments of `thermode tune`.
 #[derive(Args, Debug)]
 pub struct TuneArgs {
     /// Device file (TOML); default: the built-in default display.
     #[arg(long, value_name = "FILE")]
-    device: Option<PathBuf>,
+    device_file: Option<PathBuf>,
     /// Write the gains file here; default: print it.
     #[arg(long, value_name = "GAINS.toml")]
     out: Option<PathBuf>,
@@ -35,13 +35,8 @@ pub struct TuneArgs {
 
 /// Runs `thermode tune`.
 pub fn run(args: &TuneArgs) -> Result<()> {
-    let (device, origin) = match &args.device {
-        Some(path) => (
-            DeviceConfig::from_toml_str(&read(path)?, &path.display().to_string())?,
-            path.display().to_string(),
-        ),
-        None => (DeviceConfig::default(), "the built-in default display".to_string()),
-    };
+    let device = resolve::device_config(args.device_file.as_deref())?;
+    let origin = resolve::device_origin(args.device_file.as_deref());
     let mut spec = TuneSpec::new(device);
     spec.renderer = args.model.into();
     spec.seed = args.seed;
@@ -57,10 +52,6 @@ pub fn run(args: &TuneArgs) -> Result<()> {
         Some(path) => write_atomically(path, |sink| Ok(sink.write_all(text.as_bytes())?)),
         None => print_stdout(&text),
     }
-}
-
-fn read(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))
 }
 
 /// The comment on top of the gains file.
