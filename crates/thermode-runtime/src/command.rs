@@ -1,6 +1,6 @@
 //! Commands from the network side to the control loop, and the loop's answers. Commands travel through a bounded
 //! queue ([`CommandSender`]); every command has been validated before it enters the queue, and the loop checks it
-//! again. A reply (if asked for) comes back on a one-shot channel.
+//! again against the same limits ([`crate::limits::StimulusLimits`]). A reply (if asked for) comes back on a one-shot channel.
 
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError};
 use std::sync::Arc;
@@ -10,6 +10,8 @@ use thermode_model::materials::Material;
 use thermode_safety::FaultCode;
 use thiserror::Error;
 use tokio::sync::oneshot;
+
+use crate::engine::{EngineError, Stimulus};
 
 /// Who set a channel's stimulus. Contacts of a WebSocket client are released when it disconnects (after a grace
 /// period); OSC and script contacts have no connection and stay until released.
@@ -26,30 +28,22 @@ pub enum Owner {
     Script,
 }
 
-/// A command for the control loop.
+/// A command for the control loop: the one vocabulary of the WebSocket API, OSC, the demo script and tests. What
+/// a channel should show travels as the pipeline's [`Stimulus`], so nothing between the wire and the engine spells
+/// a touch again.
 #[derive(Debug, Clone)]
 pub enum Command {
-    /// Touch `material` at `object_c` \[°C\] on `channel`.
-    Touch {
+    /// Show `stimulus` on `channel`: a touch (`Stimulus::Touch`, wire `touch`) or direct mode (`Stimulus::Direct`,
+    /// wire `setpoint`). `Stimulus::Air` is the same as [`Command::Release`]. Build it with
+    /// [`Command::stimulate`], [`Command::touch`] or [`Command::direct`].
+    Stimulate {
         /// Channel (from 0).
         channel: usize,
-        /// The material (validated).
-        material: Material,
-        /// Object temperature \[°C\].
-        object_c: f64,
-        /// The name shown as the channel's `contact` (the material name, or "custom").
+        /// What the channel shows from the next tick on (checked against the channel's limits by the loop).
+        stimulus: Stimulus,
+        /// The name shown as the channel's `contact`: the material's name, `direct` or `air` (allocated here, so
+        /// the loop never allocates it).
         label: Arc<str>,
-        /// Who asked.
-        owner: Owner,
-    },
-    /// Direct mode: move the display set-point of `channel` to `temp_c` \[°C\] at `rate_c_s` \[°C/s\].
-    Setpoint {
-        /// Channel (from 0).
-        channel: usize,
-        /// Target display temperature \[°C\].
-        temp_c: f64,
-        /// Ramp rate \[°C/s\].
-        rate_c_s: f64,
         /// Who asked.
         owner: Owner,
     },
@@ -70,6 +64,56 @@ pub enum Command {
         /// The connection number.
         client: u64,
     },
+}
+
+impl Command {
+    /// Show `stimulus` on `channel` for `owner` (air is a release).
+    pub fn stimulate(channel: usize, stimulus: Stimulus, owner: Owner) -> Command {
+        let label: Arc<str> = match &stimulus {
+            Stimulus::Air => return Command::Release { channel },
+            Stimulus::Touch { material, .. } => Arc::from(material.name.as_str()),
+            Stimulus::Direct { .. } => Arc::from("direct"),
+        };
+        Command::Stimulate {
+            channel,
+            stimulus,
+            label,
+            owner,
+        }
+    }
+
+    /// Touch `material` at `object_c` \[°C\] on `channel`.
+    pub fn touch(channel: usize, material: Material, object_c: f64, owner: Owner) -> Command {
+        Command::stimulate(channel, Stimulus::Touch { material, object_c }, owner)
+    }
+
+    /// Direct mode: the display set-point of `channel` goes to `temp_c` \[°C\] at `rate_c_s` \[°C/s\].
+    pub fn direct(channel: usize, temp_c: f64, rate_c_s: f64, owner: Owner) -> Command {
+        Command::stimulate(channel, Stimulus::Direct { temp_c, rate_c_s }, owner)
+    }
+
+    /// The request's name on the wire: `touch`, `setpoint`, `release`, `clear_fault`, `stop_all` (and
+    /// `client_gone`, which no client sends).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Command::Stimulate {
+                stimulus: Stimulus::Touch { .. },
+                ..
+            } => "touch",
+            Command::Stimulate {
+                stimulus: Stimulus::Direct { .. },
+                ..
+            } => "setpoint",
+            Command::Stimulate {
+                stimulus: Stimulus::Air,
+                ..
+            }
+            | Command::Release { .. } => "release",
+            Command::ClearFault { .. } => "clear_fault",
+            Command::StopAll => "stop_all",
+            Command::ClientGone { .. } => "client_gone",
+        }
+    }
 }
 
 /// When the loop applied a command.
@@ -100,21 +144,22 @@ pub enum CommandError {
         /// The fault.
         fault: FaultCode,
     },
-    /// The fault could not be cleared: its cause persists (or no fresh measurement arrived yet).
-    #[error("channel {channel}: the fault cannot be cleared yet: {message}")]
+    /// The fault could not be cleared: its cause persists (or no fresh measurement arrived yet, or the engine
+    /// failed).
+    #[error("channel {channel}: the fault cannot be cleared yet: {cause}")]
     FaultPersists {
         /// The channel.
         channel: usize,
-        /// The envelope's reason.
-        message: String,
+        /// The engine's (envelope's) reason.
+        cause: EngineError,
     },
-    /// The channel's engine refused the stimulus.
-    #[error("channel {channel} refused the stimulus: {message}")]
+    /// The stimulus is outside the channel's limits, or its engine refused it.
+    #[error("channel {channel} refused the stimulus: {cause}")]
     Rejected {
         /// The channel.
         channel: usize,
-        /// The engine's reason.
-        message: String,
+        /// The reason.
+        cause: EngineError,
     },
     /// The command queue is full (the loop is overloaded); try again.
     #[error("the control loop's command queue is full; try again")]
@@ -129,7 +174,7 @@ pub type Reply = Result<Applied, CommandError>;
 
 /// A command and where to send the answer.
 #[derive(Debug)]
-pub struct Request {
+pub struct Queued {
     /// The command.
     pub command: Command,
     /// Where the answer goes (`None`: nobody waits).
@@ -139,31 +184,31 @@ pub struct Request {
 /// The sending end of the loop's bounded command queue. Cheap to clone; never blocks.
 #[derive(Debug, Clone)]
 pub struct CommandSender {
-    queue: SyncSender<Request>,
+    queue: SyncSender<Queued>,
 }
 
 impl CommandSender {
-    pub(crate) fn new(queue: SyncSender<Request>) -> Self {
+    pub(crate) fn new(queue: SyncSender<Queued>) -> Self {
         CommandSender { queue }
     }
 
     /// Queues `command` without waiting for the loop; refused when the queue is full or the loop has stopped.
     pub fn send(&self, command: Command) -> Result<(), CommandError> {
-        self.push(Request { command, reply: None })
+        self.push(Queued { command, reply: None })
     }
 
     /// Queues `command` and returns the receiver of the loop's answer.
     pub fn request(&self, command: Command) -> Result<oneshot::Receiver<Reply>, CommandError> {
         let (reply, answer) = oneshot::channel();
-        self.push(Request {
+        self.push(Queued {
             command,
             reply: Some(reply),
         })?;
         Ok(answer)
     }
 
-    fn push(&self, request: Request) -> Result<(), CommandError> {
-        self.queue.try_send(request).map_err(|e| match e {
+    fn push(&self, queued: Queued) -> Result<(), CommandError> {
+        self.queue.try_send(queued).map_err(|e| match e {
             TrySendError::Full(_) => CommandError::Busy,
             TrySendError::Disconnected(_) => CommandError::Stopped,
         })
@@ -171,4 +216,4 @@ impl CommandSender {
 }
 
 /// The receiving end, owned by the loop.
-pub(crate) type CommandReceiver = Receiver<Request>;
+pub(crate) type CommandReceiver = Receiver<Queued>;

@@ -24,9 +24,10 @@ use std::thread::JoinHandle;
 use thermode_device::{Device, Reading, MAX_CHANNELS};
 use thermode_safety::{DriveCommand, FaultCode};
 
-use crate::command::{Applied, Command, CommandError, CommandReceiver, CommandSender, Owner, Reply, Request};
+use crate::command::{Applied, Command, CommandError, CommandReceiver, CommandSender, Owner, Queued, Reply};
 use crate::engine::{ChannelEngine, EngineError, EngineFactory, Stimulus};
 use crate::error::RuntimeError;
+use crate::limits::StimulusLimits;
 use crate::snapshot::{ChannelStatus, LoopStats, Mode, RecordRow, Shared, Snapshot, TickRecord};
 use crate::stats::Window;
 use thermode_platform::Clock;
@@ -118,8 +119,12 @@ pub struct LoopHandle {
     stop: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
     channel_count: usize,
+    limits: Vec<StimulusLimits>,
     config: LoopConfig,
 }
+
+/// What the loop thread reports once its engines are built: the published state and each channel's limits.
+type Started = Result<(Arc<Shared>, Vec<StimulusLimits>), RuntimeError>;
 
 impl LoopHandle {
     /// Starts the loop on its own thread. `engines` builds one engine per device channel on that thread. Each of
@@ -140,7 +145,7 @@ impl LoopHandle {
             )));
         }
         let (queue, receiver) = sync_channel(config.command_queue_len);
-        let (ready, started) = sync_channel::<Result<Arc<Shared>, RuntimeError>>(1);
+        let (ready, started) = sync_channel::<Started>(1);
         let stop = Arc::new(AtomicBool::new(false));
         let thread = {
             let (stop, config) = (stop.clone(), config.clone());
@@ -148,12 +153,12 @@ impl LoopHandle {
                 .name("thermode-loop".into())
                 .spawn(move || {
                     let built = engines(count)
-                        .map_err(|e| RuntimeError::Config(format!("cannot build the channel engines: {e}")))
+                        .map_err(RuntimeError::Engine)
                         .and_then(|engines| ControlLoop::new(&config, device, engines, receiver, feeds));
                     let control = match built {
                         Ok(control) => control,
                         Err(e) => {
-                            let _ = ready.send(Err(RuntimeError::Config(e.to_string())));
+                            let _ = ready.send(Err(e));
                             return;
                         }
                     };
@@ -164,7 +169,8 @@ impl LoopHandle {
                             return;
                         }
                     };
-                    let _ = ready.send(Ok(control.shared.clone()));
+                    let limits = control.slots.iter().map(|s| s.limits).collect();
+                    let _ = ready.send(Ok((control.shared.clone(), limits)));
                     control.run(clock.as_ref(), ticker, &stop);
                 })
                 .map_err(|source| RuntimeError::Io {
@@ -172,7 +178,7 @@ impl LoopHandle {
                     source,
                 })?
         };
-        let shared = match started.recv() {
+        let (shared, limits) = match started.recv() {
             Ok(result) => result?,
             Err(_) => {
                 return Err(RuntimeError::Config(
@@ -186,8 +192,21 @@ impl LoopHandle {
             stop,
             thread: Some(thread),
             channel_count: count,
+            limits,
             config,
         })
+    }
+
+    /// Each channel's stimulus limits, as its engine reported them (the loop enforces them).
+    pub fn channel_limits(&self) -> &[StimulusLimits] {
+        &self.limits
+    }
+
+    /// The limits every channel accepts: the intersection of [`LoopHandle::channel_limits`].
+    pub fn stimulus_limits(&self) -> StimulusLimits {
+        self.limits
+            .iter()
+            .fold(StimulusLimits::absolute(), |all, one| all.intersection(one))
     }
 
     /// A sender for the command queue.
@@ -233,6 +252,8 @@ impl Drop for LoopHandle {
 /// Per-channel state the loop owns.
 struct Slot {
     engine: Box<dyn ChannelEngine>,
+    /// The engine's limits, read once when the loop starts.
+    limits: StimulusLimits,
     reading: Reading,
     /// The engine panicked once: it is never called again and the channel's drive stays at 0 A.
     failed: bool,
@@ -261,7 +282,6 @@ struct ControlLoop {
     counters: Counters,
     release_after_s: f64,
     air: Arc<str>,
-    direct: Arc<str>,
     last_woke_s: Option<f64>,
     next_stats_s: f64,
     time_s: f64,
@@ -295,6 +315,7 @@ impl ControlLoop {
         let mut slots = Vec::with_capacity(engines.len());
         for engine in engines {
             slots.push(Slot {
+                limits: engine.limits(),
                 engine,
                 reading: NO_READING,
                 failed: false,
@@ -331,7 +352,6 @@ impl ControlLoop {
             counters: Counters::default(),
             release_after_s: config.release_after_disconnect_s,
             air,
-            direct: Arc::from("direct"),
             last_woke_s: None,
             next_stats_s: STATS_REFRESH_S,
             time_s: 0.0,
@@ -416,7 +436,7 @@ impl ControlLoop {
                 Ok(request) => request,
                 Err(TryRecvError::Empty | TryRecvError::Disconnected) => return,
             };
-            let Request { command, reply } = request;
+            let Queued { command, reply } = request;
             let answer = self.apply(command, tick);
             match answer {
                 Ok(_) => self.counters.applied += 1,
@@ -436,31 +456,25 @@ impl ControlLoop {
             time_s: self.time_s,
         };
         match command {
-            Command::Touch {
+            Command::Stimulate {
                 channel,
-                material,
-                object_c,
+                stimulus,
                 label,
                 owner,
             } => {
+                let (mode, object_c, direct) = match &stimulus {
+                    Stimulus::Touch { object_c, .. } => (Mode::Touch, Some(*object_c), None),
+                    Stimulus::Direct { temp_c, rate_c_s } => (Mode::Direct, None, Some((*temp_c, *rate_c_s))),
+                    Stimulus::Air => {
+                        self.exists(channel)?;
+                        self.release(channel);
+                        return Ok(applied);
+                    }
+                };
                 self.usable(channel)?;
-                self.set(channel, Stimulus::Touch { material, object_c })?;
+                self.set(channel, stimulus)?;
                 let status = &mut self.status[channel];
-                (status.label, status.mode, status.object_c, status.direct) =
-                    (label, Mode::Touch, Some(object_c), None);
-                claim(status, owner);
-            }
-            Command::Setpoint {
-                channel,
-                temp_c,
-                rate_c_s,
-                owner,
-            } => {
-                self.usable(channel)?;
-                self.set(channel, Stimulus::Direct { temp_c, rate_c_s })?;
-                let status = &mut self.status[channel];
-                (status.label, status.mode, status.object_c) = (self.direct.clone(), Mode::Direct, None);
-                status.direct = Some((temp_c, rate_c_s));
+                (status.label, status.mode, status.object_c, status.direct) = (label, mode, object_c, direct);
                 claim(status, owner);
             }
             Command::Release { channel } => {
@@ -471,16 +485,13 @@ impl ControlLoop {
                 self.exists(channel)?;
                 let time_s = self.time_s;
                 let slot = &mut self.slots[channel];
-                if slot.failed {
-                    return Err(CommandError::FaultPersists {
-                        channel,
-                        message: "the channel's engine failed; restart the daemon".into(),
-                    });
-                }
-                let engine = &mut slot.engine;
-                let cleared = catch_unwind(AssertUnwindSafe(|| engine.clear_fault(time_s)))
-                    .unwrap_or_else(|_| Err(EngineError("the engine failed while clearing".into())));
-                cleared.map_err(|e| CommandError::FaultPersists { channel, message: e.0 })?;
+                let cleared = if slot.failed {
+                    Err(EngineError::Failed)
+                } else {
+                    let engine = &mut slot.engine;
+                    catch_unwind(AssertUnwindSafe(|| engine.clear_fault(time_s))).unwrap_or(Err(EngineError::Failed))
+                };
+                cleared.map_err(|cause| CommandError::FaultPersists { channel, cause })?;
                 self.status[channel].telemetry.fault = None;
             }
             Command::StopAll => {
@@ -525,11 +536,14 @@ impl ControlLoop {
         }
     }
 
+    /// Gives `stimulus` to `channel`'s engine once it passes the channel's limits.
     fn set(&mut self, channel: usize, stimulus: Stimulus) -> Result<(), CommandError> {
         let slot = &mut self.slots[channel];
+        let refused = |cause| CommandError::Rejected { channel, cause };
+        slot.limits.check(&stimulus).map_err(refused)?;
         let engine = &mut slot.engine;
         match catch_unwind(AssertUnwindSafe(|| engine.set_stimulus(stimulus))) {
-            Ok(result) => result.map_err(|e| CommandError::Rejected { channel, message: e.0 }),
+            Ok(result) => result.map_err(refused),
             Err(_) => {
                 slot.failed = true;
                 Err(CommandError::Faulted {

@@ -11,7 +11,6 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use thermode_device::Device;
-use thermode_safety::EnvelopeConfig;
 
 use crate::api::access::Access;
 use crate::api::protocol::RequestLimits;
@@ -20,6 +19,7 @@ use crate::command::CommandSender;
 use crate::control_loop::{LoopConfig, LoopHandle};
 use crate::engine::EngineFactory;
 use crate::error::RuntimeError;
+use crate::limits::OBJECT_C;
 use crate::recorder::Recorder;
 use crate::snapshot::Snapshot;
 use thermode_platform::Clock;
@@ -52,11 +52,10 @@ pub struct ServerConfig {
     pub max_message_bytes: usize,
     /// Fastest telemetry subscription \[Hz\]; also at most the loop rate. Default 100.
     pub max_subscribe_hz: f64,
-    /// Object temperature of a touch that gives none \[°C\]. Default 23.
+    /// Object temperature of a touch that gives none \[°C\]. Default 23. Within the pipeline's object range
+    /// ([`crate::limits::OBJECT_C`]). The stimulus limits themselves (display range, rate limit) are not set here:
+    /// they are those of the envelopes the channel engines run ([`crate::ChannelEngine::limits`]).
     pub default_object_c: f64,
-    /// The envelope the channels use (its range and rate limit bound direct-mode requests). Default
-    /// `EnvelopeConfig::default()`.
-    pub envelope: EnvelopeConfig,
 }
 
 impl Default for ServerConfig {
@@ -71,7 +70,6 @@ impl Default for ServerConfig {
             max_message_bytes: 16 * 1024,
             max_subscribe_hz: 100.0,
             default_object_c: 23.0,
-            envelope: EnvelopeConfig::default(),
         }
     }
 }
@@ -98,17 +96,8 @@ impl ServerConfig {
                 self.max_message_bytes, self.net.hard_message_bytes
             )));
         }
-        let o = self.default_object_c;
-        if !(o.is_finite()
-            && (crate::api::protocol::OBJECT_TEMP_RANGE_C.0..=crate::api::protocol::OBJECT_TEMP_RANGE_C.1).contains(&o))
-        {
-            return Err(RuntimeError::Config(format!(
-                "default object temperature {o} °C is out of range"
-            )));
-        }
-        self.envelope
-            .validate()
-            .map_err(|e| RuntimeError::Config(format!("envelope: {e}")))
+        OBJECT_C.check(self.default_object_c)?;
+        Ok(())
     }
 
     /// Whether OSC will listen.
@@ -188,10 +177,12 @@ impl Daemon {
             None => None,
         };
         let control = LoopHandle::spawn(config.loop_config.clone(), device, engines, clock, taps)?;
+        let limits = request_limits(&config, &control);
+        limits.stimulus.object_c.check(limits.default_object_c)?;
         let app = Arc::new(App {
             commands: control.commands(),
             shared: control.shared(),
-            limits: request_limits(&config, control.channel_count()),
+            limits,
             net: server.net.clone(),
             access: Access::new(server.token.clone(), http_addr.port(), server.allowed_origins.clone()),
             info: Info {
@@ -283,14 +274,13 @@ impl Drop for Daemon {
     }
 }
 
-fn request_limits(config: &DaemonConfig, channel_count: usize) -> RequestLimits {
+/// What the API checks requests against: the stimulus limits are those the loop's engines enforce.
+fn request_limits(config: &DaemonConfig, control: &LoopHandle) -> RequestLimits {
     let server = &config.server;
     RequestLimits {
-        channel_count,
+        channel_count: control.channel_count(),
         max_message_bytes: server.max_message_bytes,
-        setpoint_min_c: server.envelope.min_display_c,
-        setpoint_max_c: server.envelope.max_display_c,
-        max_rate_c_s: server.envelope.max_setpoint_rate_c_per_s,
+        stimulus: control.stimulus_limits(),
         max_subscribe_hz: server.max_subscribe_hz.min(config.loop_config.rate_hz),
         default_object_c: server.default_object_c,
     }

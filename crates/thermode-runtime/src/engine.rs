@@ -2,24 +2,44 @@
 //! command and telemetry out), implemented by the render pipeline (`thermode_pipeline::ChannelPipeline`: renderer →
 //! display inverse → controller → safety envelope) and by [`TrackingEngine`], a deliberately simple engine for
 //! tests of the runtime (it is not a thermal renderer). [`Stimulus`] and [`Telemetry`] are the pipeline's.
+//! Refusals are typed end to end ([`EngineError`]: the limit, pipeline or envelope error itself).
 //!
 //! Every drive an engine returns is a `thermode_safety::DriveCommand`, which only a safety envelope can make, so an
 //! engine cannot bypass the envelope.
 
 use thermode_device::Reading;
-use thermode_pipeline::ChannelPipeline;
-use thermode_safety::{DriveCommand, EnvelopeConfig, FaultCode, SafetyEnvelope};
+use thermode_model::params::{BadValue, Rule};
+use thermode_pipeline::{ChannelPipeline, PipelineError};
+use thermode_safety::{DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, SafetyEnvelope};
 use thiserror::Error;
+
+use crate::limits::StimulusLimits;
 
 pub use thermode_pipeline::{Stimulus, Telemetry};
 
-/// Why an engine refused a stimulus.
+/// Why an engine (or the loop on its behalf) refused a stimulus, a fault clearing or its own construction.
 #[derive(Debug, Clone, PartialEq, Error)]
-#[error("{0}")]
-pub struct EngineError(pub String);
+pub enum EngineError {
+    /// A number outside the channel's limits ([`StimulusLimits`]) or an engine parameter out of range.
+    #[error(transparent)]
+    BadValue(#[from] BadValue),
+    /// The render pipeline refused (a stimulus's material, its configuration, or clearing a fault).
+    #[error(transparent)]
+    Pipeline(#[from] PipelineError),
+    /// The safety envelope refused (clearing a fault whose cause persists, or its configuration).
+    #[error(transparent)]
+    Envelope(#[from] EnvelopeError),
+    /// The engine failed (panicked) earlier or while handling this request; the channel is off for the session.
+    #[error("the channel's engine failed; restart the daemon")]
+    Failed,
+}
 
 /// One channel's renderer + controller + safety envelope, as the loop sees it.
 pub trait ChannelEngine {
+    /// What this channel accepts as a stimulus: its envelope's display range and rate limit, the pipeline's object
+    /// range. The loop refuses any stimulus outside them before [`ChannelEngine::set_stimulus`] is called.
+    fn limits(&self) -> StimulusLimits;
+
     /// Changes what the channel renders from the next tick on. Invalid stimuli are refused and change nothing.
     fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), EngineError>;
 
@@ -38,8 +58,12 @@ pub trait ChannelEngine {
 pub type EngineFactory = Box<dyn FnOnce(usize) -> Result<Vec<Box<dyn ChannelEngine>>, EngineError> + Send>;
 
 impl ChannelEngine for ChannelPipeline {
+    fn limits(&self) -> StimulusLimits {
+        StimulusLimits::of_envelope(self.envelope().config())
+    }
+
     fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), EngineError> {
-        ChannelPipeline::set_stimulus(self, stimulus).map_err(|e| EngineError(e.to_string()))
+        Ok(ChannelPipeline::set_stimulus(self, stimulus)?)
     }
 
     fn tick(&mut self, now_s: f64, dt_s: f64, reading: &Reading) -> (DriveCommand, Telemetry) {
@@ -47,7 +71,7 @@ impl ChannelEngine for ChannelPipeline {
     }
 
     fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, EngineError> {
-        ChannelPipeline::clear_fault(self, now_s).map_err(|e| EngineError(e.to_string()))
+        Ok(ChannelPipeline::clear_fault(self, now_s)?)
     }
 }
 
@@ -70,13 +94,9 @@ impl TrackingEngine {
     /// A test engine: resting skin `rest_c` \[°C\] (default use 32), proportional gain `gain_a_per_c` \[A/°C\],
     /// drive limit `current_limit_a` \[A\], default envelope.
     pub fn new(rest_c: f64, gain_a_per_c: f64, current_limit_a: f64) -> Result<Self, EngineError> {
-        if !(rest_c.is_finite() && gain_a_per_c.is_finite() && gain_a_per_c >= 0.0) {
-            return Err(EngineError(format!(
-                "rest {rest_c} °C and gain {gain_a_per_c} A/°C must be finite (gain ≥ 0)"
-            )));
-        }
-        let envelope =
-            SafetyEnvelope::new(EnvelopeConfig::default(), current_limit_a).map_err(|e| EngineError(e.to_string()))?;
+        Rule::Finite.check("tracking engine rest temperature [°C]", rest_c)?;
+        Rule::NonNegative.check("tracking engine gain [A/°C]", gain_a_per_c)?;
+        let envelope = SafetyEnvelope::new(EnvelopeConfig::default(), current_limit_a)?;
         Ok(TrackingEngine {
             rest_c,
             gain_a_per_c,
@@ -111,8 +131,12 @@ impl TrackingEngine {
 }
 
 impl ChannelEngine for TrackingEngine {
+    fn limits(&self) -> StimulusLimits {
+        StimulusLimits::of_envelope(self.envelope.config())
+    }
+
     fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), EngineError> {
-        stimulus.validate().map_err(|e| EngineError(e.to_string()))?;
+        stimulus.validate()?;
         self.stimulus = stimulus;
         Ok(())
     }
@@ -140,7 +164,7 @@ impl ChannelEngine for TrackingEngine {
     }
 
     fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, EngineError> {
-        self.envelope.clear_fault(now_s).map_err(|e| EngineError(e.to_string()))
+        Ok(self.envelope.clear_fault(now_s)?)
     }
 }
 
@@ -151,7 +175,7 @@ pub fn pipeline_engines(config: thermode_pipeline::PipelineConfig) -> EngineFact
             .map(|_| {
                 ChannelPipeline::new(&config)
                     .map(|p| Box::new(p) as Box<dyn ChannelEngine>)
-                    .map_err(|e| EngineError(e.to_string()))
+                    .map_err(EngineError::from)
             })
             .collect()
     })

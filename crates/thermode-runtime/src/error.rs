@@ -1,8 +1,11 @@
-//! Typed errors of the runtime: refused configurations (including an insecure bind), device failures at start-up,
-//! and I/O errors of the listeners and the recorder.
+//! Typed errors of the runtime: refused configurations (including an insecure bind), engines that cannot be built,
+//! device failures at start-up, and I/O errors of the listeners and the recorder.
 
 use thermode_device::DeviceError;
+use thermode_model::params::BadValue;
 use thiserror::Error;
+
+use crate::engine::EngineError;
 
 /// Why the runtime could not start (or a part of it failed).
 #[derive(Debug, Error)]
@@ -10,6 +13,12 @@ pub enum RuntimeError {
     /// A configuration value is out of range or inconsistent.
     #[error("invalid runtime configuration: {0}")]
     Config(String),
+    /// A configuration number is out of range.
+    #[error("invalid runtime configuration: {0}")]
+    BadValue(#[from] BadValue),
+    /// The channel engines could not be built.
+    #[error("cannot build the channel engines: {0}")]
+    Engine(EngineError),
     /// Binding a non-loopback address without a token is refused (a stranger on the network could heat a finger).
     #[error(
         "refusing to listen on {addr} without --token: a non-loopback address is reachable from the network, and \

@@ -5,7 +5,10 @@
 //!   tick, missed-deadline counting and period statistics ([`stats`]).
 //! - [`engine`]: the [`ChannelEngine`] trait the loop drives per channel (renderer → controller → safety envelope);
 //!   every drive it returns is a gated `DriveCommand`.
-//! - [`command`]: the bounded command queue between the network side and the loop ([`CommandSender`]).
+//! - [`command`]: the one command vocabulary ([`Command`]: a channel's [`Stimulus`], release, clear fault, stop
+//!   all) and the bounded queue between the network side and the loop ([`CommandSender`]).
+//! - [`limits`]: what a channel accepts as a stimulus ([`StimulusLimits`], from the envelope it runs); the loop and
+//!   the API enforce them and `/api/status` publishes them.
 //! - [`snapshot`]: what the loop publishes (per-channel telemetry, loop statistics).
 //! - [`recorder`]: `--record DIR`, one CSV per session, written by its own thread.
 //! - [`api`]: HTTP (`/`, `/api/status`, `/api/materials`) and the WebSocket contact API (`/api/ws`), with access
@@ -43,6 +46,7 @@ pub mod control_loop;
 pub mod daemon;
 pub mod engine;
 pub mod error;
+pub mod limits;
 pub mod osc;
 pub mod recorder;
 pub mod snapshot;
@@ -53,4 +57,5 @@ pub use control_loop::{LoopConfig, LoopHandle, MAX_RATE_HZ};
 pub use daemon::{Daemon, DaemonConfig, ServerConfig, DEFAULT_OSC_PORT, DEFAULT_PORT};
 pub use engine::{ChannelEngine, EngineError, EngineFactory, Stimulus, Telemetry, TrackingEngine};
 pub use error::RuntimeError;
+pub use limits::StimulusLimits;
 pub use snapshot::{ChannelStatus, LoopStats, Mode, Snapshot, TickRecord};

@@ -7,7 +7,8 @@
 //! - `/thermode/channel/<i>/release` — release (arguments ignored, so a button's `1.0` works);
 //! - `/thermode/stop` (or `/thermode/stop_all`) — stop all.
 //!
-//! Same validation as the WebSocket API. OSC has no replies and no authentication: malformed datagrams are
+//! Same validation as the WebSocket API: a touch or set-point becomes the same [`Command`] through the same
+//! [`protocol::stimulus_command`], so both refuse the same stimuli with the same message. OSC has no replies and no authentication: malformed datagrams are
 //! ignored and counted, refused messages are counted (the last reason is in `/api/status`). OSC listens only when
 //! the daemon is bound to a loopback address.
 
@@ -20,6 +21,7 @@ use crate::api::limit::TokenBucket;
 use crate::api::protocol::{self, ApiError, ErrorCode};
 use crate::api::App;
 use crate::command::{Command, Owner};
+use crate::engine::Stimulus;
 
 /// Largest datagram read \[bytes\]; longer ones are truncated and so malformed.
 pub const MAX_PACKET_BYTES: usize = 8192;
@@ -198,26 +200,13 @@ fn channel_command(channel: usize, action: &str, args: &[OscArg], app: &App) -> 
             let material = protocol::material_by_name(name)?;
             let object_c = match args.get(1) {
                 None => app.limits.default_object_c,
-                Some(_) => protocol::object_temperature(number(1, "object temperature")?)?,
+                Some(_) => number(1, "object temperature")?,
             };
-            let label = Arc::from(material.name.as_str());
-            Ok(Command::Touch {
-                channel,
-                material,
-                object_c,
-                label,
-                owner: Owner::Osc,
-            })
+            protocol::stimulus_command(channel, Stimulus::Touch { material, object_c }, Owner::Osc, &app.limits)
         }
         "setpoint" => {
             let (temp_c, rate_c_s) = (number(0, "temperature")?, number(1, "rate")?);
-            protocol::check_setpoint(temp_c, rate_c_s, &app.limits)?;
-            Ok(Command::Setpoint {
-                channel,
-                temp_c,
-                rate_c_s,
-                owner: Owner::Osc,
-            })
+            protocol::stimulus_command(channel, Stimulus::Direct { temp_c, rate_c_s }, Owner::Osc, &app.limits)
         }
         "release" => Ok(Command::Release { channel }),
         _ => Err(ApiError::new(

@@ -78,7 +78,7 @@ pub struct LoopStats {
     pub period: Summary,
     /// Measured work per tick (wake to done) over the window.
     pub work: Summary,
-    /// Deadlines that got no tick of their own since the start (see [`crate::ticker`]).
+    /// Deadlines that got no tick of their own since the start (see `thermode_platform::Ticker`).
     pub missed_deadlines: u64,
     /// Ticks since the start.
     pub ticks: u64,

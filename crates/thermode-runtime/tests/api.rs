@@ -402,3 +402,126 @@ fn a_vanished_clients_contacts_are_released_after_the_grace_period() {
         drop(other);
     });
 }
+
+/// The `bad_value` message of a refused WebSocket request, and the OSC refusal of the same stimulus (its
+/// `last_error`), once the OSC listener has counted it.
+fn refusals(
+    daemon: &thermode_runtime::Daemon,
+    ws_request: &str,
+    osc_address: &str,
+    osc_args: &[OscArg],
+) -> (String, String) {
+    let addr = daemon.http_addr();
+    let reply = client_runtime().block_on(async {
+        let mut ws = ws_connect(addr, "").await;
+        ask(&mut ws, ws_request).await
+    });
+    assert_eq!(
+        (reply["type"].as_str(), reply["code"].as_str()),
+        (Some("error"), Some("bad_value")),
+        "{reply}"
+    );
+    let refused_before = status_of(addr)["osc"]["refused"].as_u64().unwrap_or(0);
+    let socket = UdpSocket::bind("127.0.0.1:0").expect("udp");
+    let osc = daemon.osc_addr().expect("OSC listens on loopback");
+    socket.send_to(&encode(osc_address, osc_args), osc).expect("send");
+    assert!(common::wait_until(5.0, || status_of(addr)["osc"]["refused"].as_u64()
+        > Some(refused_before)));
+    let osc_error = status_of(addr)["osc"]["last_error"].as_str().unwrap_or("").to_string();
+    let ws_error = format!("{osc_address} bad_value: {}", reply["message"].as_str().unwrap_or(""));
+    (ws_error, osc_error)
+}
+
+#[test]
+fn a_stimulus_beyond_the_channels_limits_is_refused_identically_over_websocket_and_osc() {
+    let daemon = start(test_config(), SpyDevice::new(5), pipelines());
+    let addr = daemon.http_addr();
+    let envelope = thermode_pipeline::pipeline::render_envelope();
+    let too_fast = envelope.max_setpoint_rate_c_per_s + 5.0;
+    let (ws, osc) = refusals(
+        &daemon,
+        &format!(r#"{{"type":"setpoint","id":1,"channel":0,"temp_c":30,"rate_c_s":{too_fast}}}"#),
+        "/thermode/channel/0/setpoint",
+        &[OscArg::Float(30.0), OscArg::Float(too_fast as f32)],
+    );
+    assert_eq!(ws, osc, "a too fast ramp");
+    assert!(ws.contains("direct rate"), "{ws}");
+    let too_hot = thermode_pipeline::stimulus::MAX_OBJECT_C + 1.0;
+    let (ws, osc) = refusals(
+        &daemon,
+        &format!(r#"{{"type":"touch","id":2,"channel":1,"material":"wood","object_temp_c":{too_hot}}}"#),
+        "/thermode/channel/1/touch",
+        &[OscArg::Str("wood".into()), OscArg::Float(too_hot as f32)],
+    );
+    assert_eq!(ws, osc, "a too hot object");
+    let (ws, osc) = refusals(
+        &daemon,
+        r#"{"type":"setpoint","id":3,"channel":2,"temp_c":49,"rate_c_s":1}"#,
+        "/thermode/channel/2/setpoint",
+        &[OscArg::Float(49.0), OscArg::Float(1.0)],
+    );
+    assert_eq!(ws, osc, "a display temperature above the envelope's maximum");
+    let contacts = status_of(addr)["contacts"].clone();
+    assert_eq!(contacts, json!([]), "nothing refused reached a channel");
+    // The channels run the render envelope (20 °C/s), so a ramp faster than the envelope's general default
+    // (10 °C/s) but within the channel's limit is accepted: the API enforces what the channels enforce.
+    let fast = client_runtime().block_on(async {
+        let mut ws = ws_connect(addr, "").await;
+        ask(
+            &mut ws,
+            r#"{"type":"setpoint","id":4,"channel":3,"temp_c":30,"rate_c_s":15}"#,
+        )
+        .await
+    });
+    assert_eq!(fast["type"], "ok", "{fast}");
+}
+
+#[test]
+fn the_status_limits_are_those_of_the_envelope_the_channels_run() {
+    use thermode_device::DeviceConfig;
+    use thermode_pipeline::{ControllerKind, PipelineConfig};
+    let mut pipeline = PipelineConfig::new(DeviceConfig::default(), ControllerKind::Model);
+    pipeline.envelope.min_display_c = 18.0;
+    pipeline.envelope.max_display_c = 44.0;
+    pipeline.envelope.max_setpoint_rate_c_per_s = 7.0;
+    let envelope = pipeline.envelope;
+    let engines = thermode_runtime::engine::pipeline_engines(pipeline);
+    let daemon = start(test_config(), SpyDevice::new(2), engines);
+    let addr = daemon.http_addr();
+    let limits = status_of(addr)["limits"].clone();
+    let published = |key: &str| limits[key].as_f64().unwrap_or(f64::NAN);
+    assert_eq!(
+        [
+            published("display_min_c"),
+            published("display_max_c"),
+            published("max_rate_c_s")
+        ],
+        [
+            envelope.min_display_c,
+            envelope.max_display_c,
+            envelope.max_setpoint_rate_c_per_s
+        ],
+        "{limits}"
+    );
+    assert_eq!(
+        [published("object_temp_min_c"), published("object_temp_max_c")],
+        [
+            thermode_pipeline::stimulus::MIN_OBJECT_C,
+            thermode_pipeline::stimulus::MAX_OBJECT_C
+        ],
+        "{limits}"
+    );
+    client_runtime().block_on(async {
+        let mut ws = ws_connect(addr, "").await;
+        let edge = r#"{"type":"setpoint","id":1,"channel":0,"temp_c":18,"rate_c_s":7}"#;
+        assert_eq!(
+            ask(&mut ws, edge).await["type"],
+            "ok",
+            "the published limits are accepted"
+        );
+        for (i, (temp_c, rate_c_s)) in [(17.9, 1.0), (44.1, 1.0), (30.0, 7.1)].into_iter().enumerate() {
+            let text = format!(r#"{{"type":"setpoint","id":{i},"channel":1,"temp_c":{temp_c},"rate_c_s":{rate_c_s}}}"#);
+            assert_eq!(ask(&mut ws, &text).await["code"], "bad_value", "{text}");
+        }
+    });
+}

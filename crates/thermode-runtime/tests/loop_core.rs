@@ -82,14 +82,16 @@ impl Rig {
 }
 
 fn touch(channel: usize, name: &str, owner: Owner) -> Command {
-    let material = materials::find(name).expect("library material");
-    Command::Touch {
+    touch_at(channel, name, 23.0, owner)
+}
+
+fn touch_at(channel: usize, name: &str, object_c: f64, owner: Owner) -> Command {
+    Command::touch(
         channel,
-        label: Arc::from(material.name.as_str()),
-        material,
-        object_c: 23.0,
+        materials::find(name).expect("library material"),
+        object_c,
         owner,
-    }
+    )
 }
 
 #[test]
@@ -347,6 +349,10 @@ impl thermode_runtime::ChannelEngine for Booby {
     fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, thermode_runtime::EngineError> {
         self.inner.clear_fault(now_s)
     }
+
+    fn limits(&self) -> thermode_runtime::StimulusLimits {
+        self.inner.limits()
+    }
 }
 
 #[test]
@@ -362,12 +368,7 @@ fn a_panicking_engine_switches_only_its_channel_off_for_good() {
     });
     let rig = Rig::new(2, engines, LoopConfig::default());
     rig.step(5);
-    let trap = Command::Setpoint {
-        channel: 0,
-        temp_c: 44.4,
-        rate_c_s: 1.0,
-        owner: Owner::Script,
-    };
+    let trap = Command::direct(0, 44.4, 1.0, Owner::Script);
     let armed = rig.ask(trap).expect("accepted: the bug strikes at the next tick");
     rig.step(20);
     let s = rig.snapshot();
@@ -414,32 +415,10 @@ fn commands_that_bypass_the_api_validation_are_refused_by_the_loop_and_the_pipel
     broken.conductivity_w_mk = -1.0;
     let hostile = [
         touch(9, "wood", Owner::Script),
-        Command::Touch {
-            channel: 0,
-            label: Arc::from("broken"),
-            material: broken,
-            object_c: 23.0,
-            owner: Owner::Script,
-        },
-        Command::Touch {
-            channel: 0,
-            label: Arc::from("wood"),
-            material: materials::find("wood").expect("wood"),
-            object_c: f64::NAN,
-            owner: Owner::Script,
-        },
-        Command::Setpoint {
-            channel: 1,
-            temp_c: 1000.0,
-            rate_c_s: 1.0,
-            owner: Owner::Script,
-        },
-        Command::Setpoint {
-            channel: 1,
-            temp_c: 30.0,
-            rate_c_s: f64::INFINITY,
-            owner: Owner::Script,
-        },
+        Command::touch(0, broken, 23.0, Owner::Script),
+        touch_at(0, "wood", f64::NAN, Owner::Script),
+        Command::direct(1, 1000.0, 1.0, Owner::Script),
+        Command::direct(1, 30.0, f64::INFINITY, Owner::Script),
         Command::Release { channel: usize::MAX },
     ];
     for command in hostile {
@@ -488,18 +467,16 @@ fn a_random_stream_of_extreme_commands_never_drives_outside_the_envelope() {
         let channel = (rng.next() % 3) as usize;
         let command = match rng.next() % 4 {
             0 => {
-                let mut c = touch(channel, names[(rng.next() % 5) as usize], Owner::Script);
-                if let Command::Touch { object_c, .. } = &mut c {
-                    *object_c = rng.uniform(-50.0, 150.0); // frozen to scalding objects: the envelope must cope
-                }
-                c
+                let name = names[(rng.next() % 5) as usize];
+                // frozen to scalding objects: the envelope must cope
+                touch_at(channel, name, rng.uniform(-50.0, 150.0), Owner::Script)
             }
-            1 => Command::Setpoint {
+            1 => Command::direct(
                 channel,
-                temp_c: rng.uniform(envelope.min_display_c, envelope.max_display_c),
-                rate_c_s: rng.uniform(0.1, envelope.max_setpoint_rate_c_per_s),
-                owner: Owner::Script,
-            },
+                rng.uniform(envelope.min_display_c, envelope.max_display_c),
+                rng.uniform(0.1, envelope.max_setpoint_rate_c_per_s),
+                Owner::Script,
+            ),
             2 => Command::Release { channel },
             _ => Command::StopAll,
         };

@@ -36,13 +36,7 @@ fn every_tick_of_every_channel_is_recorded_in_order() {
     let ticks = 200u64;
     for k in 1..ticks {
         if k == 100 {
-            let command = Command::Touch {
-                channel: 1,
-                label: Arc::from("wood"),
-                material: wood.clone(),
-                object_c: 23.0,
-                owner: Owner::Script,
-            };
+            let command = Command::touch(1, wood.clone(), 23.0, Owner::Script);
             handle.commands().send(command).expect("queued");
         }
         clock.set(k as f64 * PERIOD_S);

@@ -268,15 +268,12 @@ pub fn status_json(app: &App) -> Value {
         "device_errors": snapshot.device_errors,
         "clients": app.clients.load(Ordering::Relaxed),
         "auth": {"token_required": app.access.token_required()},
-        "limits": {
+        "limits": protocol::merged(json!({
             "max_message_bytes": app.limits.max_message_bytes,
             "requests_per_s": app.net.requests_per_s,
             "burst": app.net.burst,
             "max_subscribe_hz": app.limits.max_subscribe_hz,
-            "setpoint_min_c": app.limits.setpoint_min_c,
-            "setpoint_max_c": app.limits.setpoint_max_c,
-            "max_rate_c_s": app.limits.max_rate_c_s,
-        },
+        }), protocol::limits_json(&app.limits.stimulus)),
         "osc": {
             "enabled": app.info.osc_port.is_some(),
             "port": app.info.osc_port,

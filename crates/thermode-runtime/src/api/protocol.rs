@@ -1,14 +1,19 @@
-//! The contact API's messages: parsing and validating a request (every check happens here, before anything
-//! reaches the control loop), the stable error codes, and the JSON of replies, telemetry and status.
+//! The contact API's messages: parsing and validating a request into an [`ApiRequest`] (a loop [`Command`], or one
+//! of the requests only the connection handles), the stable error codes, and the JSON of replies, telemetry and
+//! status. Every check happens here, before anything reaches the control loop; a stimulus is checked by
+//! [`stimulus_command`] against the limits the channels enforce (shared with OSC), every other number with
+//! `thermode_model::params`.
 //!
 //! A request is a JSON object with `type` and `id` (a string of at most 128 characters or a number; replies
 //! carry it back unchanged). Unknown fields are refused (`unknown_field`), so a misspelt key never goes unnoticed.
 
-use std::sync::Arc;
-
 use serde_json::{json, Map, Value};
 use thermode_model::materials::{self, Material, DEFAULT_THICKNESS_M};
+use thermode_model::params::{BadValue, Range, Rule};
 
+use crate::command::{Command, Owner};
+use crate::engine::Stimulus;
+use crate::limits::StimulusLimits;
 use crate::snapshot::{ChannelStatus, Mode, Snapshot};
 
 /// Stable error codes of the API (they never change meaning).
@@ -75,6 +80,12 @@ pub struct ApiError {
     pub message: String,
 }
 
+impl From<BadValue> for ApiError {
+    fn from(e: BadValue) -> Self {
+        ApiError::bad_value(&e)
+    }
+}
+
 impl ApiError {
     /// An error with `code` and `message`.
     pub fn new(code: ErrorCode, message: impl Into<String>) -> Self {
@@ -82,6 +93,11 @@ impl ApiError {
             code,
             message: message.into(),
         }
+    }
+
+    /// A refused number (`bad_value`).
+    pub fn bad_value(e: &impl std::fmt::Display) -> Self {
+        ApiError::new(ErrorCode::BadValue, e.to_string())
     }
 
     /// The error as a message: `{"type": "error", "id", "code", "message"}`.
@@ -97,20 +113,15 @@ pub struct RequestLimits {
     pub channel_count: usize,
     /// Largest accepted message \[bytes\]. Default 16384.
     pub max_message_bytes: usize,
-    /// Lowest direct-mode temperature \[°C\] (the envelope's minimum, default 15).
-    pub setpoint_min_c: f64,
-    /// Highest direct-mode temperature \[°C\] (the envelope's maximum, default 48).
-    pub setpoint_max_c: f64,
-    /// Fastest direct-mode ramp \[°C/s\] (the envelope's rate limit, default 10).
-    pub max_rate_c_s: f64,
+    /// What every channel accepts as a stimulus: the limits its engine enforces (object temperature, the
+    /// envelope's display range and rate limit), as reported by the loop.
+    pub stimulus: StimulusLimits,
     /// Fastest telemetry subscription \[Hz\] (at most the loop rate; default 100).
     pub max_subscribe_hz: f64,
     /// Object temperature when a touch gives none \[°C\] (default 23, room temperature).
     pub default_object_c: f64,
 }
 
-/// Range of object temperatures a touch may give \[°C\].
-pub const OBJECT_TEMP_RANGE_C: (f64, f64) = (0.0, 70.0);
 /// Largest accepted thermal conductivity \[W/(m·K)\] (diamond is about 2200).
 pub const MAX_CONDUCTIVITY_W_MK: f64 = 5000.0;
 /// Largest accepted density \[kg/m³\] (osmium is about 22 600).
@@ -126,41 +137,11 @@ pub const MAX_ID_CHARS: usize = 128;
 /// Longest accepted name (material or custom label) \[characters\].
 pub const MAX_NAME_CHARS: usize = 64;
 
-/// A validated request.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Request {
-    /// Touch a material on a channel.
-    Touch {
-        /// Channel (from 0).
-        channel: usize,
-        /// The material (validated).
-        material: Material,
-        /// Object temperature \[°C\].
-        object_c: f64,
-        /// The contact label.
-        label: Arc<str>,
-    },
-    /// Release a channel.
-    Release {
-        /// Channel (from 0).
-        channel: usize,
-    },
-    /// Direct mode.
-    Setpoint {
-        /// Channel (from 0).
-        channel: usize,
-        /// Target display temperature \[°C\].
-        temp_c: f64,
-        /// Ramp rate \[°C/s\].
-        rate_c_s: f64,
-    },
-    /// Clear a channel's latched fault.
-    ClearFault {
-        /// Channel (from 0).
-        channel: usize,
-    },
-    /// Release every channel and hold every drive at 0 A.
-    StopAll,
+/// A validated request: a command for the control loop, or one the connection answers itself.
+#[derive(Debug, Clone)]
+pub enum ApiRequest {
+    /// `touch`, `setpoint`, `release`, `clear_fault` or `stop_all`: the loop's [`Command`].
+    Command(Command),
     /// Telemetry at `rate_hz`.
     Subscribe {
         /// Messages per second \[Hz\].
@@ -172,9 +153,9 @@ pub enum Request {
     Status,
 }
 
-/// Parses and validates one text message. Returns the `id` to answer with (null when there is none or it is
-/// invalid) and the request or the error.
-pub fn parse(text: &str, limits: &RequestLimits) -> (Value, Result<Request, ApiError>) {
+/// Parses and validates one text message from `owner`. Returns the `id` to answer with (null when there is none or
+/// it is invalid) and the request or the error.
+pub fn parse(text: &str, limits: &RequestLimits, owner: Owner) -> (Value, Result<ApiRequest, ApiError>) {
     if text.len() > limits.max_message_bytes {
         let message = format!(
             "message of {} bytes exceeds the limit of {} bytes",
@@ -202,7 +183,7 @@ pub fn parse(text: &str, limits: &RequestLimits) -> (Value, Result<Request, ApiE
         Ok(id) => id,
         Err(e) => return (Value::Null, Err(e)),
     };
-    let request = parse_object(&map, limits);
+    let request = parse_object(&map, limits, owner);
     (id, request)
 }
 
@@ -218,44 +199,49 @@ fn request_id(map: &Map<String, Value>) -> Result<Value, ApiError> {
     }
 }
 
-fn parse_object(map: &Map<String, Value>, limits: &RequestLimits) -> Result<Request, ApiError> {
+fn parse_object(map: &Map<String, Value>, limits: &RequestLimits, owner: Owner) -> Result<ApiRequest, ApiError> {
     let fields = Fields { map };
     let kind = fields.string("type")?;
-    match kind {
-        "touch" => parse_touch(&fields, limits),
+    let command = match kind {
+        "touch" => parse_touch(&fields, limits, owner)?,
         "release" => {
             fields.only(&["channel"])?;
-            Ok(Request::Release {
+            Command::Release {
                 channel: fields.channel(limits.channel_count)?,
-            })
+            }
         }
-        "setpoint" => parse_setpoint(&fields, limits),
+        "setpoint" => parse_setpoint(&fields, limits, owner)?,
         "clear_fault" => {
             fields.only(&["channel"])?;
-            Ok(Request::ClearFault {
+            Command::ClearFault {
                 channel: fields.channel(limits.channel_count)?,
-            })
+            }
         }
-        "stop_all" => fields.only(&[]).map(|()| Request::StopAll),
+        "stop_all" => fields.only(&[]).map(|()| Command::StopAll)?,
         "subscribe" => {
             fields.only(&["rate_hz"])?;
-            let rate_hz = fields.number("rate_hz")?;
-            check_range("rate_hz", rate_hz, MIN_SUBSCRIBE_HZ, limits.max_subscribe_hz, "Hz")?;
-            Ok(Request::Subscribe { rate_hz })
+            let rate = Range {
+                name: "rate_hz",
+                min: MIN_SUBSCRIBE_HZ,
+                max: limits.max_subscribe_hz,
+            };
+            let rate_hz = rate.check(fields.number("rate_hz")?)?;
+            return Ok(ApiRequest::Subscribe { rate_hz });
         }
-        "unsubscribe" => fields.only(&[]).map(|()| Request::Unsubscribe),
-        "status" => fields.only(&[]).map(|()| Request::Status),
+        "unsubscribe" => return fields.only(&[]).map(|()| ApiRequest::Unsubscribe),
+        "status" => return fields.only(&[]).map(|()| ApiRequest::Status),
         other => Err(ApiError::new(
             ErrorCode::UnknownType,
             format!(
                 "unknown request type {:?}; known: touch, release, setpoint, clear_fault, stop_all, subscribe, unsubscribe, status",
                 truncate(other)
             ),
-        )),
-    }
+        ))?,
+    };
+    Ok(ApiRequest::Command(command))
 }
 
-fn parse_touch(fields: &Fields, limits: &RequestLimits) -> Result<Request, ApiError> {
+fn parse_touch(fields: &Fields, limits: &RequestLimits, owner: Owner) -> Result<Command, ApiError> {
     fields.only(&["channel", "material", "properties", "object_temp_c"])?;
     let channel = fields.channel(limits.channel_count)?;
     let material = match (fields.map.get("material"), fields.map.get("properties")) {
@@ -276,35 +262,64 @@ fn parse_touch(fields: &Fields, limits: &RequestLimits) -> Result<Request, ApiEr
     };
     let object_c = match fields.map.get("object_temp_c") {
         None => limits.default_object_c,
-        Some(_) => object_temperature(fields.number("object_temp_c")?)?,
+        Some(_) => fields.number("object_temp_c")?,
     };
-    let label = Arc::from(material.name.as_str());
-    Ok(Request::Touch {
-        channel,
-        material,
-        object_c,
-        label,
-    })
+    stimulus_command(channel, Stimulus::Touch { material, object_c }, owner, limits)
 }
 
-fn parse_setpoint(fields: &Fields, limits: &RequestLimits) -> Result<Request, ApiError> {
+fn parse_setpoint(fields: &Fields, limits: &RequestLimits, owner: Owner) -> Result<Command, ApiError> {
     fields.only(&["channel", "temp_c", "rate_c_s"])?;
     let channel = fields.channel(limits.channel_count)?;
     let temp_c = fields.number("temp_c")?;
     let rate_c_s = fields.number("rate_c_s")?;
-    check_setpoint(temp_c, rate_c_s, limits)?;
-    Ok(Request::Setpoint {
-        channel,
-        temp_c,
-        rate_c_s,
-    })
+    stimulus_command(channel, Stimulus::Direct { temp_c, rate_c_s }, owner, limits)
 }
 
-/// A direct-mode request: `temp_c` \[°C\] within the envelope's range, `rate_c_s` \[°C/s\] above 0 and at most its
-/// rate limit.
-pub fn check_setpoint(temp_c: f64, rate_c_s: f64, limits: &RequestLimits) -> Result<(), ApiError> {
-    check_range("temp_c", temp_c, limits.setpoint_min_c, limits.setpoint_max_c, "°C")?;
-    check_range("rate_c_s", rate_c_s, f64::MIN_POSITIVE, limits.max_rate_c_s, "°C/s")
+/// The command showing `stimulus` on `channel` (already a valid channel) for `owner`, once the stimulus passes the
+/// limits every channel enforces ([`StimulusLimits::check`], `bad_value` otherwise). The WebSocket API and OSC
+/// both build their touch and set-point commands here, so both refuse the same stimuli with the same message.
+pub fn stimulus_command(
+    channel: usize,
+    stimulus: Stimulus,
+    owner: Owner,
+    limits: &RequestLimits,
+) -> Result<Command, ApiError> {
+    limits.stimulus.check(&stimulus).map_err(|e| ApiError::bad_value(&e))?;
+    Ok(Command::stimulate(channel, stimulus, owner))
+}
+
+/// The reply's fields for a command the loop applied (the request's name is [`Command::name`]) (`touch`: channel, material and object
+/// temperature; `setpoint`: channel, temperature and rate; `release`, `clear_fault`: channel).
+pub fn command_reply_fields(command: &Command) -> Value {
+    match command {
+        Command::Stimulate {
+            channel,
+            stimulus,
+            label,
+            ..
+        } => match stimulus {
+            Stimulus::Touch { object_c, .. } => {
+                json!({"channel": channel, "material": &**label, "object_temp_c": object_c})
+            }
+            Stimulus::Direct { temp_c, rate_c_s } => {
+                json!({"channel": channel, "temp_c": temp_c, "rate_c_s": rate_c_s})
+            }
+            Stimulus::Air => json!({"channel": channel}),
+        },
+        Command::Release { channel } | Command::ClearFault { channel } => json!({"channel": channel}),
+        Command::StopAll | Command::ClientGone { .. } => json!({}),
+    }
+}
+
+/// The stimulus limits as published in `/api/status` (`limits`): what the API and the loop enforce.
+pub fn limits_json(limits: &StimulusLimits) -> Value {
+    json!({
+        "display_min_c": limits.display_c.min,
+        "display_max_c": limits.display_c.max,
+        "max_rate_c_s": limits.max_rate_c_s,
+        "object_temp_min_c": limits.object_c.min,
+        "object_temp_max_c": limits.object_c.max,
+    })
 }
 
 /// A library material by name (case-insensitive, aliases as in `thermode materials`).
@@ -332,18 +347,6 @@ pub fn channel_index(channel: i64, count: usize) -> Result<usize, ApiError> {
     }
 }
 
-/// An object temperature within [`OBJECT_TEMP_RANGE_C`].
-pub fn object_temperature(object_c: f64) -> Result<f64, ApiError> {
-    check_range(
-        "object_temp_c",
-        object_c,
-        OBJECT_TEMP_RANGE_C.0,
-        OBJECT_TEMP_RANGE_C.1,
-        "°C",
-    )?;
-    Ok(object_c)
-}
-
 fn material_from_properties(value: &Value) -> Result<Material, ApiError> {
     let Value::Object(map) = value else {
         return Err(ApiError::new(ErrorCode::BadValue, "`properties` must be an object"));
@@ -360,26 +363,28 @@ fn material_from_properties(value: &Value) -> Result<Material, ApiError> {
         None => "custom".to_string(),
         Some(_) => label(fields.string("name")?)?,
     };
-    let positive = |key: &'static str, max: f64, unit: &str| -> Result<f64, ApiError> {
-        let value = fields.number(key)?;
-        check_range(key, value, f64::MIN_POSITIVE, max, unit)?;
-        Ok(value)
+    let positive = |key: &'static str, max: f64| -> Result<f64, ApiError> {
+        let value = Rule::Positive.check(key, fields.number(key)?)?;
+        Ok(Range {
+            name: key,
+            min: 0.0,
+            max,
+        }
+        .check(value)?)
     };
     let thickness_m = match map.get("thickness_m") {
         None => DEFAULT_THICKNESS_M,
-        Some(_) => positive("thickness_m", MAX_THICKNESS_M, "m")?,
+        Some(_) => positive("thickness_m", MAX_THICKNESS_M)?,
     };
     let material = Material {
         name,
-        conductivity_w_mk: positive("conductivity_w_mk", MAX_CONDUCTIVITY_W_MK, "W/(m·K)")?,
-        density_kg_m3: positive("density_kg_m3", MAX_DENSITY_KG_M3, "kg/m³")?,
-        specific_heat_j_kgk: positive("specific_heat_j_kgk", MAX_SPECIFIC_HEAT_J_KGK, "J/(kg·K)")?,
+        conductivity_w_mk: positive("conductivity_w_mk", MAX_CONDUCTIVITY_W_MK)?,
+        density_kg_m3: positive("density_kg_m3", MAX_DENSITY_KG_M3)?,
+        specific_heat_j_kgk: positive("specific_heat_j_kgk", MAX_SPECIFIC_HEAT_J_KGK)?,
         thickness_m,
         source: "contact API properties".to_string(),
     };
-    material
-        .validate("properties")
-        .map_err(|e| ApiError::new(ErrorCode::BadValue, e.to_string()))?;
+    material.validate("properties").map_err(|e| ApiError::bad_value(&e))?;
     Ok(material)
 }
 
@@ -396,21 +401,6 @@ fn label(name: &str) -> Result<String, ApiError> {
             format!("`name` must be 1 to {MAX_NAME_CHARS} of A-Z a-z 0-9 _ - ."),
         ))
     }
-}
-
-fn check_range(key: &str, value: f64, min: f64, max: f64, unit: &str) -> Result<(), ApiError> {
-    if value.is_finite() && value >= min && value <= max {
-        return Ok(());
-    }
-    let low = if min == f64::MIN_POSITIVE {
-        "above 0".to_string()
-    } else {
-        format!("from {min}")
-    };
-    Err(ApiError::new(
-        ErrorCode::BadValue,
-        format!("`{key}` = {value} {unit} is out of range: it must be {low} to {max} {unit}"),
-    ))
 }
 
 /// At most 40 characters of a client's string, for messages.
@@ -472,11 +462,15 @@ impl Fields<'_> {
 
 /// A successful reply: `{"type": "ok", "id", "request": <type>, ...extra}`.
 pub fn ok_reply(id: &Value, request: &str, extra: Value) -> Value {
-    let mut reply = json!({"type": "ok", "id": id, "request": request});
-    if let (Value::Object(reply), Value::Object(extra)) = (&mut reply, extra) {
-        reply.extend(extra);
+    merged(json!({"type": "ok", "id": id, "request": request}), extra)
+}
+
+/// `base` with the fields of `extra` added (both objects; otherwise `base` unchanged).
+pub fn merged(mut base: Value, extra: Value) -> Value {
+    if let (Value::Object(base), Value::Object(extra)) = (&mut base, extra) {
+        base.extend(extra);
     }
-    reply
+    base
 }
 
 /// The fault of a channel as a number: the stable code, 0 for none.
@@ -519,7 +513,6 @@ pub fn telemetry_message(snapshot: &Snapshot) -> Value {
 
 /// One channel's status: its telemetry plus mode, fault text, owner and pending release.
 pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> Value {
-    let mut value = channel_telemetry(status);
     let extra = json!({
         "name": name,
         "fault_description": status.telemetry.fault.map(|f| f.description()),
@@ -532,10 +525,7 @@ pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> Value {
         "link_ok": status.link_ok,
         "engine_failed": status.engine_failed,
     });
-    if let (Value::Object(value), Value::Object(extra)) = (&mut value, extra) {
-        value.extend(extra);
-    }
-    value
+    merged(channel_telemetry(status), extra)
 }
 
 /// The library as JSON: the fields of `thermode materials --format json`.
@@ -566,44 +556,46 @@ mod tests {
         RequestLimits {
             channel_count: 5,
             max_message_bytes: 16 * 1024,
-            setpoint_min_c: 15.0,
-            setpoint_max_c: 48.0,
-            max_rate_c_s: 10.0,
+            stimulus: StimulusLimits::of_envelope(&thermode_safety::EnvelopeConfig::default()),
             max_subscribe_hz: 100.0,
             default_object_c: 23.0,
         }
     }
 
+    fn parse_text(text: &str) -> (Value, Result<ApiRequest, ApiError>) {
+        parse(text, &limits(), Owner::Client(1))
+    }
+
     fn code_of(text: &str) -> Option<&'static str> {
-        parse(text, &limits()).1.err().map(|e| e.code.as_str())
+        parse_text(text).1.err().map(|e| e.code.as_str())
     }
 
     #[test]
     fn a_touch_by_name_and_by_properties() {
-        let (id, touch) = parse(
-            r#"{"type":"touch","id":7,"channel":1,"material":"Aluminum","object_temp_c":30}"#,
-            &limits(),
-        );
+        let (id, touch) = parse_text(r#"{"type":"touch","id":7,"channel":1,"material":"Aluminum","object_temp_c":30}"#);
         assert_eq!(id, json!(7));
         match touch {
-            Ok(Request::Touch {
+            Ok(ApiRequest::Command(Command::Stimulate {
                 channel: 1,
-                material,
-                object_c,
+                stimulus: Stimulus::Touch { material, object_c },
+                owner: Owner::Client(1),
                 ..
-            }) => {
+            })) => {
                 assert_eq!(material.name, "aluminium");
                 assert_eq!(object_c, 30.0);
             }
             other => panic!("got {other:?}"),
         }
-        let (_, custom) = parse(
+        let (_, custom) = parse_text(
             r#"{"type":"touch","id":"a","channel":0,"properties":{"conductivity_w_mk":0.2,
                 "density_kg_m3":1200,"specific_heat_j_kgk":1500}}"#,
-            &limits(),
         );
         match custom {
-            Ok(Request::Touch { material, label, .. }) => {
+            Ok(ApiRequest::Command(Command::Stimulate {
+                stimulus: Stimulus::Touch { material, .. },
+                label,
+                ..
+            })) => {
                 assert_eq!((material.thickness_m, &*label), (DEFAULT_THICKNESS_M, "custom"));
             }
             other => panic!("got {other:?}"),
@@ -674,7 +666,7 @@ mod tests {
 
     #[test]
     fn ids_are_echoed_even_with_errors() {
-        let (id, result) = parse(r#"{"type":"fly","id":"abc"}"#, &limits());
+        let (id, result) = parse_text(r#"{"type":"fly","id":"abc"}"#);
         assert_eq!(id, json!("abc"));
         assert!(result.is_err());
     }

@@ -17,7 +17,7 @@ use axum::response::Response;
 use serde_json::{json, Value};
 use tokio::time::{interval, timeout, Instant, Interval, MissedTickBehavior};
 
-use super::protocol::{self, ApiError, ErrorCode, Request};
+use super::protocol::{self, ApiError, ApiRequest, ErrorCode};
 use super::{error_response, status_json, App};
 use crate::command::{Command, CommandError, Owner};
 
@@ -117,82 +117,45 @@ impl Connection {
 
     /// The reply to one text message.
     async fn answer(&mut self, text: &str) -> Value {
+        let owner = Owner::Client(self.client);
         let now_s = self.origin.elapsed().as_secs_f64();
         if !self.bucket.take(now_s) {
-            let (id, _) = protocol::parse(text, &self.app.limits);
+            let (id, _) = protocol::parse(text, &self.app.limits, owner);
             let message = format!(
                 "more than {} requests per second (burst {}); slow down",
                 self.app.net.requests_per_s, self.app.net.burst
             );
             return ApiError::new(ErrorCode::RateLimited, message).to_json(&id);
         }
-        let (id, request) = protocol::parse(text, &self.app.limits);
+        let (id, request) = protocol::parse(text, &self.app.limits, owner);
         match request {
             Ok(request) => self.execute(request, &id).await.unwrap_or_else(|e| e.to_json(&id)),
             Err(e) => e.to_json(&id),
         }
     }
 
-    async fn execute(&mut self, request: Request, id: &Value) -> Result<Value, ApiError> {
-        let owner = Owner::Client(self.client);
-        let (name, command) = match request {
-            Request::Touch {
-                channel,
-                material,
-                object_c,
-                label,
-            } => {
-                let extra = json!({"channel": channel, "material": &*label, "object_temp_c": object_c});
-                let command = Command::Touch {
-                    channel,
-                    material,
-                    object_c,
-                    label,
-                    owner,
-                };
-                return to_loop(&self.app, "touch", command, id, extra).await;
-            }
-            Request::Release { channel } => ("release", Command::Release { channel }),
-            Request::ClearFault { channel } => ("clear_fault", Command::ClearFault { channel }),
-            Request::Setpoint {
-                channel,
-                temp_c,
-                rate_c_s,
-            } => {
-                let extra = json!({"channel": channel, "temp_c": temp_c, "rate_c_s": rate_c_s});
-                let command = Command::Setpoint {
-                    channel,
-                    temp_c,
-                    rate_c_s,
-                    owner,
-                };
-                return to_loop(&self.app, "setpoint", command, id, extra).await;
-            }
-            Request::StopAll => ("stop_all", Command::StopAll),
-            Request::Subscribe { rate_hz } => {
+    async fn execute(&mut self, request: ApiRequest, id: &Value) -> Result<Value, ApiError> {
+        match request {
+            ApiRequest::Command(command) => to_loop(&self.app, command, id).await,
+            ApiRequest::Subscribe { rate_hz } => {
                 let mut every = interval(Duration::from_secs_f64(1.0 / rate_hz));
                 every.set_missed_tick_behavior(MissedTickBehavior::Skip);
                 self.subscription = Some(every);
-                return Ok(protocol::ok_reply(id, "subscribe", json!({"rate_hz": rate_hz})));
+                Ok(protocol::ok_reply(id, "subscribe", json!({"rate_hz": rate_hz})))
             }
-            Request::Unsubscribe => {
+            ApiRequest::Unsubscribe => {
                 self.subscription = None;
-                return Ok(protocol::ok_reply(id, "unsubscribe", json!({})));
+                Ok(protocol::ok_reply(id, "unsubscribe", json!({})))
             }
-            Request::Status => {
+            ApiRequest::Status => {
                 let mut status = status_json(&self.app);
                 if let Value::Object(map) = &mut status {
                     map.insert("type".into(), json!("status"));
                     map.insert("id".into(), id.clone());
                 }
-                return Ok(status);
+                Ok(status)
             }
-        };
-        let extra = match &command {
-            Command::Release { channel } | Command::ClearFault { channel } => json!({"channel": channel}),
-            _ => json!({}),
-        };
-        to_loop(&self.app, name, command, id, extra).await
+        }
     }
 
     async fn send_telemetry(&mut self) -> bool {
@@ -228,7 +191,8 @@ async fn goodbye(app: &App, client: u64) {
 }
 
 /// Sends `command` to the loop and waits (bounded) for its answer.
-async fn to_loop(app: &App, name: &str, command: Command, id: &Value, extra: Value) -> Result<Value, ApiError> {
+async fn to_loop(app: &App, command: Command, id: &Value) -> Result<Value, ApiError> {
+    let (name, extra) = (command.name(), protocol::command_reply_fields(&command));
     let answer = app.commands.request(command).map_err(loop_error)?;
     let wait = Duration::from_secs_f64(app.net.reply_timeout_s);
     let applied = match timeout(wait, answer).await {

@@ -2,8 +2,6 @@
 //! on the middle finger, steel on the thumb, releases) repeated until the end, so a newcomer sees the dashboard move
 //! without writing a client. `--duration S` makes it exit (for tests and CI).
 
-use std::sync::Arc;
-
 use anyhow::Result;
 use clap::Args;
 use thermode_model::materials;
@@ -109,13 +107,7 @@ fn play(commands: &CommandSender, step: &Step, channels: usize) {
     let command = match step.material.map(materials::find) {
         Some(Ok(material)) => {
             println!("demo: {finger} touches {}", material.name);
-            Command::Touch {
-                channel,
-                label: Arc::from(material.name.as_str()),
-                material,
-                object_c: 23.0,
-                owner: Owner::Script,
-            }
+            Command::touch(channel, material, 23.0, Owner::Script)
         }
         Some(Err(e)) => {
             eprintln!("demo: {e}");

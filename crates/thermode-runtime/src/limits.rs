@@ -1,0 +1,138 @@
+//! The limits a channel enforces on a stimulus, from one source: the object-temperature range of the pipeline's
+//! [`Stimulus`] ([`MIN_OBJECT_C`]..[`MAX_OBJECT_C`]) and the display range and set-point rate limit of the safety
+//! envelope the channel really runs ([`StimulusLimits::of_envelope`]). Every engine reports its limits
+//! ([`crate::ChannelEngine::limits`]); the control loop checks every stimulus against its channel's limits before the
+//! engine sees it, the API checks it against the limits of all channels together before it is queued (so a refusal
+//! has a reply), and `/api/status` publishes those same limits. [`StimulusLimits::check`] is the one validation.
+
+use thermode_model::params::{BadValue, Range, Rule};
+use thermode_pipeline::stimulus::{MAX_OBJECT_C, MIN_OBJECT_C};
+use thermode_pipeline::Stimulus;
+use thermode_safety::{EnvelopeConfig, ABSOLUTE_MAX_C, ABSOLUTE_MAX_RATE_C_PER_S, ABSOLUTE_MIN_C};
+
+use crate::engine::EngineError;
+
+/// Object temperatures a touch may name \[°C\]: the pipeline's stimulus range.
+pub const OBJECT_C: Range = Range {
+    name: "object temperature [°C]",
+    min: MIN_OBJECT_C,
+    max: MAX_OBJECT_C,
+};
+
+/// Name of the direct-mode display temperature in refusals.
+const DISPLAY_NAME: &str = "direct display temperature [°C]";
+/// Name of the direct-mode rate in refusals.
+const RATE_NAME: &str = "direct rate [°C/s]";
+
+/// What a channel accepts as a stimulus.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StimulusLimits {
+    /// Object temperatures a touch may name \[°C\] ([`OBJECT_C`]).
+    pub object_c: Range,
+    /// Display temperatures a direct set-point may name \[°C\]: the envelope's `min_display_c..=max_display_c`.
+    pub display_c: Range,
+    /// Fastest direct-mode ramp \[°C/s\]: the envelope's `max_setpoint_rate_c_per_s` (every rate must be > 0).
+    pub max_rate_c_s: f64,
+}
+
+impl StimulusLimits {
+    /// The limits of a channel whose safety envelope runs `envelope`.
+    pub fn of_envelope(envelope: &EnvelopeConfig) -> Self {
+        StimulusLimits {
+            object_c: OBJECT_C,
+            display_c: Range {
+                name: DISPLAY_NAME,
+                min: envelope.min_display_c,
+                max: envelope.max_display_c,
+            },
+            max_rate_c_s: envelope.max_setpoint_rate_c_per_s,
+        }
+    }
+
+    /// The widest limits any envelope may have (the compiled-in absolute limits of `thermode_safety`).
+    pub fn absolute() -> Self {
+        StimulusLimits {
+            object_c: OBJECT_C,
+            display_c: Range {
+                name: DISPLAY_NAME,
+                min: ABSOLUTE_MIN_C,
+                max: ABSOLUTE_MAX_C,
+            },
+            max_rate_c_s: ABSOLUTE_MAX_RATE_C_PER_S,
+        }
+    }
+
+    /// What both `self` and `other` accept (the limits of several channels together).
+    pub fn intersection(&self, other: &StimulusLimits) -> StimulusLimits {
+        let both = |a: Range, b: Range| Range {
+            name: a.name,
+            min: a.min.max(b.min),
+            max: a.max.min(b.max),
+        };
+        StimulusLimits {
+            object_c: both(self.object_c, other.object_c),
+            display_c: both(self.display_c, other.display_c),
+            max_rate_c_s: self.max_rate_c_s.min(other.max_rate_c_s),
+        }
+    }
+
+    /// Checks `stimulus` against these limits, then the pipeline's own checks ([`Stimulus::validate`]: the
+    /// material). A refused number is an [`EngineError::BadValue`]; a refused material an [`EngineError::Pipeline`].
+    pub fn check(&self, stimulus: &Stimulus) -> Result<(), EngineError> {
+        match stimulus {
+            Stimulus::Air => {}
+            Stimulus::Touch { object_c, .. } => {
+                self.object_c.check(*object_c)?;
+            }
+            Stimulus::Direct { temp_c, rate_c_s } => {
+                self.display_c.check(*temp_c)?;
+                self.rate_c_s(*rate_c_s)?;
+            }
+        }
+        stimulus.validate()?;
+        Ok(())
+    }
+
+    /// A direct-mode rate: above 0, at most [`StimulusLimits::max_rate_c_s`].
+    fn rate_c_s(&self, rate_c_s: f64) -> Result<f64, BadValue> {
+        Rule::Positive.check(RATE_NAME, rate_c_s)?;
+        Rule::Within {
+            min: 0.0,
+            max: self.max_rate_c_s,
+        }
+        .check(RATE_NAME, rate_c_s)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn limits_follow_the_envelope_and_refuse_with_a_typed_bad_value() {
+        let envelope = EnvelopeConfig {
+            min_display_c: 18.0,
+            max_display_c: 44.0,
+            max_setpoint_rate_c_per_s: 7.0,
+            ..EnvelopeConfig::default()
+        };
+        let limits = StimulusLimits::of_envelope(&envelope);
+        let direct = |temp_c, rate_c_s| Stimulus::Direct { temp_c, rate_c_s };
+        assert_eq!(limits.check(&direct(18.0, 7.0)), Ok(()));
+        for (t, r) in [(17.9, 1.0), (44.1, 1.0), (30.0, 7.1), (30.0, 0.0), (f64::NAN, 1.0)] {
+            assert!(
+                matches!(limits.check(&direct(t, r)), Err(EngineError::BadValue(_))),
+                "{t} °C at {r} °C/s"
+            );
+        }
+        let both = limits.intersection(&StimulusLimits::absolute());
+        assert_eq!(both, limits);
+        let wood = thermode_model::materials::find("wood").unwrap_or_else(|e| panic!("{e}"));
+        let touch = |object_c| Stimulus::Touch {
+            material: wood.clone(),
+            object_c,
+        };
+        assert_eq!(limits.check(&touch(MIN_OBJECT_C)), Ok(()));
+        assert!(limits.check(&touch(MAX_OBJECT_C + 1.0)).is_err());
+    }
+}
