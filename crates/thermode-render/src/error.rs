@@ -3,7 +3,7 @@
 
 use thermode_control::ControlError;
 use thermode_device::DeviceError;
-use thermode_model::ParamError;
+use thermode_model::{BadValue, ParamError};
 use thermode_pipeline::PipelineError;
 use thermode_safety::EnvelopeError;
 use thiserror::Error;
@@ -29,4 +29,11 @@ pub enum RenderError {
     /// Something that is not a single number was refused (an empty material list, …).
     #[error("{0}")]
     Invalid(String),
+}
+
+impl From<BadValue> for RenderError {
+    /// A refused run setting: the pipeline's [`PipelineError::BadValue`].
+    fn from(error: BadValue) -> Self {
+        RenderError::Pipeline(PipelineError::BadValue(error))
+    }
 }

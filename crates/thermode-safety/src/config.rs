@@ -14,6 +14,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use thermode_model::Rule;
+
 use crate::dose::CEM43_REFERENCE_C;
 use crate::error::EnvelopeError;
 
@@ -136,17 +138,6 @@ impl Default for EnvelopeConfig {
     }
 }
 
-/// `Ok` if `value` is finite and in `[min, max]`.
-fn in_range(field: &'static str, value: f64, min: f64, max: f64) -> Result<(), EnvelopeError> {
-    if !value.is_finite() {
-        return Err(EnvelopeError::NotFinite { field, value });
-    }
-    if value < min || value > max {
-        return Err(EnvelopeError::OutOfRange { field, value, min, max });
-    }
-    Ok(())
-}
-
 /// `Ok` if `holds`, else [`EnvelopeError::Inconsistent`].
 fn require(holds: bool, requirement: &'static str) -> Result<(), EnvelopeError> {
     if holds {
@@ -169,56 +160,63 @@ impl EnvelopeConfig {
     }
 
     fn validate_ranges(&self) -> Result<(), EnvelopeError> {
-        in_range("min_display_c", self.min_display_c, ABSOLUTE_MIN_C, ABSOLUTE_MAX_C)?;
-        in_range("max_display_c", self.max_display_c, ABSOLUTE_MIN_C, ABSOLUTE_MAX_C)?;
-        in_range(
-            "max_setpoint_rate_c_per_s",
-            self.max_setpoint_rate_c_per_s,
-            0.01,
-            ABSOLUTE_MAX_RATE_C_PER_S,
-        )?;
-        in_range(
-            "max_time_at_or_above_43_s",
-            self.max_time_at_or_above_43_s,
-            0.0,
-            ABSOLUTE_MAX_TIME_AT_OR_ABOVE_43_S,
-        )?;
-        in_range(
-            "cem43_budget_min",
-            self.cem43_budget_min,
-            0.0,
-            ABSOLUTE_MAX_CEM43_BUDGET_MIN,
-        )?;
-        in_range("dose_lockout_margin_c", self.dose_lockout_margin_c, 0.1, 5.0)?;
-        in_range("dose_lockout_grace_s", self.dose_lockout_grace_s, 0.0, 60.0)?;
-        in_range(
-            "max_time_at_or_above_48_s",
-            self.max_time_at_or_above_48_s,
-            0.0,
-            ABSOLUTE_MAX_TIME_AT_OR_ABOVE_48_S,
-        )?;
-        in_range("limit_margin_c", self.limit_margin_c, 0.1, 5.0)?;
-        in_range("sensor_open_c", self.sensor_open_c, -300.0, 1000.0)?;
-        in_range("sensor_short_c", self.sensor_short_c, -300.0, 1000.0)?;
-        in_range("plausible_min_c", self.plausible_min_c, -300.0, 1000.0)?;
-        in_range("plausible_max_c", self.plausible_max_c, -300.0, 1000.0)?;
-        in_range(
-            "stale_timeout_s",
-            self.stale_timeout_s,
-            0.001,
-            ABSOLUTE_MAX_STALE_TIMEOUT_S,
-        )?;
-        in_range(
-            "max_measured_rate_c_per_s",
-            self.max_measured_rate_c_per_s,
-            0.01,
-            1000.0,
-        )?;
-        in_range("rate_window_s", self.rate_window_s, 0.001, 1.0)?;
-        in_range("hot_side_max_c", self.hot_side_max_c, -50.0, ABSOLUTE_MAX_HOT_SIDE_C)?;
-        in_range("hot_side_min_c", self.hot_side_min_c, -50.0, ABSOLUTE_MAX_HOT_SIDE_C)?;
-        in_range("stuck_current_fraction", self.stuck_current_fraction, 0.5, 1.0)?;
-        in_range("stuck_at_limit_s", self.stuck_at_limit_s, 0.1, 60.0)
+        // (field, value, smallest allowed, largest allowed); units are in the field names.
+        let ranges = [
+            ("min_display_c", self.min_display_c, ABSOLUTE_MIN_C, ABSOLUTE_MAX_C),
+            ("max_display_c", self.max_display_c, ABSOLUTE_MIN_C, ABSOLUTE_MAX_C),
+            (
+                "max_setpoint_rate_c_per_s",
+                self.max_setpoint_rate_c_per_s,
+                0.01,
+                ABSOLUTE_MAX_RATE_C_PER_S,
+            ),
+            (
+                "max_time_at_or_above_43_s",
+                self.max_time_at_or_above_43_s,
+                0.0,
+                ABSOLUTE_MAX_TIME_AT_OR_ABOVE_43_S,
+            ),
+            (
+                "cem43_budget_min",
+                self.cem43_budget_min,
+                0.0,
+                ABSOLUTE_MAX_CEM43_BUDGET_MIN,
+            ),
+            ("dose_lockout_margin_c", self.dose_lockout_margin_c, 0.1, 5.0),
+            ("dose_lockout_grace_s", self.dose_lockout_grace_s, 0.0, 60.0),
+            (
+                "max_time_at_or_above_48_s",
+                self.max_time_at_or_above_48_s,
+                0.0,
+                ABSOLUTE_MAX_TIME_AT_OR_ABOVE_48_S,
+            ),
+            ("limit_margin_c", self.limit_margin_c, 0.1, 5.0),
+            ("sensor_open_c", self.sensor_open_c, -300.0, 1000.0),
+            ("sensor_short_c", self.sensor_short_c, -300.0, 1000.0),
+            ("plausible_min_c", self.plausible_min_c, -300.0, 1000.0),
+            ("plausible_max_c", self.plausible_max_c, -300.0, 1000.0),
+            (
+                "stale_timeout_s",
+                self.stale_timeout_s,
+                0.001,
+                ABSOLUTE_MAX_STALE_TIMEOUT_S,
+            ),
+            (
+                "max_measured_rate_c_per_s",
+                self.max_measured_rate_c_per_s,
+                0.01,
+                1000.0,
+            ),
+            ("rate_window_s", self.rate_window_s, 0.001, 1.0),
+            ("hot_side_max_c", self.hot_side_max_c, -50.0, ABSOLUTE_MAX_HOT_SIDE_C),
+            ("hot_side_min_c", self.hot_side_min_c, -50.0, ABSOLUTE_MAX_HOT_SIDE_C),
+            ("stuck_current_fraction", self.stuck_current_fraction, 0.5, 1.0),
+            ("stuck_at_limit_s", self.stuck_at_limit_s, 0.1, 60.0),
+        ];
+        for (field, value, min, max) in ranges {
+            Rule::Within { min, max }.check(field, value)?;
+        }
+        Ok(())
     }
 
     fn validate_relations(&self) -> Result<(), EnvelopeError> {
@@ -276,10 +274,7 @@ mod tests {
         };
         assert!(matches!(
             hot.validate(),
-            Err(EnvelopeError::OutOfRange {
-                field: "max_display_c",
-                ..
-            })
+            Err(EnvelopeError::BadValue(ref e)) if e.name == "max_display_c"
         ));
         let cold = EnvelopeConfig {
             min_display_c: 9.0,
@@ -287,26 +282,23 @@ mod tests {
         };
         assert!(matches!(
             cold.validate(),
-            Err(EnvelopeError::OutOfRange {
-                field: "min_display_c",
-                ..
-            })
+            Err(EnvelopeError::BadValue(ref e)) if e.name == "min_display_c"
         ));
         let fast = EnvelopeConfig {
             max_setpoint_rate_c_per_s: 25.0,
             ..Default::default()
         };
-        assert!(matches!(fast.validate(), Err(EnvelopeError::OutOfRange { .. })));
+        assert!(matches!(fast.validate(), Err(EnvelopeError::BadValue(_))));
         let long = EnvelopeConfig {
             max_time_at_or_above_43_s: 601.0,
             ..Default::default()
         };
-        assert!(matches!(long.validate(), Err(EnvelopeError::OutOfRange { .. })));
+        assert!(matches!(long.validate(), Err(EnvelopeError::BadValue(_))));
         let nan = EnvelopeConfig {
             cem43_budget_min: f64::NAN,
             ..Default::default()
         };
-        assert!(matches!(nan.validate(), Err(EnvelopeError::NotFinite { .. })));
+        assert!(matches!(nan.validate(), Err(EnvelopeError::BadValue(_))));
         let swapped = EnvelopeConfig {
             min_display_c: 40.0,
             max_display_c: 30.0,
