@@ -5,8 +5,11 @@
 //! A gains file is the TOML form of [`PidGains`] (`kp_a_per_c`, `ki_a_per_c_s`, `kd_a_s_per_c`, `filter_cutoff_hz`,
 //! optional `derivative_filter_s`); comments are allowed, unknown keys are refused. `thermode tune` writes them.
 
-use thermode_control::{Controller, ModelController, PidController, PidGains, PlantModel};
+use thermode_control::{ControlError, Controller, ModelController, PidController, PidGains, PlantModel};
 use thermode_device::{DeviceConfig, DEFAULT_DEVICE_TOML, LAGGING_SENSOR_DEVICE_TOML, WEAK_COOLING_DEVICE_TOML};
+
+use thermode_model::params::{self, Rule, Table};
+use thermode_model::ParamError;
 
 use crate::error::PipelineError;
 
@@ -84,17 +87,27 @@ impl ShippedDisplay {
     }
 }
 
-/// Reads a gains file (TOML of [`PidGains`]) and validates it; `origin` names the file in errors.
+/// Reads a gains file (the keys of [`PidGains`]; `derivative_filter_s` optional, every other key required) with
+/// [`Table`] and validates it; `origin` names the file in errors ([`PipelineError::Param`]).
 pub fn gains_from_toml_str(text: &str, origin: &str) -> Result<PidGains, PipelineError> {
-    let gains: PidGains = toml::from_str(text).map_err(|e| PipelineError::GainsFile {
-        origin: origin.to_string(),
-        message: e.to_string(),
-    })?;
-    gains.validate().map_err(|e| PipelineError::GainsFile {
-        origin: origin.to_string(),
-        message: e.to_string(),
-    })?;
-    Ok(gains)
+    let toml = params::parse(text, origin)?;
+    let file = Table::new(&toml, origin);
+    let gains = PidGains {
+        kp_a_per_c: file.required_number("kp_a_per_c", Rule::NonNegative)?,
+        ki_a_per_c_s: file.required_number("ki_a_per_c_s", Rule::NonNegative)?,
+        kd_a_s_per_c: file.required_number("kd_a_s_per_c", Rule::NonNegative)?,
+        // Not range-checked here: `inf` (no filter) is allowed; `PidGains::validate` checks it.
+        filter_cutoff_hz: file
+            .unchecked_number("filter_cutoff_hz")?
+            .ok_or_else(|| file.missing("filter_cutoff_hz"))?,
+        derivative_filter_s: file.number("derivative_filter_s", Rule::NonNegative)?,
+    };
+    file.finish()?;
+    let ControlError::BadValue(refused) = match gains.validate() {
+        Ok(()) => return Ok(gains),
+        Err(e) => e,
+    };
+    Err(ParamError::bad_value(origin, refused).into())
 }
 
 /// Writes `gains` as a gains file, with `comment` (any number of lines) as `#` comments on top. Numbers are
@@ -228,10 +241,7 @@ mod tests {
             "kp_a_per_c = 1.0\nki_a_per_c_s = 0.0\nkd_a_s_per_c = 0.0\nfilter_cutoff_hz = 5.0\nextra = 1\n",
         ] {
             assert!(
-                matches!(
-                    gains_from_toml_str(bad, "bad.toml"),
-                    Err(PipelineError::GainsFile { .. })
-                ),
+                matches!(gains_from_toml_str(bad, "bad.toml"), Err(PipelineError::Param(_))),
                 "accepted {bad}"
             );
         }

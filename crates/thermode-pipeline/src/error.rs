@@ -26,12 +26,4 @@ pub enum PipelineError {
     /// A number (stimulus, pipeline or run setting) that must be finite and in a range is not.
     #[error(transparent)]
     BadValue(#[from] BadValue),
-    /// A gains file could not be read.
-    #[error("{origin}: {message}")]
-    GainsFile {
-        /// Where the text came from (file name, or "built-in").
-        origin: String,
-        /// What was wrong.
-        message: String,
-    },
 }

@@ -1,7 +1,8 @@
 //! The one parameter vocabulary of thermode: what a number must satisfy ([`Rule`], [`Range`]) and the one error for
 //! a refused number ([`BadValue`]). Every crate checks its numbers with these (skin, material, device, envelope,
 //! controller, pipeline, run, experiment and API inputs), so a refused number reads the same everywhere: what it is
-//! (with its unit), the value, and the rule it breaks.
+//! (with its unit), the value, and the rule it breaks. Parameter files (skin, material, device, gains, experiment)
+//! are read with the one TOML reader, [`Table`], whose getters apply a [`Rule`] to every number.
 //!
 //! Nothing here allocates when the name is a `&'static str`, so checks may run on the per-tick path.
 

@@ -145,17 +145,25 @@ impl<'a> Table<'a> {
 
     /// A number (TOML float or integer) if present, checked with `rule`; any other type is an error.
     pub fn number(&self, key: &str, rule: Rule) -> Result<Option<f64>, ParamError> {
-        let value = match self.get(key) {
-            None => return Ok(None),
-            Some(toml::Value::Float(v)) => *v,
-            // Integers in parameter files are small; the conversion is exact below 2^53.
-            Some(toml::Value::Integer(v)) => *v as f64,
-            Some(other) => return Err(self.wrong_type(key, "a number", other)),
+        let Some(value) = self.unchecked_number(key)? else {
+            return Ok(None);
         };
         if rule.admits(value) {
             Ok(Some(value))
         } else {
             Err(self.bad(key, value, rule))
+        }
+    }
+
+    /// A number (TOML float or integer) if present, not range-checked: for the few numbers where ±∞ means
+    /// something (a filter cut-off of `inf` = no filter); the caller checks it.
+    pub fn unchecked_number(&self, key: &str) -> Result<Option<f64>, ParamError> {
+        match self.get(key) {
+            None => Ok(None),
+            Some(toml::Value::Float(v)) => Ok(Some(*v)),
+            // Integers in parameter files are small; the conversion is exact below 2^53.
+            Some(toml::Value::Integer(v)) => Ok(Some(*v as f64)),
+            Some(other) => Err(self.wrong_type(key, "a number", other)),
         }
     }
 
