@@ -14,7 +14,7 @@
 //!   plate ([`observer`]: [`PlateObserver`] on a [`PlantModel`] filled from the device file) and the plate's heat
 //!   balance inverted through the Peltier equations, driving the most useful current when a set-point is
 //!   infeasible, with nothing to wind up.
-//! - [`error`]: [`ControlError`].
+//! - [`error`]: [`ControlError`], refused parameters and inputs.
 //!
 //! One tick of a channel:
 //! ```

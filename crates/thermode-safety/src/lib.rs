@@ -9,7 +9,7 @@
 //! - [`config`]: [`EnvelopeConfig`] (serde, documented defaults and sources) and the compiled-in absolute limits.
 //! - [`fault`]: [`FaultCode`], stable numeric fault codes.
 //! - [`dose`]: CEM43 and time-at-43 °C bookkeeping.
-//! - [`error`]: [`EnvelopeError`].
+//! - [`error`]: [`EnvelopeError`], refused configurations and refused fault clearing.
 //!
 //! One tick of a channel (the controller in the middle is any of `thermode-control`'s):
 //! ```
