@@ -6,7 +6,7 @@
 //! - [`envelope`]: [`SafetyEnvelope`]: set-point clamp and rate limit, thermal dose (IEC 60601-1 contact-time
 //!   limits, CEM43), fault detection with latching. [`Measurement`] goes in, a [`DriveCommand`] comes out: the only
 //!   ways to one are [`SafetyEnvelope::gate_drive`] and [`DriveCommand::off`].
-//! - [`config`]: [`EnvelopeConfig`] (serde, documented defaults and sources) and the compiled-in absolute limits.
+//! - [`config`]: [`EnvelopeConfig`] (documented defaults and sources, read with `thermode_model::params::Table`) and the compiled-in absolute limits.
 //! - [`fault`]: [`FaultCode`], stable numeric fault codes.
 //! - [`dose`]: CEM43 and time-at-43 °C bookkeeping.
 //! - [`error`]: [`EnvelopeError`], refused configurations and refused fault clearing.
