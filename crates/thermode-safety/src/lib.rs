@@ -17,9 +17,10 @@
 //! let mut envelope = SafetyEnvelope::new(EnvelopeConfig::default(), 2.8)?;
 //! let m = Measurement { time_s: 0.0, sensor_c: 32.0, hot_side_c: 24.0, sample_seq: 1 };
 //! envelope.observe(&m);
-//! let shaped = envelope.shape_setpoint(0.0, 30.0);
+//! envelope.shape_setpoint(0.0, 30.0); // the first call starts at the measured 32 °C
+//! let shaped = envelope.shape_setpoint(0.1, 30.0); // then falls at the rate limit
 //! let request_a = 0.5 * (shaped.setpoint_c - m.sensor_c); // a proportional controller
-//! let drive = envelope.gate_drive(0.0, request_a);
+//! let drive = envelope.gate_drive(0.1, request_a);
 //! assert!(drive.current_a() < 0.0 && drive.current_a().abs() <= 2.8);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
