@@ -153,149 +153,153 @@ impl DeviceConfig {
     /// Every key of the device file, in file order, each with the field of `self` it reads and writes.
     fn fields(&mut self) -> [Field<'_>; 16] {
         [
-    Field {
-        section: "peltier",
-        key: "imax_a",
-        rule: Rule::Positive,
-        value: &mut self.peltier.imax_a,
-        doc: "Datasheet maximum current I_max [A] (the current of the largest temperature difference).",
-        source: MODULE_SOURCE,
-    },
-    Field {
-        section: "peltier",
-        key: "vmax_v",
-        rule: Rule::Positive,
-        value: &mut self.peltier.vmax_v,
-        doc: "Datasheet voltage at I_max and ΔT_max, V_max [V].",
-        source: MODULE_SOURCE,
-    },
-    Field {
-        section: "peltier",
-        key: "qmax_w",
-        rule: Rule::Positive,
-        value: &mut self.peltier.qmax_w,
-        doc: "Datasheet cooling power at I_max and ΔT = 0, Q_max [W]; checked against the other values (±30 %).",
-        source: MODULE_SOURCE,
-    },
-    Field {
-        section: "peltier",
-        key: "dtmax_k",
-        rule: Rule::Positive,
-        value: &mut self.peltier.dtmax_k,
-        doc: "Datasheet largest temperature difference at I_max and zero load, ΔT_max [K].",
-        source: MODULE_SOURCE,
-    },
-    Field {
-        section: "peltier",
-        key: "hot_side_k",
-        rule: Rule::Positive,
-        value: &mut self.peltier.hot_side_k,
-        doc: "Hot-side temperature at which the datasheet values are quoted, T_h [K].",
-        source: "25 °C: these values are a 25–27 °C datasheet set (S = V_max/T_h = 6.37 mV/K matches model.md's \
-                 6.4 mV/K; 323 K would give 5.9), and the hot side runs near the 23 °C water, where the derived \
-                 S, R, K are then evaluated.",
-    },
-    Field {
-        section: "plate",
-        key: "heat_capacity_j_k",
-        rule: Rule::Positive,
-        value: &mut self.plate.heat_capacity_j_k,
-        doc: "Heat capacity of the display node: plate, cold ceramic, half the thermoelectric legs [J/K].",
-        source: "Estimate (model.md §5: 0.1–0.3): aluminium plate 8 × 8 × 1 mm (ρc = 2702 × 903 J/(m³·K), \
-                 Incropera Table A.1) 0.156 J/K + alumina ceramic 8 × 8 × 0.5 mm (96 % Al₂O₃, 3720 kg/m³, \
-                 880 J/(kg·K)) 0.105 J/K + half of 2 mm Bi₂Te₃ legs at 30 % fill (7740 kg/m³, 154 J/(kg·K)) 0.023 J/K \
-                 = 0.284 J/K.",
-    },
-    Field {
-        section: "plate",
-        key: "contact_conductance_w_m2k",
-        rule: Rule::Positive,
-        value: &mut self.plate.contact_conductance_w_m2k,
-        doc: "Contact conductance between the skin surface and the plate, 1/R_c [W/(m²·K)]; a finger model whose \
-              receptor node lies below the surface adds its own tissue in series (see thermode_device::finger).",
-        source: "model.md §3: R_c is about 1e-3 m²·K/W for a light touch (the paper's static touch without \
-                 pressure, section 4.2).",
-    },
-    Field {
-        section: "plate",
-        key: "area_m2",
-        rule: Rule::Positive,
-        value: &mut self.plate.area_m2,
-        doc: "Contact area of the finger on the plate [m²].",
-        source: "The 8 × 8 mm face of the paper's element (section 3.1), fully covered by the phalanx pad.",
-    },
-    Field {
-        section: "hot_side",
-        key: "heat_capacity_j_k",
-        rule: Rule::Positive,
-        value: &mut self.hot_side.heat_capacity_j_k,
-        doc: "Heat capacity of the hot node: hot ceramic, half the legs, the aluminium box and the water in it [J/K].",
-        source: "Estimate (the paper: 'a thin aluminium box', no size): hot ceramic 0.105 + half legs 0.023 + box \
-                 12 × 12 × 5 mm with 0.5 mm walls (236 mm³ aluminium) 0.576 + half of the 484 mm³ of water it holds \
-                 (4.17 MJ/(m³·K); its temperature lies between inlet and wall) 1.009 = 1.71 J/K.",
-    },
-    Field {
-        section: "hot_side",
-        key: "water_conductance_w_k",
-        rule: Rule::NonNegative,
-        value: &mut self.hot_side.water_conductance_w_k,
-        doc: "Conductance from the hot node to the cooling water [W/K]; a pump failure lowers it.",
-        source: "model.md §5 (about 0.3 W/K); check: laminar flow through the box (11 × 4 mm channel, hydraulic \
-                 diameter 5.9 mm, Nu 5–8, so h = 500–800 W/(m²·K)) over about 4 cm² of wetted wall at partial fin \
-                 efficiency gives 0.2–0.3 W/K.",
-    },
-    Field {
-        section: "sensor",
-        key: "time_constant_s",
-        rule: Rule::NonNegative,
-        value: &mut self.sensor.time_constant_s,
-        doc: "First-order lag of the PT-100 behind the plate temperature [s]; 0 = none.",
-        source: "model.md §5 (0.2–0.6 s): a thin-film PT-100 chip glued into the 1 mm plate.",
-    },
-    Field {
-        section: "sensor",
-        key: "noise_c",
-        rule: Rule::NonNegative,
-        value: &mut self.sensor.noise_c,
-        doc: "Standard deviation of the Gaussian measurement noise [°C]; 0 = none.",
-        source: "Estimate: two steps of the 0.01 °C resolution (1 mA through a PT-100 gives 3.85 µV per 0.01 °C, \
-                 comparable to amplifier and 16-bit converter noise); the paper needed a low-pass filter against \
-                 sensor noise (section 3.2), so the noise exceeds one step.",
-    },
-    Field {
-        section: "sensor",
-        key: "resolution_c",
-        rule: Rule::NonNegative,
-        value: &mut self.sensor.resolution_c,
-        doc: "Quantisation step of the reading [°C]; 0 = none.",
-        source: "The paper, section 3: 'a resolution of 0.01 °C'.",
-    },
-    Field {
-        section: "sensor",
-        key: "sample_rate_hz",
-        rule: Rule::Positive,
-        value: &mut self.sensor.sample_rate_hz,
-        doc: "Sampling rate of the sensor [Hz]; the reading is held between samples.",
-        source: "Estimate: the paper gives none; 100 Hz is a usual rate of a Simulink real-time loop on a thermal \
-                 plant whose fastest time constant is about 0.1 s.",
-    },
-    Field {
-        section: "drive",
-        key: "current_limit_a",
-        rule: Rule::Positive,
-        value: &mut self.drive.current_limit_a,
-        doc: "Largest current magnitude of the bipolar drive [A]; at most the module's I_max.",
-        source: "The module's I_max: beyond it a module is outside its rating and cools no better.",
-    },
-    Field {
-        section: "ambient",
-        key: "water_c",
-        rule: Rule::Between { min: 0.0, max: 100.0 },
-        value: &mut self.ambient.water_c,
-        doc: "Temperature of the cooling water [°C], held at ambient by the radiator and fans.",
-        source: "The paper, section 4.1: mean ambient temperature 23 °C; section 3.1: the water circuit keeps the \
-                 reference side at ambient level.",
-    },
+            Field {
+                section: "peltier",
+                key: "imax_a",
+                rule: Rule::Positive,
+                value: &mut self.peltier.imax_a,
+                doc: "Datasheet maximum current I_max [A] (the current of the largest temperature difference).",
+                source: MODULE_SOURCE,
+            },
+            Field {
+                section: "peltier",
+                key: "vmax_v",
+                rule: Rule::Positive,
+                value: &mut self.peltier.vmax_v,
+                doc: "Datasheet voltage at I_max and ΔT_max, V_max [V].",
+                source: MODULE_SOURCE,
+            },
+            Field {
+                section: "peltier",
+                key: "qmax_w",
+                rule: Rule::Positive,
+                value: &mut self.peltier.qmax_w,
+                doc: "Datasheet cooling power at I_max and ΔT = 0, Q_max [W]; checked against the other values (±30 \
+                      %).",
+                source: MODULE_SOURCE,
+            },
+            Field {
+                section: "peltier",
+                key: "dtmax_k",
+                rule: Rule::Positive,
+                value: &mut self.peltier.dtmax_k,
+                doc: "Datasheet largest temperature difference at I_max and zero load, ΔT_max [K].",
+                source: MODULE_SOURCE,
+            },
+            Field {
+                section: "peltier",
+                key: "hot_side_k",
+                rule: Rule::Positive,
+                value: &mut self.peltier.hot_side_k,
+                doc: "Hot-side temperature at which the datasheet values are quoted, T_h [K].",
+                source: "25 °C: these values are a 25–27 °C datasheet set (S = V_max/T_h = 6.37 mV/K matches \
+                         model.md's 6.4 mV/K; 323 K would give 5.9), and the hot side runs near the 23 °C water, where \
+                         the derived S, R, K are then evaluated.",
+            },
+            Field {
+                section: "plate",
+                key: "heat_capacity_j_k",
+                rule: Rule::Positive,
+                value: &mut self.plate.heat_capacity_j_k,
+                doc: "Heat capacity of the display node: plate, cold ceramic, half the thermoelectric legs [J/K].",
+                source: "Estimate (model.md §5: 0.1–0.3): aluminium plate 8 × 8 × 1 mm (ρc = 2702 × 903 J/(m³·K), \
+                         Incropera Table A.1) 0.156 J/K + alumina ceramic 8 × 8 × 0.5 mm (96 % Al₂O₃, 3720 kg/m³, 880 \
+                         J/(kg·K)) 0.105 J/K + half of 2 mm Bi₂Te₃ legs at 30 % fill (7740 kg/m³, 154 J/(kg·K)) 0.023 \
+                         J/K = 0.284 J/K.",
+            },
+            Field {
+                section: "plate",
+                key: "contact_conductance_w_m2k",
+                rule: Rule::Positive,
+                value: &mut self.plate.contact_conductance_w_m2k,
+                doc: "Contact conductance between the skin surface and the plate, 1/R_c [W/(m²·K)]; a finger model \
+                      whose receptor node lies below the surface adds its own tissue in series (see \
+                      thermode_device::finger).",
+                source: "model.md §3: R_c is about 1e-3 m²·K/W for a light touch (the paper's static touch without \
+                         pressure, section 4.2).",
+            },
+            Field {
+                section: "plate",
+                key: "area_m2",
+                rule: Rule::Positive,
+                value: &mut self.plate.area_m2,
+                doc: "Contact area of the finger on the plate [m²].",
+                source: "The 8 × 8 mm face of the paper's element (section 3.1), fully covered by the phalanx pad.",
+            },
+            Field {
+                section: "hot_side",
+                key: "heat_capacity_j_k",
+                rule: Rule::Positive,
+                value: &mut self.hot_side.heat_capacity_j_k,
+                doc:
+                    "Heat capacity of the hot node: hot ceramic, half the legs, the aluminium box and the water in it \
+                      [J/K].",
+                source: "Estimate (the paper: 'a thin aluminium box', no size): hot ceramic 0.105 + half legs 0.023 + \
+                         box 12 × 12 × 5 mm with 0.5 mm walls (236 mm³ aluminium) 0.576 + half of the 484 mm³ of water \
+                         it holds (4.17 MJ/(m³·K); its temperature lies between inlet and wall) 1.009 = 1.71 J/K.",
+            },
+            Field {
+                section: "hot_side",
+                key: "water_conductance_w_k",
+                rule: Rule::NonNegative,
+                value: &mut self.hot_side.water_conductance_w_k,
+                doc: "Conductance from the hot node to the cooling water [W/K]; a pump failure lowers it.",
+                source: "model.md §5 (about 0.3 W/K); check: laminar flow through the box (11 × 4 mm channel, \
+                         hydraulic diameter 5.9 mm, Nu 5–8, so h = 500–800 W/(m²·K)) over about 4 cm² of wetted wall \
+                         at partial fin efficiency gives 0.2–0.3 W/K.",
+            },
+            Field {
+                section: "sensor",
+                key: "time_constant_s",
+                rule: Rule::NonNegative,
+                value: &mut self.sensor.time_constant_s,
+                doc: "First-order lag of the PT-100 behind the plate temperature [s]; 0 = none.",
+                source: "model.md §5 (0.2–0.6 s): a thin-film PT-100 chip glued into the 1 mm plate.",
+            },
+            Field {
+                section: "sensor",
+                key: "noise_c",
+                rule: Rule::NonNegative,
+                value: &mut self.sensor.noise_c,
+                doc: "Standard deviation of the Gaussian measurement noise [°C]; 0 = none.",
+                source: "Estimate: two steps of the 0.01 °C resolution (1 mA through a PT-100 gives 3.85 µV per 0.01 \
+                         °C, comparable to amplifier and 16-bit converter noise); the paper needed a low-pass filter \
+                         against sensor noise (section 3.2), so the noise exceeds one step.",
+            },
+            Field {
+                section: "sensor",
+                key: "resolution_c",
+                rule: Rule::NonNegative,
+                value: &mut self.sensor.resolution_c,
+                doc: "Quantisation step of the reading [°C]; 0 = none.",
+                source: "The paper, section 3: 'a resolution of 0.01 °C'.",
+            },
+            Field {
+                section: "sensor",
+                key: "sample_rate_hz",
+                rule: Rule::Positive,
+                value: &mut self.sensor.sample_rate_hz,
+                doc: "Sampling rate of the sensor [Hz]; the reading is held between samples.",
+                source: "Estimate: the paper gives none; 100 Hz is a usual rate of a Simulink real-time loop on a \
+                         thermal plant whose fastest time constant is about 0.1 s.",
+            },
+            Field {
+                section: "drive",
+                key: "current_limit_a",
+                rule: Rule::Positive,
+                value: &mut self.drive.current_limit_a,
+                doc: "Largest current magnitude of the bipolar drive [A]; at most the module's I_max.",
+                source: "The module's I_max: beyond it a module is outside its rating and cools no better.",
+            },
+            Field {
+                section: "ambient",
+                key: "water_c",
+                rule: Rule::Between { min: 0.0, max: 100.0 },
+                value: &mut self.ambient.water_c,
+                doc: "Temperature of the cooling water [°C], held at ambient by the radiator and fans.",
+                source: "The paper, section 4.1: mean ambient temperature 23 °C; section 3.1: the water circuit keeps \
+                         the reference side at ambient level.",
+            },
         ]
     }
 
