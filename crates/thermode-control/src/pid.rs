@@ -15,15 +15,16 @@
 //!   continues from a given current (bumpless transfer, e.g. after a fault is cleared or a controller switch).
 //! - The last P, I and D terms are kept for logging ([`Pid::terms`]).
 
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use crate::error::ControlError;
-use thermode_model::Rule;
+use thermode_model::params::{self, Rule, Table};
+use thermode_model::ParamError;
 
 /// PID gains and the sensor filter cut-off, as saved to / loaded from a gains TOML file. Units: current in A,
-/// temperature in °C (kelvin-sized), time in s. Unknown keys are refused.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// temperature in °C (kelvin-sized), time in s. Read with [`PidGains::from_toml_str`] (unknown keys are refused);
+/// written with serde.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct PidGains {
     /// Proportional gain, A/°C (≥ 0). No default: tuned per display (`thermode tune`).
     pub kp_a_per_c: f64,
@@ -40,6 +41,30 @@ pub struct PidGains {
 }
 
 impl PidGains {
+    /// Reads a gains file (TOML, the keys of [`PidGains`]; `derivative_filter_s` optional, every other key
+    /// required) with [`Table`] and validates it ([`PidGains::validate`]); `origin` (the file name) appears in
+    /// every error, a refused number as a [`ParamError::BadValue`].
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<PidGains, ParamError> {
+        let toml = params::parse(text, origin)?;
+        let file = Table::new(&toml, origin);
+        let gains = PidGains {
+            kp_a_per_c: file.required_number("kp_a_per_c", Rule::NonNegative)?,
+            ki_a_per_c_s: file.required_number("ki_a_per_c_s", Rule::NonNegative)?,
+            kd_a_s_per_c: file.required_number("kd_a_s_per_c", Rule::NonNegative)?,
+            // Not range-checked here: `inf` (no filter) is allowed; `validate` checks it.
+            filter_cutoff_hz: file
+                .unchecked_number("filter_cutoff_hz")?
+                .ok_or_else(|| file.missing("filter_cutoff_hz"))?,
+            derivative_filter_s: file.number("derivative_filter_s", Rule::NonNegative)?,
+        };
+        file.finish()?;
+        let ControlError::BadValue(refused) = match gains.validate() {
+            Ok(()) => return Ok(gains),
+            Err(e) => e,
+        };
+        Err(ParamError::bad_value(origin, refused))
+    }
+
     /// Checks every gain: finite and ≥ 0; the cut-off > 0 (may be `inf`); the derivative filter finite and ≥ 0.
     pub fn validate(&self) -> Result<(), ControlError> {
         Rule::NonNegative.check("kp_a_per_c", self.kp_a_per_c)?;

@@ -5,11 +5,8 @@
 //! A gains file is the TOML form of [`PidGains`] (`kp_a_per_c`, `ki_a_per_c_s`, `kd_a_s_per_c`, `filter_cutoff_hz`,
 //! optional `derivative_filter_s`); comments are allowed, unknown keys are refused. `thermode tune` writes them.
 
-use thermode_control::{ControlError, Controller, ModelController, PidController, PidGains, PlantModel};
+use thermode_control::{Controller, ModelController, PidController, PidGains, PlantModel};
 use thermode_device::{DeviceConfig, DEFAULT_DEVICE_TOML, LAGGING_SENSOR_DEVICE_TOML, WEAK_COOLING_DEVICE_TOML};
-
-use thermode_model::params::{self, Rule, Table};
-use thermode_model::ParamError;
 
 use crate::error::PipelineError;
 
@@ -87,27 +84,9 @@ impl ShippedDisplay {
     }
 }
 
-/// Reads a gains file (the keys of [`PidGains`]; `derivative_filter_s` optional, every other key required) with
-/// [`Table`] and validates it; `origin` names the file in errors ([`PipelineError::Param`]).
+/// Reads a gains file ([`PidGains::from_toml_str`]); `origin` names the file in errors ([`PipelineError::Param`]).
 pub fn gains_from_toml_str(text: &str, origin: &str) -> Result<PidGains, PipelineError> {
-    let toml = params::parse(text, origin)?;
-    let file = Table::new(&toml, origin);
-    let gains = PidGains {
-        kp_a_per_c: file.required_number("kp_a_per_c", Rule::NonNegative)?,
-        ki_a_per_c_s: file.required_number("ki_a_per_c_s", Rule::NonNegative)?,
-        kd_a_s_per_c: file.required_number("kd_a_s_per_c", Rule::NonNegative)?,
-        // Not range-checked here: `inf` (no filter) is allowed; `PidGains::validate` checks it.
-        filter_cutoff_hz: file
-            .unchecked_number("filter_cutoff_hz")?
-            .ok_or_else(|| file.missing("filter_cutoff_hz"))?,
-        derivative_filter_s: file.number("derivative_filter_s", Rule::NonNegative)?,
-    };
-    file.finish()?;
-    let ControlError::BadValue(refused) = match gains.validate() {
-        Ok(()) => return Ok(gains),
-        Err(e) => e,
-    };
-    Err(ParamError::bad_value(origin, refused).into())
+    Ok(PidGains::from_toml_str(text, origin)?)
 }
 
 /// Writes `gains` as a gains file, with `comment` (any number of lines) as `#` comments on top. Numbers are
