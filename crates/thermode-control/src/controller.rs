@@ -11,6 +11,7 @@
 use crate::error::ControlError;
 use crate::filter::LowPass;
 use crate::pid::{Pid, PidGains, PidTerms};
+use thermode_model::Rule;
 
 /// Everything a controller may use on one tick. Temperatures in °C, current in A (positive heats the display).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -107,9 +108,9 @@ impl Controller for PidController {
 
     fn update(&mut self, input: &ControlInput) -> Result<f64, ControlError> {
         // Validate everything the PID uses before touching the filter, so a refused tick changes nothing.
-        crate::filter::check_finite("setpoint_c", input.setpoint_c)?;
-        crate::filter::check_finite("sensor_c", input.sensor_c)?;
-        crate::filter::check_dt(input.dt_s)?;
+        Rule::Finite.check("setpoint_c", input.setpoint_c)?;
+        Rule::Finite.check("sensor_c", input.sensor_c)?;
+        Rule::Positive.check("dt_s", input.dt_s)?;
         let filtered_c = self.filter.update(input.sensor_c, input.dt_s)?;
         self.pid.update(input.setpoint_c, filtered_c, input.dt_s)
     }

@@ -7,6 +7,8 @@
 
 use std::f64::consts::TAU;
 
+use thermode_model::{BadValue, Rule};
+
 use crate::error::ControlError;
 
 /// First-order low-pass filter. The first sample after construction or [`LowPass::reset`] initialises the output
@@ -21,18 +23,13 @@ impl LowPass {
     /// A filter with corner frequency `cutoff_hz` (Hz, > 0). `f64::INFINITY` is allowed and means "no filtering"
     /// (α = 1). NaN, zero or negative cut-offs are errors.
     pub fn new(cutoff_hz: f64) -> Result<Self, ControlError> {
-        if cutoff_hz.is_nan() {
-            return Err(ControlError::NotFinite {
-                name: "filter_cutoff_hz",
-                value: cutoff_hz,
-            });
-        }
-        if cutoff_hz <= 0.0 {
-            return Err(ControlError::OutOfRange {
-                name: "filter_cutoff_hz",
-                value: cutoff_hz,
-                requirement: "must be > 0 (use inf for no filtering)",
-            });
+        // Not `Rule::Positive`: an infinite cut-off is allowed.
+        if cutoff_hz.is_nan() || cutoff_hz <= 0.0 {
+            return Err(ControlError::BadValue(BadValue::custom(
+                "filter_cutoff_hz",
+                cutoff_hz,
+                "must be > 0 (use inf for no filtering)",
+            )));
         }
         Ok(Self { cutoff_hz, state: None })
     }
@@ -55,8 +52,8 @@ impl LowPass {
     /// Feeds one sample `x` (held over the last `dt_s` seconds) and returns the filtered value. `x` must be finite
     /// and `dt_s` finite and > 0; otherwise the state is left untouched and an error returned.
     pub fn update(&mut self, x: f64, dt_s: f64) -> Result<f64, ControlError> {
-        check_finite("sample", x)?;
-        check_dt(dt_s)?;
+        Rule::Finite.check("sample", x)?;
+        Rule::Positive.check("dt_s", dt_s)?;
         let y = match self.state {
             None => x,
             Some(y) => y + self.alpha(dt_s) * (x - y),
@@ -77,47 +74,10 @@ impl LowPass {
 
     /// Presets the output to `value` (must be finite), e.g. to start a step response from a known state.
     pub fn reset_to(&mut self, value: f64) -> Result<(), ControlError> {
-        check_finite("reset value", value)?;
+        Rule::Finite.check("reset value", value)?;
         self.state = Some(value);
         Ok(())
     }
-}
-
-/// `Ok(())` if `value` is finite, else [`ControlError::NotFinite`] naming it.
-pub(crate) fn check_finite(name: &'static str, value: f64) -> Result<(), ControlError> {
-    if value.is_finite() {
-        Ok(())
-    } else {
-        Err(ControlError::NotFinite { name, value })
-    }
-}
-
-/// `Ok(())` if `value` is finite and strictly positive.
-pub(crate) fn positive(name: &'static str, value: f64) -> Result<(), ControlError> {
-    in_range(name, value, value > 0.0, "must be > 0")
-}
-
-/// `Ok(())` if `value` is finite and not negative.
-pub(crate) fn non_negative(name: &'static str, value: f64) -> Result<(), ControlError> {
-    in_range(name, value, value >= 0.0, "must be >= 0")
-}
-
-fn in_range(name: &'static str, value: f64, ok: bool, requirement: &'static str) -> Result<(), ControlError> {
-    check_finite(name, value)?;
-    if ok {
-        Ok(())
-    } else {
-        Err(ControlError::OutOfRange {
-            name,
-            value,
-            requirement,
-        })
-    }
-}
-
-/// `Ok(())` if the time step is finite and strictly positive.
-pub(crate) fn check_dt(dt_s: f64) -> Result<(), ControlError> {
-    positive("dt_s", dt_s)
 }
 
 #[cfg(test)]
@@ -155,9 +115,12 @@ mod tests {
 
     #[test]
     fn bad_parameters_and_inputs_are_errors_and_leave_state() {
-        assert!(matches!(LowPass::new(0.0), Err(ControlError::OutOfRange { .. })));
-        assert!(matches!(LowPass::new(-1.0), Err(ControlError::OutOfRange { .. })));
-        assert!(matches!(LowPass::new(f64::NAN), Err(ControlError::NotFinite { .. })));
+        for bad in [0.0, -1.0, f64::NAN] {
+            assert!(
+                matches!(LowPass::new(bad), Err(ControlError::BadValue(ref e)) if e.name == "filter_cutoff_hz"),
+                "{bad}"
+            );
+        }
         let mut f = LowPass::new(1.0).unwrap();
         f.update(20.0, 0.01).unwrap();
         assert!(f.update(f64::NAN, 0.01).is_err());

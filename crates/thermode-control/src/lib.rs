@@ -6,15 +6,16 @@
 //! deterministic. Temperatures in °C, currents in A, times in s. **A positive current heats the display.**
 //!
 //! - [`filter`]: [`LowPass`], the first-order sensor filter with exact discretisation.
-//! - [`pid`]: [`Pid`] and [`PidGains`] (serde, for gains files), the paper's controller structure: derivative on
-//!   measurement, output limits, conditional-integration anti-windup, bumpless reset, P/I/D terms for logging.
+//! - [`pid`]: [`Pid`] and [`PidGains`] (gains files: [`PidGains::from_toml_str`]), the paper's controller
+//!   structure: derivative on measurement, output limits, conditional-integration anti-windup, bumpless reset,
+//!   P/I/D terms for logging.
 //! - [`controller`]: the object-safe [`Controller`] trait with [`ControlInput`], and [`PidController`] (low-pass
 //!   + PID, the paper's Figure 2). The model-based controller implements the same trait.
 //! - [`model_controller`]: [`ModelController`] (`model`), thermode's own controller: a Kalman observer of the true
 //!   plate ([`observer`]: [`PlateObserver`] on a [`PlantModel`] filled from the device file) and the plate's heat
 //!   balance inverted through the Peltier equations, driving the most useful current when a set-point is
 //!   infeasible, with nothing to wind up.
-//! - [`error`]: the typed errors ([`ControlError`]).
+//! - [`error`]: [`ControlError`], refused parameters and inputs.
 //!
 //! One tick of a channel:
 //! ```

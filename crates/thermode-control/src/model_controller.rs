@@ -71,8 +71,8 @@
 
 use crate::controller::{ControlInput, Controller};
 use crate::error::ControlError;
-use crate::filter::check_finite;
 use crate::observer::{Finger, ObserverDesign, ObserverTick, PlantModel, PlateEstimate, PlateObserver};
+use thermode_model::Rule;
 
 /// The controller's design constants, the same for every display (everything display-specific comes from the
 /// [`PlantModel`]). Defaults in the field docs.
@@ -128,14 +128,7 @@ impl ModelController {
     /// A controller for `plant` with the design constants `design` (both validated here).
     pub fn with_design(plant: PlantModel, design: ModelDesign) -> Result<Self, ControlError> {
         let periods = design.closed_loop_sample_periods;
-        check_finite("closed_loop_sample_periods", periods)?;
-        if periods <= 0.0 {
-            return Err(ControlError::OutOfRange {
-                name: "closed_loop_sample_periods",
-                value: periods,
-                requirement: "must be > 0",
-            });
-        }
+        Rule::Positive.check("closed_loop_sample_periods [-]", periods)?;
         Ok(Self {
             observer: PlateObserver::with_design(plant, design.observer)?,
             closed_loop_sample_periods: periods,
@@ -164,24 +157,17 @@ impl ModelController {
     }
 
     fn validate(input: &ControlInput) -> Result<Finger, ControlError> {
-        check_finite("time_s", input.time_s)?;
-        check_finite("setpoint_c", input.setpoint_c)?;
-        check_finite("setpoint_rate_c_per_s", input.setpoint_rate_c_per_s)?;
-        check_finite("sensor_c", input.sensor_c)?;
-        check_finite("hot_side_c", input.hot_side_c)?;
-        check_finite("applied_current_a", input.applied_current_a)?;
-        crate::filter::check_dt(input.dt_s)?;
-        check_finite("finger_conductance_w_k", input.finger_conductance_w_k)?;
-        if input.finger_conductance_w_k < 0.0 {
-            return Err(ControlError::OutOfRange {
-                name: "finger_conductance_w_k",
-                value: input.finger_conductance_w_k,
-                requirement: "must be >= 0",
-            });
-        }
+        Rule::Finite.check("time_s", input.time_s)?;
+        Rule::Finite.check("setpoint_c", input.setpoint_c)?;
+        Rule::Finite.check("setpoint_rate_c_per_s", input.setpoint_rate_c_per_s)?;
+        Rule::Finite.check("sensor_c", input.sensor_c)?;
+        Rule::Finite.check("hot_side_c", input.hot_side_c)?;
+        Rule::Finite.check("applied_current_a", input.applied_current_a)?;
+        Rule::Positive.check("dt_s", input.dt_s)?;
+        Rule::NonNegative.check("finger_conductance_w_k", input.finger_conductance_w_k)?;
         match input.finger_receptor_c {
             Some(receptor_c) => {
-                check_finite("finger_receptor_c", receptor_c)?;
+                Rule::Finite.check("finger_receptor_c", receptor_c)?;
                 Ok(Finger {
                     receptor_c,
                     conductance_w_k: input.finger_conductance_w_k,
@@ -255,8 +241,8 @@ impl Controller for ModelController {
             hot_side_c: input.hot_side_c,
         })?;
         let terms = self.control(&observer, &estimate, input, finger);
-        check_finite("requested current", terms.current_a)?;
-        check_finite("predicted plate temperature", terms.predicted_plate_c)?;
+        Rule::Finite.check("requested current", terms.current_a)?;
+        Rule::Finite.check("predicted plate temperature", terms.predicted_plate_c)?;
         self.observer = observer;
         self.terms = Some(terms);
         Ok(terms.current_a)

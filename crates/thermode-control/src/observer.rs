@@ -45,7 +45,7 @@
 use thermode_model::peltier::PeltierModule;
 
 use crate::error::ControlError;
-use crate::filter::{check_finite, non_negative, positive};
+use thermode_model::{BadValue, Rule};
 
 /// Number of observer states: plate, hot side, sensor element, unknown heat.
 pub const OBSERVER_STATES: usize = 4;
@@ -83,9 +83,10 @@ impl Default for ObserverDesign {
 impl ObserverDesign {
     /// Checks that every fraction is finite and ≥ 0.
     pub fn validate(&self) -> Result<(), ControlError> {
-        non_negative("disturbance_drift_per_sqrt_s", self.disturbance_drift_per_sqrt_s)?;
-        non_negative("disturbance_initial_fraction", self.disturbance_initial_fraction)?;
-        non_negative("plant_heat_noise_fraction", self.plant_heat_noise_fraction)
+        Rule::NonNegative.check("disturbance_drift_per_sqrt_s", self.disturbance_drift_per_sqrt_s)?;
+        Rule::NonNegative.check("disturbance_initial_fraction", self.disturbance_initial_fraction)?;
+        Rule::NonNegative.check("plant_heat_noise_fraction", self.plant_heat_noise_fraction)?;
+        Ok(())
     }
 }
 
@@ -136,25 +137,19 @@ impl PlantModel {
     /// Checks every number: finite; capacities, module parameters, sample rate and current limit > 0; water
     /// conductance, sensor lag, noise and resolution ≥ 0; the water between −50 and 100 °C.
     pub fn validate(&self) -> Result<(), ControlError> {
-        positive("module.seebeck_v_k", self.module.seebeck_v_k)?;
-        positive("module.resistance_ohm", self.module.resistance_ohm)?;
-        positive("module.conductance_w_k", self.module.conductance_w_k)?;
-        positive("plate_heat_capacity_j_k", self.plate_heat_capacity_j_k)?;
-        positive("hot_heat_capacity_j_k", self.hot_heat_capacity_j_k)?;
-        non_negative("water_conductance_w_k", self.water_conductance_w_k)?;
-        check_finite("water_c", self.water_c)?;
-        if !(-50.0..=100.0).contains(&self.water_c) {
-            return Err(ControlError::OutOfRange {
-                name: "water_c",
-                value: self.water_c,
-                requirement: "must lie between -50 and 100 °C",
-            });
-        }
-        non_negative("sensor_time_constant_s", self.sensor_time_constant_s)?;
-        non_negative("sensor_noise_c", self.sensor_noise_c)?;
-        non_negative("sensor_resolution_c", self.sensor_resolution_c)?;
-        positive("sensor_sample_rate_hz", self.sensor_sample_rate_hz)?;
-        positive("current_limit_a", self.current_limit_a)
+        Rule::Positive.check("module.seebeck_v_k", self.module.seebeck_v_k)?;
+        Rule::Positive.check("module.resistance_ohm", self.module.resistance_ohm)?;
+        Rule::Positive.check("module.conductance_w_k", self.module.conductance_w_k)?;
+        Rule::Positive.check("plate_heat_capacity_j_k", self.plate_heat_capacity_j_k)?;
+        Rule::Positive.check("hot_heat_capacity_j_k", self.hot_heat_capacity_j_k)?;
+        Rule::NonNegative.check("water_conductance_w_k", self.water_conductance_w_k)?;
+        Rule::Within { min: -50.0, max: 100.0 }.check("water_c", self.water_c)?;
+        Rule::NonNegative.check("sensor_time_constant_s", self.sensor_time_constant_s)?;
+        Rule::NonNegative.check("sensor_noise_c", self.sensor_noise_c)?;
+        Rule::NonNegative.check("sensor_resolution_c", self.sensor_resolution_c)?;
+        Rule::Positive.check("sensor_sample_rate_hz", self.sensor_sample_rate_hz)?;
+        Rule::Positive.check("current_limit_a", self.current_limit_a)?;
+        Ok(())
     }
 
     /// The sensor's sample period, s.
@@ -279,12 +274,13 @@ pub struct ObserverTick {
 
 impl ObserverTick {
     fn validate(&self) -> Result<(), ControlError> {
-        positive("dt_s", self.dt_s)?;
-        check_finite("applied_current_a", self.applied_current_a)?;
-        check_finite("finger_receptor_c", self.finger.receptor_c)?;
-        non_negative("finger_conductance_w_k", self.finger.conductance_w_k)?;
-        check_finite("sensor_c", self.sensor_c)?;
-        check_finite("hot_side_c", self.hot_side_c)
+        Rule::Positive.check("dt_s", self.dt_s)?;
+        Rule::Finite.check("applied_current_a", self.applied_current_a)?;
+        Rule::Finite.check("finger_receptor_c", self.finger.receptor_c)?;
+        Rule::NonNegative.check("finger_conductance_w_k", self.finger.conductance_w_k)?;
+        Rule::Finite.check("sensor_c", self.sensor_c)?;
+        Rule::Finite.check("hot_side_c", self.hot_side_c)?;
+        Ok(())
     }
 }
 
@@ -358,10 +354,11 @@ impl PlateObserver {
         } else {
             self.start(tick.sensor_c, tick.hot_side_c);
         }
-        self.estimate().ok_or(ControlError::NotFinite {
-            name: "observer state",
-            value: f64::NAN,
-        })
+        self.estimate().ok_or(ControlError::BadValue(BadValue::custom(
+            "observer state",
+            f64::NAN,
+            "must stay finite",
+        )))
     }
 
     /// The plate temperature one step of `dt_s` ahead at `current_a` with `finger`, from the current estimate, °C

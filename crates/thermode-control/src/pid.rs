@@ -15,15 +15,16 @@
 //!   continues from a given current (bumpless transfer, e.g. after a fault is cleared or a controller switch).
 //! - The last P, I and D terms are kept for logging ([`Pid::terms`]).
 
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
 use crate::error::ControlError;
-use crate::filter::{check_dt, check_finite, non_negative};
+use thermode_model::params::{self, Rule, Table};
+use thermode_model::ParamError;
 
 /// PID gains and the sensor filter cut-off, as saved to / loaded from a gains TOML file. Units: current in A,
-/// temperature in °C (kelvin-sized), time in s. Unknown keys are refused.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// temperature in °C (kelvin-sized), time in s. Read with [`PidGains::from_toml_str`] (unknown keys are refused);
+/// written with serde.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct PidGains {
     /// Proportional gain, A/°C (≥ 0). No default: tuned per display (`thermode tune`).
     pub kp_a_per_c: f64,
@@ -40,13 +41,37 @@ pub struct PidGains {
 }
 
 impl PidGains {
+    /// Reads a gains file (TOML, the keys of [`PidGains`]; `derivative_filter_s` optional, every other key
+    /// required) with [`Table`] and validates it ([`PidGains::validate`]); `origin` (the file name) appears in
+    /// every error, a refused number as a [`ParamError::BadValue`].
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<PidGains, ParamError> {
+        let toml = params::parse(text, origin)?;
+        let file = Table::new(&toml, origin);
+        let gains = PidGains {
+            kp_a_per_c: file.required_number("kp_a_per_c", Rule::NonNegative)?,
+            ki_a_per_c_s: file.required_number("ki_a_per_c_s", Rule::NonNegative)?,
+            kd_a_s_per_c: file.required_number("kd_a_s_per_c", Rule::NonNegative)?,
+            // Not range-checked here: `inf` (no filter) is allowed; `validate` checks it.
+            filter_cutoff_hz: file
+                .unchecked_number("filter_cutoff_hz")?
+                .ok_or_else(|| file.missing("filter_cutoff_hz"))?,
+            derivative_filter_s: file.number("derivative_filter_s", Rule::NonNegative)?,
+        };
+        file.finish()?;
+        let ControlError::BadValue(refused) = match gains.validate() {
+            Ok(()) => return Ok(gains),
+            Err(e) => e,
+        };
+        Err(ParamError::bad_value(origin, refused))
+    }
+
     /// Checks every gain: finite and ≥ 0; the cut-off > 0 (may be `inf`); the derivative filter finite and ≥ 0.
     pub fn validate(&self) -> Result<(), ControlError> {
-        non_negative("kp_a_per_c", self.kp_a_per_c)?;
-        non_negative("ki_a_per_c_s", self.ki_a_per_c_s)?;
-        non_negative("kd_a_s_per_c", self.kd_a_s_per_c)?;
+        Rule::NonNegative.check("kp_a_per_c", self.kp_a_per_c)?;
+        Rule::NonNegative.check("ki_a_per_c_s", self.ki_a_per_c_s)?;
+        Rule::NonNegative.check("kd_a_s_per_c", self.kd_a_s_per_c)?;
         if let Some(tf) = self.derivative_filter_s {
-            non_negative("derivative_filter_s", tf)?;
+            Rule::NonNegative.check("derivative_filter_s", tf)?;
         }
         crate::filter::LowPass::new(self.filter_cutoff_hz).map(|_| ())
     }
@@ -93,14 +118,7 @@ impl Pid {
     /// A PID with the given gains and output limits `±output_limit_a` (A, finite, > 0).
     pub fn new(gains: PidGains, output_limit_a: f64) -> Result<Self, ControlError> {
         gains.validate()?;
-        check_finite("output_limit_a", output_limit_a)?;
-        if output_limit_a <= 0.0 {
-            return Err(ControlError::OutOfRange {
-                name: "output_limit_a",
-                value: output_limit_a,
-                requirement: "must be > 0",
-            });
-        }
+        Rule::Positive.check("output_limit_a", output_limit_a)?;
         Ok(Self {
             gains,
             output_limit_a,
@@ -144,9 +162,9 @@ impl Pid {
     /// the current in A (positive heats), within the output limits. Non-finite inputs or a non-positive step are
     /// errors and leave the state untouched.
     pub fn update(&mut self, setpoint_c: f64, measured_c: f64, dt_s: f64) -> Result<f64, ControlError> {
-        check_finite("setpoint_c", setpoint_c)?;
-        check_finite("measured_c", measured_c)?;
-        check_dt(dt_s)?;
+        Rule::Finite.check("setpoint_c", setpoint_c)?;
+        Rule::Finite.check("measured_c", measured_c)?;
+        Rule::Positive.check("dt_s", dt_s)?;
         let limit = self.output_limit_a;
         let error_c = setpoint_c - measured_c;
         let p_a = self.gains.kp_a_per_c * error_c;
@@ -202,9 +220,9 @@ impl Pid {
     /// Bumpless reset: preloads the integral so that, for the same set-point and measurement, the next output is
     /// `output_a` (clamped to the limits), and sets the derivative memory to `measured_c`. Inputs must be finite.
     pub fn reset_bumpless(&mut self, setpoint_c: f64, measured_c: f64, output_a: f64) -> Result<(), ControlError> {
-        check_finite("setpoint_c", setpoint_c)?;
-        check_finite("measured_c", measured_c)?;
-        check_finite("output_a", output_a)?;
+        Rule::Finite.check("setpoint_c", setpoint_c)?;
+        Rule::Finite.check("measured_c", measured_c)?;
+        Rule::Finite.check("output_a", output_a)?;
         let limit = self.output_limit_a;
         let p_a = self.gains.kp_a_per_c * (setpoint_c - measured_c);
         self.integral_a = (output_a.clamp(-limit, limit) - p_a).clamp(-limit, limit);

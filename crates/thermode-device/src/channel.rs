@@ -28,6 +28,7 @@
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use thermode_model::peltier::PeltierModule;
+use thermode_model::Rule;
 
 use crate::config::DeviceConfig;
 use crate::error::DeviceError;
@@ -175,13 +176,7 @@ impl<F: PlateFinger> SimulatedChannel<F> {
             ("plate temperature [°C]", plate_c),
             ("hot-side temperature [°C]", hot_side_c),
         ] {
-            if !value.is_finite() {
-                return Err(DeviceError::BadValue {
-                    what: what.to_string(),
-                    value,
-                    requirement: "must be finite".to_string(),
-                });
-            }
+            Rule::Finite.check(what, value)?;
         }
         self.state.plate_c = plate_c;
         self.state.hot_side_c = hot_side_c;
@@ -299,13 +294,7 @@ impl<F: PlateFinger> SimulatedChannel<F> {
             Fault::SensorShort => self.sensor.set_condition(SensorCondition::Short),
             Fault::SensorFrozen => self.sensor.set_condition(SensorCondition::Frozen),
             Fault::PumpFailure { remaining_fraction } => {
-                if !(0.0..=1.0).contains(&remaining_fraction) {
-                    return Err(DeviceError::BadValue {
-                        what: "pump failure remaining_fraction".to_string(),
-                        value: remaining_fraction,
-                        requirement: "must lie in [0, 1]".to_string(),
-                    });
-                }
+                Rule::Within { min: 0.0, max: 1.0 }.check("pump failure remaining_fraction [-]", remaining_fraction)?;
                 self.pump_fraction = remaining_fraction;
             }
             Fault::DriveStuck { polarity } => self.stuck = Some(polarity),

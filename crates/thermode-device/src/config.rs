@@ -8,6 +8,8 @@
 //! Peltier element on a thin water-cooled aluminium box, a PT-100 sensor, water at ambient) as closely as the paper
 //! allows; where the paper is silent the number is an engineering estimate, derived in its source text.
 
+use thermode_model::error::At;
+use thermode_model::params::{self, Rule, Table};
 use thermode_model::peltier::{PeltierDatasheet, PeltierModule};
 use thermode_model::ParamError;
 
@@ -120,28 +122,25 @@ impl Default for AmbientConfig {
     }
 }
 
-/// What a value must satisfy.
-#[derive(Debug, Clone, Copy)]
-enum Check {
-    /// Finite and > 0.
-    Positive,
-    /// Finite and ≥ 0.
-    NonNegative,
-    /// Finite and strictly between the bounds.
-    Between(f64, f64),
-}
-
-/// One key of the device file: where it lives, how to read and write it, and its documentation.
-struct Field {
+/// One key of the device file: where it lives, what it must satisfy, its documentation, and the value it reads and
+/// writes (a field of one [`DeviceConfig`]; the default is the field of [`DeviceConfig::default`], written nowhere
+/// else).
+struct Field<'a> {
     section: &'static str,
     key: &'static str,
-    check: Check,
-    get: fn(&DeviceConfig) -> f64,
-    set: fn(&mut DeviceConfig, f64),
+    rule: Rule,
     /// Meaning and unit (first line of the comment).
     doc: &'static str,
     /// Where the default comes from.
     source: &'static str,
+    value: &'a mut f64,
+}
+
+impl Field<'_> {
+    /// `section.key`, as errors and [`DeviceConfig::keys`] name it.
+    fn name(&self) -> String {
+        format!("{}.{}", self.section, self.key)
+    }
 }
 
 /// Sections in file order.
@@ -150,231 +149,205 @@ const SECTIONS: [&str; 6] = ["peltier", "plate", "hot_side", "sensor", "drive", 
 const MODULE_SOURCE: &str = "model.md §5: a typical single-stage Bi₂Te₃ miniature module of 8 × 8 mm, the size of the \
      paper's 8 × 8 × 3 mm element (section 3.1; the paper names no part).";
 
-/// Every key of the device file, in file order.
-const FIELDS: [Field; 16] = [
-    Field {
-        section: "peltier",
-        key: "imax_a",
-        check: Check::Positive,
-        get: |c| c.peltier.imax_a,
-        set: |c, v| c.peltier.imax_a = v,
-        doc: "Datasheet maximum current I_max [A] (the current of the largest temperature difference).",
-        source: MODULE_SOURCE,
-    },
-    Field {
-        section: "peltier",
-        key: "vmax_v",
-        check: Check::Positive,
-        get: |c| c.peltier.vmax_v,
-        set: |c, v| c.peltier.vmax_v = v,
-        doc: "Datasheet voltage at I_max and ΔT_max, V_max [V].",
-        source: MODULE_SOURCE,
-    },
-    Field {
-        section: "peltier",
-        key: "qmax_w",
-        check: Check::Positive,
-        get: |c| c.peltier.qmax_w,
-        set: |c, v| c.peltier.qmax_w = v,
-        doc: "Datasheet cooling power at I_max and ΔT = 0, Q_max [W]; checked against the other values (±30 %).",
-        source: MODULE_SOURCE,
-    },
-    Field {
-        section: "peltier",
-        key: "dtmax_k",
-        check: Check::Positive,
-        get: |c| c.peltier.dtmax_k,
-        set: |c, v| c.peltier.dtmax_k = v,
-        doc: "Datasheet largest temperature difference at I_max and zero load, ΔT_max [K].",
-        source: MODULE_SOURCE,
-    },
-    Field {
-        section: "peltier",
-        key: "hot_side_k",
-        check: Check::Positive,
-        get: |c| c.peltier.hot_side_k,
-        set: |c, v| c.peltier.hot_side_k = v,
-        doc: "Hot-side temperature at which the datasheet values are quoted, T_h [K].",
-        source: "25 °C: these values are a 25–27 °C datasheet set (S = V_max/T_h = 6.37 mV/K matches model.md's \
-                 6.4 mV/K; 323 K would give 5.9), and the hot side runs near the 23 °C water, where the derived \
-                 S, R, K are then evaluated.",
-    },
-    Field {
-        section: "plate",
-        key: "heat_capacity_j_k",
-        check: Check::Positive,
-        get: |c| c.plate.heat_capacity_j_k,
-        set: |c, v| c.plate.heat_capacity_j_k = v,
-        doc: "Heat capacity of the display node: plate, cold ceramic, half the thermoelectric legs [J/K].",
-        source: "Estimate (model.md §5: 0.1–0.3): aluminium plate 8 × 8 × 1 mm (ρc = 2702 × 903 J/(m³·K), \
-                 Incropera Table A.1) 0.156 J/K + alumina ceramic 8 × 8 × 0.5 mm (96 % Al₂O₃, 3720 kg/m³, \
-                 880 J/(kg·K)) 0.105 J/K + half of 2 mm Bi₂Te₃ legs at 30 % fill (7740 kg/m³, 154 J/(kg·K)) 0.023 J/K \
-                 = 0.284 J/K.",
-    },
-    Field {
-        section: "plate",
-        key: "contact_conductance_w_m2k",
-        check: Check::Positive,
-        get: |c| c.plate.contact_conductance_w_m2k,
-        set: |c, v| c.plate.contact_conductance_w_m2k = v,
-        doc: "Contact conductance between the skin surface and the plate, 1/R_c [W/(m²·K)]; a finger model whose \
-              receptor node lies below the surface adds its own tissue in series (see thermode_device::finger).",
-        source: "model.md §3: R_c is about 1e-3 m²·K/W for a light touch (the paper's static touch without \
-                 pressure, section 4.2).",
-    },
-    Field {
-        section: "plate",
-        key: "area_m2",
-        check: Check::Positive,
-        get: |c| c.plate.area_m2,
-        set: |c, v| c.plate.area_m2 = v,
-        doc: "Contact area of the finger on the plate [m²].",
-        source: "The 8 × 8 mm face of the paper's element (section 3.1), fully covered by the phalanx pad.",
-    },
-    Field {
-        section: "hot_side",
-        key: "heat_capacity_j_k",
-        check: Check::Positive,
-        get: |c| c.hot_side.heat_capacity_j_k,
-        set: |c, v| c.hot_side.heat_capacity_j_k = v,
-        doc: "Heat capacity of the hot node: hot ceramic, half the legs, the aluminium box and the water in it [J/K].",
-        source: "Estimate (the paper: 'a thin aluminium box', no size): hot ceramic 0.105 + half legs 0.023 + box \
-                 12 × 12 × 5 mm with 0.5 mm walls (236 mm³ aluminium) 0.576 + half of the 484 mm³ of water it holds \
-                 (4.17 MJ/(m³·K); its temperature lies between inlet and wall) 1.009 = 1.71 J/K.",
-    },
-    Field {
-        section: "hot_side",
-        key: "water_conductance_w_k",
-        check: Check::NonNegative,
-        get: |c| c.hot_side.water_conductance_w_k,
-        set: |c, v| c.hot_side.water_conductance_w_k = v,
-        doc: "Conductance from the hot node to the cooling water [W/K]; a pump failure lowers it.",
-        source: "model.md §5 (about 0.3 W/K); check: laminar flow through the box (11 × 4 mm channel, hydraulic \
-                 diameter 5.9 mm, Nu 5–8, so h = 500–800 W/(m²·K)) over about 4 cm² of wetted wall at partial fin \
-                 efficiency gives 0.2–0.3 W/K.",
-    },
-    Field {
-        section: "sensor",
-        key: "time_constant_s",
-        check: Check::NonNegative,
-        get: |c| c.sensor.time_constant_s,
-        set: |c, v| c.sensor.time_constant_s = v,
-        doc: "First-order lag of the PT-100 behind the plate temperature [s]; 0 = none.",
-        source: "model.md §5 (0.2–0.6 s): a thin-film PT-100 chip glued into the 1 mm plate.",
-    },
-    Field {
-        section: "sensor",
-        key: "noise_c",
-        check: Check::NonNegative,
-        get: |c| c.sensor.noise_c,
-        set: |c, v| c.sensor.noise_c = v,
-        doc: "Standard deviation of the Gaussian measurement noise [°C]; 0 = none.",
-        source: "Estimate: two steps of the 0.01 °C resolution (1 mA through a PT-100 gives 3.85 µV per 0.01 °C, \
-                 comparable to amplifier and 16-bit converter noise); the paper needed a low-pass filter against \
-                 sensor noise (section 3.2), so the noise exceeds one step.",
-    },
-    Field {
-        section: "sensor",
-        key: "resolution_c",
-        check: Check::NonNegative,
-        get: |c| c.sensor.resolution_c,
-        set: |c, v| c.sensor.resolution_c = v,
-        doc: "Quantisation step of the reading [°C]; 0 = none.",
-        source: "The paper, section 3: 'a resolution of 0.01 °C'.",
-    },
-    Field {
-        section: "sensor",
-        key: "sample_rate_hz",
-        check: Check::Positive,
-        get: |c| c.sensor.sample_rate_hz,
-        set: |c, v| c.sensor.sample_rate_hz = v,
-        doc: "Sampling rate of the sensor [Hz]; the reading is held between samples.",
-        source: "Estimate: the paper gives none; 100 Hz is a usual rate of a Simulink real-time loop on a thermal \
-                 plant whose fastest time constant is about 0.1 s.",
-    },
-    Field {
-        section: "drive",
-        key: "current_limit_a",
-        check: Check::Positive,
-        get: |c| c.drive.current_limit_a,
-        set: |c, v| c.drive.current_limit_a = v,
-        doc: "Largest current magnitude of the bipolar drive [A]; at most the module's I_max.",
-        source: "The module's I_max: beyond it a module is outside its rating and cools no better.",
-    },
-    Field {
-        section: "ambient",
-        key: "water_c",
-        check: Check::Between(0.0, 100.0),
-        get: |c| c.ambient.water_c,
-        set: |c, v| c.ambient.water_c = v,
-        doc: "Temperature of the cooling water [°C], held at ambient by the radiator and fans.",
-        source: "The paper, section 4.1: mean ambient temperature 23 °C; section 3.1: the water circuit keeps the \
-                 reference side at ambient level.",
-    },
-];
-
 impl DeviceConfig {
+    /// Every key of the device file, in file order, each with the field of `self` it reads and writes.
+    fn fields(&mut self) -> [Field<'_>; 16] {
+        [
+            Field {
+                section: "peltier",
+                key: "imax_a",
+                rule: Rule::Positive,
+                value: &mut self.peltier.imax_a,
+                doc: "Datasheet maximum current I_max [A] (the current of the largest temperature difference).",
+                source: MODULE_SOURCE,
+            },
+            Field {
+                section: "peltier",
+                key: "vmax_v",
+                rule: Rule::Positive,
+                value: &mut self.peltier.vmax_v,
+                doc: "Datasheet voltage at I_max and ΔT_max, V_max [V].",
+                source: MODULE_SOURCE,
+            },
+            Field {
+                section: "peltier",
+                key: "qmax_w",
+                rule: Rule::Positive,
+                value: &mut self.peltier.qmax_w,
+                doc: "Datasheet cooling power at I_max and ΔT = 0, Q_max [W]; checked against the other values (±30 \
+                      %).",
+                source: MODULE_SOURCE,
+            },
+            Field {
+                section: "peltier",
+                key: "dtmax_k",
+                rule: Rule::Positive,
+                value: &mut self.peltier.dtmax_k,
+                doc: "Datasheet largest temperature difference at I_max and zero load, ΔT_max [K].",
+                source: MODULE_SOURCE,
+            },
+            Field {
+                section: "peltier",
+                key: "hot_side_k",
+                rule: Rule::Positive,
+                value: &mut self.peltier.hot_side_k,
+                doc: "Hot-side temperature at which the datasheet values are quoted, T_h [K].",
+                source: "25 °C: these values are a 25–27 °C datasheet set (S = V_max/T_h = 6.37 mV/K matches \
+                         model.md's 6.4 mV/K; 323 K would give 5.9), and the hot side runs near the 23 °C water, where \
+                         the derived S, R, K are then evaluated.",
+            },
+            Field {
+                section: "plate",
+                key: "heat_capacity_j_k",
+                rule: Rule::Positive,
+                value: &mut self.plate.heat_capacity_j_k,
+                doc: "Heat capacity of the display node: plate, cold ceramic, half the thermoelectric legs [J/K].",
+                source: "Estimate (model.md §5: 0.1–0.3): aluminium plate 8 × 8 × 1 mm (ρc = 2702 × 903 J/(m³·K), \
+                         Incropera Table A.1) 0.156 J/K + alumina ceramic 8 × 8 × 0.5 mm (96 % Al₂O₃, 3720 kg/m³, 880 \
+                         J/(kg·K)) 0.105 J/K + half of 2 mm Bi₂Te₃ legs at 30 % fill (7740 kg/m³, 154 J/(kg·K)) 0.023 \
+                         J/K = 0.284 J/K.",
+            },
+            Field {
+                section: "plate",
+                key: "contact_conductance_w_m2k",
+                rule: Rule::Positive,
+                value: &mut self.plate.contact_conductance_w_m2k,
+                doc: "Contact conductance between the skin surface and the plate, 1/R_c [W/(m²·K)]; a finger model \
+                      whose receptor node lies below the surface adds its own tissue in series (see \
+                      thermode_device::finger).",
+                source: "model.md §3: R_c is about 1e-3 m²·K/W for a light touch (the paper's static touch without \
+                         pressure, section 4.2).",
+            },
+            Field {
+                section: "plate",
+                key: "area_m2",
+                rule: Rule::Positive,
+                value: &mut self.plate.area_m2,
+                doc: "Contact area of the finger on the plate [m²].",
+                source: "The 8 × 8 mm face of the paper's element (section 3.1), fully covered by the phalanx pad.",
+            },
+            Field {
+                section: "hot_side",
+                key: "heat_capacity_j_k",
+                rule: Rule::Positive,
+                value: &mut self.hot_side.heat_capacity_j_k,
+                doc:
+                    "Heat capacity of the hot node: hot ceramic, half the legs, the aluminium box and the water in it \
+                      [J/K].",
+                source: "Estimate (the paper: 'a thin aluminium box', no size): hot ceramic 0.105 + half legs 0.023 + \
+                         box 12 × 12 × 5 mm with 0.5 mm walls (236 mm³ aluminium) 0.576 + half of the 484 mm³ of water \
+                         it holds (4.17 MJ/(m³·K); its temperature lies between inlet and wall) 1.009 = 1.71 J/K.",
+            },
+            Field {
+                section: "hot_side",
+                key: "water_conductance_w_k",
+                rule: Rule::NonNegative,
+                value: &mut self.hot_side.water_conductance_w_k,
+                doc: "Conductance from the hot node to the cooling water [W/K]; a pump failure lowers it.",
+                source: "model.md §5 (about 0.3 W/K); check: laminar flow through the box (11 × 4 mm channel, \
+                         hydraulic diameter 5.9 mm, Nu 5–8, so h = 500–800 W/(m²·K)) over about 4 cm² of wetted wall \
+                         at partial fin efficiency gives 0.2–0.3 W/K.",
+            },
+            Field {
+                section: "sensor",
+                key: "time_constant_s",
+                rule: Rule::NonNegative,
+                value: &mut self.sensor.time_constant_s,
+                doc: "First-order lag of the PT-100 behind the plate temperature [s]; 0 = none.",
+                source: "model.md §5 (0.2–0.6 s): a thin-film PT-100 chip glued into the 1 mm plate.",
+            },
+            Field {
+                section: "sensor",
+                key: "noise_c",
+                rule: Rule::NonNegative,
+                value: &mut self.sensor.noise_c,
+                doc: "Standard deviation of the Gaussian measurement noise [°C]; 0 = none.",
+                source: "Estimate: two steps of the 0.01 °C resolution (1 mA through a PT-100 gives 3.85 µV per 0.01 \
+                         °C, comparable to amplifier and 16-bit converter noise); the paper needed a low-pass filter \
+                         against sensor noise (section 3.2), so the noise exceeds one step.",
+            },
+            Field {
+                section: "sensor",
+                key: "resolution_c",
+                rule: Rule::NonNegative,
+                value: &mut self.sensor.resolution_c,
+                doc: "Quantisation step of the reading [°C]; 0 = none.",
+                source: "The paper, section 3: 'a resolution of 0.01 °C'.",
+            },
+            Field {
+                section: "sensor",
+                key: "sample_rate_hz",
+                rule: Rule::Positive,
+                value: &mut self.sensor.sample_rate_hz,
+                doc: "Sampling rate of the sensor [Hz]; the reading is held between samples.",
+                source: "Estimate: the paper gives none; 100 Hz is a usual rate of a Simulink real-time loop on a \
+                         thermal plant whose fastest time constant is about 0.1 s.",
+            },
+            Field {
+                section: "drive",
+                key: "current_limit_a",
+                rule: Rule::Positive,
+                value: &mut self.drive.current_limit_a,
+                doc: "Largest current magnitude of the bipolar drive [A]; at most the module's I_max.",
+                source: "The module's I_max: beyond it a module is outside its rating and cools no better.",
+            },
+            Field {
+                section: "ambient",
+                key: "water_c",
+                rule: Rule::Between { min: 0.0, max: 100.0 },
+                value: &mut self.ambient.water_c,
+                doc: "Temperature of the cooling water [°C], held at ambient by the radiator and fans.",
+                source: "The paper, section 4.1: mean ambient temperature 23 °C; section 3.1: the water circuit keeps \
+                         the reference side at ambient level.",
+            },
+        ]
+    }
+
     /// Reads a device file. Every key is optional (missing keys keep their defaults); unknown sections or keys,
     /// values of the wrong type, and invalid numbers are errors naming the key (`section.key`) and `origin` (usually
     /// the file name).
     pub fn from_toml_str(text: &str, origin: &str) -> Result<DeviceConfig, ParamError> {
-        let table: toml::Table = text.parse().map_err(|e: toml::de::Error| ParamError::Syntax {
-            origin: origin.to_string(),
-            message: e.to_string(),
-        })?;
+        let toml = params::parse(text, origin)?;
+        let file = Table::new(&toml, origin);
         let mut config = DeviceConfig::default();
-        for (section, value) in &table {
-            if !SECTIONS.contains(&section.as_str()) {
-                return Err(ParamError::UnknownKey {
-                    origin: origin.to_string(),
-                    key: section.clone(),
-                });
-            }
-            let toml::Value::Table(keys) = value else {
-                return Err(wrong_type(origin, section, "a table", value));
+        for section_name in SECTIONS {
+            let Some(section) = file.section(section_name)? else {
+                continue;
             };
-            for (key, value) in keys {
-                let full = format!("{section}.{key}");
-                let field = FIELDS
-                    .iter()
-                    .find(|f| f.section == section && f.key == key)
-                    .ok_or_else(|| ParamError::UnknownKey {
-                        origin: origin.to_string(),
-                        key: full.clone(),
-                    })?;
-                let number = match value {
-                    toml::Value::Float(x) => *x,
-                    // Integers are accepted where a number is expected (`sample_rate_hz = 100`).
-                    toml::Value::Integer(n) => *n as f64,
-                    other => return Err(wrong_type(origin, &full, "a number", other)),
-                };
-                (field.set)(&mut config, number);
+            for field in config.fields().into_iter().filter(|f| f.section == section_name) {
+                if let Some(value) = section.number(field.key, field.rule)? {
+                    *field.value = value;
+                }
             }
+            section.finish()?;
         }
+        file.finish()?;
         config.validate(origin)?;
         Ok(config)
     }
 
     /// Checks every number and the cross-conditions; `origin` names where the values came from.
     pub fn validate(&self, origin: &str) -> Result<(), ParamError> {
-        for field in &FIELDS {
-            check(origin, field, (field.get)(self))?;
+        let mut copy = *self;
+        for field in copy.fields() {
+            if !field.rule.admits(*field.value) {
+                return field.rule.check(field.name(), *field.value).at(origin).map(drop);
+            }
         }
         PeltierModule::from_datasheet_at(&self.peltier, origin, "peltier.")?;
-        if self.drive.current_limit_a > self.peltier.imax_a {
-            return Err(ParamError::BadValue {
-                origin: origin.to_string(),
-                key: "drive.current_limit_a".to_string(),
-                value: self.drive.current_limit_a,
-                requirement: format!("must not exceed the module's I_max = {} A", self.peltier.imax_a),
-            });
-        }
+        let within_module = Rule::AtMost {
+            max: self.peltier.imax_a,
+            what: "the module's I_max (peltier.imax_a) [A]",
+        };
+        within_module
+            .check("drive.current_limit_a", self.drive.current_limit_a)
+            .at(origin)?;
         Ok(())
     }
 
     /// Every key of the device file as `section.key`, in file order.
     pub fn keys() -> Vec<String> {
-        FIELDS.iter().map(|f| format!("{}.{}", f.section, f.key)).collect()
+        DeviceConfig::default().fields().iter().map(Field::name).collect()
     }
 
     /// The Peltier module's lumped parameters (S, R, K) from the datasheet values.
@@ -385,22 +358,20 @@ impl DeviceConfig {
     /// The whole configuration as a device file: every key, each preceded by a comment with its meaning, unit,
     /// default and source. [`DeviceConfig::from_toml_str`] reads it back to an equal configuration.
     pub fn to_toml_string(&self) -> String {
-        let defaults = DeviceConfig::default();
+        let mut defaults = DeviceConfig::default();
+        let mut values = *self;
         let mut out = String::from(HEADER);
-        for section in SECTIONS {
-            out.push_str(&format!("\n[{section}]\n"));
-            for field in FIELDS.iter().filter(|f| f.section == section) {
-                let text = format!(
-                    "{} Default {:?}. Source: {}",
-                    field.doc,
-                    (field.get)(&defaults),
-                    field.source
-                );
-                for line in wrap(&text, 116) {
-                    out.push_str(&format!("# {line}\n"));
-                }
-                out.push_str(&format!("{} = {:?}\n", field.key, (field.get)(self)));
+        let mut section = "";
+        for (default, field) in defaults.fields().into_iter().zip(values.fields()) {
+            if field.section != section {
+                section = field.section;
+                out.push_str(&format!("\n[{section}]\n"));
             }
+            let text = format!("{} Default {:?}. Source: {}", field.doc, *default.value, field.source);
+            for line in wrap(&text, 116) {
+                out.push_str(&format!("# {line}\n"));
+            }
+            out.push_str(&format!("{} = {:?}\n", field.key, *field.value));
         }
         out
     }
@@ -411,35 +382,6 @@ const HEADER: &str = "\
 # Every key is optional: keys left out keep the default named in their comment. Units are in the key names.
 # Written by thermode_device::DeviceConfig::to_toml_string.
 ";
-
-fn wrong_type(origin: &str, key: &str, expected: &str, found: &toml::Value) -> ParamError {
-    ParamError::WrongType {
-        origin: origin.to_string(),
-        key: key.to_string(),
-        expected: expected.to_string(),
-        found: format!("{} {}", found.type_str(), found),
-    }
-}
-
-fn check(origin: &str, field: &Field, value: f64) -> Result<(), ParamError> {
-    let (ok, requirement) = match field.check {
-        Check::Positive => (value > 0.0, "must be a finite number greater than zero".to_string()),
-        Check::NonNegative => (value >= 0.0, "must be a finite number not below zero".to_string()),
-        Check::Between(lo, hi) => (
-            value > lo && value < hi,
-            format!("must be a finite number between {lo} and {hi}"),
-        ),
-    };
-    if ok && value.is_finite() {
-        return Ok(());
-    }
-    Err(ParamError::BadValue {
-        origin: origin.to_string(),
-        key: format!("{}.{}", field.section, field.key),
-        value,
-        requirement,
-    })
-}
 
 /// Splits `text` into lines of at most `width` characters at spaces.
 fn wrap(text: &str, width: usize) -> Vec<String> {

@@ -7,6 +7,7 @@
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use thermode_model::Rule;
 use thermode_safety::fault::FaultCode;
 use thermode_safety::{DriveCommand, DriveLimits, Measurement};
 
@@ -155,13 +156,7 @@ impl<F: PlateFinger> Device for SimulatedDisplay<F> {
             .get_mut(channel)
             .ok_or(DeviceError::NoSuchChannel { channel, count })?;
         let current_a = command.current_a();
-        if !current_a.is_finite() {
-            return Err(DeviceError::BadValue {
-                what: format!("channel {channel} drive current [A]"),
-                value: current_a,
-                requirement: "must be finite".to_string(),
-            });
-        }
+        Rule::Finite.check("drive current [A]", current_a)?;
         *slot = current_a;
         Ok(())
     }

@@ -1,7 +1,7 @@
 //! Typed errors of the device layer: bad channel numbers, bad values handed to a device, bad faults, bad
 //! configuration, and link failures of real devices.
 
-use thermode_model::ParamError;
+use thermode_model::{BadValue, ParamError};
 use thiserror::Error;
 
 /// Why a device operation was refused.
@@ -24,15 +24,8 @@ pub enum DeviceError {
         max: usize,
     },
     /// A number handed to the device is not finite or out of its range.
-    #[error("{what} = {value} is invalid: {requirement}")]
-    BadValue {
-        /// What the number is.
-        what: String,
-        /// The number.
-        value: f64,
-        /// What it must satisfy.
-        requirement: String,
-    },
+    #[error(transparent)]
+    BadValue(#[from] BadValue),
     /// The device configuration was refused.
     #[error(transparent)]
     Config(#[from] ParamError),

@@ -19,9 +19,9 @@ fn error(text: &str) -> ParamError {
 
 fn bad_value_key(text: &str) -> String {
     match error(text) {
-        ParamError::BadValue { origin, key, .. } => {
+        ParamError::BadValue { origin, source } => {
             assert_eq!(origin, "bad.toml");
-            key
+            source.name.into_owned()
         }
         other => panic!("expected BadValue from\n{text}\ngot {other:?}"),
     }

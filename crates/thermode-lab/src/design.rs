@@ -17,13 +17,16 @@
 //! stored under their library names. The response options must be exactly the materials (in any order): the
 //! analysis takes the presented materials as the options and the chance level as one over their number, so an option
 //! that is never presented would make the data inconsistent with it. Unknown keys, wrong types, out-of-range
-//! numbers, duplicate names and unknown materials are errors naming the file and the key.
+//! numbers, duplicate names and unknown materials are errors naming the file and the key. The file is read with
+//! [`thermode_model::params::Table`], the reader of every parameter file.
 
 use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
 use thermode_model::materials::find;
+use thermode_model::params::{self, Rule, Table};
+use thermode_model::ParamError;
 use thiserror::Error;
 
 /// Why an experiment file was refused. Every variant names the file.
@@ -37,55 +40,11 @@ pub enum DesignError {
         /// The operating-system error (part of the message, so not chained as a source).
         error: std::io::Error,
     },
-    /// The text is not valid TOML (the message gives line and column).
-    #[error("{}: invalid TOML: {message}", file.display())]
-    Syntax {
-        /// The experiment file.
-        file: PathBuf,
-        /// The parser's message.
-        message: String,
-    },
-    /// A key the format does not know.
-    #[error("{}: unknown key `{key}` (known keys: {})", file.display(), KNOWN_KEYS.join(", "))]
-    UnknownKey {
-        /// The experiment file.
-        file: PathBuf,
-        /// The unknown key.
-        key: String,
-    },
-    /// A required key is absent.
-    #[error("{}: missing key `{key}`", file.display())]
-    MissingKey {
-        /// The experiment file.
-        file: PathBuf,
-        /// The required key.
-        key: String,
-    },
-    /// A key's value has the wrong type or is out of range.
-    #[error("{}: `{key}`: {message}", file.display())]
-    BadValue {
-        /// The experiment file.
-        file: PathBuf,
-        /// The key.
-        key: String,
-        /// What is wrong and what is expected.
-        message: String,
-    },
+    /// The text is not valid TOML, or a key is unknown, missing, of the wrong type or out of range (the error names
+    /// the file and the key).
+    #[error(transparent)]
+    Param(#[from] ParamError),
 }
-
-/// Every key an experiment file may contain.
-pub const KNOWN_KEYS: [&str; 10] = [
-    "name",
-    "materials",
-    "conditions",
-    "participants",
-    "participant_ids",
-    "repetitions",
-    "presentation_s",
-    "response_options",
-    "exclusion_max_drift_c",
-    "seed",
-];
 
 /// Default presentation time \[s\] (the paper: "after 30 seconds of presentation").
 pub const DEFAULT_PRESENTATION_S: f64 = 30.0;
@@ -152,39 +111,36 @@ impl ExperimentFile {
 impl Experiment {
     /// Parses and validates an experiment file's text; `file` names it in errors.
     pub fn from_toml_str(text: &str, file: &Path) -> Result<Experiment, DesignError> {
-        let table: toml::Table = text.parse().map_err(|e: toml::de::Error| DesignError::Syntax {
-            file: file.to_path_buf(),
-            message: e.to_string().trim().to_string(),
-        })?;
-        let keys = Keys { table: &table, file };
-        keys.reject_unknown()?;
-        let name = keys.name()?;
-        let materials = keys.materials("materials")?.ok_or_else(|| keys.missing("materials"))?;
+        let origin = file.display().to_string();
+        let toml = params::parse(text, &origin)?;
+        let keys = Table::new(&toml, &origin);
+        let name = name(&keys)?;
+        let materials = material_names(&keys, "materials")?.ok_or_else(|| keys.missing("materials"))?;
         if materials.len() < 2 {
-            return Err(keys.bad("materials", "needs at least 2 materials".to_string()));
+            return Err(keys.invalid("materials", "needs at least 2 materials").into());
         }
         let participants = keys
-            .count("participants", MAX_PARTICIPANTS)?
+            .count("participants", 1, MAX_PARTICIPANTS)?
             .ok_or_else(|| keys.missing("participants"))?;
-        let response_options = match keys.materials("response_options")? {
+        let response_options = match material_names(&keys, "response_options")? {
             Some(options) => check_options(&keys, options, &materials)?,
             None => materials.clone(),
         };
-        Ok(Experiment {
+        let experiment = Experiment {
             name,
-            conditions: keys.conditions()?,
-            participant_ids: keys.participant_ids(participants)?,
-            repetitions: keys.count("repetitions", MAX_REPETITIONS)?.unwrap_or(1),
-            presentation_s: keys
-                .positive("presentation_s", MAX_PRESENTATION_S)?
+            conditions: conditions(&keys)?,
+            participant_ids: participant_ids(&keys, participants)?,
+            repetitions: keys.count("repetitions", 1, MAX_REPETITIONS)?.unwrap_or(1),
+            presentation_s: positive_at_most(&keys, "presentation_s", MAX_PRESENTATION_S)?
                 .unwrap_or(DEFAULT_PRESENTATION_S),
-            exclusion_max_drift_c: keys
-                .positive("exclusion_max_drift_c", f64::MAX)?
+            exclusion_max_drift_c: positive_at_most(&keys, "exclusion_max_drift_c", f64::MAX)?
                 .unwrap_or(DEFAULT_EXCLUSION_MAX_DRIFT_C),
-            seed: keys.seed()?,
+            seed: seed(&keys)?,
             response_options,
             materials,
-        })
+        };
+        keys.finish()?;
+        Ok(experiment)
     }
 
     /// Number of participants.
@@ -250,13 +206,13 @@ pub fn is_valid_identifier(id: &str) -> bool {
 }
 
 /// The response options must be the materials, each once.
-fn check_options(keys: &Keys, options: Vec<String>, materials: &[String]) -> Result<Vec<String>, DesignError> {
+fn check_options(keys: &Table, options: Vec<String>, materials: &[String]) -> Result<Vec<String>, ParamError> {
     let mut a = options.clone();
     let mut b = materials.to_vec();
     a.sort();
     b.sort();
     if a != b {
-        return Err(keys.bad(
+        return Err(keys.invalid(
             "response_options",
             format!(
                 "must list exactly the materials ({}) in any order: the analysis takes the presented materials \
@@ -268,167 +224,99 @@ fn check_options(keys: &Keys, options: Vec<String>, materials: &[String]) -> Res
     Ok(options)
 }
 
-/// Typed access to the keys of one experiment file.
-struct Keys<'a> {
-    table: &'a toml::Table,
-    file: &'a Path,
+/// An array of distinct strings.
+fn distinct_strings(keys: &Table, key: &str) -> Result<Option<Vec<String>>, ParamError> {
+    let Some(strings) = keys.strings(key)? else {
+        return Ok(None);
+    };
+    if let Some(dup) = first_duplicate(&strings) {
+        return Err(keys.invalid(key, format!("`{dup}` appears more than once")));
+    }
+    Ok(Some(strings))
 }
 
-impl Keys<'_> {
-    fn missing(&self, key: &str) -> DesignError {
-        DesignError::MissingKey {
-            file: self.file.to_path_buf(),
-            key: key.to_string(),
-        }
+fn name(keys: &Table) -> Result<String, ParamError> {
+    let name = keys.required_string("name")?;
+    if !is_valid_identifier(&name) {
+        return Err(keys.invalid(
+            "name",
+            format!("{name:?} must be 1 to 64 characters from A-Z, a-z, 0-9, `_` and `-` (it names files)"),
+        ));
     }
+    Ok(name)
+}
 
-    fn bad(&self, key: &str, message: String) -> DesignError {
-        DesignError::BadValue {
-            file: self.file.to_path_buf(),
-            key: key.to_string(),
-            message,
-        }
+/// A list of material names resolved to library names.
+fn material_names(keys: &Table, key: &str) -> Result<Option<Vec<String>>, ParamError> {
+    let Some(names) = distinct_strings(keys, key)? else {
+        return Ok(None);
+    };
+    let resolved: Vec<String> = names
+        .iter()
+        .map(|n| find(n).map(|m| m.name).map_err(|e| keys.invalid(key, e)))
+        .collect::<Result<_, _>>()?;
+    if let Some(dup) = first_duplicate(&resolved) {
+        return Err(keys.invalid(key, format!("`{dup}` appears more than once (after resolving aliases)")));
     }
+    Ok(Some(resolved))
+}
 
-    fn reject_unknown(&self) -> Result<(), DesignError> {
-        match self.table.keys().find(|k| !KNOWN_KEYS.contains(&k.as_str())) {
-            Some(key) => Err(DesignError::UnknownKey {
-                file: self.file.to_path_buf(),
-                key: key.clone(),
-            }),
-            None => Ok(()),
-        }
+fn conditions(keys: &Table) -> Result<Vec<Condition>, ParamError> {
+    let Some(names) = distinct_strings(keys, "conditions")? else {
+        return Ok(Condition::ALL.to_vec());
+    };
+    if names.is_empty() {
+        return Err(keys.invalid("conditions", "needs at least one of `real`, `simulated`"));
     }
+    let parsed: Vec<Condition> = names
+        .iter()
+        .map(|n| {
+            Condition::parse(n)
+                .ok_or_else(|| keys.invalid("conditions", format!("`{n}` is neither `real` nor `simulated`")))
+        })
+        .collect::<Result<_, _>>()?;
+    if parsed.len() == 2 && parsed[0] == parsed[1] {
+        return Err(keys.invalid("conditions", "a condition appears more than once"));
+    }
+    Ok(parsed)
+}
 
-    fn string(&self, key: &str) -> Result<Option<String>, DesignError> {
-        match self.table.get(key) {
-            None => Ok(None),
-            Some(toml::Value::String(s)) => Ok(Some(s.clone())),
-            Some(other) => Err(self.bad(key, format!("must be a string, found {}", other.type_str()))),
-        }
+/// A finite number in (0, max]; integers are accepted.
+fn positive_at_most(keys: &Table, key: &str, max: f64) -> Result<Option<f64>, ParamError> {
+    let Some(value) = keys.number(key, Rule::Positive)? else {
+        return Ok(None);
+    };
+    let rule = Rule::Within { min: 0.0, max };
+    if rule.admits(value) {
+        Ok(Some(value))
+    } else {
+        Err(keys.bad(key, value, rule))
     }
+}
 
-    fn strings(&self, key: &str) -> Result<Option<Vec<String>>, DesignError> {
-        let Some(value) = self.table.get(key) else {
-            return Ok(None);
-        };
-        let wrong = || self.bad(key, format!("must be an array of strings, found {value}"));
-        let items = value.as_array().ok_or_else(wrong)?;
-        let strings: Option<Vec<String>> = items.iter().map(|v| v.as_str().map(str::to_string)).collect();
-        let strings = strings.ok_or_else(wrong)?;
-        if let Some(dup) = first_duplicate(&strings) {
-            return Err(self.bad(key, format!("`{dup}` appears more than once")));
-        }
-        Ok(Some(strings))
-    }
+fn seed(keys: &Table) -> Result<u64, ParamError> {
+    let seed = keys.integer("seed")?.ok_or_else(|| keys.missing("seed"))?;
+    u64::try_from(seed).map_err(|_| keys.bad("seed", seed as f64, Rule::NonNegative))
+}
 
-    fn name(&self) -> Result<String, DesignError> {
-        let name = self.string("name")?.ok_or_else(|| self.missing("name"))?;
-        if !is_valid_identifier(&name) {
-            return Err(self.bad(
-                "name",
-                format!("{name:?} must be 1 to 64 characters from A-Z, a-z, 0-9, `_` and `-` (it names files)"),
-            ));
-        }
-        Ok(name)
+fn participant_ids(keys: &Table, participants: usize) -> Result<Vec<String>, ParamError> {
+    let Some(ids) = distinct_strings(keys, "participant_ids")? else {
+        let width = participants.to_string().len().max(2);
+        return Ok((1..=participants).map(|i| format!("P{i:0width$}")).collect());
+    };
+    if ids.len() != participants {
+        return Err(keys.invalid(
+            "participant_ids",
+            format!("has {} identifiers for {participants} participants", ids.len()),
+        ));
     }
-
-    /// A list of material names resolved to library names.
-    fn materials(&self, key: &str) -> Result<Option<Vec<String>>, DesignError> {
-        let Some(names) = self.strings(key)? else {
-            return Ok(None);
-        };
-        let resolved: Vec<String> = names
-            .iter()
-            .map(|n| find(n).map(|m| m.name).map_err(|e| self.bad(key, e.to_string())))
-            .collect::<Result<_, _>>()?;
-        if let Some(dup) = first_duplicate(&resolved) {
-            return Err(self.bad(key, format!("`{dup}` appears more than once (after resolving aliases)")));
-        }
-        Ok(Some(resolved))
+    if let Some(bad) = ids.iter().find(|id| !is_valid_identifier(id)) {
+        return Err(keys.invalid(
+            "participant_ids",
+            format!("{bad:?} must be 1 to 64 characters from A-Z, a-z, 0-9, `_` and `-`"),
+        ));
     }
-
-    fn conditions(&self) -> Result<Vec<Condition>, DesignError> {
-        let Some(names) = self.strings("conditions")? else {
-            return Ok(Condition::ALL.to_vec());
-        };
-        if names.is_empty() {
-            return Err(self.bad("conditions", "needs at least one of `real`, `simulated`".to_string()));
-        }
-        let parsed: Vec<Condition> = names
-            .iter()
-            .map(|n| {
-                Condition::parse(n)
-                    .ok_or_else(|| self.bad("conditions", format!("`{n}` is neither `real` nor `simulated`")))
-            })
-            .collect::<Result<_, _>>()?;
-        if parsed.len() == 2 && parsed[0] == parsed[1] {
-            return Err(self.bad("conditions", "a condition appears more than once".to_string()));
-        }
-        Ok(parsed)
-    }
-
-    fn integer(&self, key: &str) -> Result<Option<i64>, DesignError> {
-        match self.table.get(key) {
-            None => Ok(None),
-            Some(toml::Value::Integer(i)) => Ok(Some(*i)),
-            Some(other) => Err(self.bad(key, format!("must be an integer, found {other}"))),
-        }
-    }
-
-    /// A count between 1 and `max`.
-    fn count(&self, key: &str, max: usize) -> Result<Option<usize>, DesignError> {
-        let Some(i) = self.integer(key)? else {
-            return Ok(None);
-        };
-        match usize::try_from(i) {
-            Ok(n) if (1..=max).contains(&n) => Ok(Some(n)),
-            _ => Err(self.bad(key, format!("{i} is out of range: must be between 1 and {max}"))),
-        }
-    }
-
-    /// A finite number in (0, max]; integers are accepted.
-    fn positive(&self, key: &str, max: f64) -> Result<Option<f64>, DesignError> {
-        let value = match self.table.get(key) {
-            None => return Ok(None),
-            Some(toml::Value::Float(f)) => *f,
-            Some(toml::Value::Integer(i)) => *i as f64,
-            Some(other) => return Err(self.bad(key, format!("must be a number, found {other}"))),
-        };
-        if value.is_finite() && value > 0.0 && value <= max {
-            Ok(Some(value))
-        } else {
-            Err(self.bad(
-                key,
-                format!("{value} is out of range: must be a finite number above 0 and at most {max}"),
-            ))
-        }
-    }
-
-    fn seed(&self) -> Result<u64, DesignError> {
-        let seed = self.integer("seed")?.ok_or_else(|| self.missing("seed"))?;
-        u64::try_from(seed).map_err(|_| self.bad("seed", format!("{seed} is negative: must be 0 or more")))
-    }
-
-    fn participant_ids(&self, participants: usize) -> Result<Vec<String>, DesignError> {
-        let Some(ids) = self.strings("participant_ids")? else {
-            let width = participants.to_string().len().max(2);
-            return Ok((1..=participants).map(|i| format!("P{i:0width$}")).collect());
-        };
-        if ids.len() != participants {
-            return Err(self.bad(
-                "participant_ids",
-                format!("has {} identifiers for {participants} participants", ids.len()),
-            ));
-        }
-        if let Some(bad) = ids.iter().find(|id| !is_valid_identifier(id)) {
-            return Err(self.bad(
-                "participant_ids",
-                format!("{bad:?} must be 1 to 64 characters from A-Z, a-z, 0-9, `_` and `-`"),
-            ));
-        }
-        Ok(ids)
-    }
+    Ok(ids)
 }
 
 fn first_duplicate(items: &[String]) -> Option<&String> {

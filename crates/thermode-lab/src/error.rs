@@ -102,7 +102,7 @@ pub enum LabError {
     },
     /// A field that cannot be parsed or is out of range (e.g. `excluded = maybe`, a non-finite temperature).
     #[error("{}:{line}: column `{column}` = `{value}`: {expected}", file.display())]
-    BadValue {
+    BadField {
         /// The CSV file.
         file: PathBuf,
         /// 1-based line of the row.

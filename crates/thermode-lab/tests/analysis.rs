@@ -547,7 +547,7 @@ fn bad_inputs_give_typed_errors_with_file_and_line() {
     );
     let (err, msg) = error_of("participant,condition,presented,identified,excluded\np1,real,wood,wood,perhaps\n");
     assert!(
-        matches!(&err, LabError::BadValue { line: 2, column, .. } if column == "excluded"),
+        matches!(&err, LabError::BadField { line: 2, column, .. } if column == "excluded"),
         "{msg}"
     );
     let (err, msg) = error_of("participant,condition,presented,identified,excluded\np1,real,wood,wood,1\n");
@@ -791,7 +791,7 @@ fn curve_files_without_repetition_column_and_bad_curves() {
         &format!("{header}0,30,steel,real\n1,29,steel,real\n0.5,29.5,steel,real\n"),
     );
     assert!(
-        matches!(&err, LabError::BadValue { line: 4, column, .. } if column == "time_s"),
+        matches!(&err, LabError::BadField { line: 4, column, .. } if column == "time_s"),
         "{err}"
     );
     let err = bad(
@@ -801,7 +801,7 @@ fn curve_files_without_repetition_column_and_bad_curves() {
     assert!(matches!(err, LabError::UnknownMaterial { line: 2, .. }), "{err}");
     let err = bad("nan.csv", &format!("{header}0,NaN,steel,real\n1,29,steel,real\n"));
     assert!(
-        matches!(&err, LabError::BadValue { line: 2, column, .. } if column == "skin_c"),
+        matches!(&err, LabError::BadField { line: 2, column, .. } if column == "skin_c"),
         "{err}"
     );
 }

@@ -26,6 +26,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use thermode_model::{BadValue, Rule};
 use thermode_platform::Clock;
 use thermode_safety::DriveCommand;
 
@@ -83,30 +84,29 @@ impl Default for SerialConfig {
 impl SerialConfig {
     /// `Ok` if every setting is in its range.
     pub fn validate(&self) -> Result<(), DeviceError> {
+        // (name, value, lower rule, largest allowed value)
         let checks = [
-            ("handshake_timeout_s", self.handshake_timeout_s, false, 60.0),
-            ("link_timeout_s", self.link_timeout_s, false, 10.0),
-            ("drive_interval_s", self.drive_interval_s, true, 1.0),
-            ("write_timeout_s", self.write_timeout_s, false, 1.0),
-            ("read_poll_s", self.read_poll_s, false, 0.1),
+            (
+                "serial handshake_timeout_s [s]",
+                self.handshake_timeout_s,
+                Rule::Positive,
+                60.0,
+            ),
+            ("serial link_timeout_s [s]", self.link_timeout_s, Rule::Positive, 10.0),
+            (
+                "serial drive_interval_s [s]",
+                self.drive_interval_s,
+                Rule::NonNegative,
+                1.0,
+            ),
+            ("serial write_timeout_s [s]", self.write_timeout_s, Rule::Positive, 1.0),
+            ("serial read_poll_s [s]", self.read_poll_s, Rule::Positive, 0.1),
         ];
-        for (what, value, zero_ok, max) in checks {
-            let above_min = if zero_ok { value >= 0.0 } else { value > 0.0 };
-            if !(above_min && value <= max) {
-                return Err(DeviceError::BadValue {
-                    what: format!("serial {what} [s]"),
-                    value,
-                    requirement: format!("must lie in {}0, {max}]", if zero_ok { "[" } else { "(" }),
-                });
-            }
+        for (name, value, lower, max) in checks {
+            lower.check(name, value)?;
+            Rule::Within { min: 0.0, max }.check(name, value)?;
         }
-        if self.baud_rate == 0 {
-            return Err(DeviceError::BadValue {
-                what: "serial baud_rate [bit/s]".to_string(),
-                value: 0.0,
-                requirement: "must be positive".to_string(),
-            });
-        }
+        Rule::Positive.check("serial baud_rate [bit/s]", f64::from(self.baud_rate))?;
         Ok(())
     }
 }
@@ -637,11 +637,8 @@ impl Device for SerialDevice {
     fn apply(&mut self, channel: usize, command: &DriveCommand) -> Result<(), DeviceError> {
         self.check_channel(channel)?;
         let current_a = command.current_a();
-        let ma = to_milliamps(current_a).ok_or_else(|| DeviceError::BadValue {
-            what: format!("channel {channel} drive current [A]"),
-            value: current_a,
-            requirement: "must be finite and within ±32.767 A".to_string(),
-        })?;
+        let ma = to_milliamps(current_a)
+            .ok_or_else(|| BadValue::custom("drive current [A]", current_a, "must be finite and within ±32.767 A"))?;
         self.check_failed()?;
         let bit = 1u16 << channel;
         if self.round & bit != 0 {

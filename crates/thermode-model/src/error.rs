@@ -1,13 +1,16 @@
-//! Typed errors for parameters: material and skin files, physical values out of range, unknown names.
+//! Typed errors for parameters: material, skin, device and experiment files, refused numbers (the one
+//! [`BadValue`] with the file it came from), unknown names.
 
 use thiserror::Error;
+
+use crate::params::BadValue;
 
 /// Why a set of parameters was refused. Every variant names what was wrong and where it came from (`origin` is the
 /// file name, or `"built-in"`/`"command line"`), so the message can be shown to a user as it is.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum ParamError {
-    /// The text is not valid TOML, or a value has the wrong type.
-    #[error("{origin}: {message}")]
+    /// The text is not valid TOML.
+    #[error("{origin}: invalid TOML: {message}")]
     Syntax {
         /// Where the parameters came from (file name, `"built-in"`, `"command line"`).
         origin: String,
@@ -52,17 +55,13 @@ pub enum ParamError {
         /// The type found.
         found: String,
     },
-    /// A number that must be finite and inside a range is not.
-    #[error("{origin}: `{key}` = {value} is invalid: {requirement}")]
+    /// A number that breaks its [`Rule`](crate::params::Rule): the one [`BadValue`], with where it came from.
+    #[error("{origin}: {source}")]
     BadValue {
         /// Where the parameters came from (file name, `"built-in"`, `"command line"`).
         origin: String,
-        /// The key.
-        key: String,
-        /// The offending value.
-        value: f64,
-        /// What the value must satisfy.
-        requirement: String,
+        /// The refused number: its key (with the section path), value and rule.
+        source: BadValue,
     },
     /// A structural problem (wrong number of layers, empty name, …).
     #[error("{origin}: {message}")]
@@ -90,44 +89,32 @@ fn suggest(close: &[String]) -> String {
     }
 }
 
-/// Checks that `value` is finite and strictly positive.
-pub fn require_positive(origin: &str, key: &str, value: f64) -> Result<f64, ParamError> {
-    if value.is_finite() && value > 0.0 {
-        Ok(value)
-    } else {
-        Err(ParamError::BadValue {
+impl ParamError {
+    /// A [`ParamError::BadValue`]: `source` refused, from `origin`.
+    pub fn bad_value(origin: &str, source: BadValue) -> Self {
+        ParamError::BadValue {
             origin: origin.to_string(),
-            key: key.to_string(),
-            value,
-            requirement: "must be a finite number greater than zero".to_string(),
-        })
+            source,
+        }
+    }
+
+    /// The key (or description) of a refused number, if this is a [`ParamError::BadValue`].
+    pub fn bad_key(&self) -> Option<&str> {
+        match self {
+            ParamError::BadValue { source, .. } => Some(&source.name),
+            _ => None,
+        }
     }
 }
 
-/// Checks that `value` is finite and not negative.
-pub fn require_non_negative(origin: &str, key: &str, value: f64) -> Result<f64, ParamError> {
-    if value.is_finite() && value >= 0.0 {
-        Ok(value)
-    } else {
-        Err(ParamError::BadValue {
-            origin: origin.to_string(),
-            key: key.to_string(),
-            value,
-            requirement: "must be a finite number not below zero".to_string(),
-        })
-    }
+/// Attaches where a refused number came from: `Rule::Positive.check("dt_s", dt).at(origin)?`.
+pub trait At<T> {
+    /// The result with a [`BadValue`] turned into a [`ParamError::BadValue`] from `origin`.
+    fn at(self, origin: &str) -> Result<T, ParamError>;
 }
 
-/// Checks that `value` is finite (any sign).
-pub fn require_finite(origin: &str, key: &str, value: f64) -> Result<f64, ParamError> {
-    if value.is_finite() {
-        Ok(value)
-    } else {
-        Err(ParamError::BadValue {
-            origin: origin.to_string(),
-            key: key.to_string(),
-            value,
-            requirement: "must be a finite number".to_string(),
-        })
+impl<T> At<T> for Result<T, BadValue> {
+    fn at(self, origin: &str) -> Result<T, ParamError> {
+        self.map_err(|source| ParamError::bad_value(origin, source))
     }
 }

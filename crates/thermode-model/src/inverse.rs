@@ -6,7 +6,8 @@
 //! target. When the set-point is then limited (safety envelope, actuator), the second model is advanced with the
 //! limited value so it keeps tracking what the finger really receives.
 
-use crate::error::{require_positive, ParamError};
+use crate::error::{At, ParamError};
+use crate::params::Rule;
 
 /// Default finger–display contact conductance G_d [W/(m²·K)].
 ///
@@ -41,7 +42,9 @@ impl<M: PlateCoupled> DisplayInverse<M> {
     /// Wraps `model` (the finger resting on the display, in its current state) with the finger–display contact
     /// conductance G_d [W/(m²·K)] (default [`DEFAULT_DISPLAY_CONDUCTANCE_W_M2K`]), which must be finite and positive.
     pub fn new(model: M, conductance_w_m2k: f64) -> Result<Self, ParamError> {
-        require_positive("display inverse", "conductance_w_m2k", conductance_w_m2k)?;
+        Rule::Positive
+            .check("conductance_w_m2k", conductance_w_m2k)
+            .at("display inverse")?;
         Ok(DisplayInverse {
             model,
             conductance_w_m2k,

@@ -29,9 +29,10 @@
 //! its density and specific heat (and hence its effusivity) do not matter. The finite-volume model in
 //! [`crate::fv`] remedies this.
 
-use crate::error::{require_finite, require_positive, ParamError};
+use crate::error::{At, ParamError};
 use crate::inverse::PlateCoupled;
 use crate::materials::Material;
+use crate::params::{BadValue, Rule};
 use crate::skin::Skin;
 
 /// Ambient temperature \[°C\] of the paper's experiments (mean 23 °C); the initial state of [`KronModel::new`] is
@@ -88,22 +89,26 @@ impl KronEnvironment {
     /// The model's methods assume a valid environment (an invalid one gives non-finite temperatures, no panic).
     pub fn validate(&self, origin: &str) -> Result<(), ParamError> {
         match *self {
-            KronEnvironment::Air { ambient_c } => require_finite(origin, "ambient_c", ambient_c).map(drop),
+            KronEnvironment::Air { ambient_c } => Rule::Finite.check("ambient_c", ambient_c).at(origin).map(drop),
             KronEnvironment::Object {
                 conductivity_w_mk,
                 thickness_m,
                 temperature_c,
             } => {
-                require_positive(origin, "conductivity_w_mk", conductivity_w_mk)?;
-                require_positive(origin, "thickness_m", thickness_m)?;
-                require_finite(origin, "temperature_c", temperature_c).map(drop)
+                Rule::Positive
+                    .check("conductivity_w_mk", conductivity_w_mk)
+                    .at(origin)?;
+                Rule::Positive.check("thickness_m", thickness_m).at(origin)?;
+                Rule::Finite.check("temperature_c", temperature_c).at(origin).map(drop)
             }
             KronEnvironment::Plate {
                 conductance_w_m2k,
                 temperature_c,
             } => {
-                require_positive(origin, "conductance_w_m2k", conductance_w_m2k)?;
-                require_finite(origin, "temperature_c", temperature_c).map(drop)
+                Rule::Positive
+                    .check("conductance_w_m2k", conductance_w_m2k)
+                    .at(origin)?;
+                Rule::Finite.check("temperature_c", temperature_c).at(origin).map(drop)
             }
         }
     }
@@ -340,8 +345,8 @@ impl PlateCoupled for KronModel {
 /// reachable open interval (the message states the interval).
 pub fn calibrate_to_surface(skin: &Skin, ambient_c: f64, surface_c: f64) -> Result<Skin, ParamError> {
     const ORIGIN: &str = "surface calibration";
-    require_finite(ORIGIN, "ambient_c", ambient_c)?;
-    require_finite(ORIGIN, "surface_c", surface_c)?;
+    Rule::Finite.check("ambient_c", ambient_c).at(ORIGIN)?;
+    Rule::Finite.check("surface_c", surface_c).at(ORIGIN)?;
     let model = KronModel::new(skin)?;
     if model.perfusion_w_m2k.iter().all(|&p| p == 0.0) {
         return Err(ParamError::Invalid {
@@ -349,24 +354,19 @@ pub fn calibrate_to_surface(skin: &Skin, ambient_c: f64, surface_c: f64) -> Resu
             message: "the skin has no perfused layer, so its surface temperature cannot be calibrated".to_string(),
         });
     }
-    if ambient_c >= model.arterial_c {
-        return Err(bad_value(
-            "ambient_c",
-            ambient_c,
-            format!("must be below the arterial {} °C", model.arterial_c),
-        ));
-    }
+    let below_arterial = Rule::Below {
+        max: model.arterial_c,
+        what: "the arterial temperature [°C]",
+    };
+    below_arterial.check("ambient_c", ambient_c).at(ORIGIN)?;
     let env = KronEnvironment::Air { ambient_c };
     let t1 = |g: f64| model.steady_state_scaled_c(&env, g / (1.0 - g))[0];
     const G_MAX: f64 = 1.0 - 1e-12;
     let (t_lo, t_hi) = (t1(0.0), t1(G_MAX));
-    if !(surface_c > t_lo && surface_c < t_hi) {
-        let requirement = format!(
-            "must lie between {t_lo:.3} °C (no perfusion) and {t_hi:.3} °C (unlimited perfusion) for this skin in air \
-             at {ambient_c} °C"
-        );
-        return Err(bad_value("surface_c", surface_c, requirement));
-    }
+    // Between the surface temperature without perfusion and with unlimited perfusion, for this skin in this air.
+    Rule::Between { min: t_lo, max: t_hi }
+        .check("surface_c", surface_c)
+        .at(ORIGIN)?;
     let (mut lo, mut hi) = (0.0, G_MAX);
     for _ in 0..200 {
         let mid = 0.5 * (lo + hi);
@@ -379,22 +379,16 @@ pub fn calibrate_to_surface(skin: &Skin, ambient_c: f64, surface_c: f64) -> Resu
     let g = 0.5 * (lo + hi);
     let reached = t1(g);
     if (reached - surface_c).abs() > 1e-7 {
-        return Err(bad_value(
-            "surface_c",
-            surface_c,
-            format!("calibration reached only {reached} °C"),
+        return Err(ParamError::bad_value(
+            ORIGIN,
+            BadValue::custom(
+                "surface_c",
+                surface_c,
+                "could not be reached by the calibration's bisection",
+            ),
         ));
     }
     Ok(skin.with_perfusion_scaled(g / (1.0 - g)))
-}
-
-fn bad_value(key: &str, value: f64, requirement: String) -> ParamError {
-    ParamError::BadValue {
-        origin: "surface calibration".to_string(),
-        key: key.to_string(),
-        value,
-        requirement,
-    }
 }
 
 #[cfg(test)]
@@ -475,11 +469,15 @@ mod tests {
             thickness_m: 0.01,
             temperature_c: 23.0,
         };
-        assert!(matches!(bad.validate("t"), Err(ParamError::BadValue { key, .. }) if key == "conductivity_w_mk"));
+        assert!(
+            matches!(bad.validate("t"), Err(ParamError::BadValue { source, .. }) if source.name == "conductivity_w_mk")
+        );
         let bad = KronEnvironment::Plate {
             conductance_w_m2k: 800.0,
             temperature_c: f64::NAN,
         };
-        assert!(matches!(bad.validate("t"), Err(ParamError::BadValue { key, .. }) if key == "temperature_c"));
+        assert!(
+            matches!(bad.validate("t"), Err(ParamError::BadValue { source, .. }) if source.name == "temperature_c")
+        );
     }
 }

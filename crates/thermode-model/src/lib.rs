@@ -12,7 +12,8 @@
 //! - [`semi_infinite`]: the analytic model of two semi-infinite bodies (the paper's model (a)), with and without
 //!   contact resistance.
 //! - [`peltier`]: Peltier module physics (from datasheet values) and its inverse, for the plant and for feedforward.
-//! - [`params`]: the one parameter vocabulary: [`params::Rule`], [`params::Range`] and [`params::BadValue`].
+//! - [`params`]: the one parameter vocabulary: [`params::Rule`], [`params::Range`] and [`params::BadValue`], and
+//!   the one TOML table reader of parameter files, [`params::Table`].
 //! - [`simulate`]: one complete contact simulation with any of the three models, as `thermode simulate` runs it.
 
 pub mod error;

@@ -11,7 +11,8 @@
 
 use serde::Serialize;
 
-use crate::error::{require_positive, ParamError};
+use crate::error::{At, ParamError};
+use crate::params::{self, Rule, Table, CONDUCTIVITY, DENSITY, SPECIFIC_HEAT};
 use crate::units;
 
 /// Default thickness of a touched object \[m\] (1 cm) when a material file gives none.
@@ -57,10 +58,14 @@ impl Material {
     /// and appears in the error.
     pub fn validate(&self, origin: &str) -> Result<(), ParamError> {
         validate_name(origin, "name", &self.name)?;
-        require_positive(origin, "conductivity_w_mk", self.conductivity_w_mk)?;
-        require_positive(origin, "density_kg_m3", self.density_kg_m3)?;
-        require_positive(origin, "specific_heat_j_kgk", self.specific_heat_j_kgk)?;
-        require_positive(origin, "thickness_m", self.thickness_m)?;
+        for (key, value) in [
+            ("conductivity_w_mk", self.conductivity_w_mk),
+            ("density_kg_m3", self.density_kg_m3),
+            ("specific_heat_j_kgk", self.specific_heat_j_kgk),
+            ("thickness_m", self.thickness_m),
+        ] {
+            Rule::Positive.check(key, value).at(origin)?;
+        }
         Ok(())
     }
 
@@ -72,29 +77,19 @@ impl Material {
     /// `source` (default: "user file " followed by `origin`). Exactly one spelling per quantity. Missing, negative,
     /// zero, non-finite values, both spellings, unknown keys and wrong types are errors naming the key.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Material, ParamError> {
-        let table = fields::parse_table(text, origin)?;
-        let fields = fields::Fields::new(&table, origin, "");
-        fields.reject_unknown(&[
-            "name",
-            "conductivity_w_mk",
-            "conductivity_cal_cm_s_c",
-            "density_kg_m3",
-            "density_g_cm3",
-            "specific_heat_j_kgk",
-            "specific_heat_cal_g_c",
-            "thickness_m",
-            "source",
-        ])?;
+        let toml = params::parse(text, origin)?;
+        let file = Table::new(&toml, origin);
         let material = Material {
-            name: fields.required_string("name")?,
-            conductivity_w_mk: fields.conductivity()?,
-            density_kg_m3: fields.density()?,
-            specific_heat_j_kgk: fields.specific_heat()?,
-            thickness_m: fields.optional_positive("thickness_m")?.unwrap_or(DEFAULT_THICKNESS_M),
-            source: fields
-                .optional_string("source")?
-                .unwrap_or_else(|| format!("user file {origin}")),
+            name: file.required_string("name")?,
+            conductivity_w_mk: file.required_either(CONDUCTIVITY, Rule::Positive)?,
+            density_kg_m3: file.required_either(DENSITY, Rule::Positive)?,
+            specific_heat_j_kgk: file.required_either(SPECIFIC_HEAT, Rule::Positive)?,
+            thickness_m: file
+                .number("thickness_m", Rule::Positive)?
+                .unwrap_or(DEFAULT_THICKNESS_M),
+            source: file.string("source")?.unwrap_or_else(|| format!("user file {origin}")),
         };
+        file.finish()?;
         material.validate(origin)?;
         Ok(material)
     }
@@ -330,167 +325,6 @@ fn edit_distance(a: &str, b: &str) -> usize {
     row[b.len()]
 }
 
-/// Reading typed, validated fields from a TOML table (shared by material and skin files).
-pub(crate) mod fields {
-    use crate::error::{require_finite, require_non_negative, require_positive, ParamError};
-    use crate::units;
-
-    /// Parses TOML text into a table; syntax errors carry `origin`.
-    pub(crate) fn parse_table(text: &str, origin: &str) -> Result<toml::Table, ParamError> {
-        text.parse::<toml::Table>().map_err(|e| ParamError::Syntax {
-            origin: origin.to_string(),
-            message: e.to_string().trim().to_string(),
-        })
-    }
-
-    /// A TOML table with the file it came from and the path of the table inside it (for error messages).
-    pub(crate) struct Fields<'a> {
-        table: &'a toml::Table,
-        origin: &'a str,
-        prefix: String,
-    }
-
-    impl<'a> Fields<'a> {
-        /// `prefix` is prepended to key names in errors (e.g. `"layer[2]."`, or `""` at top level).
-        pub(crate) fn new(table: &'a toml::Table, origin: &'a str, prefix: &str) -> Self {
-            Fields {
-                table,
-                origin,
-                prefix: prefix.to_string(),
-            }
-        }
-
-        /// The full key name used in error messages.
-        pub(crate) fn key(&self, key: &str) -> String {
-            format!("{}{}", self.prefix, key)
-        }
-
-        pub(crate) fn reject_unknown(&self, allowed: &[&str]) -> Result<(), ParamError> {
-            match self.table.keys().find(|k| !allowed.contains(&k.as_str())) {
-                Some(k) => Err(ParamError::UnknownKey {
-                    origin: self.origin.to_string(),
-                    key: self.key(k),
-                }),
-                None => Ok(()),
-            }
-        }
-
-        fn wrong_type(&self, key: &str, expected: &str, found: &toml::Value) -> ParamError {
-            ParamError::WrongType {
-                origin: self.origin.to_string(),
-                key: self.key(key),
-                expected: expected.to_string(),
-                found: format!("{} {}", found.type_str(), found),
-            }
-        }
-
-        fn missing(&self, key: &str) -> ParamError {
-            ParamError::MissingKey {
-                origin: self.origin.to_string(),
-                key: self.key(key),
-            }
-        }
-
-        /// A number (TOML float or integer) if present; any other type is an error. Not range-checked.
-        pub(crate) fn optional_number(&self, key: &str) -> Result<Option<f64>, ParamError> {
-            match self.table.get(key) {
-                None => Ok(None),
-                Some(toml::Value::Float(v)) => Ok(Some(*v)),
-                // Integers in material files are small; the conversion is exact below 2^53.
-                Some(toml::Value::Integer(v)) => Ok(Some(*v as f64)),
-                Some(other) => Err(self.wrong_type(key, "a number", other)),
-            }
-        }
-
-        pub(crate) fn optional_string(&self, key: &str) -> Result<Option<String>, ParamError> {
-            match self.table.get(key) {
-                None => Ok(None),
-                Some(toml::Value::String(s)) => Ok(Some(s.clone())),
-                Some(other) => Err(self.wrong_type(key, "a string", other)),
-            }
-        }
-
-        pub(crate) fn required_string(&self, key: &str) -> Result<String, ParamError> {
-            self.optional_string(key)?.ok_or_else(|| self.missing(key))
-        }
-
-        pub(crate) fn optional_table(&self, key: &str) -> Result<Option<&'a toml::Table>, ParamError> {
-            match self.table.get(key) {
-                None => Ok(None),
-                Some(toml::Value::Table(t)) => Ok(Some(t)),
-                Some(other) => Err(self.wrong_type(key, "a table", other)),
-            }
-        }
-
-        pub(crate) fn optional_array(&self, key: &str) -> Result<Option<&'a Vec<toml::Value>>, ParamError> {
-            match self.table.get(key) {
-                None => Ok(None),
-                Some(toml::Value::Array(a)) => Ok(Some(a)),
-                Some(other) => Err(self.wrong_type(key, "an array of tables", other)),
-            }
-        }
-
-        pub(crate) fn optional_positive(&self, key: &str) -> Result<Option<f64>, ParamError> {
-            self.optional_number(key)?
-                .map(|v| require_positive(self.origin, &self.key(key), v))
-                .transpose()
-        }
-
-        pub(crate) fn required_positive(&self, key: &str) -> Result<f64, ParamError> {
-            self.optional_positive(key)?.ok_or_else(|| self.missing(key))
-        }
-
-        pub(crate) fn optional_non_negative(&self, key: &str) -> Result<Option<f64>, ParamError> {
-            self.optional_number(key)?
-                .map(|v| require_non_negative(self.origin, &self.key(key), v))
-                .transpose()
-        }
-
-        pub(crate) fn required_finite(&self, key: &str) -> Result<f64, ParamError> {
-            let v = self.optional_number(key)?.ok_or_else(|| self.missing(key))?;
-            require_finite(self.origin, &self.key(key), v)
-        }
-
-        /// A strictly positive quantity given in exactly one of two spellings; the cgs value is converted with
-        /// `to_si`. Neither or both spellings is an error.
-        pub(crate) fn one_of(&self, si_key: &str, cgs_key: &str, to_si: fn(f64) -> f64) -> Result<f64, ParamError> {
-            match (self.optional_positive(si_key)?, self.optional_positive(cgs_key)?) {
-                (Some(v), None) => Ok(v),
-                (None, Some(v)) => Ok(to_si(v)),
-                (Some(_), Some(_)) => Err(ParamError::BothSpellings {
-                    origin: self.origin.to_string(),
-                    si_key: self.key(si_key),
-                    cgs_key: self.key(cgs_key),
-                }),
-                (None, None) => Err(self.missing(si_key)),
-            }
-        }
-
-        /// Conductivity [W/(m·K)] from `conductivity_w_mk` or `conductivity_cal_cm_s_c`.
-        pub(crate) fn conductivity(&self) -> Result<f64, ParamError> {
-            self.one_of(
-                "conductivity_w_mk",
-                "conductivity_cal_cm_s_c",
-                units::conductivity_to_si,
-            )
-        }
-
-        /// Density [kg/m³] from `density_kg_m3` or `density_g_cm3`.
-        pub(crate) fn density(&self) -> Result<f64, ParamError> {
-            self.one_of("density_kg_m3", "density_g_cm3", units::density_to_si)
-        }
-
-        /// Specific heat [J/(kg·K)] from `specific_heat_j_kgk` or `specific_heat_cal_g_c`.
-        pub(crate) fn specific_heat(&self) -> Result<f64, ParamError> {
-            self.one_of(
-                "specific_heat_j_kgk",
-                "specific_heat_cal_g_c",
-                units::specific_heat_to_si,
-            )
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -647,8 +481,8 @@ mod tests {
 
     fn assert_bad_value(e: ParamError, want_key: &str) {
         match &e {
-            ParamError::BadValue { origin, key, .. } => {
-                assert_eq!((origin.as_str(), key.as_str()), ("bad.toml", want_key))
+            ParamError::BadValue { origin, source } => {
+                assert_eq!((origin.as_str(), source.name.as_ref()), ("bad.toml", want_key))
             }
             other => panic!("expected BadValue for {want_key}, got {other:?}"),
         }
@@ -732,8 +566,8 @@ mod tests {
         assert_eq!(m.validate("net"), Ok(()));
         m.thickness_m = f64::NAN;
         match m.validate("net") {
-            Err(ParamError::BadValue { origin, key, .. }) => {
-                assert_eq!((origin.as_str(), key.as_str()), ("net", "thickness_m"))
+            Err(ParamError::BadValue { origin, source }) => {
+                assert_eq!((origin.as_str(), source.name.as_ref()), ("net", "thickness_m"))
             }
             other => panic!("expected BadValue, got {other:?}"),
         }

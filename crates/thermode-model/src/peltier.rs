@@ -26,7 +26,8 @@
 //! miniature module that is 3.30 W against the quoted 3.2 W (+3 %); [`PeltierModule::from_datasheet`] refuses
 //! datasheets where the two differ by more than [`QMAX_CONSISTENCY_TOLERANCE`], which catches typing errors.
 
-use crate::error::{require_positive, ParamError};
+use crate::error::{At, ParamError};
+use crate::params::Rule;
 
 /// Offset between °C and K.
 pub const KELVIN_OFFSET: f64 = 273.15;
@@ -83,31 +84,26 @@ impl PeltierDatasheet {
     /// names in errors (e.g. `"peltier."` for a device file, `""` otherwise).
     pub fn validate(&self, origin: &str, prefix: &str) -> Result<(), ParamError> {
         let key = |k: &str| format!("{prefix}{k}");
-        require_positive(origin, &key("imax_a"), self.imax_a)?;
-        require_positive(origin, &key("vmax_v"), self.vmax_v)?;
-        require_positive(origin, &key("qmax_w"), self.qmax_w)?;
-        require_positive(origin, &key("dtmax_k"), self.dtmax_k)?;
-        require_positive(origin, &key("hot_side_k"), self.hot_side_k)?;
-        if self.dtmax_k >= self.hot_side_k {
-            return Err(ParamError::BadValue {
-                origin: origin.to_string(),
-                key: key("dtmax_k"),
-                value: self.dtmax_k,
-                requirement: format!("must be below the hot-side temperature {} K", self.hot_side_k),
-            });
+        Rule::Positive.check(key("imax_a"), self.imax_a).at(origin)?;
+        Rule::Positive.check(key("vmax_v"), self.vmax_v).at(origin)?;
+        Rule::Positive.check(key("qmax_w"), self.qmax_w).at(origin)?;
+        Rule::Positive.check(key("dtmax_k"), self.dtmax_k).at(origin)?;
+        Rule::Positive.check(key("hot_side_k"), self.hot_side_k).at(origin)?;
+        let below_hot_side = Rule::Below {
+            max: self.hot_side_k,
+            what: "the hot-side temperature hot_side_k [K]",
+        };
+        if !below_hot_side.admits(self.dtmax_k) {
+            return below_hot_side.check(key("dtmax_k"), self.dtmax_k).at(origin).map(drop);
         }
         let predicted = self.predicted_qmax_w();
-        if (self.qmax_w - predicted).abs() > QMAX_CONSISTENCY_TOLERANCE * predicted {
-            return Err(ParamError::BadValue {
-                origin: origin.to_string(),
-                key: key("qmax_w"),
-                value: self.qmax_w,
-                requirement: format!(
-                    "is inconsistent with I_max, V_max and ΔT_max, which imply Q_max ≈ {predicted:.3} W \
-                     (allowed difference {:.0} %)",
-                    100.0 * QMAX_CONSISTENCY_TOLERANCE
-                ),
-            });
+        let consistent = Rule::Near {
+            target: predicted,
+            relative: QMAX_CONSISTENCY_TOLERANCE,
+            what: "the Q_max [W] that I_max, V_max and ΔT_max imply",
+        };
+        if !consistent.admits(self.qmax_w) {
+            return consistent.check(key("qmax_w"), self.qmax_w).at(origin).map(drop);
         }
         Ok(())
     }
@@ -153,9 +149,9 @@ impl PeltierModule {
     pub fn new(seebeck_v_k: f64, resistance_ohm: f64, conductance_w_k: f64) -> Result<Self, ParamError> {
         let origin = "peltier module";
         Ok(PeltierModule {
-            seebeck_v_k: require_positive(origin, "seebeck_v_k", seebeck_v_k)?,
-            resistance_ohm: require_positive(origin, "resistance_ohm", resistance_ohm)?,
-            conductance_w_k: require_positive(origin, "conductance_w_k", conductance_w_k)?,
+            seebeck_v_k: Rule::Positive.check("seebeck_v_k", seebeck_v_k).at(origin)?,
+            resistance_ohm: Rule::Positive.check("resistance_ohm", resistance_ohm).at(origin)?,
+            conductance_w_k: Rule::Positive.check("conductance_w_k", conductance_w_k).at(origin)?,
         })
     }
 

@@ -14,11 +14,12 @@
 
 use std::str::FromStr;
 
-use crate::error::{require_finite, require_non_negative, require_positive, ParamError};
+use crate::error::{At, ParamError};
 use crate::fv::{self, FvConfig, FvEnvironment, FvModel, InitialState};
 use crate::inverse::{DisplayInverse, DEFAULT_DISPLAY_CONDUCTANCE_W_M2K};
 use crate::kron::{self, KronEnvironment, KronModel};
 use crate::materials::Material;
+use crate::params::Rule;
 use crate::semi_infinite;
 use crate::skin::Skin;
 
@@ -132,8 +133,8 @@ impl SimulationSpec {
 
     /// Checks every number and the combination of model and options.
     pub fn validate(&self) -> Result<(), ParamError> {
-        require_positive(ORIGIN, "duration_s", self.duration_s)?;
-        require_positive(ORIGIN, "dt_s", self.dt_s)?;
+        Rule::Positive.check("duration_s", self.duration_s).at(ORIGIN)?;
+        Rule::Positive.check("dt_s", self.dt_s).at(ORIGIN)?;
         if self.dt_s > self.duration_s {
             return Err(invalid(format!(
                 "dt_s = {} is longer than duration_s = {}",
@@ -145,11 +146,13 @@ impl SimulationSpec {
                 "more than 1e7 steps: use a longer dt_s or a shorter duration_s".into(),
             ));
         }
-        require_finite(ORIGIN, "ambient_c", self.ambient_c)?;
-        require_finite(ORIGIN, "object_c", self.object_c)?;
-        require_positive(ORIGIN, "display_conductance_w_m2k", self.display_conductance_w_m2k)?;
+        Rule::Finite.check("ambient_c", self.ambient_c).at(ORIGIN)?;
+        Rule::Finite.check("object_c", self.object_c).at(ORIGIN)?;
+        Rule::Positive
+            .check("display_conductance_w_m2k", self.display_conductance_w_m2k)
+            .at(ORIGIN)?;
         if let Some(r) = self.contact_resistance_m2k_w {
-            require_non_negative(ORIGIN, "contact_resistance_m2k_w", r)?;
+            Rule::NonNegative.check("contact_resistance_m2k_w", r).at(ORIGIN)?;
             if self.model == ModelKind::Kron && r != 0.0 {
                 return Err(invalid(
                     "the kron model has no contact resistance; use --model fv".into(),

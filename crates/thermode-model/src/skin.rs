@@ -5,8 +5,8 @@
 
 use serde::Serialize;
 
-use crate::error::{require_finite, require_non_negative, require_positive, ParamError};
-use crate::materials::fields::{self, Fields};
+use crate::error::{At, ParamError};
+use crate::params::{self, Rule, Table, DENSITY, SPECIFIC_HEAT};
 
 /// One tissue layer.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -140,10 +140,16 @@ impl Skin {
         for (i, layer) in self.layers.iter().enumerate() {
             validate_layer(origin, &layer_prefix(i), layer)?;
         }
-        require_finite(origin, "blood.arterial_c", self.blood.arterial_c)?;
-        require_positive(origin, "blood.density_kg_m3", self.blood.density_kg_m3)?;
-        require_positive(origin, "blood.specific_heat_j_kgk", self.blood.specific_heat_j_kgk)?;
-        require_positive(origin, "air.convection_w_m2k", self.air_convection_w_m2k)?;
+        Rule::Finite
+            .check("blood.arterial_c", self.blood.arterial_c)
+            .at(origin)?;
+        for (key, value) in [
+            ("blood.density_kg_m3", self.blood.density_kg_m3),
+            ("blood.specific_heat_j_kgk", self.blood.specific_heat_j_kgk),
+            ("air.convection_w_m2k", self.air_convection_w_m2k),
+        ] {
+            Rule::Positive.check(key, value).at(origin)?;
+        }
         Ok(())
     }
 
@@ -157,26 +163,26 @@ impl Skin {
     /// [`Skin::fingertip`] values. Exactly one spelling per quantity; unknown keys, wrong types and bad numbers are
     /// errors naming the key (layers as `layer[1]`, `layer[2]`, … counted from the outermost).
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Skin, ParamError> {
-        let table = fields::parse_table(text, origin)?;
-        let top = Fields::new(&table, origin, "");
-        top.reject_unknown(&["layer", "blood", "air"])?;
+        let toml = params::parse(text, origin)?;
+        let file = Table::new(&toml, origin);
         let defaults = Skin::fingertip();
-        let layers = match top.optional_array("layer")? {
-            Some(items) => parse_layers(items, origin)?,
+        let layers = match file.sections("layer")? {
+            Some(tables) => tables.iter().map(parse_layer).collect::<Result<_, _>>()?,
             None => Vec::new(),
         };
-        let blood = match top.optional_table("blood")? {
-            Some(t) => parse_blood(&Fields::new(t, origin, "blood."))?,
+        let blood = match file.section("blood")? {
+            Some(t) => parse_blood(&t)?,
             None => defaults.blood,
         };
-        let air_convection_w_m2k = match top.optional_table("air")? {
-            Some(t) => {
-                let air = Fields::new(t, origin, "air.");
-                air.reject_unknown(&["convection_w_m2k"])?;
-                air.required_positive("convection_w_m2k")?
+        let air_convection_w_m2k = match file.section("air")? {
+            Some(air) => {
+                let value = air.required_number("convection_w_m2k", Rule::Positive)?;
+                air.finish()?;
+                value
             }
             None => defaults.air_convection_w_m2k,
         };
+        file.finish()?;
         let skin = Skin {
             layers,
             blood,
@@ -227,74 +233,45 @@ fn validate_layer(origin: &str, prefix: &str, layer: &SkinLayer) -> Result<(), P
             message: format!("`{prefix}name` is empty"),
         });
     }
-    let key = |k: &str| format!("{prefix}{k}");
-    require_positive(origin, &key("thickness_m"), layer.thickness_m)?;
-    require_positive(origin, &key("conductivity_w_mk"), layer.conductivity_w_mk)?;
-    require_positive(origin, &key("density_kg_m3"), layer.density_kg_m3)?;
-    require_positive(origin, &key("specific_heat_j_kgk"), layer.specific_heat_j_kgk)?;
-    require_non_negative(origin, &key("perfusion_per_s"), layer.perfusion_per_s)?;
-    require_non_negative(origin, &key("metabolic_w_m3"), layer.metabolic_w_m3)?;
+    for (key, value, rule) in [
+        ("thickness_m", layer.thickness_m, Rule::Positive),
+        ("conductivity_w_mk", layer.conductivity_w_mk, Rule::Positive),
+        ("density_kg_m3", layer.density_kg_m3, Rule::Positive),
+        ("specific_heat_j_kgk", layer.specific_heat_j_kgk, Rule::Positive),
+        ("perfusion_per_s", layer.perfusion_per_s, Rule::NonNegative),
+        ("metabolic_w_m3", layer.metabolic_w_m3, Rule::NonNegative),
+    ] {
+        if !rule.admits(value) {
+            return rule.check(format!("{prefix}{key}"), value).at(origin).map(drop);
+        }
+    }
     Ok(())
 }
 
-const LAYER_KEYS: [&str; 11] = [
-    "name",
-    "thickness_m",
-    "conductivity_w_mk",
-    "conductivity_cal_cm_s_c",
-    "density_kg_m3",
-    "density_g_cm3",
-    "specific_heat_j_kgk",
-    "specific_heat_cal_g_c",
-    "perfusion_per_s",
-    "metabolic_w_m3",
-    "source",
-];
-
-fn parse_layers(items: &[toml::Value], origin: &str) -> Result<Vec<SkinLayer>, ParamError> {
-    items
-        .iter()
-        .enumerate()
-        .map(|(i, item)| match item {
-            toml::Value::Table(t) => parse_layer(&Fields::new(t, origin, &layer_prefix(i))),
-            other => Err(ParamError::WrongType {
-                origin: origin.to_string(),
-                key: format!("layer[{}]", i + 1),
-                expected: "a table ([[layer]])".to_string(),
-                found: other.type_str().to_string(),
-            }),
-        })
-        .collect()
-}
-
-fn parse_layer(f: &Fields) -> Result<SkinLayer, ParamError> {
+fn parse_layer(t: &Table) -> Result<SkinLayer, ParamError> {
     // `source` is allowed (and ignored) so that a layer can say where its numbers come from.
-    f.reject_unknown(&LAYER_KEYS)?;
-    f.optional_string("source")?;
-    Ok(SkinLayer {
-        name: f.required_string("name")?,
-        thickness_m: f.required_positive("thickness_m")?,
-        conductivity_w_mk: f.conductivity()?,
-        density_kg_m3: f.density()?,
-        specific_heat_j_kgk: f.specific_heat()?,
-        perfusion_per_s: f.optional_non_negative("perfusion_per_s")?.unwrap_or(0.0),
-        metabolic_w_m3: f.optional_non_negative("metabolic_w_m3")?.unwrap_or(0.0),
-    })
+    t.string("source")?;
+    let layer = SkinLayer {
+        name: t.required_string("name")?,
+        thickness_m: t.required_number("thickness_m", Rule::Positive)?,
+        conductivity_w_mk: t.required_either(params::CONDUCTIVITY, Rule::Positive)?,
+        density_kg_m3: t.required_either(DENSITY, Rule::Positive)?,
+        specific_heat_j_kgk: t.required_either(SPECIFIC_HEAT, Rule::Positive)?,
+        perfusion_per_s: t.number("perfusion_per_s", Rule::NonNegative)?.unwrap_or(0.0),
+        metabolic_w_m3: t.number("metabolic_w_m3", Rule::NonNegative)?.unwrap_or(0.0),
+    };
+    t.finish()?;
+    Ok(layer)
 }
 
-fn parse_blood(f: &Fields) -> Result<Blood, ParamError> {
-    f.reject_unknown(&[
-        "arterial_c",
-        "density_kg_m3",
-        "density_g_cm3",
-        "specific_heat_j_kgk",
-        "specific_heat_cal_g_c",
-    ])?;
-    Ok(Blood {
-        arterial_c: f.required_finite("arterial_c")?,
-        density_kg_m3: f.density()?,
-        specific_heat_j_kgk: f.specific_heat()?,
-    })
+fn parse_blood(t: &Table) -> Result<Blood, ParamError> {
+    let blood = Blood {
+        arterial_c: t.required_number("arterial_c", Rule::Finite)?,
+        density_kg_m3: t.required_either(DENSITY, Rule::Positive)?,
+        specific_heat_j_kgk: t.required_either(SPECIFIC_HEAT, Rule::Positive)?,
+    };
+    t.finish()?;
+    Ok(blood)
 }
 
 #[cfg(test)]
@@ -327,8 +304,11 @@ convection_w_m2k = 10.0
 
     fn key_of(e: &ParamError) -> String {
         match e {
-            ParamError::BadValue { key, origin, .. }
-            | ParamError::MissingKey { key, origin }
+            ParamError::BadValue { source, origin } => {
+                assert_eq!(origin, "skin.toml");
+                source.name.to_string()
+            }
+            ParamError::MissingKey { key, origin }
             | ParamError::UnknownKey { key, origin }
             | ParamError::WrongType { key, origin, .. } => {
                 assert_eq!(origin, "skin.toml");

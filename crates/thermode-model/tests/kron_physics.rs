@@ -479,7 +479,7 @@ fn calibration_rejects_unreachable_surfaces() {
     let skin = Skin::fingertip();
     for surface in [23.0, 22.0, 35.5, 36.8, 40.0, f64::NAN] {
         match calibrate_to_surface(&skin, 23.0, surface) {
-            Err(ParamError::BadValue { key, .. }) => assert_eq!(key, "surface_c", "surface {surface}"),
+            Err(ParamError::BadValue { source, .. }) => assert_eq!(source.name, "surface_c", "surface {surface}"),
             other => panic!("surface {surface}: expected BadValue, got {other:?}"),
         }
     }
@@ -489,7 +489,7 @@ fn calibration_rejects_unreachable_surfaces() {
         .to_string();
     assert!(message.contains("between"), "{message}");
     match calibrate_to_surface(&skin, 37.0, 38.0) {
-        Err(ParamError::BadValue { key, .. }) => assert_eq!(key, "ambient_c"),
+        Err(ParamError::BadValue { source, .. }) => assert_eq!(source.name, "ambient_c"),
         other => panic!("expected BadValue for ambient, got {other:?}"),
     }
     let unperfused = skin.with_perfusion_scaled(0.0);

@@ -225,9 +225,9 @@ fn affine_forms_match_direct_evaluation() {
 
 fn bad_key(ds: PeltierDatasheet) -> String {
     match PeltierModule::from_datasheet(&ds) {
-        Err(ParamError::BadValue { key, origin, .. }) => {
+        Err(ParamError::BadValue { source, origin }) => {
             assert_eq!(origin, "peltier datasheet");
-            key
+            source.name.into_owned()
         }
         other => panic!("expected BadValue, got {other:?}"),
     }

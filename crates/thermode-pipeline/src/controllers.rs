@@ -84,17 +84,9 @@ impl ShippedDisplay {
     }
 }
 
-/// Reads a gains file (TOML of [`PidGains`]) and validates it; `origin` names the file in errors.
+/// Reads a gains file ([`PidGains::from_toml_str`]); `origin` names the file in errors ([`PipelineError::Param`]).
 pub fn gains_from_toml_str(text: &str, origin: &str) -> Result<PidGains, PipelineError> {
-    let gains: PidGains = toml::from_str(text).map_err(|e| PipelineError::GainsFile {
-        origin: origin.to_string(),
-        message: e.to_string(),
-    })?;
-    gains.validate().map_err(|e| PipelineError::GainsFile {
-        origin: origin.to_string(),
-        message: e.to_string(),
-    })?;
-    Ok(gains)
+    Ok(PidGains::from_toml_str(text, origin)?)
 }
 
 /// Writes `gains` as a gains file, with `comment` (any number of lines) as `#` comments on top. Numbers are
@@ -228,10 +220,7 @@ mod tests {
             "kp_a_per_c = 1.0\nki_a_per_c_s = 0.0\nkd_a_s_per_c = 0.0\nfilter_cutoff_hz = 5.0\nextra = 1\n",
         ] {
             assert!(
-                matches!(
-                    gains_from_toml_str(bad, "bad.toml"),
-                    Err(PipelineError::GainsFile { .. })
-                ),
+                matches!(gains_from_toml_str(bad, "bad.toml"), Err(PipelineError::Param(_))),
                 "accepted {bad}"
             );
         }

@@ -10,7 +10,7 @@
 //! - [`stimulus`]: [`Stimulus`] — air, a touch, or a direct display temperature — and its validation.
 //! - [`controllers`]: `pid` (gains files; the tuned files of the shipped displays are embedded) and `model` (plant
 //!   model from the device file).
-//! - [`error`]: the typed errors ([`PipelineError`]).
+//! - [`error`]: [`PipelineError`], refused parameters and stimuli.
 //!
 //! Temperatures in °C, currents in A (positive heats the display), times in s. Deterministic: nothing here draws a
 //! random number.

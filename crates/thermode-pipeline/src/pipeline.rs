@@ -36,14 +36,14 @@ use thermode_control::{ControlInput, Controller};
 use thermode_device::{DeviceConfig, Reading};
 use thermode_model::fv::{FvConfig, FvModel};
 use thermode_model::kron::calibrate_to_surface;
-use thermode_model::{Material, Skin};
+use thermode_model::{Material, Range, Rule, Skin};
 use thermode_safety::{
     DriveCommand, EnvelopeConfig, FaultCode, SafetyEnvelope, SetpointDecision, ABSOLUTE_MAX_RATE_C_PER_S,
 };
 
 use crate::controllers::{build_controller, ControllerKind};
 use crate::display::DisplayFinger;
-use crate::error::{require_in, PipelineError};
+use crate::error::PipelineError;
 use crate::renderer::{fv_config, Renderer, RendererKind, LIGHT_TOUCH_RESISTANCE_M2K_W};
 use crate::stimulus::Stimulus;
 
@@ -52,6 +52,13 @@ pub const MIN_AMBIENT_C: f64 = -30.0;
 /// Highest ambient (air) temperature a pipeline accepts \[°C\]: 50 (above it the resting finger has no steady state
 /// below the arterial temperature worth rendering).
 pub const MAX_AMBIENT_C: f64 = 50.0;
+
+/// The ambient temperature a pipeline accepts: [`MIN_AMBIENT_C`] to [`MAX_AMBIENT_C`].
+pub const AMBIENT_TEMPERATURE: Range = Range {
+    name: "ambient temperature [°C]",
+    min: MIN_AMBIENT_C,
+    max: MAX_AMBIENT_C,
+};
 
 /// The set-point rate limit of a rendering pipeline \[°C/s\]: 20, the compiled-in absolute maximum
 /// ([`ABSOLUTE_MAX_RATE_C_PER_S`]), instead of the envelope's general default of 10.
@@ -123,13 +130,8 @@ impl PipelineConfig {
     /// Checks the numbers the pipeline itself adds (the models, device, envelope and controller check theirs when
     /// the pipeline is built).
     pub fn validate(&self) -> Result<(), PipelineError> {
-        require_in("ambient temperature [°C]", self.ambient_c, MIN_AMBIENT_C, MAX_AMBIENT_C)?;
-        require_in(
-            "contact resistance [m²K/W]",
-            self.contact_resistance_m2k_w,
-            0.0,
-            f64::MAX,
-        )?;
+        AMBIENT_TEMPERATURE.check(self.ambient_c)?;
+        Rule::NonNegative.check("contact resistance [m²K/W]", self.contact_resistance_m2k_w)?;
         self.device.validate("device config")?;
         self.envelope.validate()?;
         Ok(())

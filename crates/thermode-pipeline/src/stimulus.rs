@@ -1,16 +1,38 @@
 //! What a channel is asked to display: air, the touch of a virtual object, or a direct display temperature
 //! (psychophysics), and the checks every stimulus passes before the pipeline accepts it.
 
-use thermode_model::Material;
+use thermode_model::{Material, Range, Rule};
 use thermode_safety::{ABSOLUTE_MAX_C, ABSOLUTE_MAX_RATE_C_PER_S, ABSOLUTE_MIN_C};
 
-use crate::error::{require_in, PipelineError};
+use crate::error::PipelineError;
 
 /// Coldest virtual object a stimulus may name \[°C\]: −50 (frozen goods well below a freezer's −18 °C). The safety
 /// envelope, not this range, limits what the display shows.
 pub const MIN_OBJECT_C: f64 = -50.0;
 /// Hottest virtual object a stimulus may name \[°C\]: 150 (beyond boiling water and a hot pan handle).
 pub const MAX_OBJECT_C: f64 = 150.0;
+
+/// The temperature a virtual object may have: [`MIN_OBJECT_C`] to [`MAX_OBJECT_C`].
+pub const OBJECT_TEMPERATURE: Range = Range {
+    name: "object temperature [°C]",
+    min: MIN_OBJECT_C,
+    max: MAX_OBJECT_C,
+};
+
+/// The display temperature a direct stimulus may ask for: the safety envelope's absolute limits.
+pub const DIRECT_TEMPERATURE: Range = Range {
+    name: "direct display temperature [°C]",
+    min: ABSOLUTE_MIN_C,
+    max: ABSOLUTE_MAX_C,
+};
+
+/// The rate a direct stimulus may ask for (above zero, see [`Stimulus::Direct`]): at most the safety envelope's
+/// absolute rate limit.
+pub const DIRECT_RATE: Range = Range {
+    name: "direct rate [°C/s]",
+    min: 0.0,
+    max: ABSOLUTE_MAX_RATE_C_PER_S,
+};
 
 /// What the display renders.
 #[derive(Debug, Clone, PartialEq)]
@@ -45,25 +67,14 @@ impl Stimulus {
             Stimulus::Air => Ok(()),
             Stimulus::Touch { material, object_c } => {
                 material.validate(&format!("stimulus material `{}`", material.name))?;
-                require_in("object temperature [°C]", *object_c, MIN_OBJECT_C, MAX_OBJECT_C).map(drop)
+                OBJECT_TEMPERATURE.check(*object_c)?;
+                Ok(())
             }
             Stimulus::Direct { temp_c, rate_c_s } => {
-                require_in(
-                    "direct display temperature [°C]",
-                    *temp_c,
-                    ABSOLUTE_MIN_C,
-                    ABSOLUTE_MAX_C,
-                )?;
-                let rate = require_in("direct rate [°C/s]", *rate_c_s, 0.0, ABSOLUTE_MAX_RATE_C_PER_S)?;
-                if rate > 0.0 {
-                    Ok(())
-                } else {
-                    Err(PipelineError::BadValue {
-                        what: "direct rate [°C/s]".to_string(),
-                        value: rate,
-                        requirement: "must be greater than zero".to_string(),
-                    })
-                }
+                DIRECT_TEMPERATURE.check(*temp_c)?;
+                DIRECT_RATE.check(*rate_c_s)?;
+                Rule::Positive.check(DIRECT_RATE.name, *rate_c_s)?;
+                Ok(())
             }
         }
     }

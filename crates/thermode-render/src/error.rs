@@ -3,7 +3,7 @@
 
 use thermode_control::ControlError;
 use thermode_device::DeviceError;
-use thermode_model::ParamError;
+use thermode_model::{BadValue, ParamError};
 use thermode_pipeline::PipelineError;
 use thermode_safety::EnvelopeError;
 use thiserror::Error;
@@ -31,4 +31,4 @@ macro_rules! through_pipeline {
     )*};
 }
 
-through_pipeline!(ParamError, ControlError, EnvelopeError, DeviceError);
+through_pipeline!(BadValue, ParamError, ControlError, EnvelopeError, DeviceError);

@@ -7,7 +7,7 @@
 //! - [`tune`]: the PID tuner behind `thermode tune` (Nelder–Mead in log-gain space, materials in parallel), composed
 //!   of the pipeline's stages.
 //! - [`figure`]: the paper's Figure 3 for the simulated system.
-//! - [`error`]: the typed errors ([`RenderError`]).
+//! - [`error`]: [`RenderError`], refused runs and settings.
 //!
 //! Temperatures in °C, currents in A (positive heats the display), times in s. Deterministic: the only randomness
 //! is the simulated sensor noise, seeded explicitly.

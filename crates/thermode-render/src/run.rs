@@ -48,10 +48,11 @@ use std::io::Write;
 
 use thermode_device::{Device, DeviceConfig, PlateFinger, SimulatedChannel, SimulatedDisplay};
 use thermode_model::fv::{FvConfig, FvModel};
-use thermode_model::{Material, Skin};
+use thermode_model::{BadValue, Material, Skin};
 use thermode_safety::FaultCode;
 
-use thermode_pipeline::error::{require_in, require_positive};
+use thermode_model::Rule;
+use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
 
 use crate::error::RenderError;
 use crate::summary::{actuator_limit, summarise, Summary};
@@ -127,30 +128,36 @@ impl RenderSpec {
         self.finger_skin.validate("finger skin")?;
         self.material.validate(&format!("material `{}`", self.material.name))?;
         if let Some(g) = self.finger_contact_w_m2k {
-            require_positive("finger contact conductance [W/(m²·K)]", g)?;
+            Rule::Positive.check("finger contact conductance [W/(m²·K)]", g)?;
         }
         if let Some(c) = self.object_c {
-            require_in(
-                "object temperature [°C]",
-                c,
-                thermode_pipeline::stimulus::MIN_OBJECT_C,
-                thermode_pipeline::stimulus::MAX_OBJECT_C,
-            )?;
+            OBJECT_TEMPERATURE.check(c)?;
         }
-        require_positive("duration [s]", self.duration_s)?;
-        require_in("pre-contact time [s]", self.pre_contact_s, 0.0, MAX_RUN_S)?;
-        require_in("duration [s]", self.duration_s + self.pre_contact_s, 0.0, MAX_RUN_S)?;
+        let run_time = Rule::Within {
+            min: 0.0,
+            max: MAX_RUN_S,
+        };
+        Rule::Positive.check("duration [s]", self.duration_s)?;
+        run_time.check("pre-contact time [s]", self.pre_contact_s)?;
+        run_time.check(
+            "duration [s] (with the pre-contact time)",
+            self.duration_s + self.pre_contact_s,
+        )?;
         if let Some(r) = self.release_at_s {
-            require_in("release time [s]", r, 0.0, self.duration_s)?;
+            Rule::Within {
+                min: 0.0,
+                max: self.duration_s,
+            }
+            .check("release time [s]", r)?;
         }
-        require_in("tick rate [Hz]", self.rate_hz, 1.0, 100_000.0)?;
-        require_in("plant substep [s]", self.plant_substep_s, 1e-6, 0.01)?;
+        Rule::Within {
+            min: 1.0,
+            max: 100_000.0,
+        }
+        .check("tick rate [Hz]", self.rate_hz)?;
+        Rule::Within { min: 1e-6, max: 0.01 }.check("plant substep [s]", self.plant_substep_s)?;
         if (self.duration_s * self.rate_hz).round() < 1.0 {
-            return Err(RenderError::Pipeline(thermode_pipeline::PipelineError::BadValue {
-                what: "duration [s]".into(),
-                value: self.duration_s,
-                requirement: "must last at least one tick".into(),
-            }));
+            return Err(BadValue::custom("duration [s]", self.duration_s, "must last at least one tick").into());
         }
         Ok(())
     }

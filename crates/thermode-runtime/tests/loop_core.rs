@@ -64,7 +64,8 @@ impl Rig {
         }
     }
 
-    /// Sends `command`, runs one tick, returns the loop's answer.
+    /// Sends `command`, runs one tick, returns the loop's answer (as the loop sends it, a large `Err` included).
+    #[allow(clippy::result_large_err)]
     fn ask(&self, command: Command) -> Reply {
         let answer = self.handle.commands().request(command).expect("queued");
         self.step(1);

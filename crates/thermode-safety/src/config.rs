@@ -12,7 +12,10 @@
 //!   (Yarmolenko et al. 2011); van Rhoon et al. 2013 (Eur. Radiol. 23:2215) propose limits of a few CEM43-minutes
 //!   for routine, uncontrolled exposure. The default budget of 1 CEM43-minute stays below that proposal.
 
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
+
+use thermode_model::params::{self, Rule, Table};
+use thermode_model::ParamError;
 
 use crate::dose::CEM43_REFERENCE_C;
 use crate::error::EnvelopeError;
@@ -41,9 +44,8 @@ pub const ABSOLUTE_MAX_STALE_TIMEOUT_S: f64 = 1.0;
 pub const NEUTRAL_SETPOINT_C: f64 = 33.0;
 
 /// Safety envelope settings of one channel. Every field has a default (`EnvelopeConfig::default()`), so a TOML
-/// table may give only some keys; unknown keys are refused.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
+/// table may give only some keys; unknown keys are refused ([`EnvelopeConfig::from_toml_str`]).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct EnvelopeConfig {
     /// Lowest display set-point, °C. Default 15 (paper: cold pain below 15 °C). Range [10, 48).
     pub min_display_c: f64,
@@ -136,17 +138,6 @@ impl Default for EnvelopeConfig {
     }
 }
 
-/// `Ok` if `value` is finite and in `[min, max]`.
-fn in_range(field: &'static str, value: f64, min: f64, max: f64) -> Result<(), EnvelopeError> {
-    if !value.is_finite() {
-        return Err(EnvelopeError::NotFinite { field, value });
-    }
-    if value < min || value > max {
-        return Err(EnvelopeError::OutOfRange { field, value, min, max });
-    }
-    Ok(())
-}
-
 /// `Ok` if `holds`, else [`EnvelopeError::Inconsistent`].
 fn require(holds: bool, requirement: &'static str) -> Result<(), EnvelopeError> {
     if holds {
@@ -168,57 +159,101 @@ impl EnvelopeConfig {
         self.validate_relations()
     }
 
+    /// Every field with its key (units are in the names) and its range `[min, max]`, in declaration order.
+    fn fields(&mut self) -> [(&'static str, &mut f64, f64, f64); 20] {
+        [
+            ("min_display_c", &mut self.min_display_c, ABSOLUTE_MIN_C, ABSOLUTE_MAX_C),
+            ("max_display_c", &mut self.max_display_c, ABSOLUTE_MIN_C, ABSOLUTE_MAX_C),
+            (
+                "max_setpoint_rate_c_per_s",
+                &mut self.max_setpoint_rate_c_per_s,
+                0.01,
+                ABSOLUTE_MAX_RATE_C_PER_S,
+            ),
+            (
+                "max_time_at_or_above_43_s",
+                &mut self.max_time_at_or_above_43_s,
+                0.0,
+                ABSOLUTE_MAX_TIME_AT_OR_ABOVE_43_S,
+            ),
+            (
+                "cem43_budget_min",
+                &mut self.cem43_budget_min,
+                0.0,
+                ABSOLUTE_MAX_CEM43_BUDGET_MIN,
+            ),
+            ("dose_lockout_margin_c", &mut self.dose_lockout_margin_c, 0.1, 5.0),
+            ("dose_lockout_grace_s", &mut self.dose_lockout_grace_s, 0.0, 60.0),
+            (
+                "max_time_at_or_above_48_s",
+                &mut self.max_time_at_or_above_48_s,
+                0.0,
+                ABSOLUTE_MAX_TIME_AT_OR_ABOVE_48_S,
+            ),
+            ("limit_margin_c", &mut self.limit_margin_c, 0.1, 5.0),
+            ("sensor_open_c", &mut self.sensor_open_c, -300.0, 1000.0),
+            ("sensor_short_c", &mut self.sensor_short_c, -300.0, 1000.0),
+            ("plausible_min_c", &mut self.plausible_min_c, -300.0, 1000.0),
+            ("plausible_max_c", &mut self.plausible_max_c, -300.0, 1000.0),
+            (
+                "stale_timeout_s",
+                &mut self.stale_timeout_s,
+                0.001,
+                ABSOLUTE_MAX_STALE_TIMEOUT_S,
+            ),
+            (
+                "max_measured_rate_c_per_s",
+                &mut self.max_measured_rate_c_per_s,
+                0.01,
+                1000.0,
+            ),
+            ("rate_window_s", &mut self.rate_window_s, 0.001, 1.0),
+            (
+                "hot_side_max_c",
+                &mut self.hot_side_max_c,
+                -50.0,
+                ABSOLUTE_MAX_HOT_SIDE_C,
+            ),
+            (
+                "hot_side_min_c",
+                &mut self.hot_side_min_c,
+                -50.0,
+                ABSOLUTE_MAX_HOT_SIDE_C,
+            ),
+            ("stuck_current_fraction", &mut self.stuck_current_fraction, 0.5, 1.0),
+            ("stuck_at_limit_s", &mut self.stuck_at_limit_s, 0.1, 60.0),
+        ]
+    }
+
     fn validate_ranges(&self) -> Result<(), EnvelopeError> {
-        in_range("min_display_c", self.min_display_c, ABSOLUTE_MIN_C, ABSOLUTE_MAX_C)?;
-        in_range("max_display_c", self.max_display_c, ABSOLUTE_MIN_C, ABSOLUTE_MAX_C)?;
-        in_range(
-            "max_setpoint_rate_c_per_s",
-            self.max_setpoint_rate_c_per_s,
-            0.01,
-            ABSOLUTE_MAX_RATE_C_PER_S,
-        )?;
-        in_range(
-            "max_time_at_or_above_43_s",
-            self.max_time_at_or_above_43_s,
-            0.0,
-            ABSOLUTE_MAX_TIME_AT_OR_ABOVE_43_S,
-        )?;
-        in_range(
-            "cem43_budget_min",
-            self.cem43_budget_min,
-            0.0,
-            ABSOLUTE_MAX_CEM43_BUDGET_MIN,
-        )?;
-        in_range("dose_lockout_margin_c", self.dose_lockout_margin_c, 0.1, 5.0)?;
-        in_range("dose_lockout_grace_s", self.dose_lockout_grace_s, 0.0, 60.0)?;
-        in_range(
-            "max_time_at_or_above_48_s",
-            self.max_time_at_or_above_48_s,
-            0.0,
-            ABSOLUTE_MAX_TIME_AT_OR_ABOVE_48_S,
-        )?;
-        in_range("limit_margin_c", self.limit_margin_c, 0.1, 5.0)?;
-        in_range("sensor_open_c", self.sensor_open_c, -300.0, 1000.0)?;
-        in_range("sensor_short_c", self.sensor_short_c, -300.0, 1000.0)?;
-        in_range("plausible_min_c", self.plausible_min_c, -300.0, 1000.0)?;
-        in_range("plausible_max_c", self.plausible_max_c, -300.0, 1000.0)?;
-        in_range(
-            "stale_timeout_s",
-            self.stale_timeout_s,
-            0.001,
-            ABSOLUTE_MAX_STALE_TIMEOUT_S,
-        )?;
-        in_range(
-            "max_measured_rate_c_per_s",
-            self.max_measured_rate_c_per_s,
-            0.01,
-            1000.0,
-        )?;
-        in_range("rate_window_s", self.rate_window_s, 0.001, 1.0)?;
-        in_range("hot_side_max_c", self.hot_side_max_c, -50.0, ABSOLUTE_MAX_HOT_SIDE_C)?;
-        in_range("hot_side_min_c", self.hot_side_min_c, -50.0, ABSOLUTE_MAX_HOT_SIDE_C)?;
-        in_range("stuck_current_fraction", self.stuck_current_fraction, 0.5, 1.0)?;
-        in_range("stuck_at_limit_s", self.stuck_at_limit_s, 0.1, 60.0)
+        let mut copy = *self;
+        for (field, value, min, max) in copy.fields() {
+            Rule::Within { min, max }.check(field, *value)?;
+        }
+        Ok(())
+    }
+
+    /// Reads an envelope table (TOML) with [`Table`]: every key optional (missing keys keep their defaults),
+    /// unknown keys and values of the wrong type refused, and the result validated (see
+    /// [`EnvelopeConfig::validate`]). `origin` (usually the file name) appears in every error.
+    pub fn from_toml_str(text: &str, origin: &str) -> Result<EnvelopeConfig, ParamError> {
+        let toml = params::parse(text, origin)?;
+        let file = Table::new(&toml, origin);
+        let mut config = EnvelopeConfig::default();
+        for (key, value, min, max) in config.fields() {
+            if let Some(read) = file.number(key, Rule::Within { min, max })? {
+                *value = read;
+            }
+        }
+        file.finish()?;
+        config.validate().map_err(|error| match error {
+            EnvelopeError::BadValue(refused) => ParamError::bad_value(origin, refused),
+            other => ParamError::Invalid {
+                origin: origin.to_string(),
+                message: other.to_string(),
+            },
+        })?;
+        Ok(config)
     }
 
     fn validate_relations(&self) -> Result<(), EnvelopeError> {
@@ -276,10 +311,7 @@ mod tests {
         };
         assert!(matches!(
             hot.validate(),
-            Err(EnvelopeError::OutOfRange {
-                field: "max_display_c",
-                ..
-            })
+            Err(EnvelopeError::BadValue(ref e)) if e.name == "max_display_c"
         ));
         let cold = EnvelopeConfig {
             min_display_c: 9.0,
@@ -287,26 +319,23 @@ mod tests {
         };
         assert!(matches!(
             cold.validate(),
-            Err(EnvelopeError::OutOfRange {
-                field: "min_display_c",
-                ..
-            })
+            Err(EnvelopeError::BadValue(ref e)) if e.name == "min_display_c"
         ));
         let fast = EnvelopeConfig {
             max_setpoint_rate_c_per_s: 25.0,
             ..Default::default()
         };
-        assert!(matches!(fast.validate(), Err(EnvelopeError::OutOfRange { .. })));
+        assert!(matches!(fast.validate(), Err(EnvelopeError::BadValue(_))));
         let long = EnvelopeConfig {
             max_time_at_or_above_43_s: 601.0,
             ..Default::default()
         };
-        assert!(matches!(long.validate(), Err(EnvelopeError::OutOfRange { .. })));
+        assert!(matches!(long.validate(), Err(EnvelopeError::BadValue(_))));
         let nan = EnvelopeConfig {
             cem43_budget_min: f64::NAN,
             ..Default::default()
         };
-        assert!(matches!(nan.validate(), Err(EnvelopeError::NotFinite { .. })));
+        assert!(matches!(nan.validate(), Err(EnvelopeError::BadValue(_))));
         let swapped = EnvelopeConfig {
             min_display_c: 40.0,
             max_display_c: 30.0,
@@ -323,12 +352,22 @@ mod tests {
 
     #[test]
     fn partial_toml_keeps_defaults_and_unknown_keys_are_refused() {
-        let c: EnvelopeConfig = toml::from_str("max_display_c = 42.0\nstale_timeout_s = 0.1\n").unwrap();
+        let c = EnvelopeConfig::from_toml_str("max_display_c = 42.0\nstale_timeout_s = 0.1\n", "e.toml").unwrap();
         assert_eq!(c.max_display_c, 42.0);
         assert_eq!(c.stale_timeout_s, 0.1);
         assert_eq!(c.min_display_c, 15.0);
-        assert!(toml::from_str::<EnvelopeConfig>("max_display = 42.0\n").is_err());
-        let back: EnvelopeConfig = toml::from_str(&toml::to_string(&c).unwrap()).unwrap();
+        assert!(matches!(
+            EnvelopeConfig::from_toml_str("max_display = 42.0\n", "e.toml"),
+            Err(ParamError::UnknownKey { key, .. }) if key == "max_display"
+        ));
+        let hot = EnvelopeConfig::from_toml_str("max_display_c = 49\n", "e.toml")
+            .map(|_| ())
+            .unwrap_err();
+        assert_eq!(hot.bad_key(), Some("max_display_c"));
+        assert!(hot.to_string().starts_with("e.toml: `max_display_c` = 49"), "{hot}");
+        let swapped = EnvelopeConfig::from_toml_str("min_display_c = 40\nmax_display_c = 30\n", "e.toml");
+        assert!(matches!(swapped, Err(ParamError::Invalid { .. })), "{swapped:?}");
+        let back = EnvelopeConfig::from_toml_str(&toml::to_string(&c).unwrap(), "back.toml").unwrap();
         assert_eq!(back, c);
     }
 }

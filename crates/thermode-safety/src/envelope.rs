@@ -28,6 +28,8 @@
 
 use crate::config::{EnvelopeConfig, ABSOLUTE_MAX_C, NEUTRAL_SETPOINT_C};
 use crate::dose::{DoseTracker, CEM43_REFERENCE_C};
+use thermode_model::Rule;
+
 use crate::error::EnvelopeError;
 use crate::fault::FaultCode;
 
@@ -166,21 +168,7 @@ impl SafetyEnvelope {
     /// configuration is validated; anything outside the absolute limits is an error.
     pub fn new(config: EnvelopeConfig, current_limit_a: f64) -> Result<Self, EnvelopeError> {
         config.validate()?;
-        if !current_limit_a.is_finite() {
-            return Err(EnvelopeError::NotFinite {
-                field: "current_limit_a",
-                value: current_limit_a,
-            });
-        }
-        if current_limit_a <= 0.0 {
-            let (min, max) = (f64::MIN_POSITIVE, f64::MAX);
-            return Err(EnvelopeError::OutOfRange {
-                field: "current_limit_a",
-                value: current_limit_a,
-                min,
-                max,
-            });
-        }
+        Rule::Positive.check("current_limit_a", current_limit_a)?;
         Ok(Self {
             config,
             current_limit_a,
@@ -558,12 +546,7 @@ impl SafetyEnvelope {
         let Some(latch) = self.latch else {
             return Ok(None);
         };
-        if !now_s.is_finite() {
-            return Err(EnvelopeError::NotFinite {
-                field: "now_s",
-                value: now_s,
-            });
-        }
+        Rule::Finite.check("now_s", now_s)?;
         let fresh = self.sample.filter(|s| match latch.seq {
             None => true,
             Some(seq) => s.sample_seq > seq,

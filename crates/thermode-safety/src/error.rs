@@ -1,34 +1,19 @@
 //! Typed errors of the safety crate: bad envelope configurations and refused fault clearing ([`EnvelopeError`]).
-//! No variant allocates, so errors may be returned on the per-tick path.
+//! Every name is a `&'static str`, so no variant allocates and errors may be returned on the per-tick path.
 
+use thermode_model::BadValue;
 use thiserror::Error;
 
 use crate::fault::FaultCode;
 
 /// Why an envelope configuration was refused, or why a latched fault may not be cleared yet.
-#[derive(Debug, Clone, Copy, PartialEq, Error)]
+#[derive(Debug, Clone, PartialEq, Error)]
 pub enum EnvelopeError {
-    /// A configuration value (or a time passed to the envelope) is NaN or infinite.
-    #[error("`{field}` must be finite, got {value}")]
-    NotFinite {
-        /// Name of the field.
-        field: &'static str,
-        /// The offending value.
-        value: f64,
-    },
-    /// A configuration value lies outside the range the envelope accepts (wider than the compiled-in absolute
-    /// limits, or physically meaningless). It is an error, never clamped.
-    #[error("`{field}` = {value} is outside the allowed range [{min}, {max}]")]
-    OutOfRange {
-        /// Name of the field.
-        field: &'static str,
-        /// The offending value.
-        value: f64,
-        /// Smallest allowed value (inclusive).
-        min: f64,
-        /// Largest allowed value (inclusive).
-        max: f64,
-    },
+    /// A configuration value (or a time passed to the envelope) is not finite or lies outside the range the
+    /// envelope accepts (wider than the compiled-in absolute limits, or physically meaningless). It is an error,
+    /// never clamped.
+    #[error(transparent)]
+    BadValue(#[from] BadValue),
     /// Two configuration values contradict each other.
     #[error("inconsistent envelope configuration: {requirement}")]
     Inconsistent {

@@ -6,10 +6,10 @@
 //! - [`envelope`]: [`SafetyEnvelope`]: set-point clamp and rate limit, thermal dose (IEC 60601-1 contact-time
 //!   limits, CEM43), fault detection with latching. [`Measurement`] goes in, a [`DriveCommand`] comes out: the only
 //!   ways to one are [`SafetyEnvelope::gate_drive`] and [`DriveCommand::off`].
-//! - [`config`]: [`EnvelopeConfig`] (serde, documented defaults and sources) and the compiled-in absolute limits.
+//! - [`config`]: [`EnvelopeConfig`] (documented defaults and sources, read with `thermode_model::params::Table`) and the compiled-in absolute limits.
 //! - [`fault`]: [`FaultCode`], stable numeric fault codes.
 //! - [`dose`]: CEM43 and time-at-43 °C bookkeeping.
-//! - [`error`]: the typed errors ([`EnvelopeError`]).
+//! - [`error`]: [`EnvelopeError`], refused configurations and refused fault clearing.
 //!
 //! One tick of a channel (the controller in the middle is any of `thermode-control`'s):
 //! ```
@@ -17,10 +17,11 @@
 //! let mut envelope = SafetyEnvelope::new(EnvelopeConfig::default(), 2.8)?;
 //! let m = Measurement { time_s: 0.0, sensor_c: 32.0, hot_side_c: 24.0, sample_seq: 1 };
 //! envelope.observe(&m);
-//! let shaped = envelope.shape_setpoint(0.0, 30.0); // the first set-point starts at the measured plate
-//! let request_a = 0.5 * (shaped.setpoint_c - m.sensor_c) - 5.0; // a controller asking for too much cooling
-//! let drive = envelope.gate_drive(0.0, request_a);
-//! assert_eq!(drive.current_a(), -2.8); // within the drive limit
+//! envelope.shape_setpoint(0.0, 30.0); // the first call starts at the measured 32 °C
+//! let shaped = envelope.shape_setpoint(0.1, 30.0); // then falls at the rate limit
+//! let request_a = 0.5 * (shaped.setpoint_c - m.sensor_c); // a proportional controller
+//! let drive = envelope.gate_drive(0.1, request_a);
+//! assert!(drive.current_a() < 0.0 && drive.current_a().abs() <= 2.8);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 

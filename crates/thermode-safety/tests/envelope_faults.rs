@@ -579,7 +579,7 @@ fn bad_configuration_and_current_limit_are_errors() {
     };
     assert!(matches!(
         SafetyEnvelope::new(too_hot, LIMIT_A),
-        Err(EnvelopeError::OutOfRange { .. })
+        Err(EnvelopeError::BadValue(_))
     ));
     for limit in [0.0, -1.0, f64::NAN, f64::INFINITY] {
         assert!(

@@ -159,7 +159,7 @@ impl CsvTable {
 
     /// An error for the field `column` of the row at `line`.
     pub fn bad_value(&self, line: u64, column: &str, value: &str, expected: &str) -> LabError {
-        LabError::BadValue {
+        LabError::BadField {
             file: self.file.clone(),
             line,
             column: column.to_string(),

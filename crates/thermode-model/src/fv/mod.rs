@@ -42,7 +42,8 @@ pub use run::{
     simulate_contact, simulate_contact_converged, ContactRun, ContactSpec, InitialState, Refinement, Resolution,
 };
 
-use crate::error::{require_finite, require_non_negative, require_positive, ParamError};
+use crate::error::{At, ParamError};
+use crate::params::{BadValue, Rule};
 
 const ORIGIN: &str = "fv model";
 
@@ -107,14 +108,19 @@ impl FvEnvironment {
     /// Checks that the numbers are finite and the conductance not negative.
     pub fn validate(&self) -> Result<(), ParamError> {
         match *self {
-            FvEnvironment::Air { ambient_c } => require_finite(ORIGIN, "ambient_c", ambient_c).map(|_| ()),
+            FvEnvironment::Air { ambient_c } => Rule::Finite.check("ambient_c", ambient_c).at(ORIGIN).map(|_| ()),
             FvEnvironment::Object => Ok(()),
             FvEnvironment::Plate {
                 conductance_w_m2k,
                 temperature_c,
             } => {
-                require_non_negative(ORIGIN, "conductance_w_m2k", conductance_w_m2k)?;
-                require_finite(ORIGIN, "temperature_c", temperature_c).map(|_| ())
+                Rule::NonNegative
+                    .check("conductance_w_m2k", conductance_w_m2k)
+                    .at(ORIGIN)?;
+                Rule::Finite
+                    .check("temperature_c", temperature_c)
+                    .at(ORIGIN)
+                    .map(|_| ())
             }
         }
     }
@@ -179,10 +185,12 @@ impl FvConfig {
     /// Checks every number: widths and step finite and positive, growth ≥ 1, maximum width ≥ surface width,
     /// contact resistance ≥ 0, held temperatures finite.
     pub fn validate(&self) -> Result<(), ParamError> {
-        require_positive(ORIGIN, "surface_cell_m", self.surface_cell_m)?;
-        require_positive(ORIGIN, "max_cell_m", self.max_cell_m)?;
-        require_positive(ORIGIN, "max_step_s", self.max_step_s)?;
-        require_non_negative(ORIGIN, "contact_resistance_m2k_w", self.contact_resistance_m2k_w)?;
+        Rule::Positive.check("surface_cell_m", self.surface_cell_m).at(ORIGIN)?;
+        Rule::Positive.check("max_cell_m", self.max_cell_m).at(ORIGIN)?;
+        Rule::Positive.check("max_step_s", self.max_step_s).at(ORIGIN)?;
+        Rule::NonNegative
+            .check("contact_resistance_m2k_w", self.contact_resistance_m2k_w)
+            .at(ORIGIN)?;
         if !(self.growth.is_finite() && self.growth >= 1.0) {
             return Err(bad("growth", self.growth, "must be a finite number of at least 1"));
         }
@@ -194,20 +202,17 @@ impl FvConfig {
             ));
         }
         if let DeepBoundary::Core { temperature_c } = self.deep_boundary {
-            require_finite(ORIGIN, "deep_boundary.temperature_c", temperature_c)?;
+            Rule::Finite
+                .check("deep_boundary.temperature_c", temperature_c)
+                .at(ORIGIN)?;
         }
         if let FarSide::Held { temperature_c } = self.far_side {
-            require_finite(ORIGIN, "far_side.temperature_c", temperature_c)?;
+            Rule::Finite.check("far_side.temperature_c", temperature_c).at(ORIGIN)?;
         }
         Ok(())
     }
 }
 
-fn bad(key: &str, value: f64, requirement: &str) -> ParamError {
-    ParamError::BadValue {
-        origin: ORIGIN.to_string(),
-        key: key.to_string(),
-        value,
-        requirement: requirement.to_string(),
-    }
+fn bad(key: &'static str, value: f64, requirement: &'static str) -> ParamError {
+    ParamError::bad_value(ORIGIN, BadValue::custom(key, value, requirement))
 }

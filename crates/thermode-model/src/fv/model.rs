@@ -11,10 +11,11 @@ use std::cell::RefCell;
 
 use super::chain::{Arm, Bodies, Side, StepFlows, Work};
 use super::grid::{centres_m, stack_cells, SizeRule, MAX_CELLS};
-use super::{bad, DeepBoundary, FarSide, FvConfig, FvEnvironment, TimeScheme, ORIGIN};
-use crate::error::{require_finite, require_non_negative, ParamError};
+use super::{DeepBoundary, FarSide, FvConfig, FvEnvironment, TimeScheme, ORIGIN};
+use crate::error::{At, ParamError};
 use crate::inverse::PlateCoupled;
 use crate::materials::Material;
+use crate::params::Rule;
 use crate::skin::Skin;
 
 /// Heat that crossed each boundary since the model was built or the ledger reset [J/m²], integrated consistently
@@ -232,7 +233,7 @@ impl FvModel {
 
     /// Multiplies every layer's `perfusion_per_s` by `scale` (≥ 0), as `Skin::with_perfusion_scaled` would.
     pub fn set_perfusion_scale(&mut self, scale: f64) -> Result<(), ParamError> {
-        require_non_negative(ORIGIN, "perfusion_scale", scale)?;
+        Rule::NonNegative.check("perfusion_scale", scale).at(ORIGIN)?;
         self.perfusion_scale = scale;
         self.skin.set_perfusion_scale(scale);
         self.work.get_mut().invalidate();
@@ -242,7 +243,7 @@ impl FvModel {
 
     /// Sets every skin cell to `temperature_c` \[°C\].
     pub fn set_skin_uniform(&mut self, temperature_c: f64) -> Result<(), ParamError> {
-        require_finite(ORIGIN, "temperature_c", temperature_c)?;
+        Rule::Finite.check("temperature_c", temperature_c).at(ORIGIN)?;
         self.skin_t.iter_mut().for_each(|t| *t = temperature_c);
         self.plate.get_mut().forget_offset();
         Ok(())
@@ -251,7 +252,7 @@ impl FvModel {
     /// Touches the object: it becomes uniform at `object_c` \[°C\] and the environment becomes
     /// [`FvEnvironment::Object`]. Errors if the model has no object or `object_c` is not finite.
     pub fn touch(&mut self, object_c: f64) -> Result<(), ParamError> {
-        require_finite(ORIGIN, "object_c", object_c)?;
+        Rule::Finite.check("object_c", object_c).at(ORIGIN)?;
         if self.object.is_none() {
             return Err(ParamError::Invalid {
                 origin: ORIGIN.to_string(),
@@ -378,8 +379,8 @@ impl FvModel {
     /// model in that state. Returns the scale. Errors, leaving the model unchanged, if the surface temperature cannot
     /// be reached with a scale between 0 and 1e6.
     pub fn calibrate_to_surface(&mut self, ambient_c: f64, surface_c: f64) -> Result<f64, ParamError> {
-        require_finite(ORIGIN, "ambient_c", ambient_c)?;
-        require_finite(ORIGIN, "surface_c", surface_c)?;
+        Rule::Finite.check("ambient_c", ambient_c).at(ORIGIN)?;
+        Rule::Finite.check("surface_c", surface_c).at(ORIGIN)?;
         let saved = (
             self.skin_t.clone(),
             self.object_t.clone(),
@@ -413,13 +414,12 @@ impl FvModel {
         let mut high_miss = at(self, hi)?;
         while high_miss != 0.0 && high_miss.signum() == low_miss.signum() {
             if hi >= MAX_SCALE {
-                let reach = high_miss + target_c;
-                let message = format!(
-                    "must lie between {:.4} °C (no perfusion) and {reach:.4} °C (perfusion ×{MAX_SCALE:e}) for \
-                     this skin in air at {ambient_c} °C",
-                    low_miss + target_c
-                );
-                return Err(bad("surface_c", target_c, &message));
+                // Between the surface without perfusion and with the largest perfusion scale, in this air.
+                let reachable = Rule::Between {
+                    min: low_miss + target_c,
+                    max: high_miss + target_c,
+                };
+                return reachable.check("surface_c", target_c).at(ORIGIN).map(|_| 0.0);
             }
             lo = hi;
             hi *= 2.0;

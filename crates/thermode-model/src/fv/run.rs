@@ -2,8 +2,9 @@
 //! refined until the answer no longer depends on the grid ([`simulate_contact_converged`]).
 
 use super::{bad, FvConfig, FvEnvironment, FvModel};
-use crate::error::{require_finite, require_positive, ParamError};
+use crate::error::{At, ParamError};
 use crate::materials::Material;
+use crate::params::Rule;
 use crate::skin::Skin;
 
 /// How the finger is prepared before it touches the object.
@@ -57,17 +58,17 @@ impl ContactSpec {
     /// Checks the numbers: temperatures finite, duration and output interval positive, at most 10⁷ output rows.
     pub fn validate(&self) -> Result<(), ParamError> {
         const ORIGIN: &str = "fv contact";
-        require_finite(ORIGIN, "ambient_c", self.ambient_c)?;
-        require_finite(ORIGIN, "object_c", self.object_c)?;
-        require_positive(ORIGIN, "duration_s", self.duration_s)?;
-        require_positive(ORIGIN, "output_dt_s", self.output_dt_s)?;
+        Rule::Finite.check("ambient_c", self.ambient_c).at(ORIGIN)?;
+        Rule::Finite.check("object_c", self.object_c).at(ORIGIN)?;
+        Rule::Positive.check("duration_s", self.duration_s).at(ORIGIN)?;
+        Rule::Positive.check("output_dt_s", self.output_dt_s).at(ORIGIN)?;
         match self.initial {
             InitialState::SteadyInAir => {}
             InitialState::Uniform { temperature_c } => {
-                require_finite(ORIGIN, "initial temperature_c", temperature_c)?;
+                Rule::Finite.check("initial temperature_c", temperature_c).at(ORIGIN)?;
             }
             InitialState::RestingSurface { surface_c } => {
-                require_finite(ORIGIN, "initial surface_c", surface_c)?;
+                Rule::Finite.check("initial surface_c", surface_c).at(ORIGIN)?;
             }
         }
         if self.duration_s / self.output_dt_s > 1e7 {
@@ -224,7 +225,9 @@ pub fn simulate_contact_converged(
     spec: &ContactSpec,
     refinement: &Refinement,
 ) -> Result<(ContactRun, Resolution), ParamError> {
-    require_positive("fv refinement", "tolerance_c", refinement.tolerance_c)?;
+    Rule::Positive
+        .check("tolerance_c", refinement.tolerance_c)
+        .at("fv refinement")?;
     if refinement.max_refinements == 0 {
         return Err(bad("max_refinements", 0.0, "must be at least 1"));
     }

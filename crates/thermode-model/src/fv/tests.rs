@@ -320,7 +320,7 @@ fn unreachable_calibration_is_an_error_and_changes_nothing() {
     for target in [37.5, 22.0] {
         let err = model.calibrate_to_surface(23.0, target).unwrap_err();
         assert!(
-            matches!(err, ParamError::BadValue { ref key, .. } if key == "surface_c"),
+            matches!(err, ParamError::BadValue { ref source, .. } if source.name == "surface_c"),
             "{err}"
         );
         assert_eq!((model.skin_temperatures_c().to_vec(), model.perfusion_scale()), before);

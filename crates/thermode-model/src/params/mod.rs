@@ -1,7 +1,8 @@
 //! The one parameter vocabulary of thermode: what a number must satisfy ([`Rule`], [`Range`]) and the one error for
 //! a refused number ([`BadValue`]). Every crate checks its numbers with these (skin, material, device, envelope,
 //! controller, pipeline, run, experiment and API inputs), so a refused number reads the same everywhere: what it is
-//! (with its unit), the value, and the rule it breaks.
+//! (with its unit), the value, and the rule it breaks. Parameter files (skin, material, device, gains, experiment)
+//! are read with the one TOML reader, [`Table`], whose getters apply a [`Rule`] to every number.
 //!
 //! Nothing here allocates when the name is a `&'static str`, so checks may run on the per-tick path.
 
@@ -9,6 +10,10 @@ use std::borrow::Cow;
 use std::fmt;
 
 use thiserror::Error;
+
+mod table;
+
+pub use table::{parse, Spellings, Table, CONDUCTIVITY, DENSITY, SPECIFIC_HEAT};
 
 /// What a number must satisfy. Every rule requires a finite number (NaN and ±∞ are always refused).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -28,6 +33,36 @@ pub enum Rule {
     },
     /// A requirement the other rules cannot say, in words (`"must last at least one tick"`); checked by the caller.
     Custom(&'static str),
+    /// A finite number strictly between `min` and `max` (both excluded).
+    Between {
+        /// The value must be greater than this.
+        min: f64,
+        /// The value must be smaller than this.
+        max: f64,
+    },
+    /// A finite number not above another quantity's value (`drive.current_limit_a` at most the module's I_max).
+    AtMost {
+        /// The largest allowed value.
+        max: f64,
+        /// What the bound is, with its unit (`"the module's I_max [A]"`).
+        what: &'static str,
+    },
+    /// A finite number below another quantity's value (ΔT_max below the hot-side temperature).
+    Below {
+        /// The value must be smaller than this.
+        max: f64,
+        /// What the bound is, with its unit (`"the hot-side temperature [K]"`).
+        what: &'static str,
+    },
+    /// A finite number within a relative tolerance of another quantity's value: |value − target| ≤ relative·|target|.
+    Near {
+        /// The value the number should be close to.
+        target: f64,
+        /// The allowed relative difference (0.3 = 30 %).
+        relative: f64,
+        /// What the target is, with its unit (`"the Q_max that I_max, V_max and ΔT_max imply [W]"`).
+        what: &'static str,
+    },
 }
 
 impl Rule {
@@ -39,6 +74,10 @@ impl Rule {
                 Rule::Positive => value > 0.0,
                 Rule::NonNegative => value >= 0.0,
                 Rule::Within { min, max } => value >= min && value <= max,
+                Rule::Between { min, max } => value > min && value < max,
+                Rule::AtMost { max, .. } => value <= max,
+                Rule::Below { max, .. } => value < max,
+                Rule::Near { target, relative, .. } => (value - target).abs() <= relative * target.abs(),
             }
     }
 
@@ -64,6 +103,14 @@ impl fmt::Display for Rule {
             Rule::NonNegative => f.write_str("must be a finite number not below zero"),
             Rule::Within { min, max } => write!(f, "must be a finite number in [{min}, {max}]"),
             Rule::Custom(text) => f.write_str(text),
+            Rule::Between { min, max } => write!(f, "must be a finite number strictly between {min} and {max}"),
+            Rule::AtMost { max, what } => write!(f, "must be a finite number not above {what} = {max}"),
+            Rule::Below { max, what } => write!(f, "must be a finite number below {what} = {max}"),
+            Rule::Near { target, relative, what } => write!(
+                f,
+                "must be a finite number within {:.0} % of {what} = {target:.4}",
+                100.0 * relative
+            ),
         }
     }
 }
@@ -133,6 +180,12 @@ mod tests {
                 max: 1e300,
             },
             Rule::Custom("any"),
+            Rule::Between {
+                min: -1e300,
+                max: 1e300,
+            },
+            Rule::AtMost { max: 1e300, what: "x" },
+            Rule::Below { max: 1e300, what: "x" },
         ] {
             for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
                 assert!(!rule.admits(bad), "{rule:?} admitted {bad}");
@@ -143,6 +196,20 @@ mod tests {
             Err("`dt [s]` = 0 is invalid: must be a finite number greater than zero".to_string())
         );
         assert_eq!(Rule::NonNegative.check("noise [°C]", 0.0), Ok(0.0));
+        let between = Rule::Between { min: 0.0, max: 100.0 };
+        assert!(!between.admits(0.0) && !between.admits(100.0) && between.admits(50.0));
+        let at_most = Rule::AtMost {
+            max: 2.8,
+            what: "the module's I_max [A]",
+        };
+        assert!(at_most.admits(2.8) && !at_most.admits(2.9));
+        assert_eq!(
+            at_most.check("drive.current_limit_a", 3.0).map_err(|e| e.to_string()),
+            Err("`drive.current_limit_a` = 3 is invalid: must be a finite number not above the module's I_max [A] = 2.8"
+                .to_string())
+        );
+        let below = Rule::Below { max: 1.0, what: "one" };
+        assert!(below.admits(0.5) && !below.admits(1.0));
     }
 
     #[test]
