@@ -1,8 +1,8 @@
 //! The controller interface every display controller implements, and the paper's controller behind it.
 //!
 //! A [`Controller`] turns one tick's [`ControlInput`] into a requested drive current (A, positive heats the
-//! display). The request is *not* a drive: it must pass [`crate::SafetyEnvelope::gate_drive`], which is the only
-//! way to a [`crate::DriveCommand`]. The trait is object safe (`Box<dyn Controller>`), so the runtime can pick
+//! display). The request is *not* a drive: it must pass `thermode_safety::SafetyEnvelope::gate_drive`, which is the only
+//! way to a `thermode_safety::DriveCommand`. The trait is object safe (`Box<dyn Controller>`), so the runtime can pick
 //! `pid` or the model-based controller at run time.
 //!
 //! [`PidController`] is the paper's structure (section 3.2, Figure 2): a first-order low-pass filter on the sensor,
