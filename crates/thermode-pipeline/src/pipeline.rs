@@ -337,10 +337,10 @@ impl SetpointStage {
     /// request holds over [`SetpointStage::request_horizon_s`] (step 3).
     pub fn request(&mut self, dt_s: f64) -> (f64, f64) {
         self.renderer.step(dt_s);
+        let horizon_s = self.request_horizon_s(dt_s);
         match &mut self.mode {
             Mode::Render => {
                 let target_c = self.renderer.receptor_c();
-                let horizon_s = dt_s.max(self.min_request_horizon_s);
                 (target_c, self.display.setpoint_c(target_c, horizon_s))
             }
             Mode::Direct {

@@ -19,9 +19,9 @@ use crate::command::CommandSender;
 use crate::control_loop::{LoopConfig, LoopHandle};
 use crate::engine::EngineFactory;
 use crate::error::RuntimeError;
-use crate::limits::OBJECT_C;
 use crate::recorder::Recorder;
 use crate::snapshot::Snapshot;
+use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
 use thermode_platform::Clock;
 
 /// Default HTTP/WebSocket port.
@@ -53,7 +53,7 @@ pub struct ServerConfig {
     /// Fastest telemetry subscription \[Hz\]; also at most the loop rate. Default 100.
     pub max_subscribe_hz: f64,
     /// Object temperature of a touch that gives none \[°C\]. Default 23. Within the pipeline's object range
-    /// ([`crate::limits::OBJECT_C`]). The stimulus limits themselves (display range, rate limit) are not set here:
+    /// (`thermode_pipeline::stimulus::OBJECT_TEMPERATURE`). The stimulus limits themselves (display range, rate limit) are not set here:
     /// they are those of the envelopes the channel engines run ([`crate::ChannelEngine::limits`]).
     pub default_object_c: f64,
 }
@@ -96,7 +96,7 @@ impl ServerConfig {
                 self.max_message_bytes, self.net.hard_message_bytes
             )));
         }
-        OBJECT_C.check(self.default_object_c)?;
+        OBJECT_TEMPERATURE.check(self.default_object_c)?;
         Ok(())
     }
 

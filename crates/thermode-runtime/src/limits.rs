@@ -1,33 +1,21 @@
 //! The limits a channel enforces on a stimulus, from one source: the object-temperature range of the pipeline's
-//! [`Stimulus`] ([`MIN_OBJECT_C`]..[`MAX_OBJECT_C`]) and the display range and set-point rate limit of the safety
+//! [`Stimulus`] ([`OBJECT_TEMPERATURE`]) and the display range and set-point rate limit of the safety
 //! envelope the channel really runs ([`StimulusLimits::of_envelope`]). Every engine reports its limits
 //! ([`crate::ChannelEngine::limits`]); the control loop checks every stimulus against its channel's limits before the
 //! engine sees it, the API checks it against the limits of all channels together before it is queued (so a refusal
 //! has a reply), and `/api/status` publishes those same limits. [`StimulusLimits::check`] is the one validation.
 
 use thermode_model::params::{BadValue, Range, Rule};
-use thermode_pipeline::stimulus::{MAX_OBJECT_C, MIN_OBJECT_C};
+use thermode_pipeline::stimulus::{DIRECT_RATE, DIRECT_TEMPERATURE, OBJECT_TEMPERATURE};
 use thermode_pipeline::Stimulus;
-use thermode_safety::{EnvelopeConfig, ABSOLUTE_MAX_C, ABSOLUTE_MAX_RATE_C_PER_S, ABSOLUTE_MIN_C};
+use thermode_safety::EnvelopeConfig;
 
 use crate::engine::EngineError;
-
-/// Object temperatures a touch may name \[°C\]: the pipeline's stimulus range.
-pub const OBJECT_C: Range = Range {
-    name: "object temperature [°C]",
-    min: MIN_OBJECT_C,
-    max: MAX_OBJECT_C,
-};
-
-/// Name of the direct-mode display temperature in refusals.
-const DISPLAY_NAME: &str = "direct display temperature [°C]";
-/// Name of the direct-mode rate in refusals.
-const RATE_NAME: &str = "direct rate [°C/s]";
 
 /// What a channel accepts as a stimulus.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StimulusLimits {
-    /// Object temperatures a touch may name \[°C\] ([`OBJECT_C`]).
+    /// Object temperatures a touch may name \[°C\] ([`OBJECT_TEMPERATURE`]).
     pub object_c: Range,
     /// Display temperatures a direct set-point may name \[°C\]: the envelope's `min_display_c..=max_display_c`.
     pub display_c: Range,
@@ -39,9 +27,9 @@ impl StimulusLimits {
     /// The limits of a channel whose safety envelope runs `envelope`.
     pub fn of_envelope(envelope: &EnvelopeConfig) -> Self {
         StimulusLimits {
-            object_c: OBJECT_C,
+            object_c: OBJECT_TEMPERATURE,
             display_c: Range {
-                name: DISPLAY_NAME,
+                name: DIRECT_TEMPERATURE.name,
                 min: envelope.min_display_c,
                 max: envelope.max_display_c,
             },
@@ -52,13 +40,9 @@ impl StimulusLimits {
     /// The widest limits any envelope may have (the compiled-in absolute limits of `thermode_safety`).
     pub fn absolute() -> Self {
         StimulusLimits {
-            object_c: OBJECT_C,
-            display_c: Range {
-                name: DISPLAY_NAME,
-                min: ABSOLUTE_MIN_C,
-                max: ABSOLUTE_MAX_C,
-            },
-            max_rate_c_s: ABSOLUTE_MAX_RATE_C_PER_S,
+            object_c: OBJECT_TEMPERATURE,
+            display_c: DIRECT_TEMPERATURE,
+            max_rate_c_s: DIRECT_RATE.max,
         }
     }
 
@@ -95,18 +79,19 @@ impl StimulusLimits {
 
     /// A direct-mode rate: above 0, at most [`StimulusLimits::max_rate_c_s`].
     fn rate_c_s(&self, rate_c_s: f64) -> Result<f64, BadValue> {
-        Rule::Positive.check(RATE_NAME, rate_c_s)?;
+        Rule::Positive.check(DIRECT_RATE.name, rate_c_s)?;
         Rule::Within {
             min: 0.0,
             max: self.max_rate_c_s,
         }
-        .check(RATE_NAME, rate_c_s)
+        .check(DIRECT_RATE.name, rate_c_s)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use thermode_pipeline::stimulus::{MAX_OBJECT_C, MIN_OBJECT_C};
 
     #[test]
     fn limits_follow_the_envelope_and_refuse_with_a_typed_bad_value() {

@@ -18,10 +18,12 @@ pub fn write_atomically(path: &Path, fill: impl FnOnce(&mut dyn Write) -> Result
         writer.flush()?;
         Ok(())
     };
-    thermode_platform::write_atomically(path, fill_file).or_else(|e| match e {
-        WriteError::Fill(e) => Err(e).with_context(|| format!("cannot write {}", path.display())),
-        WriteError::Io { source, .. } => Err(source).with_context(|| format!("cannot write {}", path.display())),
-    })
+    thermode_platform::write_atomically(path, fill_file)
+        .map_err(|e| match e {
+            WriteError::Fill(e) => e,
+            WriteError::Io { source, .. } => source.into(),
+        })
+        .with_context(|| format!("cannot write {}", path.display()))
 }
 /// Prints `text` to standard output; a closed pipe (e.g. `| head`) ends quietly instead of panicking.
 pub fn print_stdout(text: &str) -> Result<()> {
