@@ -57,11 +57,8 @@ pub const OBSERVER_STATES: usize = 4;
 pub struct ObserverDesign {
     /// Random-walk intensity of the unknown plate heat d, as a fraction of the reference heat per √s. Default 0.003
     /// (10 mW/√s for the default module). A finger off the model misses about 0.1 W during a contact transient,
-    /// which builds up over a second or more. Measured rendering aluminium in closed loop on the 1.5 s lagging
-    /// display (largest estimate error in the first 10 s after the touch with the finger's contact conductance
-    /// halved or doubled; steady RMS estimate error after 10 s): 0.002 → 0.18 °C, 0.011 °C; 0.003 → 0.16 °C,
-    /// 0.013 °C; 0.01 → 0.13 °C, 0.022 °C; 0.05 doubles the steady error again. The default trades a little speed
-    /// after a grossly wrong contact for a steady estimate.
+    /// which builds up over a second or more. The default trades a little speed after a grossly wrong contact for a
+    /// steady estimate (figures in `docs/design-choices.md`).
     pub disturbance_drift_per_sqrt_s: f64,
     /// Standard deviation of the unknown heat at start, as a fraction of the reference heat. Default 0.1.
     pub disturbance_initial_fraction: f64,

@@ -37,7 +37,7 @@ use crate::sensor::{quantise, Pt100, SensorCondition, SensorSample};
 
 /// Longest internal step of the plant \[s\]; longer steps are split into equal substeps. The scheme is first order:
 /// during a full-current transient the plate's error is about 0.04 K at 8–10 ms and 0.004 K at 1 ms
-/// (`tests/plant.rs`, Richardson estimate), below the sensor's 0.01 °C resolution from about 2 ms down.
+/// (`tests/integration/plant.rs`, Richardson estimate), below the sensor's 0.01 °C resolution from about 2 ms down.
 pub const MAX_SUBSTEP_S: f64 = 0.01;
 
 /// Fraction of the water conductance left by default after a pump failure: 0.1. Estimate: the box's water is still;

@@ -10,11 +10,8 @@
 //!    display to the target (unlimited). The finger model itself still advances by dt (step 7): the request is
 //!    recomputed every tick from the model's present state, a receding horizon of which only the first dt is used.
 //!    Why not one tick: at a high tick rate a one-tick request is a steep set-point that asks the receptor to
-//!    close its whole error in 1 ms, swings far beyond the plate and turns back too late; measured on the default
-//!    display, model controller, aluminium, the overshoot below the target was 0.13–0.15 °C at 1000 Hz and
-//!    0.06–0.07 °C at 200 Hz with a one-tick request. The sensor delivers no new information faster than its
-//!    sample period, so a request over one sample period asks for nothing the loop could correct sooner. At the
-//!    default 100 Hz (tick = sample period) nothing changes.
+//!    close its whole error in 1 ms and overshoots (figures in `docs/design-choices.md`); the sensor delivers
+//!    nothing new faster than its sample period. At the default 100 Hz (tick = sample period) nothing changes.
 //!    3a. If the controller reports a plate estimate (an observer), the request is limited to a band of
 //!    [`FEASIBLE_BAND_C`] around the plate temperature it expects now, so the envelope's rate limiter never winds up
 //!    far from a plate that cannot follow (the paper's PID has no estimate and gets the request unchanged).
@@ -64,12 +61,8 @@ pub const AMBIENT_TEMPERATURE: Range = Range {
 /// ([`ABSOLUTE_MAX_RATE_C_PER_S`]), instead of the envelope's general default of 10.
 ///
 /// Why: rendering a touch must let the Peltier cool as fast as it physically can (the paper's first flaw is that
-/// limit). The default module cools the resting plate at about 13 °C/s at full current (3.4 W into 0.28 J/K with
-/// the hot side near the water temperature) — faster than 10 °C/s, so at 10 °C/s the envelope and not the actuator
-/// limits the initial drop. Measured on the default display, model controller, fv renderer, aluminium: lag at half
-/// drop 0.580 s at 10 °C/s against 0.477 s at 20 °C/s, where the actuator limit is 0.477 s. A real touch changes
-/// the skin surface at well over 100 °C/s, so 20 °C/s shows nothing a real contact would not; the display limits
-/// and the thermal dose are untouched.
+/// limit); the default module cools the resting plate at about 13 °C/s at full current, so at 10 °C/s the envelope
+/// and not the actuator would limit the initial drop (figures in `docs/design-choices.md`).
 pub const RENDER_MAX_RATE_C_PER_S: f64 = ABSOLUTE_MAX_RATE_C_PER_S;
 
 /// The safety envelope of a rendering pipeline: [`EnvelopeConfig::default`] with the set-point rate limit
@@ -240,16 +233,13 @@ pub struct ChannelPipeline {
     receptor_offset_c: f64,
 }
 
-/// Time the finger must rest on the display before the controller's unknown heat is averaged \[s\]: 1. The model
-/// controller's observer starts with no unknown heat and an uncertainty of a tenth of its reference heat; measured
-/// on the default display its estimate settles within 0.75 s (0.15 W at 0.25 s, 0.003 W at 0.75 s with the default
-/// finger).
+/// Time the finger must rest on the display before the controller's unknown heat is averaged \[s\]: 1, longer than
+/// the model controller's observer needs to settle from its start (figures in `docs/design-choices.md`).
 pub const REST_SETTLE_S: f64 = 1.0;
 
-/// Time constant of the average of the unknown heat over the rest \[s\]: 1. Measured on the default display with the
-/// default finger, the observer's estimate fluctuates by about ±3 mW (±0.05 °C of receptor temperature) from tick
-/// to tick; the average over about a second halves that and still follows the real finger, which settles on the
-/// display within seconds.
+/// Time constant of the average of the unknown heat over the rest \[s\]: 1. The average halves the observer's tick
+/// to tick fluctuation and still follows a real finger, which settles on the display within seconds (figures in
+/// `docs/design-choices.md`).
 pub const REST_AVERAGE_S: f64 = 1.0;
 
 /// The controller's unknown heat averaged over the rest before the first touch: exponentially weighted mean and
@@ -464,9 +454,8 @@ impl DriveStage {
     /// plate temperature the controller expects now, when it has an estimate. Without the band a set-point the
     /// plate cannot follow runs away from it inside the envelope's rate limiter (which shapes from its own last
     /// value), and when the request turns back the shaped set-point needs time to return to the plate: the
-    /// controller keeps driving past the target (measured on the default display, model controller, aluminium,
-    /// 20 °C/s: overshoot 0.27 °C without the band). The band is wide enough for the controller to drive its
-    /// full current towards a set-point beyond it. NaN passes unchanged (the envelope latches it).
+    /// controller keeps driving past the target (figures in `docs/design-choices.md`). The band is wide enough for
+    /// the controller to drive its full current towards a set-point beyond it. NaN passes unchanged (the envelope latches it).
     fn feasible(&self, requested_c: f64, dt_s: f64) -> f64 {
         match self.controller.plate_estimate_c() {
             Some(plate_c) if plate_c.is_finite() && requested_c.is_finite() => {

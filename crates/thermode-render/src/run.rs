@@ -14,14 +14,9 @@
 //! - The display renders air for [`RenderSpec::pre_contact_s`], the finger touches the object at t = 0 and lets go
 //!   at [`RenderSpec::release_at_s`] if given. One tick every 1/[`RenderSpec::rate_hz`] s.
 //! - After each tick the plant is advanced by the tick in equal substeps of at most [`RenderSpec::plant_substep_s`]
-//!   (default [`PLANT_SUBSTEP_S`]), the gated drive held. The plant's backward Euler is first order; measured on
-//!   the default display (aluminium, fv renderer, 100 Hz, pid and model alike) with a noiseless, unquantised
-//!   sensor, the largest deviation of the skin trajectory from a 0.25 ms reference is 0.023 °C at 10 ms, 0.0115 at
-//!   5 ms, 0.0043 at 2 ms and 0.0018 at 1 ms, and the RMS skin error over 90 s changes by 4.6e-4 °C (0.2 %)
-//!   between 2 ms and 0.25 ms. 2 ms keeps the plant's error below half the sensor's 0.01 °C resolution at five
-//!   substeps per tick (test `plant_substep_convergence` in `tests/run.rs`). With the real, noisy and quantised
-//!   sensor a high-gain PID's trajectory differs by about 0.01 °C whatever the substep: a slightly different plate
-//!   flips a quantised reading, and the loop's response to that dominates.
+//!   (default [`PLANT_SUBSTEP_S`]), the gated drive held. The plant's backward Euler is first order; 2 ms keeps its
+//!   error below half the sensor's 0.01 °C resolution (test `plant_substep_convergence` in
+//!   `tests/integration/run.rs`; figures in `docs/design-choices.md`).
 //! - Truth: the simulated finger touching the real material under the reference fv physics (light-touch contact
 //!   resistance [`LIGHT_TOUCH_RESISTANCE_M2K_W`]), stepped with the same steps as the renderer. With the default
 //!   finger and the fv renderer it is the renderer's target itself (the pipeline's calibration at the touch,

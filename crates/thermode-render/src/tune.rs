@@ -20,9 +20,8 @@
 //! 1. the SIMC start point (below) is evaluated — the "before" of the report;
 //! 2. 24 screening points around the plant's scales ([`PlantScales::screening`]): the objective has several basins
 //!    (a smooth SIMC-like loop, and high-gain loops that saturate the drive on any real error, with a derivative
-//!    lead against the sensor lag), and a local search from one start point can end in the worse one (measured on
-//!    the default display: 0.1505 °C after 340 evaluations from the SIMC start alone, 0.1446 °C with the
-//!    screening after 188);
+//!    lead against the sensor lag), and a local search from one start point can end in the worse one (figures in
+//!    `docs/design-choices.md`);
 //! 3. Nelder–Mead ([`crate::nelder_mead`]) from each of the two best screening points, restarted from its best
 //!    point until a restart no longer improves, half of the remaining budget each.
 //!

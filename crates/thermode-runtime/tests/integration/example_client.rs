@@ -1,7 +1,7 @@
 //! The Python example client (`examples/touch_aluminium.py`, standard library only) against a running daemon:
 //! it touches aluminium, prints the cooling finger, and releases. Skipped loudly without `python3` (fails on CI).
 
-mod common;
+use crate::common;
 
 use std::path::PathBuf;
 use std::process::Command;

@@ -4,7 +4,7 @@
 //! lets the finger warm back towards its resting temperature; the controller gets the finger model's receptor and
 //! its conductance over the contact area.
 
-mod common;
+use crate::common;
 
 use common::{material, spec, Loop};
 use thermode_device::PlateFinger;

@@ -21,7 +21,7 @@
 //!
 //! Each test renders 2–30 contacts of up to 95 s (a few seconds for all in the test profile).
 
-mod common;
+use crate::common;
 
 use std::sync::OnceLock;
 

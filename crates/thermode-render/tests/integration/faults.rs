@@ -11,7 +11,7 @@
 //! - drive stuck at its limit: the plate runs away; the lagging PT-100 follows a ramp τ behind, so the measured
 //!   display passes its limit (48 + 1 °C, or 15 − 1 °C) at most 2τ + 1 sample + 1 tick after the true plate does.
 
-mod common;
+use crate::common;
 
 use common::{material, spec, Loop, Tick};
 use thermode_device::{Fault, Polarity};

@@ -2,7 +2,7 @@
 //! to start; with a token every HTTP request and WebSocket must present it; other web sites (Origin) and DNS
 //! rebinding (Host) are refused; the connection count is limited. A refused stranger changes nothing.
 
-mod common;
+use crate::common;
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddr};
 use std::sync::Arc;

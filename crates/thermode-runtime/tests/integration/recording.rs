@@ -2,7 +2,7 @@
 //! the tick grid, the contact names, and it is flushed while the daemon runs (a crash loses at most the last
 //! second).
 
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 

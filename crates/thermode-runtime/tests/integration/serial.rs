@@ -3,7 +3,7 @@
 //! when the port vanishes, every channel faults (stale sensor), its drive is off, touches are refused with
 //! `device_fault`, and the daemon keeps answering.
 
-mod common;
+use crate::common;
 
 use std::sync::Arc;
 use std::time::Duration;

@@ -5,7 +5,7 @@
 //! substep converges; a run is bit-for-bit reproducible from its seed; and the tuner's shortcut reproduces the
 //! render's RMS exactly.
 
-mod common;
+use crate::common;
 
 use common::{material, pid, spec};
 use thermode_model::fv::{simulate_contact, ContactSpec, FvConfig, InitialState};

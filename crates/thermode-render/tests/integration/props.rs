@@ -6,7 +6,7 @@
 //! maximum and no cooling at or below the minimum, the shaped set-point stays within the limits, and a refused
 //! stimulus is an error, never a panic.
 
-mod common;
+use crate::common;
 
 use common::{material, Loop};
 use proptest::prelude::*;

@@ -3,7 +3,7 @@
 //! device failures and faults switch the drive off, and hostile commands that bypass the API validation are
 //! refused again by the pipeline — with no drive ever outside the envelope.
 
-mod common;
+use crate::common;
 
 use std::sync::{Arc, Mutex};
 

@@ -6,7 +6,7 @@
 //! Without `/usr/bin/chromium` the test fails when `CI` is set and is skipped loudly otherwise. Set
 //! `THERMODE_DASHBOARD_PNG=/path/file.png` to keep a copy of the screenshot.
 
-mod common;
+use crate::common;
 
 use std::io::{BufRead, BufReader};
 use std::path::Path;

@@ -3,7 +3,7 @@
 //! in the first tick after touching aluminium (heat has not got there yet, while the surface jumps by degrees),
 //! and that the summary's lag and overshoot of a kron render are physical (lag ≥ 0, near the actuator limit).
 
-mod common;
+use crate::common;
 
 use common::{pid, spec};
 use thermode_pipeline::{ControllerKind, RendererKind, ShippedDisplay};

@@ -76,7 +76,7 @@ fn child_session() {
 
 fn spawn_child(dir: &Path) -> Child {
     Command::new(std::env::current_exe().expect("test binary"))
-        .args(["child_session", "--exact", "--ignored", "--test-threads=1"])
+        .args(["kill::child_session", "--exact", "--ignored", "--test-threads=1"])
         .env(CHILD_ENV, dir)
         .stdout(Stdio::null())
         .stderr(Stdio::piped())

@@ -2,7 +2,7 @@
 //! pipelines): every WebSocket request and its reply, every error code, HTTP status and materials, limits, OSC,
 //! and release of a vanished client's contacts.
 
-mod common;
+use crate::common;
 
 use std::net::UdpSocket;
 use std::time::Duration;

@@ -1,0 +1,7 @@
+//! The crate's integration tests in one binary (one link instead of one per file keeps the test build short).
+
+mod analysis;
+mod display_stimulus;
+mod kill;
+mod plan;
+mod runner;

@@ -1,0 +1,5 @@
+//! The crate's integration tests in one binary (one link instead of one per file keeps the test build short).
+
+mod emulator;
+mod protocol;
+mod serial_pty;

@@ -1,0 +1,11 @@
+//! The crate's integration tests in one binary (one link instead of one per file keeps the test build short).
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod faults;
+mod judged;
+mod kron_depth;
+mod pipeline;
+mod props;
+mod run;

@@ -1,0 +1,12 @@
+//! The crate's integration tests in one binary (one link instead of one per file keeps the test build short).
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod api;
+mod dashboard;
+mod example_client;
+mod loop_core;
+mod recording;
+mod security;
+mod serial;
