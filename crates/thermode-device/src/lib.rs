@@ -19,7 +19,7 @@
 //!
 //! One second of one channel, every drive through the safety envelope:
 //! ```
-//! use thermode_safety::{EnvelopeConfig, SafetyEnvelope};
+//! use thermode_safety::{EnvelopeConfig, MeasuredOnly, SafetyEnvelope};
 //! use thermode_device::{Device, DeviceConfig, SimulatedDisplay};
 //! use thermode_model::kron::KronModel;
 //!
@@ -29,7 +29,7 @@
 //! for n in 0..1000 {
 //!     let reading = display.read(0)?;
 //!     envelope.observe(&reading.measurement());
-//!     let command = envelope.gate_drive(n as f64 * 1e-3, 1.0); // ask for 1 A of heating
+//!     let command = envelope.gate_drive(n as f64 * 1e-3, 1.0, &MeasuredOnly); // ask for 1 A of heating
 //!     display.apply(0, &command)?;
 //!     display.poll((n + 1) as f64 * 1e-3);
 //! }

@@ -220,6 +220,8 @@ pub struct Trajectory {
     pub display_c: Vec<f64>,
     /// The PT-100 reading \[°C\].
     pub sensor_c: Vec<f64>,
+    /// The safety envelope's estimate of the true plate (`display_c`) from the reading \[°C\].
+    pub plate_estimate_c: Vec<f64>,
     /// The gated drive current \[A\].
     pub current_a: Vec<f64>,
     /// The true hot-side temperature \[°C\].
@@ -243,6 +245,7 @@ impl Trajectory {
             display_setpoint_c: v(),
             display_c: v(),
             sensor_c: v(),
+            plate_estimate_c: v(),
             current_a: v(),
             hot_side_c: v(),
             contact: Vec::with_capacity(rows),
@@ -274,6 +277,7 @@ impl Trajectory {
         self.display_setpoint_c.push(telemetry.display_setpoint_c);
         self.display_c.push(state.plate_c);
         self.sensor_c.push(state.sensor.value_c);
+        self.plate_estimate_c.push(telemetry.plate_estimate_c);
         self.current_a.push(state.applied_current_a);
         self.hot_side_c.push(state.hot_side_c);
         self.contact.push(telemetry.contact);
@@ -448,7 +452,7 @@ pub fn tick(
 }
 
 /// The CSV columns, in order.
-pub const CSV_HEADER: [&str; 17] = [
+pub const CSV_HEADER: [&str; 18] = [
     "time_s",
     "truth_skin_c",
     "target_skin_c",
@@ -458,6 +462,7 @@ pub const CSV_HEADER: [&str; 17] = [
     "requested_setpoint_c",
     "display_c",
     "sensor_c",
+    "plate_estimate_c",
     "current_a",
     "hot_side_c",
     "contact",
@@ -493,6 +498,7 @@ pub fn write_csv(runs: &[RenderRun], sink: &mut dyn Write) -> Result<(), csv::Er
                 &t.requested_setpoint_c,
                 &t.display_c,
                 &t.sensor_c,
+                &t.plate_estimate_c,
                 &t.current_a,
                 &t.hot_side_c,
             ] {

@@ -498,6 +498,11 @@ impl ControlLoop {
                 for channel in 0..self.slots.len() {
                     self.release(channel);
                     self.status[channel].held_off = true;
+                    let slot = &mut self.slots[channel];
+                    let engine = &mut slot.engine;
+                    if !slot.failed && catch_unwind(AssertUnwindSafe(|| engine.hold())).is_err() {
+                        slot.failed = true;
+                    }
                 }
             }
             Command::ClientGone { client } => {

@@ -24,6 +24,7 @@ pub const EMPTY_TELEMETRY: Telemetry = Telemetry {
     hot_side_c: f64::NAN,
     requested_current_a: f64::NAN,
     current_a: 0.0,
+    plate_estimate_c: f64::NAN,
     fault: None,
 };
 

@@ -18,7 +18,7 @@ use thermode_link::protocol::DeviceMessage;
 use thermode_link::serial::{serial_path, SerialConfig, SerialDevice};
 use thermode_model::kron::KronModel;
 use thermode_platform::{Clock, MonotonicClock};
-use thermode_safety::{EnvelopeConfig, SafetyEnvelope};
+use thermode_safety::{EnvelopeConfig, MeasuredOnly, SafetyEnvelope};
 
 const WATCHDOG_S: f64 = 0.25;
 const TICK_S: f64 = 1e-3;
@@ -107,7 +107,7 @@ impl ControlLoop {
             if let Ok(r) = &reading {
                 envelope.observe(&r.measurement());
             }
-            let command = envelope.gate_drive(now, currents_a[ch]);
+            let command = envelope.gate_drive(now, currents_a[ch], &MeasuredOnly);
             if let Err(e) = self.device.apply(ch, &command) {
                 readings.push(Err(e));
                 continue;

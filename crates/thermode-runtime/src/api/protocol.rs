@@ -490,6 +490,7 @@ pub fn channel_telemetry(status: &ChannelStatus) -> Value {
         "skin_c": finite(t.skin_c),
         "display_setpoint_c": finite(t.display_setpoint_c),
         "sensor_c": finite(t.sensor_c),
+        "plate_estimate_c": finite(t.plate_estimate_c),
         "current_a": finite(t.current_a),
         "hot_side_c": finite(t.hot_side_c),
         "fault": fault_code(status),
