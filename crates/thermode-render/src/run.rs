@@ -80,6 +80,9 @@ pub struct RenderSpec {
     pub finger_skin: Skin,
     /// The simulated finger's skin-to-plate contact conductance [W/(m²·K)]; `None` = the device file's.
     pub finger_contact_w_m2k: Option<f64>,
+    /// The simulated hardware, when it differs from the device file the pipeline believes (`pipeline.device`):
+    /// real displays differ from their datasheets. Default `None`: the plant is the pipeline's device.
+    pub hardware: Option<DeviceConfig>,
     /// The touched material.
     pub material: Material,
     /// Object temperature at the touch \[°C\]; `None` = the ambient temperature (the paper's objects lay in the room).
@@ -106,6 +109,7 @@ impl RenderSpec {
             pipeline,
             finger_skin: Skin::fingertip(),
             finger_contact_w_m2k: None,
+            hardware: None,
             material,
             object_c: None,
             duration_s: DEFAULT_DURATION_S,
@@ -187,9 +191,10 @@ impl RenderSpec {
         self.pipeline.renderer.receptor_depth_m(&self.finger_skin)
     }
 
-    /// The device as the plant sees it: the device file with the simulated finger's contact conductance.
+    /// The device as the plant sees it: the hardware (default: the pipeline's device file) with the simulated
+    /// finger's contact conductance.
     pub fn plant_device(&self) -> DeviceConfig {
-        let mut device = self.pipeline.device;
+        let mut device = self.hardware.unwrap_or(self.pipeline.device);
         if let Some(g) = self.finger_contact_w_m2k {
             device.plate.contact_conductance_w_m2k = g;
         }
