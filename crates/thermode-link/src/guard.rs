@@ -34,18 +34,20 @@
 //! `A h_c · min(0, 37 − u) ≤ q_f ≤ A h_c · max(0, 37 − u)` (0 for a lifted finger, which is inside). `A h_c` is the
 //! plate's contact conductance (area × `contact_conductance_w_m2k`): a finger's tissue only adds resistance. The
 //! plate temperature in these terms is only known to lie in `[L, U]` (at the sample); the upper rate bound is the
-//! largest of the (convex, piecewise affine) right-hand side at the two ends, the lower bound the smallest. The rate
-//! bounds use the larger of the current the drive delivered and the one it is about to deliver.
+//! largest of the (convex, piecewise affine) right-hand side at the two ends, the lower bound the smallest. The check
+//! before a step uses the current about to be delivered; the bound's history uses the drive's own measurement of the
+//! current it delivered (so a stuck drive is accounted for, though it cannot be cut).
 //!
 //! The reading's error `δ = 4σ + q` ([`NOISE_SIGMAS`] standard deviations of the sensor noise plus one quantisation
 //! step): a reading that errs by more is rare (6·10⁻⁵ of the samples) and then only by hundredths of a degree.
 //!
 //! Numbers for the default display (S 6.37 mV/K, R 0.515 Ω, K 28 mW/K, C_d 0.28 J/K, τ 0.3 s), hot side at
-//! 25 °C: at 2.5 A and 46 °C the plate can rise at 22 K/s, so `G` reaches 6.6 K (33 K on a 1.5 s sensor) and heating
-//! is cut when the reading passes about 41 °C; holding a finger at 48 °C takes about 0.5 A, at which a lifted finger
-//! would let the plate rise at 1.6 K/s: heating is cut when the reading reaches about 47.4 °C (45.5 °C with a 1.5 s
-//! sensor). The device's line therefore sits below 48 °C by the plate's possible rise during the sensor's lag; a host
-//! that keeps its plate within that margin of 48 °C trips it (`docs/protocol.md` §6).
+//! 25 °C: at 2.5 A and 46 °C the plate can rise at 22 K/s, so `G` approaches 6.5 K and a host ramping at full
+//! current is cut when the reading passes about 42 °C, the true plate near 47.4 °C; holding a finger at 48 °C takes
+//! about 0.5 A, at which a lifted finger would let the plate rise at 1.6 K/s: heating is cut when the reading reaches
+//! about 47.4 °C (45.5 °C with a 1.5 s sensor). The device's line therefore sits below 48 °C by the plate's possible
+//! rise during the sensor's lag; a host that keeps its plate within that margin of 48 °C trips it
+//! (`docs/protocol.md` §6.1).
 //!
 //! A reading outside the sensor's valid range (open: ≥ [`SENSOR_OPEN_THRESHOLD_C`], shorted: ≤
 //! [`SENSOR_SHORT_THRESHOLD_C`], or not a number) leaves the plate unbounded: both directions are cut. A frozen
