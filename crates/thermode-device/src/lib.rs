@@ -48,7 +48,7 @@ pub mod sensor;
 pub use channel::{ChannelState, Fault, HeatFlows, Polarity, SimulatedChannel, MAX_SUBSTEP_S};
 pub use config::DeviceConfig;
 pub use device::{Device, Reading, RecordedCommand, RecordingDevice, SimulatedDisplay, MAX_CHANNELS};
-pub use error::DeviceError;
+pub use error::{DeviceCut, DeviceError};
 pub use finger::{default_finger, DefaultFinger, PlateFinger};
 pub use sensor::{Pt100, SensorCondition, SensorSample, SENSOR_OPEN_READING_C, SENSOR_SHORT_READING_C};
 

@@ -524,6 +524,8 @@ pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> Value {
         "owner": status.owner,
         "release_at_s": status.release_at_s,
         "link_ok": status.link_ok,
+        "device_cut": status.device_cut.map(|c| c.name()),
+        "device_cut_description": status.device_cut.map(|c| c.to_string()),
         "engine_failed": status.engine_failed,
     });
     merged(channel_telemetry(status), extra)

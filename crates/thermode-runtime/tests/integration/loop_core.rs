@@ -343,6 +343,41 @@ fn a_failing_read_gets_zero_current_then_a_latched_fault_that_can_be_cleared() {
     rig.ask(touch(2, "wood", Owner::Script)).expect("touch after clearing");
 }
 
+#[test]
+fn a_device_cut_is_shown_on_its_channel_with_zero_current_until_the_device_releases_it() {
+    use thermode_device::DeviceCut;
+    use thermode_runtime::api::protocol::channel_status;
+    let rig = Rig::new(2, pipelines(), LoopConfig::default());
+    rig.step(20);
+    rig.control
+        .lock()
+        .expect("control")
+        .cut_reads
+        .push((1, DeviceCut::OverTemperature));
+    let cut_from = rig.snapshot().time_s + PERIOD_S;
+    rig.step(30);
+    let s = rig.snapshot();
+    assert_eq!(s.channels[1].device_cut, Some(DeviceCut::OverTemperature));
+    assert_eq!(s.channels[0].device_cut, None, "the other channel");
+    let currents = rig.currents_since(1, cut_from);
+    assert!(currents.iter().all(|&a| a == 0.0), "drive while cut: {currents:?}");
+    let json = channel_status(&s.channels[1], None);
+    println!("status of the cut channel: {json}");
+    assert_eq!(json["device_cut"], "over_temperature");
+    let description = json["device_cut_description"].as_str().unwrap_or_default();
+    assert!(
+        description.contains("over-temperature cut") && description.contains("heating off"),
+        "{description}"
+    );
+    rig.control.lock().expect("control").cut_reads.clear();
+    rig.step(2);
+    assert_eq!(
+        rig.snapshot().channels[1].device_cut,
+        None,
+        "cleared by the next good read"
+    );
+}
+
 fn open_sensor_case(engines: EngineFactory) {
     let rig = Rig::new(2, engines, LoopConfig::default());
     rig.step(20);
