@@ -10,7 +10,7 @@
 use thermode_device::Reading;
 use thermode_model::params::{BadValue, Rule};
 use thermode_pipeline::{ChannelPipeline, PipelineError};
-use thermode_safety::{DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, SafetyEnvelope};
+use thermode_safety::{DoseLedger, DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, SafetyEnvelope};
 use thiserror::Error;
 
 use crate::limits::StimulusLimits;
@@ -51,6 +51,14 @@ pub trait ChannelEngine {
     /// Clears the latched safety fault at `now_s` \[s\] if its cause is gone; returns the cleared fault (`None`
     /// if none was latched). Refused while the cause persists.
     fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, EngineError>;
+
+    /// The channel's thermal dose as its safety envelope counts it (`SafetyEnvelope::dose_ledger`). Called by the
+    /// loop after every tick (it publishes it and the daemon saves it): cheap, no allocation.
+    fn dose(&self) -> DoseLedger;
+
+    /// Restores a saved thermal dose into the channel's safety envelope (`SafetyEnvelope::restore_dose`: never
+    /// lowers the dose). The daemon calls it before the first tick.
+    fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), EngineError>;
 }
 
 /// Builds a channel's engines on the loop thread (engines need not be `Send`): called once with the device's
@@ -72,6 +80,14 @@ impl ChannelEngine for ChannelPipeline {
 
     fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, EngineError> {
         Ok(ChannelPipeline::clear_fault(self, now_s)?)
+    }
+
+    fn dose(&self) -> DoseLedger {
+        self.envelope().dose_ledger()
+    }
+
+    fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), EngineError> {
+        Ok(ChannelPipeline::restore_dose(self, saved)?)
     }
 }
 
@@ -166,6 +182,14 @@ impl ChannelEngine for TrackingEngine {
     fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, EngineError> {
         Ok(self.envelope.clear_fault(now_s)?)
     }
+
+    fn dose(&self) -> DoseLedger {
+        self.envelope.dose_ledger()
+    }
+
+    fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), EngineError> {
+        Ok(self.envelope.restore_dose(saved)?)
+    }
 }
 
 /// An [`EngineFactory`] of one render pipeline per channel, all built from `config`.
@@ -178,6 +202,21 @@ pub fn pipeline_engines(config: thermode_pipeline::PipelineConfig) -> EngineFact
                     .map_err(EngineError::from)
             })
             .collect()
+    })
+}
+
+/// `engines` with each channel's saved dose restored (`saved(channel)`) before the factory returns, i.e. before
+/// the loop's first tick. A refused restore (a bad number) fails the start.
+pub fn with_restored_doses(
+    engines: EngineFactory,
+    saved: impl Fn(usize) -> DoseLedger + Send + 'static,
+) -> EngineFactory {
+    Box::new(move |count| {
+        let mut built = engines(count)?;
+        for (channel, engine) in built.iter_mut().enumerate() {
+            engine.restore_dose(&saved(channel))?;
+        }
+        Ok(built)
     })
 }
 

@@ -354,6 +354,14 @@ impl thermode_runtime::ChannelEngine for Booby {
     fn limits(&self) -> thermode_runtime::StimulusLimits {
         self.inner.limits()
     }
+
+    fn dose(&self) -> thermode_safety::DoseLedger {
+        self.inner.dose()
+    }
+
+    fn restore_dose(&mut self, saved: &thermode_safety::DoseLedger) -> Result<(), thermode_runtime::EngineError> {
+        self.inner.restore_dose(saved)
+    }
 }
 
 #[test]
