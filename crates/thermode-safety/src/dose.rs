@@ -543,42 +543,82 @@ mod tests {
         }
     }
 
+    /// The plate at `request_c(t)` clamped to the ceiling of the previous sample (the most a plate that obeys the
+    /// ceiling can spend), sampled every `dt_s` for `duration_s`, from a tracker `d`.
+    fn obey(cap: &DoseCap, d: &mut DoseTracker, t0_s: f64, duration_s: f64, dt_s: f64, request_c: impl Fn(f64) -> f64) {
+        let mut plate_c = d.last_plate_c().unwrap_or(33.0);
+        let steps = (duration_s / dt_s).round() as u64;
+        for k in 0..steps {
+            let t = t0_s + k as f64 * dt_s;
+            d.add_sample(t, plate_c);
+            if cap.lockout_reached(d) {
+                d.lock();
+            }
+            plate_c = request_c(t).min(cap.ceiling_c(d)).max(15.0);
+        }
+    }
+
     /// A plate held at whatever the ceiling allows (any request above it is clamped to it) for a long time: the
-    /// estimate's dose converges to B·(1 + 2.5 %) and never exceeds it, for several budgets and any request
-    /// (a request below the ceiling spends less). Analytic: D(t) = B(1 + a) − R₀·e^{−t/τ} after the lockout.
+    /// estimate's dose converges to B·(1 + 2.5 %) and never exceeds it, and the time at or above 43 °C stays within
+    /// its budget (plus one sample), for several budgets and any constant request (a request below the ceiling
+    /// spends less). Analytic: D(t) = B(1 + a) − R₀·e^{−t/τ} after the lockout.
     #[test]
     fn any_continuation_stays_within_the_estimate_allowance() {
-        for budget in [0.1, 1.0, 10.0] {
+        for (budget, time_budget_s) in [(0.1, 600.0), (1.0, 600.0), (10.0, 600.0), (10.0, 20.0)] {
             let cap = DoseCap {
                 cem43_budget_min: budget,
-                max_time_at_or_above_43_s: 600.0,
+                max_time_at_or_above_43_s: time_budget_s,
                 lockout_max_c: 42.5,
             };
             let limit = budget * (1.0 + DOSE_ESTIMATE_ALLOWANCE);
-            for request_c in [38.0f64, 42.0, 45.0, 48.0] {
+            for request_c in [38.0f64, 42.0, 44.0, 45.0, 48.0] {
                 let mut d = DoseTracker::new();
                 let dt_s = 0.05;
-                // 10 hours, the plate at the request clamped to the ceiling of the previous sample.
-                let mut plate_c = 33.0;
-                for k in 0..720_000u64 {
-                    d.add_sample(k as f64 * dt_s, plate_c);
-                    if cap.lockout_reached(&d) {
-                        d.lock();
-                    }
-                    plate_c = request_c.min(cap.ceiling_c(&d)).max(15.0);
-                }
-                let got = d.cem43_min();
+                obey(&cap, &mut d, 0.0, 36_000.0, dt_s, |_| request_c);
+                let (got, t43) = (d.cem43_min(), d.time_at_or_above_43_s());
                 assert!(
                     got <= limit * (1.0 + 1e-9),
                     "budget {budget}, request {request_c} °C: {got} CEM43-min > {limit}"
                 );
-                if request_c >= 45.0 {
+                assert!(
+                    t43 <= time_budget_s + dt_s,
+                    "time budget {time_budget_s} s, request {request_c} °C: {t43} s at ≥ 43 °C"
+                );
+                if request_c >= 45.0 && time_budget_s >= 600.0 {
                     assert!(
                         got >= budget,
                         "budget {budget}, request {request_c}: {got} never reached the budget"
                     );
                 }
             }
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 24, failure_persistence: None,
+            ..proptest::prelude::ProptestConfig::default() })]
+
+        /// Any budgets, any sequence of requests (up to 20 segments of up to 10 min each at 15–48 °C), then ten
+        /// hours asking for 48 °C: the total stays within the estimate's allowance and the time budget.
+        #[test]
+        fn any_request_sequence_stays_within_the_allowance(
+            budget in 0.05..10.0f64,
+            time_budget_s in 1.0..600.0f64,
+            segments in proptest::collection::vec((1.0..600.0f64, 15.0..48.0f64), 1..20),
+        ) {
+            let cap = DoseCap { cem43_budget_min: budget, max_time_at_or_above_43_s: time_budget_s, lockout_max_c: 42.5 };
+            let dt_s = 0.1;
+            let mut d = DoseTracker::new();
+            let mut t0_s = 0.0;
+            for (duration_s, request_c) in segments {
+                obey(&cap, &mut d, t0_s, duration_s, dt_s, |_| request_c);
+                t0_s += (duration_s / dt_s).round() * dt_s;
+            }
+            obey(&cap, &mut d, t0_s, 36_000.0, dt_s, |_| 48.0);
+            let limit = budget * (1.0 + DOSE_ESTIMATE_ALLOWANCE);
+            proptest::prop_assert!(d.cem43_min() <= limit * (1.0 + 1e-9), "{} > {limit}", d.cem43_min());
+            proptest::prop_assert!(d.time_at_or_above_43_s() <= time_budget_s + dt_s,
+                "{} s at ≥ 43 °C, budget {time_budget_s} s", d.time_at_or_above_43_s());
         }
     }
 
