@@ -23,7 +23,7 @@
 //! the CEM43 rate being convex, unbiased noise over-counts by about 3 %), and limited to the fastest plausible rate
 //! (the envelope's `max_measured_rate_c_per_s`, 50 °C/s: a jump of the reading beyond it is a sensor fault, not a
 //! plate 60 °C hotter). The window's delay errs on the safe side where the dose is large: at the top of a rise
-//! the slope is that of 25–50 ms earlier, so `T̂` overshoots the plate (the estimate counted 1.03 CEM43-min when
+//! the slope is that of 25–50 ms earlier, so `T̂` overshoots the plate (the estimate counted 1.02 CEM43-min when
 //! the plate had 0.87 in the copper run), and at the start of a fall it is still small. The reconstruction is as
 //! good as τ_s: a τ_s longer than the real one over-counts rises and under-counts falls, a shorter one the reverse
 //! (the device file gives it; a rendering pipeline refuses an envelope τ_s shorter than its device's).
