@@ -417,7 +417,7 @@ fn osc_setpoint(channel: usize, temp_c: f32, rate_c_s: f32) -> Vec<u8> {
     fn padded(text: &str) -> Vec<u8> {
         let mut bytes = text.as_bytes().to_vec();
         bytes.push(0);
-        while bytes.len() % 4 != 0 {
+        while !bytes.len().is_multiple_of(4) {
             bytes.push(0);
         }
         bytes
