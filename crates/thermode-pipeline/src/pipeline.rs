@@ -40,7 +40,8 @@ use thermode_model::fv::{FvConfig, FvModel};
 use thermode_model::kron::calibrate_to_surface;
 use thermode_model::{Material, Range, Rule, Skin};
 use thermode_safety::{
-    DriveCommand, EnvelopeConfig, FaultCode, MeasuredOnly, SafetyEnvelope, SetpointDecision, ABSOLUTE_MAX_RATE_C_PER_S,
+    DoseLedger, DriveCommand, EnvelopeConfig, FaultCode, MeasuredOnly, SafetyEnvelope, SetpointDecision,
+    ABSOLUTE_MAX_RATE_C_PER_S,
 };
 
 use crate::controllers::{build_controller, plant_model, ControllerKind};
@@ -95,7 +96,9 @@ pub struct PipelineConfig {
     pub renderer: RendererKind,
     /// The controller. No default here: see [`crate::controllers::gains_for_device`] for the tuned PID gains.
     pub controller: ControllerKind,
-    /// The safety envelope. Default [`render_envelope`] (15–48 °C, 20 °C/s).
+    /// The safety envelope. Default [`render_envelope`] (15–48 °C, 20 °C/s) with the device file's sensor time
+    /// constant (the thermal dose is counted at the plate reconstructed from the sensor); its
+    /// `sensor_time_constant_s` must not be shorter than the device's.
     pub envelope: EnvelopeConfig,
     /// The controller's model of the finger (renderer and display inverse). Default [`Skin::fingertip`].
     pub skin: Skin,
@@ -118,7 +121,10 @@ impl PipelineConfig {
             device,
             renderer: RendererKind::Fv,
             controller,
-            envelope: render_envelope(),
+            envelope: EnvelopeConfig {
+                sensor_time_constant_s: device.sensor.time_constant_s,
+                ..render_envelope()
+            },
             skin: Skin::fingertip(),
             ambient_c: 23.0,
             contact_resistance_m2k_w: LIGHT_TOUCH_RESISTANCE_M2K_W,
@@ -133,6 +139,11 @@ impl PipelineConfig {
         Rule::NonNegative.check("contact resistance [m²K/W]", self.contact_resistance_m2k_w)?;
         self.device.validate("device config")?;
         self.envelope.validate()?;
+        Rule::AtMost {
+            max: self.envelope.sensor_time_constant_s,
+            what: "the envelope's sensor_time_constant_s [s] (a shorter assumed lag under-counts the thermal dose)",
+        }
+        .check("device sensor time constant [s]", self.device.sensor.time_constant_s)?;
         Ok(())
     }
 }
@@ -722,6 +733,12 @@ impl ChannelPipeline {
     /// The safety envelope (fault, thermal dose, limits).
     pub fn envelope(&self) -> &SafetyEnvelope {
         self.drive.envelope()
+    }
+
+    /// Restores a saved thermal dose into the envelope (before the first tick; see
+    /// [`SafetyEnvelope::restore_dose`]: a restore never lowers the dose).
+    pub fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), PipelineError> {
+        Ok(self.drive.envelope.restore_dose(saved)?)
     }
 
     /// The controller.

@@ -65,8 +65,9 @@ pub const DEFAULT_DURATION_S: f64 = 90.0;
 pub const DEFAULT_PRE_CONTACT_S: f64 = 5.0;
 /// Default seed of the sensor noise.
 pub const DEFAULT_SEED: u64 = 1;
-/// Longest run accepted (pre-contact plus contact) \[s\]: one hour.
-pub const MAX_RUN_S: f64 = 3600.0;
+/// Longest run accepted (pre-contact plus contact) \[s\]: two hours, so that an hour of contact (the thermal-dose
+/// check `--duration 3600`) fits with any pre-contact of up to an hour.
+pub const MAX_RUN_S: f64 = 7200.0;
 
 /// The simulated display of a run: one channel with the finite-volume finger.
 pub type Plant = SimulatedDisplay<FvModel>;

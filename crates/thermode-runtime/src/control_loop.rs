@@ -24,7 +24,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use thermode_device::{Device, DeviceError, Reading, MAX_CHANNELS};
-use thermode_safety::{DriveCommand, FaultCode};
+use thermode_safety::{DoseLedger, DriveCommand, FaultCode};
 
 use crate::command::{Applied, Command, CommandError, CommandReceiver, CommandSender, Owner, Queued, Reply};
 use crate::engine::{ChannelEngine, EngineError, EngineFactory, Stimulus};
@@ -323,7 +323,11 @@ impl ControlLoop {
                 failed: false,
             });
         }
-        let status: Vec<ChannelStatus> = (0..slots.len()).map(|channel| air_status(channel, &air)).collect();
+        let status: Vec<ChannelStatus> = slots
+            .iter()
+            .enumerate()
+            .map(|(channel, slot)| air_status(channel, &air, slot.engine.dose()))
+            .collect();
         let stats = LoopStats {
             rate_hz: config.rate_hz,
             period_s: config.period_s(),
@@ -410,10 +414,17 @@ impl ControlLoop {
             None
         } else {
             let (engine, reading) = (&mut slot.engine, &slot.reading);
-            catch_unwind(AssertUnwindSafe(|| engine.tick(time_s, dt_s, reading))).ok()
+            catch_unwind(AssertUnwindSafe(|| {
+                let ticked = engine.tick(time_s, dt_s, reading);
+                (ticked, engine.dose())
+            }))
+            .ok()
         };
         let (command, mut telemetry) = match ticked {
-            Some((command, telemetry)) => (Some(command), telemetry),
+            Some(((command, telemetry), dose)) => {
+                status.dose = dose;
+                (Some(command), telemetry)
+            }
             None => {
                 // The engine panicked (a bug): this channel is off for the rest of the session.
                 slot.failed = true;
@@ -681,7 +692,7 @@ impl ControlLoop {
 }
 
 /// The status of a channel in air, nobody's, drive free.
-fn air_status(channel: usize, air: &Arc<str>) -> ChannelStatus {
+fn air_status(channel: usize, air: &Arc<str>, dose: DoseLedger) -> ChannelStatus {
     ChannelStatus {
         channel,
         label: air.clone(),
@@ -695,6 +706,7 @@ fn air_status(channel: usize, air: &Arc<str>) -> ChannelStatus {
         device_cut: None,
         engine_failed: false,
         telemetry: crate::snapshot::EMPTY_TELEMETRY,
+        dose,
     }
 }
 

@@ -4,9 +4,15 @@
 //!
 //! Security rules applied here, before anything listens: a non-loopback bind address needs a token
 //! ([`RuntimeError::InsecureBind`] otherwise), and OSC, which cannot carry a token, listens only on loopback binds.
+//!
+//! With a state directory ([`DaemonConfig::state_dir`]) the thermal dose survives restarts ([`crate::ledger`]): the
+//! directory is locked, its ledger read (a corrupt or unreadable one refuses the start: [`RuntimeError::Ledger`])
+//! and written back once (an unwritable directory refuses the start), every channel's dose is restored into its
+//! engine before the loop's first tick, and a writer thread keeps the ledger up to date until the shutdown, whose
+//! final write follows the loop's last tick.
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener, UdpSocket};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, AtomicUsize};
 use std::sync::Arc;
 use std::time::Duration;
@@ -18,8 +24,9 @@ use crate::api::protocol::RequestLimits;
 use crate::api::{router, App, Info, NetLimits, OscCounters};
 use crate::command::CommandSender;
 use crate::control_loop::{LoopConfig, LoopHandle};
-use crate::engine::EngineFactory;
+use crate::engine::{with_restored_doses, EngineFactory};
 use crate::error::RuntimeError;
+use crate::ledger::{DoseWriter, StateDir};
 use crate::recorder::Recorder;
 use crate::snapshot::Snapshot;
 use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
@@ -120,6 +127,9 @@ pub struct DaemonConfig {
     pub device_label: String,
     /// A name per channel (e.g. the fingers), or empty.
     pub channel_names: Vec<String>,
+    /// The state directory of the dose ledger ([`crate::ledger`]), or `None`: then each channel's dose lives only
+    /// as long as the daemon (tests, the bench). Default `None`; `thermode serve` always gives one.
+    pub state_dir: Option<PathBuf>,
 }
 
 /// What [`Daemon::stop`] did.
@@ -140,6 +150,8 @@ pub struct Daemon {
     runtime: Option<tokio::runtime::Runtime>,
     control: Option<LoopHandle>,
     recorder: Option<Recorder>,
+    dose_writer: Option<DoseWriter>,
+    ledger_path: Option<PathBuf>,
     http_addr: SocketAddr,
     osc_addr: Option<SocketAddr>,
     token: Option<String>,
@@ -167,6 +179,17 @@ impl Daemon {
         let server = &config.server;
         server.validate()?;
         config.loop_config.validate()?;
+        // The dose ledger before anything listens or drives: a corrupt, unreadable or unwritable one refuses the
+        // start.
+        let ledger = match &config.state_dir {
+            Some(dir) => {
+                let state = StateDir::open(dir)?;
+                let ledger = state.load()?;
+                state.store(&ledger)?;
+                Some((state, ledger))
+            }
+            None => None,
+        };
         let http = bind_tcp(SocketAddr::new(server.bind, server.port))?;
         let http_addr = local_addr(&http, server.bind)?;
         let osc = match server.osc_port.filter(|_| server.osc_enabled()) {
@@ -189,7 +212,26 @@ impl Daemon {
             }
             None => None,
         };
+        let engines = match &ledger {
+            Some((_, saved)) => {
+                let saved = saved.clone();
+                with_restored_doses(engines, move |channel| saved.dose(channel))
+            }
+            None => engines,
+        };
         let control = LoopHandle::spawn(config.loop_config.clone(), device, engines, clock, taps)?;
+        let ledger_path = ledger.as_ref().map(|(state, _)| state.ledger_path());
+        let dose_writer = match ledger {
+            Some((state, saved)) => {
+                Some(
+                    DoseWriter::start(state, saved, control.shared()).map_err(|source| RuntimeError::Io {
+                        context: "cannot start the dose ledger thread".into(),
+                        source,
+                    })?,
+                )
+            }
+            None => None,
+        };
         let limits = request_limits(&config, &control);
         limits.stimulus.object_c.check(limits.default_object_c)?;
         let app = Arc::new(App {
@@ -206,6 +248,7 @@ impl Daemon {
             },
             osc: Arc::new(OscCounters::default()),
             recorded_rows: recorder.as_ref().map(Recorder::rows_counter),
+            dose_ledger: dose_writer.as_ref().map(DoseWriter::status),
             clients: AtomicUsize::new(0),
             next_client: AtomicU64::new(1),
         });
@@ -214,6 +257,8 @@ impl Daemon {
             runtime: Some(runtime),
             control: Some(control),
             recorder,
+            dose_writer,
+            ledger_path,
             http_addr,
             osc_addr,
             token: server.token.clone(),
@@ -244,6 +289,11 @@ impl Daemon {
         format!("http://{host}:{}/{query}", self.http_addr.port())
     }
 
+    /// The dose ledger file, when the daemon has a state directory.
+    pub fn ledger_path(&self) -> Option<&Path> {
+        self.ledger_path.as_deref()
+    }
+
     /// The session CSV, when recording.
     pub fn recording_path(&self) -> Option<PathBuf> {
         self.recorder.as_ref().map(|r| r.path().to_path_buf())
@@ -265,8 +315,8 @@ impl Daemon {
     }
 
     /// Stops the loop first (its last act: every drive to 0 A at once, within one loop period), then the network
-    /// side, then the recorder (every queued row written, flushed and synced). Returns the rows recorded, if
-    /// recording.
+    /// side, then the dose ledger (its final write holds the loop's last tick) and the recorder (every queued row
+    /// written, flushed and synced). Returns the rows recorded, if recording.
     pub fn shutdown(mut self) -> Result<Option<u64>, RuntimeError> {
         self.stop_parts().map(|report| report.rows)
     }
@@ -289,7 +339,9 @@ impl Daemon {
         if let Some(runtime) = self.runtime.take() {
             runtime.shutdown_timeout(Duration::from_millis(500));
         }
+        let ledger = self.dose_writer.take().map(DoseWriter::finish).transpose();
         report.rows = self.recorder.take().map(Recorder::finish).transpose()?;
+        ledger?;
         Ok(report)
     }
 }

@@ -10,7 +10,9 @@
 use thermode_device::Reading;
 use thermode_model::params::{BadValue, Rule};
 use thermode_pipeline::{ChannelPipeline, PipelineError};
-use thermode_safety::{DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, MeasuredOnly, SafetyEnvelope};
+use thermode_safety::{
+    DoseLedger, DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, MeasuredOnly, SafetyEnvelope,
+};
 use thiserror::Error;
 
 use crate::limits::StimulusLimits;
@@ -55,6 +57,13 @@ pub trait ChannelEngine {
     /// Holds the drive off until the next stimulus (stop all): the channel renders air, its envelope keeps
     /// checking faults with the drive at 0 A, and the next stimulus starts the controller afresh.
     fn hold(&mut self);
+    /// The channel's thermal dose as its safety envelope counts it (`SafetyEnvelope::dose_ledger`). Called by the
+    /// loop after every tick (it publishes it and the daemon saves it): cheap, no allocation.
+    fn dose(&self) -> DoseLedger;
+
+    /// Restores a saved thermal dose into the channel's safety envelope (`SafetyEnvelope::restore_dose`: never
+    /// lowers the dose). The daemon calls it before the first tick.
+    fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), EngineError>;
 }
 
 /// Builds a channel's engines on the loop thread (engines need not be `Send`): called once with the device's
@@ -80,6 +89,14 @@ impl ChannelEngine for ChannelPipeline {
 
     fn hold(&mut self) {
         ChannelPipeline::hold(self);
+    }
+
+    fn dose(&self) -> DoseLedger {
+        self.envelope().dose_ledger()
+    }
+
+    fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), EngineError> {
+        Ok(ChannelPipeline::restore_dose(self, saved)?)
     }
 }
 
@@ -188,6 +205,14 @@ impl ChannelEngine for TrackingEngine {
         self.stimulus = Stimulus::Air;
         self.held = true;
     }
+
+    fn dose(&self) -> DoseLedger {
+        self.envelope.dose_ledger()
+    }
+
+    fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), EngineError> {
+        Ok(self.envelope.restore_dose(saved)?)
+    }
 }
 
 /// An [`EngineFactory`] of one render pipeline per channel, all built from `config`.
@@ -200,6 +225,21 @@ pub fn pipeline_engines(config: thermode_pipeline::PipelineConfig) -> EngineFact
                     .map_err(EngineError::from)
             })
             .collect()
+    })
+}
+
+/// `engines` with each channel's saved dose restored (`saved(channel)`) before the factory returns, i.e. before
+/// the loop's first tick. A refused restore (a bad number) fails the start.
+pub fn with_restored_doses(
+    engines: EngineFactory,
+    saved: impl Fn(usize) -> DoseLedger + Send + 'static,
+) -> EngineFactory {
+    Box::new(move |count| {
+        let mut built = engines(count)?;
+        for (channel, engine) in built.iter_mut().enumerate() {
+            engine.restore_dose(&saved(channel))?;
+        }
+        Ok(built)
     })
 }
 

@@ -6,6 +6,7 @@ use thermode_model::params::BadValue;
 use thiserror::Error;
 
 use crate::engine::EngineError;
+use crate::ledger::LedgerError;
 
 /// Why the runtime could not start (or a part of it failed).
 #[derive(Debug, Error)]
@@ -40,6 +41,10 @@ pub enum RuntimeError {
         /// The operating system's reason.
         source: std::io::Error,
     },
+    /// The dose ledger of the state directory cannot be used (corrupt, unreadable, unwritable, or in use by
+    /// another process): the daemon refuses to start rather than forget a dose.
+    #[error("dose ledger: {0}")]
+    Ledger(#[from] LedgerError),
     /// Another I/O failure (recording directory, thread start).
     #[error("{context}: {source}")]
     Io {

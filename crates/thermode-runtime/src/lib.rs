@@ -11,6 +11,8 @@
 //!   the API enforce them and `/api/status` publishes them.
 //! - [`snapshot`]: what the loop publishes (per-channel telemetry, loop statistics).
 //! - [`recorder`]: `--record DIR`, one CSV per session, written by its own thread.
+//! - [`ledger`]: the dose ledger of a state directory, so that each channel's thermal dose survives restarts
+//!   (`--state-dir DIR`; `thermode dose show` and `thermode dose reset`).
 //! - [`api`]: HTTP (`/`, `/api/status`, `/api/materials`) and the WebSocket contact API (`/api/ws`), with access
 //!   control (token, Host and Origin checks) and limits; [`osc`]: the same commands over OSC/UDP.
 //! - [`daemon`]: starts and stops all of it ([`Daemon`]); [`mod@bench`]: loop jitter and touch-to-drive latency.
@@ -46,6 +48,7 @@ pub mod control_loop;
 pub mod daemon;
 pub mod engine;
 pub mod error;
+pub mod ledger;
 pub mod limits;
 pub mod osc;
 pub mod recorder;

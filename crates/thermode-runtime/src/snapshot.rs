@@ -7,6 +7,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use serde::Serialize;
 use thermode_device::{DeviceCut, MAX_CHANNELS};
+use thermode_safety::DoseLedger;
 
 use crate::command::Owner;
 use crate::engine::Telemetry;
@@ -69,6 +70,9 @@ pub struct ChannelStatus {
     pub engine_failed: bool,
     /// This tick's numbers.
     pub telemetry: Telemetry,
+    /// The channel's thermal dose after this tick (CEM43, time at or above 43 °C, lockout), as its envelope counts
+    /// it; restored from the dose ledger at the start.
+    pub dose: DoseLedger,
 }
 
 /// Loop timing: the measured periods (wake to wake) and tick durations over the window, and missed deadlines.

@@ -109,6 +109,11 @@ pub struct EnvelopeConfig {
     /// crosses the whole 15–48 °C range in 3.3 s; a plate that needs full current for longer is not following
     /// the model). Range [0.1, 60].
     pub stuck_at_limit_s: f64,
+    /// First-order time constant of the display sensor behind the plate, s: the thermal dose is counted at the
+    /// plate temperature reconstructed from the reading (`crate::dose`, "The plate, not the sensor"). Default 0.3
+    /// (the default display's PT-100; a rendering pipeline requires at least its device file's). Larger than the
+    /// real one over-counts the dose (safe); smaller under-counts it. Range [0, 10].
+    pub sensor_time_constant_s: f64,
 }
 
 impl Default for EnvelopeConfig {
@@ -134,6 +139,7 @@ impl Default for EnvelopeConfig {
             hot_side_min_c: 0.0,
             stuck_current_fraction: 0.98,
             stuck_at_limit_s: 10.0,
+            sensor_time_constant_s: 0.3,
         }
     }
 }
@@ -160,7 +166,7 @@ impl EnvelopeConfig {
     }
 
     /// Every field with its key (units are in the names) and its range `[min, max]`, in declaration order.
-    fn fields(&mut self) -> [(&'static str, &mut f64, f64, f64); 20] {
+    fn fields(&mut self) -> [(&'static str, &mut f64, f64, f64); 21] {
         [
             ("min_display_c", &mut self.min_display_c, ABSOLUTE_MIN_C, ABSOLUTE_MAX_C),
             ("max_display_c", &mut self.max_display_c, ABSOLUTE_MIN_C, ABSOLUTE_MAX_C),
@@ -222,6 +228,7 @@ impl EnvelopeConfig {
             ),
             ("stuck_current_fraction", &mut self.stuck_current_fraction, 0.5, 1.0),
             ("stuck_at_limit_s", &mut self.stuck_at_limit_s, 0.1, 60.0),
+            ("sensor_time_constant_s", &mut self.sensor_time_constant_s, 0.0, 10.0),
         ]
     }
 

@@ -27,12 +27,18 @@
 //! cleared; they latch again at once if they recur. Clearing never resets the thermal dose: the dose belongs to the
 //! session, and a new session is a new envelope.
 //!
-//! Thermal dose: the measured display temperature feeds a [`DoseTracker`]. Once the time at/above 43 °C reaches
-//! `max_time_at_or_above_43_s` or CEM43 reaches `cem43_budget_min`, the effective maximum becomes
-//! `43 − dose_lockout_margin_c`, which may make the shaped set-point step down (the only case in which the
-//! set-point moves faster than the rate limit: the safe direction wins). Fault checks act on the **measured**
-//! display temperature; the drive limits act on the measured display and, where a forecast is given, on the
-//! estimated true plate, which a lagging sensor would otherwise hide.
+//! Thermal dose: the measured display temperature feeds a [`DoseTracker`], which counts the dose at the plate
+//! temperature reconstructed from the lagging sensor (`sensor_time_constant_s`). The dose is a **cap**, not a
+//! slope ([`crate::dose`], "The cap"): near the end of the budget the effective maximum comes down at
+//! [`crate::dose::DOSE_COOLDOWN_RATE_C_PER_S`]; once the time at/above 43 °C reaches `max_time_at_or_above_43_s` or
+//! CEM43 reaches `cem43_budget_min` the lockout engages for good, and the effective maximum, at most
+//! `43 − dose_lockout_margin_c`, keeps falling as dose is spent so that the total stays within 5 % of the budget
+//! over any continuation; it never goes below the display minimum. A lowered maximum may make the shaped
+//! set-point step down (the only case in which the set-point moves faster than the rate limit: the safe direction
+//! wins). The dose can be saved and restored ([`SafetyEnvelope::dose_ledger`], [`SafetyEnvelope::restore_dose`]),
+//! so that it survives a restart. Fault checks act on the **measured** display temperature; the drive limits act
+//! on the measured display and, where a forecast is given, on the estimated true plate, which a lagging sensor
+//! would otherwise hide.
 //!
 //! Stuck drive: the time at the current limit counts only while the drive really is at its limit in one
 //! direction and the plate does not answer (the measured display has not moved [`STUCK_PROGRESS_C`] in the
@@ -40,7 +46,7 @@
 //! restarts it.
 
 use crate::config::{EnvelopeConfig, ABSOLUTE_MAX_C, NEUTRAL_SETPOINT_C};
-use crate::dose::{DoseTracker, CEM43_REFERENCE_C};
+use crate::dose::{DoseCap, DoseLedger, DoseTracker, CEM43_REFERENCE_C};
 use thermode_model::Rule;
 
 use crate::error::EnvelopeError;
@@ -212,7 +218,11 @@ impl SafetyEnvelope {
             sample: None,
             last_seq: None,
             rate_ref: None,
-            dose: DoseTracker::new(),
+            dose: DoseTracker::with_sensor_lag(
+                config.sensor_time_constant_s,
+                config.rate_window_s,
+                config.max_measured_rate_c_per_s,
+            ),
             lockout_at_s: None,
             at_48_since_s: None,
             at_limit: None,
@@ -244,15 +254,43 @@ impl SafetyEnvelope {
         self.dose.cem43_min()
     }
 
-    /// Accumulated time with the measured display at or above 43 °C, s.
+    /// Accumulated time with the display (reconstructed from the measurement) at or above 43 °C, s.
     pub fn time_at_or_above_43_s(&self) -> f64 {
         self.dose.time_at_or_above_43_s()
     }
 
-    /// Whether the thermal-dose lockout is active (time at ≥ 43 °C or CEM43 budget used up).
+    /// Whether the thermal-dose lockout is active (time at ≥ 43 °C or CEM43 budget used up, now or in a restored
+    /// ledger). Once active it stays active for the envelope's life.
     pub fn dose_lockout_active(&self) -> bool {
-        self.dose.time_at_or_above_43_s() >= self.config.max_time_at_or_above_43_s
-            || self.dose.cem43_min() >= self.config.cem43_budget_min
+        self.dose_cap().lockout_reached(&self.dose)
+    }
+
+    /// The channel's dose budget and its ceilings.
+    fn dose_cap(&self) -> DoseCap {
+        DoseCap {
+            cem43_budget_min: self.config.cem43_budget_min,
+            max_time_at_or_above_43_s: self.config.max_time_at_or_above_43_s,
+            lockout_max_c: self.config.dose_lockout_max_c(),
+        }
+    }
+
+    /// The dose to save: accumulated CEM43, time at or above 43 °C, and whether the lockout has engaged.
+    pub fn dose_ledger(&self) -> DoseLedger {
+        DoseLedger {
+            lockout: self.dose_lockout_active(),
+            ..self.dose.ledger()
+        }
+    }
+
+    /// Restores a saved dose (call it before the first measurement): each total becomes the larger of the present
+    /// and the saved one and a saved lockout stays engaged, so a restore never lowers the dose. A negative or
+    /// non-finite total is refused ([`EnvelopeError::BadValue`]) and changes nothing.
+    pub fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), EnvelopeError> {
+        self.dose.restore(saved)?;
+        if self.dose_lockout_active() {
+            self.dose.lock();
+        }
+        Ok(())
     }
 
     /// The lowest display set-point, °C.
@@ -260,12 +298,18 @@ impl SafetyEnvelope {
         self.config.min_display_c
     }
 
-    /// The highest display set-point now, °C: `max_display_c`, or below 43 °C under a dose lockout.
+    /// The highest display set-point now, °C: `max_display_c`, lowered by the dose cap near and after the end of the
+    /// budget ([`crate::dose`], "The cap"), never below `min_display_c`.
     pub fn effective_max_c(&self) -> f64 {
-        if self.dose_lockout_active() {
-            self.config.max_display_c.min(self.config.dose_lockout_max_c())
+        let ceiling_c = self.dose_cap().ceiling_c(&self.dose);
+        let (min_c, max_c) = (self.config.min_display_c, self.config.max_display_c);
+        // Written so that a NaN ceiling (none is expected) gives the minimum.
+        if ceiling_c >= max_c {
+            max_c
+        } else if ceiling_c > min_c {
+            ceiling_c
         } else {
-            self.config.max_display_c
+            min_c
         }
     }
 
@@ -482,11 +526,13 @@ impl SafetyEnvelope {
         }
     }
 
-    /// After the dose lockout engaged, readings at/above 43 °C past the grace period are a fault.
+    /// After the dose lockout engaged (it is then held for good), readings at/above 43 °C past the grace period are
+    /// a fault.
     fn check_dose_lockout(&mut self, m: &Measurement) {
         if !self.dose_lockout_active() {
             return;
         }
+        self.dose.lock();
         let since = *self.lockout_at_s.get_or_insert(m.time_s);
         if m.sensor_c >= CEM43_REFERENCE_C && m.time_s - since > self.config.dose_lockout_grace_s {
             self.latch(FaultCode::DoseLockoutViolated, m.time_s);

@@ -8,7 +8,9 @@
 //!   ways to one are [`SafetyEnvelope::gate_drive`] and [`DriveCommand::off`].
 //! - [`config`]: [`EnvelopeConfig`] (documented defaults and sources, read with `thermode_model::params::Table`) and the compiled-in absolute limits.
 //! - [`fault`]: [`FaultCode`], stable numeric fault codes.
-//! - [`dose`]: CEM43 and time-at-43 °C bookkeeping.
+//! - [`dose`]: CEM43 and time-at-43 °C bookkeeping at the reconstructed plate temperature, the dose cap (the
+//!   ceiling that keeps the total within 5 % of the budget over any continuation) and the [`DoseLedger`] that is
+//!   saved and restored across restarts.
 //! - [`plate`]: [`PlateForecast`], what a model of the plate tells the envelope so that it bounds the true plate.
 //! - [`error`]: [`EnvelopeError`], refused configurations and refused fault clearing.
 //!
@@ -34,7 +36,7 @@ pub mod fault;
 pub mod plate;
 
 pub use config::{EnvelopeConfig, ABSOLUTE_MAX_C, ABSOLUTE_MAX_RATE_C_PER_S, ABSOLUTE_MIN_C};
-pub use dose::DoseTracker;
+pub use dose::{DoseCap, DoseLedger, DoseTracker};
 pub use envelope::{DriveCommand, DriveLimits, Measurement, SafetyEnvelope, SetpointDecision, SetpointLimits};
 pub use error::EnvelopeError;
 pub use fault::FaultCode;

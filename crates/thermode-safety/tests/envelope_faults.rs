@@ -5,8 +5,8 @@
 //! through the envelope against hand-computed CEM43 values.
 
 use thermode_safety::{
-    DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, MeasuredOnly, Measurement, PlateForecast, PlateNow,
-    SafetyEnvelope,
+    DoseLedger, DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, MeasuredOnly, Measurement, PlateForecast,
+    PlateNow, SafetyEnvelope,
 };
 
 const LIMIT_A: f64 = 2.8;
@@ -31,6 +31,15 @@ impl Rig {
 
     fn default() -> Self {
         Self::new(EnvelopeConfig::default())
+    }
+
+    /// The default envelope with the largest CEM43 budget (10 CEM43-min), for tests of other faults whose readings
+    /// near 48 °C spend about one CEM43-minute — enough to lock the default budget out (the dose is tested below).
+    fn generous() -> Self {
+        Self::new(EnvelopeConfig {
+            cem43_budget_min: 10.0,
+            ..Default::default()
+        })
     }
 
     fn now_s(&self) -> f64 {
@@ -265,7 +274,7 @@ fn display_beyond_its_limits_by_the_margin() {
         (50.0f64, 49.0, FaultCode::DisplayOverTemperature, -REQUEST_A),
         (10.0, 14.0, FaultCode::DisplayUnderTemperature, REQUEST_A),
     ] {
-        let mut rig = Rig::default();
+        let mut rig = Rig::generous();
         rig.healthy(0.2);
         let t0 = rig.now_s();
         let reading = |t: f64| {
@@ -293,7 +302,7 @@ fn display_beyond_its_limits_by_the_margin() {
 
 #[test]
 fn display_sustained_at_48_is_a_fault_after_one_second() {
-    let mut rig = Rig::default();
+    let mut rig = Rig::generous();
     rig.healthy(0.2);
     for k in 0..1500 {
         // approach 48 °C at 10 °C/s
@@ -327,28 +336,39 @@ fn dose_time_limit_lowers_the_maximum_and_a_hot_display_after_the_grace_is_a_fau
     let mut rig = Rig::new(config);
     let _ = rig.step(44.0, 25.0, REQUEST_A);
     let t0 = rig.now_s() - DT_S;
-    // Before the lockout: heating allowed at 44 °C, maximum 48 °C.
+    // Long before the lockout: heating allowed at 44 °C, maximum 48 °C.
     assert_eq!(rig.env.effective_max_c(), 48.0);
-    let mut t_lock = None;
+    let (mut t_lock, mut t_block) = (None, None);
     let (t, d) = rig.until_fault(10.0, None, |r| {
         let d = r.step(44.0, 25.0, REQUEST_A);
+        let now = r.now_s() - DT_S;
         if r.env.dose_lockout_active() && t_lock.is_none() {
-            t_lock = Some(r.now_s() - DT_S);
+            t_lock = Some(now);
         }
         if d.fault().is_none() {
-            // Before the lockout heating passes; under it heating at 44 °C ≥ 42.5 °C is refused.
-            let locked = r.env.dose_lockout_active();
-            assert_eq!(d.current_a(), if locked { 0.0 } else { REQUEST_A });
-            assert_eq!(d.limited_by().heating_blocked_at_max, locked);
+            // The anticipating ceiling 42.5 + 5 °C/s · (2 s − time at ≥ 43 °C) falls to 44 °C after 1.7 s: from
+            // then on heating at 44 °C is refused; before, it passes.
+            let blocked = r.env.effective_max_c() <= 44.0;
+            if blocked && t_block.is_none() {
+                t_block = Some(now);
+            }
+            assert_eq!(d.current_a(), if blocked { 0.0 } else { REQUEST_A });
+            assert_eq!(d.limited_by().heating_blocked_at_max, blocked);
         }
         d
     });
-    let t_lock = t_lock.expect("lockout engaged");
+    let (t_lock, t_block) = (t_lock.expect("lockout engaged"), t_block.expect("heating blocked"));
+    assert!(
+        (t_block - t0 - 1.7).abs() <= DT_S + 1e-9,
+        "heating refused {} s after reaching 44 °C, hand 1.7 s",
+        t_block - t0
+    );
     assert!(
         (t_lock - t0 - 2.0).abs() <= DT_S + 1e-9,
         "lockout {} s after reaching 44 °C",
         t_lock - t0
     );
+    // Locked with little CEM43 spent (7 s at 44 °C = 0.23 of 10 CEM43-min): the maximum is 43 − 0.5 °C.
     assert_eq!(rig.env.effective_max_c(), 42.5);
     let late_s = t - t_lock - config.dose_lockout_grace_s;
     assert!(
@@ -379,39 +399,107 @@ fn dose_time_limit_lowers_the_maximum_and_a_hot_display_after_the_grace_is_a_fau
 }
 
 #[test]
-fn cem43_budget_lowers_the_maximum_at_the_analytic_time() {
-    // 45 °C accrues 0.5^(−2) = 4 CEM43-min per minute: the 1 CEM43-min budget is used after 15 s.
+fn cem43_budget_lowers_the_maximum_at_the_analytic_times() {
+    // 45 °C accrues 0.5^(−2) = 4 CEM43-min per minute: the 1 CEM43-min budget is used after 15 s. The anticipating
+    // ceiling falls below 45 °C when what is left equals the dose of a fall at 5 °C/s from 45 °C to the landing
+    // temperature T_b = 43 + ln(0.0025)/ln 4 = 38.678 °C: (1/ln 4 + 3/ln 2 − 0.0025/ln 4)/300 = 0.016 826 CEM43-min,
+    // i.e. at 15 s · (1 − 0.016 826) = 14.748 s.
+    let landing_c = 43.0 + 0.0025f64.ln() / 4f64.ln();
+    let left_min = (1.0 / 4f64.ln() + 3.0 / 2f64.ln() - 0.0025 / 4f64.ln()) / 300.0;
+    let t_below_45_hand = 15.0 * (1.0 - left_min);
     let mut rig = Rig::default();
-    let mut t_lock = None;
-    // 18 s: past the lockout, within its 5 s grace.
-    for _ in 0..18_000 {
+    let (mut t_lock, mut t_below_45) = (None, None);
+    while t_lock.is_none() {
         let d = rig.step(45.0, 25.0, -REQUEST_A);
         assert_eq!(d.fault(), None);
-        if rig.env.dose_lockout_active() && t_lock.is_none() {
-            t_lock = Some(rig.now_s() - DT_S);
+        let now = rig.now_s() - DT_S;
+        if rig.env.effective_max_c() < 45.0 && t_below_45.is_none() {
+            t_below_45 = Some(now);
         }
+        if rig.env.dose_lockout_active() {
+            t_lock = Some(now);
+        }
+        assert!(now < 16.0, "no lockout after {now} s");
     }
-    let t_lock = t_lock.expect("CEM43 lockout");
+    let (t_lock, t_below_45) = (t_lock.unwrap(), t_below_45.expect("ceiling fell below 45 °C"));
+    assert!(
+        (t_below_45 - t_below_45_hand).abs() <= DT_S + 1e-9,
+        "ceiling below 45 °C at {t_below_45} s, hand {t_below_45_hand} s"
+    );
     assert!(
         (t_lock - 15.0).abs() <= DT_S + 1e-9,
         "CEM43 budget used at {t_lock} s, analytic 15 s"
     );
+    // At the lockout the ceiling is the landing temperature (one tick of dose past the budget moves it by 2 mK).
+    let max_c = rig.env.effective_max_c();
     assert!(
-        (rig.env.cem43_min() - 4.0 * 17.999 / 60.0).abs() < 1e-9,
-        "CEM43 {}",
-        rig.env.cem43_min()
+        (max_c - landing_c).abs() < 0.003,
+        "ceiling {max_c} at the lockout, hand {landing_c}"
     );
-    assert_eq!(rig.env.effective_max_c(), 42.5);
-    // Cool to 42 °C at 10 °C/s; then heating below the lowered maximum is allowed, at it refused.
-    for k in 1..=300 {
-        let d = rig.step((45.0 - 10.0 * k as f64 * DT_S).max(42.0), 25.0, -REQUEST_A);
-        assert_eq!(d.current_a(), -REQUEST_A);
+    // Cool to 38 °C at 10 °C/s; the ceiling is then 43 + ln((1.025 − D)/10)/ln 4 for the dose D spent: heating
+    // 0.1 °C below it is allowed, at it refused.
+    for k in 1..=700 {
+        let _ = rig.step((45.0 - 10.0 * k as f64 * DT_S).max(38.0), 25.0, -REQUEST_A);
     }
-    let d = rig.step(42.0, 25.0, 1.0);
+    let d_min = rig.env.cem43_min();
+    let want_c = 43.0 + ((1.025 - d_min) / 10.0).ln() / 4f64.ln();
+    let max_c = rig.env.effective_max_c();
+    assert!(
+        (max_c - want_c).abs() < 1e-6,
+        "ceiling {max_c} °C after {d_min} CEM43-min, hand {want_c} °C"
+    );
+    assert!(want_c > 38.0 && want_c < landing_c, "ceiling {want_c}");
+    let d = rig.step(want_c - 0.1, 25.0, 1.0);
     assert_eq!(d.current_a(), 1.0, "heating below the lowered maximum is allowed");
-    let d = rig.step(42.5, 25.0, 1.0);
+    let d = rig.step(want_c, 25.0, 1.0);
     assert_eq!(d.current_a(), 0.0);
     assert!(d.limited_by().heating_blocked_at_max);
+    // The estimate's allowance spent: the ceiling is the display minimum, never below.
+    for _ in 0..20_000 {
+        let _ = rig.step(43.0, 25.0, -REQUEST_A);
+    }
+    assert!(rig.env.cem43_min() > 1.025, "{}", rig.env.cem43_min());
+    assert_eq!(rig.env.effective_max_c(), rig.env.min_c());
+}
+
+/// The dose survives a restart: a fresh envelope restored from the ledger of a locked one is locked, has the same
+/// totals and the same ceiling, and a restore never lowers a dose; bad ledgers are refused and change nothing.
+#[test]
+fn a_restored_dose_keeps_the_lockout_and_the_ceiling() {
+    let mut rig = Rig::default();
+    for _ in 0..15_500 {
+        let _ = rig.step(45.0, 25.0, -REQUEST_A);
+    }
+    assert!(rig.env.dose_lockout_active());
+    let saved = rig.env.dose_ledger();
+    assert!(saved.lockout && saved.cem43_min >= 1.0, "{saved:?}");
+    let mut fresh = SafetyEnvelope::new(EnvelopeConfig::default(), LIMIT_A).unwrap();
+    assert_eq!(fresh.effective_max_c(), 48.0);
+    fresh.restore_dose(&saved).unwrap();
+    assert_eq!(fresh.dose_ledger(), saved);
+    assert!(fresh.dose_lockout_active());
+    assert_eq!(fresh.effective_max_c(), rig.env.effective_max_c());
+    assert!(fresh.effective_max_c() < 42.5);
+    // A larger budget in the new configuration does not unlock a restored lockout.
+    let mut roomy = SafetyEnvelope::new(
+        EnvelopeConfig {
+            cem43_budget_min: 10.0,
+            ..Default::default()
+        },
+        LIMIT_A,
+    )
+    .unwrap();
+    roomy.restore_dose(&saved).unwrap();
+    assert!(roomy.dose_lockout_active() && roomy.effective_max_c() <= 42.5);
+    // Never lower; bad numbers refused.
+    fresh.restore_dose(&DoseLedger::default()).unwrap();
+    assert_eq!(fresh.dose_ledger(), saved);
+    let bad = DoseLedger {
+        cem43_min: f64::NAN,
+        ..saved
+    };
+    assert!(matches!(fresh.restore_dose(&bad), Err(EnvelopeError::BadValue(_))));
+    assert_eq!(fresh.dose_ledger(), saved);
 }
 
 #[test]

@@ -43,6 +43,17 @@ enum Command {
     Emulate(cmd::emulate::EmulateArgs),
     /// Measure control-loop jitter and touch-to-drive latency (figures only; build with --release).
     Bench(cmd::bench::BenchArgs),
+    /// Show or reset the thermal-dose ledger that `serve` keeps per channel across restarts.
+    #[command(subcommand)]
+    Dose(DoseCommand),
+}
+
+#[derive(Subcommand, Debug)]
+enum DoseCommand {
+    /// Print each channel's dose (CEM43, time at or above 43 °C, lockout, last update).
+    Show(cmd::dose::ShowArgs),
+    /// Clear one channel's dose (or every channel's); the reset is logged with its reason and UTC time.
+    Reset(cmd::dose::ResetArgs),
 }
 
 #[derive(Subcommand, Debug)]
@@ -69,6 +80,8 @@ fn main() -> ExitCode {
         Command::Lab(LabCommand::Run(args)) => cmd::lab_run::run(args),
         Command::Render(args) => cmd::render::run(args),
         Command::Tune(args) => cmd::tune::run(args),
+        Command::Dose(DoseCommand::Show(args)) => cmd::dose::show(args),
+        Command::Dose(DoseCommand::Reset(args)) => cmd::dose::reset(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -321,3 +321,228 @@ fn emulate_prints_the_pseudo_terminal_path_first() {
     let path = first.trim();
     assert!(path.starts_with("/dev/"), "first line is not a device path: `{path}`");
 }
+
+/// The state directory's ledger as JSON (panics if it cannot be read).
+fn ledger_json(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("dose-ledger.json")).expect("read the ledger");
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("ledger: {e}: {text}"))
+}
+
+#[test]
+fn dose_show_and_reset_and_a_corrupt_ledger_is_refused_never_reset() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let dir = tmp.path().to_str().expect("utf-8 path");
+    let out = expect_success(&["dose", "show", "--state-dir", dir]);
+    assert!(out.contains("no dose recorded"), "{out}");
+    // A ledger with a locked channel, as `serve` writes it.
+    let ledger = r#"{"format": "thermode-dose-ledger", "version": 1, "channels": [
+        {"channel": 2, "cem43_min": 1.0125, "time_at_or_above_43_s": 3.5, "lockout": true,
+         "updated_utc": "2025-01-31T12:00:00Z"}]}"#;
+    std::fs::write(tmp.path().join("dose-ledger.json"), ledger).expect("write");
+    let out = expect_success(&["dose", "show", "--state-dir", dir]);
+    assert!(
+        out.contains("1.012500") && out.contains("yes") && out.contains("2025-01-31T12:00:00Z"),
+        "{out}"
+    );
+    let json: serde_json::Value = serde_json::from_str(&expect_success(&[
+        "dose",
+        "show",
+        "--state-dir",
+        dir,
+        "--format",
+        "json",
+    ]))
+    .expect("json");
+    assert_eq!(json["channels"][0]["channel"], 2);
+    // A reset needs a reason and a channel (or --all).
+    expect_error(
+        &["dose", "reset", "--channel", "2", "--reason", "  ", "--state-dir", dir],
+        "reason",
+    );
+    let out = thermode(&["dose", "reset", "--reason", "x", "--state-dir", dir]);
+    assert_eq!(out.status.code(), Some(2), "reset without --channel or --all");
+    let out = expect_success(&[
+        "dose",
+        "reset",
+        "--channel",
+        "2",
+        "--reason",
+        "new participant P07",
+        "--state-dir",
+        dir,
+    ]);
+    assert!(
+        out.contains("dose reset channel 2: cem43_min 1.0125") && out.contains("new participant P07"),
+        "{out}"
+    );
+    let log = std::fs::read_to_string(tmp.path().join("dose-reset.log")).expect("log");
+    assert_eq!(log.lines().count(), 1, "{log}");
+    assert!(
+        log.starts_with("20") && log.contains("Z dose reset channel 2"),
+        "UTC time first: {log}"
+    );
+    assert_eq!(ledger_json(tmp.path())["channels"].as_array().map(Vec::len), Some(0));
+    // Corrupt: serve, show and a channel reset refuse (exit 2) and leave the file as it is; reset --all sets it aside.
+    let corrupt = "{\"format\": \"thermode-dose-ledger\", \"version\": 1, \"channels\": [{\"channel\": 0,";
+    std::fs::write(tmp.path().join("dose-ledger.json"), corrupt).expect("write");
+    let serve = [
+        "serve",
+        "--state-dir",
+        dir,
+        "--port",
+        "0",
+        "--no-osc",
+        "--channels",
+        "1",
+        "--duration",
+        "0",
+    ];
+    expect_error(&serve, "corrupt");
+    expect_error(&["dose", "show", "--state-dir", dir], "corrupt");
+    expect_error(
+        &["dose", "reset", "--channel", "0", "--reason", "x", "--state-dir", dir],
+        "corrupt",
+    );
+    let kept = std::fs::read_to_string(tmp.path().join("dose-ledger.json")).expect("read");
+    assert_eq!(kept, corrupt, "the corrupt ledger is left as it is");
+    let out = expect_success(&["dose", "reset", "--all", "--reason", "disk error", "--state-dir", dir]);
+    assert!(out.contains("set aside as"), "{out}");
+    let out = expect_success(&["dose", "show", "--state-dir", dir]);
+    assert!(out.contains("no dose recorded"), "{out}");
+    assert_eq!(
+        std::fs::read_to_string(tmp.path().join("dose-reset.log"))
+            .expect("log")
+            .lines()
+            .count(),
+        2
+    );
+}
+
+/// An OSC message `/thermode/channel/<channel>/setpoint f f`.
+fn osc_setpoint(channel: usize, temp_c: f32, rate_c_s: f32) -> Vec<u8> {
+    fn padded(text: &str) -> Vec<u8> {
+        let mut bytes = text.as_bytes().to_vec();
+        bytes.push(0);
+        while !bytes.len().is_multiple_of(4) {
+            bytes.push(0);
+        }
+        bytes
+    }
+    let mut message = padded(&format!("/thermode/channel/{channel}/setpoint"));
+    message.extend(padded(",ff"));
+    message.extend(temp_c.to_be_bytes());
+    message.extend(rate_c_s.to_be_bytes());
+    message
+}
+
+/// `GET /api/status` of the daemon at `addr` as JSON.
+fn status(addr: &str) -> serde_json::Value {
+    use std::io::{Read, Write};
+    let mut stream = std::net::TcpStream::connect(addr).expect("connect");
+    stream
+        .set_read_timeout(Some(std::time::Duration::from_secs(10)))
+        .expect("timeout");
+    write!(
+        stream,
+        "GET /api/status HTTP/1.1\r\nHost: {addr}\r\nConnection: close\r\n\r\n"
+    )
+    .expect("send");
+    let mut response = String::new();
+    stream.read_to_string(&mut response).expect("read");
+    let body = response.split_once("\r\n\r\n").map_or("", |(_, b)| b);
+    serde_json::from_str(body).unwrap_or_else(|e| panic!("status: {e}: {response}"))
+}
+
+/// `serve` heating one channel at 48 °C is killed with SIGKILL: the ledger it leaves is whole and holds at least
+/// the dose the daemon reported before its last write; while it ran, a reset was refused (the state directory is
+/// locked); after the kill the lock is gone and a reset works.
+#[test]
+fn a_sigkilled_serve_leaves_a_whole_ledger_with_the_dose_it_reported() {
+    use std::io::{BufRead, BufReader};
+    use std::time::{Duration, Instant};
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let dir = tmp.path().to_str().expect("utf-8 path");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args([
+            "serve",
+            "--state-dir",
+            dir,
+            "--port",
+            "0",
+            "--osc-port",
+            "0",
+            "--channels",
+            "1",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("spawn serve");
+    let mut lines = BufReader::new(child.stdout.take().expect("stdout")).lines();
+    let (mut http, mut osc, mut ledger_line) = (None, None, None);
+    while http.is_none() || osc.is_none() || ledger_line.is_none() {
+        let line = lines.next().expect("banner line").expect("utf-8");
+        let word = |prefix: &str| line.trim().strip_prefix(prefix).map(|rest| rest.trim().to_string());
+        if let Some(url) = word("dashboard") {
+            http = url.strip_prefix("http://").map(|u| u.trim_end_matches('/').to_string());
+        } else if let Some(url) = word("OSC") {
+            osc = url.strip_prefix("udp://").map(str::to_string);
+        } else if let Some(path) = word("dose") {
+            ledger_line = Some(path);
+        }
+    }
+    let (http, osc) = (http.expect("http"), osc.expect("osc"));
+    assert_eq!(ledger_line.as_deref(), tmp.path().join("dose-ledger.json").to_str());
+    let socket = std::net::UdpSocket::bind("127.0.0.1:0").expect("udp");
+    socket.send_to(&osc_setpoint(0, 48.0, 20.0), &osc).expect("send osc");
+    // Wait for dose to accumulate (the loop runs in real time; 48 °C spends 0.53 CEM43-min per second).
+    let start = Instant::now();
+    let reported = loop {
+        let s = status(&http);
+        let dose = s["channels"][0]["cem43_min"].as_f64().expect("cem43_min");
+        if dose >= 0.2 {
+            break dose;
+        }
+        assert!(start.elapsed() < Duration::from_secs(60), "no dose after 60 s: {s}");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    expect_error(
+        &["dose", "reset", "--channel", "0", "--reason", "x", "--state-dir", dir],
+        "in use",
+    );
+    // The writer (every 0.25 s) catches up with what was reported; then the daemon is killed.
+    let written_at = Instant::now();
+    let written = loop {
+        let written = ledger_json(tmp.path())["channels"][0]["cem43_min"]
+            .as_f64()
+            .unwrap_or(0.0);
+        if written >= reported {
+            break written;
+        }
+        assert!(
+            written_at.elapsed() < Duration::from_secs(10),
+            "ledger {written} never reached {reported}"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    println!(
+        "reported {reported} CEM43-min; the ledger held {written} {:.3} s later",
+        written_at.elapsed().as_secs_f64()
+    );
+    child.kill().expect("SIGKILL");
+    let _ = child.wait();
+    let after = ledger_json(tmp.path());
+    let saved = after["channels"][0]["cem43_min"].as_f64().expect("a whole ledger");
+    assert!(saved >= reported, "ledger {saved} < reported {reported}");
+    let out = expect_success(&[
+        "dose",
+        "reset",
+        "--channel",
+        "0",
+        "--reason",
+        "test",
+        "--state-dir",
+        dir,
+    ]);
+    assert!(out.contains("dose reset channel 0"), "{out}");
+}

@@ -3,6 +3,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 
+mod dose;
 mod faults;
 mod judged;
 mod kron_depth;

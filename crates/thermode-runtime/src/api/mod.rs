@@ -19,6 +19,7 @@ use axum::{Json, Router};
 use serde_json::{json, Value};
 
 use crate::command::CommandSender;
+use crate::ledger::WriterStatus;
 use crate::snapshot::{Mode, Shared};
 use access::Access;
 use protocol::{ApiError, ErrorCode, RequestLimits};
@@ -149,6 +150,7 @@ pub struct App {
     pub(crate) info: Info,
     pub(crate) osc: Arc<OscCounters>,
     pub(crate) recorded_rows: Option<Arc<AtomicU64>>,
+    pub(crate) dose_ledger: Option<Arc<WriterStatus>>,
     pub(crate) clients: AtomicUsize,
     pub(crate) next_client: AtomicU64,
 }
@@ -295,6 +297,12 @@ pub fn status_json(app: &App) -> Value {
             "path": path,
             "rows": app.recorded_rows.as_ref().map_or(0, |r| r.load(Ordering::Relaxed)),
             "dropped_ticks": app.shared.dropped_records(),
+        })),
+        "dose_ledger": app.dose_ledger.as_ref().map(|w| json!({
+            "path": w.path.display().to_string(),
+            "writes": count(&w.writes),
+            "errors": count(&w.errors),
+            "last_error": w.last_error.lock().map(|e| e.clone()).unwrap_or(None),
         })),
     })
 }

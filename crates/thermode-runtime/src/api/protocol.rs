@@ -494,6 +494,9 @@ pub fn channel_telemetry(status: &ChannelStatus) -> Value {
         "current_a": finite(t.current_a),
         "hot_side_c": finite(t.hot_side_c),
         "fault": fault_code(status),
+        "cem43_min": finite(status.dose.cem43_min),
+        "time_at_or_above_43_s": finite(status.dose.time_at_or_above_43_s),
+        "dose_lockout": status.dose.lockout,
     })
 }
 

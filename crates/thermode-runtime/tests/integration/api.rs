@@ -96,6 +96,11 @@ fn check_telemetry(m: &Value, channels: usize) {
             "{c}"
         );
         assert_eq!(c["contact"], c["mode"] == "touch", "{c}");
+        // The thermal dose: a number from the first tick on (restored or zero), never negative.
+        for key in ["cem43_min", "time_at_or_above_43_s"] {
+            assert!(c[key].as_f64().is_some_and(|v| v >= 0.0), "{key} in {c}");
+        }
+        assert!(c["dose_lockout"].is_boolean(), "{c}");
     }
     let skin = list[0]["skin_c"].as_f64().expect("a rendered skin temperature");
     assert!((20.0..40.0).contains(&skin), "skin {skin} °C");

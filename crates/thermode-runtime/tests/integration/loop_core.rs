@@ -446,6 +446,14 @@ impl thermode_runtime::ChannelEngine for Booby {
     fn hold(&mut self) {
         self.inner.hold();
     }
+
+    fn dose(&self) -> thermode_safety::DoseLedger {
+        self.inner.dose()
+    }
+
+    fn restore_dose(&mut self, saved: &thermode_safety::DoseLedger) -> Result<(), thermode_runtime::EngineError> {
+        self.inner.restore_dose(saved)
+    }
 }
 
 #[test]

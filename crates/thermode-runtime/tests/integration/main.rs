@@ -5,6 +5,7 @@ mod common;
 
 mod api;
 mod dashboard;
+mod dose;
 mod example_client;
 mod loop_core;
 mod recording;

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod demo;
+pub mod dose;
 pub mod emulate;
 pub mod lab_analyze;
 pub mod lab_plan;

@@ -86,6 +86,10 @@ pub struct ServeArgs {
     /// Stop after this many seconds (default: run until interrupted).
     #[arg(long, value_name = "S")]
     pub duration: Option<f64>,
+    /// Directory of the dose ledger, which keeps each channel's thermal dose across restarts (see `thermode dose`)
+    /// [default: $XDG_STATE_HOME/thermode, else ~/.local/state/thermode].
+    #[arg(long = "state-dir", value_name = "DIR")]
+    pub state_dir: Option<PathBuf>,
 }
 
 /// A display ready for the loop.
@@ -195,6 +199,7 @@ pub fn start(args: &ServeArgs) -> Result<Daemon> {
         record_dir: args.record.clone(),
         device_label: display.label,
         channel_names: display.names.clone(),
+        state_dir: Some(super::dose::state_dir(args.state_dir.as_deref())?),
     };
     let daemon = Daemon::start(config, display.device, display.engines, clock)?;
     print_banner(&daemon, &display.description, args);
@@ -213,6 +218,9 @@ fn print_banner(daemon: &Daemon, description: &str, args: &ServeArgs) {
     }
     if let Some(path) = daemon.recording_path() {
         println!("  recording  {}", path.display());
+    }
+    if let Some(path) = daemon.ledger_path() {
+        println!("  dose       {}", path.display());
     }
     if args.token.is_some() {
         println!("  clients must present the token (Authorization: Bearer … or ?token=…)");

@@ -85,10 +85,13 @@ struct Serve {
     process: Process,
     http_port: u16,
     osc_port: u16,
+    /// Its own state directory (dose ledger): tests run in parallel, and one directory takes one daemon.
+    _state: tempfile::TempDir,
 }
 
 /// `thermode serve` on the emulator at `pty`, with free ports; waits for its banner.
 fn serve(pty: &str, device_file: Option<&Path>, record: Option<&Path>) -> Serve {
+    let state = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
     let mut command = Command::new(binary());
     command.args([
         "serve",
@@ -99,6 +102,7 @@ fn serve(pty: &str, device_file: Option<&Path>, record: Option<&Path>) -> Serve 
         "--osc-port",
         "0",
     ]);
+    command.arg("--state-dir").arg(state.path());
     if let Some(file) = device_file {
         command.arg("--device-file").arg(file);
     }
@@ -138,6 +142,7 @@ fn serve(pty: &str, device_file: Option<&Path>, record: Option<&Path>) -> Serve 
         process,
         http_port: http_port.unwrap_or_else(|| panic!("no dashboard port in the banner")),
         osc_port: osc_port.unwrap_or_else(|| panic!("no OSC port in the banner")),
+        _state: state,
     }
 }
 
@@ -373,6 +378,8 @@ fn serve_refuses_a_device_whose_watchdog_is_too_long() {
     let (_emulator, pty) = emulate_with(1, None, &dir.path().join("trace.csv"), &["--watchdog-ms", "60000"]);
     let out = Command::new(binary())
         .args(["serve", "--device", &format!("serial:{pty}"), "--port", "0", "--no-osc"])
+        .arg("--state-dir")
+        .arg(dir.path())
         .output()
         .unwrap_or_else(|e| panic!("run serve: {e}"));
     let stderr = String::from_utf8_lossy(&out.stderr);
