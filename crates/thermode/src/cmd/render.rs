@@ -197,6 +197,8 @@ fn specs(args: &RenderArgs) -> Result<Vec<RenderSpec>> {
             specs.push(spec);
         }
     }
+    // All runs are held in memory together: refuse work that would not fit before any of it starts.
+    thermode_render::run::check_result_bytes(&specs)?;
     Ok(specs)
 }
 
@@ -267,6 +269,7 @@ mod tests {
         assert!(err(&["--material", "wood", "--rate", "0"]).contains("rate"));
         assert!(err(&["--material", "wood", "--max-rate", "301"]).contains("max_setpoint_rate"));
         assert!(err(&["--material", "wood", "--object-temp", "-300"]).contains("object temperature"));
+        assert!(err(&["--material", "wood", "--duration", "3000", "--rate", "100000"]).contains("memory"));
         assert!(err(&["--material", "wood", "--release-at", "100"]).contains("release"));
         assert!(err(&["--material", "wood", "--device-file", "/nonexistent/device.toml"]).contains("cannot read"));
     }
