@@ -20,7 +20,7 @@
 //! One tick of a channel:
 //! ```
 //! use thermode_control::{ControlInput, Controller, PidController, PidGains};
-//! use thermode_safety::{EnvelopeConfig, Measurement, SafetyEnvelope};
+//! use thermode_safety::{EnvelopeConfig, Measurement, MeasuredOnly, SafetyEnvelope};
 //! let gains = PidGains { kp_a_per_c: 0.5, ki_a_per_c_s: 0.2, kd_a_s_per_c: 0.0, filter_cutoff_hz: 5.0,
 //!     derivative_filter_s: None };
 //! let mut controller = PidController::new(gains, 2.8)?;
@@ -32,7 +32,7 @@
 //!     setpoint_rate_c_per_s: sp.rate_c_per_s, sensor_c: m.sensor_c, hot_side_c: m.hot_side_c,
 //!     applied_current_a: 0.0, finger_receptor_c: None, finger_conductance_w_k: 0.0 };
 //! let request_a = controller.update(&input).unwrap_or(f64::NAN);
-//! let drive = envelope.gate_drive(0.0, request_a);
+//! let drive = envelope.gate_drive(0.0, request_a, &MeasuredOnly);
 //! assert!(drive.current_a().abs() <= 2.8);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
@@ -48,5 +48,5 @@ pub use controller::{ControlInput, Controller, PidController};
 pub use error::ControlError;
 pub use filter::LowPass;
 pub use model_controller::{ModelController, ModelDesign, ModelTerms};
-pub use observer::{Finger, ObserverDesign, PlantModel, PlateEstimate, PlateObserver};
+pub use observer::{Finger, ObserverDesign, ObserverTick, PlantModel, PlateEstimate, PlateObserver};
 pub use pid::{AntiWindup, Pid, PidGains, PidTerms};

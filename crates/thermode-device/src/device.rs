@@ -63,6 +63,20 @@ pub trait Device {
     /// link thread of its own has nothing to do. A time that is not finite or not later than the previous one
     /// changes nothing.
     fn poll(&mut self, now_s: f64);
+    /// Switches every drive off at once (a stop). By default [`DriveCommand::off`] on every channel, each error
+    /// counted but not stopping the others (the first is returned); a device with an all-off command of its own (a
+    /// serial display's `AllOff`) uses it.
+    fn all_off(&mut self) -> Result<(), DeviceError> {
+        let mut first = Ok(());
+        for channel in 0..self.channel_count() {
+            if let Err(e) = self.apply(channel, &DriveCommand::off()) {
+                if first.is_ok() {
+                    first = Err(e);
+                }
+            }
+        }
+        first
+    }
 }
 
 /// The simulated display: up to [`MAX_CHANNELS`] identical, independent channels, each with its own finger and its

@@ -19,7 +19,7 @@
 //!
 //! One second of one channel, every drive through the safety envelope:
 //! ```
-//! use thermode_safety::{EnvelopeConfig, SafetyEnvelope};
+//! use thermode_safety::{EnvelopeConfig, MeasuredOnly, SafetyEnvelope};
 //! use thermode_device::{Device, DeviceConfig, SimulatedDisplay};
 //! use thermode_model::kron::KronModel;
 //!
@@ -29,7 +29,7 @@
 //! for n in 0..1000 {
 //!     let reading = display.read(0)?;
 //!     envelope.observe(&reading.measurement());
-//!     let command = envelope.gate_drive(n as f64 * 1e-3, 1.0); // ask for 1 A of heating
+//!     let command = envelope.gate_drive(n as f64 * 1e-3, 1.0, &MeasuredOnly); // ask for 1 A of heating
 //!     display.apply(0, &command)?;
 //!     display.poll((n + 1) as f64 * 1e-3);
 //! }
@@ -48,7 +48,7 @@ pub mod sensor;
 pub use channel::{ChannelState, Fault, HeatFlows, Polarity, SimulatedChannel, MAX_SUBSTEP_S};
 pub use config::DeviceConfig;
 pub use device::{Device, Reading, RecordedCommand, RecordingDevice, SimulatedDisplay, MAX_CHANNELS};
-pub use error::DeviceError;
+pub use error::{DeviceCut, DeviceError};
 pub use finger::{default_finger, DefaultFinger, PlateFinger};
 pub use sensor::{Pt100, SensorCondition, SensorSample, SENSOR_OPEN_READING_C, SENSOR_SHORT_READING_C};
 

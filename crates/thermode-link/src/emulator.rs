@@ -17,6 +17,10 @@
 //!   version, type and body are good. The trip happens at the first tick more than one period after the last
 //!   valid frame, so the drives are off at most one period plus one tick after the host went silent.
 //!
+//! - before every plant step, each channel's [`PlateGuard`] (the firmware's own over- and under-temperature cut,
+//!   [`crate::guard`]) may remove heating or cooling from the step and latch that cut (report bits
+//!   `OVER_TEMPERATURE`, `UNDER_TEMPERATURE`); `ClearFault` releases a cut once the plate is back inside.
+//!
 //! Bytes are stamped with the time they were handed over, after the ticks up to that time have run: a command that
 //! arrived while the emulator was not scheduled counts as late, never as early (the watchdog errs on the safe side).
 //! When the emulator falls behind by more than `max_catch_up_s`, it merges plant steps (the plant is implicit and
@@ -34,6 +38,7 @@ use rand_chacha::ChaCha8Rng;
 use thermode_platform::Clock;
 use thiserror::Error;
 
+use crate::guard::{Cuts, GuardTrip, PlateGuard};
 use crate::protocol::{
     encode_frame, to_centi_c, to_milli_c, ChannelFaults, ChannelReport, DecodeError, DeviceMessage, DriveFrame,
     FirmwareVersion, Frame, HostMessage, Identify, LinkCounters, NackCode, ReportFlags, SensorReport, StreamDecoder,
@@ -206,6 +211,23 @@ pub struct EmulatorStats {
     pub merged_ticks: u64,
     /// Writes to the port that timed out (their bytes are lost).
     pub write_stalls: u64,
+    /// Cuts latched by the plate guards (heating or cooling, any channel).
+    pub guard_trips: u64,
+    /// The latest cut.
+    pub last_guard_trip: Option<GuardTripAt>,
+}
+
+/// When and where a plate guard cut heating or cooling.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GuardTripAt {
+    /// Emulator time of the cut \[s\] (the start of the step it changed).
+    pub time_s: f64,
+    /// The channel.
+    pub channel: usize,
+    /// The bound, reading and request behind it.
+    pub trip: GuardTrip,
+    /// The true plate temperature at the cut \[°C\] (the plant's, which the firmware does not know).
+    pub plate_c: f64,
 }
 
 /// Why the drives are latched off.
@@ -280,6 +302,8 @@ pub struct Emulator<F> {
     frame: Vec<u8>,
     stats: EmulatorStats,
     log: Option<Arc<SentLog>>,
+    trace: Option<Trace>,
+    guards: Vec<PlateGuard>,
 }
 
 impl<F: PlateFinger> Emulator<F> {
@@ -302,6 +326,12 @@ impl<F: PlateFinger> Emulator<F> {
             watchdog_ms: config.watchdog_ms,
             report_interval_ms: config.report_interval_ms,
         };
+        let mut guards = Vec::with_capacity(display.channel_count());
+        for i in 0..display.channel_count() {
+            let channel = display.channel(i)?;
+            let guard = PlateGuard::new(channel.config(), channel.state().sensor).map_err(DeviceError::from)?;
+            guards.push(guard);
+        }
         let report_every = ((f64::from(config.report_interval_ms) * 1e-3 / config.tick_s).round() as u64).max(1);
         Ok(Emulator {
             display,
@@ -321,6 +351,8 @@ impl<F: PlateFinger> Emulator<F> {
             frame: Vec::with_capacity(crate::protocol::MAX_ENCODED_LEN + 1),
             stats: EmulatorStats::default(),
             log: None,
+            trace: None,
+            guards,
         })
     }
 
@@ -352,6 +384,16 @@ impl<F: PlateFinger> Emulator<F> {
     /// The current commanded on `channel` \[A\] (0 for a channel that does not exist).
     pub fn commanded_current_a(&self, channel: usize) -> f64 {
         self.commanded_a.get(channel).copied().unwrap_or(0.0)
+    }
+
+    /// What the plate guard of `channel` has cut (nothing for a channel that does not exist).
+    pub fn cuts(&self, channel: usize) -> Cuts {
+        self.guards.get(channel).map(PlateGuard::cuts).unwrap_or_default()
+    }
+
+    /// The plate guard of `channel`'s bounds on its true plate \[°C\], (lower, upper).
+    pub fn plate_bounds_c(&self, channel: usize) -> Option<(f64, f64)> {
+        self.guards.get(channel).map(PlateGuard::plate_bounds_c)
     }
 
     /// Whether the drives are latched off.
@@ -386,6 +428,30 @@ impl<F: PlateFinger> Emulator<F> {
     /// Logs every frame made from now on (before fault injection) to `log`.
     pub fn log_sent_to(&mut self, log: Arc<SentLog>) {
         self.log = Some(log);
+    }
+
+    /// Writes a trace of the plant to `out` from now on: first the header [`TRACE_HEADER`], then after every plant
+    /// step one CSV row per channel (`time_s,channel,plate_c,sensor_c,current_a`: emulator time at the end of the
+    /// step \[s\], channel from 0, true plate \[°C\], the sensor's latest sample \[°C\], the current the drive
+    /// delivered during the step \[A\]). A step is one tick, or several merged while catching up. Each step's rows go
+    /// out in one `write_all` followed by `flush`, so with an unbuffered sink (a `File`) a reader following the file
+    /// sees whole rows only, and a kill between ticks tears none. A write that fails stops the trace (see
+    /// [`Emulator::trace_error`]); the emulator runs on.
+    pub fn trace_to(&mut self, out: Box<dyn Write + Send>) {
+        let mut trace = Trace {
+            out,
+            line: Vec::with_capacity(64 * MAX_CHANNELS),
+            error: None,
+        };
+        trace.line.extend_from_slice(TRACE_HEADER.as_bytes());
+        trace.line.push(b'\n');
+        trace.write();
+        self.trace = Some(trace);
+    }
+
+    /// Why the trace stopped, if it did (a write to its sink failed).
+    pub fn trace_error(&self) -> Option<&str> {
+        self.trace.as_ref().and_then(|t| t.error.as_deref())
     }
 
     /// Takes bytes from the host that arrived at `now_s` \[s\]: first runs the ticks up to `now_s`, then decodes the
@@ -482,6 +548,7 @@ impl<F: PlateFinger> Emulator<F> {
             commanded_a: self.commanded_a,
             applied_a: [0.0; MAX_CHANNELS],
             plate_c: [f64::NAN; MAX_CHANNELS],
+            cuts: [Cuts::default(); MAX_CHANNELS],
             link_faults: self.faults,
             stats: self.stats(),
         };
@@ -490,6 +557,7 @@ impl<F: PlateFinger> Emulator<F> {
                 status.applied_a[i] = ch.state().applied_current_a;
                 status.plate_c[i] = ch.state().plate_c;
             }
+            status.cuts[i] = self.cuts(i);
         }
         status
     }
@@ -530,16 +598,61 @@ impl<F: PlateFinger> Emulator<F> {
     }
 
     /// Steps the plant over the time not yet simulated with the commanded currents.
+    /// Each channel's guard first takes heating or cooling out of the step if the plate could pass its lines (the cut
+    /// latches: the command becomes what the guard allows), then learns from the step.
     fn flush_plant(&mut self) {
         if self.pending_s <= 0.0 {
             return;
         }
-        for (i, &current_a) in self.commanded_a.iter().enumerate().take(self.display.channel_count()) {
-            if let Ok(channel) = self.display.channel_mut(i) {
-                channel.step(self.pending_s, current_a);
+        let start_s = self.time_s() - self.pending_s;
+        for i in 0..self.display.channel_count() {
+            let (Ok(channel), Some(guard)) = (self.display.channel_mut(i), self.guards.get_mut(i)) else {
+                continue;
+            };
+            let (allowed_a, trip) = guard.gate(self.commanded_a[i], self.pending_s, channel.hot_side_reading_c());
+            if let Some(trip) = trip {
+                self.stats.guard_trips += 1;
+                self.stats.last_guard_trip = Some(GuardTripAt {
+                    time_s: start_s,
+                    channel: i,
+                    trip,
+                    plate_c: channel.state().plate_c,
+                });
             }
+            self.commanded_a[i] = allowed_a;
+            let state = *channel.step(self.pending_s, allowed_a);
+            let hot_side_c = channel.hot_side_reading_c();
+            guard.account(
+                self.pending_s,
+                state.time_s,
+                state.applied_current_a,
+                hot_side_c,
+                state.sensor,
+            );
         }
         self.pending_s = 0.0;
+        self.write_trace();
+    }
+
+    /// One trace row per channel for the step just taken, written at once.
+    fn write_trace(&mut self) {
+        let time_s = self.time_s();
+        let Some(trace) = self.trace.as_mut().filter(|t| t.error.is_none()) else {
+            return;
+        };
+        trace.line.clear();
+        for i in 0..self.display.channel_count() {
+            if let Ok(channel) = self.display.channel(i) {
+                let state = channel.state();
+                // Writing into a Vec cannot fail.
+                let _ = writeln!(
+                    trace.line,
+                    "{time_s:.3},{i},{:.4},{:.4},{:.4}",
+                    state.plate_c, state.sensor.value_c, state.applied_current_a
+                );
+            }
+        }
+        trace.write();
     }
 
     fn handle(&mut self, frame: Frame<HostMessage>, now_s: f64, out: &mut Vec<u8>) {
@@ -555,6 +668,9 @@ impl<F: PlateFinger> Emulator<F> {
             }
             HostMessage::ClearFault => {
                 self.latch = None;
+                for guard in &mut self.guards {
+                    guard.release();
+                }
                 self.send(DeviceMessage::Ack { seq: frame.seq }, out);
             }
         }
@@ -641,6 +757,13 @@ impl<F: PlateFinger> Emulator<F> {
         if self.latch.is_some() {
             faults |= ChannelFaults::LATCHED_OFF;
         }
+        let cuts = self.cuts(index);
+        if cuts.heating {
+            faults |= ChannelFaults::OVER_TEMPERATURE;
+        }
+        if cuts.cooling {
+            faults |= ChannelFaults::UNDER_TEMPERATURE;
+        }
         let age_ms = ((t_s - state.sensor.time_s) * 1e3)
             .round()
             .clamp(0.0, f64::from(u16::MAX));
@@ -688,6 +811,34 @@ impl<F: PlateFinger> Emulator<F> {
     }
 }
 
+/// The header of a trace ([`Emulator::trace_to`]).
+pub const TRACE_HEADER: &str = "time_s,channel,plate_c,sensor_c,current_a";
+
+/// A trace sink and the rows of the step being written.
+struct Trace {
+    out: Box<dyn Write + Send>,
+    line: Vec<u8>,
+    error: Option<String>,
+}
+
+impl Trace {
+    /// Writes the pending rows in one call and flushes; a failure stops the trace.
+    fn write(&mut self) {
+        if let Err(e) = self.out.write_all(&self.line).and_then(|()| self.out.flush()) {
+            self.error = Some(format!("trace write failed: {e}"));
+        }
+        self.line.clear();
+    }
+}
+
+impl std::fmt::Debug for Trace {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Trace")
+            .field("error", &self.error)
+            .finish_non_exhaustive()
+    }
+}
+
 /// Whether a port error means the other end closed (a socket's peer went away).
 fn host_went_away(error: &io::Error) -> bool {
     matches!(
@@ -713,6 +864,8 @@ pub struct EmulatorStatus {
     pub applied_a: [f64; MAX_CHANNELS],
     /// True plate temperature per channel \[°C\] (NaN past `channel_count`).
     pub plate_c: [f64; MAX_CHANNELS],
+    /// What each channel's plate guard has cut.
+    pub cuts: [Cuts; MAX_CHANNELS],
     /// The link faults in force.
     pub link_faults: LinkFaults,
     /// The statistics.

@@ -7,9 +7,12 @@
 //! - [`serial`]: [`serial::SerialDevice`], a display behind a serial port speaking that protocol (`serial:PATH`).
 //! - [`emulator`]: the device side of the protocol running the simulated display on a pseudo-terminal, for
 //!   `thermode emulate` and end-to-end tests without hardware.
+//! - [`guard`]: the device's own over- and under-temperature cut (the emulated firmware's second line of
+//!   protection, independent of the host), bounded from its own sensor and drive current.
 //!
 //! Time comes from an injected `thermode_platform::Clock` on both ends.
 
 pub mod emulator;
+pub mod guard;
 pub mod protocol;
 pub mod serial;

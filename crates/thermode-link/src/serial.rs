@@ -3,7 +3,9 @@
 //!
 //! - **Open** (`serial:PATH`): the port in raw mode at [`SerialConfig::baud_rate`], then the handshake: `Hello`
 //!   until the device answers `Identify`, then `ClearFault` until a report shows the drives released, all within
-//!   [`SerialConfig::handshake_timeout_s`].
+//!   [`SerialConfig::handshake_timeout_s`]. A device whose announced watchdog is longer than
+//!   [`MAX_DEVICE_WATCHDOG_MS`] (or 0) is refused before its drives are released
+//!   ([`DeviceError::WatchdogTooLong`]).
 //! - **Reading**: a small background thread reads the port (short read timeouts), decodes frames and keeps the
 //!   newest state of every channel behind a mutex held for microseconds; [`Device::read`] only copies it, so the
 //!   control loop never waits for the port. A reading's `sample_seq` advances only when the device reports a new
@@ -11,14 +13,18 @@
 //!   [`Clock`] time the sample was taken (arrival time minus the sample's age; never decreasing).
 //! - **Errors** ([`DeviceError::Link`]): no report for longer than [`SerialConfig::link_timeout_s`] (the device
 //!   stopped answering), a port that fails or vanishes, or drives latched off by the device (after its watchdog
-//!   expired or a restart). The caller's envelope then sees no fresh samples and faults the channel.
+//!   expired or a restart). A channel whose heating or cooling the device's own over- or under-temperature cut
+//!   latched off (report bits `OVER_TEMPERATURE`, `UNDER_TEMPERATURE`) reads [`DeviceError::Cut`]. Either way the
+//!   caller's envelope sees no fresh samples and faults the channel.
 //! - **Driving**: [`Device::apply`] takes only envelope-gated [`DriveCommand`]s, in mA. One `Drive` frame for all
 //!   channels goes out when every channel has been applied (a control round), at most once per
 //!   [`SerialConfig::drive_interval_s`] — except that switching a channel off is sent at once. When nothing was
 //!   sent for a quarter of the device's watchdog period, a `Heartbeat` goes out from `read` or `apply`, so the
 //!   watchdog stays fed exactly as long as the control loop calls the device. Drives latched off by the device are
-//!   released (`ClearFault`) only once the host commands 0 A on every channel.
-//! - **Dropping** the device sends `AllOff`.
+//!   released (`ClearFault`) only once the host commands 0 A on every channel; a channel's over- or
+//!   under-temperature cut only once the host commands 0 A on every cut channel (and the device releases it only
+//!   once its plate is back inside).
+//! - **Stopping**: [`Device::all_off`] sends `AllOff` (every drive 0 A at once); so does dropping the device.
 
 use std::io::{self, Read, Write};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -34,8 +40,7 @@ use crate::protocol::{
     encode_frame, to_milliamps, ChannelFaults, DeviceMessage, DriveFrame, Frame, HostMessage, Identify, LinkCounters,
     NackCode, SensorReport, StreamDecoder, DEFAULT_BAUD_RATE, DELIMITER,
 };
-use thermode_device::DeviceError;
-use thermode_device::{Device, Reading, MAX_CHANNELS};
+use thermode_device::{Device, DeviceCut, DeviceError, Reading, MAX_CHANNELS};
 
 /// The prefix of a serial device specification: `serial:PATH`.
 pub const SERIAL_PREFIX: &str = "serial:";
@@ -44,6 +49,11 @@ pub const SERIAL_PREFIX: &str = "serial:";
 pub fn serial_path(spec: &str) -> Option<&str> {
     spec.strip_prefix(SERIAL_PREFIX).filter(|path| !path.is_empty())
 }
+
+/// The longest watchdog period a device may announce \[ms\]: 250, compiled in. A device whose drives stay on for
+/// longer after the host's last frame is refused at the handshake: a host that dies mid-heating leaves the current on
+/// until the watchdog cuts it, and at full current the plate rises about 25 K/s (`docs/protocol.md` §6).
+pub const MAX_DEVICE_WATCHDOG_MS: u16 = 250;
 
 /// Settings of the host side of a serial link.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -403,6 +413,13 @@ impl SerialDevice {
                 self.name, self.config.handshake_timeout_s
             )));
         };
+        if identify.watchdog_ms == 0 || identify.watchdog_ms > MAX_DEVICE_WATCHDOG_MS {
+            return Err(DeviceError::WatchdogTooLong {
+                device: self.name.clone(),
+                device_ms: identify.watchdog_ms,
+                max_ms: MAX_DEVICE_WATCHDOG_MS,
+            });
+        }
         self.identify = identify;
         let released = self.retry_until(deadline, HostMessage::ClearFault, |s| {
             s.last_report.filter(|r| !r.report.flags.latched()).map(|_| ())
@@ -565,10 +582,21 @@ impl SerialDevice {
     }
 
     /// Sends `ClearFault` (at most every 0.1 s) when the device reports its drives latched and the host holds 0 A on
-    /// every channel.
+    /// every channel, or when it reports a channel cut (and no device-wide latch) and the host holds 0 A on every cut
+    /// channel.
     fn release_latch_if_off(&mut self, now: f64) -> Result<(), DeviceError> {
-        let latched = self.lock()?.last_report.is_some_and(|r| r.report.flags.latched());
-        if latched && self.pending_ma.iter().all(|&ma| ma == 0) && now - self.last_clear_s >= 0.1 {
+        let count = self.channel_count();
+        let (latched, any_cut, cuts_idle) = {
+            let state = self.lock()?;
+            let latched = state.last_report.is_some_and(|r| r.report.flags.latched());
+            let cut = |ch: usize| cut_of(state.tracks[ch].faults).is_some();
+            let any_cut = (0..count).any(cut);
+            let cuts_idle = (0..count).all(|ch| !cut(ch) || self.pending_ma[ch] == 0);
+            (latched, any_cut, cuts_idle)
+        };
+        let all_off = self.pending_ma.iter().all(|&ma| ma == 0);
+        let wanted = if latched { all_off } else { any_cut && cuts_idle };
+        if wanted && now - self.last_clear_s >= 0.1 {
             self.tx.clear_faults += 1;
             self.last_clear_s = now;
             self.send(&HostMessage::ClearFault)?;
@@ -619,6 +647,9 @@ impl SerialDevice {
             )));
         }
         let track = &state.tracks[channel];
+        if let Some(cut) = cut_of(track.faults) {
+            return Err(DeviceError::Cut { channel, cut });
+        }
         Ok(Reading {
             sensor_c: track.sensor_c,
             hot_side_c: track.hot_side_c,
@@ -663,6 +694,19 @@ impl Device for SerialDevice {
 
     /// A real device runs in real time: nothing to do.
     fn poll(&mut self, _now_s: f64) {}
+
+    /// `AllOff`: every drive 0 A in one frame.
+    fn all_off(&mut self) -> Result<(), DeviceError> {
+        SerialDevice::all_off(self)
+    }
+}
+
+/// The device's own cut of a channel, from its report's fault bits.
+fn cut_of(faults: ChannelFaults) -> Option<DeviceCut> {
+    DeviceCut::from_latches(
+        faults.has(ChannelFaults::OVER_TEMPERATURE),
+        faults.has(ChannelFaults::UNDER_TEMPERATURE),
+    )
 }
 
 impl Drop for SerialDevice {

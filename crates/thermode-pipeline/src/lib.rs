@@ -10,6 +10,8 @@
 //! - [`stimulus`]: [`Stimulus`] — air, a touch, or a direct display temperature — and its validation.
 //! - [`controllers`]: `pid` (gains files; the tuned files of the shipped displays are embedded) and `model` (plant
 //!   model from the device file).
+//! - [`guard`]: [`guard::PlateGuard`], the safety envelope's own model of the plate on every channel: the estimate
+//!   and one-tick forecast of the true plate that the envelope bounds.
 //! - [`error`]: [`PipelineError`], refused parameters and stimuli.
 //!
 //! Temperatures in °C, currents in A (positive heats the display), times in s. Deterministic: nothing here draws a
@@ -18,6 +20,7 @@
 pub mod controllers;
 pub mod display;
 pub mod error;
+pub mod guard;
 pub mod pipeline;
 pub mod renderer;
 pub mod stimulus;

@@ -18,9 +18,14 @@
 //! 4. `envelope.shape_setpoint`: clamp into the display limits and rate limit.
 //! 5. `controller.update` on the shaped set-point, with the finger model's receptor temperature and its
 //!    conductance to the plate (receptor conductance × contact area).
-//! 6. `envelope.gate_drive`: the only way to a [`DriveCommand`].
+//! 6. `envelope.gate_drive`: the only way to a [`DriveCommand`], with the plate guard's forecast of the true
+//!    plate ([`crate::guard::PlateGuard`], updated at the start of this step), so the envelope bounds the plate and
+//!    not only the lagging reading, whatever the controller.
 //! 7. The finger model on the display advances with what the finger really receives: the controller's plate
 //!    estimate if it has one (an observer), else the shaped set-point (the paper's way).
+//!
+//! While the channel is held off ([`ChannelPipeline::hold`], stop all) steps 3a–6 are replaced by the envelope's
+//! hold: 0 A, faults still checked, the controller not asked and restarted when the hold ends.
 //!
 //! Before the first touch, while the display renders air, the controller's learned unknown heat is averaged; at
 //! the first touch it calibrates the finger models to the real finger ([`PipelineConfig::calibrate_finger_at_touch`]).
@@ -29,17 +34,18 @@
 //! [`thermode_safety::FaultCode::NonFiniteCommand`] (as for any controller error) and switches the drive off.
 //! Every other broken number (NaN from a model, a sensor fault) latches its fault in the envelope as well.
 
-use thermode_control::{ControlInput, Controller};
+use thermode_control::{ControlInput, Controller, Finger};
 use thermode_device::{DeviceConfig, Reading};
 use thermode_model::fv::{FvConfig, FvModel};
 use thermode_model::kron::calibrate_to_surface;
 use thermode_model::limits::CONTACT_RESISTANCE;
 use thermode_model::{Material, Skin};
-use thermode_safety::{DriveCommand, EnvelopeConfig, FaultCode, SafetyEnvelope, SetpointDecision};
+use thermode_safety::{DriveCommand, EnvelopeConfig, FaultCode, MeasuredOnly, SafetyEnvelope, SetpointDecision};
 
-use crate::controllers::{build_controller, ControllerKind};
+use crate::controllers::{build_controller, plant_model, ControllerKind};
 use crate::display::DisplayFinger;
 use crate::error::PipelineError;
+use crate::guard::PlateGuard;
 use crate::renderer::{fv_config, Renderer, RendererKind, LIGHT_TOUCH_RESISTANCE_M2K_W};
 use crate::stimulus::Stimulus;
 
@@ -163,8 +169,11 @@ pub struct Telemetry {
     pub hot_side_c: f64,
     /// The controller's request (NaN if it refused its input).
     pub requested_current_a: f64,
-    /// The current the envelope let through (0 when faulted).
+    /// The current the envelope let through (0 when faulted or held off).
     pub current_a: f64,
+    /// The safety envelope's estimate of the true plate (its own model of the display, whatever the controller);
+    /// NaN before the first reading.
+    pub plate_estimate_c: f64,
     /// The latched fault, if any.
     pub fault: Option<FaultCode>,
 }
@@ -199,17 +208,10 @@ pub struct SetpointStage {
 pub struct DriveStage {
     controller: Box<dyn Controller>,
     envelope: SafetyEnvelope,
+    /// The envelope's own model of the plate (whatever the controller).
+    guard: PlateGuard,
     /// The current the envelope let through on the previous tick \[A\].
     applied_current_a: f64,
-}
-
-/// What the finger model tells the controller: its receptor and its conductance to the plate.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FingerInput {
-    /// The finger model's receptor temperature at the start of the tick \[°C\].
-    pub receptor_c: f64,
-    /// Receptor-to-plate conductance of the finger model over the contact area [W/K].
-    pub conductance_w_k: f64,
 }
 
 /// What the drive stage did in one tick.
@@ -239,6 +241,8 @@ pub struct ChannelPipeline {
     /// How much warmer the calibrated display finger model is than the one the controller's unknown heat was
     /// learned against \[°C\]; subtracted from the receptor temperature given to the controller (0 uncalibrated).
     receptor_offset_c: f64,
+    /// Held off (stop all) until the next stimulus.
+    held: bool,
 }
 
 /// Time the finger must rest on the display before the controller's unknown heat is averaged \[s\]: 1, longer than
@@ -411,6 +415,7 @@ impl DriveStage {
         Ok(DriveStage {
             controller,
             envelope: SafetyEnvelope::new(config.envelope, config.device.drive.current_limit_a)?,
+            guard: PlateGuard::new(plant_model(&config.device)?)?,
             applied_current_a: 0.0,
         })
     }
@@ -428,8 +433,9 @@ impl DriveStage {
         dt_s: f64,
         reading: &Reading,
         requested_c: f64,
-        finger: FingerInput,
+        finger: Finger,
     ) -> DriveOutcome {
+        self.guard.update(now_s, reading, self.applied_current_a, finger);
         let decision = self.envelope.shape_setpoint(now_s, self.feasible(requested_c, dt_s));
         let input = ControlInput {
             time_s: now_s,
@@ -443,7 +449,9 @@ impl DriveStage {
             finger_conductance_w_k: finger.conductance_w_k,
         };
         let requested_current_a = self.controller.update(&input).unwrap_or(f64::NAN);
-        let drive = self.refuse_or_gate(now_s, requested_current_a);
+        let forecast = self.guard.forecast(dt_s, finger);
+        let drive = self.envelope.gate_drive(now_s, requested_current_a, &forecast);
+        self.applied_current_a = drive.current_a();
         DriveOutcome {
             decision,
             requested_current_a,
@@ -451,11 +459,32 @@ impl DriveStage {
         }
     }
 
-    /// Step 6 alone: the envelope gates `request_a` \[A\] (NaN latches a fault and switches the drive off).
-    pub fn refuse_or_gate(&mut self, now_s: f64, request_a: f64) -> DriveCommand {
-        let drive = self.envelope.gate_drive(now_s, request_a);
+    /// A tick at `now_s` \[s\] whose time step is not usable: the envelope gets a NaN request, latches
+    /// [`FaultCode::NonFiniteCommand`] and switches the drive off.
+    pub fn refuse(&mut self, now_s: f64) -> DriveCommand {
+        let drive = self.envelope.gate_drive(now_s, f64::NAN, &MeasuredOnly);
         self.applied_current_a = drive.current_a();
         drive
+    }
+
+    /// A tick at `now_s` \[s\] while the channel is held off (stop all): the plate guard follows the plate at 0 A
+    /// with `finger`, the envelope checks faults with the drive off ([`SafetyEnvelope::hold`]), and the controller
+    /// is not asked (it restarts when the hold ends, [`DriveStage::end_hold`]).
+    pub fn hold(&mut self, now_s: f64, reading: &Reading, finger: Finger) -> DriveCommand {
+        self.guard.update(now_s, reading, self.applied_current_a, finger);
+        self.applied_current_a = 0.0;
+        self.envelope.hold(now_s)
+    }
+
+    /// Ends a hold: the controller restarts from the present readings, as on a fresh channel.
+    pub fn end_hold(&mut self) {
+        self.controller.reset();
+        self.applied_current_a = 0.0;
+    }
+
+    /// The plate guard's estimate of the true plate \[°C\] (NaN before the first reading).
+    pub fn plate_estimate_c(&self) -> f64 {
+        self.guard.plate_estimate_c()
     }
 
     /// The request limited to [`FEASIBLE_BAND_C`] (or two ticks of the envelope's rate limit, if more) around the
@@ -524,6 +553,7 @@ impl ChannelPipeline {
             }),
             rest_heat: RestHeat::default(),
             receptor_offset_c: 0.0,
+            held: false,
         })
     }
 
@@ -532,12 +562,29 @@ impl ChannelPipeline {
     /// leaves the pipeline unchanged. Not a per-tick operation: a new material may allocate its grid.
     pub fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), PipelineError> {
         stimulus.validate()?;
+        if self.held {
+            self.held = false;
+            self.drive.end_hold();
+        }
         match stimulus {
             Stimulus::Air => self.setpoint.release(),
             Stimulus::Touch { material, object_c } => self.touch(&material, object_c)?,
-            Stimulus::Direct { temp_c, rate_c_s } => self.setpoint.direct(temp_c, rate_c_s, self.last_setpoint_c),
+            Stimulus::Direct { temp_c, rate_c_s } => {
+                // After a hold there is no set-point to continue from: the ramp starts where the plate stands.
+                let plate_c = Some(self.drive.plate_estimate_c()).filter(|p| p.is_finite());
+                self.setpoint.direct(temp_c, rate_c_s, self.last_setpoint_c.or(plate_c))
+            }
         }
         Ok(())
+    }
+
+    /// Holds the drive off until the next stimulus (stop all): the display renders air, the envelope keeps
+    /// checking faults with the drive at 0 A, the controller is not asked, and the next stimulus starts it afresh,
+    /// as on a fresh channel.
+    pub fn hold(&mut self) {
+        self.setpoint.release();
+        self.last_setpoint_c = None;
+        self.held = true;
     }
 
     fn touch(&mut self, material: &Material, object_c: f64) -> Result<(), PipelineError> {
@@ -579,15 +626,18 @@ impl ChannelPipeline {
     pub fn tick(&mut self, now_s: f64, dt_s: f64, reading: &Reading) -> (DriveCommand, Telemetry) {
         self.drive.observe(reading);
         if !(dt_s.is_finite() && dt_s > 0.0) {
-            let drive = self.drive.refuse_or_gate(now_s, f64::NAN);
+            let drive = self.drive.refuse(now_s);
             let telemetry = self.refused_tick(now_s, reading, &drive);
             return (drive, telemetry);
         }
         let (target_c, requested_c) = self.setpoint.request(dt_s);
-        let finger = FingerInput {
+        let finger = Finger {
             receptor_c: self.setpoint.receptor_c() - self.receptor_offset_c,
             conductance_w_k: self.finger_conductance_w_k,
         };
+        if self.held {
+            return self.held_tick(now_s, dt_s, reading, finger, (target_c, requested_c));
+        }
         let outcome = self.drive.drive(now_s, dt_s, reading, requested_c, finger);
         self.last_setpoint_c = Some(outcome.decision.setpoint_c);
         if self.calibration.is_some() && self.setpoint.mode == Mode::Render && !self.setpoint.renderer.in_contact() {
@@ -607,6 +657,37 @@ impl ChannelPipeline {
             hot_side_c: reading.hot_side_c,
             requested_current_a: outcome.requested_current_a,
             current_a: drive.current_a(),
+            plate_estimate_c: self.drive.plate_estimate_c(),
+            fault: drive.fault(),
+        };
+        (drive, telemetry)
+    }
+
+    /// A tick while held off: 0 A; the finger model on the display follows the estimated plate.
+    fn held_tick(
+        &mut self,
+        now_s: f64,
+        dt_s: f64,
+        reading: &Reading,
+        finger: Finger,
+        (target_c, requested_c): (f64, f64),
+    ) -> (DriveCommand, Telemetry) {
+        let drive = self.drive.hold(now_s, reading, finger);
+        let plate_c = self.drive.plate_estimate_c();
+        self.setpoint
+            .follow(dt_s, if plate_c.is_finite() { plate_c } else { reading.sensor_c });
+        let telemetry = Telemetry {
+            time_s: now_s,
+            contact: false,
+            target_skin_c: target_c,
+            skin_c: self.setpoint.receptor_c(),
+            requested_setpoint_c: requested_c,
+            display_setpoint_c: f64::NAN,
+            sensor_c: reading.sensor_c,
+            hot_side_c: reading.hot_side_c,
+            requested_current_a: 0.0,
+            current_a: 0.0,
+            plate_estimate_c: plate_c,
             fault: drive.fault(),
         };
         (drive, telemetry)
@@ -630,6 +711,7 @@ impl ChannelPipeline {
             hot_side_c: reading.hot_side_c,
             requested_current_a: f64::NAN,
             current_a: drive.current_a(),
+            plate_estimate_c: self.drive.plate_estimate_c(),
             fault: drive.fault(),
         }
     }

@@ -1,7 +1,9 @@
 //! thermode-plot: figures for thermode written as SVG or PNG files.
 //!
 //! A [`Figure`] is a grid of [`Panel`]s; each panel has axes, labels and [`Series`] drawn as lines, dashed lines,
-//! points or bars. [`write_figure`] picks the format from the file extension (`.svg` or `.png`) and writes
+//! points or bars. The legend stands in a column to the right of the axes, never over the data, and its swatches
+//! are drawn in each series' own style (a dashed series has a dashed swatch), so series of one colour that differ
+//! only in style stay apart. [`write_figure`] picks the format from the file extension (`.svg` or `.png`) and writes
 //! atomically (a temporary file in the same folder, then a rename), so a failed plot never leaves half a file.
 //! The PNG text uses DejaVu Sans, embedded in the binary (licence in `assets/DejaVuSans-LICENSE.txt`), so no system
 //! font is needed at run time.
@@ -99,6 +101,31 @@ pub struct Panel {
     pub x_range: Option<(f64, f64)>,
     /// Fixed y range; `None` fits the data with a margin.
     pub y_range: Option<(f64, f64)>,
+}
+
+impl Panel {
+    /// A close-up of this panel over `from..=to` on the x axis, titled `title`: every series keeps only its points
+    /// inside the window (so the y axis fits them), and the x axis spans exactly the window.
+    pub fn window(&self, from: f64, to: f64, title: impl Into<String>) -> Panel {
+        Panel {
+            title: title.into(),
+            series: self
+                .series
+                .iter()
+                .map(|s| Series {
+                    points: s
+                        .points
+                        .iter()
+                        .copied()
+                        .filter(|(x, _)| *x >= from && *x <= to)
+                        .collect(),
+                    ..s.clone()
+                })
+                .collect(),
+            x_range: Some((from, to)),
+            ..self.clone()
+        }
+    }
 }
 
 /// A grid of panels written to one file.
@@ -266,9 +293,20 @@ fn panel_ranges(panel: &Panel) -> Result<(AxisRange, AxisRange), PlotError> {
     Ok((x, y))
 }
 
+/// Width of the legend column to the right of a panel's axes (px): 230, room for about 28 characters.
+pub const LEGEND_WIDTH_PX: u32 = 230;
+
 fn draw_panel<DB: DrawingBackend>(panel: &Panel, area: &DrawingArea<DB, Shift>) -> Result<(), PlotError> {
     let ((x0, x1), (y0, y1)) = panel_ranges(panel)?;
-    let mut chart = ChartBuilder::on(area)
+    let labelled: Vec<&Series> = panel.series.iter().filter(|s| !s.label.is_empty()).collect();
+    let width_px = area.dim_in_pixel().0;
+    let (plot_area, legend_area) = if labelled.is_empty() || width_px < 2 * LEGEND_WIDTH_PX {
+        (area.clone(), None)
+    } else {
+        let (left, right) = area.split_horizontally(width_px - LEGEND_WIDTH_PX);
+        (left, Some(right))
+    };
+    let mut chart = ChartBuilder::on(&plot_area)
         .caption(&panel.title, ("sans-serif", 22))
         .margin(12)
         .x_label_area_size(45)
@@ -287,15 +325,56 @@ fn draw_panel<DB: DrawingBackend>(panel: &Panel, area: &DrawingArea<DB, Shift>) 
     for series in &panel.series {
         draw_series(&mut chart, series)?;
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(RGBColor(180, 180, 180))
-        .label_font(("sans-serif", 14))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(drawing)?;
+    match legend_area {
+        Some(legend) => draw_legend(&legend, &labelled),
+        None if labelled.is_empty() => Ok(()),
+        // Too narrow for a column: the legend goes inside the axes.
+        None => chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(RGBColor(180, 180, 180))
+            .label_font(("sans-serif", 14))
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(drawing),
+    }
+}
+
+/// Vertical distance between legend entries (px).
+const LEGEND_ROW_PX: i32 = 22;
+
+/// The legend column: one row per labelled series, a swatch in the series' style and its label.
+fn draw_legend<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, series: &[&Series]) -> Result<(), PlotError> {
+    let top_px = 50;
+    for (row, s) in series.iter().enumerate() {
+        let y = top_px + row as i32 * LEGEND_ROW_PX;
+        draw_swatch(area, s, (8, y))?;
+        area.draw(&Text::new(s.label.as_str(), (48, y - 8), ("sans-serif", 14)))
+            .map_err(drawing)?;
+    }
     Ok(())
+}
+
+/// A 32 px swatch of `series`' style whose left end is at `(x, y)` (px, y at the middle).
+fn draw_swatch<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    series: &Series,
+    (x, y): (i32, i32),
+) -> Result<(), PlotError> {
+    let color = palette(series.color);
+    let stroke = ShapeStyle::from(color).stroke_width(3);
+    match series.style {
+        SeriesStyle::Line => area.draw(&PathElement::new(vec![(x, y), (x + 32, y)], stroke)),
+        SeriesStyle::Dashed => [(0, 8), (12, 20), (24, 32)]
+            .into_iter()
+            .try_for_each(|(a, b)| area.draw(&PathElement::new(vec![(x + a, y), (x + b, y)], stroke))),
+        SeriesStyle::Points => area.draw(&Circle::new((x + 16, y), 4, color.filled())),
+        SeriesStyle::Bars { .. } => area.draw(&Rectangle::new(
+            [(x + 8, y - 6), (x + 24, y + 6)],
+            color.mix(0.75).filled(),
+        )),
+    }
+    .map_err(drawing)
 }
 
 type Chart<'a, DB> =
@@ -325,9 +404,12 @@ fn draw_series<DB: DrawingBackend>(chart: &mut Chart<'_, DB>, series: &Series) -
         }
     };
     if !series.label.is_empty() {
-        annotation
-            .label(series.label.as_str())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(3)));
+        // Used only when the panel is too narrow for the legend column.
+        let dashed = series.style == SeriesStyle::Dashed;
+        annotation.label(series.label.as_str()).legend(move |(x, y)| {
+            let end = if dashed { x + 8 } else { x + 18 };
+            PathElement::new(vec![(x, y), (end, y)], color.stroke_width(3))
+        });
     }
     Ok(())
 }
@@ -400,6 +482,20 @@ mod tests {
         assert_eq!(leftovers.len(), 2, "temporary files left behind: {leftovers:?}");
         let missing = dir.path().join("no-such-dir").join("f.svg");
         assert!(matches!(write_figure(&sample(), &missing), Err(PlotError::Io { .. })));
+    }
+
+    #[test]
+    fn a_window_keeps_only_its_points_and_spans_exactly_the_window() {
+        let panel = &sample().panels[0];
+        let early = panel.window(0.0, 5.0, "first 5 s");
+        assert_eq!(early.x_range, Some((0.0, 5.0)));
+        assert_eq!(early.series[0].points.len(), 6, "{:?}", early.series[0].points);
+        assert!(early
+            .series
+            .iter()
+            .all(|s| s.points.iter().all(|(x, _)| (0.0..=5.0).contains(x))));
+        let svg = svg_string(&Figure::grid(vec![panel.clone(), early], 2)).expect("svg");
+        assert!(svg.contains("first 5 s"));
     }
 
     #[test]

@@ -65,9 +65,9 @@ pub const DEFAULT_DURATION_S: f64 = 90.0;
 pub const DEFAULT_PRE_CONTACT_S: f64 = 5.0;
 /// Default seed of the sensor noise.
 pub const DEFAULT_SEED: u64 = 1;
-/// Estimated memory of one row of a run \[bytes\]: the [`Trajectory`] row (eleven numbers, the contact flag and
+/// Estimated memory of one row of a run \[bytes\]: the [`Trajectory`] row (twelve numbers, the contact flag and
 /// the fault) plus a figure's copy of up to four of its curves as (time, value) pairs (`--plot`).
-pub const BYTES_PER_ROW: u64 = (11 * std::mem::size_of::<f64>()
+pub const BYTES_PER_ROW: u64 = (12 * std::mem::size_of::<f64>()
     + std::mem::size_of::<bool>()
     + std::mem::size_of::<Option<FaultCode>>()
     + 4 * 2 * std::mem::size_of::<f64>()) as u64;
@@ -84,6 +84,9 @@ pub struct RenderSpec {
     pub finger_skin: Skin,
     /// The simulated finger's skin-to-plate contact conductance [W/(m²·K)]; `None` = the device file's.
     pub finger_contact_w_m2k: Option<f64>,
+    /// The simulated hardware, when it differs from the device file the pipeline believes (`pipeline.device`):
+    /// real displays differ from their datasheets. Default `None`: the plant is the pipeline's device.
+    pub hardware: Option<DeviceConfig>,
     /// The touched material.
     pub material: Material,
     /// Object temperature at the touch \[°C\]; `None` = the ambient temperature (the paper's objects lay in the room).
@@ -110,6 +113,7 @@ impl RenderSpec {
             pipeline,
             finger_skin: Skin::fingertip(),
             finger_contact_w_m2k: None,
+            hardware: None,
             material,
             object_c: None,
             duration_s: DEFAULT_DURATION_S,
@@ -201,9 +205,10 @@ impl RenderSpec {
         self.pipeline.renderer.receptor_depth_m(&self.finger_skin)
     }
 
-    /// The device as the plant sees it: the device file with the simulated finger's contact conductance.
+    /// The device as the plant sees it: the hardware (default: the pipeline's device file) with the simulated
+    /// finger's contact conductance.
     pub fn plant_device(&self) -> DeviceConfig {
-        let mut device = self.pipeline.device;
+        let mut device = self.hardware.unwrap_or(self.pipeline.device);
         if let Some(g) = self.finger_contact_w_m2k {
             device.plate.contact_conductance_w_m2k = g;
         }
@@ -234,6 +239,8 @@ pub struct Trajectory {
     pub display_c: Vec<f64>,
     /// The PT-100 reading \[°C\].
     pub sensor_c: Vec<f64>,
+    /// The safety envelope's estimate of the true plate (`display_c`) from the reading \[°C\].
+    pub plate_estimate_c: Vec<f64>,
     /// The gated drive current \[A\].
     pub current_a: Vec<f64>,
     /// The true hot-side temperature \[°C\].
@@ -257,6 +264,7 @@ impl Trajectory {
             display_setpoint_c: v(),
             display_c: v(),
             sensor_c: v(),
+            plate_estimate_c: v(),
             current_a: v(),
             hot_side_c: v(),
             contact: Vec::with_capacity(rows),
@@ -276,6 +284,7 @@ impl Trajectory {
             ("requested_setpoint_c", &self.requested_setpoint_c),
             ("display_c", &self.display_c),
             ("sensor_c", &self.sensor_c),
+            ("plate_estimate_c", &self.plate_estimate_c),
             ("current_a", &self.current_a),
             ("hot_side_c", &self.hot_side_c),
         ]
@@ -314,6 +323,7 @@ impl Trajectory {
         self.display_setpoint_c.push(telemetry.display_setpoint_c);
         self.display_c.push(state.plate_c);
         self.sensor_c.push(state.sensor.value_c);
+        self.plate_estimate_c.push(telemetry.plate_estimate_c);
         self.current_a.push(state.applied_current_a);
         self.hot_side_c.push(state.hot_side_c);
         self.contact.push(telemetry.contact);
@@ -516,7 +526,7 @@ pub fn tick(
 }
 
 /// The CSV columns, in order.
-pub const CSV_HEADER: [&str; 17] = [
+pub const CSV_HEADER: [&str; 18] = [
     "time_s",
     "truth_skin_c",
     "target_skin_c",
@@ -526,6 +536,7 @@ pub const CSV_HEADER: [&str; 17] = [
     "requested_setpoint_c",
     "display_c",
     "sensor_c",
+    "plate_estimate_c",
     "current_a",
     "hot_side_c",
     "contact",
@@ -561,6 +572,7 @@ pub fn write_csv(runs: &[RenderRun], sink: &mut dyn Write) -> Result<(), csv::Er
                 &t.requested_setpoint_c,
                 &t.display_c,
                 &t.sensor_c,
+                &t.plate_estimate_c,
                 &t.current_a,
                 &t.hot_side_c,
             ] {
@@ -597,6 +609,7 @@ mod tests {
                 &mut t.display_setpoint_c,
                 &mut t.display_c,
                 &mut t.sensor_c,
+                &mut t.plate_estimate_c,
                 &mut t.current_a,
                 &mut t.hot_side_c,
             ] {
@@ -610,6 +623,6 @@ mod tests {
         t.skin_c[2] = f64::NAN;
         assert_eq!(t.first_non_finite(), Some(("skin_c", 2)));
         let names: Vec<&str> = t.numbers().map(|(name, _)| name).collect();
-        assert_eq!(names, CSV_HEADER[..11].to_vec(), "numeric columns in CSV order");
+        assert_eq!(names, CSV_HEADER[..12].to_vec(), "numeric columns in CSV order");
     }
 }

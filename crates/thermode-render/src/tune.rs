@@ -49,8 +49,9 @@ use crate::error::RenderError;
 use crate::nelder_mead::{minimise_with_restarts, Minimum, NelderMead};
 use crate::run::{resting_plant, Plant, RenderSpec};
 use crate::summary::FULL_WINDOW_S;
+use thermode_control::Finger;
 use thermode_pipeline::controllers::ControllerKind;
-use thermode_pipeline::pipeline::{render_envelope, DriveStage, FingerInput, PipelineConfig, SetpointStage};
+use thermode_pipeline::pipeline::{render_envelope, DriveStage, PipelineConfig, SetpointStage};
 use thermode_pipeline::renderer::RendererKind;
 use thermode_pipeline::ChannelPipeline;
 
@@ -202,7 +203,7 @@ fn evaluate_ticks(prepared: &Ticks, mut plant: Plant, gains: &PidGains) -> Resul
         let now_s = start_s + k as f64 * dt;
         let reading = plant.read(0)?;
         stage.observe(&reading);
-        let finger = FingerInput {
+        let finger = Finger {
             receptor_c: prepared.receptor_c[k],
             conductance_w_k: prepared.finger_conductance_w_k,
         };

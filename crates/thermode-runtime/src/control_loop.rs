@@ -13,7 +13,9 @@
 //!
 //! Stop-all releases every channel (the display renders air) and, in addition, holds that channel's drive at 0 A
 //! until the channel's next command: "stop" makes the display passive, not merely neutral. A channel whose device
-//! read fails also gets 0 A for that tick. When the loop stops, every channel gets 0 A.
+//! read fails also gets 0 A for that tick. When the loop stops, every drive goes to 0 A at once
+//! ([`Device::all_off`]: a serial display's `AllOff`, `DriveCommand::off` on every channel otherwise), and
+//! [`LoopHandle::stop`] says whether the device took it.
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -21,7 +23,7 @@ use std::sync::mpsc::{sync_channel, SyncSender, TryRecvError, TrySendError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
-use thermode_device::{Device, Reading, MAX_CHANNELS};
+use thermode_device::{Device, DeviceError, Reading, MAX_CHANNELS};
 use thermode_safety::{DriveCommand, FaultCode};
 
 use crate::command::{Applied, Command, CommandError, CommandReceiver, CommandSender, Owner, Queued, Reply};
@@ -117,7 +119,7 @@ pub struct LoopHandle {
     commands: CommandSender,
     shared: Arc<Shared>,
     stop: Arc<AtomicBool>,
-    thread: Option<JoinHandle<()>>,
+    thread: Option<JoinHandle<Option<Result<(), DeviceError>>>>,
     channel_count: usize,
     limits: Vec<StimulusLimits>,
     config: LoopConfig,
@@ -159,19 +161,19 @@ impl LoopHandle {
                         Ok(control) => control,
                         Err(e) => {
                             let _ = ready.send(Err(e));
-                            return;
+                            return None;
                         }
                     };
                     let ticker = match Ticker::new(config.period_s(), clock.now_s()) {
                         Ok(ticker) => ticker,
                         Err(e) => {
                             let _ = ready.send(Err(RuntimeError::Config(e.to_string())));
-                            return;
+                            return None;
                         }
                     };
                     let limits = control.slots.iter().map(|s| s.limits).collect();
                     let _ = ready.send(Ok((control.shared.clone(), limits)));
-                    control.run(clock.as_ref(), ticker, &stop);
+                    Some(control.run(clock.as_ref(), ticker, &stop))
                 })
                 .map_err(|source| RuntimeError::Io {
                     context: "cannot start the control-loop thread".into(),
@@ -234,18 +236,18 @@ impl LoopHandle {
         &self.config
     }
 
-    /// Stops the loop (every drive goes to 0 A) and waits for its thread.
-    pub fn stop(&mut self) {
+    /// Stops the loop and waits for its thread: its last act switches every drive to 0 A at once
+    /// ([`Device::all_off`]). Returns the device's answer to that, or `None` if the loop had already stopped (or its
+    /// thread panicked).
+    pub fn stop(&mut self) -> Option<Result<(), DeviceError>> {
         self.stop.store(true, Ordering::Relaxed);
-        if let Some(thread) = self.thread.take() {
-            let _ = thread.join();
-        }
+        self.thread.take().and_then(|thread| thread.join().ok().flatten())
     }
 }
 
 impl Drop for LoopHandle {
     fn drop(&mut self) {
-        self.stop();
+        let _ = self.stop();
     }
 }
 
@@ -358,7 +360,8 @@ impl ControlLoop {
         })
     }
 
-    fn run(mut self, clock: &dyn Clock, mut ticker: Ticker, stop: &AtomicBool) {
+    /// Ticks until `stop`; then every drive to 0 A (the device's answer is returned).
+    fn run(mut self, clock: &dyn Clock, mut ticker: Ticker, stop: &AtomicBool) -> Result<(), DeviceError> {
         while let Some(tick) = ticker.wait(clock, stop) {
             self.step(&tick, tick.scheduled_s);
             let done_s = clock.now_s();
@@ -368,7 +371,7 @@ impl ControlLoop {
                 let _ = reply.send(answer);
             }
         }
-        self.shutdown();
+        self.shutdown()
     }
 
     /// One tick at loop time `time_s`.
@@ -390,10 +393,14 @@ impl ControlLoop {
         let link_ok = match self.device.read(channel) {
             Ok(reading) => {
                 self.slots[channel].reading = reading;
+                self.status[channel].device_cut = None;
                 true
             }
-            Err(_) => {
+            Err(error) => {
                 self.counters.device_errors += 1;
+                if let DeviceError::Cut { cut, .. } = error {
+                    self.status[channel].device_cut = Some(cut);
+                }
                 false
             }
         };
@@ -498,6 +505,11 @@ impl ControlLoop {
                 for channel in 0..self.slots.len() {
                     self.release(channel);
                     self.status[channel].held_off = true;
+                    let slot = &mut self.slots[channel];
+                    let engine = &mut slot.engine;
+                    if !slot.failed && catch_unwind(AssertUnwindSafe(|| engine.hold())).is_err() {
+                        slot.failed = true;
+                    }
                 }
             }
             Command::ClientGone { client } => {
@@ -655,15 +667,16 @@ impl ControlLoop {
         snapshot.running = running;
     }
 
-    /// Every drive to 0 A; the final snapshot says the loop stopped.
-    fn shutdown(&mut self) {
-        for channel in 0..self.slots.len() {
-            let _ = self.device.apply(channel, &DriveCommand::off());
-            self.status[channel].telemetry.current_a = 0.0;
+    /// Every drive to 0 A at once; the final snapshot says the loop stopped.
+    fn shutdown(&mut self) -> Result<(), DeviceError> {
+        let result = self.device.all_off();
+        for status in &mut self.status {
+            status.telemetry.current_a = 0.0;
         }
         let tick = self.stats.ticks;
         self.shared
             .publish(|snapshot| self.write(snapshot, tick.saturating_sub(1), false));
+        result
     }
 }
 
@@ -679,6 +692,7 @@ fn air_status(channel: usize, air: &Arc<str>) -> ChannelStatus {
         owner: Owner::Nobody,
         release_at_s: None,
         link_ok: true,
+        device_cut: None,
         engine_failed: false,
         telemetry: crate::snapshot::EMPTY_TELEMETRY,
     }

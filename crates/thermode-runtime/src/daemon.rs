@@ -1,5 +1,6 @@
 //! The daemon: the control loop, the optional recorder, and the network side (HTTP + WebSocket on one port, OSC
-//! on another), started together by [`Daemon::start`] and stopped by [`Daemon::shutdown`].
+//! on another), started together by [`Daemon::start`] and stopped by [`Daemon::stop`] (or [`Daemon::shutdown`]):
+//! the loop first (every drive to 0 A at once), then the network side, then the recorder (flushed and synced).
 //!
 //! Security rules applied here, before anything listens: a non-loopback bind address needs a token
 //! ([`RuntimeError::InsecureBind`] otherwise), and OSC, which cannot carry a token, listens only on loopback binds.
@@ -10,7 +11,7 @@ use std::sync::atomic::{AtomicU64, AtomicUsize};
 use std::sync::Arc;
 use std::time::Duration;
 
-use thermode_device::Device;
+use thermode_device::{Device, DeviceError};
 
 use crate::api::access::Access;
 use crate::api::protocol::RequestLimits;
@@ -119,6 +120,18 @@ pub struct DaemonConfig {
     pub device_label: String,
     /// A name per channel (e.g. the fingers), or empty.
     pub channel_names: Vec<String>,
+}
+
+/// What [`Daemon::stop`] did.
+#[derive(Debug)]
+pub struct StopReport {
+    /// The device's answer to switching every drive off at once: `Ok` when it took the command (on a serial display:
+    /// the `AllOff` frame was written); `None` if the loop had already stopped.
+    pub all_off: Option<Result<(), DeviceError>>,
+    /// Loop time of the last tick \[s\].
+    pub last_tick_s: f64,
+    /// Rows recorded (flushed and synced), if recording.
+    pub rows: Option<u64>,
 }
 
 /// A running daemon.
@@ -251,20 +264,33 @@ impl Daemon {
         self.control.as_ref().map_or(0, |c| c.shared().dropped_records())
     }
 
-    /// Stops the network side, then the loop (every drive to 0 A), then the recorder (flushed and synced).
-    /// Returns the rows recorded, if recording.
+    /// Stops the loop first (its last act: every drive to 0 A at once, within one loop period), then the network
+    /// side, then the recorder (every queued row written, flushed and synced). Returns the rows recorded, if
+    /// recording.
     pub fn shutdown(mut self) -> Result<Option<u64>, RuntimeError> {
+        self.stop_parts().map(|report| report.rows)
+    }
+
+    /// As [`Daemon::shutdown`], with what the stop did.
+    pub fn stop(mut self) -> Result<StopReport, RuntimeError> {
         self.stop_parts()
     }
 
-    fn stop_parts(&mut self) -> Result<Option<u64>, RuntimeError> {
+    fn stop_parts(&mut self) -> Result<StopReport, RuntimeError> {
+        let mut report = StopReport {
+            all_off: None,
+            last_tick_s: f64::NAN,
+            rows: None,
+        };
+        if let Some(mut control) = self.control.take() {
+            report.all_off = control.stop();
+            report.last_tick_s = control.snapshot().time_s;
+        }
         if let Some(runtime) = self.runtime.take() {
             runtime.shutdown_timeout(Duration::from_millis(500));
         }
-        if let Some(mut control) = self.control.take() {
-            control.stop();
-        }
-        self.recorder.take().map(Recorder::finish).transpose()
+        report.rows = self.recorder.take().map(Recorder::finish).transpose()?;
+        Ok(report)
     }
 }
 

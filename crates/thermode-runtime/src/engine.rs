@@ -10,7 +10,7 @@
 use thermode_device::Reading;
 use thermode_model::params::{BadValue, Rule};
 use thermode_pipeline::{ChannelPipeline, PipelineError};
-use thermode_safety::{DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, SafetyEnvelope};
+use thermode_safety::{DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, MeasuredOnly, SafetyEnvelope};
 use thiserror::Error;
 
 use crate::limits::StimulusLimits;
@@ -51,6 +51,10 @@ pub trait ChannelEngine {
     /// Clears the latched safety fault at `now_s` \[s\] if its cause is gone; returns the cleared fault (`None`
     /// if none was latched). Refused while the cause persists.
     fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, EngineError>;
+
+    /// Holds the drive off until the next stimulus (stop all): the channel renders air, its envelope keeps
+    /// checking faults with the drive at 0 A, and the next stimulus starts the controller afresh.
+    fn hold(&mut self);
 }
 
 /// Builds a channel's engines on the loop thread (engines need not be `Send`): called once with the device's
@@ -73,6 +77,10 @@ impl ChannelEngine for ChannelPipeline {
     fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, EngineError> {
         Ok(ChannelPipeline::clear_fault(self, now_s)?)
     }
+
+    fn hold(&mut self) {
+        ChannelPipeline::hold(self);
+    }
 }
 
 /// Skin effusivity used by [`TrackingEngine`]'s contact temperature \[W·s^½/(m²·K)\] (a typical fingertip value).
@@ -88,6 +96,8 @@ pub struct TrackingEngine {
     stimulus: Stimulus,
     direct_c: Option<f64>,
     envelope: SafetyEnvelope,
+    /// Held off (stop all) until the next stimulus.
+    held: bool,
 }
 
 impl TrackingEngine {
@@ -103,6 +113,7 @@ impl TrackingEngine {
             stimulus: Stimulus::Air,
             direct_c: None,
             envelope,
+            held: false,
         })
     }
 
@@ -138,6 +149,7 @@ impl ChannelEngine for TrackingEngine {
     fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), EngineError> {
         stimulus.validate()?;
         self.stimulus = stimulus;
+        self.held = false;
         Ok(())
     }
 
@@ -146,7 +158,11 @@ impl ChannelEngine for TrackingEngine {
         let requested_c = self.requested_setpoint_c(dt_s);
         let shaped = self.envelope.shape_setpoint(now_s, requested_c);
         let request_a = self.gain_a_per_c * (shaped.setpoint_c - reading.sensor_c);
-        let command = self.envelope.gate_drive(now_s, request_a);
+        let command = if self.held {
+            self.envelope.hold(now_s)
+        } else {
+            self.envelope.gate_drive(now_s, request_a, &MeasuredOnly)
+        };
         let telemetry = Telemetry {
             time_s: now_s,
             contact: matches!(self.stimulus, Stimulus::Touch { .. }),
@@ -158,6 +174,7 @@ impl ChannelEngine for TrackingEngine {
             hot_side_c: reading.hot_side_c,
             requested_current_a: request_a,
             current_a: command.current_a(),
+            plate_estimate_c: f64::NAN,
             fault: command.fault(),
         };
         (command, telemetry)
@@ -165,6 +182,11 @@ impl ChannelEngine for TrackingEngine {
 
     fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, EngineError> {
         Ok(self.envelope.clear_fault(now_s)?)
+    }
+
+    fn hold(&mut self) {
+        self.stimulus = Stimulus::Air;
+        self.held = true;
     }
 }
 

@@ -54,7 +54,7 @@ pub mod stats;
 
 pub use command::{Applied, Command, CommandError, CommandSender, Owner};
 pub use control_loop::{LoopConfig, LoopHandle, MAX_RATE_HZ};
-pub use daemon::{Daemon, DaemonConfig, ServerConfig, DEFAULT_OSC_PORT, DEFAULT_PORT};
+pub use daemon::{Daemon, DaemonConfig, ServerConfig, StopReport, DEFAULT_OSC_PORT, DEFAULT_PORT};
 pub use engine::{ChannelEngine, EngineError, EngineFactory, Stimulus, Telemetry, TrackingEngine};
 pub use error::RuntimeError;
 pub use limits::StimulusLimits;

@@ -2,7 +2,10 @@
 //!
 //! The loop hands each tick's [`TickRecord`] to a bounded queue ([`RECORD_QUEUE_TICKS`] ticks, 8 s at 1 kHz) and
 //! never waits; a full queue drops the record and counts it. The writer flushes at least every
-//! [`FLUSH_INTERVAL_S`] of real time, so a crash loses at most the last half second.
+//! [`FLUSH_INTERVAL_S`] of real time, so a crash loses at most the last half second. Each tick's rows are formatted
+//! first and handed to the file's buffer in one piece, so what reaches the file is whole rows (a kill tears none
+//! unless it lands inside a write). When the loop stops, the writer drains the queue, flushes, and syncs the file
+//! and its directory ([`Recorder::finish`]).
 //!
 //! Columns (the `render` CSV names and conventions): `time_s, channel, contact, material, mode, target_skin_c,
 //! skin_c, display_setpoint_c, sensor_c, current_a, hot_side_c, fault` — `time_s` is loop time (the daemon clock's
@@ -49,6 +52,8 @@ impl Recorder {
             source,
         })?;
         let (path, file) = create_session_file(dir, &session_stem())?;
+        // The new file's name is durable once its directory is synced.
+        sync_dir(dir);
         let (feed, queue) = sync_channel(RECORD_QUEUE_TICKS);
         let rows = Arc::new(AtomicU64::new(0));
         let thread = {
@@ -96,6 +101,9 @@ impl Recorder {
             context: format!("recording to {}", self.path.display()),
             source,
         })?;
+        if let Some(dir) = self.path.parent() {
+            sync_dir(dir);
+        }
         Ok(self.rows_written())
     }
 }
@@ -125,6 +133,13 @@ fn create_session_file(dir: &Path, stem: &str) -> Result<(PathBuf, File), Runtim
     )))
 }
 
+/// Syncs a directory (best effort: not every platform or file system can).
+fn sync_dir(dir: &Path) {
+    if let Ok(handle) = File::open(dir) {
+        let _ = handle.sync_all();
+    }
+}
+
 /// The writer thread: rows until the feed closes, flushing at least every [`FLUSH_INTERVAL_S`].
 fn write_session(file: File, queue: Receiver<TickRecord>, rows: &AtomicU64) -> Result<(), std::io::Error> {
     let mut out = BufWriter::with_capacity(1 << 16, file);
@@ -132,10 +147,13 @@ fn write_session(file: File, queue: Receiver<TickRecord>, rows: &AtomicU64) -> R
     out.flush()?;
     let interval = Duration::from_secs_f64(FLUSH_INTERVAL_S);
     let mut last_flush = Instant::now();
+    let mut tick_rows = Vec::with_capacity(1024);
     loop {
         match queue.recv_timeout(interval) {
             Ok(record) => {
-                write_record(&mut out, &record)?;
+                tick_rows.clear();
+                write_record(&mut tick_rows, &record)?;
+                out.write_all(&tick_rows)?;
                 rows.fetch_add(record.channels().len() as u64, Ordering::Relaxed);
             }
             Err(RecvTimeoutError::Timeout) => {}

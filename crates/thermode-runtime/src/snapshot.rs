@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 
 use serde::Serialize;
-use thermode_device::MAX_CHANNELS;
+use thermode_device::{DeviceCut, MAX_CHANNELS};
 
 use crate::command::Owner;
 use crate::engine::Telemetry;
@@ -24,6 +24,7 @@ pub const EMPTY_TELEMETRY: Telemetry = Telemetry {
     hot_side_c: f64::NAN,
     requested_current_a: f64::NAN,
     current_a: 0.0,
+    plate_estimate_c: f64::NAN,
     fault: None,
 };
 
@@ -61,6 +62,9 @@ pub struct ChannelStatus {
     pub release_at_s: Option<f64>,
     /// The device answered the last read.
     pub link_ok: bool,
+    /// The device's own protection has cut this channel (its over- or under-temperature cut): set while its reads
+    /// say so, cleared by the next good read.
+    pub device_cut: Option<DeviceCut>,
     /// The channel's engine failed (panicked): its drive is off for the rest of the session.
     pub engine_failed: bool,
     /// This tick's numbers.

@@ -8,8 +8,15 @@
 //!    `[min, effective max]`; rate limit);
 //! 3. the controller, on the shaped set-point;
 //! 4. [`SafetyEnvelope::gate_drive`] with the controller's request (use `f64::NAN` if the controller returned an
-//!    error): 0 A while a fault is latched or before the first measurement; never heating while the measured
-//!    display is at/above the effective maximum, never cooling at/below the minimum; within `±current_limit_a`.
+//!    error) and a [`PlateForecast`]: 0 A while a fault is latched or before the first measurement; never heating
+//!    while the measured display is at/above the effective maximum, never cooling at/below the minimum; within
+//!    `±current_limit_a`; and, with a model of the plate, never a current whose predicted plate at the end of the
+//!    tick passes `[min + margin, effective max − margin]` (the margin follows the estimate's uncertainty,
+//!    [`crate::plate::plate_margin_c`]): heating and cooling are limited, and the drive is turned round when the
+//!    plate would pass a limit even at 0 A.
+//!
+//! While a channel is held off (stop all), [`SafetyEnvelope::hold`] replaces steps 2–4: fault checks go on, the
+//! drive is off, and the stuck-drive detection is reset.
 //!
 //! Sign convention: **positive current heats the display**.
 //!
@@ -23,8 +30,14 @@
 //! Thermal dose: the measured display temperature feeds a [`DoseTracker`]. Once the time at/above 43 °C reaches
 //! `max_time_at_or_above_43_s` or CEM43 reaches `cem43_budget_min`, the effective maximum becomes
 //! `43 − dose_lockout_margin_c`, which may make the shaped set-point step down (the only case in which the
-//! set-point moves faster than the rate limit: the safe direction wins). All checks act on the **measured**
-//! display temperature; a lagging sensor hides the true plate temperature from the envelope.
+//! set-point moves faster than the rate limit: the safe direction wins). Fault checks act on the **measured**
+//! display temperature; the drive limits act on the measured display and, where a forecast is given, on the
+//! estimated true plate, which a lagging sensor would otherwise hide.
+//!
+//! Stuck drive: the time at the current limit counts only while the drive really is at its limit in one
+//! direction and the plate does not answer (the measured display has not moved [`STUCK_PROGRESS_C`] in the
+//! drive's direction since the count started); a change of sign, a drive below the limit, a hold or a fault
+//! restarts it.
 
 use crate::config::{EnvelopeConfig, ABSOLUTE_MAX_C, NEUTRAL_SETPOINT_C};
 use crate::dose::{DoseTracker, CEM43_REFERENCE_C};
@@ -32,6 +45,12 @@ use thermode_model::Rule;
 
 use crate::error::EnvelopeError;
 use crate::fault::FaultCode;
+use crate::plate::{plate_margin_c, search_current_a, PlateForecast};
+
+/// Movement of the measured display in the drive's direction that shows the plate answers a drive at its limit,
+/// °C: 0.5 (50 steps of the PT-100's resolution, well above its noise; a working module at full current moves
+/// the plate several °C per second).
+pub const STUCK_PROGRESS_C: f64 = 0.5;
 
 /// One sample of a channel's sensors.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -86,6 +105,12 @@ pub struct DriveLimits {
     pub heating_blocked_at_max: bool,
     /// Cooling refused: the measured display is at/below the minimum.
     pub cooling_blocked_at_min: bool,
+    /// Heating limited (or cooling imposed): the plate predicted at the end of the tick would pass the effective
+    /// maximum less the estimate's margin.
+    pub heating_limited_by_plate: bool,
+    /// Cooling limited (or heating imposed): the plate predicted at the end of the tick would pass the minimum
+    /// plus the estimate's margin.
+    pub cooling_limited_by_plate: bool,
 }
 
 /// A drive current that has passed the safety envelope. Obtainable only from [`SafetyEnvelope::gate_drive`].
@@ -140,6 +165,14 @@ struct Shaped {
     time_s: f64,
 }
 
+/// The drive at its limit in one direction since `since_s`, with the measured display at `from_c` then.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct AtLimit {
+    since_s: f64,
+    heating: bool,
+    from_c: f64,
+}
+
 /// The safety envelope of one channel. See the module documentation.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SafetyEnvelope {
@@ -160,7 +193,7 @@ pub struct SafetyEnvelope {
     dose: DoseTracker,
     lockout_at_s: Option<f64>,
     at_48_since_s: Option<f64>,
-    stuck_since_s: Option<f64>,
+    at_limit: Option<AtLimit>,
 }
 
 impl SafetyEnvelope {
@@ -182,7 +215,7 @@ impl SafetyEnvelope {
             dose: DoseTracker::new(),
             lockout_at_s: None,
             at_48_since_s: None,
-            stuck_since_s: None,
+            at_limit: None,
         })
     }
 
@@ -472,12 +505,14 @@ impl SafetyEnvelope {
         }
     }
 
-    /// Gates the controller's requested current (A, positive heats) at time `now_s` (s) into the current allowed.
+    /// Gates the controller's requested current (A, positive heats) at time `now_s` (s) into the current allowed,
+    /// with `plate` the model of the plate over the tick ([`crate::plate::MeasuredOnly`] if there is none).
     /// Returns 0 A while a fault is latched (a non-finite request, a non-finite or backward time, a stale sensor
     /// or a drive stuck at its limit latch here) and before the first measurement. Otherwise the request is
     /// limited to `±current_limit_a`, heating is refused while the measured display is at/above the effective
-    /// maximum, and cooling while it is at/below the minimum.
-    pub fn gate_drive(&mut self, now_s: f64, requested_current_a: f64) -> DriveCommand {
+    /// maximum and cooling while it is at/below the minimum, and the predicted plate is kept inside the limits less
+    /// its margin (see the module documentation).
+    pub fn gate_drive(&mut self, now_s: f64, requested_current_a: f64, plate: &dyn PlateForecast) -> DriveCommand {
         let mut limits = DriveLimits::default();
         if self.advance_clock(now_s) {
             self.armed_at_s.get_or_insert(now_s);
@@ -505,7 +540,8 @@ impl SafetyEnvelope {
             current_a = 0.0;
             limits.cooling_blocked_at_min = true;
         }
-        if self.stuck_at_limit(now_s, current_a) {
+        current_a = self.bound_by_plate(current_a, plate, &mut limits);
+        if self.stuck_at_limit(now_s, current_a, sample.sensor_c) {
             self.latch(FaultCode::DriveStuckAtLimit, now_s);
             limits.faulted = true;
             return self.off(limits);
@@ -517,20 +553,82 @@ impl SafetyEnvelope {
         }
     }
 
-    /// Tracks how long the drive has been at its limit; true once that exceeds `stuck_at_limit_s`.
-    fn stuck_at_limit(&mut self, now_s: f64, current_a: f64) -> bool {
-        if current_a.abs() >= self.config.stuck_current_fraction * self.current_limit_a {
-            let since = *self.stuck_since_s.get_or_insert(now_s);
-            now_s - since > self.config.stuck_at_limit_s
+    /// The current nearest to `current_a` \[A\] whose predicted plate stays within `[min + margin, effective max −
+    /// margin]` (unchanged without an estimate, or when no current within the drive's range can keep it there).
+    fn bound_by_plate(&self, current_a: f64, plate: &dyn PlateForecast, limits: &mut DriveLimits) -> f64 {
+        let Some(now) = plate.now().filter(|p| p.plate_c.is_finite()) else {
+            return current_a;
+        };
+        let margin_c = plate_margin_c(now.sd_c);
+        let (floor_c, ceiling_c) = (self.min_c() + margin_c, self.effective_max_c() - margin_c);
+        let strongest_cooling_a = plate.strongest_cooling_a().clamp(-self.current_limit_a, 0.0);
+        let after_c = plate.plate_after_c(current_a);
+        if after_c > ceiling_c && current_a > strongest_cooling_a {
+            limits.heating_limited_by_plate = true;
+            search_current_a(plate, strongest_cooling_a, current_a, ceiling_c, true)
+        } else if after_c < floor_c && current_a < self.current_limit_a {
+            limits.cooling_limited_by_plate = true;
+            search_current_a(
+                plate,
+                current_a.max(strongest_cooling_a),
+                self.current_limit_a,
+                floor_c,
+                false,
+            )
         } else {
-            self.stuck_since_s = None;
-            false
+            current_a
         }
+    }
+
+    /// Tracks how long the drive has been at its limit in one direction without the plate answering; true once
+    /// that exceeds `stuck_at_limit_s` (see the module documentation). `sensor_c` is the newest measured display.
+    fn stuck_at_limit(&mut self, now_s: f64, current_a: f64, sensor_c: f64) -> bool {
+        if current_a.abs() < self.config.stuck_current_fraction * self.current_limit_a {
+            self.at_limit = None;
+            return false;
+        }
+        let heating = current_a > 0.0;
+        let restart = match self.at_limit {
+            None => true,
+            Some(at) if at.heating != heating => true,
+            Some(at) => {
+                let moved_c = if heating {
+                    sensor_c - at.from_c
+                } else {
+                    at.from_c - sensor_c
+                };
+                moved_c >= STUCK_PROGRESS_C
+            }
+        };
+        if restart {
+            self.at_limit = Some(AtLimit {
+                since_s: now_s,
+                heating,
+                from_c: sensor_c,
+            });
+        }
+        self.at_limit
+            .is_some_and(|at| now_s - at.since_s > self.config.stuck_at_limit_s)
+    }
+
+    /// A tick in which the channel is held off (stop all) at `now_s` \[s\]: the clock and the stale-sensor check
+    /// advance, the stuck-drive count restarts, the shaped set-point is forgotten (the next one starts again from
+    /// the measured display, as on a fresh channel), and the command is 0 A (carrying any latched fault).
+    pub fn hold(&mut self, now_s: f64) -> DriveCommand {
+        self.shaped = None;
+        if self.advance_clock(now_s) {
+            self.armed_at_s.get_or_insert(now_s);
+            self.check_stale(now_s);
+        }
+        self.off(DriveLimits {
+            faulted: self.latch.is_some(),
+            ..DriveLimits::default()
+        })
     }
 
     /// A zero-current command carrying the latched fault (if any).
     fn off(&mut self, limits: DriveLimits) -> DriveCommand {
-        self.stuck_since_s = None;
+        self.at_limit = None;
         DriveCommand {
             current_a: 0.0,
             fault: self.fault(),
@@ -560,7 +658,7 @@ impl SafetyEnvelope {
         self.latch = None;
         self.rate_ref = Some((sample.time_s, sample.sensor_c));
         self.at_48_since_s = None;
-        self.stuck_since_s = None;
+        self.at_limit = None;
         self.clock_s = Some(self.clock_s.map_or(now_s, |c| c.max(now_s)));
         Ok(Some(latch.code))
     }

@@ -4,7 +4,10 @@
 //! Also: gating (limit, heating/cooling refused at the limits), set-point shaping, and the thermal dose measured
 //! through the envelope against hand-computed CEM43 values.
 
-use thermode_safety::{DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, Measurement, SafetyEnvelope};
+use thermode_safety::{
+    DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, MeasuredOnly, Measurement, PlateForecast, PlateNow,
+    SafetyEnvelope,
+};
 
 const LIMIT_A: f64 = 2.8;
 const DT_S: f64 = 1e-3;
@@ -49,7 +52,7 @@ impl Rig {
     fn blind(&mut self, request_a: f64) -> DriveCommand {
         let now_s = self.now_s();
         let _ = self.env.shape_setpoint(now_s, 33.0);
-        let drive = self.env.gate_drive(now_s, request_a);
+        let drive = self.env.gate_drive(now_s, request_a, &MeasuredOnly);
         self.tick += 1;
         drive
     }
@@ -442,6 +445,138 @@ fn drive_stuck_at_its_limit_is_a_fault_after_the_configured_time() {
 }
 
 #[test]
+fn a_drive_at_its_limit_that_moves_the_plate_or_changes_sign_is_not_stuck() {
+    // Heating at the limit for 30 s while the plate warms 0.6 °C every 5 s: the plate answers, no fault.
+    let mut rig = Rig::default();
+    rig.healthy(0.1);
+    for k in 0..30_000 {
+        let sensor_c = 33.0 + 0.6 * (k / 5_000) as f64;
+        let d = rig.step(sensor_c, 25.0, 5.0);
+        assert_eq!(d.fault(), None, "tick {k}: plate at {sensor_c} °C answers the drive");
+    }
+    // Alternating heating and cooling at the limit every 6 s, the plate never moving: each change of sign restarts
+    // the count, so 10 s is never reached.
+    let mut rig = Rig::default();
+    rig.healthy(0.1);
+    for k in 0..30_000 {
+        let request_a = if (k / 6_000) % 2 == 0 { 5.0 } else { -5.0 };
+        let d = rig.step(33.0, 25.0, request_a);
+        assert_eq!(d.fault(), None, "tick {k}: {request_a} A");
+    }
+    // The plate moving against the drive is not an answer: stuck after 10 s.
+    let mut rig = Rig::default();
+    rig.healthy(0.1);
+    let t0 = rig.now_s();
+    let (t, d) = rig.until_fault(20.0, Some(LIMIT_A), |r| {
+        let sensor_c = 33.0 - 0.1 * (r.now_s() - t0);
+        r.step(sensor_c, 25.0, 5.0)
+    });
+    assert_off(&d, FaultCode::DriveStuckAtLimit);
+    assert!((t - t0 - 10.0).abs() <= 2.0 * DT_S, "stuck after {} s, want 10", t - t0);
+}
+
+#[test]
+fn a_hold_switches_the_drive_off_without_counting_towards_a_stuck_drive() {
+    let mut rig = Rig::default();
+    rig.healthy(0.1);
+    // 8 s at the limit, a 60 s hold, 8 s at the limit again: never 10 s in a row.
+    for _ in 0..8_000 {
+        assert_eq!(rig.step(33.0, 25.0, 5.0).fault(), None);
+    }
+    for _ in 0..60_000 {
+        rig.sample(33.0, 25.0);
+        let now_s = rig.now_s();
+        let d = rig.env.hold(now_s);
+        rig.tick += 1;
+        assert_eq!((d.current_a(), d.fault()), (0.0, None), "held at {now_s} s");
+    }
+    for _ in 0..8_000 {
+        assert_eq!(rig.step(33.0, 25.0, 5.0).fault(), None);
+    }
+    // A hold still sees a dead sensor.
+    let stale_after_s = EnvelopeConfig::default().stale_timeout_s;
+    let mut latched = None;
+    for _ in 0..((stale_after_s / DT_S) as usize + 2) {
+        let now_s = rig.now_s();
+        latched = latched.or(rig.env.hold(now_s).fault());
+        rig.tick += 1;
+    }
+    assert_eq!(latched, Some(FaultCode::SensorStale));
+}
+
+/// A plate that follows the current at `slope` °C per A over one tick from `plate_c`, with no uncertainty.
+struct LinearPlate {
+    plate_c: f64,
+    slope_c_per_a: f64,
+}
+
+impl PlateForecast for LinearPlate {
+    fn now(&self) -> Option<PlateNow> {
+        Some(PlateNow {
+            plate_c: self.plate_c,
+            sd_c: 0.0,
+        })
+    }
+    fn plate_after_c(&self, current_a: f64) -> f64 {
+        self.plate_c + self.slope_c_per_a * current_a
+    }
+    fn strongest_cooling_a(&self) -> f64 {
+        -LIMIT_A
+    }
+}
+
+#[test]
+fn the_predicted_plate_limits_heating_and_cooling_even_when_the_reading_lags() {
+    let config = EnvelopeConfig::default();
+    let margin_c = thermode_safety::plate::MIN_PLATE_MARGIN_C;
+    let mut rig = Rig::default();
+    rig.healthy(0.1);
+    let gate = |rig: &mut Rig, sensor_c: f64, plate: &LinearPlate, request_a: f64| {
+        rig.sample(sensor_c, 25.0);
+        let now_s = rig.now_s();
+        let d = rig.env.gate_drive(now_s, request_a, plate);
+        rig.tick += 1;
+        d
+    };
+    // The reading says 33 °C, the model 47.6 °C; 2 A would take the plate to 47.6 + 0.4 = 48 > 48 − margin.
+    let hot = LinearPlate {
+        plate_c: 47.6,
+        slope_c_per_a: 0.2,
+    };
+    let d = gate(&mut rig, 33.0, &hot, 2.0);
+    let want_a = (config.max_display_c - margin_c - hot.plate_c) / hot.slope_c_per_a;
+    assert!(d.limited_by().heating_limited_by_plate);
+    assert!(
+        (d.current_a() - want_a).abs() < 1e-6,
+        "heating limited to {} A, want {want_a} A",
+        d.current_a()
+    );
+    // A plate that would pass the maximum even at 0 A is cooled.
+    let hotter = LinearPlate {
+        plate_c: 48.2,
+        slope_c_per_a: 0.2,
+    };
+    let d = gate(&mut rig, 33.0, &hotter, 0.0);
+    assert!(d.current_a() < 0.0, "{} A: the plate must be cooled", d.current_a());
+    // Cooling towards the minimum is limited the same way; a request inside the band passes unchanged.
+    let cold = LinearPlate {
+        plate_c: 15.5,
+        slope_c_per_a: 0.2,
+    };
+    let d = gate(&mut rig, 33.0, &cold, -2.8);
+    let want_a = (config.min_display_c + margin_c - cold.plate_c) / cold.slope_c_per_a;
+    assert!(d.limited_by().cooling_limited_by_plate);
+    assert!(
+        (d.current_a() - want_a).abs() < 1e-6,
+        "cooling limited to {} A, want {want_a} A",
+        d.current_a()
+    );
+    let d = gate(&mut rig, 33.0, &cold, 0.5);
+    assert_eq!(d.current_a(), 0.5);
+    assert_eq!(d.fault(), None);
+}
+
+#[test]
 fn non_finite_set_point_request_measurement_and_time_latch() {
     type Inject = fn(&mut Rig) -> DriveCommand;
     let cases: [(Inject, FaultCode); 9] = [
@@ -458,14 +593,14 @@ fn non_finite_set_point_request_measurement_and_time_latch() {
         (
             |r| {
                 r.sample(33.0, 25.0);
-                r.env.gate_drive(f64::NAN, REQUEST_A)
+                r.env.gate_drive(f64::NAN, REQUEST_A, &MeasuredOnly)
             },
             FaultCode::NonFiniteTime,
         ),
         (
             |r| {
                 r.sample(33.0, 25.0);
-                r.env.gate_drive(r.now_s() - 0.5, REQUEST_A)
+                r.env.gate_drive(r.now_s() - 0.5, REQUEST_A, &MeasuredOnly)
             },
             FaultCode::TimeNotMonotonic,
         ),
@@ -486,7 +621,7 @@ fn inject_setpoint(r: &mut Rig, requested_c: f64) -> DriveCommand {
     let sp = r.env.shape_setpoint(r.now_s(), requested_c);
     assert!(sp.limited_by.rejected);
     assert_eq!(sp.setpoint_c, before, "a rejected set-point holds the previous one");
-    r.env.gate_drive(r.now_s(), REQUEST_A)
+    r.env.gate_drive(r.now_s(), REQUEST_A, &MeasuredOnly)
 }
 
 #[test]

@@ -8,6 +8,7 @@
 mod cmd;
 mod output;
 mod resolve;
+mod signals;
 
 use std::process::ExitCode;
 

@@ -1,8 +1,14 @@
 //! End-to-end tests of the `thermode` binary: `materials` and `simulate`, run as a user would, with small helpers
-//! that print what was expected and what came back.
+//! that print what was expected and what came back; `serve` on `emulate` (killed, signalled) in
+//! [`serve_on_emulator`].
 
 use std::path::Path;
 use std::process::{Command, Output};
+
+// A module file, not a second test binary (Cargo builds every `tests/*.rs` as one).
+#[cfg(unix)]
+#[path = "cli/serve_on_emulator.rs"]
+mod serve_on_emulator;
 
 fn thermode(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_thermode"))

@@ -9,7 +9,7 @@
 
 use proptest::prelude::*;
 use thermode_control::{ControlInput, Controller, PidController, PidGains};
-use thermode_safety::{EnvelopeConfig, Measurement, SafetyEnvelope};
+use thermode_safety::{EnvelopeConfig, MeasuredOnly, Measurement, SafetyEnvelope};
 
 const LIMIT_A: f64 = 2.8;
 
@@ -111,7 +111,7 @@ proptest! {
             if env.dose_lockout_active() {
                 prop_assert!(max_c <= 42.5 && sp.setpoint_c <= 42.5, "dose lockout: max {max_c}, sp {}", sp.setpoint_c);
             }
-            let d = env.gate_drive(now_s, t.request_a);
+            let d = env.gate_drive(now_s, t.request_a, &MeasuredOnly);
             let i = d.current_a();
             prop_assert!(i.is_finite() && i.abs() <= LIMIT_A, "current {i}");
             prop_assert_eq!(d.fault(), env.fault());
@@ -167,7 +167,7 @@ proptest! {
                     setpoint_rate_c_per_s: sp.rate_c_per_s, sensor_c: temp_c, hot_side_c: 25.0,
                     applied_current_a: applied_a, finger_receptor_c: None, finger_conductance_w_k: 0.0 };
                 let request_a = controller.update(&input).unwrap_or(f64::NAN);
-                let d = env.gate_drive(now_s, request_a);
+                let d = env.gate_drive(now_s, request_a, &MeasuredOnly);
                 applied_a = d.current_a();
                 prop_assert!(applied_a.abs() <= LIMIT_A);
                 let ss = ambient_c + b_w_a * applied_a / g_w_k;

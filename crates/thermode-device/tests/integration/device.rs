@@ -3,7 +3,7 @@
 
 use thermode_device::{Device, DeviceConfig, DeviceError, RecordingDevice, SimulatedDisplay, MAX_CHANNELS};
 use thermode_model::kron::KronModel;
-use thermode_safety::{EnvelopeConfig, SafetyEnvelope};
+use thermode_safety::{EnvelopeConfig, MeasuredOnly, SafetyEnvelope};
 
 fn display(count: usize) -> SimulatedDisplay<KronModel> {
     SimulatedDisplay::fingertips(&DeviceConfig::default(), count, 21).unwrap_or_else(|e| panic!("{e}"))
@@ -28,7 +28,7 @@ fn channel_counts_are_checked() {
         d.read(10).err(),
         Some(DeviceError::NoSuchChannel { channel: 10, count: 10 })
     );
-    let command = envelope().gate_drive(0.0, 1.0);
+    let command = envelope().gate_drive(0.0, 1.0, &MeasuredOnly);
     assert_eq!(
         d.apply(12, &command).err(),
         Some(DeviceError::NoSuchChannel { channel: 12, count: 10 })
@@ -48,7 +48,7 @@ fn gated_commands_drive_only_their_channel_and_the_recorder_sees_every_one() {
             env.observe(&reading.measurement());
             // Channel 0 heats, channel 1 cools, channel 2 is asked for nothing.
             let request = [1.0, -1.0, 0.0][channel];
-            let command = env.gate_drive(now, request);
+            let command = env.gate_drive(now, request, &MeasuredOnly);
             sent.push((now, channel, command.current_a()));
             device.apply(channel, &command).unwrap_or_else(|e| panic!("{e}"));
         }
@@ -161,7 +161,7 @@ fn a_faulted_envelope_switches_the_drive_off() {
     for n in 0..20 {
         let reading = d.read(0).unwrap_or_else(|e| panic!("{e}"));
         env.observe(&reading.measurement());
-        let command = env.gate_drive(n as f64 * 0.01, -2.0);
+        let command = env.gate_drive(n as f64 * 0.01, -2.0, &MeasuredOnly);
         d.apply(0, &command).unwrap_or_else(|e| panic!("{e}"));
         d.poll((n + 1) as f64 * 0.01);
     }

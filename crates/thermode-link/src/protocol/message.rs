@@ -142,6 +142,12 @@ impl ChannelFaults {
     pub const CURRENT_LIMITED: u8 = 0x08;
     /// Bit 4: the drive is latched off (see [`ReportFlags::LATCHED`]).
     pub const LATCHED_OFF: u8 = 0x10;
+    /// Bit 5: the device's own cut latched this channel's heating off: its bound on the plate reached the upper
+    /// line (48 °C). Released by [`HostMessage::ClearFault`] once the plate is back inside (`docs/protocol.md` §6).
+    pub const OVER_TEMPERATURE: u8 = 0x20;
+    /// Bit 6: the device's own cut latched this channel's cooling off: its bound on the plate reached the lower
+    /// line (10 °C). Released like [`ChannelFaults::OVER_TEMPERATURE`].
+    pub const UNDER_TEMPERATURE: u8 = 0x40;
 
     /// Whether `bit` (one of the constants) is set.
     pub fn has(self, bit: u8) -> bool {

@@ -5,8 +5,8 @@
 //!
 //! Timing assertions use generous bounds (scheduling on a loaded machine); exact properties (the watchdog's delay
 //! on the emulator clock, the host's count of dropped frames) are asserted exactly. Tests that are not about timing
-//! use a tolerant link timeout and stale-sensor timeout (1 s) and a 5 s watchdog, so a starved thread on a busy
-//! machine cannot fault them. Measured numbers are printed (`cargo test -- --nocapture`).
+//! use a tolerant link timeout and stale-sensor timeout (1 s); the watchdog is the longest the host accepts (250 ms),
+//! fed by the tests' own calls every 5–10 ms. Measured numbers are printed (`cargo test -- --nocapture`).
 #![cfg(unix)]
 
 use std::sync::Arc;
@@ -15,10 +15,10 @@ use std::time::{Duration, Instant};
 use thermode_device::{Device, DeviceConfig, DeviceError, Reading, SimulatedDisplay};
 use thermode_link::emulator::{Emulator, EmulatorConfig, EmulatorStatus, LinkFaults, PtyEmulator, SentLog};
 use thermode_link::protocol::DeviceMessage;
-use thermode_link::serial::{serial_path, SerialConfig, SerialDevice};
+use thermode_link::serial::{serial_path, SerialConfig, SerialDevice, MAX_DEVICE_WATCHDOG_MS};
 use thermode_model::kron::KronModel;
 use thermode_platform::{Clock, MonotonicClock};
-use thermode_safety::{EnvelopeConfig, SafetyEnvelope};
+use thermode_safety::{EnvelopeConfig, MeasuredOnly, SafetyEnvelope};
 
 const WATCHDOG_S: f64 = 0.25;
 const TICK_S: f64 = 1e-3;
@@ -31,11 +31,11 @@ fn tolerant() -> SerialConfig {
     }
 }
 
-/// Emulator settings for tests that are not about the watchdog: a 5 s period, so a starved thread on a busy machine
-/// cannot trip it.
+/// Emulator settings for tests that are not about the watchdog: the longest period the host accepts
+/// ([`MAX_DEVICE_WATCHDOG_MS`]); these tests call the device every 5–10 ms, which feeds it.
 fn patient() -> EmulatorConfig {
     EmulatorConfig {
-        watchdog_ms: 5000,
+        watchdog_ms: MAX_DEVICE_WATCHDOG_MS,
         ..EmulatorConfig::default()
     }
 }
@@ -107,7 +107,7 @@ impl ControlLoop {
             if let Ok(r) = &reading {
                 envelope.observe(&r.measurement());
             }
-            let command = envelope.gate_drive(now, currents_a[ch]);
+            let command = envelope.gate_drive(now, currents_a[ch], &MeasuredOnly);
             if let Err(e) = self.device.apply(ch, &command) {
                 readings.push(Err(e));
                 continue;
@@ -148,7 +148,7 @@ fn the_serial_device_can_move_between_threads() {
 fn handshake_and_fresh_readings() {
     let (pty, mut device, clock) = link(emulator(2, patient()), &tolerant());
     let id = device.identify();
-    assert_eq!((id.channel_count, id.current_limit_ma, id.watchdog_ms), (2, 2800, 5000));
+    assert_eq!((id.channel_count, id.current_limit_ma, id.watchdog_ms), (2, 2800, 250));
     assert!(pty.path().starts_with("/dev/"), "pty path {}", pty.path());
     let first = ok(&device.read(0));
     let mut later = first;
@@ -533,4 +533,89 @@ fn runs_over_a_socket_pair_and_switches_off_on_drop() {
         .join()
         .unwrap_or_else(|_| panic!("emulator thread panicked"));
     assert_eq!(end, Ok(RunEnd::HostClosed));
+}
+
+/// A device whose watchdog is longer than the host accepts is refused at the handshake, with one error naming both
+/// periods, and its drives are never released.
+#[test]
+fn a_device_with_a_slow_watchdog_is_refused() {
+    let config = EmulatorConfig {
+        watchdog_ms: MAX_DEVICE_WATCHDOG_MS + 1,
+        ..EmulatorConfig::default()
+    };
+    let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
+    let pty = PtyEmulator::spawn(emulator(1, config), Arc::clone(&clock)).unwrap_or_else(|e| panic!("pty: {e}"));
+    let result = SerialDevice::open(pty.path(), &SerialConfig::default(), clock);
+    let message = result.as_ref().map_err(ToString::to_string).err().unwrap_or_default();
+    println!("{message}");
+    assert!(
+        matches!(
+            result,
+            Err(DeviceError::WatchdogTooLong {
+                device_ms: 251,
+                max_ms: 250,
+                ..
+            })
+        ),
+        "{result:?}"
+    );
+    assert!(
+        message.contains("251 ms") && message.contains("250 ms") && !message.contains('\n'),
+        "{message}"
+    );
+    assert!(status(&pty).latched, "the refused device's drives were released");
+}
+
+/// The device's own over-temperature cut reaches the host as a typed error on that channel; the host holds 0 A,
+/// sends `ClearFault`, and readings resume once the device released the cut (its plate back inside).
+#[test]
+fn the_device_cut_reaches_the_host_and_is_released_back_inside() {
+    use thermode_device::DeviceCut;
+    let mut emu = emulator(1, EmulatorConfig::default());
+    emu.display_mut()
+        .channel_mut(0)
+        .and_then(|c| c.set_temperatures(45.0, 25.0))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let (pty, device, clock) = link(emu, &tolerant());
+    let mut control = ControlLoop::new(device, clock);
+    let mut last = Vec::new();
+    let cut = wait_for(3.0, || {
+        last = control.tick(&[2.8]);
+        std::thread::sleep(Duration::from_millis(5));
+        matches!(last[0], Err(DeviceError::Cut { .. }))
+    });
+    let s = status(&pty);
+    println!(
+        "cut seen by the host after {cut:?} s: {:?}; device trip {:?}",
+        last[0], s.stats.last_guard_trip
+    );
+    assert!(cut.is_some(), "no cut: {last:?}");
+    assert!(
+        matches!(
+            last[0],
+            Err(DeviceError::Cut {
+                channel: 0,
+                cut: DeviceCut::OverTemperature
+            })
+        ),
+        "{last:?}"
+    );
+    let peak = s.stats.last_guard_trip.map_or(f64::NAN, |t| t.plate_c);
+    assert!(peak < 48.0, "plate at the cut {peak} °C");
+    assert!(s.cuts[0].heating && s.applied_a[0] == 0.0, "{s:?}");
+    // The host holds 0 A (as a faulted envelope does): ClearFault goes out and the device releases the cut once
+    // its plate is back inside; readings resume.
+    let resumed = wait_for(10.0, || {
+        let r = control.tick(&[0.0]);
+        std::thread::sleep(Duration::from_millis(5));
+        r[0].is_ok()
+    });
+    let s = status(&pty);
+    println!(
+        "readings resumed {resumed:?} s later, plate {:.2} °C; host sent {} ClearFault",
+        s.plate_c[0],
+        control.device.stats().clear_faults
+    );
+    assert!(resumed.is_some() && !s.cuts[0].heating, "cut never released: {s:?}");
+    assert!(s.plate_c[0] < 47.0, "released at {} °C", s.plate_c[0]);
 }

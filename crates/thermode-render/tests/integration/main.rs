@@ -9,3 +9,4 @@ mod kron_depth;
 mod pipeline;
 mod props;
 mod run;
+mod true_plate;

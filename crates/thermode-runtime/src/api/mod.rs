@@ -236,6 +236,12 @@ pub fn status_json(app: &App) -> Value {
         .filter_map(|c| c.telemetry.fault.map(|f| (c.channel, f)))
         .map(|(channel, f)| json!({"channel": channel, "fault": f.code(), "description": f.description()}))
         .collect();
+    let device_cuts: Vec<Value> = snapshot
+        .channels
+        .iter()
+        .filter_map(|c| c.device_cut.map(|cut| (c.channel, cut)))
+        .map(|(channel, cut)| json!({"channel": channel, "cut": cut.name(), "description": cut.to_string()}))
+        .collect();
     let s = &snapshot.stats;
     let osc = &app.osc;
     let count = |a: &AtomicU64| a.load(Ordering::Relaxed);
@@ -250,6 +256,7 @@ pub fn status_json(app: &App) -> Value {
         "channels": channels,
         "contacts": contacts,
         "faults": faults,
+        "device_cuts": device_cuts,
         "loop": {
             "rate_hz": s.rate_hz,
             "period_s": s.period_s,

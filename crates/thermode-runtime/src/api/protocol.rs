@@ -478,6 +478,7 @@ pub fn channel_telemetry(status: &ChannelStatus) -> Value {
         "skin_c": finite(t.skin_c),
         "display_setpoint_c": finite(t.display_setpoint_c),
         "sensor_c": finite(t.sensor_c),
+        "plate_estimate_c": finite(t.plate_estimate_c),
         "current_a": finite(t.current_a),
         "hot_side_c": finite(t.hot_side_c),
         "fault": fault_code(status),
@@ -511,6 +512,8 @@ pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> Value {
         "owner": status.owner,
         "release_at_s": status.release_at_s,
         "link_ok": status.link_ok,
+        "device_cut": status.device_cut.map(|c| c.name()),
+        "device_cut_description": status.device_cut.map(|c| c.to_string()),
         "engine_failed": status.engine_failed,
     });
     merged(channel_telemetry(status), extra)

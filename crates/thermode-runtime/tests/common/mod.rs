@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use futures_util::{SinkExt, StreamExt};
 use serde_json::Value;
-use thermode_device::{DefaultFinger, Device, DeviceConfig, DeviceError, Fault, Reading, SimulatedDisplay};
+use thermode_device::{DefaultFinger, Device, DeviceConfig, DeviceCut, DeviceError, Fault, Reading, SimulatedDisplay};
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::engine::{pipeline_engines, tracking_engines};
@@ -55,6 +55,8 @@ pub struct SpyControl {
     pub clear: Vec<usize>,
     /// Channels whose reads fail.
     pub failing_reads: Vec<usize>,
+    /// Channels whose reads say the device's own protection cut them.
+    pub cut_reads: Vec<(usize, DeviceCut)>,
 }
 
 /// The simulated display with a recorder and a remote control.
@@ -100,15 +102,14 @@ impl Device for SpyDevice {
     }
 
     fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
-        if self
-            .control
-            .lock()
-            .expect("spy control")
-            .failing_reads
-            .contains(&channel)
-        {
+        let control = self.control.lock().expect("spy control");
+        if control.failing_reads.contains(&channel) {
             return Err(DeviceError::Link("spy: read fails".into()));
         }
+        if let Some(&(_, cut)) = control.cut_reads.iter().find(|(c, _)| *c == channel) {
+            return Err(DeviceError::Cut { channel, cut });
+        }
+        drop(control);
         self.inner.read(channel)
     }
 

@@ -179,6 +179,59 @@ fn stop_all_holds_every_drive_at_exactly_zero_until_the_next_command() {
     }
 }
 
+/// A stop-all during a hot touch holds for 60 s without any fault (the stuck-drive count does not run while the
+/// drive is held off), and the next command behaves like one on a fresh channel: a direct set-point of 40 °C at the
+/// paper's 2 °C/s is reached without the plate passing it by 0.5 °C (a controller left running through the hold
+/// would have wound up; the tuned pid on a fresh channel peaks at 40.43 °C).
+fn stop_all_holds_without_faults_case(engines: EngineFactory) {
+    let rig = Rig::new(2, engines, LoopConfig::default());
+    rig.step(100);
+    rig.ask(touch_at(0, "copper", 70.0, Owner::Script)).expect("hot touch");
+    rig.ask(touch_at(1, "copper", -20.0, Owner::Script))
+        .expect("cold touch");
+    rig.step(500);
+    rig.ask(Command::StopAll).expect("stop");
+    for second in 1..=60 {
+        rig.step(100);
+        for (i, c) in rig.snapshot().channels.iter().enumerate() {
+            assert_eq!(c.telemetry.fault, None, "channel {i} faulted {second} s into the hold");
+        }
+    }
+    for channel in 0..2 {
+        rig.log.lock().expect("log").max_plate_c = f64::NEG_INFINITY;
+        let start = rig
+            .ask(Command::direct(channel, 40.0, 2.0, Owner::Script))
+            .expect("accepted after the hold");
+        rig.step(2000);
+        let max_plate_c = rig.log.lock().expect("log").max_plate_c;
+        assert!(
+            max_plate_c < 40.5,
+            "channel {channel}: plate peaked at {max_plate_c} °C after a 40 °C set-point (sent at {} s)",
+            start.time_s
+        );
+        assert!(
+            max_plate_c > 39.5,
+            "channel {channel}: the plate only reached {max_plate_c} °C"
+        );
+        assert_eq!(
+            rig.snapshot().channels[channel].telemetry.fault,
+            None,
+            "channel {channel}"
+        );
+        rig.ask(Command::Release { channel }).expect("release");
+    }
+}
+
+#[test]
+fn stop_all_holds_without_faults_and_the_next_command_starts_fresh_pid() {
+    stop_all_holds_without_faults_case(common::pid_pipelines());
+}
+
+#[test]
+fn stop_all_holds_without_faults_and_the_next_command_starts_fresh_model() {
+    stop_all_holds_without_faults_case(pipelines());
+}
+
 #[test]
 fn a_disconnected_clients_contacts_are_released_exactly_after_the_grace_period() {
     let grace_s = 2.0;
@@ -290,6 +343,41 @@ fn a_failing_read_gets_zero_current_then_a_latched_fault_that_can_be_cleared() {
     rig.ask(touch(2, "wood", Owner::Script)).expect("touch after clearing");
 }
 
+#[test]
+fn a_device_cut_is_shown_on_its_channel_with_zero_current_until_the_device_releases_it() {
+    use thermode_device::DeviceCut;
+    use thermode_runtime::api::protocol::channel_status;
+    let rig = Rig::new(2, pipelines(), LoopConfig::default());
+    rig.step(20);
+    rig.control
+        .lock()
+        .expect("control")
+        .cut_reads
+        .push((1, DeviceCut::OverTemperature));
+    let cut_from = rig.snapshot().time_s + PERIOD_S;
+    rig.step(30);
+    let s = rig.snapshot();
+    assert_eq!(s.channels[1].device_cut, Some(DeviceCut::OverTemperature));
+    assert_eq!(s.channels[0].device_cut, None, "the other channel");
+    let currents = rig.currents_since(1, cut_from);
+    assert!(currents.iter().all(|&a| a == 0.0), "drive while cut: {currents:?}");
+    let json = channel_status(&s.channels[1], None);
+    println!("status of the cut channel: {json}");
+    assert_eq!(json["device_cut"], "over_temperature");
+    let description = json["device_cut_description"].as_str().unwrap_or_default();
+    assert!(
+        description.contains("over-temperature cut") && description.contains("heating off"),
+        "{description}"
+    );
+    rig.control.lock().expect("control").cut_reads.clear();
+    rig.step(2);
+    assert_eq!(
+        rig.snapshot().channels[1].device_cut,
+        None,
+        "cleared by the next good read"
+    );
+}
+
 fn open_sensor_case(engines: EngineFactory) {
     let rig = Rig::new(2, engines, LoopConfig::default());
     rig.step(20);
@@ -353,6 +441,10 @@ impl thermode_runtime::ChannelEngine for Booby {
 
     fn limits(&self) -> thermode_runtime::StimulusLimits {
         self.inner.limits()
+    }
+
+    fn hold(&mut self) {
+        self.inner.hold();
     }
 }
 

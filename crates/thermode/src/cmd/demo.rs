@@ -1,6 +1,7 @@
 //! `thermode demo`: `thermode serve` plus a short scripted sequence of touches (aluminium on the index finger, wood
 //! on the middle finger, steel on the thumb, releases) repeated until the end, so a newcomer sees the dashboard move
-//! without writing a client. `--duration S` makes it exit (for tests and CI).
+//! without writing a client. `--duration S` makes it exit (for tests and CI); SIGINT and SIGTERM stop it cleanly, as
+//! they stop `serve`.
 
 use anyhow::Result;
 use clap::Args;
@@ -8,6 +9,7 @@ use thermode_model::materials;
 use thermode_runtime::{Command, CommandSender, Owner};
 
 use super::serve::{self, ServeArgs};
+use crate::signals::StopSignals;
 
 /// Arguments of `thermode demo`: those of `thermode serve`.
 #[derive(Args, Debug, Clone)]
@@ -73,12 +75,13 @@ const FINGERS: [&str; 5] = ["thumb", "index finger", "middle finger", "ring fing
 
 /// Runs `thermode demo`.
 pub fn run(args: &DemoArgs) -> Result<()> {
+    let signals = StopSignals::install()?;
     let daemon = serve::start(&args.serve)?;
     let channels = daemon.snapshot().map_or(1, |s| s.channels.len());
     let commands = daemon.commands();
     println!("demo: a touch every few seconds; watch the dashboard");
     let mut next = 0usize;
-    serve::run_for(args.serve.duration, |elapsed_s| {
+    let ended = serve::run_for(args.serve.duration, &signals, |elapsed_s| {
         let Some(commands) = &commands else {
             return;
         };
@@ -87,7 +90,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             next += 1;
         }
     })?;
-    serve::finish(daemon)
+    serve::finish(daemon, ended)
 }
 
 /// The step with running number `n` if it is due at `elapsed_s`.

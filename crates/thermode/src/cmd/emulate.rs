@@ -3,13 +3,15 @@
 //!
 //! The first line on standard output is the path the host opens (e.g. `/dev/pts/7`), flushed at once; the
 //! emulator then runs in real time (1 kHz firmware tick, reports every `--report-ms`) until the process is ended.
-//! Link faults can be injected for tests of the host: corrupted bytes and dropped frames.
+//! Link faults can be injected for tests of the host: corrupted bytes and dropped frames. `--trace FILE` writes the
+//! true plate of every channel at every firmware tick (CSV, whole rows written and flushed tick by tick, so a reader
+//! can follow it live and a killed emulator leaves no torn row).
 
 use std::io::Write;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::Args;
 use thermode_device::{DefaultFinger, SimulatedDisplay};
 use thermode_link::emulator::{Emulator, EmulatorConfig, LinkFaults, PtyEmulator, RunEnd};
@@ -41,6 +43,10 @@ pub struct EmulateArgs {
     /// Fault injection: probability that a sent frame is dropped, 0 to 1.
     #[arg(long = "drop-rate", value_name = "P", default_value_t = 0.0)]
     drop_rate: f64,
+    /// Write one CSV row per channel per firmware tick to FILE (time_s,channel,plate_c,sensor_c,current_a: the true
+    /// plate [°C], the sensor's latest sample [°C], the delivered current [A]); replaces FILE.
+    #[arg(long, value_name = "FILE")]
+    trace: Option<PathBuf>,
 }
 
 /// Runs `thermode emulate`.
@@ -59,6 +65,11 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
         drop_frame_rate: args.drop_rate,
         mute: false,
     })?;
+    if let Some(path) = &args.trace {
+        let file =
+            std::fs::File::create(path).with_context(|| format!("cannot create the trace {}", path.display()))?;
+        emulator.trace_to(Box::new(file));
+    }
     let pty = PtyEmulator::spawn(emulator, Arc::new(MonotonicClock::new()))?;
     let mut stdout = std::io::stdout().lock();
     writeln!(stdout, "{}", pty.path()).and_then(|()| stdout.flush())?;

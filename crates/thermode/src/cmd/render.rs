@@ -75,6 +75,10 @@ pub struct RenderArgs {
     /// Device file (TOML); default: the built-in default display.
     #[arg(long, value_name = "FILE")]
     device_file: Option<PathBuf>,
+    /// Device file of the simulated hardware when it differs from the one the controller believes (`--device-file`):
+    /// how the pipeline copes with a display that is not its datasheet. Default: the same file.
+    #[arg(long = "plant-device", value_name = "FILE")]
+    plant_device: Option<PathBuf>,
     /// PID gains file (TOML); default: the tuned gains of the shipped display that matches the device.
     #[arg(long = "pid-gains", value_name = "FILE")]
     pid_gains: Option<PathBuf>,
@@ -170,6 +174,10 @@ fn specs(args: &RenderArgs) -> Result<Vec<RenderSpec>> {
     let materials = resolve::materials(&args.materials, &[])?;
     let device = resolve::device_config(args.device_file.as_deref())?;
     let gains = pid_gains(args, &device)?;
+    let hardware = match &args.plant_device {
+        Some(path) => Some(resolve::device_config(Some(path))?),
+        None => None,
+    };
     let finger_skin = resolve::skin(args.finger_skin.as_deref())?;
     let controllers = match args.controller {
         ControllerArg::Pid => vec![ControllerKind::Pid(gains)],
@@ -187,6 +195,7 @@ fn specs(args: &RenderArgs) -> Result<Vec<RenderSpec>> {
             let mut spec = RenderSpec::new(pipeline, material.clone());
             spec.finger_skin = finger_skin.clone();
             spec.finger_contact_w_m2k = args.finger_contact;
+            spec.hardware = hardware;
             spec.object_c = args.object_temp;
             spec.duration_s = args.duration;
             spec.pre_contact_s = args.pre_contact;

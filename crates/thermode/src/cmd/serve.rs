@@ -1,6 +1,9 @@
 //! `thermode serve`: the daemon — a display (the simulated five-finger display by default, or a real one over
 //! `serial:PATH`) rendered in real time by the control loop, driven through the contact API (WebSocket, HTTP, OSC)
 //! and watched on the live dashboard. Also the display set-up shared by `thermode demo` and `thermode bench`.
+//!
+//! SIGINT (Ctrl-C) and SIGTERM stop it cleanly ([`crate::signals`]): every drive to 0 A at once (`AllOff` on a
+//! serial display), the recording flushed and synced, one summary line on standard error, exit code 0.
 
 use std::net::IpAddr;
 use std::path::PathBuf;
@@ -17,6 +20,7 @@ use thermode_runtime::engine::pipeline_engines;
 use thermode_runtime::{Daemon, DaemonConfig, EngineFactory, LoopConfig, ServerConfig};
 
 use crate::resolve;
+use crate::signals::StopSignals;
 
 /// The controller of every channel.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -219,37 +223,77 @@ fn print_banner(daemon: &Daemon, description: &str, args: &ServeArgs) {
     }
 }
 
-/// Runs until `duration_s` has passed (forever without one), calling `every_100ms` in between.
-pub fn run_for(duration_s: Option<f64>, mut every_100ms: impl FnMut(f64)) -> Result<()> {
+/// How a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ended {
+    /// `--duration` passed.
+    Duration,
+    /// A stop signal arrived (its name, e.g. `SIGTERM`).
+    Signal(&'static str),
+}
+
+/// Runs until `duration_s` has passed (forever without one) or a stop signal arrives, calling `every_100ms` in
+/// between; a signal ends the wait at once.
+pub fn run_for(duration_s: Option<f64>, signals: &StopSignals, mut every_100ms: impl FnMut(f64)) -> Result<Ended> {
     if let Some(d) = duration_s {
         if !(d.is_finite() && d >= 0.0) {
             bail!("--duration must be a finite number of seconds ≥ 0, not {d}");
         }
     }
     let start = Instant::now();
+    let step = Duration::from_millis(100);
     loop {
         let elapsed_s = start.elapsed().as_secs_f64();
-        if duration_s.is_some_and(|d| elapsed_s >= d) {
-            return Ok(());
-        }
+        let left = match duration_s {
+            Some(d) if elapsed_s >= d => return Ok(Ended::Duration),
+            Some(d) => Duration::from_secs_f64(d - elapsed_s).min(step),
+            None => step,
+        };
         every_100ms(elapsed_s);
-        std::thread::sleep(Duration::from_millis(100));
+        if let Some(signal) = signals.wait(left) {
+            return Ok(Ended::Signal(signal.as_str()));
+        }
     }
 }
 
-/// Stops the daemon and reports the recording.
-pub fn finish(daemon: Daemon) -> Result<()> {
+/// Stops the daemon (every drive to 0 A at once, then the network, then the recording, flushed and synced) and
+/// reports: after `--duration` the recording on standard output as before; after a signal one summary line on
+/// standard error. A device that did not take the all-off command is an error (exit 2).
+pub fn finish(daemon: Daemon, ended: Ended) -> Result<()> {
     let path = daemon.recording_path();
-    let rows = daemon.shutdown()?;
-    if let (Some(path), Some(rows)) = (path, rows) {
-        println!("recorded {rows} rows to {}", path.display());
+    let report = daemon.stop()?;
+    let recorded = match (&path, report.rows) {
+        (Some(path), Some(rows)) => format!("; {rows} rows recorded to {} (flushed and synced)", path.display()),
+        _ => String::new(),
+    };
+    match ended {
+        Ended::Signal(name) => {
+            let drives = match &report.all_off {
+                Some(Ok(())) => "every drive set to 0 A",
+                Some(Err(_)) => "the device did not take the all-off command",
+                None => "the control loop had already stopped",
+            };
+            eprintln!(
+                "thermode: {name}: stopped at loop time {:.3} s, {drives}{recorded}",
+                report.last_tick_s
+            );
+        }
+        Ended::Duration => {
+            if let (Some(path), Some(rows)) = (path, report.rows) {
+                println!("recorded {rows} rows to {}", path.display());
+            }
+        }
     }
-    Ok(())
+    match report.all_off {
+        Some(Err(e)) => Err(e).context("switching every drive off at the stop"),
+        _ => Ok(()),
+    }
 }
 
 /// Runs `thermode serve`.
 pub fn run(args: &ServeArgs) -> Result<()> {
+    let signals = StopSignals::install()?;
     let daemon = start(args)?;
-    run_for(args.duration, |_| {})?;
-    finish(daemon)
+    let ended = run_for(args.duration, &signals, |_| {})?;
+    finish(daemon, ended)
 }

@@ -10,6 +10,7 @@ use thermode_model::limits;
 use thermode_model::materials::Material;
 use thermode_model::simulate::{simulate, Initial, ModelKind, SimulationSpec, Trace};
 use thermode_plot::{write_figure, Figure, Panel, Series, SeriesStyle};
+use thermode_render::figure::EARLY_WINDOW_S;
 
 use crate::output::{print_stdout, write_atomically};
 use crate::resolve;
@@ -192,7 +193,8 @@ fn write_plot(path: &Path, traces: &[(Material, Trace)], model: ModelArg) -> Res
         series,
         ..Panel::default()
     };
-    Ok(write_figure(&Figure::single(panel), path)?)
+    let early = panel.window(0.0, EARLY_WINDOW_S, format!("The first {EARLY_WINDOW_S} s"));
+    Ok(write_figure(&Figure::grid(vec![panel, early], 2), path)?)
 }
 
 /// A table of the receptor temperature at the summary times, one row per material.

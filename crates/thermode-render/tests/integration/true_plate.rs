@@ -1,0 +1,71 @@
+//! The envelope bounds the true plate, whatever the controller: on the default, lagging-sensor and weakly cooled
+//! displays, with the tuned pid and the model controller, touching the hottest and the coldest object the pipeline
+//! accepts (150 °C and −50 °C) in library materials from copper to rubber, at the rendering rate limit and at the
+//! largest rate any envelope may allow, the simulated plate (`display_c`, the truth the envelope never sees) stays
+//! within 0.1 °C of the configured display range at every tick, and no fault latches (the envelope limits the
+//! drive; it does not need to trip).
+
+use crate::common::{pid, spec};
+
+use thermode_pipeline::pipeline::render_envelope_with_rate;
+use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
+use thermode_pipeline::{ControllerKind, ShippedDisplay};
+use thermode_render::run::render_all;
+use thermode_safety::ABSOLUTE_MAX_RATE_C_PER_S;
+
+/// How far the true plate may pass a display limit \[°C\] (the issue's judgement).
+const TOLERANCE_C: f64 = 0.1;
+
+#[test]
+fn the_true_plate_stays_inside_the_display_range_for_every_controller() {
+    let displays = [
+        ShippedDisplay::Default,
+        ShippedDisplay::LaggingSensor,
+        ShippedDisplay::WeakCooling,
+    ];
+    let mut specs = Vec::new();
+    for display in displays {
+        for controller in [pid(display), ControllerKind::Model] {
+            for material in ["copper", "aluminium", "wood", "rubber"] {
+                for object_c in [OBJECT_TEMPERATURE.max, OBJECT_TEMPERATURE.min] {
+                    for rate_c_per_s in [None, Some(ABSOLUTE_MAX_RATE_C_PER_S)] {
+                        let mut s = spec(display, controller, material);
+                        s.object_c = Some(object_c);
+                        s.duration_s = 12.0;
+                        if let Some(rate) = rate_c_per_s {
+                            // The rendering envelope at that rate (its measured-rate bound stays above it).
+                            s.pipeline.envelope = render_envelope_with_rate(rate);
+                        }
+                        specs.push((display, s));
+                    }
+                }
+            }
+        }
+    }
+    let runs = render_all(&specs.iter().map(|(_, s)| s.clone()).collect::<Vec<_>>()).unwrap_or_else(|e| panic!("{e}"));
+    let mut failures = Vec::new();
+    for ((display, s), run) in specs.iter().zip(&runs) {
+        let (min_c, max_c) = (s.pipeline.envelope.min_display_c, s.pipeline.envelope.max_display_c);
+        let t = &run.trajectory;
+        let hottest_c = t.display_c.iter().copied().fold(f64::MIN, f64::max);
+        let coldest_c = t.display_c.iter().copied().fold(f64::MAX, f64::min);
+        let fault = t.fault.iter().flatten().next();
+        if hottest_c > max_c + TOLERANCE_C || coldest_c < min_c - TOLERANCE_C || fault.is_some() {
+            failures.push(format!(
+                "{display:?} {} {} at {} °C, {} °C/s: plate {coldest_c:.3}..{hottest_c:.3} °C against [{min_c}, {max_c}] \
+                 ± {TOLERANCE_C}; fault {fault:?}",
+                run.summary.controller,
+                s.material.name,
+                s.object_c.unwrap_or(f64::NAN),
+                s.pipeline.envelope.max_setpoint_rate_c_per_s,
+            ));
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "{} of {} runs left the range:\n{}",
+        failures.len(),
+        runs.len(),
+        failures.join("\n")
+    );
+}

@@ -1,0 +1,500 @@
+//! `thermode serve` on `thermode emulate`, both spawned as a user would, with the emulator's per-tick trace of the
+//! true plate (`--trace`) as the judge:
+//! - a host killed with SIGKILL while it heats (a direct-mode set-point of 48 °C at the largest allowed rate, killed
+//!   at seeded moments from a 35 °C plate up to holding) never lets the true plate pass 48.5 °C, on the default and
+//!   on the lagging-sensor display: the device's own cut and its 250 ms watchdog act without the host;
+//! - `serve` refuses an emulator whose watchdog is longer than 250 ms: exit 2, one line naming both periods;
+//! - SIGTERM and SIGINT stop `serve` cleanly: every current in the trace 0 A within 20 ms of the signal, the
+//!   recording's last row within two loop ticks of the last status read before the signal, no torn row, a one-line
+//!   summary, exit 0.
+//!
+//! The signal's time on the emulator's clock is bounded from below by the newest trace row read just before the
+//! signal is sent (rows are written and flushed tick by tick), so "within 20 ms" is measured conservatively. The
+//! measured figures are printed (`cargo test -p thermode --test cli -- --nocapture`).
+
+use std::fs::File;
+use std::io::{BufRead, BufReader, Read, Seek, SeekFrom, Write};
+use std::net::{TcpStream, UdpSocket};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use nix::sys::signal::{kill, Signal};
+use nix::unistd::Pid;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+/// The line the true plate must never pass in the kill test \[°C\].
+const JUDGED_MAX_PLATE_C: f64 = 48.5;
+/// Longest time from a stop signal to 0 A on every drive \[s\].
+const SIGNAL_TO_OFF_S: f64 = 0.020;
+/// The loop period of `serve` at its default 100 Hz \[s\].
+const LOOP_TICK_S: f64 = 0.01;
+/// Generous limit for anything that waits on the other processes (liveness only) \[s\].
+const LIVENESS_S: f64 = 20.0;
+
+fn binary() -> &'static str {
+    env!("CARGO_BIN_EXE_thermode")
+}
+
+/// A child process killed (SIGKILL) and reaped when dropped, so a failing test leaves nothing running.
+struct Process(Child);
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn signal(child: &Child, signal: Signal) {
+    let pid = Pid::from_raw(i32::try_from(child.id()).unwrap_or_else(|e| panic!("pid: {e}")));
+    kill(pid, signal).unwrap_or_else(|e| panic!("kill {signal}: {e}"));
+}
+
+/// `thermode emulate` with a trace; returns it and the pseudo-terminal path.
+fn emulate(channels: usize, device_file: Option<&Path>, trace: &Path) -> (Process, String) {
+    emulate_with(channels, device_file, trace, &[])
+}
+
+/// As [`emulate`], with more arguments.
+fn emulate_with(channels: usize, device_file: Option<&Path>, trace: &Path, extra: &[&str]) -> (Process, String) {
+    let mut command = Command::new(binary());
+    command
+        .args(["emulate", "--channels", &channels.to_string(), "--trace"])
+        .arg(trace)
+        .args(extra);
+    if let Some(file) = device_file {
+        command.arg("--device-file").arg(file);
+    }
+    let mut child = command
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap_or_else(|e| panic!("spawn emulate: {e}"));
+    let mut path = String::new();
+    let stdout = child.stdout.take().unwrap_or_else(|| panic!("emulate stdout"));
+    BufReader::new(stdout)
+        .read_line(&mut path)
+        .unwrap_or_else(|e| panic!("read the pty path: {e}"));
+    (Process(child), path.trim().to_string())
+}
+
+/// Where a started `serve` listens.
+struct Serve {
+    process: Process,
+    http_port: u16,
+    osc_port: u16,
+}
+
+/// `thermode serve` on the emulator at `pty`, with free ports; waits for its banner.
+fn serve(pty: &str, device_file: Option<&Path>, record: Option<&Path>) -> Serve {
+    let mut command = Command::new(binary());
+    command.args([
+        "serve",
+        "--device",
+        &format!("serial:{pty}"),
+        "--port",
+        "0",
+        "--osc-port",
+        "0",
+    ]);
+    if let Some(file) = device_file {
+        command.arg("--device-file").arg(file);
+    }
+    if let Some(dir) = record {
+        command.arg("--record").arg(dir);
+    }
+    let mut child = command
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("spawn serve: {e}"));
+    let stdout = child.stdout.take().unwrap_or_else(|| panic!("serve stdout"));
+    let process = Process(child);
+    let (mut http_port, mut osc_port) = (None, None);
+    let mut lines = BufReader::new(stdout).lines();
+    for line in lines.by_ref() {
+        let line = line.unwrap_or_else(|e| panic!("serve stdout: {e}"));
+        let port = |prefix: &str| {
+            line.split(prefix)
+                .nth(1)
+                .and_then(|rest| rest.split(['/', ' ']).next())
+                .and_then(|p| p.parse::<u16>().ok())
+        };
+        if line.contains("dashboard") {
+            http_port = port("127.0.0.1:");
+        }
+        if line.contains("OSC") {
+            osc_port = port("127.0.0.1:");
+        }
+        if line.starts_with("press Ctrl-C") {
+            break;
+        }
+    }
+    // Keep reading, so a later line on standard output never meets a closed pipe.
+    std::thread::spawn(move || lines.for_each(drop));
+    Serve {
+        process,
+        http_port: http_port.unwrap_or_else(|| panic!("no dashboard port in the banner")),
+        osc_port: osc_port.unwrap_or_else(|| panic!("no OSC port in the banner")),
+    }
+}
+
+/// An OSC message of float arguments.
+fn osc(address: &str, args: &[f32]) -> Vec<u8> {
+    fn padded(mut bytes: Vec<u8>) -> Vec<u8> {
+        bytes.push(0);
+        while !bytes.len().is_multiple_of(4) {
+            bytes.push(0);
+        }
+        bytes
+    }
+    let mut packet = padded(address.as_bytes().to_vec());
+    packet.extend(padded(format!(",{}", "f".repeat(args.len())).into_bytes()));
+    for a in args {
+        packet.extend(a.to_be_bytes());
+    }
+    packet
+}
+
+/// Direct mode on `channel`: `temp_c` at `rate_c_s`.
+fn setpoint(osc_port: u16, channel: usize, temp_c: f32, rate_c_s: f32) {
+    let socket = UdpSocket::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("udp: {e}"));
+    let message = osc(&format!("/thermode/channel/{channel}/setpoint"), &[temp_c, rate_c_s]);
+    socket
+        .send_to(&message, ("127.0.0.1", osc_port))
+        .unwrap_or_else(|e| panic!("osc: {e}"));
+}
+
+/// `GET /api/status` as JSON.
+fn status(http_port: u16) -> serde_json::Value {
+    let mut stream = TcpStream::connect(("127.0.0.1", http_port)).unwrap_or_else(|e| panic!("connect: {e}"));
+    write!(
+        stream,
+        "GET /api/status HTTP/1.1\r\nHost: 127.0.0.1:{http_port}\r\nConnection: close\r\n\r\n"
+    )
+    .unwrap_or_else(|e| panic!("request: {e}"));
+    let mut response = String::new();
+    stream
+        .read_to_string(&mut response)
+        .unwrap_or_else(|e| panic!("response: {e}"));
+    let body = response
+        .split("\r\n\r\n")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no body: {response}"));
+    serde_json::from_str(body).unwrap_or_else(|e| panic!("status json: {e}\n{body}"))
+}
+
+/// One trace row.
+#[derive(Debug, Clone, Copy)]
+struct Row {
+    time_s: f64,
+    channel: usize,
+    plate_c: f64,
+    current_a: f64,
+}
+
+/// Parses a whole trace row; panics on a torn or malformed one.
+fn row(line: &str) -> Row {
+    let fields: Vec<&str> = line.split(',').collect();
+    let number = |i: usize| -> f64 {
+        fields
+            .get(i)
+            .and_then(|f| f.parse().ok())
+            .unwrap_or_else(|| panic!("torn or malformed trace row `{line}`"))
+    };
+    assert_eq!(fields.len(), 5, "torn trace row `{line}`");
+    Row {
+        time_s: number(0),
+        channel: number(1) as usize,
+        plate_c: number(2),
+        current_a: number(4),
+    }
+}
+
+/// Follows a growing trace: hands out the whole rows written since the last call.
+struct Tail {
+    file: File,
+    pending: String,
+    header_seen: bool,
+}
+
+impl Tail {
+    fn open(path: &Path) -> Tail {
+        let file = File::open(path).unwrap_or_else(|e| panic!("open trace {}: {e}", path.display()));
+        Tail {
+            file,
+            pending: String::new(),
+            header_seen: false,
+        }
+    }
+
+    fn rows(&mut self) -> Vec<Row> {
+        let mut bytes = Vec::new();
+        self.file
+            .read_to_end(&mut bytes)
+            .unwrap_or_else(|e| panic!("read trace: {e}"));
+        self.pending.push_str(&String::from_utf8_lossy(&bytes));
+        let Some(end) = self.pending.rfind('\n') else {
+            return Vec::new();
+        };
+        let whole: String = self.pending.drain(..=end).collect();
+        let mut rows = Vec::new();
+        for line in whole.lines() {
+            if !self.header_seen {
+                assert_eq!(line, "time_s,channel,plate_c,sensor_c,current_a", "trace header");
+                self.header_seen = true;
+                continue;
+            }
+            rows.push(row(line));
+        }
+        rows
+    }
+}
+
+/// Every row of a finished trace; the file must end with a whole row.
+fn read_trace(path: &Path) -> Vec<Row> {
+    let mut file = File::open(path).unwrap_or_else(|e| panic!("trace: {e}"));
+    let mut text = String::new();
+    file.seek(SeekFrom::Start(0)).unwrap_or_else(|e| panic!("{e}"));
+    file.read_to_string(&mut text)
+        .unwrap_or_else(|e| panic!("read trace: {e}"));
+    assert!(text.ends_with('\n'), "the trace ends in a torn row");
+    text.lines().skip(1).map(row).collect()
+}
+
+/// When to kill the host.
+#[derive(Debug, Clone, Copy)]
+enum KillAt {
+    /// When the true plate first reaches this temperature \[°C\], or when the device cut heating if that comes
+    /// first (its own cut acts on a bound of the plate, so it comes before the plate nears 48 °C).
+    Plate(f64),
+    /// This long after the plate first reached 47 °C (or the device cut heating, whichever comes first) \[s\].
+    Holding(f64),
+}
+
+/// One run: emulator and host on `device_file`, 48 °C at `rate_c_s` on channel 0, SIGKILL at `at`; the peak of the
+/// true plate over the whole trace, the plate at the kill, and the time from the set-point to the kill.
+fn kill_while_heating(dir: &Path, device_file: Option<&Path>, rate_c_s: f32, at: KillAt) -> (f64, f64, f64) {
+    let trace = dir.join("trace.csv");
+    let (emulator, pty) = emulate(1, device_file, &trace);
+    let mut host = serve(&pty, device_file, None);
+    let mut tail = Tail::open(&trace);
+    setpoint(host.osc_port, 0, 48.0, rate_c_s);
+    let started = Instant::now();
+    let mut plate_at_kill = f64::NAN;
+    let mut hot_since: Option<Instant> = None;
+    let mut peak_before_kill = f64::NEG_INFINITY;
+    'watch: while started.elapsed().as_secs_f64() < LIVENESS_S {
+        for r in tail.rows() {
+            peak_before_kill = peak_before_kill.max(r.plate_c);
+            // The device's cut shows as 0 A while the host still heats: count it as the start of holding too.
+            if hot_since.is_none() && (r.plate_c >= 47.0 || (r.plate_c > 45.0 && r.current_a == 0.0)) {
+                hot_since = Some(Instant::now());
+            }
+            let cut = r.plate_c > 40.0 && r.current_a == 0.0;
+            let due = match at {
+                KillAt::Plate(c) => r.plate_c >= c || cut,
+                KillAt::Holding(s) => hot_since.is_some_and(|t| t.elapsed().as_secs_f64() >= s),
+            };
+            if due {
+                plate_at_kill = r.plate_c;
+                break 'watch;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    let killed_after_s = started.elapsed().as_secs_f64();
+    assert!(
+        plate_at_kill.is_finite(),
+        "{at:?} never came (peak {peak_before_kill} °C)"
+    );
+    host.process.0.kill().unwrap_or_else(|e| panic!("SIGKILL serve: {e}"));
+    let _ = host.process.0.wait();
+    // Long past the watchdog (250 ms) and the plate's peak after it.
+    std::thread::sleep(Duration::from_millis(1500));
+    drop(emulator);
+    let rows = read_trace(&trace);
+    let peak = rows.iter().map(|r| r.plate_c).fold(f64::NEG_INFINITY, f64::max);
+    (peak, plate_at_kill, killed_after_s)
+}
+
+fn device_file(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../thermode-device/devices")
+        .join(name)
+}
+
+#[test]
+fn a_host_killed_while_heating_never_lets_the_true_plate_pass_48_5() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
+    // The largest rate the daemon allows, read from a throwaway run's status.
+    let rate_c_s = {
+        let (_emulator, pty) = emulate(1, None, &dir.path().join("probe.csv"));
+        let host = serve(&pty, None, None);
+        let limits = &status(host.http_port)["limits"];
+        limits["max_rate_c_s"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("no rate limit: {limits}")) as f32
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(4848);
+    let mut worst = f64::NEG_INFINITY;
+    for (name, file) in [
+        ("default", None),
+        ("lagging sensor", Some(device_file("lagging-sensor.toml"))),
+    ] {
+        let moments = [
+            KillAt::Plate(rng.gen_range(35.0..40.0)),
+            KillAt::Plate(rng.gen_range(40.0..44.0)),
+            KillAt::Plate(rng.gen_range(44.0..48.0)),
+            KillAt::Holding(rng.gen_range(0.2..1.0)),
+        ];
+        for at in moments {
+            let (peak, at_kill, after_s) = kill_while_heating(dir.path(), file.as_deref(), rate_c_s, at);
+            println!(
+                "{name} display, 48 °C at {rate_c_s} °C/s, SIGKILL at {at:?} ({after_s:.2} s, plate {at_kill:.2} °C): \
+                 peak true plate {peak:.3} °C"
+            );
+            assert!(
+                peak <= JUDGED_MAX_PLATE_C,
+                "{name} display, killed at {at:?} (plate {at_kill} °C): the true plate peaked at {peak} °C, above \
+                 {JUDGED_MAX_PLATE_C} °C"
+            );
+            worst = worst.max(peak);
+        }
+    }
+    println!("highest true plate over all runs: {worst:.3} °C");
+}
+
+#[test]
+fn serve_refuses_a_device_whose_watchdog_is_too_long() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
+    let (_emulator, pty) = emulate_with(1, None, &dir.path().join("trace.csv"), &["--watchdog-ms", "60000"]);
+    let out = Command::new(binary())
+        .args(["serve", "--device", &format!("serial:{pty}"), "--port", "0", "--no-osc"])
+        .output()
+        .unwrap_or_else(|e| panic!("run serve: {e}"));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    println!(
+        "serve against a 60000 ms watchdog: exit {:?}: {stderr}",
+        out.status.code()
+    );
+    assert_eq!(out.status.code(), Some(2), "stderr: {stderr}");
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert!(
+        lines.len() == 1 && lines[0].contains("60000 ms") && lines[0].contains("250 ms"),
+        "want one line naming both periods: {stderr}"
+    );
+}
+
+/// The newest session CSV in `dir`.
+fn session_csv(dir: &Path) -> PathBuf {
+    std::fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("{e}"))
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .find(|p| p.extension().is_some_and(|x| x == "csv"))
+        .unwrap_or_else(|| panic!("no session CSV in {}", dir.display()))
+}
+
+/// Signals `serve` while it drives two channels (one heating, one cooling); checks the trace and the recording.
+fn stop_with(sig: Signal) {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
+    let (trace, record) = (dir.path().join("trace.csv"), dir.path().join("sessions"));
+    let (emulator, pty) = emulate(2, None, &trace);
+    let mut host = serve(&pty, None, Some(&record));
+    let mut tail = Tail::open(&trace);
+    setpoint(host.osc_port, 0, 40.0, 5.0);
+    setpoint(host.osc_port, 1, 18.0, 5.0);
+    // Wait until both drives carry current.
+    let started = Instant::now();
+    let mut driving = [false; 2];
+    while !(driving[0] && driving[1]) {
+        assert!(started.elapsed().as_secs_f64() < LIVENESS_S, "the drives never came on");
+        for r in tail.rows() {
+            driving[r.channel] = r.current_a.abs() > 0.05;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    let mut newest_s = tail.rows().last().map_or(f64::NAN, |r| r.time_s);
+    let before = status(host.http_port);
+    let status_time_s = before["time_s"].as_f64().unwrap_or(f64::NAN);
+    // The newest whole trace row: the signal comes later on the emulator's clock.
+    if let Some(r) = tail.rows().last() {
+        newest_s = r.time_s;
+    }
+    let signal_at_or_after_s = newest_s;
+    signal(&host.process.0, sig);
+    let waited = Instant::now();
+    let code = loop {
+        if let Some(code) = host.process.0.try_wait().unwrap_or_else(|e| panic!("{e}")) {
+            break code;
+        }
+        assert!(
+            waited.elapsed().as_secs_f64() < LIVENESS_S,
+            "serve did not stop on {sig}"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    };
+    let mut stderr = String::new();
+    if let Some(mut err) = host.process.0.stderr.take() {
+        let _ = err.read_to_string(&mut stderr);
+    }
+    std::thread::sleep(Duration::from_millis(100));
+    drop(emulator);
+    assert_eq!(code.code(), Some(0), "{sig}: exit {code:?}; stderr: {stderr}");
+    let summary: Vec<&str> = stderr.lines().collect();
+    assert!(
+        summary.len() == 1 && summary[0].contains(sig.as_str()) && summary[0].contains("every drive set to 0 A"),
+        "{sig}: want one summary line on stderr, got: {stderr}"
+    );
+    // The trace: after the signal, every current 0 A within 20 ms.
+    let rows = read_trace(&trace);
+    let last_on_s = rows
+        .iter()
+        .filter(|r| r.current_a != 0.0)
+        .map(|r| r.time_s)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let off_after_s = last_on_s - signal_at_or_after_s;
+    // The recording: whole rows, the last within two ticks of the last status read before the signal.
+    let csv_path = session_csv(&record);
+    let text = std::fs::read_to_string(&csv_path).unwrap_or_else(|e| panic!("{e}"));
+    assert!(text.ends_with('\n'), "the recording ends in a torn row");
+    let mut lines = text.lines();
+    let header = lines.next().unwrap_or_default();
+    let columns = header.split(',').count();
+    let mut last_row_s = f64::NAN;
+    for line in lines {
+        assert_eq!(line.split(',').count(), columns, "torn recording row `{line}`");
+        last_row_s = line
+            .split(',')
+            .next()
+            .and_then(|t| t.parse().ok())
+            .unwrap_or_else(|| panic!("bad time in `{line}`"));
+    }
+    println!(
+        "{sig}: {}; last current at {last_on_s:.3} s on the emulator clock, signal at or after {signal_at_or_after_s:.3} \
+         s: off {:.1} ms after the signal; recording's last row {last_row_s:.3} s vs status {status_time_s:.3} s",
+        summary[0],
+        off_after_s * 1e3
+    );
+    assert!(
+        off_after_s <= SIGNAL_TO_OFF_S,
+        "{sig}: a drive was still on {off_after_s} s after the signal (limit {SIGNAL_TO_OFF_S} s)"
+    );
+    assert!(
+        (last_row_s - status_time_s).abs() <= 2.0 * LOOP_TICK_S + 1e-6,
+        "{sig}: the recording ends at {last_row_s} s, the last status before the signal was at {status_time_s} s"
+    );
+}
+
+#[test]
+fn sigterm_stops_serve_cleanly() {
+    stop_with(Signal::SIGTERM);
+}
+
+#[test]
+fn sigint_stops_serve_cleanly() {
+    stop_with(Signal::SIGINT);
+}
