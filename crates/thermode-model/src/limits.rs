@@ -65,19 +65,22 @@ ranges! {
     /// hotter air heat-stresses the body; the skin models (no freezing, no sweating) have no resting finger to
     /// start from there.
     AMBIENT_TEMPERATURE = "ambient temperature [°C]", -30.0, 50.0;
-    used by "`simulate --ambient`, the pipeline's ambient (`render`, `serve`, lab display), the lab's fv contact";
+    used by "`simulate --ambient`, the pipeline's ambient (`render`, `serve`, lab display), the lab's fv contact, the \
+             kron and fv models' air";
 
     /// The touched object at the moment of touch, −50 to 150 °C: below any freezer (−18 °C) and winter day, above
     /// boiling water and a hot pan handle. Beyond it a touch injures within a second (frostbite on metal, burns)
     /// and the materials' room-temperature properties no longer hold. The safety envelope, not this range, limits
     /// what a display shows.
     OBJECT_TEMPERATURE = "object temperature [°C]", -50.0, 150.0;
-    used by "`simulate --object-temp`, `render --object-temp`, API `touch.object_temp_c`, the lab's fv contact";
+    used by "`simulate --object-temp`, `render --object-temp`, API `touch.object_temp_c`, the lab's fv contact, the \
+             kron and fv models' touch";
 
     /// A living finger's skin, 0 to 50 °C: tissue freezes just below 0 °C (frostbite) and burns within minutes at
     /// 50 °C (Moritz & Henriques 1947), so no finger starts a touch outside.
     SKIN_TEMPERATURE = "skin temperature [°C]", 0.0, 50.0;
-    used by "`simulate --initial uniform:C` and `surface:C`, the fv model's initial states";
+    used by "`simulate --initial uniform:C` and `surface:C`, the fv model's initial states, the kron and fv \
+             resting-surface calibrations";
 
     /// Arterial blood, 30 to 42 °C: from severe hypothermia to the highest fever survived.
     ARTERIAL_TEMPERATURE = "arterial blood temperature [°C]", 30.0, 42.0;
