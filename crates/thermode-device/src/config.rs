@@ -9,6 +9,7 @@
 //! allows; where the paper is silent the number is an engineering estimate, derived in its source text.
 
 use thermode_model::error::At;
+use thermode_model::limits;
 use thermode_model::params::{self, Rule, Table};
 use thermode_model::peltier::{PeltierDatasheet, PeltierModule};
 use thermode_model::ParamError;
@@ -63,6 +64,15 @@ pub struct AmbientConfig {
     pub water_c: f64,
 }
 
+/// How the display renders contacts (section `\[render\]`): what the rendering pipeline's safety envelope allows on
+/// this display.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RenderConfig {
+    /// Set-point rate limit of the safety envelope when this display renders contacts \[°C/s\], in
+    /// [`limits::SETPOINT_RATE`] (at most the compiled-in 300). Default 20.
+    pub max_setpoint_rate_c_per_s: f64,
+}
+
 /// Everything that describes one simulated display channel (all channels of a display are identical).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct DeviceConfig {
@@ -78,6 +88,8 @@ pub struct DeviceConfig {
     pub drive: DriveConfig,
     /// Surroundings.
     pub ambient: AmbientConfig,
+    /// Rendering settings of this display.
+    pub render: RenderConfig,
 }
 
 impl Default for PlateConfig {
@@ -122,6 +134,14 @@ impl Default for AmbientConfig {
     }
 }
 
+impl Default for RenderConfig {
+    fn default() -> Self {
+        RenderConfig {
+            max_setpoint_rate_c_per_s: 20.0,
+        }
+    }
+}
+
 /// One key of the device file: where it lives, what it must satisfy, its documentation, and the value it reads and
 /// writes (a field of one [`DeviceConfig`]; the default is the field of [`DeviceConfig::default`], written nowhere
 /// else).
@@ -144,14 +164,14 @@ impl Field<'_> {
 }
 
 /// Sections in file order.
-const SECTIONS: [&str; 6] = ["peltier", "plate", "hot_side", "sensor", "drive", "ambient"];
+const SECTIONS: [&str; 7] = ["peltier", "plate", "hot_side", "sensor", "drive", "ambient", "render"];
 
 const MODULE_SOURCE: &str = "model.md §5: a typical single-stage Bi₂Te₃ miniature module of 8 × 8 mm, the size of the \
      paper's 8 × 8 × 3 mm element (section 3.1; the paper names no part).";
 
 impl DeviceConfig {
     /// Every key of the device file, in file order, each with the field of `self` it reads and writes.
-    fn fields(&mut self) -> [Field<'_>; 16] {
+    fn fields(&mut self) -> [Field<'_>; 17] {
         [
             Field {
                 section: "peltier",
@@ -210,7 +230,7 @@ impl DeviceConfig {
             Field {
                 section: "plate",
                 key: "contact_conductance_w_m2k",
-                rule: Rule::Positive,
+                rule: limits::CONTACT_CONDUCTANCE.rule(),
                 value: &mut self.plate.contact_conductance_w_m2k,
                 doc: "Contact conductance between the skin surface and the plate, 1/R_c [W/(m²·K)]; a finger model \
                       whose receptor node lies below the surface adds its own tissue in series (see \
@@ -299,6 +319,18 @@ impl DeviceConfig {
                 doc: "Temperature of the cooling water [°C], held at ambient by the radiator and fans.",
                 source: "The paper, section 4.1: mean ambient temperature 23 °C; section 3.1: the water circuit keeps \
                          the reference side at ambient level.",
+            },
+            Field {
+                section: "render",
+                key: "max_setpoint_rate_c_per_s",
+                rule: limits::SETPOINT_RATE.rule(),
+                value: &mut self.render.max_setpoint_rate_c_per_s,
+                doc: "Set-point rate limit of the safety envelope when this display renders contacts [°C/s], at most \
+                      the compiled-in 300 (see docs/ranges.md). A display with a stronger module may raise it so that \
+                      its actuator, not the limiter, sets how fast a touch is rendered.",
+                source: "The default module cools the resting plate at about 13 °C/s at full current, so 20 °C/s \
+                         leaves the actuator in charge of the initial drop (docs/design-choices.md, rendering rate \
+                         limit); commercial stimulators ramp at 70-300 °C/s within the same temperature bounds.",
             },
         ]
     }

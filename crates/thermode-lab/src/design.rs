@@ -24,6 +24,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Serialize;
 
+use thermode_model::limits;
 use thermode_model::materials::find;
 use thermode_model::params::{self, Rule, Table};
 use thermode_model::ParamError;
@@ -54,8 +55,9 @@ pub const DEFAULT_EXCLUSION_MAX_DRIFT_C: f64 = 1.0;
 pub const MAX_PARTICIPANTS: usize = 10_000;
 /// Largest number of repetitions accepted.
 pub const MAX_REPETITIONS: usize = 1_000;
-/// Longest presentation accepted \[s\].
-pub const MAX_PRESENTATION_S: f64 = 3600.0;
+/// Longest presentation accepted \[s\]: the top of the physical range of durations
+/// ([`thermode_model::limits::DURATION`], one hour).
+pub const MAX_PRESENTATION_S: f64 = limits::DURATION.max;
 
 /// A validated experiment design.
 #[derive(Debug, Clone, PartialEq)]

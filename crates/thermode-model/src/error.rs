@@ -71,6 +71,28 @@ pub enum ParamError {
         /// What was wrong.
         message: String,
     },
+    /// A computation from accepted inputs gave a number that is not finite (NaN or ±∞): the result is refused,
+    /// never written.
+    #[error("{origin}: the result is not finite: `{quantity}` = {value} at t = {time_s} s")]
+    NonFinite {
+        /// What computed it (`"simulation"`, …).
+        origin: String,
+        /// The quantity (a column name, with its unit).
+        quantity: String,
+        /// The non-finite value.
+        value: f64,
+        /// When \[s\].
+        time_s: f64,
+    },
+    /// Work whose results would not fit in the memory thermode allows one command
+    /// ([`crate::limits::MAX_RESULT_BYTES`]); refused before anything is allocated.
+    #[error("{origin}: {message}")]
+    TooLarge {
+        /// What was asked for (`"simulation"`, …).
+        origin: String,
+        /// The estimate, the limit and how to make the work smaller.
+        message: String,
+    },
     /// A material name that is not in the library; `close` lists the nearest known names.
     #[error("unknown material `{name}`{}", suggest(close))]
     UnknownMaterial {

@@ -31,6 +31,7 @@
 
 use crate::error::{At, ParamError};
 use crate::inverse::PlateCoupled;
+use crate::limits;
 use crate::materials::Material;
 use crate::params::{BadValue, Rule};
 use crate::skin::Skin;
@@ -85,11 +86,17 @@ impl KronEnvironment {
         }
     }
 
-    /// Checks that temperatures are finite and conductivities, thicknesses and conductances finite and positive.
-    /// The model's methods assume a valid environment (an invalid one gives non-finite temperatures, no panic).
+    /// Checks that the air and the object lie in their physical ranges ([`limits::AMBIENT_TEMPERATURE`],
+    /// [`limits::OBJECT_TEMPERATURE`]), a plate temperature is finite, and conductivities, thicknesses and
+    /// conductances finite and positive. The model's methods assume a valid environment (an invalid one gives
+    /// non-finite temperatures, no panic).
     pub fn validate(&self, origin: &str) -> Result<(), ParamError> {
         match *self {
-            KronEnvironment::Air { ambient_c } => Rule::Finite.check("ambient_c", ambient_c).at(origin).map(drop),
+            KronEnvironment::Air { ambient_c } => limits::AMBIENT_TEMPERATURE
+                .rule()
+                .check("ambient_c", ambient_c)
+                .at(origin)
+                .map(drop),
             KronEnvironment::Object {
                 conductivity_w_mk,
                 thickness_m,
@@ -99,7 +106,11 @@ impl KronEnvironment {
                     .check("conductivity_w_mk", conductivity_w_mk)
                     .at(origin)?;
                 Rule::Positive.check("thickness_m", thickness_m).at(origin)?;
-                Rule::Finite.check("temperature_c", temperature_c).at(origin).map(drop)
+                limits::OBJECT_TEMPERATURE
+                    .rule()
+                    .check("temperature_c", temperature_c)
+                    .at(origin)
+                    .map(drop)
             }
             KronEnvironment::Plate {
                 conductance_w_m2k,
@@ -345,8 +356,14 @@ impl PlateCoupled for KronModel {
 /// reachable open interval (the message states the interval).
 pub fn calibrate_to_surface(skin: &Skin, ambient_c: f64, surface_c: f64) -> Result<Skin, ParamError> {
     const ORIGIN: &str = "surface calibration";
-    Rule::Finite.check("ambient_c", ambient_c).at(ORIGIN)?;
-    Rule::Finite.check("surface_c", surface_c).at(ORIGIN)?;
+    limits::AMBIENT_TEMPERATURE
+        .rule()
+        .check("ambient_c", ambient_c)
+        .at(ORIGIN)?;
+    limits::SKIN_TEMPERATURE
+        .rule()
+        .check("surface_c", surface_c)
+        .at(ORIGIN)?;
     let model = KronModel::new(skin)?;
     if model.perfusion_w_m2k.iter().all(|&p| p == 0.0) {
         return Err(ParamError::Invalid {

@@ -12,6 +12,8 @@
 //! - [`semi_infinite`]: the analytic model of two semi-infinite bodies (the paper's model (a)), with and without
 //!   contact resistance.
 //! - [`peltier`]: Peltier module physics (from datasheet values) and its inverse, for the plant and for feedforward.
+//! - [`limits`]: the one physical range of every quantity a user, a file or a client can give (temperatures,
+//!   material and skin properties, contact, durations, rates), each with the reason for its bounds.
 //! - [`params`]: the one parameter vocabulary: [`params::Rule`], [`params::Range`] and [`params::BadValue`], and
 //!   the one TOML table reader of parameter files, [`params::Table`].
 //! - [`simulate`]: one complete contact simulation with any of the three models, as `thermode simulate` runs it.
@@ -20,6 +22,7 @@ pub mod error;
 pub mod fv;
 pub mod inverse;
 pub mod kron;
+pub mod limits;
 pub mod materials;
 pub mod params;
 pub mod peltier;

@@ -12,7 +12,8 @@
 use serde::Serialize;
 
 use crate::error::{At, ParamError};
-use crate::params::{self, Rule, Table, CONDUCTIVITY, DENSITY, SPECIFIC_HEAT};
+use crate::limits;
+use crate::params::{self, Table, CONDUCTIVITY, DENSITY, SPECIFIC_HEAT};
 use crate::units;
 
 /// Default thickness of a touched object \[m\] (1 cm) when a material file gives none.
@@ -53,18 +54,19 @@ impl Material {
         crate::units::diffusivity_m2_s(self.conductivity_w_mk, self.density_kg_m3, self.specific_heat_j_kgk)
     }
 
-    /// Checks every field: a non-empty name without white space, and finite, strictly positive conductivity,
-    /// density, specific heat and thickness. `origin` names where the values came from (a file, a network message)
-    /// and appears in the error.
+    /// Checks every field: a non-empty name without white space, and conductivity, density, specific heat and
+    /// thickness inside their physical ranges ([`limits::CONDUCTIVITY`], [`limits::DENSITY`],
+    /// [`limits::SPECIFIC_HEAT`], [`limits::OBJECT_THICKNESS`]; NaN and ±∞ are refused). `origin` names where the
+    /// values came from (a file, a network message) and appears in the error.
     pub fn validate(&self, origin: &str) -> Result<(), ParamError> {
         validate_name(origin, "name", &self.name)?;
-        for (key, value) in [
-            ("conductivity_w_mk", self.conductivity_w_mk),
-            ("density_kg_m3", self.density_kg_m3),
-            ("specific_heat_j_kgk", self.specific_heat_j_kgk),
-            ("thickness_m", self.thickness_m),
+        for (key, value, range) in [
+            ("conductivity_w_mk", self.conductivity_w_mk, limits::CONDUCTIVITY),
+            ("density_kg_m3", self.density_kg_m3, limits::DENSITY),
+            ("specific_heat_j_kgk", self.specific_heat_j_kgk, limits::SPECIFIC_HEAT),
+            ("thickness_m", self.thickness_m, limits::OBJECT_THICKNESS),
         ] {
-            Rule::Positive.check(key, value).at(origin)?;
+            range.rule().check(key, value).at(origin)?;
         }
         Ok(())
     }
@@ -74,18 +76,19 @@ impl Material {
     /// Keys: `name` (string); conductivity as `conductivity_w_mk` [W/(m·K)] or `conductivity_cal_cm_s_c`
     /// [cal/(cm·s·°C)]; density as `density_kg_m3` or `density_g_cm3`; specific heat as `specific_heat_j_kgk` or
     /// `specific_heat_cal_g_c` [cal/(g·°C)]; optional `thickness_m` (default [`DEFAULT_THICKNESS_M`]); optional
-    /// `source` (default: "user file " followed by `origin`). Exactly one spelling per quantity. Missing, negative,
-    /// zero, non-finite values, both spellings, unknown keys and wrong types are errors naming the key.
+    /// `source` (default: "user file " followed by `origin`). Exactly one spelling per quantity. Missing values,
+    /// values outside their physical range (see [`Material::validate`]; a cgs value is checked in its own unit),
+    /// non-finite values, both spellings, unknown keys and wrong types are errors naming the key.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Material, ParamError> {
         let toml = params::parse(text, origin)?;
         let file = Table::new(&toml, origin);
         let material = Material {
             name: file.required_string("name")?,
-            conductivity_w_mk: file.required_either(CONDUCTIVITY, Rule::Positive)?,
-            density_kg_m3: file.required_either(DENSITY, Rule::Positive)?,
-            specific_heat_j_kgk: file.required_either(SPECIFIC_HEAT, Rule::Positive)?,
+            conductivity_w_mk: file.required_either(CONDUCTIVITY, limits::CONDUCTIVITY.rule())?,
+            density_kg_m3: file.required_either(DENSITY, limits::DENSITY.rule())?,
+            specific_heat_j_kgk: file.required_either(SPECIFIC_HEAT, limits::SPECIFIC_HEAT.rule())?,
             thickness_m: file
-                .number("thickness_m", Rule::Positive)?
+                .number("thickness_m", limits::OBJECT_THICKNESS.rule())?
                 .unwrap_or(DEFAULT_THICKNESS_M),
             source: file.string("source")?.unwrap_or_else(|| format!("user file {origin}")),
         };
@@ -524,6 +527,13 @@ mod tests {
             "specific_heat_j_kgk",
         );
         assert_bad_value(error_of(&material_file("thickness_m = -0.01")), "thickness_m");
+        // Finite but unphysical: beyond diamond, lighter than any aerogel, a 10 m slab.
+        assert_bad_value(
+            error_of(&material_file("").replace("= 0.15", "= 1e300")),
+            "conductivity_w_mk",
+        );
+        assert_bad_value(error_of(&material_file("").replace("= 650", "= 0.1")), "density_kg_m3");
+        assert_bad_value(error_of(&material_file("thickness_m = 10")), "thickness_m");
         assert_bad_value(error_of(&material_file("density_g_cm3 = -1")), "density_g_cm3");
         assert_eq!(
             error_of(&material_file("conductivity_cal_cm_s_c = 0.1")),

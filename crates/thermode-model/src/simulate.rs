@@ -18,6 +18,7 @@ use crate::error::{At, ParamError};
 use crate::fv::{self, FvConfig, FvEnvironment, FvModel, InitialState};
 use crate::inverse::{DisplayInverse, DEFAULT_DISPLAY_CONDUCTANCE_W_M2K};
 use crate::kron::{self, KronEnvironment, KronModel};
+use crate::limits;
 use crate::materials::Material;
 use crate::params::Rule;
 use crate::semi_infinite;
@@ -131,10 +132,17 @@ impl SimulationSpec {
         }
     }
 
-    /// Checks every number and the combination of model and options.
+    /// Checks every number against its physical range ([`crate::limits`]: duration, time step, ambient and
+    /// object temperature, the initial skin temperature, contact resistance and display conductance, the skin and
+    /// the material), the combination of model and options, and that the results fit in memory
+    /// ([`SimulationSpec::result_bytes`] at most [`limits::MAX_RESULT_BYTES`]).
     pub fn validate(&self) -> Result<(), ParamError> {
         Rule::Positive.check("duration_s", self.duration_s).at(ORIGIN)?;
-        Rule::Positive.check("dt_s", self.dt_s).at(ORIGIN)?;
+        limits::DURATION
+            .rule()
+            .check("duration_s", self.duration_s)
+            .at(ORIGIN)?;
+        limits::TIME_STEP.rule().check("dt_s", self.dt_s).at(ORIGIN)?;
         if self.dt_s > self.duration_s {
             return Err(invalid(format!(
                 "dt_s = {} is longer than duration_s = {}",
@@ -146,13 +154,42 @@ impl SimulationSpec {
                 "more than 1e7 steps: use a longer dt_s or a shorter duration_s".into(),
             ));
         }
-        Rule::Finite.check("ambient_c", self.ambient_c).at(ORIGIN)?;
-        Rule::Finite.check("object_c", self.object_c).at(ORIGIN)?;
-        Rule::Positive
+        limits::check_result_bytes(self.result_bytes()).map_err(|message| ParamError::TooLarge {
+            origin: ORIGIN.into(),
+            message: format!("{message}: use a longer dt_s or a shorter duration_s"),
+        })?;
+        limits::AMBIENT_TEMPERATURE
+            .rule()
+            .check("ambient_c", self.ambient_c)
+            .at(ORIGIN)?;
+        limits::OBJECT_TEMPERATURE
+            .rule()
+            .check("object_c", self.object_c)
+            .at(ORIGIN)?;
+        match self.initial {
+            Initial::Steady => {}
+            Initial::Uniform(c) => {
+                limits::SKIN_TEMPERATURE
+                    .rule()
+                    .check("initial uniform_c", c)
+                    .at(ORIGIN)?;
+            }
+            Initial::Surface(c) => {
+                limits::SKIN_TEMPERATURE
+                    .rule()
+                    .check("initial surface_c", c)
+                    .at(ORIGIN)?;
+            }
+        }
+        limits::CONTACT_CONDUCTANCE
+            .rule()
             .check("display_conductance_w_m2k", self.display_conductance_w_m2k)
             .at(ORIGIN)?;
         if let Some(r) = self.contact_resistance_m2k_w {
-            Rule::NonNegative.check("contact_resistance_m2k_w", r).at(ORIGIN)?;
+            limits::CONTACT_RESISTANCE
+                .rule()
+                .check("contact_resistance_m2k_w", r)
+                .at(ORIGIN)?;
             if self.model == ModelKind::Kron && r != 0.0 {
                 return Err(invalid(
                     "the kron model has no contact resistance; use --model fv".into(),
@@ -163,6 +200,27 @@ impl SimulationSpec {
         self.material.validate(ORIGIN)
     }
 
+    /// Number of output rows: one per output time (see [`Trace::time_s`]). Meaningful for a spec whose duration
+    /// and time step are finite and positive.
+    pub fn rows(&self) -> usize {
+        let intervals = (self.duration_s / self.dt_s - 1e-9).ceil().max(1.0);
+        // Saturates for absurd ratios; `validate` refuses those by the step count first.
+        intervals as usize + 1
+    }
+
+    /// Estimated memory of the result \[bytes\]: rows × bytes per row. A row holds the time and every column as
+    /// `f64`: kron 5 + layers, semi-infinite 3 columns; fv 7 + layers, plus the two finite-volume runs its grid
+    /// refinement holds at once (4 numbers and a per-layer row of its own, with its allocation, each).
+    pub fn result_bytes(&self) -> u64 {
+        let layers = self.skin.layers.len() as u64;
+        let per_row = match self.model {
+            ModelKind::Kron => 8 * (5 + layers),
+            ModelKind::SemiInfinite => 8 * 3,
+            ModelKind::Fv => 8 * (7 + layers) + 2 * (8 * 4 + 24 + 8 * layers + 16),
+        };
+        (self.rows() as u64).saturating_mul(per_row)
+    }
+
     fn contact_resistance(&self) -> f64 {
         self.contact_resistance_m2k_w
             .unwrap_or_else(|| self.model.default_contact_resistance_m2k_w())
@@ -170,7 +228,7 @@ impl SimulationSpec {
 
     /// Output times: 0, dt, 2dt, … with the last row exactly at the duration.
     fn times_s(&self) -> Vec<f64> {
-        let intervals = (self.duration_s / self.dt_s - 1e-9).ceil().max(1.0) as usize;
+        let intervals = self.rows() - 1;
         (0..=intervals)
             .map(|k| (k as f64 * self.dt_s).min(self.duration_s))
             .collect()
@@ -201,6 +259,23 @@ impl Trace {
         self.columns.iter().find(|(n, _)| n == name).map(|(_, v)| v.as_slice())
     }
 
+    /// `Ok` if every number of the trace is finite, else a [`ParamError::NonFinite`] naming the first column (in
+    /// column order) that is not, with its first such value and time.
+    pub fn check_finite(&self) -> Result<(), ParamError> {
+        let time = ("time_s".to_string(), self.time_s.clone());
+        for (name, values) in std::iter::once(&time).chain(&self.columns) {
+            if let Some(row) = values.iter().position(|v| !v.is_finite()) {
+                return Err(ParamError::NonFinite {
+                    origin: ORIGIN.into(),
+                    quantity: name.clone(),
+                    value: values[row],
+                    time_s: self.time_s.get(row).copied().unwrap_or(f64::NAN),
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// The receptor temperature (`skin_surface_c`) at `time_s`, linearly interpolated; `None` outside the run.
     pub fn skin_surface_at(&self, time_s: f64) -> Option<f64> {
         let surface = self.column("skin_surface_c")?;
@@ -214,14 +289,17 @@ impl Trace {
     }
 }
 
-/// Runs the simulation described by `spec`.
+/// Runs the simulation described by `spec`. A result with a number that is not finite is refused
+/// ([`ParamError::NonFinite`] naming the first such column and time), never returned.
 pub fn simulate(spec: &SimulationSpec) -> Result<Trace, ParamError> {
     spec.validate()?;
-    match spec.model {
+    let trace = match spec.model {
         ModelKind::Kron => simulate_kron(spec),
         ModelKind::Fv => simulate_fv(spec),
         ModelKind::SemiInfinite => simulate_semi_infinite(spec),
-    }
+    }?;
+    trace.check_finite()?;
+    Ok(trace)
 }
 
 /// The skin the model runs with: calibrated by perfusion when a resting surface temperature is requested.
@@ -498,5 +576,116 @@ mod tests {
         s.dt_s = 2.0;
         s.duration_s = 1.0;
         assert!(simulate(&s).is_err());
+    }
+
+    #[test]
+    fn unphysical_inputs_are_refused_with_their_range() {
+        let refused = |change: &dyn Fn(&mut SimulationSpec), key: &str| {
+            for model in [ModelKind::Kron, ModelKind::Fv, ModelKind::SemiInfinite] {
+                let mut s = spec(model, "wood");
+                s.duration_s = 1.0;
+                change(&mut s);
+                match simulate(&s) {
+                    Err(ParamError::BadValue { source, .. }) => assert_eq!(source.name, key, "{model:?}"),
+                    other => panic!("{model:?}, {key}: expected a refused value, got {other:?}"),
+                }
+            }
+        };
+        refused(&|s| s.ambient_c = 1000.0, "ambient_c");
+        refused(&|s| s.object_c = -300.0, "object_c");
+        refused(&|s| s.material.conductivity_w_mk = 1e300, "conductivity_w_mk");
+        refused(&|s| s.initial = Initial::Uniform(80.0), "initial uniform_c");
+        refused(&|s| s.display_conductance_w_m2k = 1e9, "display_conductance_w_m2k");
+        refused(&|s| s.duration_s = 4000.0, "duration_s");
+    }
+
+    #[test]
+    fn work_beyond_the_memory_cap_is_refused_before_it_runs() {
+        let mut s = spec(ModelKind::Fv, "wood");
+        s.duration_s = 3600.0;
+        s.dt_s = 3600.0 / 9e6;
+        let bytes = s.result_bytes();
+        assert!(bytes > limits::MAX_RESULT_BYTES, "estimate {bytes} B");
+        assert!(
+            matches!(simulate(&s), Err(ParamError::TooLarge { .. })),
+            "9e6 fv rows accepted"
+        );
+        s.model = ModelKind::SemiInfinite;
+        assert!(s.result_bytes() <= limits::MAX_RESULT_BYTES, "{} B", s.result_bytes());
+    }
+
+    #[test]
+    fn every_model_stays_finite_at_the_corners_of_the_ranges() {
+        // The most extreme objects the ranges admit: the best conductor, thinnest and lightest or thickest and
+        // heaviest, at the coldest and hottest object and ambient temperatures.
+        for (k, rho, c, thickness) in [
+            (
+                limits::CONDUCTIVITY.max,
+                limits::DENSITY.min,
+                limits::SPECIFIC_HEAT.min,
+                limits::OBJECT_THICKNESS.min,
+            ),
+            (
+                limits::CONDUCTIVITY.max,
+                limits::DENSITY.max,
+                limits::SPECIFIC_HEAT.max,
+                limits::OBJECT_THICKNESS.max,
+            ),
+            (
+                limits::CONDUCTIVITY.min,
+                limits::DENSITY.min,
+                limits::SPECIFIC_HEAT.min,
+                limits::OBJECT_THICKNESS.min,
+            ),
+            (
+                limits::CONDUCTIVITY.min,
+                limits::DENSITY.max,
+                limits::SPECIFIC_HEAT.max,
+                limits::OBJECT_THICKNESS.max,
+            ),
+        ] {
+            for (ambient_c, object_c) in [
+                (limits::AMBIENT_TEMPERATURE.min, limits::OBJECT_TEMPERATURE.max),
+                (limits::AMBIENT_TEMPERATURE.max, limits::OBJECT_TEMPERATURE.min),
+            ] {
+                for model in [ModelKind::Kron, ModelKind::Fv, ModelKind::SemiInfinite] {
+                    let mut s = spec(model, "wood");
+                    s.material = Material {
+                        name: "corner".into(),
+                        conductivity_w_mk: k,
+                        density_kg_m3: rho,
+                        specific_heat_j_kgk: c,
+                        thickness_m: thickness,
+                        source: "test".into(),
+                    };
+                    // Short: a 1 m object needs 65 000 fv cells (a second or two per corner).
+                    s.duration_s = 0.2;
+                    s.dt_s = 0.01;
+                    s.ambient_c = ambient_c;
+                    s.object_c = object_c;
+                    if let Err(e) = simulate(&s) {
+                        panic!("{model:?} k {k} ρ {rho} c {c} d {thickness} air {ambient_c} object {object_c}: {e}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_non_finite_result_names_its_column_and_time() {
+        let trace = Trace {
+            time_s: vec![0.0, 0.5, 1.0],
+            columns: vec![
+                ("skin_surface_c".into(), vec![32.0, 31.0, 30.0]),
+                ("heat_flux_w_m2".into(), vec![90.0, f64::NAN, f64::INFINITY]),
+            ],
+            resolution: String::new(),
+        };
+        match trace.check_finite() {
+            Err(ParamError::NonFinite { quantity, time_s, .. }) => {
+                assert_eq!((quantity.as_str(), time_s), ("heat_flux_w_m2", 0.5))
+            }
+            other => panic!("expected NonFinite, got {other:?}"),
+        }
     }
 }

@@ -6,6 +6,7 @@
 use serde::Serialize;
 
 use crate::error::{At, ParamError};
+use crate::limits;
 use crate::params::{self, Rule, Table, DENSITY, SPECIFIC_HEAT};
 
 /// One tissue layer.
@@ -127,9 +128,12 @@ impl Skin {
         skin
     }
 
-    /// Checks every value: at least one layer; non-empty names; finite, strictly positive thickness, conductivity,
-    /// density, specific heat; finite, non-negative perfusion and metabolic heat; finite arterial temperature;
-    /// positive blood density and specific heat and air convection coefficient. `origin` appears in the error.
+    /// Checks every value against its physical range ([`crate::limits`]): at least one layer; non-empty names;
+    /// thickness ([`limits::SKIN_LAYER_THICKNESS`]), conductivity, density, specific heat and metabolic heat of
+    /// every layer; arterial temperature, blood density and specific heat; the air's heat transfer coefficient.
+    /// Perfusion only has to be finite and not negative here: the resting-surface calibration scales it beyond
+    /// [`limits::PERFUSION`] by design; skin files are held to that range ([`Skin::from_toml_str`]). `origin`
+    /// appears in the error.
     pub fn validate(&self, origin: &str) -> Result<(), ParamError> {
         if self.layers.is_empty() {
             return Err(ParamError::Invalid {
@@ -140,15 +144,21 @@ impl Skin {
         for (i, layer) in self.layers.iter().enumerate() {
             validate_layer(origin, &layer_prefix(i), layer)?;
         }
-        Rule::Finite
-            .check("blood.arterial_c", self.blood.arterial_c)
-            .at(origin)?;
-        for (key, value) in [
-            ("blood.density_kg_m3", self.blood.density_kg_m3),
-            ("blood.specific_heat_j_kgk", self.blood.specific_heat_j_kgk),
-            ("air.convection_w_m2k", self.air_convection_w_m2k),
+        for (key, value, range) in [
+            ("blood.arterial_c", self.blood.arterial_c, limits::ARTERIAL_TEMPERATURE),
+            ("blood.density_kg_m3", self.blood.density_kg_m3, limits::DENSITY),
+            (
+                "blood.specific_heat_j_kgk",
+                self.blood.specific_heat_j_kgk,
+                limits::SPECIFIC_HEAT,
+            ),
+            (
+                "air.convection_w_m2k",
+                self.air_convection_w_m2k,
+                limits::AIR_CONVECTION,
+            ),
         ] {
-            Rule::Positive.check(key, value).at(origin)?;
+            range.rule().check(key, value).at(origin)?;
         }
         Ok(())
     }
@@ -160,7 +170,8 @@ impl Skin {
     /// heat (`specific_heat_j_kgk` or `specific_heat_cal_g_c`), optional `perfusion_per_s` and `metabolic_w_m3`
     /// (default 0). `[blood]` holds `arterial_c`, density and specific heat (same spelling choices); `[air]` holds
     /// `convection_w_m2k`. Each section present must be complete; an absent `[blood]` or `[air]` section takes the
-    /// [`Skin::fingertip`] values. Exactly one spelling per quantity; unknown keys, wrong types and bad numbers are
+    /// [`Skin::fingertip`] values. Exactly one spelling per quantity; every number must lie in its physical range
+    /// (see [`Skin::validate`]; perfusion in [`limits::PERFUSION`]); unknown keys, wrong types and bad numbers are
     /// errors naming the key (layers as `layer[1]`, `layer[2]`, … counted from the outermost).
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Skin, ParamError> {
         let toml = params::parse(text, origin)?;
@@ -176,7 +187,7 @@ impl Skin {
         };
         let air_convection_w_m2k = match file.section("air")? {
             Some(air) => {
-                let value = air.required_number("convection_w_m2k", Rule::Positive)?;
+                let value = air.required_number("convection_w_m2k", limits::AIR_CONVECTION.rule())?;
                 air.finish()?;
                 value
             }
@@ -234,12 +245,21 @@ fn validate_layer(origin: &str, prefix: &str, layer: &SkinLayer) -> Result<(), P
         });
     }
     for (key, value, rule) in [
-        ("thickness_m", layer.thickness_m, Rule::Positive),
-        ("conductivity_w_mk", layer.conductivity_w_mk, Rule::Positive),
-        ("density_kg_m3", layer.density_kg_m3, Rule::Positive),
-        ("specific_heat_j_kgk", layer.specific_heat_j_kgk, Rule::Positive),
+        ("thickness_m", layer.thickness_m, limits::SKIN_LAYER_THICKNESS.rule()),
+        (
+            "conductivity_w_mk",
+            layer.conductivity_w_mk,
+            limits::CONDUCTIVITY.rule(),
+        ),
+        ("density_kg_m3", layer.density_kg_m3, limits::DENSITY.rule()),
+        (
+            "specific_heat_j_kgk",
+            layer.specific_heat_j_kgk,
+            limits::SPECIFIC_HEAT.rule(),
+        ),
+        // Calibrated skins scale the perfusion beyond its range of measured tissues (see `Skin::validate`).
         ("perfusion_per_s", layer.perfusion_per_s, Rule::NonNegative),
-        ("metabolic_w_m3", layer.metabolic_w_m3, Rule::NonNegative),
+        ("metabolic_w_m3", layer.metabolic_w_m3, limits::METABOLIC_HEAT.rule()),
     ] {
         if !rule.admits(value) {
             return rule.check(format!("{prefix}{key}"), value).at(origin).map(drop);
@@ -253,12 +273,14 @@ fn parse_layer(t: &Table) -> Result<SkinLayer, ParamError> {
     t.string("source")?;
     let layer = SkinLayer {
         name: t.required_string("name")?,
-        thickness_m: t.required_number("thickness_m", Rule::Positive)?,
-        conductivity_w_mk: t.required_either(params::CONDUCTIVITY, Rule::Positive)?,
-        density_kg_m3: t.required_either(DENSITY, Rule::Positive)?,
-        specific_heat_j_kgk: t.required_either(SPECIFIC_HEAT, Rule::Positive)?,
-        perfusion_per_s: t.number("perfusion_per_s", Rule::NonNegative)?.unwrap_or(0.0),
-        metabolic_w_m3: t.number("metabolic_w_m3", Rule::NonNegative)?.unwrap_or(0.0),
+        thickness_m: t.required_number("thickness_m", limits::SKIN_LAYER_THICKNESS.rule())?,
+        conductivity_w_mk: t.required_either(params::CONDUCTIVITY, limits::CONDUCTIVITY.rule())?,
+        density_kg_m3: t.required_either(DENSITY, limits::DENSITY.rule())?,
+        specific_heat_j_kgk: t.required_either(SPECIFIC_HEAT, limits::SPECIFIC_HEAT.rule())?,
+        perfusion_per_s: t.number("perfusion_per_s", limits::PERFUSION.rule())?.unwrap_or(0.0),
+        metabolic_w_m3: t
+            .number("metabolic_w_m3", limits::METABOLIC_HEAT.rule())?
+            .unwrap_or(0.0),
     };
     t.finish()?;
     Ok(layer)
@@ -266,9 +288,9 @@ fn parse_layer(t: &Table) -> Result<SkinLayer, ParamError> {
 
 fn parse_blood(t: &Table) -> Result<Blood, ParamError> {
     let blood = Blood {
-        arterial_c: t.required_number("arterial_c", Rule::Finite)?,
-        density_kg_m3: t.required_either(DENSITY, Rule::Positive)?,
-        specific_heat_j_kgk: t.required_either(SPECIFIC_HEAT, Rule::Positive)?,
+        arterial_c: t.required_number("arterial_c", limits::ARTERIAL_TEMPERATURE.rule())?,
+        density_kg_m3: t.required_either(DENSITY, limits::DENSITY.rule())?,
+        specific_heat_j_kgk: t.required_either(SPECIFIC_HEAT, limits::SPECIFIC_HEAT.rule())?,
     };
     t.finish()?;
     Ok(blood)
@@ -366,9 +388,10 @@ convection_w_m2k = 10.0
         let mut skin = Skin::fingertip();
         skin.layers[1].metabolic_w_m3 = 368.1;
         skin.layers[0].name = "epi \"dermis\"".to_string();
-        skin.layers[2].perfusion_per_s = 1.0 / 3.0;
-        skin.blood.arterial_c = -0.0;
-        skin.air_convection_w_m2k = 1e-7;
+        // Numbers without a short decimal form, inside their physical ranges.
+        skin.layers[2].perfusion_per_s = 1.0 / 30.0;
+        skin.blood.arterial_c = 36.8 + f64::EPSILON * 32.0;
+        skin.air_convection_w_m2k = 10.0 / 3.0;
         let text = skin.to_toml_string();
         let back = Skin::from_toml_str(&text, "written").unwrap_or_else(|e| panic!("{e}\n{text}"));
         assert_eq!(back, skin, "text:\n{text}");
@@ -430,6 +453,20 @@ convection_w_m2k = 10.0
             "air.convection_w_m2k"
         );
         assert_eq!(key_of(&bad("thickness_m = 0.0005", "")), "layer[1].thickness_m");
+        // Finite but unphysical: a 1 m skin layer, the kidney's perfusion tenfold, a feverish 45 °C blood.
+        assert_eq!(
+            key_of(&bad("thickness_m = 0.0005", "thickness_m = 1.0")),
+            "layer[1].thickness_m"
+        );
+        assert_eq!(
+            key_of(&bad("perfusion_per_s = 0.0", "perfusion_per_s = 1.0")),
+            "layer[1].perfusion_per_s"
+        );
+        assert_eq!(key_of(&bad("arterial_c = 36.8", "arterial_c = 45")), "blood.arterial_c");
+        assert_eq!(
+            key_of(&bad("conductivity_w_mk = 0.21", "conductivity_w_mk = 1e300")),
+            "layer[1].conductivity_w_mk"
+        );
         assert_eq!(key_of(&bad("name = \"epidermis\"", "")), "layer[1].name");
         assert_eq!(
             key_of(&bad("perfusion_per_s = 0.0", "perfusion = 0.0")),

@@ -38,10 +38,10 @@ use thermode_control::{ControlInput, Controller, Finger};
 use thermode_device::{DeviceConfig, Reading};
 use thermode_model::fv::{FvConfig, FvModel};
 use thermode_model::kron::calibrate_to_surface;
-use thermode_model::{Material, Range, Rule, Skin};
+use thermode_model::limits::CONTACT_RESISTANCE;
+use thermode_model::{Material, Rule, Skin};
 use thermode_safety::{
     DoseLedger, DriveCommand, EnvelopeConfig, FaultCode, MeasuredOnly, SafetyEnvelope, SetpointDecision,
-    ABSOLUTE_MAX_RATE_C_PER_S,
 };
 
 use crate::controllers::{build_controller, plant_model, ControllerKind};
@@ -51,34 +51,41 @@ use crate::guard::PlateGuard;
 use crate::renderer::{fv_config, Renderer, RendererKind, LIGHT_TOUCH_RESISTANCE_M2K_W};
 use crate::stimulus::Stimulus;
 
-/// Lowest ambient (air) temperature a pipeline accepts \[°C\]: −30.
-pub const MIN_AMBIENT_C: f64 = -30.0;
-/// Highest ambient (air) temperature a pipeline accepts \[°C\]: 50 (above it the resting finger has no steady state
-/// below the arterial temperature worth rendering).
-pub const MAX_AMBIENT_C: f64 = 50.0;
+/// The ambient temperature a pipeline accepts: the one physical range of air temperatures,
+/// [`thermode_model::limits::AMBIENT_TEMPERATURE`] (−30 to 50 °C).
+pub use thermode_model::limits::AMBIENT_TEMPERATURE;
 
-/// The ambient temperature a pipeline accepts: [`MIN_AMBIENT_C`] to [`MAX_AMBIENT_C`].
-pub const AMBIENT_TEMPERATURE: Range = Range {
-    name: "ambient temperature [°C]",
-    min: MIN_AMBIENT_C,
-    max: MAX_AMBIENT_C,
-};
+/// How much higher than its set-point rate limit a rendering envelope puts its plausibility bound on the measured
+/// plate rate (`max_measured_rate_c_per_s`): 2.5 times, and never below the envelope's default (50 °C/s). The
+/// default display renders at 20 °C/s, where this is exactly the default 50 °C/s; a display that renders faster
+/// keeps the same margin for a plate that follows its set-point with sensor noise on top.
+pub const MEASURED_RATE_PER_SETPOINT_RATE: f64 = 2.5;
 
-/// The set-point rate limit of a rendering pipeline \[°C/s\]: 20, the compiled-in absolute maximum
-/// ([`ABSOLUTE_MAX_RATE_C_PER_S`]), instead of the envelope's general default of 10.
-///
-/// Why: rendering a touch must let the Peltier cool as fast as it physically can (the paper's first flaw is that
-/// limit); the default module cools the resting plate at about 13 °C/s at full current, so at 10 °C/s the envelope
-/// and not the actuator would limit the initial drop (figures in `docs/design-choices.md`).
-pub const RENDER_MAX_RATE_C_PER_S: f64 = ABSOLUTE_MAX_RATE_C_PER_S;
-
-/// The safety envelope of a rendering pipeline: [`EnvelopeConfig::default`] with the set-point rate limit
-/// [`RENDER_MAX_RATE_C_PER_S`].
-pub fn render_envelope() -> EnvelopeConfig {
+/// The safety envelope of a pipeline that renders with the set-point rate limit `max_rate_c_per_s` \[°C/s\]:
+/// [`EnvelopeConfig::default`] with that limit and the measured-rate plausibility bound raised to
+/// [`MEASURED_RATE_PER_SETPOINT_RATE`] times it where that exceeds the default. The limit is checked when the
+/// envelope is validated (at most the compiled-in [`thermode_safety::ABSOLUTE_MAX_RATE_C_PER_S`]).
+pub fn render_envelope_with_rate(max_rate_c_per_s: f64) -> EnvelopeConfig {
+    let default = EnvelopeConfig::default();
     EnvelopeConfig {
-        max_setpoint_rate_c_per_s: RENDER_MAX_RATE_C_PER_S,
-        ..EnvelopeConfig::default()
+        max_setpoint_rate_c_per_s: max_rate_c_per_s,
+        max_measured_rate_c_per_s: default
+            .max_measured_rate_c_per_s
+            .max(MEASURED_RATE_PER_SETPOINT_RATE * max_rate_c_per_s),
+        ..default
     }
+}
+
+/// The safety envelope of a pipeline rendering on `device`: [`render_envelope_with_rate`] with the device file's
+/// rendering rate (`render.max_setpoint_rate_c_per_s`, 20 °C/s for the default display) instead of the envelope's
+/// general default of 10.
+///
+/// Why a per-device rate: rendering a touch must let the Peltier cool as fast as it physically can (the paper's
+/// first flaw is that limit); the default module cools the resting plate at about 13 °C/s at full current, so at
+/// 10 °C/s the envelope and not the actuator would limit the initial drop (figures in `docs/design-choices.md`),
+/// and a display with a stronger module needs a higher limit for the same reason.
+pub fn render_envelope(device: &DeviceConfig) -> EnvelopeConfig {
+    render_envelope_with_rate(device.render.max_setpoint_rate_c_per_s)
 }
 
 /// Half width of the band around the controller's plate estimate that a requested set-point is limited to \[°C\]:
@@ -96,15 +103,16 @@ pub struct PipelineConfig {
     pub renderer: RendererKind,
     /// The controller. No default here: see [`crate::controllers::gains_for_device`] for the tuned PID gains.
     pub controller: ControllerKind,
-    /// The safety envelope. Default [`render_envelope`] (15–48 °C, 20 °C/s) with the device file's sensor time
-    /// constant (the thermal dose is counted at the plate reconstructed from the sensor); its
-    /// `sensor_time_constant_s` must not be shorter than the device's.
+    /// The safety envelope. Default [`render_envelope`] of the device (15–48 °C, the device's rendering rate: 20
+    /// °C/s for the default display) with the device file's sensor time constant (the thermal dose is counted at the
+    /// plate reconstructed from the sensor); its `sensor_time_constant_s` must not be shorter than the device's.
     pub envelope: EnvelopeConfig,
     /// The controller's model of the finger (renderer and display inverse). Default [`Skin::fingertip`].
     pub skin: Skin,
-    /// Air temperature \[°C\], in [[`MIN_AMBIENT_C`], [`MAX_AMBIENT_C`]]. Default 23 (the paper's room).
+    /// Air temperature \[°C\], in [`AMBIENT_TEMPERATURE`]. Default 23 (the paper's room).
     pub ambient_c: f64,
-    /// Contact resistance between skin and virtual object of the fv renderer [m²K/W], ≥ 0. Default
+    /// Contact resistance between skin and virtual object of the fv renderer [m²K/W], in
+    /// [`thermode_model::limits::CONTACT_RESISTANCE`]. Default
     /// [`LIGHT_TOUCH_RESISTANCE_M2K_W`] (1e-3, light touch). The kron renderer has none.
     pub contact_resistance_m2k_w: f64,
     /// Whether a touch from air calibrates the finger models (renderer and display inverse) to the resting surface
@@ -123,7 +131,7 @@ impl PipelineConfig {
             controller,
             envelope: EnvelopeConfig {
                 sensor_time_constant_s: device.sensor.time_constant_s,
-                ..render_envelope()
+                ..render_envelope(&device)
             },
             skin: Skin::fingertip(),
             ambient_c: 23.0,
@@ -136,7 +144,7 @@ impl PipelineConfig {
     /// the pipeline is built).
     pub fn validate(&self) -> Result<(), PipelineError> {
         AMBIENT_TEMPERATURE.check(self.ambient_c)?;
-        Rule::NonNegative.check("contact resistance [m²K/W]", self.contact_resistance_m2k_w)?;
+        CONTACT_RESISTANCE.check(self.contact_resistance_m2k_w)?;
         self.device.validate("device config")?;
         self.envelope.validate()?;
         Rule::AtMost {

@@ -18,6 +18,24 @@ pub enum RenderError {
     /// Something that is not a single number was refused (an empty material list, …).
     #[error("{0}")]
     Invalid(String),
+    /// The runs' results would not fit in the memory one command may use
+    /// ([`thermode_model::limits::MAX_RESULT_BYTES`]); refused before anything is allocated.
+    #[error("{0}: use a lower tick rate, a shorter duration or fewer runs")]
+    TooLarge(String),
+    /// A run produced a number that is not finite (NaN or ±∞); its results are refused, never written.
+    #[error("{material} ({controller}): the result is not finite: `{quantity}` = {value} at t = {time_s} s")]
+    NonFinite {
+        /// The rendered material.
+        material: String,
+        /// The controller.
+        controller: String,
+        /// The quantity (its CSV column).
+        quantity: &'static str,
+        /// The value.
+        value: f64,
+        /// When (time since the touch) \[s\].
+        time_s: f64,
+    },
 }
 
 /// The pipeline's sources of errors convert through [`PipelineError`], so `?` works on each of them.

@@ -46,8 +46,8 @@ use thermode_model::fv::{FvConfig, FvModel};
 use thermode_model::{BadValue, Material, Skin};
 use thermode_safety::FaultCode;
 
+use thermode_model::limits::{self, CONTACT_CONDUCTANCE, DURATION, OBJECT_TEMPERATURE, TICK_RATE};
 use thermode_model::Rule;
-use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
 
 use crate::error::RenderError;
 use crate::summary::{actuator_limit, summarise, Summary};
@@ -68,6 +68,12 @@ pub const DEFAULT_SEED: u64 = 1;
 /// Longest run accepted (pre-contact plus contact) \[s\]: two hours, so that an hour of contact (the thermal-dose
 /// check `--duration 3600`) fits with any pre-contact of up to an hour.
 pub const MAX_RUN_S: f64 = 7200.0;
+/// Estimated memory of one row of a run \[bytes\]: the [`Trajectory`] row (twelve numbers, the contact flag and
+/// the fault) plus a figure's copy of up to four of its curves as (time, value) pairs (`--plot`).
+pub const BYTES_PER_ROW: u64 = (12 * std::mem::size_of::<f64>()
+    + std::mem::size_of::<bool>()
+    + std::mem::size_of::<Option<FaultCode>>()
+    + 4 * 2 * std::mem::size_of::<f64>()) as u64;
 
 /// The simulated display of a run: one channel with the finite-volume finger.
 pub type Plant = SimulatedDisplay<FvModel>;
@@ -122,24 +128,30 @@ impl RenderSpec {
         }
     }
 
-    /// Checks every number of the run (the pipeline, models and device check their own when built).
+    /// Checks every number of the run against its physical range ([`thermode_model::limits`]: object
+    /// temperature, contact conductance, duration with the pre-contact time, tick rate; the pipeline, models and
+    /// device check their own when built), and that the run's results fit in memory ([`RenderSpec::result_bytes`]
+    /// at most [`limits::MAX_RESULT_BYTES`]), before anything is allocated.
     pub fn validate(&self) -> Result<(), RenderError> {
         self.pipeline.validate()?;
         self.finger_skin.validate("finger skin")?;
         self.material.validate(&format!("material `{}`", self.material.name))?;
         if let Some(g) = self.finger_contact_w_m2k {
-            Rule::Positive.check("finger contact conductance [W/(m²·K)]", g)?;
+            CONTACT_CONDUCTANCE
+                .rule()
+                .check("finger contact conductance [W/(m²·K)]", g)?;
         }
         if let Some(c) = self.object_c {
             OBJECT_TEMPERATURE.check(c)?;
         }
-        let run_time = Rule::Within {
-            min: 0.0,
-            max: MAX_RUN_S,
-        };
         Rule::Positive.check("duration [s]", self.duration_s)?;
-        run_time.check("pre-contact time [s]", self.pre_contact_s)?;
-        run_time.check(
+        DURATION.check(self.duration_s)?;
+        DURATION.rule().check("pre-contact time [s]", self.pre_contact_s)?;
+        Rule::AtMost {
+            max: MAX_RUN_S,
+            what: "the longest run [s]",
+        }
+        .check(
             "duration [s] (with the pre-contact time)",
             self.duration_s + self.pre_contact_s,
         )?;
@@ -150,16 +162,24 @@ impl RenderSpec {
             }
             .check("release time [s]", r)?;
         }
-        Rule::Within {
-            min: 1.0,
-            max: 100_000.0,
-        }
-        .check("tick rate [Hz]", self.rate_hz)?;
+        TICK_RATE.check(self.rate_hz)?;
         Rule::Within { min: 1e-6, max: 0.01 }.check("plant substep [s]", self.plant_substep_s)?;
         if (self.duration_s * self.rate_hz).round() < 1.0 {
             return Err(BadValue::custom("duration [s]", self.duration_s, "must last at least one tick").into());
         }
-        Ok(())
+        check_result_bytes(std::slice::from_ref(self))
+    }
+
+    /// Number of rows the run records: one per tick, before and after the touch. Meaningful for a spec whose
+    /// times and tick rate are finite (saturates otherwise).
+    pub fn rows(&self) -> u64 {
+        let ticks = |s: f64| (s * self.rate_hz).round().max(0.0) as u64;
+        ticks(self.pre_contact_s).saturating_add(ticks(self.duration_s).max(1))
+    }
+
+    /// Estimated memory of the run's results \[bytes\]: [`RenderSpec::rows`] × [`BYTES_PER_ROW`].
+    pub fn result_bytes(&self) -> u64 {
+        self.rows().saturating_mul(BYTES_PER_ROW)
     }
 
     /// The tick length \[s\].
@@ -257,6 +277,33 @@ impl Trajectory {
             contact: Vec::with_capacity(rows),
             fault: Vec::with_capacity(rows),
         }
+    }
+
+    /// The numeric columns with their CSV names, in CSV order.
+    pub fn numbers(&self) -> impl Iterator<Item = (&'static str, &[f64])> {
+        [
+            ("time_s", &self.time_s),
+            ("truth_skin_c", &self.truth_skin_c),
+            ("target_skin_c", &self.target_skin_c),
+            ("skin_c", &self.skin_c),
+            ("model_skin_c", &self.model_skin_c),
+            ("display_setpoint_c", &self.display_setpoint_c),
+            ("requested_setpoint_c", &self.requested_setpoint_c),
+            ("display_c", &self.display_c),
+            ("sensor_c", &self.sensor_c),
+            ("plate_estimate_c", &self.plate_estimate_c),
+            ("current_a", &self.current_a),
+            ("hot_side_c", &self.hot_side_c),
+        ]
+        .into_iter()
+        .map(|(name, column)| (name, column.as_slice()))
+    }
+
+    /// The first numeric column (in CSV order) holding a number that is not finite, with the row of its first
+    /// such number; `None` if every number is finite.
+    pub fn first_non_finite(&self) -> Option<(&'static str, usize)> {
+        self.numbers()
+            .find_map(|(name, column)| column.iter().position(|v| !v.is_finite()).map(|row| (name, row)))
     }
 
     /// Number of rows.
@@ -358,9 +405,26 @@ pub fn render(spec: &RenderSpec) -> Result<RenderRun, RenderError> {
     render_with(spec, pipeline)
 }
 
+/// `Ok` if the results of all `specs` together fit in [`limits::MAX_RESULT_BYTES`] (the sum of their
+/// [`RenderSpec::result_bytes`]), else [`RenderError::TooLarge`].
+pub fn check_result_bytes(specs: &[RenderSpec]) -> Result<(), RenderError> {
+    let total = specs
+        .iter()
+        .fold(0u64, |sum, spec| sum.saturating_add(spec.result_bytes()));
+    limits::check_result_bytes(total).map_err(|message| {
+        let rows = specs.iter().fold(0u64, |sum, spec| sum.saturating_add(spec.rows()));
+        RenderError::TooLarge(format!(
+            "{} run(s) of {rows} rows in all at {BYTES_PER_ROW} bytes per row: {message}",
+            specs.len()
+        ))
+    })
+}
+
 /// Runs every spec, in parallel threads (one per spec); results in the order of `specs`. The first error is
-/// returned.
+/// returned. Work whose results would not fit in memory together ([`check_result_bytes`]) is refused before any
+/// run starts.
 pub fn render_all(specs: &[RenderSpec]) -> Result<Vec<RenderRun>, RenderError> {
+    check_result_bytes(specs)?;
     std::thread::scope(|scope| {
         let handles: Vec<_> = specs.iter().map(|spec| scope.spawn(move || render(spec))).collect();
         handles
@@ -373,7 +437,8 @@ pub fn render_all(specs: &[RenderSpec]) -> Result<Vec<RenderRun>, RenderError> {
     })
 }
 
-/// Runs `spec` with a pipeline of the caller's (e.g. with a custom controller).
+/// Runs `spec` with a pipeline of the caller's (e.g. with a custom controller). A run that records a number that
+/// is not finite is refused ([`RenderError::NonFinite`], see [`Trajectory::first_non_finite`]).
 pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<RenderRun, RenderError> {
     spec.validate()?;
     let mut plant = resting_plant(spec)?;
@@ -409,6 +474,16 @@ pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<R
         trajectory.record(time_s, truth_c, &telemetry, &plant, depth_m);
     }
     let contact = at_contact.ok_or_else(|| RenderError::Invalid("the run never reached the touch".into()))?;
+    if let Some((quantity, row)) = trajectory.first_non_finite() {
+        let column = trajectory.numbers().find(|(name, _)| *name == quantity).map(|(_, c)| c);
+        return Err(RenderError::NonFinite {
+            material: spec.material.name.clone(),
+            controller: pipeline.controller().name().to_string(),
+            quantity,
+            value: column.map_or(f64::NAN, |c| c[row]),
+            time_s: trajectory.time_s[row],
+        });
+    }
     let limit = actuator_limit(spec, &trajectory, &contact)?;
     let summary = summarise(spec, pipeline.controller().name(), &trajectory, &contact, limit);
     Ok(RenderRun {
@@ -521,4 +596,40 @@ pub fn write_csv(runs: &[RenderRun], sink: &mut dyn Write) -> Result<(), csv::Er
     }
     writer.flush()?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_first_non_finite_number_is_found_in_csv_order() {
+        let mut t = Trajectory::with_capacity(3);
+        for (k, time_s) in [-0.01, 0.0, 0.01].into_iter().enumerate() {
+            t.time_s.push(time_s);
+            for column in [
+                &mut t.truth_skin_c,
+                &mut t.target_skin_c,
+                &mut t.skin_c,
+                &mut t.model_skin_c,
+                &mut t.requested_setpoint_c,
+                &mut t.display_setpoint_c,
+                &mut t.display_c,
+                &mut t.sensor_c,
+                &mut t.plate_estimate_c,
+                &mut t.current_a,
+                &mut t.hot_side_c,
+            ] {
+                column.push(30.0 + k as f64);
+            }
+            t.contact.push(k > 0);
+            t.fault.push(None);
+        }
+        assert_eq!(t.first_non_finite(), None);
+        t.hot_side_c[1] = f64::INFINITY;
+        t.skin_c[2] = f64::NAN;
+        assert_eq!(t.first_non_finite(), Some(("skin_c", 2)));
+        let names: Vec<&str> = t.numbers().map(|(name, _)| name).collect();
+        assert_eq!(names, CSV_HEADER[..12].to_vec(), "numeric columns in CSV order");
+    }
 }

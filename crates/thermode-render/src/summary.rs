@@ -22,20 +22,27 @@
 //!   first reaches it minus the time the target first reaches it, both interpolated linearly between rows (the
 //!   skin's curve starts at its own value at the touch). Undefined (None) if Δ < [`MIN_DROP_C`] or a curve never
 //!   reaches the level.
-//! - Actuator limit of that lag: the plant as it was at the touch (same finger, same plate and hot-side state) is
+//! - Limit of that lag (`limit`): the plant as it was at the touch (same finger, same plate and hot-side state) is
 //!   driven by an ideal controller that knows the true plate temperature and applies, in every plant substep, the
 //!   most useful current: for cooling the module's optimum cooling current −S·T_d/R at the present plate
 //!   temperature, capped by the drive limit (beyond the optimum more current warms the plate); for heating the full
-//!   drive limit (the heat into the plate grows with the current). It runs from the touch until the skin meets the
-//!   target (from then on an ideal controller follows the target); the limit lag is the time its skin reaches the
-//!   half level minus the target's time, at least 0 (0 if it meets the target before the half level). It is a
-//!   bound from the physics of the plant alone: no sensor, no safety envelope (no set-point rate limit, no display
-//!   minimum), no controller delay.
+//!   drive limit (the heat into the plate grows with the current) — unless that would take the plate past the
+//!   fastest set-point the run's safety envelope can produce, and then the current that puts the plate exactly on
+//!   it. That set-point starts where the envelope's set-point was at the touch (or the plate, if that is further
+//!   in the direction of the change), moves at the envelope's set-point rate limit (`max_setpoint_rate_c_per_s`,
+//!   one step per tick, as the envelope shapes it) and stops at the display limits (`min_display_c`,
+//!   `max_display_c`). It runs from the touch until the skin meets the target (from then on an ideal controller
+//!   follows the target); the limit lag is the time its skin reaches the half level minus the target's time, at
+//!   least 0 (0 if it meets the target before the half level). It is the best any controller can do inside the
+//!   envelope on this plant: no sensor, no controller delay, but the actuator and the envelope's rate and range.
+//!   With the default display at its 20 °C/s the plate cools slower than the rate limit (about 13 °C/s), so the
+//!   actuator binds; a display with a stronger module, or a lower `--max-rate`, is held by the envelope.
 //! - RMS floor: the same ideal run's RMS skin error over 0 < t ≤ 90 s, counting its error until it meets the target
-//!   and none afterwards. The heat equation is monotone in the plate temperature and no admissible current cools
-//!   the plate faster, so before that meeting no controller's skin gets nearer a target below it: the floor bounds
-//!   every controller's RMS from below, up to the plant's substep and the slow hot-side coupling (cooling less now
-//!   leaves the hot side a little cooler for later; over the ~1 s to the meeting that is a few mK).
+//!   and none afterwards. The heat equation is monotone in the plate temperature and no admissible current moves
+//!   the plate towards the target faster within the envelope, so before that meeting no controller's skin whose
+//!   plate stays on the envelope's side of its fastest set-point gets nearer a target below it: the floor bounds
+//!   every such controller's RMS from below, up to the plant's substep and the slow hot-side coupling (cooling
+//!   less now leaves the hot side a little cooler for later; over the ~1 s to the meeting that is a few mK).
 
 use serde::Serialize;
 
@@ -90,7 +97,7 @@ pub struct Summary {
     pub skin_half_time_s: Option<f64>,
     /// Skin half time minus target half time.
     pub lag_s: Option<f64>,
-    /// The same lag for the ideal controller at the actuator limit (see the module documentation).
+    /// The same lag for the ideal controller at the actuator and envelope limits (see the module documentation).
     pub actuator_limit_lag_s: Option<f64>,
     /// The RMS skin error floor over 0 < t ≤ 90 s of that ideal controller ([`ActuatorLimit::rms_floor_c`]).
     pub actuator_limit_rms_c: Option<f64>,
@@ -188,20 +195,141 @@ fn half_drop(trajectory: &Trajectory, contact_target_c: f64) -> HalfDrop {
     }
 }
 
-/// What the ideal controller at the actuator limit achieves (see the module documentation).
+/// What the ideal controller at the actuator and envelope limits achieves (see the module documentation).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ActuatorLimit {
     /// Its lag at half of the target's drop \[s\] (`None` if the target does not change enough or it never gets
     /// there within the recorded rows).
     pub lag_s: Option<f64>,
     /// Its RMS skin error over 0 < t ≤ 90 s \[°C\], counting the error until the skin meets the target and none
-    /// after (perfect tracking from then on): a floor no controller on this plant can go below, since no current
-    /// brings the skin towards the target faster (`None` if the skin never meets the target within the rows).
+    /// after (perfect tracking from then on): a floor no controller on this plant inside this envelope can go
+    /// below, since no admissible current brings the skin towards the target faster (`None` if the skin never
+    /// meets the target within the rows).
     pub rms_floor_c: Option<f64>,
 }
 
-/// Runs the ideal controller at the actuator limit from the plant at the touch until the skin meets the target
-/// (see the module documentation).
+/// The fastest set-point the envelope of a run can produce after the touch, which the ideal controller's plate
+/// may not pass (see the module documentation).
+#[derive(Debug, Clone, Copy)]
+struct FastestSetpoint {
+    /// Where it starts \[°C\].
+    origin_c: f64,
+    /// Signed step per tick \[°C\]: −rate·dt when cooling, +rate·dt when heating.
+    step_c: f64,
+    /// The display limit it stops at \[°C\] (`min_display_c` cooling, `max_display_c` heating).
+    stop_c: f64,
+    cooling: bool,
+}
+
+impl FastestSetpoint {
+    fn new(spec: &RenderSpec, trajectory: &Trajectory, plate_at_touch_c: f64, cooling: bool) -> Self {
+        let envelope = &spec.pipeline.envelope;
+        // The set-point the envelope held over the tick before the touch (the last row at or before t = 0).
+        let before = trajectory
+            .time_s
+            .iter()
+            .zip(&trajectory.display_setpoint_c)
+            .take_while(|(t, _)| **t <= TIME_SLACK_S)
+            .last()
+            .map_or(plate_at_touch_c, |(_, s)| *s);
+        let step_c = envelope.max_setpoint_rate_c_per_s * spec.tick_s();
+        if cooling {
+            FastestSetpoint {
+                origin_c: before.min(plate_at_touch_c),
+                step_c: -step_c,
+                stop_c: envelope.min_display_c,
+                cooling,
+            }
+        } else {
+            FastestSetpoint {
+                origin_c: before.max(plate_at_touch_c),
+                step_c,
+                stop_c: envelope.max_display_c,
+                cooling,
+            }
+        }
+    }
+
+    /// The set-point held over tick `k` after the touch (k = 0 is the first) \[°C\].
+    fn at_tick(&self, k: usize) -> f64 {
+        let ramp_c = self.origin_c + self.step_c * (k + 1) as f64;
+        if self.cooling {
+            ramp_c.max(self.stop_c)
+        } else {
+            ramp_c.min(self.stop_c)
+        }
+    }
+
+    /// Whether a plate at `plate_c` is past `bound_c` in the direction of the change.
+    fn passes(&self, plate_c: f64, bound_c: f64) -> bool {
+        if self.cooling {
+            plate_c < bound_c
+        } else {
+            plate_c > bound_c
+        }
+    }
+}
+
+/// One plant substep of `h` \[s\] of the ideal controller: the most useful current (see the module documentation),
+/// or, if that takes the plate past `bound_c`, the current that puts it on `bound_c` (the plate temperature after
+/// a substep grows with the current from the optimum cooling current up; found by the Illinois variant of regula
+/// falsi to 1e-9 °C).
+fn ideal_substep(channel: &mut Channel, h: f64, limit_a: f64, bound: &FastestSetpoint, bound_c: f64) {
+    let module = *channel.module();
+    let lo_a = module.optimum_cooling_current_a(channel.state().plate_c).max(-limit_a);
+    let hi_a = limit_a;
+    let trial = |current_a: f64| {
+        let mut next = channel.clone();
+        next.step(h, current_a);
+        next
+    };
+    let ideal = trial(if bound.cooling { lo_a } else { hi_a });
+    if !bound.passes(ideal.state().plate_c, bound_c) {
+        *channel = ideal;
+        return;
+    }
+    let other = trial(if bound.cooling { hi_a } else { lo_a });
+    if bound.passes(other.state().plate_c, bound_c) {
+        // Even the opposite extreme passes the bound (the plate started beyond it): as near as the drive allows.
+        *channel = other;
+        return;
+    }
+    let miss = |next: &Channel| next.state().plate_c - bound_c;
+    let (mut a, mut fa) = (lo_a, miss(if bound.cooling { &ideal } else { &other }));
+    let (mut b, mut fb) = (hi_a, miss(if bound.cooling { &other } else { &ideal }));
+    let mut best = if fa.abs() < fb.abs() { (a, fa) } else { (b, fb) };
+    let mut side = 0;
+    for _ in 0..60 {
+        if best.1.abs() <= 1e-9 || fa == fb {
+            break;
+        }
+        let c = (a * fb - b * fa) / (fb - fa);
+        let fc = miss(&trial(c));
+        if fc.abs() < best.1.abs() {
+            best = (c, fc);
+        }
+        if (fc > 0.0) == (fb > 0.0) {
+            (b, fb) = (c, fc);
+            if side == -1 {
+                fa /= 2.0;
+            }
+            side = -1;
+        } else {
+            (a, fa) = (c, fc);
+            if side == 1 {
+                fb /= 2.0;
+            }
+            side = 1;
+        }
+    }
+    *channel = trial(best.0);
+}
+
+/// The simulated channel of a run's plant.
+type Channel = thermode_device::SimulatedChannel<thermode_model::fv::FvModel>;
+
+/// Runs the ideal controller at the actuator and envelope limits from the plant at the touch until the skin meets
+/// the target (see the module documentation).
 pub fn actuator_limit(
     spec: &RenderSpec,
     trajectory: &Trajectory,
@@ -214,7 +342,7 @@ pub fn actuator_limit(
     let mut plant = contact.plant.clone();
     let channel = plant.channel_mut(0)?;
     let limit_a = channel.config().drive.current_limit_a;
-    let module = *channel.module();
+    let bound = FastestSetpoint::new(spec, trajectory, channel.state().plate_c, half.cooling);
     let substeps = spec.substeps();
     let depth_m = spec.receptor_depth_m();
     let h = spec.tick_s() / substeps as f64;
@@ -227,15 +355,10 @@ pub fn actuator_limit(
     let mut result = ActuatorLimit::default();
     let (mut previous, mut squares) = ((0.0, contact.skin_c), 0.0);
     let rows = trajectory.time_s.iter().zip(&trajectory.target_skin_c);
-    for (&t, &target_c) in rows.filter(|(t, _)| **t > TIME_SLACK_S) {
+    for (tick, (&t, &target_c)) in rows.filter(|(t, _)| **t > TIME_SLACK_S).enumerate() {
+        let bound_c = bound.at_tick(tick);
         for _ in 0..substeps {
-            let plate_c = channel.state().plate_c;
-            let current_a = if half.cooling {
-                module.optimum_cooling_current_a(plate_c).max(-limit_a)
-            } else {
-                limit_a
-            };
-            channel.step(h, current_a);
+            ideal_substep(channel, h, limit_a, &bound, bound_c);
         }
         let skin_c = crate::run::finger_at_depth_c(channel, depth_m);
         if result.lag_s.is_none() && sign * (half.level_c - skin_c) >= 0.0 {
@@ -351,7 +474,7 @@ pub fn summary_table(summaries: &[Summary]) -> String {
     }
     out.push_str(
         "(°C and s; rms = root mean square of skin − target over 0–5, 5–90, 0–90 s after contact; floor = rms0-90 of \
-         an ideal controller at the actuator limit; rmsTruth, rmsDisp = of skin − truth and of plate − set-point over \
+         an ideal controller at the actuator and safety-envelope limits (drive, set-point rate, display range); rmsTruth, rmsDisp = of skin − truth and of plate − set-point over \
          0–90 s; overshoot = largest skin excursion beyond the target during contact; lag = skin minus target time at half of the \
          target's drop; limit = the same for the ideal controller; ratio = lag/limit)\n",
     );

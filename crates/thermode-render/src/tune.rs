@@ -77,7 +77,7 @@ pub struct TuneSpec {
     pub device: DeviceConfig,
     /// The renderer (and display-inverse model). Default fv.
     pub renderer: RendererKind,
-    /// The safety envelope. Default [`render_envelope`] (as `thermode render`).
+    /// The safety envelope. Default [`render_envelope`] of the device (as `thermode render`).
     pub envelope: EnvelopeConfig,
     /// The materials. Default the paper's five.
     pub materials: Vec<Material>,
@@ -93,7 +93,7 @@ impl TuneSpec {
         TuneSpec {
             device,
             renderer: RendererKind::Fv,
-            envelope: render_envelope(),
+            envelope: render_envelope(&device),
             materials: paper_materials(),
             seed: crate::run::DEFAULT_SEED,
             max_evaluations: DEFAULT_MAX_EVALUATIONS,

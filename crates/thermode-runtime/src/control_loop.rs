@@ -35,10 +35,10 @@ use crate::stats::Window;
 use thermode_platform::Clock;
 use thermode_platform::{Tick, Ticker};
 
-/// Highest loop rate \[Hz\].
-pub const MAX_RATE_HZ: f64 = 1000.0;
-/// Lowest loop rate \[Hz\].
-pub const MIN_RATE_HZ: f64 = 1.0;
+/// Highest loop rate \[Hz\]: the top of the physical range of loop rates ([`thermode_model::limits::LOOP_RATE`]).
+pub const MAX_RATE_HZ: f64 = thermode_model::limits::LOOP_RATE.max;
+/// Lowest loop rate \[Hz\]: the bottom of [`thermode_model::limits::LOOP_RATE`].
+pub const MIN_RATE_HZ: f64 = thermode_model::limits::LOOP_RATE.min;
 /// Most commands applied in one tick; the rest wait for the next tick.
 pub const MAX_COMMANDS_PER_TICK: usize = 64;
 /// Longest loop-statistics window \[ticks\] (10 s at 1 kHz).

@@ -19,7 +19,9 @@ pub struct StimulusLimits {
     pub object_c: Range,
     /// Display temperatures a direct set-point may name \[°C\]: the envelope's `min_display_c..=max_display_c`.
     pub display_c: Range,
-    /// Fastest direct-mode ramp \[°C/s\]: the envelope's `max_setpoint_rate_c_per_s` (every rate must be > 0).
+    /// Fastest direct-mode ramp \[°C/s\]: the envelope's `max_setpoint_rate_c_per_s`, the rate the channel really
+    /// enforces (for a rendering pipeline the device file's `render.max_setpoint_rate_c_per_s`). Every rate must
+    /// also be at least the smallest set-point rate ([`DIRECT_RATE`]).
     pub max_rate_c_s: f64,
 }
 
@@ -77,11 +79,11 @@ impl StimulusLimits {
         Ok(())
     }
 
-    /// A direct-mode rate: above 0, at most [`StimulusLimits::max_rate_c_s`].
+    /// A direct-mode rate: in the physical range of set-point rates ([`DIRECT_RATE`]), at most
+    /// [`StimulusLimits::max_rate_c_s`].
     fn rate_c_s(&self, rate_c_s: f64) -> Result<f64, BadValue> {
-        Rule::Positive.check(DIRECT_RATE.name, rate_c_s)?;
         Rule::Within {
-            min: 0.0,
+            min: DIRECT_RATE.min,
             max: self.max_rate_c_s,
         }
         .check(DIRECT_RATE.name, rate_c_s)
@@ -91,7 +93,6 @@ impl StimulusLimits {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use thermode_pipeline::stimulus::{MAX_OBJECT_C, MIN_OBJECT_C};
 
     #[test]
     fn limits_follow_the_envelope_and_refuse_with_a_typed_bad_value() {
@@ -117,7 +118,7 @@ mod tests {
             material: wood.clone(),
             object_c,
         };
-        assert_eq!(limits.check(&touch(MIN_OBJECT_C)), Ok(()));
-        assert!(limits.check(&touch(MAX_OBJECT_C + 1.0)).is_err());
+        assert_eq!(limits.check(&touch(OBJECT_TEMPERATURE.min)), Ok(()));
+        assert!(limits.check(&touch(OBJECT_TEMPERATURE.max + 1.0)).is_err());
     }
 }

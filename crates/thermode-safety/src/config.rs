@@ -14,6 +14,7 @@
 
 use serde::Serialize;
 
+use thermode_model::limits;
 use thermode_model::params::{self, Rule, Table};
 use thermode_model::ParamError;
 
@@ -26,8 +27,19 @@ pub const ABSOLUTE_MIN_C: f64 = 10.0;
 /// Highest display temperature any configuration may allow, °C (IEC 60601-1 applied-part limit for 1–10 min
 /// contact; the paper's pain threshold).
 pub const ABSOLUTE_MAX_C: f64 = 48.0;
-/// Highest set-point rate any configuration may allow, °C/s (twice the 10 °C/s of Jones & Berris).
-pub const ABSOLUTE_MAX_RATE_C_PER_S: f64 = 20.0;
+/// Highest set-point rate any configuration may allow, °C/s: 300, the upper bound of the physical range of
+/// set-point rates ([`limits::SETPOINT_RATE`], written there once). It is not what protects the skin — the
+/// temperature limits and the thermal dose do, whatever the rate; commercial stimulators ramp at 70–300 °C/s
+/// inside the same temperature bounds (e.g. QST.Lab TCS II, up to 300 °C/s) — but a cap on how fast a display may
+/// follow. A display's rendering rate is a per-device setting (its device file's
+/// `render.max_setpoint_rate_c_per_s`, default 20); the envelope's general default stays 10 (Jones & Berris).
+pub const ABSOLUTE_MAX_RATE_C_PER_S: f64 = limits::SETPOINT_RATE.max;
+/// Highest plausibility bound on the measured plate rate any configuration may set, °C/s: 1000, so that it can
+/// always stay above the set-point rate limit (`max_setpoint_rate_c_per_s < max_measured_rate_c_per_s`), with
+/// margin for a plate that follows a 300 °C/s ramp with sensor noise.
+pub const ABSOLUTE_MAX_MEASURED_RATE_C_PER_S: f64 = 1000.0;
+// Any allowed set-point rate leaves room for a measured-rate bound above it.
+const _: () = assert!(ABSOLUTE_MAX_MEASURED_RATE_C_PER_S > ABSOLUTE_MAX_RATE_C_PER_S);
 /// Longest cumulative time at or above 43 °C any configuration may allow, s (IEC 60601-1: 43 °C for ≥ 10 min).
 pub const ABSOLUTE_MAX_TIME_AT_OR_ABOVE_43_S: f64 = 600.0;
 /// Largest CEM43 budget any configuration may allow, CEM43-minutes (= 10 min at 43 °C, the IEC long-contact case).
@@ -52,7 +64,8 @@ pub struct EnvelopeConfig {
     /// Highest display set-point, °C. Default 48 (paper: heat pain above 48 °C; IEC 60601-1). Range (min, 48].
     pub max_display_c: f64,
     /// Largest rate of change of the shaped set-point, °C/s. Default 10 (Jones & Berris; the paper used 2).
-    /// Range [0.01, 20].
+    /// Range [0.01, 300] ([`limits::SETPOINT_RATE`]; at most [`ABSOLUTE_MAX_RATE_C_PER_S`]); must stay below
+    /// `max_measured_rate_c_per_s`.
     pub max_setpoint_rate_c_per_s: f64,
     /// Cumulative time at or above 43 °C (measured) after which the maximum drops below 43 °C, s. Default 600
     /// (IEC 60601-1: 43 °C for ≥ 10 min). Range [0, 600].
@@ -90,8 +103,9 @@ pub struct EnvelopeConfig {
     /// 50–60 Hz PT-100 converter; the set-point moves at most 2 °C at the default rate limit). Range [0.001, 1].
     pub stale_timeout_s: f64,
     /// Largest plausible rate of change of the measured display, °C/s. Default 50 (a bare 0.2 J/K plate heated
-    /// by the 8×8 mm module at full current warms at about 35 °C/s). Must exceed `max_setpoint_rate_c_per_s`;
-    /// at most 1000.
+    /// by the 8×8 mm module at full current warms at about 35 °C/s). Must exceed `max_setpoint_rate_c_per_s` (a
+    /// plate that follows its set-point at the rate limit must not look implausible); at most
+    /// [`ABSOLUTE_MAX_MEASURED_RATE_C_PER_S`] (1000), which stays above any allowed set-point rate.
     pub max_measured_rate_c_per_s: f64,
     /// Shortest time span over which the measured rate is evaluated, s (suppresses noise/quantisation between
     /// close samples: a jump of `max_measured_rate_c_per_s · rate_window_s` = 2.5 °C is implausible). Default
@@ -173,7 +187,7 @@ impl EnvelopeConfig {
             (
                 "max_setpoint_rate_c_per_s",
                 &mut self.max_setpoint_rate_c_per_s,
-                0.01,
+                limits::SETPOINT_RATE.min,
                 ABSOLUTE_MAX_RATE_C_PER_S,
             ),
             (
@@ -210,8 +224,8 @@ impl EnvelopeConfig {
             (
                 "max_measured_rate_c_per_s",
                 &mut self.max_measured_rate_c_per_s,
-                0.01,
-                1000.0,
+                limits::SETPOINT_RATE.min,
+                ABSOLUTE_MAX_MEASURED_RATE_C_PER_S,
             ),
             ("rate_window_s", &mut self.rate_window_s, 0.001, 1.0),
             (
@@ -329,10 +343,26 @@ mod tests {
             Err(EnvelopeError::BadValue(ref e)) if e.name == "min_display_c"
         ));
         let fast = EnvelopeConfig {
-            max_setpoint_rate_c_per_s: 25.0,
+            max_setpoint_rate_c_per_s: 301.0,
+            max_measured_rate_c_per_s: 900.0,
             ..Default::default()
         };
         assert!(matches!(fast.validate(), Err(EnvelopeError::BadValue(_))));
+        // Up to 300 °C/s is allowed, as long as the measured-rate plausibility bound stays above it.
+        let quick = EnvelopeConfig {
+            max_setpoint_rate_c_per_s: ABSOLUTE_MAX_RATE_C_PER_S,
+            max_measured_rate_c_per_s: ABSOLUTE_MAX_MEASURED_RATE_C_PER_S,
+            ..Default::default()
+        };
+        quick.validate().unwrap();
+        let implausible = EnvelopeConfig {
+            max_setpoint_rate_c_per_s: 60.0,
+            ..Default::default()
+        };
+        assert!(matches!(
+            implausible.validate(),
+            Err(EnvelopeError::Inconsistent { requirement }) if requirement.contains("max_measured_rate")
+        ));
         let long = EnvelopeConfig {
             max_time_at_or_above_43_s: 601.0,
             ..Default::default()

@@ -86,8 +86,26 @@ fn main() -> ExitCode {
     match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(error) => {
-            eprintln!("thermode: error: {error:#}");
+            eprintln!("thermode: error: {}", message(&error));
             ExitCode::from(2)
         }
     }
+}
+
+/// The error and its causes as one line, `: `-separated (as `{:#}` writes it), leaving out a cause whose text the
+/// line already ends with (an error that shows its source in its own message, such as a refused value with the
+/// file it came from, would otherwise say it twice).
+fn message(error: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in error.chain() {
+        let text = cause.to_string();
+        if out.ends_with(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
 }

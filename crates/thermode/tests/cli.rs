@@ -229,6 +229,139 @@ fn bad_input_gets_a_clear_message_and_exit_code_2() {
 }
 
 #[test]
+fn unphysical_input_is_refused_with_its_range_and_writes_nothing() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let csv = dir.path().join("out.csv");
+    let out = csv.to_str().expect("path");
+    let simulate = |extra: &[&'static str]| -> Vec<&str> {
+        let mut args = vec!["simulate", "--duration", "1", "--out", out];
+        args.extend_from_slice(extra);
+        args
+    };
+    // An oven for air, colder than absolute zero, an unheard-of skin: each named with its range.
+    expect_error(
+        &simulate(&["--material", "wood", "--ambient", "1000"]),
+        "`ambient_c` = 1000 is invalid: must be a finite number in [-30, 50]",
+    );
+    expect_error(
+        &simulate(&["--material", "wood", "--object-temp", "-300"]),
+        "`object_c` = -300 is invalid: must be a finite number in [-50, 150]",
+    );
+    expect_error(
+        &simulate(&["--material", "wood", "--initial", "uniform:80"]),
+        "must be a finite number in [0, 50]",
+    );
+    // A material with k = 1e300 (fv gave NaN curves, kron a table of nonsense, both with exit 0).
+    let material = dir.path().join("hyper.toml");
+    std::fs::write(
+        &material,
+        "name = \"hyper\"\nconductivity_w_mk = 1e300\ndensity_kg_m3 = 1000\nspecific_heat_j_kgk = 1000\n",
+    )
+    .expect("write");
+    let path = material.to_str().expect("path");
+    for model in ["fv", "kron", "semi-infinite"] {
+        let mut args = simulate(&["--model", model]);
+        args.extend(["--material-file", path]);
+        expect_error(
+            &args,
+            "`conductivity_w_mk` = 1e300 is invalid: must be a finite number in [0.01, 2500]",
+        );
+    }
+    let mut args = simulate(&[]);
+    args.extend(["--material-file", path]);
+    let stderr = String::from_utf8_lossy(&thermode(&args).stderr).to_string();
+    assert_eq!(stderr.matches("is invalid").count(), 1, "said once: {stderr}");
+    expect_error(
+        &["render", "--material", "wood", "--object-temp", "-300", "--out", out],
+        "object temperature [°C]` = -300",
+    );
+    expect_error(
+        &["render", "--material", "wood", "--max-rate", "301", "--out", out],
+        "max_setpoint_rate",
+    );
+    assert!(!csv.exists(), "a refused run left {}", csv.display());
+}
+
+#[test]
+fn work_too_large_for_memory_is_refused_before_it_starts() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let csv = dir.path().join("big.csv");
+    let out = csv.to_str().expect("path");
+    // 3000 s at 100 kHz: 3e8 rows, about 46 GB; aborted on a failed allocation before.
+    let args = [
+        "render",
+        "--material",
+        "wood",
+        "--duration",
+        "3000",
+        "--rate",
+        "100000",
+        "--out",
+        out,
+    ];
+    let started = std::time::Instant::now();
+    expect_error(&args, "more than the 1074 MB one command may use");
+    expect_error(&args, "use a lower tick rate, a shorter duration or fewer runs");
+    // Refused up front, not after rendering (a generous bound: the run itself would take hours).
+    assert!(started.elapsed().as_secs() < 60, "took {:?}", started.elapsed());
+    // The case (an hour at 100 kHz, 3.6e8 rows): refused for its memory, not aborted.
+    expect_error(
+        &[
+            "render",
+            "--material",
+            "wood",
+            "--duration",
+            "3599",
+            "--rate",
+            "100000",
+            "--out",
+            out,
+        ],
+        "more than the 1074 MB one command may use",
+    );
+    // Over the one-hour duration range the duration is refused first.
+    expect_error(
+        &["render", "--material", "wood", "--duration", "3601", "--out", out],
+        "duration [s]` = 3601",
+    );
+    // Ten runs that each fit but not together.
+    expect_error(
+        &[
+            "render",
+            "--material",
+            "all-paper",
+            "--controller",
+            "both",
+            "--duration",
+            "3500",
+            "--rate",
+            "1000",
+            "--out",
+            out,
+        ],
+        "10 run(s)",
+    );
+    // fv keeps two refinement levels of every row: an hour at 0.4 ms is about 2.4 GB.
+    expect_error(
+        &[
+            "simulate",
+            "--material",
+            "wood",
+            "--model",
+            "fv",
+            "--duration",
+            "3600",
+            "--dt",
+            "0.0004",
+            "--out",
+            out,
+        ],
+        "more than the 1074 MB",
+    );
+    assert!(!csv.exists(), "a refused run left {}", csv.display());
+}
+
+#[test]
 fn render_summary_json_reports_the_judged_metrics_and_the_csv_has_the_documented_columns() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("render.csv");

@@ -46,7 +46,7 @@ fn default_file_is_the_generated_default() {
 fn every_key_is_documented_with_default_and_source() {
     let text = DeviceConfig::default().to_toml_string();
     let keys = DeviceConfig::keys();
-    assert_eq!(keys.len(), 16, "{keys:?}");
+    assert_eq!(keys.len(), 17, "{keys:?}");
     for full in keys {
         let (section, key) = full.split_once('.').unwrap_or(("", ""));
         assert!(text.contains(&format!("[{section}]")), "section {section} missing");
@@ -136,6 +136,7 @@ fn a_changed_config_round_trips_through_its_file() {
     c.sensor.noise_c = 1e-7;
     c.drive.current_limit_a = 3.1;
     c.ambient.water_c = 18.25;
+    c.render.max_setpoint_rate_c_per_s = 61.5;
     let back = DeviceConfig::from_toml_str(&c.to_toml_string(), "round.toml");
     assert_eq!(back, Ok(c));
 }
@@ -208,11 +209,27 @@ fn every_number_is_validated() {
         "sensor.sample_rate_hz",
         "drive.current_limit_a",
         "ambient.water_c",
+        "render.max_setpoint_rate_c_per_s",
     ] {
         let (section, key) = full.split_once('.').unwrap_or(("", ""));
         assert_eq!(bad_value_key(&format!("[{section}]\n{key} = 0")), full);
     }
     assert_eq!(bad_value_key("[ambient]\nwater_c = 100"), "ambient.water_c");
+    // Physical ranges (docs/ranges.md): beyond the compiled-in 300 °C/s; a contact better than a paste joint.
+    assert_eq!(
+        bad_value_key("[render]\nmax_setpoint_rate_c_per_s = 301"),
+        "render.max_setpoint_rate_c_per_s"
+    );
+    assert_eq!(
+        bad_value_key("[plate]\ncontact_conductance_w_m2k = 1e9"),
+        "plate.contact_conductance_w_m2k"
+    );
+    assert_eq!(
+        parse("[render]\nmax_setpoint_rate_c_per_s = 300")
+            .render
+            .max_setpoint_rate_c_per_s,
+        300.0
+    );
 }
 
 #[test]

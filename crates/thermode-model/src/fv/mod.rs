@@ -43,6 +43,7 @@ pub use run::{
 };
 
 use crate::error::{At, ParamError};
+use crate::limits;
 use crate::params::{BadValue, Rule};
 
 const ORIGIN: &str = "fv model";
@@ -105,10 +106,15 @@ pub enum FvEnvironment {
 }
 
 impl FvEnvironment {
-    /// Checks that the numbers are finite and the conductance not negative.
+    /// Checks that the numbers are finite, the air in [`limits::AMBIENT_TEMPERATURE`] and the conductance not
+    /// negative.
     pub fn validate(&self) -> Result<(), ParamError> {
         match *self {
-            FvEnvironment::Air { ambient_c } => Rule::Finite.check("ambient_c", ambient_c).at(ORIGIN).map(|_| ()),
+            FvEnvironment::Air { ambient_c } => limits::AMBIENT_TEMPERATURE
+                .rule()
+                .check("ambient_c", ambient_c)
+                .at(ORIGIN)
+                .map(|_| ()),
             FvEnvironment::Object => Ok(()),
             FvEnvironment::Plate {
                 conductance_w_m2k,

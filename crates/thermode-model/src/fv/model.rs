@@ -14,6 +14,7 @@ use super::grid::{centres_m, stack_cells, SizeRule, MAX_CELLS};
 use super::{DeepBoundary, FarSide, FvConfig, FvEnvironment, TimeScheme, ORIGIN};
 use crate::error::{At, ParamError};
 use crate::inverse::PlateCoupled;
+use crate::limits;
 use crate::materials::Material;
 use crate::params::Rule;
 use crate::skin::Skin;
@@ -250,9 +251,13 @@ impl FvModel {
     }
 
     /// Touches the object: it becomes uniform at `object_c` \[°C\] and the environment becomes
-    /// [`FvEnvironment::Object`]. Errors if the model has no object or `object_c` is not finite.
+    /// [`FvEnvironment::Object`]. Errors if the model has no object or `object_c` is outside
+    /// [`limits::OBJECT_TEMPERATURE`].
     pub fn touch(&mut self, object_c: f64) -> Result<(), ParamError> {
-        Rule::Finite.check("object_c", object_c).at(ORIGIN)?;
+        limits::OBJECT_TEMPERATURE
+            .rule()
+            .check("object_c", object_c)
+            .at(ORIGIN)?;
         if self.object.is_none() {
             return Err(ParamError::Invalid {
                 origin: ORIGIN.to_string(),
@@ -379,8 +384,14 @@ impl FvModel {
     /// model in that state. Returns the scale. Errors, leaving the model unchanged, if the surface temperature cannot
     /// be reached with a scale between 0 and 1e6.
     pub fn calibrate_to_surface(&mut self, ambient_c: f64, surface_c: f64) -> Result<f64, ParamError> {
-        Rule::Finite.check("ambient_c", ambient_c).at(ORIGIN)?;
-        Rule::Finite.check("surface_c", surface_c).at(ORIGIN)?;
+        limits::AMBIENT_TEMPERATURE
+            .rule()
+            .check("ambient_c", ambient_c)
+            .at(ORIGIN)?;
+        limits::SKIN_TEMPERATURE
+            .rule()
+            .check("surface_c", surface_c)
+            .at(ORIGIN)?;
         let saved = (
             self.skin_t.clone(),
             self.object_t.clone(),

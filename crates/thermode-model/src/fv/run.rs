@@ -3,6 +3,7 @@
 
 use super::{bad, FvConfig, FvEnvironment, FvModel};
 use crate::error::{At, ParamError};
+use crate::limits;
 use crate::materials::Material;
 use crate::params::Rule;
 use crate::skin::Skin;
@@ -55,20 +56,32 @@ impl Default for ContactSpec {
 }
 
 impl ContactSpec {
-    /// Checks the numbers: temperatures finite, duration and output interval positive, at most 10⁷ output rows.
+    /// Checks the numbers against their physical ranges ([`crate::limits`]: ambient, object and initial skin
+    /// temperature, duration), the output interval positive, at most 10⁷ output rows.
     pub fn validate(&self) -> Result<(), ParamError> {
         const ORIGIN: &str = "fv contact";
-        Rule::Finite.check("ambient_c", self.ambient_c).at(ORIGIN)?;
-        Rule::Finite.check("object_c", self.object_c).at(ORIGIN)?;
+        limits::AMBIENT_TEMPERATURE
+            .rule()
+            .check("ambient_c", self.ambient_c)
+            .at(ORIGIN)?;
+        limits::OBJECT_TEMPERATURE
+            .rule()
+            .check("object_c", self.object_c)
+            .at(ORIGIN)?;
         Rule::Positive.check("duration_s", self.duration_s).at(ORIGIN)?;
+        limits::DURATION
+            .rule()
+            .check("duration_s", self.duration_s)
+            .at(ORIGIN)?;
         Rule::Positive.check("output_dt_s", self.output_dt_s).at(ORIGIN)?;
+        let skin = limits::SKIN_TEMPERATURE.rule();
         match self.initial {
             InitialState::SteadyInAir => {}
             InitialState::Uniform { temperature_c } => {
-                Rule::Finite.check("initial temperature_c", temperature_c).at(ORIGIN)?;
+                skin.check("initial temperature_c", temperature_c).at(ORIGIN)?;
             }
             InitialState::RestingSurface { surface_c } => {
-                Rule::Finite.check("initial surface_c", surface_c).at(ORIGIN)?;
+                skin.check("initial surface_c", surface_c).at(ORIGIN)?;
             }
         }
         if self.duration_s / self.output_dt_s > 1e7 {

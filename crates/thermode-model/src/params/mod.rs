@@ -144,7 +144,7 @@ impl Range {
 
 /// A refused number: what it is (a key or a description, with its unit), the value, and the rule it breaks.
 #[derive(Debug, Clone, PartialEq, Error)]
-#[error("`{name}` = {value} is invalid: {rule}")]
+#[error("`{name}` = {} is invalid: {rule}", Shown(*value))]
 pub struct BadValue {
     /// What the number is: a file key (`conductivity_w_mk`) or a description with its unit.
     pub name: Cow<'static, str>,
@@ -152,6 +152,21 @@ pub struct BadValue {
     pub value: f64,
     /// The rule it breaks.
     pub rule: Rule,
+}
+
+/// A number as an error message shows it: as Rust writes it, except that very large and very small magnitudes
+/// (from 1e15, below 1e-6) are written in exponent form (`1e300`, not three hundred digits).
+struct Shown(f64);
+
+impl fmt::Display for Shown {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let magnitude = self.0.abs();
+        if magnitude.is_finite() && (magnitude >= 1e15 || (magnitude > 0.0 && magnitude < 1e-6)) {
+            write!(f, "{:e}", self.0)
+        } else {
+            write!(f, "{}", self.0)
+        }
+    }
 }
 
 impl BadValue {

@@ -30,6 +30,26 @@ pub struct Spellings {
     pub to_si: fn(f64) -> f64,
 }
 
+impl Spellings {
+    /// `rule`, a rule on the SI value, as a rule on the cgs value: the bounds of [`Rule::Within`] and
+    /// [`Rule::Between`] divided by the conversion factor (the conversions are proportional); other rules hold in
+    /// either unit as they are.
+    pub fn cgs_rule(self, rule: Rule) -> Rule {
+        let factor = (self.to_si)(1.0);
+        match rule {
+            Rule::Within { min, max } => Rule::Within {
+                min: min / factor,
+                max: max / factor,
+            },
+            Rule::Between { min, max } => Rule::Between {
+                min: min / factor,
+                max: max / factor,
+            },
+            other => other,
+        }
+    }
+}
+
 /// Thermal conductivity: `conductivity_w_mk` [W/(m·K)] or `conductivity_cal_cm_s_c` [cal/(cm·s·°C)].
 pub const CONDUCTIVITY: Spellings = Spellings {
     si: "conductivity_w_mk",
@@ -173,9 +193,14 @@ impl<'a> Table<'a> {
     }
 
     /// A quantity given in exactly one of its two [`Spellings`] (the cgs value converted to SI), checked with
-    /// `rule` as written. Neither spelling is `None`; both are a [`ParamError::BothSpellings`].
+    /// `rule`, a rule on the SI value: a cgs value is checked against the same bounds converted to its unit, so
+    /// the error shows the number as written with bounds in that unit. Neither spelling is `None`; both are a
+    /// [`ParamError::BothSpellings`].
     pub fn either(&self, spellings: Spellings, rule: Rule) -> Result<Option<f64>, ParamError> {
-        match (self.number(spellings.si, rule)?, self.number(spellings.cgs, rule)?) {
+        match (
+            self.number(spellings.si, rule)?,
+            self.number(spellings.cgs, spellings.cgs_rule(rule))?,
+        ) {
             (Some(v), None) => Ok(Some(v)),
             (None, Some(v)) => Ok(Some((spellings.to_si)(v))),
             (Some(_), Some(_)) => Err(ParamError::BothSpellings {
@@ -307,6 +332,24 @@ mod tests {
         );
         assert_eq!(top.finish(), Ok(()));
         assert!(matches!(parse("a = ", "g.toml"), Err(ParamError::Syntax { origin, .. }) if origin == "g.toml"));
+    }
+
+    #[test]
+    fn a_range_applies_to_the_cgs_spelling_in_its_own_unit() {
+        let within = Rule::Within { min: 0.01, max: 2500.0 };
+        // 0.526 cal/(cm·s·°C) is 220 W/(m·K): inside, although 0.526 would be "inside" either way; 10 cal/(cm·s·°C)
+        // is 4187 W/(m·K): beyond diamond, refused with the bound in cal/(cm·s·°C).
+        let toml = parse("conductivity_cal_cm_s_c = 0.526\n", "m.toml").expect("valid");
+        let got = Table::new(&toml, "m.toml").required_either(CONDUCTIVITY, within);
+        assert!(got.as_ref().is_ok_and(|k| (k - 220.22).abs() < 0.01), "{got:?}");
+        let toml = parse("conductivity_cal_cm_s_c = 10\n", "m.toml").expect("valid");
+        let error = Table::new(&toml, "m.toml")
+            .required_either(CONDUCTIVITY, within)
+            .expect_err("4187 W/(m·K)");
+        assert_eq!(error.bad_key(), Some("conductivity_cal_cm_s_c"));
+        let bound = 2500.0 / 418.68;
+        assert!(error.to_string().contains(&format!("{bound}")), "{error}");
+        assert_eq!(CONDUCTIVITY.cgs_rule(Rule::Positive), Rule::Positive);
     }
 
     #[test]

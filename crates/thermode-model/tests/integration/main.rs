@@ -5,3 +5,4 @@ mod fv_physics;
 mod fv_replace_object;
 mod kron_physics;
 mod peltier_physics;
+mod ranges;

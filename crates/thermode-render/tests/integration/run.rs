@@ -157,6 +157,81 @@ fn no_controller_beats_the_actuator_limit() {
 }
 
 #[test]
+fn the_floor_is_held_by_the_envelope_rate_limit_when_it_binds() {
+    // Aluminium, model controller, default display. At the device's 20 °C/s the plate (about 13 °C/s at full
+    // current) and not the envelope binds; at 5 °C/s the envelope does, and the floor (the best any controller can
+    // do inside the envelope) must say so: higher than the actuator's floor, and still below what the controller
+    // reaches.
+    let runs: Vec<_> = [None, Some(5.0)]
+        .into_iter()
+        .map(|rate| {
+            let mut s = spec(ShippedDisplay::Default, ControllerKind::Model, "aluminium");
+            if let Some(rate) = rate {
+                s.pipeline.envelope = thermode_pipeline::pipeline::render_envelope_with_rate(rate);
+            }
+            s.duration_s = 10.0;
+            s
+        })
+        .collect();
+    let runs = render_all(&runs).unwrap_or_else(|e| panic!("{e}"));
+    let figures = |i: usize| {
+        let s = &runs[i].summary;
+        (
+            s.actuator_limit_rms_c.unwrap_or(f64::NAN),
+            s.actuator_limit_lag_s.unwrap_or(f64::NAN),
+            s.rms_skin_0_90_c.unwrap_or(f64::NAN),
+            s.lag_s.unwrap_or(f64::NAN),
+        )
+    };
+    let (floor_20, limit_20, _, _) = figures(0);
+    let (floor_5, limit_5, rms_5, lag_5) = figures(1);
+    assert!(
+        floor_5 > 1.5 * floor_20 && limit_5 > 2.0 * limit_20,
+        "at 5 °C/s floor {floor_5} °C, limit lag {limit_5} s; at 20 °C/s floor {floor_20} °C, limit lag {limit_20} s"
+    );
+    // A controller inside the same envelope cannot beat it (one tick of slack for the lag).
+    assert!(
+        rms_5 >= floor_5 - 1e-3,
+        "controller rms {rms_5} °C below the floor {floor_5} °C"
+    );
+    assert!(
+        lag_5 >= limit_5 - 0.01,
+        "controller lag {lag_5} s beats the limit {limit_5} s"
+    );
+    // With the rate limit binding, the ideal plate falls no faster than the envelope's ramp: half the 5.2 °C drop
+    // of the target at 5 °C/s takes at least about half a second of ramp.
+    assert!(limit_5 > 0.5, "limit lag {limit_5} s at 5 °C/s");
+}
+
+#[test]
+fn work_beyond_the_memory_cap_is_refused_before_any_run_starts() {
+    let mut big = spec(ShippedDisplay::Default, ControllerKind::Model, "wood");
+    big.duration_s = 3000.0;
+    big.rate_hz = 100_000.0;
+    assert!(
+        big.result_bytes() > thermode_model::limits::MAX_RESULT_BYTES,
+        "{} B",
+        big.result_bytes()
+    );
+    match render(&big) {
+        Err(thermode_render::RenderError::TooLarge(message)) => {
+            assert!(message.contains("MB"), "{message}")
+        }
+        other => panic!("expected TooLarge, got {:?}", other.map(|r| r.summary)),
+    }
+    // Each fits alone; ten together do not.
+    let mut hour = spec(ShippedDisplay::Default, ControllerKind::Model, "wood");
+    hour.duration_s = 3500.0;
+    hour.rate_hz = 1000.0;
+    assert_eq!(hour.validate(), Ok(()));
+    let ten = vec![hour; 10];
+    assert!(matches!(
+        render_all(&ten),
+        Err(thermode_render::RenderError::TooLarge(_))
+    ));
+}
+
+#[test]
 fn plant_substep_convergence() {
     // With a noiseless, unquantised sensor (else a different substep flips quantised readings and the loop's
     // response to that masks the plant's error) the skin trajectory converges at first order in the plant

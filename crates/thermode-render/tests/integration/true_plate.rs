@@ -7,6 +7,7 @@
 
 use crate::common::{pid, spec};
 
+use thermode_pipeline::pipeline::render_envelope_with_rate;
 use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
 use thermode_pipeline::{ControllerKind, ShippedDisplay};
 use thermode_render::run::render_all;
@@ -32,7 +33,8 @@ fn the_true_plate_stays_inside_the_display_range_for_every_controller() {
                         s.object_c = Some(object_c);
                         s.duration_s = 12.0;
                         if let Some(rate) = rate_c_per_s {
-                            s.pipeline.envelope.max_setpoint_rate_c_per_s = rate;
+                            // The rendering envelope at that rate (its measured-rate bound stays above it).
+                            s.pipeline.envelope = render_envelope_with_rate(rate);
                         }
                         specs.push((display, s));
                     }

@@ -8,8 +8,9 @@
 //! carry it back unchanged). Unknown fields are refused (`unknown_field`), so a misspelt key never goes unnoticed.
 
 use serde_json::{json, Map, Value};
+use thermode_model::limits;
 use thermode_model::materials::{self, Material, DEFAULT_THICKNESS_M};
-use thermode_model::params::{BadValue, Range, Rule};
+use thermode_model::params::{BadValue, Range};
 
 use crate::command::{Command, Owner};
 use crate::engine::Stimulus;
@@ -122,14 +123,6 @@ pub struct RequestLimits {
     pub default_object_c: f64,
 }
 
-/// Largest accepted thermal conductivity \[W/(m·K)\] (diamond is about 2200).
-pub const MAX_CONDUCTIVITY_W_MK: f64 = 5000.0;
-/// Largest accepted density \[kg/m³\] (osmium is about 22 600).
-pub const MAX_DENSITY_KG_M3: f64 = 25_000.0;
-/// Largest accepted specific heat \[J/(kg·K)\] (hydrogen gas is about 14 300).
-pub const MAX_SPECIFIC_HEAT_J_KGK: f64 = 20_000.0;
-/// Largest accepted object thickness \[m\].
-pub const MAX_THICKNESS_M: f64 = 1.0;
 /// Slowest telemetry subscription \[Hz\] (one message every 100 s).
 pub const MIN_SUBSCRIBE_HZ: f64 = 0.01;
 /// Longest accepted `id` string \[characters\].
@@ -363,24 +356,19 @@ fn material_from_properties(value: &Value) -> Result<Material, ApiError> {
         None => "custom".to_string(),
         Some(_) => label(fields.string("name")?)?,
     };
-    let positive = |key: &'static str, max: f64| -> Result<f64, ApiError> {
-        let value = Rule::Positive.check(key, fields.number(key)?)?;
-        Ok(Range {
-            name: key,
-            min: 0.0,
-            max,
-        }
-        .check(value)?)
+    // The physical ranges of material properties (docs/ranges.md), as for material files.
+    let property = |key: &'static str, range: Range| -> Result<f64, ApiError> {
+        Ok(range.rule().check(key, fields.number(key)?)?)
     };
     let thickness_m = match map.get("thickness_m") {
         None => DEFAULT_THICKNESS_M,
-        Some(_) => positive("thickness_m", MAX_THICKNESS_M)?,
+        Some(_) => property("thickness_m", limits::OBJECT_THICKNESS)?,
     };
     let material = Material {
         name,
-        conductivity_w_mk: positive("conductivity_w_mk", MAX_CONDUCTIVITY_W_MK)?,
-        density_kg_m3: positive("density_kg_m3", MAX_DENSITY_KG_M3)?,
-        specific_heat_j_kgk: positive("specific_heat_j_kgk", MAX_SPECIFIC_HEAT_J_KGK)?,
+        conductivity_w_mk: property("conductivity_w_mk", limits::CONDUCTIVITY)?,
+        density_kg_m3: property("density_kg_m3", limits::DENSITY)?,
+        specific_heat_j_kgk: property("specific_heat_j_kgk", limits::SPECIFIC_HEAT)?,
         thickness_m,
         source: "contact API properties".to_string(),
     };

@@ -442,7 +442,7 @@ fn refusals(
 fn a_stimulus_beyond_the_channels_limits_is_refused_identically_over_websocket_and_osc() {
     let daemon = start(test_config(), SpyDevice::new(5), pipelines());
     let addr = daemon.http_addr();
-    let envelope = thermode_pipeline::pipeline::render_envelope();
+    let envelope = thermode_pipeline::pipeline::render_envelope(&thermode_device::DeviceConfig::default());
     let too_fast = envelope.max_setpoint_rate_c_per_s + 5.0;
     let (ws, osc) = refusals(
         &daemon,
@@ -451,8 +451,8 @@ fn a_stimulus_beyond_the_channels_limits_is_refused_identically_over_websocket_a
         &[OscArg::Float(30.0), OscArg::Float(too_fast as f32)],
     );
     assert_eq!(ws, osc, "a too fast ramp");
-    assert!(ws.contains("direct rate"), "{ws}");
-    let too_hot = thermode_pipeline::stimulus::MAX_OBJECT_C + 1.0;
+    assert!(ws.contains("set-point rate"), "{ws}");
+    let too_hot = thermode_pipeline::stimulus::OBJECT_TEMPERATURE.max + 1.0;
     let (ws, osc) = refusals(
         &daemon,
         &format!(r#"{{"type":"touch","id":2,"channel":1,"material":"wood","object_temp_c":{too_hot}}}"#),
@@ -512,8 +512,8 @@ fn the_status_limits_are_those_of_the_envelope_the_channels_run() {
     assert_eq!(
         [published("object_temp_min_c"), published("object_temp_max_c")],
         [
-            thermode_pipeline::stimulus::MIN_OBJECT_C,
-            thermode_pipeline::stimulus::MAX_OBJECT_C
+            thermode_pipeline::stimulus::OBJECT_TEMPERATURE.min,
+            thermode_pipeline::stimulus::OBJECT_TEMPERATURE.max
         ],
         "{limits}"
     );
@@ -529,5 +529,31 @@ fn the_status_limits_are_those_of_the_envelope_the_channels_run() {
             let text = format!(r#"{{"type":"setpoint","id":{i},"channel":1,"temp_c":{temp_c},"rate_c_s":{rate_c_s}}}"#);
             assert_eq!(ask(&mut ws, &text).await["code"], "bad_value", "{text}");
         }
+    });
+}
+
+#[test]
+fn the_status_reports_the_rendering_rate_of_the_device_file() {
+    use thermode_device::DeviceConfig;
+    use thermode_pipeline::{ControllerKind, PipelineConfig};
+    // A display with a stronger module renders at 60 °C/s (its device file's render.max_setpoint_rate_c_per_s):
+    // that is the rate its channels enforce, so it is what /api/status publishes and what a ramp may ask for.
+    let device = DeviceConfig::from_toml_str("[render]\nmax_setpoint_rate_c_per_s = 60\n", "fast.toml")
+        .unwrap_or_else(|e| panic!("{e}"));
+    let pipeline = PipelineConfig::new(device, ControllerKind::Model);
+    assert_eq!(pipeline.envelope.max_setpoint_rate_c_per_s, 60.0);
+    let engines = thermode_runtime::engine::pipeline_engines(pipeline);
+    let daemon = start(test_config(), SpyDevice::new(1), engines);
+    let addr = daemon.http_addr();
+    let published = status_of(addr)["limits"]["max_rate_c_s"].as_f64().unwrap_or(f64::NAN);
+    assert_eq!(published, 60.0, "published rate limit");
+    client_runtime().block_on(async {
+        let mut ws = ws_connect(addr, "").await;
+        let fast = r#"{"type":"setpoint","id":1,"channel":0,"temp_c":30,"rate_c_s":55}"#;
+        let reply = ask(&mut ws, fast).await;
+        assert_eq!(reply["type"], "ok", "{reply}");
+        let too_fast = r#"{"type":"setpoint","id":2,"channel":0,"temp_c":30,"rate_c_s":61}"#;
+        let reply = ask(&mut ws, too_fast).await;
+        assert_eq!(reply["code"], "bad_value", "{reply}");
     });
 }

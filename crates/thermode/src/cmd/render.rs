@@ -9,7 +9,7 @@ use clap::{Args, ValueEnum};
 use thermode_control::PidGains;
 use thermode_device::DeviceConfig;
 use thermode_pipeline::controllers::GainsSource;
-use thermode_pipeline::pipeline::RENDER_MAX_RATE_C_PER_S;
+use thermode_pipeline::pipeline::render_envelope_with_rate;
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, RendererKind};
 use thermode_plot::write_figure;
 use thermode_render::figure::figure3;
@@ -103,9 +103,10 @@ pub struct RenderArgs {
     /// Tick rate of the pipeline [Hz].
     #[arg(long, value_name = "HZ", default_value_t = DEFAULT_RATE_HZ, allow_negative_numbers = true)]
     rate: f64,
-    /// Set-point rate limit of the safety envelope [°C/s] (at most 20).
-    #[arg(long = "max-rate", value_name = "C_PER_S", default_value_t = RENDER_MAX_RATE_C_PER_S, allow_negative_numbers = true)]
-    max_rate: f64,
+    /// Set-point rate limit of the safety envelope [°C/s], at most 300; default: the device file's
+    /// render.max_setpoint_rate_c_per_s (20 for the default display).
+    #[arg(long = "max-rate", value_name = "C_PER_S", allow_negative_numbers = true)]
+    max_rate: Option<f64>,
     /// Seed of the simulated sensor noise.
     #[arg(long, value_name = "N", default_value_t = thermode_render::run::DEFAULT_SEED)]
     seed: u64,
@@ -188,7 +189,9 @@ fn specs(args: &RenderArgs) -> Result<Vec<RenderSpec>> {
         for material in &materials {
             let mut pipeline = PipelineConfig::new(device, controller);
             pipeline.renderer = args.model.into();
-            pipeline.envelope.max_setpoint_rate_c_per_s = args.max_rate;
+            if let Some(rate) = args.max_rate {
+                pipeline.envelope = render_envelope_with_rate(rate);
+            }
             let mut spec = RenderSpec::new(pipeline, material.clone());
             spec.finger_skin = finger_skin.clone();
             spec.finger_contact_w_m2k = args.finger_contact;
@@ -203,6 +206,8 @@ fn specs(args: &RenderArgs) -> Result<Vec<RenderSpec>> {
             specs.push(spec);
         }
     }
+    // All runs are held in memory together: refuse work that would not fit before any of it starts.
+    thermode_render::run::check_result_bytes(&specs)?;
     Ok(specs)
 }
 
@@ -233,9 +238,31 @@ mod tests {
         assert_eq!(specs[9].pipeline.controller.name(), "model");
         assert_eq!(specs[4].material.name, "rubber");
         assert_eq!(
-            specs[0].pipeline.envelope.max_setpoint_rate_c_per_s,
-            RENDER_MAX_RATE_C_PER_S
+            specs[0].pipeline.envelope,
+            thermode_pipeline::pipeline::render_envelope(&DeviceConfig::default())
         );
+        assert_eq!(specs[0].pipeline.envelope.max_setpoint_rate_c_per_s, 20.0);
+    }
+
+    #[test]
+    fn the_rate_limit_follows_the_device_file_unless_given() {
+        let dir = std::env::temp_dir().join(format!("thermode-render-rate-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let device = dir.join("fast.toml");
+        std::fs::write(&device, "[render]\nmax_setpoint_rate_c_per_s = 60\n").unwrap_or_else(|e| panic!("{e}"));
+        let path = device.to_string_lossy().to_string();
+        let rate = |extra: &[&str]| {
+            let mut args = vec!["--material", "wood", "--device-file", path.as_str()];
+            args.extend_from_slice(extra);
+            let specs = specs(&parse(&args)).unwrap_or_else(|e| panic!("{e:#}"));
+            let envelope = specs[0].pipeline.envelope;
+            (envelope.max_setpoint_rate_c_per_s, envelope.max_measured_rate_c_per_s)
+        };
+        // The measured-rate plausibility bound stays 2.5 times above the set-point rate limit.
+        assert_eq!(rate(&[]), (60.0, 150.0));
+        assert_eq!(rate(&["--max-rate", "300"]), (300.0, 750.0));
+        assert_eq!(rate(&["--max-rate", "5"]), (5.0, 50.0));
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]
@@ -249,7 +276,9 @@ mod tests {
         assert!(err(&["--material", "wood", "--finger-contact", "-5"]).contains("contact"));
         assert!(err(&["--material", "wood", "--pre-contact", "-1"]).contains("pre-contact"));
         assert!(err(&["--material", "wood", "--rate", "0"]).contains("rate"));
-        assert!(err(&["--material", "wood", "--max-rate", "50"]).contains("max_setpoint_rate"));
+        assert!(err(&["--material", "wood", "--max-rate", "301"]).contains("max_setpoint_rate"));
+        assert!(err(&["--material", "wood", "--object-temp", "-300"]).contains("object temperature"));
+        assert!(err(&["--material", "wood", "--duration", "3000", "--rate", "100000"]).contains("memory"));
         assert!(err(&["--material", "wood", "--release-at", "100"]).contains("release"));
         assert!(err(&["--material", "wood", "--device-file", "/nonexistent/device.toml"]).contains("cannot read"));
     }

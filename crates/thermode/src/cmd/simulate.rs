@@ -4,8 +4,9 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
+use thermode_model::limits;
 use thermode_model::materials::Material;
 use thermode_model::simulate::{simulate, Initial, ModelKind, SimulationSpec, Trace};
 use thermode_plot::{write_figure, Figure, Panel, Series, SeriesStyle};
@@ -88,9 +89,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     let materials = resolve::materials(&args.materials, &args.material_files)?;
     let skin = resolve::skin(args.skin.as_deref())?;
     let initial: Initial = args.initial.parse()?;
-    let mut traces = Vec::with_capacity(materials.len());
-    for material in materials {
-        let spec = SimulationSpec {
+    let specs: Vec<SimulationSpec> = materials
+        .into_iter()
+        .map(|material| SimulationSpec {
             model: args.model.into(),
             skin: skin.clone(),
             duration_s: args.duration,
@@ -100,11 +101,27 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             initial,
             contact_resistance_m2k_w: args.contact_resistance,
             display_conductance_w_m2k: args.display_conductance,
-            ..SimulationSpec::new(args.model.into(), material.clone())
-        };
-        let trace = simulate(&spec).with_context(|| format!("simulating {}", material.name))?;
-        eprintln!("{}: {}", material.name, trace.resolution);
-        traces.push((material, trace));
+            ..SimulationSpec::new(args.model.into(), material)
+        })
+        .collect();
+    // Every number is checked, and the results of all materials (held together until written) must fit in
+    // memory, before the first simulation starts.
+    for spec in &specs {
+        spec.validate()
+            .with_context(|| format!("simulating {}", spec.material.name))?;
+    }
+    let bytes = specs.iter().fold(0u64, |sum, s| sum.saturating_add(s.result_bytes()));
+    if let Err(message) = limits::check_result_bytes(bytes) {
+        bail!(
+            "simulating {} material(s): {message}: use a longer --dt, a shorter --duration or fewer materials",
+            specs.len()
+        );
+    }
+    let mut traces = Vec::with_capacity(specs.len());
+    for spec in specs {
+        let trace = simulate(&spec).with_context(|| format!("simulating {}", spec.material.name))?;
+        eprintln!("{}: {}", spec.material.name, trace.resolution);
+        traces.push((spec.material, trace));
     }
     if let Some(path) = &args.out {
         write_csv(path, &traces)?;
