@@ -61,14 +61,16 @@ pub use thermode_model::limits::AMBIENT_TEMPERATURE;
 /// keeps the same margin for a plate that follows its set-point with sensor noise on top.
 pub const MEASURED_RATE_PER_SETPOINT_RATE: f64 = 2.5;
 
-/// The safety envelope of a pipeline that renders with the set-point rate limit `max_rate_c_per_s` \[°C/s\]:
-/// [`EnvelopeConfig::default`] with that limit and the measured-rate plausibility bound raised to
-/// [`MEASURED_RATE_PER_SETPOINT_RATE`] times it where that exceeds the default. The limit is checked when the
-/// envelope is validated (at most the compiled-in [`thermode_safety::ABSOLUTE_MAX_RATE_C_PER_S`]).
-pub fn render_envelope_with_rate(max_rate_c_per_s: f64) -> EnvelopeConfig {
+/// The safety envelope of a pipeline that renders on `device` with the set-point rate limit `max_rate_c_per_s`
+/// \[°C/s\]: [`EnvelopeConfig::default`] with that limit, the measured-rate plausibility bound raised to
+/// [`MEASURED_RATE_PER_SETPOINT_RATE`] times it where that exceeds the default, and the device's sensor time
+/// constant (the thermal dose is counted at the plate reconstructed from the sensor). The limit is checked when
+/// the envelope is validated (at most the compiled-in [`thermode_safety::ABSOLUTE_MAX_RATE_C_PER_S`]).
+pub fn render_envelope_with_rate(device: &DeviceConfig, max_rate_c_per_s: f64) -> EnvelopeConfig {
     let default = EnvelopeConfig::default();
     EnvelopeConfig {
         max_setpoint_rate_c_per_s: max_rate_c_per_s,
+        sensor_time_constant_s: device.sensor.time_constant_s,
         max_measured_rate_c_per_s: default
             .max_measured_rate_c_per_s
             .max(MEASURED_RATE_PER_SETPOINT_RATE * max_rate_c_per_s),
@@ -85,7 +87,7 @@ pub fn render_envelope_with_rate(max_rate_c_per_s: f64) -> EnvelopeConfig {
 /// 10 °C/s the envelope and not the actuator would limit the initial drop (figures in `docs/design-choices.md`),
 /// and a display with a stronger module needs a higher limit for the same reason.
 pub fn render_envelope(device: &DeviceConfig) -> EnvelopeConfig {
-    render_envelope_with_rate(device.render.max_setpoint_rate_c_per_s)
+    render_envelope_with_rate(device, device.render.max_setpoint_rate_c_per_s)
 }
 
 /// Half width of the band around the controller's plate estimate that a requested set-point is limited to \[°C\]:
@@ -129,10 +131,7 @@ impl PipelineConfig {
             device,
             renderer: RendererKind::Fv,
             controller,
-            envelope: EnvelopeConfig {
-                sensor_time_constant_s: device.sensor.time_constant_s,
-                ..render_envelope(&device)
-            },
+            envelope: render_envelope(&device),
             skin: Skin::fingertip(),
             ambient_c: 23.0,
             contact_resistance_m2k_w: LIGHT_TOUCH_RESISTANCE_M2K_W,

@@ -167,7 +167,7 @@ fn the_floor_is_held_by_the_envelope_rate_limit_when_it_binds() {
         .map(|rate| {
             let mut s = spec(ShippedDisplay::Default, ControllerKind::Model, "aluminium");
             if let Some(rate) = rate {
-                s.pipeline.envelope = thermode_pipeline::pipeline::render_envelope_with_rate(rate);
+                s.pipeline.envelope = thermode_pipeline::pipeline::render_envelope_with_rate(&s.pipeline.device, rate);
             }
             s.duration_s = 10.0;
             s

@@ -34,7 +34,7 @@ fn the_true_plate_stays_inside_the_display_range_for_every_controller() {
                         s.duration_s = 12.0;
                         if let Some(rate) = rate_c_per_s {
                             // The rendering envelope at that rate (its measured-rate bound stays above it).
-                            s.pipeline.envelope = render_envelope_with_rate(rate);
+                            s.pipeline.envelope = render_envelope_with_rate(&s.pipeline.device, rate);
                         }
                         specs.push((display, s));
                     }
@@ -61,6 +61,9 @@ fn the_true_plate_stays_inside_the_display_range_for_every_controller() {
             ));
         }
     }
+    let all = runs.iter().flat_map(|r| r.trajectory.display_c.iter().copied());
+    let (coldest_c, hottest_c) = all.fold((f64::MAX, f64::MIN), |(lo, hi), c| (lo.min(c), hi.max(c)));
+    println!("{} runs: true plate {coldest_c:.3}..{hottest_c:.3} °C", runs.len());
     assert!(
         failures.is_empty(),
         "{} of {} runs left the range:\n{}",

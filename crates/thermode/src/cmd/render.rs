@@ -190,7 +190,7 @@ fn specs(args: &RenderArgs) -> Result<Vec<RenderSpec>> {
             let mut pipeline = PipelineConfig::new(device, controller);
             pipeline.renderer = args.model.into();
             if let Some(rate) = args.max_rate {
-                pipeline.envelope = render_envelope_with_rate(rate);
+                pipeline.envelope = render_envelope_with_rate(&device, rate);
             }
             let mut spec = RenderSpec::new(pipeline, material.clone());
             spec.finger_skin = finger_skin.clone();
