@@ -7,6 +7,8 @@ use std::process::{Command, Output};
 
 // A module file, not a second test binary (Cargo builds every `tests/*.rs` as one).
 #[cfg(unix)]
+#[path = "cli/python_packages.rs"]
+mod python_packages;
 #[path = "cli/serve_on_emulator.rs"]
 mod serve_on_emulator;
 
