@@ -10,7 +10,7 @@
 
 use std::io::{self, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
@@ -79,6 +79,7 @@ pub struct FirmwareControl {
     stop: AtomicBool,
     close: AtomicBool,
     mute: AtomicBool,
+    corrupt_one_in: AtomicU64,
     status: Mutex<Option<FirmwareStatus>>,
 }
 
@@ -102,6 +103,12 @@ impl FirmwareControl {
     /// talkative again.
     pub fn set_mute(&self, mute: bool) {
         self.mute.store(mute, Ordering::SeqCst);
+    }
+
+    /// Corrupts one byte (its lowest bit flipped, in the middle) of every `n`-th write to the host from now on; 0
+    /// stops it. Deterministic, for tests of the host's CRC and format checks.
+    pub fn set_corrupt_one_in(&self, n: u64) {
+        self.corrupt_one_in.store(n, Ordering::SeqCst);
     }
 
     /// The latest published status (None before the first loop).
@@ -135,6 +142,7 @@ pub fn run_firmware<P: Read + Write>(
 ) -> Result<RunEnd, EmulatorError> {
     let mut buf = [0u8; 512];
     let mut out = Vec::with_capacity(4096);
+    let mut writes = 0u64;
     loop {
         if control.stop.load(Ordering::SeqCst) {
             return Ok(RunEnd::Stopped);
@@ -160,6 +168,12 @@ pub fn run_firmware<P: Read + Write>(
             out.clear();
         }
         if !out.is_empty() {
+            writes += 1;
+            let every = control.corrupt_one_in.load(Ordering::SeqCst);
+            if every > 0 && writes.is_multiple_of(every) {
+                let middle = out.len() / 2;
+                out[middle] ^= 0x01;
+            }
             let result = port.write_all(&out).and_then(|()| port.flush());
             out.clear();
             match result {

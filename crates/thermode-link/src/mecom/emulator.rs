@@ -14,7 +14,7 @@
 //! - the error state (status 3, output disabled, latched): the object reading above the upper threshold (error
 //!   138) or below the lower one (137), or no valid frame for longer than the watchdog timeout (183). It holds
 //!   until `RS` resets the device (volatile parameters back to their reset state) or the auto-restart delay passes;
-//! - answers: values, acknowledges (the set command's CRC), server errors (`+01` unknown command, `+04` format,
+//! - answers: values, acknowledges (the set command's CRC in place of a payload and frame CRC), server errors (`+01` unknown command, `+04` format,
 //!   `+05` unknown parameter, `+06` read only, `+07` out of range, `+08` no such instance). Frames with a bad CRC
 //!   or for another address get no answer, as on the device.
 //!
@@ -26,7 +26,7 @@
 use thermode_device::{Device, DeviceError, PlateFinger, SimulatedDisplay, MAX_CHANNELS};
 use thermode_model::peltier::PeltierModule;
 
-use super::frame::{encode_frame, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
+use super::frame::{encode_ack, encode_frame, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
 use super::payload::{error_number, param, status, Request};
 use crate::emulator::EmulatorError;
 use crate::firmware::{Firmware, FirmwareStatus};
@@ -335,7 +335,7 @@ impl<F: PlateFinger> MecomEmulator<F> {
             Ok(Request::Identify) => EMULATOR_IDENTITY.to_string(),
             Ok(Request::Reset) => {
                 self.reset(now_s);
-                format!("{crc:04X}")
+                String::new()
             }
             Ok(Request::Read { id, instance }) => match self.read(id, instance) {
                 Ok(bits) => format!("{bits:08X}"),
@@ -346,11 +346,16 @@ impl<F: PlateFinger> MecomEmulator<F> {
                 Err(code) => format!("+{code:02X}"),
             },
             Ok(Request::Set { id, instance, value }) => match self.set(id, instance, value) {
-                Ok(()) => format!("{crc:04X}"),
+                Ok(()) => String::new(),
                 Err(code) => format!("+{code:02X}"),
             },
         };
-        encode_frame(DEVICE_CONTROL, address, seq, &answer, out);
+        if answer.is_empty() {
+            // An acknowledge: the set command's CRC in place of a payload and frame CRC.
+            encode_ack(address, seq, crc, out);
+        } else {
+            encode_frame(DEVICE_CONTROL, address, seq, &answer, out);
+        }
         self.frames_out += 1;
     }
 

@@ -5,6 +5,12 @@
 //! initial value 0, not reflected, no final XOR) over every character before it as 4 hex digits, and a carriage
 //! return. Hex digits are upper case on the wire; the decoder also takes lower case.
 //!
+//! The one exception is the device's acknowledge of a set command (5117C §1.3.1): `!`, address, sequence number and
+//! the **set command's own CRC** in place of a payload and frame CRC (`!0015AE8F97` acknowledges
+//! `#0015AEVS07DA01000000028F97`). A device frame of exactly [`FRAME_OVERHEAD`] characters is such an acknowledge:
+//! its CRC field is not checked against its own characters but handed out as its payload, and the host compares it
+//! with the CRC of the request it answers ([`super::payload::check_answer`]).
+//!
 //! [`FrameDecoder`] takes bytes as they arrive and returns whole frames or a typed [`FrameError`]: it synchronises on
 //! the control character it expects, drops a frame longer than [`MAX_FRAME_LEN`], and never panics whatever the
 //! bytes.
@@ -94,6 +100,15 @@ pub fn encode_frame(control: u8, address: u8, seq: u16, payload: &str, out: &mut
     crc
 }
 
+/// Appends the device's acknowledge of the set command with CRC `set_crc` (no frame CRC of its own) to `out`.
+pub fn encode_ack(address: u8, seq: u16, set_crc: u16, out: &mut Vec<u8>) {
+    out.push(DEVICE_CONTROL);
+    push_hex(out, u32::from(address), 2);
+    push_hex(out, u32::from(seq), 4);
+    push_hex(out, u32::from(set_crc), 4);
+    out.push(END_OF_FRAME);
+}
+
 /// Appends `value` as `digits` upper-case hex digits (the low `4 × digits` bits).
 pub fn push_hex(out: &mut Vec<u8>, value: u32, digits: usize) {
     const HEX: &[u8; 16] = b"0123456789ABCDEF";
@@ -120,13 +135,15 @@ pub fn parse_frame(text: &[u8]) -> Result<Frame, FrameError> {
     }
     let body_end = text.len() - 4;
     let received = parse_hex(&text[body_end..]).ok_or(FrameError::NotHex { field: "CRC" })? as u16;
+    let acknowledge = text[0] == DEVICE_CONTROL && text.len() == FRAME_OVERHEAD;
     let computed = crc16(&text[..body_end]);
-    if received != computed {
+    if received != computed && !acknowledge {
         return Err(FrameError::Crc { received, computed });
     }
     let address = parse_hex(&text[1..3]).ok_or(FrameError::NotHex { field: "address" })? as u8;
     let seq = parse_hex(&text[3..7]).ok_or(FrameError::NotHex { field: "sequence number" })? as u16;
-    let payload = &text[7..body_end];
+    // An acknowledge's payload is the CRC it echoes.
+    let payload = if acknowledge { &text[body_end..] } else { &text[7..body_end] };
     if let Some(&byte) = payload.iter().find(|b| !(0x20..0x7F).contains(*b)) {
         return Err(FrameError::NotAscii { byte });
     }
@@ -258,7 +275,6 @@ mod tests {
             (HOST_CONTROL, 0x00, 0x15AB, "?VR006401", "#0015AB?VR0064018000\r"),
             (DEVICE_CONTROL, 0x00, 0x15AB, "00000441", "!0015AB000004411DBD\r"),
             (HOST_CONTROL, 0x00, 0x15AE, "VS07DA0100000002", "#0015AEVS07DA01000000028F97\r"),
-            (DEVICE_CONTROL, 0x00, 0x15AE, "8F97", "!0015AE8F97\r"),
             (HOST_CONTROL, 0x00, 0x15AB, "?VR03E801", "#0015AB?VR03E801C21A\r"),
             (DEVICE_CONTROL, 0x00, 0x15AB, "41CD2F28", "!0015AB41CD2F28D5C2\r"),
             (HOST_CONTROL, 0x00, 0x15B0, "VS0BB80141AE0000", "#0015B0VS0BB80141AE0000C482\r"),
@@ -269,6 +285,16 @@ mod tests {
             assert_eq!(got, expected, "frame of {payload:?}: got {got:?}, published {expected:?}");
         }
         assert_eq!(crc16(b"#0015AA?IF"), 0x62AE, "CRC of the identity query");
+        // Acknowledges echo the set command's CRC instead of a frame CRC of their own.
+        for (seq, set_crc, expected) in [(0x15AE, 0x8F97, "!0015AE8F97\r"), (0xBDE2, 0x9780, "!00BDE29780\r")] {
+            let mut out = Vec::new();
+            encode_ack(0, seq, set_crc, &mut out);
+            assert_eq!(String::from_utf8_lossy(&out), expected);
+            let mut decoder = FrameDecoder::new(DEVICE_CONTROL);
+            let mut got = Vec::new();
+            decoder.feed(&out, |r| got.push(r));
+            assert!(got[0].as_ref().is_ok_and(|f| f.payload == expected[7..11]), "{got:?}");
+        }
     }
 
     #[test]

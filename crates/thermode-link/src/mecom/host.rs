@@ -606,7 +606,8 @@ fn connect(
             link.set(probe, Request::Reset)
                 .map_err(|e| fail(format!("cannot reset address {address} from error {number}: {e}")))?;
             link.stats.reset_at_connect = Some(number);
-            std::thread::sleep(Duration::from_millis(300));
+            // No pause: the device restarts within 200 ms, and `?IF` until it answers also keeps a stored watchdog
+            // fed from its first moment.
             identify(link, address, deadline)?;
         }
     }
