@@ -76,7 +76,11 @@ fn number(spec: &str, key: &str, value: &str) -> Result<f64, DeviceError> {
 }
 
 /// The MeCom settings of `spec`'s options over the defaults of `context`.
-pub fn mecom_config(spec: &str, options: &[(&str, &str)], context: &HardwareContext) -> Result<MecomConfig, DeviceError> {
+pub fn mecom_config(
+    spec: &str,
+    options: &[(&str, &str)],
+    context: &HardwareContext,
+) -> Result<MecomConfig, DeviceError> {
     let mut config = MecomConfig {
         current_limit_a: context.device.drive.current_limit_a,
         voltage_limit_v: context.device.peltier.vmax_v,

@@ -193,7 +193,10 @@ impl<F: PlateFinger> MecomEmulator<F> {
         for i in 0..display.channel_count() {
             let channel = display.channel(i)?;
             let module = PeltierModule::from_datasheet(&channel.config().peltier).map_err(DeviceError::from)?;
-            instances.push(Instance::new(channel.config().drive.current_limit_a, module.resistance_ohm));
+            instances.push(Instance::new(
+                channel.config().drive.current_limit_a,
+                module.resistance_ohm,
+            ));
         }
         Ok(MecomEmulator {
             display,
@@ -385,10 +388,7 @@ impl<F: PlateFinger> MecomEmulator<F> {
     /// The 32 bits of parameter `id` of `instance`, or a server error code.
     fn read(&self, id: u16, instance: u8) -> Result<u32, u8> {
         let inst = *self.instance(instance)?;
-        let channel = self
-            .display
-            .channel(usize::from(instance) - 1)
-            .map_err(|_| 8u8)?;
+        let channel = self.display.channel(usize::from(instance) - 1).map_err(|_| 8u8)?;
         let state = channel.state();
         let f = |v: f64| Ok((v as f32).to_bits());
         let i = |v: i32| Ok(v as u32);
@@ -471,7 +471,13 @@ impl<F: PlateFinger> MecomEmulator<F> {
     fn set(&mut self, id: u16, instance: u8, value: u32) -> Result<(), u8> {
         let int = value as i32;
         let float = f32::from_bits(value);
-        let in_range = |v: f32, min: f32, max: f32| if v.is_finite() && v >= min && v <= max { Ok(v) } else { Err(7u8) };
+        let in_range = |v: f32, min: f32, max: f32| {
+            if v.is_finite() && v >= min && v <= max {
+                Ok(v)
+            } else {
+                Err(7u8)
+            }
+        };
         let choice = |v: i32, max: i32| if (0..=max).contains(&v) { Ok(v) } else { Err(7u8) };
         match id {
             100..=107 | 1000..=1099 => {

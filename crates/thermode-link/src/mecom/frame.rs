@@ -141,9 +141,15 @@ pub fn parse_frame(text: &[u8]) -> Result<Frame, FrameError> {
         return Err(FrameError::Crc { received, computed });
     }
     let address = parse_hex(&text[1..3]).ok_or(FrameError::NotHex { field: "address" })? as u8;
-    let seq = parse_hex(&text[3..7]).ok_or(FrameError::NotHex { field: "sequence number" })? as u16;
+    let seq = parse_hex(&text[3..7]).ok_or(FrameError::NotHex {
+        field: "sequence number",
+    })? as u16;
     // An acknowledge's payload is the CRC it echoes.
-    let payload = if acknowledge { &text[body_end..] } else { &text[7..body_end] };
+    let payload = if acknowledge {
+        &text[body_end..]
+    } else {
+        &text[7..body_end]
+    };
     if let Some(&byte) = payload.iter().find(|b| !(0x20..0x7F).contains(*b)) {
         return Err(FrameError::NotAscii { byte });
     }
@@ -274,15 +280,30 @@ mod tests {
             (DEVICE_CONTROL, 0x01, 0x15AC, "+05", "!0115AC+057509\r"),
             (HOST_CONTROL, 0x00, 0x15AB, "?VR006401", "#0015AB?VR0064018000\r"),
             (DEVICE_CONTROL, 0x00, 0x15AB, "00000441", "!0015AB000004411DBD\r"),
-            (HOST_CONTROL, 0x00, 0x15AE, "VS07DA0100000002", "#0015AEVS07DA01000000028F97\r"),
+            (
+                HOST_CONTROL,
+                0x00,
+                0x15AE,
+                "VS07DA0100000002",
+                "#0015AEVS07DA01000000028F97\r",
+            ),
             (HOST_CONTROL, 0x00, 0x15AB, "?VR03E801", "#0015AB?VR03E801C21A\r"),
             (DEVICE_CONTROL, 0x00, 0x15AB, "41CD2F28", "!0015AB41CD2F28D5C2\r"),
-            (HOST_CONTROL, 0x00, 0x15B0, "VS0BB80141AE0000", "#0015B0VS0BB80141AE0000C482\r"),
+            (
+                HOST_CONTROL,
+                0x00,
+                0x15B0,
+                "VS0BB80141AE0000",
+                "#0015B0VS0BB80141AE0000C482\r",
+            ),
             (DEVICE_CONTROL, 0x00, 0x15AC, "+05", "!0015AC+0532DA\r"),
         ];
         for (control, address, seq, payload, expected) in cases {
             let got = frame(control, address, seq, payload);
-            assert_eq!(got, expected, "frame of {payload:?}: got {got:?}, published {expected:?}");
+            assert_eq!(
+                got, expected,
+                "frame of {payload:?}: got {got:?}, published {expected:?}"
+            );
         }
         assert_eq!(crc16(b"#0015AA?IF"), 0x62AE, "CRC of the identity query");
         // Acknowledges echo the set command's CRC instead of a frame CRC of their own.
@@ -304,12 +325,29 @@ mod tests {
         decoder.feed(b"noise!0015AB41CD2F28D5C2\r!0015AB41CD2F28D5C3\r!00\r", |r| got.push(r));
         assert_eq!(got.len(), 3, "{got:?}");
         let first = got[0].clone().unwrap_or_else(|e| panic!("first frame: {e}"));
-        assert_eq!((first.address, first.seq, first.payload.as_str()), (0, 0x15AB, "41CD2F28"));
+        assert_eq!(
+            (first.address, first.seq, first.payload.as_str()),
+            (0, 0x15AB, "41CD2F28")
+        );
         assert_eq!(f32::from_bits(0x41CD2F28), 25.648026);
-        assert!(matches!(got[1], Err(FrameError::Crc { received: 0xD5C3, computed: 0xD5C2 })), "{:?}", got[1]);
+        assert!(
+            matches!(
+                got[1],
+                Err(FrameError::Crc {
+                    received: 0xD5C3,
+                    computed: 0xD5C2
+                })
+            ),
+            "{:?}",
+            got[1]
+        );
         assert!(matches!(got[2], Err(FrameError::TooShort { len: 3 })), "{:?}", got[2]);
         let c = decoder.counters();
-        assert_eq!((c.frames, c.crc_errors, c.malformed, c.skipped_bytes), (1, 1, 1, 5), "{c:?}");
+        assert_eq!(
+            (c.frames, c.crc_errors, c.malformed, c.skipped_bytes),
+            (1, 1, 1, 5),
+            "{c:?}"
+        );
     }
 
     #[test]

@@ -93,7 +93,8 @@ pub struct MecomConfig {
     pub discover_address: u8,
     /// Serial baud rate \[bit/s\]. Default [`DEFAULT_MECOM_BAUD_RATE`].
     pub baud_rate: u32,
-    /// Longest wait for an answer before the request is sent once more \[s\], in (0, 1]. Default 0.1.
+    /// Longest wait for an answer before the request is sent once more \[s\], in (0, 1]. Default 0.05 (a request and
+    /// its answer take about 7 ms at 57600 baud).
     pub answer_timeout_s: f64,
     /// Longest time for the connection and the configuration \[s\], wall clock, in (0, 60]. Default 3.
     pub handshake_timeout_s: f64,
@@ -127,7 +128,7 @@ impl Default for MecomConfig {
             channels: Vec::new(),
             discover_address: 0,
             baud_rate: DEFAULT_MECOM_BAUD_RATE,
-            answer_timeout_s: 0.1,
+            answer_timeout_s: 0.05,
             handshake_timeout_s: 3.0,
             link_timeout_s: 0.5,
             cycle_interval_s: 0.01,
@@ -623,15 +624,18 @@ fn connect(
     }
     for &address in &addresses {
         let probe = MecomChannel { address, instance: 1 };
-        link.set(probe, Request::set_f32(param::WATCHDOG_TIMEOUT, 1, config.watchdog_s as f32))
-            .map_err(|e| {
-                fail(format!(
-                    "address {address} did not take the communication watchdog (2060 = {} s): {e}. thermode drives \
+        link.set(
+            probe,
+            Request::set_f32(param::WATCHDOG_TIMEOUT, 1, config.watchdog_s as f32),
+        )
+        .map_err(|e| {
+            fail(format!(
+                "address {address} did not take the communication watchdog (2060 = {} s): {e}. thermode drives \
                      no TEC controller that keeps its output on when the host is gone: update its firmware, or \
                      use its hardware enable with a dead-man switch (docs/hardware.md)",
-                    config.watchdog_s
-                ))
-            })?;
+                config.watchdog_s
+            ))
+        })?;
     }
     for setup in &setups {
         let (device_status, number) = (
@@ -686,9 +690,18 @@ fn identity_text(link: &mut Link, address: u8) -> Option<String> {
 fn configure(link: &mut Link, config: &MecomConfig, channel: MecomChannel) -> Result<(), String> {
     let i = channel.instance;
     let mut steps: Vec<(&str, Request)> = vec![
-        ("output stage enable off (2010 = 0)", Request::set_i32(param::OUTPUT_STAGE_ENABLE, i, 0)),
-        ("live enable off (50000 = 0)", Request::set_i32(param::LIVE_ENABLE, i, 0)),
-        ("live set current 0 A (50001)", Request::set_f32(param::LIVE_SET_CURRENT, i, 0.0)),
+        (
+            "output stage enable off (2010 = 0)",
+            Request::set_i32(param::OUTPUT_STAGE_ENABLE, i, 0),
+        ),
+        (
+            "live enable off (50000 = 0)",
+            Request::set_i32(param::LIVE_ENABLE, i, 0),
+        ),
+        (
+            "live set current 0 A (50001)",
+            Request::set_f32(param::LIVE_SET_CURRENT, i, 0.0),
+        ),
         (
             "current limitation (2030)",
             Request::set_f32(param::CURRENT_LIMITATION, i, config.current_limit_a as f32),
@@ -709,7 +722,10 @@ fn configure(link: &mut Link, config: &MecomConfig, channel: MecomChannel) -> Re
             "max object temperature change (4012)",
             Request::set_f32(param::MAX_TEMP_CHANGE, i, config.max_change_c_per_s as f32),
         ),
-        ("no restart from the error state (6310 = 0)", Request::set_f32(param::ERROR_RESTART_DELAY, i, 0.0)),
+        (
+            "no restart from the error state (6310 = 0)",
+            Request::set_f32(param::ERROR_RESTART_DELAY, i, 0.0),
+        ),
     ];
     match config.mode {
         MecomMode::Current => {
@@ -717,21 +733,33 @@ fn configure(link: &mut Link, config: &MecomConfig, channel: MecomChannel) -> Re
                 "live set voltage at the limitation (50002)",
                 Request::set_f32(param::LIVE_SET_VOLTAGE, i, config.voltage_limit_v as f32),
             ));
-            steps.push(("input selection live current (2000 = 1)", Request::set_i32(param::INPUT_SELECTION, i, 1)));
+            steps.push((
+                "input selection live current (2000 = 1)",
+                Request::set_i32(param::INPUT_SELECTION, i, 1),
+            ));
         }
         MecomMode::Temperature => {
             let object_c = link
                 .read_f32(channel, param::OBJECT_TEMPERATURE)
                 .map_err(|e| format!("cannot read the object temperature (1000): {e}"))?;
-            steps.push(("live target at the plate (50012)", Request::set_f32(param::LIVE_TARGET, i, object_c as f32)));
-            steps.push(("live target source (50011 = 1)", Request::set_i32(param::TARGET_SOURCE, i, 1)));
+            steps.push((
+                "live target at the plate (50012)",
+                Request::set_f32(param::LIVE_TARGET, i, object_c as f32),
+            ));
+            steps.push((
+                "live target source (50011 = 1)",
+                Request::set_i32(param::TARGET_SOURCE, i, 1),
+            ));
             steps.push((
                 "input selection temperature controller (2000 = 2)",
                 Request::set_i32(param::INPUT_SELECTION, i, 2),
             ));
         }
     }
-    steps.push(("output stage enable live off/on (2010 = 2)", Request::set_i32(param::OUTPUT_STAGE_ENABLE, i, 2)));
+    steps.push((
+        "output stage enable live off/on (2010 = 2)",
+        Request::set_i32(param::OUTPUT_STAGE_ENABLE, i, 2),
+    ));
     for (what, request) in steps {
         link.set(channel, request)
             .map_err(|e| format!("address {} instance {i} refused {what}: {e}", channel.address))?;
@@ -839,7 +867,9 @@ impl Worker {
             self.link
                 .set(channel, Request::set_i32(param::LIVE_ENABLE, i, 0))
                 .and_then(|()| match self.config.mode {
-                    MecomMode::Current => self.link.set(channel, Request::set_f32(param::LIVE_SET_CURRENT, i, 0.0)),
+                    MecomMode::Current => self
+                        .link
+                        .set(channel, Request::set_f32(param::LIVE_SET_CURRENT, i, 0.0)),
                     MecomMode::Temperature => Ok(()),
                 })
         };
@@ -942,7 +972,10 @@ impl Device for MecomDevice {
             });
         };
         let Some(last_s) = track.last_answer_s else {
-            return Err(DeviceError::Link(format!("{}: no reading of channel {channel} yet", self.name)));
+            return Err(DeviceError::Link(format!(
+                "{}: no reading of channel {channel} yet",
+                self.name
+            )));
         };
         let silent_s = now_s - last_s;
         if silent_s > self.config.link_timeout_s {

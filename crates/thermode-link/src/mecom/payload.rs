@@ -180,7 +180,11 @@ impl Request {
             Request::Identify => out.extend_from_slice(b"?IF"),
             Request::Reset => out.extend_from_slice(b"RS"),
             Request::Read { id, instance } | Request::Meta { id, instance } => {
-                out.extend_from_slice(if matches!(self, Request::Read { .. }) { b"?VR" } else { b"?VM" });
+                out.extend_from_slice(if matches!(self, Request::Read { .. }) {
+                    b"?VR"
+                } else {
+                    b"?VM"
+                });
                 push_hex(&mut out, u32::from(id), 4);
                 push_hex(&mut out, u32::from(instance), 2);
             }
@@ -287,11 +291,9 @@ pub fn check_answer(request: &Request, request_crc: u16, payload: &str) -> Resul
             }
             parse_hex(&bytes[4..6]).map(Some).ok_or_else(unexpected)
         }
-        Request::Set { .. } | Request::Reset => {
-            (parse_hex(bytes) == Some(u32::from(request_crc)) && bytes.len() == 4)
-                .then_some(None)
-                .ok_or_else(unexpected)
-        }
+        Request::Set { .. } | Request::Reset => (parse_hex(bytes) == Some(u32::from(request_crc)) && bytes.len() == 4)
+            .then_some(None)
+            .ok_or_else(unexpected),
     }
 }
 

@@ -87,7 +87,11 @@ impl<F: PlateFinger> Tcs2Emulator<F> {
             requirement,
         };
         if display.channel_count() > TCS2_ZONES {
-            return Err(bad("channels", display.channel_count() as f64, "a TCS II probe has 1 to 5 zones"));
+            return Err(bad(
+                "channels",
+                display.channel_count() as f64,
+                "a TCS II probe has 1 to 5 zones",
+            ));
         }
         if !(1e-4..=0.01).contains(&config.tick_s) {
             return Err(bad("tick_s", config.tick_s, "must lie in [1e-4, 0.01]"));
@@ -176,7 +180,10 @@ impl<F: PlateFinger> Tcs2Emulator<F> {
                 *slot = channel.state().sensor.value_c;
             }
         }
-        let neutral_c = self.display.channel(0).map_or(self.neutral_c, |c| c.hot_side_reading_c());
+        let neutral_c = self
+            .display
+            .channel(0)
+            .map_or(self.neutral_c, |c| c.hot_side_reading_c());
         Temperatures {
             neutral_c,
             zones_c,

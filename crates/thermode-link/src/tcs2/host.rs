@@ -94,7 +94,12 @@ impl Tcs2Config {
         }
         let checks = [
             ("tcs2 neutral_c [°C]", self.neutral_c, 20.0, 40.0),
-            ("tcs2 hold_max_c [°C]", self.hold_max_c, self.neutral_c, DEFAULT_HOLD_MAX_C),
+            (
+                "tcs2 hold_max_c [°C]",
+                self.hold_max_c,
+                self.neutral_c,
+                DEFAULT_HOLD_MAX_C,
+            ),
             ("tcs2 hold_min_c [°C]", self.hold_min_c, TCS2_MIN_C, self.neutral_c),
             ("tcs2 max_c [°C]", self.max_c, self.hold_max_c, TCS2_MAX_C),
             ("tcs2 speed_c_per_s [°C/s]", self.speed_c_per_s, 0.1, 999.9),
@@ -249,7 +254,14 @@ impl Tcs2Device {
         writer
             .set_timeout(Duration::from_millis(50))
             .map_err(|e| link("cannot set the write timeout of", e))?;
-        Tcs2Device::start(&format!("tcs2:{path}"), Box::new(port), Box::new(writer), config, clock, true)
+        Tcs2Device::start(
+            &format!("tcs2:{path}"),
+            Box::new(port),
+            Box::new(writer),
+            config,
+            clock,
+            true,
+        )
     }
 
     /// A stimulator over any byte streams, named `name` in messages (the reader should time out within a few
@@ -306,7 +318,12 @@ impl Tcs2Device {
 
     fn connect(&mut self) -> Result<(), DeviceError> {
         let deadline = Instant::now() + Duration::from_secs_f64(self.config.handshake_timeout_s);
-        self.wait_for(deadline, Command::Identify, |s| s.identified, "did not answer TCS to '?'")?;
+        self.wait_for(
+            deadline,
+            Command::Identify,
+            |s| s.identified,
+            "did not answer TCS to '?'",
+        )?;
         let c = self.config;
         let t = |celsius: f64| tenths(celsius).unwrap_or(0);
         let speed = ((c.speed_c_per_s * 10.0).round() as u16).clamp(1, 9999);
@@ -328,9 +345,19 @@ impl Tcs2Device {
             self.send(command)?;
         }
         self.enter_follow()?;
-        self.wait_for(deadline, Command::ErrorState, |s| s.error_codes.is_some(), "did not answer 'Q'")?;
+        self.wait_for(
+            deadline,
+            Command::ErrorState,
+            |s| s.error_codes.is_some(),
+            "did not answer 'Q'",
+        )?;
         let first = self.lock()?.sample_seq;
-        self.wait_for(deadline, Command::Temperatures, |s| s.sample_seq > first, "sent no temperatures")?;
+        self.wait_for(
+            deadline,
+            Command::Temperatures,
+            |s| s.sample_seq > first,
+            "sent no temperatures",
+        )?;
         if let Some(why) = self.zone_error(None)? {
             return Err(DeviceError::Link(why));
         }
@@ -448,8 +475,15 @@ impl Tcs2Device {
             .find(|&(_, c)| c != 0);
         Ok(match (neutral, bad) {
             (0, None) => None,
-            (n, _) if n != 0 => Some(format!("{}: the stimulator reports error {n} on its neutral sensor", self.name)),
-            (_, Some((z, c))) => Some(format!("{}: the stimulator reports error {c} on zone {}", self.name, z + 1)),
+            (n, _) if n != 0 => Some(format!(
+                "{}: the stimulator reports error {n} on its neutral sensor",
+                self.name
+            )),
+            (_, Some((z, c))) => Some(format!(
+                "{}: the stimulator reports error {c} on zone {}",
+                self.name,
+                z + 1
+            )),
             _ => None,
         })
     }

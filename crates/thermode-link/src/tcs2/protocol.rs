@@ -374,7 +374,11 @@ mod tests {
             let mut out = Vec::new();
             command.encode(&mut out);
             assert_eq!(String::from_utf8_lossy(&out), text, "{command:?}");
-            assert_eq!(parse_command(text.as_bytes()), ParseStep::Command(command, text.len()), "{text}");
+            assert_eq!(
+                parse_command(text.as_bytes()),
+                ParseStep::Command(command, text.len()),
+                "{text}"
+            );
         }
         assert_eq!(parse_command(b"C04"), ParseStep::Incomplete);
         assert_eq!(parse_command(b"C0x50"), ParseStep::Skip(1));
@@ -390,7 +394,10 @@ mod tests {
         let Ok(Line::Temperatures(t)) = &got[0] else {
             panic!("not temperatures: {:?}", got[0]);
         };
-        assert_eq!((t.neutral_c, t.zones_c[0], t.zones_c[2], t.zone_count), (32.0, 32.1, -0.5, 5));
+        assert_eq!(
+            (t.neutral_c, t.zones_c[0], t.zones_c[2], t.zone_count),
+            (32.0, 32.1, -0.5, 5)
+        );
         assert_eq!(t.to_line(), "320+321+320-005+320+320");
         assert_eq!(got[1], Ok(Line::Identity));
         assert_eq!(got[2], Ok(Line::ErrorState(vec![0; 6])));

@@ -8,21 +8,21 @@
 //! number, its output). Measured figures are printed (`cargo test -- --nocapture`).
 #![cfg(unix)]
 
+use std::collections::VecDeque;
 use std::io::{self, Read, Write};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use proptest::prelude::*;
 use serialport::SerialPort;
 use thermode_device::{Device, DeviceConfig, DeviceError, SimulatedDisplay};
+use thermode_link::firmware::Firmware;
 use thermode_link::firmware::{FirmwareStatus, PtyFirmware, TcpFirmware};
 use thermode_link::mecom::emulator::{MecomEmulator, MecomEmulatorConfig};
 use thermode_link::mecom::frame::{FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
 use thermode_link::mecom::host::{MecomConfig, MecomDevice, MecomMode};
 use thermode_link::mecom::payload::{check_answer, Request};
-use thermode_link::firmware::Firmware;
 use thermode_model::kron::KronModel;
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_safety::DriveCommand;
@@ -50,7 +50,9 @@ fn clock() -> Arc<dyn Clock> {
 }
 
 fn status(pty: &PtyFirmware) -> FirmwareStatus {
-    pty.control().status().unwrap_or_else(|| panic!("the emulator published no status"))
+    pty.control()
+        .status()
+        .unwrap_or_else(|| panic!("the emulator published no status"))
 }
 
 /// A serial port whose cable can be pulled: once cut, writes vanish and reads time out.
@@ -128,19 +130,32 @@ fn current_mode_connects_configures_and_drives_a_touch() {
         end.plate_c[0]
     );
     let heated = ok(&last[0]);
-    assert!(end.plate_c[0] > start.plate_c[0] + 5.0, "plate {} → {}", start.plate_c[0], end.plate_c[0]);
+    assert!(
+        end.plate_c[0] > start.plate_c[0] + 5.0,
+        "plate {} → {}",
+        start.plate_c[0],
+        end.plate_c[0]
+    );
     assert!(
         heated.sensor_c > first[0].sensor_c + 5.0 && heated.sample_seq > first[0].sample_seq + 20,
         "readings {:?} → {heated:?}",
         first[0]
     );
     assert!(heated.current_a > 0.0, "the device's own current reading {heated:?}");
-    assert!((ok(&last[1]).sensor_c - first[1].sensor_c).abs() < 2.0, "channel 1 {:?}", last[1]);
+    assert!(
+        (ok(&last[1]).sensor_c - first[1].sensor_c).abs() < 2.0,
+        "channel 1 {:?}",
+        last[1]
+    );
     assert!(end.output_on[0], "channel 0 output off while heating");
     assert_eq!((stats.timeouts, stats.bad_answers), (0, 0), "{stats:?}");
     drop(control);
     let off = wait_for(1.0, || !status(&pty).output_on[0] && status(&pty).applied_a[0] == 0.0);
-    assert!(off.is_some(), "dropping the device left the output on: {:?}", status(&pty));
+    assert!(
+        off.is_some(),
+        "dropping the device left the output on: {:?}",
+        status(&pty)
+    );
 }
 
 /// The emulator in the test's own thread behind a port: what the host writes is handed to it at once; reads return
@@ -203,7 +218,11 @@ fn connect_sets_the_devices_own_protection() {
         let emu = emu.lock().unwrap_or_else(|e| panic!("{e}"));
         for ch in 0..2 {
             assert_eq!(emu.current_limit_a(ch), Some(1.5), "current limitation of channel {ch}");
-            assert_eq!(emu.error_thresholds_c(ch), Some((10.0, 48.0)), "object error thresholds of {ch}");
+            assert_eq!(
+                emu.error_thresholds_c(ch),
+                Some((10.0, 48.0)),
+                "object error thresholds of {ch}"
+            );
             assert_eq!(emu.restart_delay_s(ch), Some(0.0), "auto-restart of {ch}");
             assert!(!emu.output_on(ch), "output of {ch} on before any command");
         }
@@ -227,10 +246,16 @@ fn temperature_mode_follows_the_shaped_setpoint_and_off_disables_the_output() {
     let last = control.run(5.0, &[36.0]);
     let reading = ok(&last[0]);
     let plate_c = status(&pty).plate_c[0];
-    println!("temperature mode: target 36 °C, after 5 s sensor {:.2} °C, plate {plate_c:.2} °C", reading.sensor_c);
+    println!(
+        "temperature mode: target 36 °C, after 5 s sensor {:.2} °C, plate {plate_c:.2} °C",
+        reading.sensor_c
+    );
     assert!((reading.sensor_c - 36.0).abs() < 1.0, "sensor {} °C", reading.sensor_c);
     assert!(status(&pty).output_on[0]);
-    control.device.apply(0, &DriveCommand::off()).unwrap_or_else(|e| panic!("off: {e}"));
+    control
+        .device
+        .apply(0, &DriveCommand::off())
+        .unwrap_or_else(|e| panic!("off: {e}"));
     let off = wait_for(1.0, || !status(&pty).output_on[0]);
     assert!(off.is_some(), "a command without a set-point left the output on");
 }
@@ -240,8 +265,13 @@ fn a_host_that_vanishes_trips_the_devices_watchdog_and_a_reconnect_resets_it() {
     let clock = clock();
     let pty = PtyFirmware::spawn(Box::new(emulator(1)), Arc::clone(&clock)).unwrap_or_else(|e| panic!("pty: {e}"));
     let (port, cut) = cable(pty.path());
-    let device = MecomDevice::open("mecom:cable", Box::new(port), &config(MecomMode::Current), Arc::clone(&clock))
-        .unwrap_or_else(|e| panic!("open: {e}"));
+    let device = MecomDevice::open(
+        "mecom:cable",
+        Box::new(port),
+        &config(MecomMode::Current),
+        Arc::clone(&clock),
+    )
+    .unwrap_or_else(|e| panic!("open: {e}"));
     let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
     control.run(0.5, &[45.0]);
     assert!(status(&pty).applied_a[0] > 0.5, "not heating: {:?}", status(&pty));

@@ -37,7 +37,9 @@ fn host_config(zones: usize) -> Tcs2Config {
 }
 
 fn status(pty: &PtyFirmware) -> FirmwareStatus {
-    pty.control().status().unwrap_or_else(|| panic!("the emulator published no status"))
+    pty.control()
+        .status()
+        .unwrap_or_else(|| panic!("the emulator published no status"))
 }
 
 fn spawn(zones: usize, forced_stream_hz: Option<f64>) -> (PtyFirmware, Arc<dyn Clock>) {
@@ -90,11 +92,21 @@ fn only_hold_safe_setpoints_are_streamed() {
     control.run(5.0, &[47.0]);
     let plate_c = status(&pty).plate_c[0];
     let reading = ok(&control.tick(&[47.0])[0]);
-    println!("asked 47 °C: the stimulator holds its sensor at {:.2} °C, plate {plate_c:.2} °C", reading.sensor_c);
-    assert!(reading.sensor_c <= 43.3 && reading.sensor_c > 42.0, "sensor {} °C", reading.sensor_c);
+    println!(
+        "asked 47 °C: the stimulator holds its sensor at {:.2} °C, plate {plate_c:.2} °C",
+        reading.sensor_c
+    );
+    assert!(
+        reading.sensor_c <= 43.3 && reading.sensor_c > 42.0,
+        "sensor {} °C",
+        reading.sensor_c
+    );
     assert!(plate_c < 43.5, "plate {plate_c} °C");
     // An off command streams neutral.
-    control.device.apply(0, &DriveCommand::off()).unwrap_or_else(|e| panic!("{e}"));
+    control
+        .device
+        .apply(0, &DriveCommand::off())
+        .unwrap_or_else(|e| panic!("{e}"));
     let cooled = wait_for(5.0, || (status(&pty).plate_c[0] - 32.0).abs() < 1.5);
     assert!(cooled.is_some(), "off did not bring neutral: {:?}", status(&pty));
 }

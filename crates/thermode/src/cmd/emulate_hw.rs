@@ -44,7 +44,10 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
                 ..MecomEmulatorConfig::default()
             };
             let emulator = MecomEmulator::new(display, config)?;
-            let what = format!("a MeCom TEC controller at address {}, {channels} instances", args.address);
+            let what = format!(
+                "a MeCom TEC controller at address {}, {channels} instances",
+                args.address
+            );
             let spelling = if args.tcp.is_some() { "mecom-tcp:" } else { "mecom:" };
             (Box::new(emulator), what, spelling)
         }
@@ -57,7 +60,11 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
                 ..Tcs2EmulatorConfig::default()
             };
             let emulator = Tcs2Emulator::new(display, config)?;
-            (Box::new(emulator), format!("a TCS II stimulator, {channels} zones"), "tcs2:")
+            (
+                Box::new(emulator),
+                format!("a TCS II stimulator, {channels} zones"),
+                "tcs2:",
+            )
         }
         Protocol::Own => bail!("the own protocol is emulated by `thermode emulate` itself"),
     };
@@ -66,13 +73,19 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
         let tcp = TcpFirmware::spawn(firmware, bind, clock)?;
         writeln!(stdout, "{}", tcp.address()).and_then(|()| stdout.flush())?;
         drop(stdout);
-        eprintln!("thermode emulate: {what}; connect with --device {spelling}{}", tcp.address());
+        eprintln!(
+            "thermode emulate: {what}; connect with --device {spelling}{}",
+            tcp.address()
+        );
         tcp.wait()?
     } else {
         let pty = PtyFirmware::spawn(firmware, clock)?;
         writeln!(stdout, "{}", pty.path()).and_then(|()| stdout.flush())?;
         drop(stdout);
-        eprintln!("thermode emulate: {what}; connect with --device {spelling}{}", pty.path());
+        eprintln!(
+            "thermode emulate: {what}; connect with --device {spelling}{}",
+            pty.path()
+        );
         pty.wait()?
     };
     match end {

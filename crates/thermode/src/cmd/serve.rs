@@ -37,7 +37,11 @@ pub struct DisplayArgs {
     /// The display: `sim` (the simulated display), `serial:PATH` (thermode's own protocol), `mecom:PATH[?OPTIONS]` or
     /// `mecom-tcp:HOST:PORT[?OPTIONS]` (Meerstetter TEC controllers; `mode=current|temperature`), `tcs2:PATH` (a
     /// QST.Lab TCS II); a real display or `thermode emulate`. See docs/hardware.md.
-    #[arg(long, value_name = "sim|serial:PATH|mecom:PATH|mecom-tcp:HOST:PORT|tcs2:PATH", default_value = "sim")]
+    #[arg(
+        long,
+        value_name = "sim|serial:PATH|mecom:PATH|mecom-tcp:HOST:PORT|tcs2:PATH",
+        default_value = "sim"
+    )]
     pub device: String,
     /// Device file (TOML) describing the display's hardware; default: the built-in default display.
     #[arg(long = "device-file", value_name = "FILE")]
