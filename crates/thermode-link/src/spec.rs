@@ -51,8 +51,11 @@ fn bad_spec(spec: &str, why: impl std::fmt::Display) -> DeviceError {
     DeviceError::Link(format!("--device {spec:?}: {why}"))
 }
 
+/// `key=value` options, in order.
+type Options<'a> = Vec<(&'a str, &'a str)>;
+
 /// Splits `rest` into the target and its `key=value` options.
-fn split_options<'a>(spec: &str, rest: &'a str) -> Result<(&'a str, Vec<(&'a str, &'a str)>), DeviceError> {
+fn split_options<'a>(spec: &str, rest: &'a str) -> Result<(&'a str, Options<'a>), DeviceError> {
     let (target, options) = rest.split_once('?').unwrap_or((rest, ""));
     if target.is_empty() {
         return Err(bad_spec(spec, "no path or address"));

@@ -544,12 +544,11 @@ impl MecomDevice {
     }
 }
 
+/// The configured channels and each address's identity.
+type Connected = (Vec<ChannelSetup>, Vec<(u8, String)>);
+
 /// Identifies the device(s), finds the channels and configures them. Returns the channels and identities.
-fn connect(
-    link: &mut Link,
-    config: &MecomConfig,
-    deadline: Instant,
-) -> Result<(Vec<ChannelSetup>, Vec<(u8, String)>), DeviceError> {
+fn connect(link: &mut Link, config: &MecomConfig, deadline: Instant) -> Result<Connected, DeviceError> {
     let name = link.name.clone();
     let fail = |what: String| DeviceError::Link(format!("{name}: {what}"));
     let mut addresses: Vec<u8> = config.channels.iter().map(|c| c.address).collect();
@@ -614,7 +613,7 @@ fn connect(
     }
     let mut setups = Vec::with_capacity(channels.len());
     for &channel in &channels {
-        configure(link, config, channel).map_err(|e| fail(e))?;
+        configure(link, config, channel).map_err(&fail)?;
         let sign = match link.read_i32(channel, param::POSITIVE_CURRENT_IS) {
             Ok(0) => -1.0,
             Ok(_) => 1.0,
@@ -810,8 +809,8 @@ impl Worker {
                 }
             }
         }
-        for index in 0..self.channels.len() {
-            if let Err(Failure::Io(e)) = self.drive(index, commands[index]) {
+        for (index, command) in commands.into_iter().enumerate().take(self.channels.len()) {
+            if let Err(Failure::Io(e)) = self.drive(index, command) {
                 return self.port_failed(e);
             }
             if let Err(Failure::Io(e)) = self.sample(index) {

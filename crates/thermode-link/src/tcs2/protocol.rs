@@ -184,7 +184,7 @@ fn parse_temperatures(bytes: &[u8]) -> Option<Temperatures> {
         (b.len() == 3 && b.iter().all(u8::is_ascii_digit))
             .then(|| f64::from((b[0] - b'0') as u16 * 100 + (b[1] - b'0') as u16 * 10 + (b[2] - b'0') as u16) / 10.0)
     };
-    if bytes.len() < 7 || (bytes.len() - 3) % 4 != 0 {
+    if bytes.len() < 7 || !(bytes.len() - 3).is_multiple_of(4) {
         return None;
     }
     let zone_count = (bytes.len() - 3) / 4;
