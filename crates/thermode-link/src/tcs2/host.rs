@@ -437,7 +437,7 @@ impl Tcs2Device {
         })
     }
 
-    /// Every zone's set-point sent again, then `Od`.
+    /// `Od`: follow mode.
     fn enter_follow(&mut self) -> Result<(), DeviceError> {
         self.send(Command::Follow)?;
         self.following = true;
@@ -507,13 +507,20 @@ impl Device for Tcs2Device {
                 // Out of follow mode the probe already rests at neutral.
                 return self.keep_polling();
             }
-            self.sent = [None; TCS2_ZONES];
+            // Every zone to neutral first: the stimulator keeps the stimulation temperatures of the last follow mode,
+            // and `Od` would send every zone back to them.
+            let neutral = tenths(self.config.neutral_c).unwrap_or(0);
+            self.send(Command::Target {
+                zone: 0,
+                tenths: neutral,
+            })?;
+            self.sent = [Some(neutral); TCS2_ZONES];
             self.send(Command::Target {
                 zone: channel as u8 + 1,
                 tenths: t,
             })?;
             self.sent[channel] = Some(t);
-            self.setpoints_sent += 1;
+            self.setpoints_sent += 2;
             self.enter_follow()?;
         } else if self.sent[channel] != Some(t) {
             self.send(Command::Target {
