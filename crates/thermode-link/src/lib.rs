@@ -9,10 +9,19 @@
 //!   `thermode emulate` and end-to-end tests without hardware.
 //! - [`guard`]: the device's own over- and under-temperature cut (the emulated firmware's second line of
 //!   protection, independent of the host), bounded from its own sensor and drive current.
+//! - [`mecom`]: Meerstetter TEC controllers over MeCom (serial or TCP), host and emulator (`mecom:PATH`,
+//!   `mecom-tcp:HOST:PORT`).
+//! - [`tcs2`]: the QST.Lab TCS II stimulator in follow mode, host and emulator (`tcs2:PATH`).
+//! - [`firmware`]: any emulated device in real time on a pseudo-terminal or a TCP listener.
+//! - [`spec`]: the `--device` spellings and opening the device they name.
 //!
 //! Time comes from an injected `thermode_platform::Clock` on both ends.
 
 pub mod emulator;
+pub mod firmware;
 pub mod guard;
+pub mod mecom;
 pub mod protocol;
 pub mod serial;
+pub mod spec;
+pub mod tcs2;

@@ -126,6 +126,7 @@ pub struct DriveCommand {
     current_a: f64,
     fault: Option<FaultCode>,
     limited_by: DriveLimits,
+    setpoint_c: Option<f64>,
 }
 
 impl DriveCommand {
@@ -136,6 +137,7 @@ impl DriveCommand {
             current_a: 0.0,
             fault: None,
             limited_by: DriveLimits::default(),
+            setpoint_c: None,
         }
     }
 
@@ -152,6 +154,16 @@ impl DriveCommand {
     /// Which limits acted on this command.
     pub fn limited_by(&self) -> DriveLimits {
         self.limited_by
+    }
+
+    /// The envelope's shaped display set-point \[°C\] that this command serves, for a device that regulates its
+    /// plate itself (a temperature-commanded display follows this instead of the current). `Some` only when the
+    /// command passed the gate (no fault latched, a measurement observed) and the envelope shaped a set-point at the
+    /// same time as the gate (`shape_setpoint` and `gate_drive` with one `now_s`); it then lies in `[min, effective
+    /// max]` and moves no faster than the set-point rate limit. `None` for [`DriveCommand::off`], a hold, a fault or
+    /// a gate without a set-point of that tick: such a command switches a temperature-commanded output off.
+    pub fn setpoint_c(&self) -> Option<f64> {
+        self.setpoint_c
     }
 }
 
@@ -592,10 +604,12 @@ impl SafetyEnvelope {
             limits.faulted = true;
             return self.off(limits);
         }
+        let setpoint_c = self.shaped.filter(|s| s.time_s == now_s).map(|s| s.value_c);
         DriveCommand {
             current_a,
             fault: None,
             limited_by: limits,
+            setpoint_c,
         }
     }
 
@@ -679,6 +693,7 @@ impl SafetyEnvelope {
             current_a: 0.0,
             fault: self.fault(),
             limited_by: limits,
+            setpoint_c: None,
         }
     }
 

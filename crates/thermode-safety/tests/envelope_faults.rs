@@ -813,3 +813,34 @@ fn bad_configuration_and_current_limit_are_errors() {
     let mut env = SafetyEnvelope::new(EnvelopeConfig::default(), LIMIT_A).unwrap();
     assert_eq!(env.clear_fault(0.0), Ok(None), "nothing to clear");
 }
+
+/// The gated command carries the envelope's shaped set-point (for temperature-commanded devices) only when it passed
+/// the gate in the same tick as the shaping: never before a measurement, under a fault, in a hold, or for `off`.
+#[test]
+fn the_gated_command_carries_the_shaped_setpoint_only_when_it_passed() {
+    let mut env = SafetyEnvelope::new(EnvelopeConfig::default(), LIMIT_A).unwrap();
+    let sample = |t: f64, seq: u64, c: f64| Measurement {
+        time_s: t,
+        sensor_c: c,
+        hot_side_c: 25.0,
+        sample_seq: seq,
+    };
+    // Before any measurement: off, no set-point.
+    env.shape_setpoint(0.0, 40.0);
+    let before = env.gate_drive(0.0, REQUEST_A, &MeasuredOnly);
+    assert_eq!(before.setpoint_c(), None, "{before:?}");
+    env.observe(&sample(0.01, 1, 30.0));
+    let shaped = env.shape_setpoint(0.02, 40.0).setpoint_c;
+    let passed = env.gate_drive(0.02, REQUEST_A, &MeasuredOnly);
+    assert_eq!(passed.setpoint_c(), Some(shaped), "shaped {shaped}, command {passed:?}");
+    assert!((30.0..=40.0).contains(&shaped), "shaped {shaped}");
+    // A gate without a shaping at its time carries none.
+    let unshaped = env.gate_drive(0.03, REQUEST_A, &MeasuredOnly);
+    assert_eq!(unshaped.setpoint_c(), None, "{unshaped:?}");
+    assert_eq!(DriveCommand::off().setpoint_c(), None);
+    assert_eq!(env.hold(0.04).setpoint_c(), None);
+    // A fault (a NaN request) switches it off.
+    env.shape_setpoint(0.05, 40.0);
+    let faulted = env.gate_drive(0.05, f64::NAN, &MeasuredOnly);
+    assert_eq!((faulted.current_a(), faulted.setpoint_c()), (0.0, None), "{faulted:?}");
+}

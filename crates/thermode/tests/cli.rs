@@ -12,6 +12,11 @@ mod python_packages;
 #[path = "cli/serve_on_emulator.rs"]
 mod serve_on_emulator;
 
+// MeCom and TCS II emulators with `bench` on them.
+#[cfg(unix)]
+#[path = "cli/hardware.rs"]
+mod hardware;
+
 fn thermode(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_thermode"))
         .args(args)

@@ -2,5 +2,8 @@
 
 mod emulator;
 mod guard;
+mod hardware_common;
+mod mecom;
 mod protocol;
 mod serial_pty;
+mod tcs2;

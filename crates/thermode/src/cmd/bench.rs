@@ -40,7 +40,10 @@ pub struct BenchArgs {
 /// Runs `thermode bench`.
 pub fn run(args: &BenchArgs) -> Result<()> {
     let mut display_args = args.display.clone();
-    display_args.channels = Some(display_args.channels.unwrap_or(10));
+    if display_args.device == "sim" {
+        // The simulated display at its largest; a real display has the channels it reports.
+        display_args.channels = Some(display_args.channels.unwrap_or(10));
+    }
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
     let display = build_display(&display_args, &clock)?;
     eprintln!(

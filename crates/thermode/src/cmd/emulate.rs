@@ -1,5 +1,7 @@
 //! `thermode emulate`: runs the device side of the serial protocol (`docs/protocol.md`) on a pseudo-terminal, with
 //! the simulated display behind it, so the real hardware path (`--device serial:PATH`) works without hardware.
+//! `--protocol mecom` or `tcs2` emulates a Meerstetter TEC controller or a TCS II stimulator instead
+//! ([`super::emulate_hw`], `docs/hardware.md`).
 //!
 //! The first line on standard output is the path the host opens (e.g. `/dev/pts/7`), flushed at once; the
 //! emulator then runs in real time (1 kHz firmware tick, reports every `--report-ms`) until the process is ended.
@@ -47,10 +49,33 @@ pub struct EmulateArgs {
     /// plate [°C], the sensor's latest sample [°C], the delivered current [A]); replaces FILE.
     #[arg(long, value_name = "FILE")]
     trace: Option<PathBuf>,
+    /// The protocol spoken: `own` (thermode's), `mecom` (a Meerstetter TEC controller) or `tcs2` (a QST.Lab TCS II).
+    #[arg(long, value_enum, default_value = "own")]
+    pub protocol: super::emulate_hw::Protocol,
+    /// MeCom only: listen on this TCP address (e.g. `127.0.0.1:0`; the first line printed is the address) instead
+    /// of a pseudo-terminal.
+    #[arg(long, value_name = "ADDR")]
+    pub tcp: Option<String>,
+    /// MeCom only: the device address, 1 to 254 (frames to address 0 are answered too).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub address: u8,
+    /// TCS II only: stream temperature lines at this rate [Hz] even when muted (a test of the host).
+    #[arg(long = "stream-hz", value_name = "HZ")]
+    pub stream_hz: Option<f64>,
+}
+
+impl EmulateArgs {
+    /// Channels, device file and seed: what every protocol's emulator is built from.
+    pub fn plant(&self) -> (usize, Option<&std::path::Path>, u64) {
+        (self.channels, self.device_file.as_deref(), self.seed)
+    }
 }
 
 /// Runs `thermode emulate`.
 pub fn run(args: &EmulateArgs) -> Result<()> {
+    if args.protocol != super::emulate_hw::Protocol::Own {
+        return super::emulate_hw::run(args);
+    }
     let device = resolve::device_config(args.device_file.as_deref())?;
     let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device, args.channels, args.seed)?;
     let config = EmulatorConfig {

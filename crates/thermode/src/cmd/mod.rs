@@ -4,6 +4,7 @@ pub mod bench;
 pub mod demo;
 pub mod dose;
 pub mod emulate;
+pub mod emulate_hw;
 pub mod lab_analyze;
 pub mod lab_plan;
 pub mod lab_run;

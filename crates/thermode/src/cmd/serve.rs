@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use thermode_device::{DefaultFinger, Device, SimulatedDisplay, MAX_CHANNELS};
-use thermode_link::serial::{serial_path, SerialConfig, SerialDevice};
+use thermode_link::spec::{is_hardware, open_hardware, HardwareContext};
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::engine::pipeline_engines;
@@ -34,8 +34,14 @@ pub enum ControllerArg {
 /// How the display is set up (shared by serve, demo and bench).
 #[derive(Args, Debug, Clone)]
 pub struct DisplayArgs {
-    /// The display: `sim` (the simulated display) or `serial:PATH` (a real display or `thermode emulate`).
-    #[arg(long, value_name = "sim|serial:PATH", default_value = "sim")]
+    /// The display: `sim` (the simulated display), `serial:PATH` (thermode's own protocol), `mecom:PATH[?OPTIONS]` or
+    /// `mecom-tcp:HOST:PORT[?OPTIONS]` (Meerstetter TEC controllers; `mode=current|temperature`), `tcs2:PATH` (a
+    /// QST.Lab TCS II); a real display or `thermode emulate`. See docs/hardware.md.
+    #[arg(
+        long,
+        value_name = "sim|serial:PATH|mecom:PATH|mecom-tcp:HOST:PORT|tcs2:PATH",
+        default_value = "sim"
+    )]
     pub device: String,
     /// Device file (TOML) describing the display's hardware; default: the built-in default display.
     #[arg(long = "device-file", value_name = "FILE")]
@@ -135,19 +141,26 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Displ
         }
         let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device_config, count, args.seed)?;
         (Box::new(display), "sim".to_string())
-    } else if serial_path(&args.device).is_some() {
-        let serial = SerialDevice::open_spec(&args.device, &SerialConfig::default(), clock.clone())
+    } else if is_hardware(&args.device) {
+        let context = HardwareContext {
+            device: pipeline.device,
+            envelope: pipeline.envelope,
+        };
+        let device = open_hardware(&args.device, &context, clock.clone())
             .with_context(|| format!("cannot open {}", args.device))?;
-        if let Some(n) = args.channels.filter(|&n| n != serial.channel_count()) {
+        if let Some(n) = args.channels.filter(|&n| n != device.channel_count()) {
             bail!(
                 "--channels {n}, but {} has {} channels",
                 args.device,
-                serial.channel_count()
+                device.channel_count()
             );
         }
-        (Box::new(serial), args.device.clone())
+        (device, args.device.clone())
     } else {
-        bail!("--device must be `sim` or `serial:PATH`, not {:?}", args.device);
+        bail!(
+            "--device must be `sim`, `serial:PATH`, `mecom:PATH`, `mecom-tcp:HOST:PORT` or `tcs2:PATH`, not {:?}",
+            args.device
+        );
     };
     let count = device.channel_count();
     let names = finger_names(count);

@@ -31,7 +31,7 @@ const SIGNAL_TO_OFF_S: f64 = 0.020;
 /// The loop period of `serve` at its default 100 Hz \[s\].
 const LOOP_TICK_S: f64 = 0.01;
 /// Generous limit for anything that waits on the other processes (liveness only) \[s\].
-const LIVENESS_S: f64 = 20.0;
+const LIVENESS_S: f64 = 60.0;
 
 fn binary() -> &'static str {
     env!("CARGO_BIN_EXE_thermode")

@@ -1,0 +1,1058 @@
+//! [`MecomDevice`]: Meerstetter TEC controllers over MeCom, on a serial port (`mecom:PATH`) or TCP
+//! (`mecom-tcp:HOST:PORT`), as a [`Device`] with one channel per TEC instance (address and instance).
+//!
+//! - **Connect** ([`MecomDevice::open`]): `?IF` until each address answers; without a channel list, `?VM` on the
+//!   object temperature of the first address gives the number of instances. A device in its error state is reset
+//!   (`RS`) first ([`MecomConfig::reset_on_error`]). Then, per channel, the output goes off (output stage enable
+//!   0, live enable 0) before anything else, and the device's own protection is set as a second line: current and
+//!   voltage limitation, object temperature error thresholds (the envelope's absolute 10–48 °C by default: beyond
+//!   them the device disables its output by itself), the largest plausible temperature change, no automatic
+//!   restart from the error state (6310 = 0), and the communication watchdog (2060, default 0.25 s: with no frame
+//!   for that long the device disables its output, error 183). A device that refuses any of these is refused. Then
+//!   the mode's input selection and the output stage enable "live off/on", so the output runs only while thermode
+//!   sets live enable.
+//! - **Modes** ([`MecomMode`]): *current-commanded* — the live set current (50001) carries the gated command's
+//!   current every cycle (sign per the device's "positive current is" 3034), so thermode's controller and envelope
+//!   drive the Peltier and the device's limits are the second line; live enable follows whether the current is
+//!   non-zero. *Temperature-commanded* — the device's own controller follows the live target (50012), which
+//!   carries the envelope's shaped set-point of the gated command ([`DriveCommand::setpoint_c`]); a command without
+//!   one (off, a hold, a fault) disables the output.
+//! - **Cycle**: a worker thread owns the port and, at most every [`MecomConfig::cycle_interval_s`], per channel
+//!   writes the drive and reads object temperature (1000), sink temperature (1001), actual current (1020), device
+//!   status (104) and error number (105). Every request waits for its answer (the sequence number matches), and is
+//!   sent once more with the same sequence number after [`MecomConfig::answer_timeout_s`]. [`Device::read`] only
+//!   copies the newest values.
+//! - **Errors**: no good answer for longer than [`MecomConfig::link_timeout_s`], or a port that fails, makes
+//!   [`Device::read`] fail with [`DeviceError::Link`]; the device's error state reads as [`DeviceError::Cut`] for
+//!   its object temperature thresholds (137, 138) and [`DeviceError::Link`] naming the error otherwise. Malformed
+//!   and CRC-bad answers are counted and dropped.
+//! - **Stopping**: [`Device::all_off`] disables every output and waits for the device's acknowledges; dropping the
+//!   device does the same before the worker ends.
+
+use std::io::{self, Read, Write};
+use std::net::{TcpStream, ToSocketAddrs};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use thermode_model::{BadValue, Rule};
+use thermode_platform::Clock;
+use thermode_safety::DriveCommand;
+
+use super::frame::{encode_frame, FrameCounters, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
+use super::payload::{check_answer, describe_error, error_number, param, status, AnswerError, Request};
+use thermode_device::{Device, DeviceCut, DeviceError, Reading, MAX_CHANNELS};
+
+/// Default baud rate of a MeCom serial port \[bit/s\]: 57600 (the TEC family's default and the rate its service
+/// software always listens on).
+pub const DEFAULT_MECOM_BAUD_RATE: u32 = 57_600;
+
+/// The longest communication watchdog thermode sets \[s\]: 0.25, as for its own protocol
+/// ([`crate::serial::MAX_DEVICE_WATCHDOG_MS`]); the device's range starts at 0.1.
+pub const MAX_MECOM_WATCHDOG_S: f64 = 0.25;
+
+/// What the device regulates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MecomMode {
+    /// Live current control: thermode's controller and envelope set the current.
+    #[default]
+    Current,
+    /// The device's own temperature controller follows the envelope's shaped set-point.
+    Temperature,
+}
+
+impl MecomMode {
+    /// `current` or `temperature`.
+    pub fn name(self) -> &'static str {
+        match self {
+            MecomMode::Current => "current",
+            MecomMode::Temperature => "temperature",
+        }
+    }
+}
+
+/// One channel: a TEC instance of a device address.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct MecomChannel {
+    /// Device address, 0 to 254 (0: whichever device is on the line answers).
+    pub address: u8,
+    /// Instance (output channel of that device), from 1.
+    pub instance: u8,
+}
+
+/// Settings of the MeCom host.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MecomConfig {
+    /// What the device regulates. Default [`MecomMode::Current`].
+    pub mode: MecomMode,
+    /// The channels in order; empty: every instance of [`MecomConfig::discover_address`] (found with `?VM`).
+    /// Default empty.
+    pub channels: Vec<MecomChannel>,
+    /// Address whose instances become the channels when none are listed. Default 0 (the one device on the line).
+    pub discover_address: u8,
+    /// Serial baud rate \[bit/s\]. Default [`DEFAULT_MECOM_BAUD_RATE`].
+    pub baud_rate: u32,
+    /// Longest wait for an answer before the request is sent once more \[s\], in (0, 1]. Default 0.05 (a request and
+    /// its answer take about 7 ms at 57600 baud).
+    pub answer_timeout_s: f64,
+    /// Longest time for the connection and the configuration \[s\], wall clock, in (0, 60]. Default 3.
+    pub handshake_timeout_s: f64,
+    /// Longest time without a good answer from a channel before its readings fail \[s\], in (0, 10]. Default 0.5.
+    pub link_timeout_s: f64,
+    /// Shortest interval between the starts of two cycles \[s\], in \[0, 1\]. Default 0.01 (100 Hz, the control loop's
+    /// default rate; a cycle takes longer on a slow line: about 42 ms per channel at 57600 baud).
+    pub cycle_interval_s: f64,
+    /// The device's communication watchdog \[s\], in \[0.1, [`MAX_MECOM_WATCHDOG_S`]\]. Default 0.25.
+    pub watchdog_s: f64,
+    /// Current limitation set on every channel \[A\] (2030), positive. Default 2.8 (the default display's drive).
+    pub current_limit_a: f64,
+    /// Voltage limitation set on every channel \[V\] (2031), positive. Default 4.0.
+    pub voltage_limit_v: f64,
+    /// Lower object temperature error threshold \[°C\] (4010). Default 10 (the envelope's absolute minimum).
+    pub lower_error_c: f64,
+    /// Upper object temperature error threshold \[°C\] (4011). Default 48 (the envelope's absolute maximum).
+    pub upper_error_c: f64,
+    /// Largest plausible object temperature change \[°C/s\] (4012), in \[1, 200\]. Default 50 (the envelope's
+    /// implausible-rate check).
+    pub max_change_c_per_s: f64,
+    /// Reset (`RS`) a device found in its error state at connect (e.g. after the watchdog of an earlier session
+    /// tripped) instead of refusing it. Default true.
+    pub reset_on_error: bool,
+}
+
+impl Default for MecomConfig {
+    fn default() -> Self {
+        MecomConfig {
+            mode: MecomMode::Current,
+            channels: Vec::new(),
+            discover_address: 0,
+            baud_rate: DEFAULT_MECOM_BAUD_RATE,
+            answer_timeout_s: 0.05,
+            handshake_timeout_s: 3.0,
+            link_timeout_s: 0.5,
+            cycle_interval_s: 0.01,
+            watchdog_s: MAX_MECOM_WATCHDOG_S,
+            current_limit_a: 2.8,
+            voltage_limit_v: 4.0,
+            lower_error_c: 10.0,
+            upper_error_c: 48.0,
+            max_change_c_per_s: 50.0,
+            reset_on_error: true,
+        }
+    }
+}
+
+impl MecomConfig {
+    /// `Ok` if every setting is in its range.
+    pub fn validate(&self) -> Result<(), DeviceError> {
+        let checks = [
+            ("mecom answer_timeout_s [s]", self.answer_timeout_s, 1e-9, 1.0),
+            ("mecom handshake_timeout_s [s]", self.handshake_timeout_s, 1e-9, 60.0),
+            ("mecom link_timeout_s [s]", self.link_timeout_s, 1e-9, 10.0),
+            ("mecom cycle_interval_s [s]", self.cycle_interval_s, 0.0, 1.0),
+            ("mecom watchdog_s [s]", self.watchdog_s, 0.1, MAX_MECOM_WATCHDOG_S),
+            ("mecom current_limit_a [A]", self.current_limit_a, 1e-9, 100.0),
+            ("mecom voltage_limit_v [V]", self.voltage_limit_v, 1e-9, 100.0),
+            ("mecom lower_error_c [°C]", self.lower_error_c, -273.0, 1000.0),
+            ("mecom upper_error_c [°C]", self.upper_error_c, -273.0, 1000.0),
+            ("mecom max_change_c_per_s [°C/s]", self.max_change_c_per_s, 1.0, 200.0),
+        ];
+        for (name, value, min, max) in checks {
+            Rule::Within { min, max }.check(name, value)?;
+        }
+        if self.lower_error_c >= self.upper_error_c {
+            return Err(BadValue::custom(
+                "mecom lower_error_c [°C]",
+                self.lower_error_c,
+                "must lie below upper_error_c",
+            )
+            .into());
+        }
+        Rule::Positive.check("mecom baud_rate [bit/s]", f64::from(self.baud_rate))?;
+        if self.channels.len() > MAX_CHANNELS {
+            return Err(DeviceError::ChannelCount {
+                count: self.channels.len(),
+                max: MAX_CHANNELS,
+            });
+        }
+        if let Some(c) = self.channels.iter().find(|c| c.instance == 0 || c.address == 255) {
+            return Err(DeviceError::Link(format!(
+                "MeCom channel {}:{}: addresses are 0 to 254 and instances start at 1",
+                c.address, c.instance
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// What the host has seen and done on the link.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct MecomStats {
+    /// Frames received, dropped by CRC or shape, bytes skipped.
+    pub rx: FrameCounters,
+    /// Requests sent (repeats included).
+    pub requests: u64,
+    /// Requests sent again after no answer.
+    pub repeats: u64,
+    /// Requests that got no answer even when repeated.
+    pub timeouts: u64,
+    /// Answers that were a server error or had the wrong shape.
+    pub bad_answers: u64,
+    /// Answers to an earlier request (late), skipped.
+    pub stale_answers: u64,
+    /// Whole cycles (every channel written and read).
+    pub cycles: u64,
+    /// Duration of the last cycle \[s\].
+    pub last_cycle_s: f64,
+    /// Longest cycle so far \[s\].
+    pub max_cycle_s: f64,
+    /// Mean time from a request to its answer \[s\] (answered requests).
+    pub mean_round_trip_s: f64,
+    /// The device's error number found and cleared by a reset at connect, if any.
+    pub reset_at_connect: Option<i32>,
+}
+
+/// The newest values of one channel.
+#[derive(Debug, Clone, Default)]
+struct Track {
+    sample_seq: u64,
+    time_s: f64,
+    object_c: f64,
+    sink_c: f64,
+    current_a: f64,
+    device_status: i32,
+    error_number: i32,
+    /// Host clock time of the last good answer from this channel \[s\].
+    last_answer_s: Option<f64>,
+    /// Why the last request failed, if it did.
+    last_failure: Option<String>,
+}
+
+/// What the device holds for one channel, as commanded.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Command {
+    current_a: f64,
+    setpoint_c: Option<f64>,
+}
+
+/// State shared by the worker and the device.
+#[derive(Debug, Default)]
+struct Shared {
+    tracks: Vec<Track>,
+    commands: [Command; MAX_CHANNELS],
+    /// All-off requests made and carried out.
+    off_requested: u64,
+    off_done: u64,
+    stats: MecomStats,
+    /// Set when the port failed; permanent.
+    error: Option<String>,
+}
+
+/// A port both ways with a read timeout.
+pub trait Port: Read + Write + Send {}
+impl<T: Read + Write + Send> Port for T {}
+
+/// Why a request got no usable answer.
+#[derive(Debug)]
+enum Failure {
+    /// No answer even when repeated.
+    Timeout,
+    /// A server error or an answer of the wrong shape.
+    Answer(AnswerError),
+    /// The port failed.
+    Io(String),
+}
+
+impl std::fmt::Display for Failure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Failure::Timeout => write!(f, "no answer"),
+            Failure::Answer(e) => write!(f, "{e}"),
+            Failure::Io(e) => write!(f, "port failed: {e}"),
+        }
+    }
+}
+
+/// The port and the request/answer machinery (used by the connecting thread, then by the worker).
+struct Link {
+    name: String,
+    port: Box<dyn Port>,
+    decoder: FrameDecoder,
+    seq: u16,
+    answer_timeout: Duration,
+    out: Vec<u8>,
+    buf: [u8; 256],
+    stats: MecomStats,
+    answered: u64,
+    round_trip_total_s: f64,
+}
+
+impl Link {
+    /// Sends `request` to `address` and waits for its answer (once more with the same sequence number after the
+    /// answer timeout).
+    fn transact(&mut self, address: u8, request: &Request) -> Result<Option<u32>, Failure> {
+        self.seq = self.seq.wrapping_add(1);
+        let payload = request.payload();
+        self.out.clear();
+        let crc = encode_frame(HOST_CONTROL, address, self.seq, &payload, &mut self.out);
+        for attempt in 0..2 {
+            if attempt > 0 {
+                self.stats.repeats += 1;
+            }
+            let sent = Instant::now();
+            self.port
+                .write_all(&self.out)
+                .and_then(|()| self.port.flush())
+                .map_err(|e| Failure::Io(e.to_string()))?;
+            self.stats.requests += 1;
+            if let Some(answer) = self.await_answer(address, sent)? {
+                self.answered += 1;
+                self.round_trip_total_s += sent.elapsed().as_secs_f64();
+                self.stats.mean_round_trip_s = self.round_trip_total_s / self.answered as f64;
+                return check_answer(request, crc, &answer).map_err(|e| {
+                    self.stats.bad_answers += 1;
+                    Failure::Answer(e)
+                });
+            }
+        }
+        self.stats.timeouts += 1;
+        Err(Failure::Timeout)
+    }
+
+    /// Reads until the answer with the current sequence number from `address` arrives, or the answer timeout.
+    fn await_answer(&mut self, address: u8, sent: Instant) -> Result<Option<String>, Failure> {
+        while sent.elapsed() < self.answer_timeout {
+            let n = match self.port.read(&mut self.buf) {
+                Ok(0) => return Err(Failure::Io("the port reached its end (closed)".to_string())),
+                Ok(n) => n,
+                Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::Interrupted) => continue,
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                    std::thread::sleep(Duration::from_micros(200));
+                    continue;
+                }
+                Err(e) => return Err(Failure::Io(e.to_string())),
+            };
+            let mut found = None;
+            let (seq, stats) = (self.seq, &mut self.stats);
+            for &byte in &self.buf[..n] {
+                if let Some(Ok(frame)) = self.decoder.push(byte) {
+                    if frame.seq == seq && (frame.address == address || address == 0) && found.is_none() {
+                        found = Some(frame.payload);
+                    } else {
+                        stats.stale_answers += 1;
+                    }
+                }
+            }
+            self.stats.rx = *self.decoder.counters();
+            if found.is_some() {
+                return Ok(found);
+            }
+        }
+        self.stats.rx = *self.decoder.counters();
+        Ok(None)
+    }
+
+    fn read_i32(&mut self, channel: MecomChannel, id: u16) -> Result<i32, Failure> {
+        let bits = self.transact(
+            channel.address,
+            &Request::Read {
+                id,
+                instance: channel.instance,
+            },
+        )?;
+        Ok(bits.unwrap_or(0) as i32)
+    }
+
+    fn read_f32(&mut self, channel: MecomChannel, id: u16) -> Result<f64, Failure> {
+        let bits = self.transact(
+            channel.address,
+            &Request::Read {
+                id,
+                instance: channel.instance,
+            },
+        )?;
+        Ok(f64::from(f32::from_bits(bits.unwrap_or(0))))
+    }
+
+    fn set(&mut self, channel: MecomChannel, request: Request) -> Result<(), Failure> {
+        self.transact(channel.address, &request).map(|_| ())
+    }
+}
+
+/// How the device maps thermode's current (positive heats) to its own.
+#[derive(Debug, Clone, Copy)]
+struct ChannelSetup {
+    channel: MecomChannel,
+    /// +1 if the device's positive current heats, −1 if it cools.
+    sign: f64,
+}
+
+/// A Meerstetter TEC controller (or several on one bus) over MeCom. See the module documentation.
+pub struct MecomDevice {
+    name: String,
+    config: MecomConfig,
+    channels: Vec<ChannelSetup>,
+    identity: Vec<(u8, String)>,
+    shared: Arc<Mutex<Shared>>,
+    stop: Arc<AtomicBool>,
+    worker: Option<JoinHandle<()>>,
+    clock: Arc<dyn Clock>,
+}
+
+impl std::fmt::Debug for MecomDevice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MecomDevice")
+            .field("name", &self.name)
+            .field("mode", &self.config.mode)
+            .field("channels", &self.channels.len())
+            .finish_non_exhaustive()
+    }
+}
+
+impl MecomDevice {
+    /// Opens the serial port `path` (raw, 8N1, [`MecomConfig::baud_rate`]), connects and configures the device.
+    pub fn open_serial(path: &str, config: &MecomConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
+        config.validate()?;
+        let port = serialport::new(path, config.baud_rate)
+            .timeout(Duration::from_millis(2))
+            .open()
+            .map_err(|e| DeviceError::Link(format!("cannot open serial port {path}: {e}")))?;
+        let _ = port.clear(serialport::ClearBuffer::Input);
+        MecomDevice::open(&format!("mecom:{path}"), Box::new(port), config, clock)
+    }
+
+    /// Connects to `address` (`HOST:PORT`) over TCP, then connects and configures the device.
+    pub fn open_tcp(address: &str, config: &MecomConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
+        config.validate()?;
+        let link = |what: &str, e: io::Error| DeviceError::Link(format!("{what} {address}: {e}"));
+        let target = address
+            .to_socket_addrs()
+            .map_err(|e| link("cannot resolve", e))?
+            .next()
+            .ok_or_else(|| DeviceError::Link(format!("{address} resolves to no address")))?;
+        let timeout = Duration::from_secs_f64(config.handshake_timeout_s);
+        let stream = TcpStream::connect_timeout(&target, timeout).map_err(|e| link("cannot connect to", e))?;
+        stream
+            .set_read_timeout(Some(Duration::from_millis(2)))
+            .and_then(|()| stream.set_write_timeout(Some(Duration::from_millis(100))))
+            .and_then(|()| stream.set_nodelay(true))
+            .map_err(|e| link("cannot configure the connection to", e))?;
+        MecomDevice::open(&format!("mecom-tcp:{address}"), Box::new(stream), config, clock)
+    }
+
+    /// Connects over any port (reads should time out within a few milliseconds), named `name` in messages:
+    /// identifies the device(s), finds the channels, configures them (see the module documentation) and starts the
+    /// worker. Reading times are on `clock`.
+    pub fn open(
+        name: &str,
+        port: Box<dyn Port>,
+        config: &MecomConfig,
+        clock: Arc<dyn Clock>,
+    ) -> Result<Self, DeviceError> {
+        config.validate()?;
+        let mut link = Link {
+            name: name.to_string(),
+            port,
+            decoder: FrameDecoder::new(DEVICE_CONTROL),
+            // The specification recommends a random start; the time is random enough and keeps tests deterministic
+            // in what matters (answers are matched by sequence number, whatever it starts at).
+            seq: (clock.now_s() * 1e6) as u64 as u16,
+            answer_timeout: Duration::from_secs_f64(config.answer_timeout_s),
+            out: Vec::with_capacity(64),
+            buf: [0; 256],
+            stats: MecomStats::default(),
+            answered: 0,
+            round_trip_total_s: 0.0,
+        };
+        let deadline = Instant::now() + Duration::from_secs_f64(config.handshake_timeout_s);
+        let (channels, identity) = connect(&mut link, config, deadline)?;
+        let shared = Arc::new(Mutex::new(Shared {
+            tracks: vec![Track::default(); MAX_CHANNELS],
+            ..Shared::default()
+        }));
+        let mut device = MecomDevice {
+            name: name.to_string(),
+            config: config.clone(),
+            channels,
+            identity,
+            shared: Arc::clone(&shared),
+            stop: Arc::new(AtomicBool::new(false)),
+            worker: None,
+            clock: Arc::clone(&clock),
+        };
+        // One cycle here, so the first read after open has values.
+        let mut worker = Worker {
+            link,
+            config: config.clone(),
+            channels: device.channels.clone(),
+            shared,
+            clock,
+            enabled: vec![false; device.channels.len()],
+        };
+        worker.cycle();
+        let stop = Arc::clone(&device.stop);
+        let thread = std::thread::Builder::new()
+            .name("thermode-mecom".to_string())
+            .spawn(move || worker.run(&stop))
+            .map_err(|e| DeviceError::Link(format!("cannot start the MeCom worker: {e}")))?;
+        device.worker = Some(thread);
+        Ok(device)
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &MecomConfig {
+        &self.config
+    }
+
+    /// The channels (address, instance) in order.
+    pub fn channels(&self) -> Vec<MecomChannel> {
+        self.channels.iter().map(|c| c.channel).collect()
+    }
+
+    /// Each address's answer to `?IF`.
+    pub fn identity(&self) -> &[(u8, String)] {
+        &self.identity
+    }
+
+    /// What has been seen and done on the link so far.
+    pub fn stats(&self) -> MecomStats {
+        self.lock().map(|s| s.stats).unwrap_or_default()
+    }
+
+    /// The device status (104) and error number (105) last read from `channel`.
+    pub fn device_status(&self, channel: usize) -> Result<(i32, i32), DeviceError> {
+        self.check_channel(channel)?;
+        let state = self.lock()?;
+        let track = state.tracks.get(channel).cloned().unwrap_or_default();
+        Ok((track.device_status, track.error_number))
+    }
+
+    fn lock(&self) -> Result<MutexGuard<'_, Shared>, DeviceError> {
+        self.shared
+            .lock()
+            .map_err(|_| DeviceError::Link(format!("{}: the MeCom worker failed", self.name)))
+    }
+
+    fn check_channel(&self, channel: usize) -> Result<(), DeviceError> {
+        let count = self.channels.len();
+        if channel < count {
+            Ok(())
+        } else {
+            Err(DeviceError::NoSuchChannel { channel, count })
+        }
+    }
+}
+
+/// The configured channels and each address's identity.
+type Connected = (Vec<ChannelSetup>, Vec<(u8, String)>);
+
+/// Identifies the device(s), finds the channels and configures them. Returns the channels and identities.
+fn connect(link: &mut Link, config: &MecomConfig, deadline: Instant) -> Result<Connected, DeviceError> {
+    let name = link.name.clone();
+    let fail = |what: String| DeviceError::Link(format!("{name}: {what}"));
+    let mut addresses: Vec<u8> = config.channels.iter().map(|c| c.address).collect();
+    if addresses.is_empty() {
+        addresses.push(config.discover_address);
+    }
+    addresses.dedup();
+    let mut identity = Vec::new();
+    for &address in &addresses {
+        identity.push((address, identify(link, address, deadline)?));
+    }
+    let channels: Vec<MecomChannel> = if config.channels.is_empty() {
+        let first = MecomChannel {
+            address: config.discover_address,
+            instance: 1,
+        };
+        let count = link
+            .transact(
+                first.address,
+                &Request::Meta {
+                    id: param::OBJECT_TEMPERATURE,
+                    instance: 1,
+                },
+            )
+            .map_err(|e| fail(format!("cannot count the TEC instances (?VM of parameter 1000): {e}")))?
+            .unwrap_or(0) as usize;
+        if count == 0 || count > MAX_CHANNELS {
+            return Err(fail(format!(
+                "the device has {count} TEC instances; thermode drives 1 to {MAX_CHANNELS}"
+            )));
+        }
+        (1..=count as u8)
+            .map(|instance| MecomChannel {
+                address: config.discover_address,
+                instance,
+            })
+            .collect()
+    } else {
+        config.channels.clone()
+    };
+    // A device in its error state (its output is off) is reset first, or refused.
+    for &address in &addresses {
+        let probe = MecomChannel { address, instance: 1 };
+        let device_status = link
+            .read_i32(probe, param::DEVICE_STATUS)
+            .map_err(|e| fail(format!("cannot read the device status (104) of address {address}: {e}")))?;
+        if device_status == status::ERROR {
+            let number = link.read_i32(probe, param::ERROR_NUMBER).unwrap_or(-1);
+            if !config.reset_on_error {
+                return Err(fail(format!(
+                    "address {address} is in its error state, error {number} ({}); clear it or allow the reset",
+                    describe_error(number)
+                )));
+            }
+            link.set(probe, Request::Reset)
+                .map_err(|e| fail(format!("cannot reset address {address} from error {number}: {e}")))?;
+            link.stats.reset_at_connect = Some(number);
+            // No pause: the device restarts within 200 ms, and `?IF` until it answers also keeps a stored watchdog
+            // fed from its first moment.
+            identify(link, address, deadline)?;
+        }
+    }
+    let mut setups = Vec::with_capacity(channels.len());
+    for &channel in &channels {
+        configure(link, config, channel).map_err(&fail)?;
+        let sign = match link.read_i32(channel, param::POSITIVE_CURRENT_IS) {
+            Ok(0) => -1.0,
+            Ok(_) => 1.0,
+            Err(e) => return Err(fail(format!("cannot read 'positive current is' (3034): {e}"))),
+        };
+        setups.push(ChannelSetup { channel, sign });
+    }
+    for &address in &addresses {
+        let probe = MecomChannel { address, instance: 1 };
+        link.set(
+            probe,
+            Request::set_f32(param::WATCHDOG_TIMEOUT, 1, config.watchdog_s as f32),
+        )
+        .map_err(|e| {
+            fail(format!(
+                "address {address} did not take the communication watchdog (2060 = {} s): {e}. thermode drives \
+                     no TEC controller that keeps its output on when the host is gone: update its firmware, or \
+                     use its hardware enable with a dead-man switch (docs/hardware.md)",
+                config.watchdog_s
+            ))
+        })?;
+    }
+    for setup in &setups {
+        let (device_status, number) = (
+            link.read_i32(setup.channel, param::DEVICE_STATUS),
+            link.read_i32(setup.channel, param::ERROR_NUMBER),
+        );
+        if let (Ok(status::ERROR), Ok(number)) = (device_status, number) {
+            return Err(fail(format!(
+                "address {} entered its error state while being configured: error {number} ({})",
+                setup.channel.address,
+                describe_error(number)
+            )));
+        }
+    }
+    Ok((setups, identity))
+}
+
+/// `?IF` to `address` until it answers or `deadline`.
+fn identify(link: &mut Link, address: u8, deadline: Instant) -> Result<String, DeviceError> {
+    let mut last = String::from("no answer");
+    while Instant::now() < deadline {
+        link.seq = link.seq.wrapping_add(1);
+        match link.transact(address, &Request::Identify) {
+            Ok(_) => {
+                // The identity text itself: ask once more and keep the payload (check_answer only checks its length).
+                return Ok(identity_text(link, address).unwrap_or_default());
+            }
+            Err(Failure::Io(e)) => return Err(DeviceError::Link(format!("{}: {e}", link.name))),
+            Err(e) => last = e.to_string(),
+        }
+    }
+    Err(DeviceError::Link(format!(
+        "{}: address {address} did not identify itself (?IF) before the handshake timeout: {last}",
+        link.name
+    )))
+}
+
+/// The identity string of `address` (one more `?IF`, keeping the payload).
+fn identity_text(link: &mut Link, address: u8) -> Option<String> {
+    link.seq = link.seq.wrapping_add(1);
+    link.out.clear();
+    encode_frame(HOST_CONTROL, address, link.seq, "?IF", &mut link.out);
+    link.port.write_all(&link.out).ok()?;
+    link.port.flush().ok()?;
+    link.await_answer(address, Instant::now())
+        .ok()
+        .flatten()
+        .map(|s| s.trim_end().to_string())
+}
+
+/// The per-channel configuration: output off first, then the device's own limits, then the mode.
+fn configure(link: &mut Link, config: &MecomConfig, channel: MecomChannel) -> Result<(), String> {
+    let i = channel.instance;
+    let mut steps: Vec<(&str, Request)> = vec![
+        (
+            "output stage enable off (2010 = 0)",
+            Request::set_i32(param::OUTPUT_STAGE_ENABLE, i, 0),
+        ),
+        (
+            "live enable off (50000 = 0)",
+            Request::set_i32(param::LIVE_ENABLE, i, 0),
+        ),
+        (
+            "live set current 0 A (50001)",
+            Request::set_f32(param::LIVE_SET_CURRENT, i, 0.0),
+        ),
+        (
+            "current limitation (2030)",
+            Request::set_f32(param::CURRENT_LIMITATION, i, config.current_limit_a as f32),
+        ),
+        (
+            "voltage limitation (2031)",
+            Request::set_f32(param::VOLTAGE_LIMITATION, i, config.voltage_limit_v as f32),
+        ),
+        (
+            "lower object error threshold (4010)",
+            Request::set_f32(param::LOWER_ERROR_THRESHOLD, i, config.lower_error_c as f32),
+        ),
+        (
+            "upper object error threshold (4011)",
+            Request::set_f32(param::UPPER_ERROR_THRESHOLD, i, config.upper_error_c as f32),
+        ),
+        (
+            "max object temperature change (4012)",
+            Request::set_f32(param::MAX_TEMP_CHANGE, i, config.max_change_c_per_s as f32),
+        ),
+        (
+            "no restart from the error state (6310 = 0)",
+            Request::set_f32(param::ERROR_RESTART_DELAY, i, 0.0),
+        ),
+    ];
+    match config.mode {
+        MecomMode::Current => {
+            steps.push((
+                "live set voltage at the limitation (50002)",
+                Request::set_f32(param::LIVE_SET_VOLTAGE, i, config.voltage_limit_v as f32),
+            ));
+            steps.push((
+                "input selection live current (2000 = 1)",
+                Request::set_i32(param::INPUT_SELECTION, i, 1),
+            ));
+        }
+        MecomMode::Temperature => {
+            let object_c = link
+                .read_f32(channel, param::OBJECT_TEMPERATURE)
+                .map_err(|e| format!("cannot read the object temperature (1000): {e}"))?;
+            steps.push((
+                "live target at the plate (50012)",
+                Request::set_f32(param::LIVE_TARGET, i, object_c as f32),
+            ));
+            steps.push((
+                "live target source (50011 = 1)",
+                Request::set_i32(param::TARGET_SOURCE, i, 1),
+            ));
+            steps.push((
+                "input selection temperature controller (2000 = 2)",
+                Request::set_i32(param::INPUT_SELECTION, i, 2),
+            ));
+        }
+    }
+    steps.push((
+        "output stage enable live off/on (2010 = 2)",
+        Request::set_i32(param::OUTPUT_STAGE_ENABLE, i, 2),
+    ));
+    for (what, request) in steps {
+        link.set(channel, request)
+            .map_err(|e| format!("address {} instance {i} refused {what}: {e}", channel.address))?;
+    }
+    Ok(())
+}
+
+/// The worker: owns the port after the connection.
+struct Worker {
+    link: Link,
+    config: MecomConfig,
+    channels: Vec<ChannelSetup>,
+    shared: Arc<Mutex<Shared>>,
+    clock: Arc<dyn Clock>,
+    /// Whether live enable is set on each channel, as last acknowledged.
+    enabled: Vec<bool>,
+}
+
+impl Worker {
+    fn run(mut self, stop: &AtomicBool) {
+        let interval = Duration::from_secs_f64(self.config.cycle_interval_s);
+        while !stop.load(Ordering::SeqCst) {
+            let start = Instant::now();
+            if !self.cycle() {
+                return;
+            }
+            if let Some(rest) = interval.checked_sub(start.elapsed()) {
+                std::thread::sleep(rest);
+            }
+        }
+        // Dropped: every output off before the worker ends.
+        self.switch_all_off();
+    }
+
+    /// One cycle over every channel; false when the port failed.
+    fn cycle(&mut self) -> bool {
+        let start = Instant::now();
+        let (commands, off_requested) = match self.shared.lock() {
+            Ok(state) => (state.commands, state.off_requested),
+            Err(_) => return false,
+        };
+        let off_done = self.shared.lock().map(|s| s.off_done).unwrap_or(0);
+        if off_requested > off_done {
+            let done = self.switch_all_off();
+            if let Ok(mut state) = self.shared.lock() {
+                if done {
+                    state.off_done = off_requested;
+                }
+            }
+        }
+        for (index, command) in commands.into_iter().enumerate().take(self.channels.len()) {
+            if let Err(Failure::Io(e)) = self.drive(index, command) {
+                return self.port_failed(e);
+            }
+            if let Err(Failure::Io(e)) = self.sample(index) {
+                return self.port_failed(e);
+            }
+        }
+        let elapsed_s = start.elapsed().as_secs_f64();
+        self.link.stats.cycles += 1;
+        self.link.stats.last_cycle_s = elapsed_s;
+        self.link.stats.max_cycle_s = self.link.stats.max_cycle_s.max(elapsed_s);
+        if let Ok(mut state) = self.shared.lock() {
+            state.stats = self.link.stats;
+        }
+        true
+    }
+
+    fn port_failed(&mut self, error: String) -> bool {
+        if let Ok(mut state) = self.shared.lock() {
+            state.error = Some(format!("{}: {error}", self.link.name));
+            state.stats = self.link.stats;
+        }
+        false
+    }
+
+    /// Writes channel `index`'s command: the live current or target, and live enable when it changes.
+    fn drive(&mut self, index: usize, command: Command) -> Result<(), Failure> {
+        let ChannelSetup { channel, sign } = self.channels[index];
+        let i = channel.instance;
+        let (enable, value) = match self.config.mode {
+            MecomMode::Current => {
+                let limit_a = self.config.current_limit_a;
+                let current_a = command.current_a.clamp(-limit_a, limit_a);
+                (
+                    current_a != 0.0,
+                    Request::set_f32(param::LIVE_SET_CURRENT, i, (current_a * sign) as f32),
+                )
+            }
+            MecomMode::Temperature => match command.setpoint_c {
+                Some(setpoint_c) => (true, Request::set_f32(param::LIVE_TARGET, i, setpoint_c as f32)),
+                None => (false, Request::set_i32(param::LIVE_ENABLE, i, 0)),
+            },
+        };
+        let result = if enable {
+            self.link.set(channel, value).and_then(|()| {
+                if self.enabled[index] {
+                    Ok(())
+                } else {
+                    self.link.set(channel, Request::set_i32(param::LIVE_ENABLE, i, 1))
+                }
+            })
+        } else {
+            // Off: the enable first, then (current mode) the current to 0.
+            self.link
+                .set(channel, Request::set_i32(param::LIVE_ENABLE, i, 0))
+                .and_then(|()| match self.config.mode {
+                    MecomMode::Current => self
+                        .link
+                        .set(channel, Request::set_f32(param::LIVE_SET_CURRENT, i, 0.0)),
+                    MecomMode::Temperature => Ok(()),
+                })
+        };
+        match &result {
+            Ok(()) => self.enabled[index] = enable,
+            Err(e) => self.note_failure(index, e),
+        }
+        result
+    }
+
+    /// Reads channel `index`'s object and sink temperature, current, status and error number.
+    fn sample(&mut self, index: usize) -> Result<(), Failure> {
+        let ChannelSetup { channel, sign } = self.channels[index];
+        let values = (|| -> Result<(f64, f64, f64, f64, i32, i32), Failure> {
+            let object_c = self.link.read_f32(channel, param::OBJECT_TEMPERATURE)?;
+            let time_s = self.clock.now_s();
+            let sink_c = self.link.read_f32(channel, param::SINK_TEMPERATURE)?;
+            let current_a = self.link.read_f32(channel, param::ACTUAL_OUTPUT_CURRENT)? * sign;
+            let device_status = self.link.read_i32(channel, param::DEVICE_STATUS)?;
+            let number = self.link.read_i32(channel, param::ERROR_NUMBER)?;
+            Ok((time_s, object_c, sink_c, current_a, device_status, number))
+        })();
+        match values {
+            Ok((time_s, object_c, sink_c, current_a, device_status, number)) => {
+                if device_status == status::ERROR {
+                    // The device disabled its output by itself; it stays off until thermode enables it again.
+                    self.enabled[index] = false;
+                }
+                if let Some(track) = self.shared.lock().ok().as_mut().and_then(|s| s.tracks.get_mut(index)) {
+                    track.sample_seq += 1;
+                    track.time_s = track.time_s.max(time_s);
+                    track.object_c = object_c;
+                    track.sink_c = sink_c;
+                    track.current_a = current_a;
+                    track.device_status = device_status;
+                    track.error_number = number;
+                    track.last_answer_s = Some(self.clock.now_s());
+                    track.last_failure = None;
+                }
+                Ok(())
+            }
+            Err(e) => {
+                self.note_failure(index, &e);
+                Err(e)
+            }
+        }
+    }
+
+    fn note_failure(&mut self, index: usize, failure: &Failure) {
+        if let Some(track) = self.shared.lock().ok().as_mut().and_then(|s| s.tracks.get_mut(index)) {
+            track.last_failure = Some(failure.to_string());
+        }
+    }
+
+    /// Live enable 0 (and, current mode, 0 A) on every channel; true when every write was acknowledged.
+    fn switch_all_off(&mut self) -> bool {
+        let mut all = true;
+        for index in 0..self.channels.len() {
+            let ok = self.drive(index, Command::default()).is_ok();
+            all &= ok;
+        }
+        all
+    }
+}
+
+impl Device for MecomDevice {
+    fn channel_count(&self) -> usize {
+        self.channels.len()
+    }
+
+    fn apply(&mut self, channel: usize, command: &DriveCommand) -> Result<(), DeviceError> {
+        self.check_channel(channel)?;
+        let current_a = command.current_a();
+        Rule::Finite.check("drive current [A]", current_a)?;
+        if let Some(setpoint_c) = command.setpoint_c() {
+            Rule::Finite.check("drive set-point [°C]", setpoint_c)?;
+        }
+        let mut state = self.lock()?;
+        if let Some(error) = &state.error {
+            return Err(DeviceError::Link(error.clone()));
+        }
+        state.commands[channel] = Command {
+            current_a,
+            setpoint_c: command.setpoint_c(),
+        };
+        Ok(())
+    }
+
+    fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
+        self.check_channel(channel)?;
+        let now_s = self.clock.now_s();
+        let state = self.lock()?;
+        if let Some(error) = &state.error {
+            return Err(DeviceError::Link(error.clone()));
+        }
+        let Some(track) = state.tracks.get(channel) else {
+            return Err(DeviceError::NoSuchChannel {
+                channel,
+                count: self.channels.len(),
+            });
+        };
+        let Some(last_s) = track.last_answer_s else {
+            return Err(DeviceError::Link(format!(
+                "{}: no reading of channel {channel} yet",
+                self.name
+            )));
+        };
+        let silent_s = now_s - last_s;
+        if silent_s > self.config.link_timeout_s {
+            let why = track.last_failure.as_deref().unwrap_or("no answer");
+            return Err(DeviceError::Link(format!(
+                "{}: channel {channel} has not answered for {silent_s:.3} s (link timeout {} s): {why}",
+                self.name, self.config.link_timeout_s
+            )));
+        }
+        if track.device_status == status::ERROR {
+            return Err(match track.error_number {
+                error_number::OBJECT_TOO_HIGH => DeviceError::Cut {
+                    channel,
+                    cut: DeviceCut::OverTemperature,
+                },
+                error_number::OBJECT_TOO_LOW => DeviceError::Cut {
+                    channel,
+                    cut: DeviceCut::UnderTemperature,
+                },
+                number => DeviceError::Link(format!(
+                    "{}: the device is in its error state with its output off: error {number} ({}); reconnect \
+                     to reset it",
+                    self.name,
+                    describe_error(number)
+                )),
+            });
+        }
+        Ok(Reading {
+            sensor_c: track.object_c,
+            hot_side_c: track.sink_c,
+            time_s: track.time_s,
+            sample_seq: track.sample_seq,
+            current_a: track.current_a,
+        })
+    }
+
+    /// The worker runs in real time: nothing to do.
+    fn poll(&mut self, _now_s: f64) {}
+
+    /// Every output disabled (live enable 0, and 0 A in current mode); waits for the acknowledges (at most two
+    /// answer timeouts per write and channel, plus a cycle).
+    fn all_off(&mut self) -> Result<(), DeviceError> {
+        let wanted = {
+            let mut state = self.lock()?;
+            state.commands = [Command::default(); MAX_CHANNELS];
+            state.off_requested += 1;
+            state.off_requested
+        };
+        let wait_s = self.config.cycle_interval_s
+            + 2.0 * (1.0 + self.channels.len() as f64) * 4.0 * self.config.answer_timeout_s;
+        let deadline = Instant::now() + Duration::from_secs_f64(wait_s);
+        while Instant::now() < deadline {
+            {
+                let state = self.lock()?;
+                if state.off_done >= wanted {
+                    return Ok(());
+                }
+                if let Some(error) = &state.error {
+                    return Err(DeviceError::Link(error.clone()));
+                }
+            }
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        Err(DeviceError::Link(format!(
+            "{}: the device did not acknowledge switching every output off within {wait_s:.2} s",
+            self.name
+        )))
+    }
+}
+
+impl Drop for MecomDevice {
+    fn drop(&mut self) {
+        if let Ok(mut state) = self.shared.lock() {
+            state.commands = [Command::default(); MAX_CHANNELS];
+        }
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(worker) = self.worker.take() {
+            let _ = worker.join();
+        }
+    }
+}

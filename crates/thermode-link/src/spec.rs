@@ -1,0 +1,192 @@
+//! The `--device` spellings of real displays and opening the device one names ([`open_hardware`]):
+//!
+//! | spelling | device |
+//! | --- | --- |
+//! | `serial:PATH` | thermode's own protocol ([`crate::serial::SerialDevice`]) |
+//! | `mecom:PATH[?OPTIONS]` | Meerstetter TEC controller(s) over a serial port ([`crate::mecom::host::MecomDevice`]) |
+//! | `mecom-tcp:HOST:PORT[?OPTIONS]` | the same over TCP |
+//! | `tcs2:PATH[?OPTIONS]` | QST.Lab TCS II in follow mode ([`crate::tcs2::host::Tcs2Device`]) |
+//!
+//! OPTIONS are `key=value` pairs joined by `&`. MeCom: `mode=current|temperature` (default current),
+//! `channels=ADDRESS:INSTANCE,…` (default: every instance of address 0), `baud=N` (default 57600), `watchdog=S`
+//! (the device's communication watchdog, 0.1 to 0.25 s; default 0.25). TCS II: `zones=N` (1 to 5; default 5),
+//! `hold_max=C` (the warmest set-point streamed, at most 43 °C; default 43), `neutral=C` (20 to 40 °C; default 32).
+//! Everything else follows the device file and the envelope ([`HardwareContext`]).
+
+use std::sync::Arc;
+
+use thermode_device::{Device, DeviceConfig, DeviceError};
+use thermode_platform::Clock;
+use thermode_safety::{EnvelopeConfig, ABSOLUTE_MAX_C, ABSOLUTE_MIN_C};
+
+use crate::mecom::host::{MecomChannel, MecomConfig, MecomDevice, MecomMode};
+use crate::serial::{SerialConfig, SerialDevice, SERIAL_PREFIX};
+use crate::tcs2::host::{Tcs2Config, Tcs2Device, DEFAULT_HOLD_MAX_C};
+
+/// Prefix of a MeCom serial device: `mecom:`.
+pub const MECOM_PREFIX: &str = "mecom:";
+/// Prefix of a MeCom TCP device: `mecom-tcp:`.
+pub const MECOM_TCP_PREFIX: &str = "mecom-tcp:";
+/// Prefix of a TCS II device: `tcs2:`.
+pub const TCS2_PREFIX: &str = "tcs2:";
+
+/// What thermode knows of the display besides the device's spelling: the device file (current limit, module
+/// voltage) and the safety envelope (limits the device's own protection is set to).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HardwareContext {
+    /// The device file.
+    pub device: DeviceConfig,
+    /// The envelope every channel runs.
+    pub envelope: EnvelopeConfig,
+}
+
+/// Whether `spec` names a real display (any spelling of the table above).
+pub fn is_hardware(spec: &str) -> bool {
+    [SERIAL_PREFIX, MECOM_PREFIX, MECOM_TCP_PREFIX, TCS2_PREFIX]
+        .iter()
+        .any(|p| spec.starts_with(p))
+}
+
+fn bad_spec(spec: &str, why: impl std::fmt::Display) -> DeviceError {
+    DeviceError::Link(format!("--device {spec:?}: {why}"))
+}
+
+/// `key=value` options, in order.
+type Options<'a> = Vec<(&'a str, &'a str)>;
+
+/// Splits `rest` into the target and its `key=value` options.
+fn split_options<'a>(spec: &str, rest: &'a str) -> Result<(&'a str, Options<'a>), DeviceError> {
+    let (target, options) = rest.split_once('?').unwrap_or((rest, ""));
+    if target.is_empty() {
+        return Err(bad_spec(spec, "no path or address"));
+    }
+    let mut pairs = Vec::new();
+    for pair in options.split('&').filter(|p| !p.is_empty()) {
+        let (key, value) = pair
+            .split_once('=')
+            .ok_or_else(|| bad_spec(spec, format!("option {pair:?} is not key=value")))?;
+        pairs.push((key, value));
+    }
+    Ok((target, pairs))
+}
+
+fn number(spec: &str, key: &str, value: &str) -> Result<f64, DeviceError> {
+    value
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| bad_spec(spec, format!("{key}={value:?} is not a number")))
+}
+
+/// The MeCom settings of `spec`'s options over the defaults of `context`.
+pub fn mecom_config(
+    spec: &str,
+    options: &[(&str, &str)],
+    context: &HardwareContext,
+) -> Result<MecomConfig, DeviceError> {
+    let mut config = MecomConfig {
+        current_limit_a: context.device.drive.current_limit_a,
+        voltage_limit_v: context.device.peltier.vmax_v,
+        lower_error_c: ABSOLUTE_MIN_C,
+        upper_error_c: ABSOLUTE_MAX_C,
+        max_change_c_per_s: context.envelope.max_measured_rate_c_per_s.clamp(1.0, 200.0),
+        ..MecomConfig::default()
+    };
+    for &(key, value) in options {
+        match key {
+            "mode" => {
+                config.mode = match value {
+                    "current" => MecomMode::Current,
+                    "temperature" => MecomMode::Temperature,
+                    _ => return Err(bad_spec(spec, format!("mode={value:?}: use current or temperature"))),
+                }
+            }
+            "channels" => {
+                config.channels = value
+                    .split(',')
+                    .map(|pair| {
+                        let parsed = pair
+                            .split_once(':')
+                            .and_then(|(a, i)| Some((a.parse::<u8>().ok()?, i.parse::<u8>().ok()?)));
+                        parsed
+                            .map(|(address, instance)| MecomChannel { address, instance })
+                            .ok_or_else(|| bad_spec(spec, format!("channel {pair:?} is not ADDRESS:INSTANCE")))
+                    })
+                    .collect::<Result<_, _>>()?;
+            }
+            "baud" => {
+                config.baud_rate = value
+                    .parse()
+                    .map_err(|_| bad_spec(spec, format!("baud={value:?} is not a whole number")))?;
+            }
+            "watchdog" => config.watchdog_s = number(spec, key, value)?,
+            "address" => {
+                config.discover_address = value
+                    .parse()
+                    .map_err(|_| bad_spec(spec, format!("address={value:?} is not 0 to 254")))?;
+            }
+            _ => return Err(bad_spec(spec, format!("unknown MeCom option {key:?}"))),
+        }
+    }
+    config.validate()?;
+    Ok(config)
+}
+
+/// The TCS II settings of `spec`'s options over the defaults of `context`.
+pub fn tcs2_config(spec: &str, options: &[(&str, &str)], context: &HardwareContext) -> Result<Tcs2Config, DeviceError> {
+    let envelope = &context.envelope;
+    let mut config = Tcs2Config {
+        speed_c_per_s: envelope.max_setpoint_rate_c_per_s.clamp(0.1, 999.9),
+        ..Tcs2Config::default()
+    };
+    for &(key, value) in options {
+        match key {
+            "zones" => {
+                config.zones = value
+                    .parse()
+                    .map_err(|_| bad_spec(spec, format!("zones={value:?} is not 1 to 5")))?;
+            }
+            "hold_max" => config.hold_max_c = number(spec, key, value)?,
+            "neutral" => config.neutral_c = number(spec, key, value)?,
+            _ => return Err(bad_spec(spec, format!("unknown TCS II option {key:?}"))),
+        }
+    }
+    config.hold_max_c = config.hold_max_c.min(DEFAULT_HOLD_MAX_C).min(envelope.max_display_c);
+    config.max_c = envelope.max_display_c.max(config.hold_max_c);
+    config.hold_min_c = envelope.min_display_c.max(10.0).min(config.neutral_c);
+    config.validate()?;
+    Ok(config)
+}
+
+/// Opens the real display `spec` names (see the module documentation), with its readings on `clock`.
+pub fn open_hardware(
+    spec: &str,
+    context: &HardwareContext,
+    clock: Arc<dyn Clock>,
+) -> Result<Box<dyn Device + Send>, DeviceError> {
+    if let Some(rest) = spec.strip_prefix(SERIAL_PREFIX) {
+        if rest.is_empty() {
+            return Err(bad_spec(spec, "no path"));
+        }
+        return Ok(Box::new(SerialDevice::open(rest, &SerialConfig::default(), clock)?));
+    }
+    if let Some(rest) = spec.strip_prefix(MECOM_TCP_PREFIX) {
+        let (address, options) = split_options(spec, rest)?;
+        let config = mecom_config(spec, &options, context)?;
+        return Ok(Box::new(MecomDevice::open_tcp(address, &config, clock)?));
+    }
+    if let Some(rest) = spec.strip_prefix(MECOM_PREFIX) {
+        let (path, options) = split_options(spec, rest)?;
+        let config = mecom_config(spec, &options, context)?;
+        return Ok(Box::new(MecomDevice::open_serial(path, &config, clock)?));
+    }
+    if let Some(rest) = spec.strip_prefix(TCS2_PREFIX) {
+        let (path, options) = split_options(spec, rest)?;
+        let config = tcs2_config(spec, &options, context)?;
+        return Ok(Box::new(Tcs2Device::open(path, &config, clock)?));
+    }
+    Err(bad_spec(
+        spec,
+        "not a real display: use serial:PATH, mecom:PATH, mecom-tcp:HOST:PORT or tcs2:PATH",
+    ))
+}

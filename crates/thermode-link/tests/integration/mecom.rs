@@ -1,0 +1,402 @@
+//! MeCom end to end: the TEC controller emulator on a pseudo-terminal (or a TCP listener), [`MecomDevice`] on the
+//! other side, a control loop through safety envelopes. Covers the connection and configuration (the device's own
+//! limits, watchdog and no auto-restart set), a touch in current- and temperature-commanded mode read back, corrupted
+//! answers, a silent device, a host that vanishes (the device's watchdog switches its output off), the reset of a
+//! device found in its error state, TCP, and random bytes fed to every MeCom decoder.
+//!
+//! Timing bounds are generous (a loaded machine); what is asserted exactly is on the emulator's side (its error
+//! number, its output). Measured figures are printed (`cargo test -- --nocapture`).
+#![cfg(unix)]
+
+use std::collections::VecDeque;
+use std::io::{self, Read, Write};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use proptest::prelude::*;
+use serialport::SerialPort;
+use thermode_device::{Device, DeviceConfig, DeviceError, SimulatedDisplay};
+use thermode_link::firmware::Firmware;
+use thermode_link::firmware::{FirmwareStatus, PtyFirmware, TcpFirmware};
+use thermode_link::mecom::emulator::{MecomEmulator, MecomEmulatorConfig};
+use thermode_link::mecom::frame::{FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
+use thermode_link::mecom::host::{MecomConfig, MecomDevice, MecomMode};
+use thermode_link::mecom::payload::{check_answer, Request};
+use thermode_model::kron::KronModel;
+use thermode_platform::{Clock, MonotonicClock};
+use thermode_safety::DriveCommand;
+
+use crate::hardware_common::{ok, wait_for, Loop};
+
+const LIMIT_A: f64 = 2.8;
+
+fn emulator(channels: usize) -> MecomEmulator<KronModel> {
+    let display = SimulatedDisplay::<KronModel>::fingertips(&DeviceConfig::default(), channels, 5)
+        .unwrap_or_else(|e| panic!("display: {e}"));
+    MecomEmulator::new(display, MecomEmulatorConfig::default()).unwrap_or_else(|e| panic!("emulator: {e}"))
+}
+
+fn config(mode: MecomMode) -> MecomConfig {
+    MecomConfig {
+        mode,
+        link_timeout_s: 1.0,
+        ..MecomConfig::default()
+    }
+}
+
+fn clock() -> Arc<dyn Clock> {
+    Arc::new(MonotonicClock::new())
+}
+
+fn status(pty: &PtyFirmware) -> FirmwareStatus {
+    pty.control()
+        .status()
+        .unwrap_or_else(|| panic!("the emulator published no status"))
+}
+
+/// A serial port whose cable can be pulled: once cut, writes vanish and reads time out.
+struct Cable {
+    port: Box<dyn SerialPort>,
+    cut: Arc<AtomicBool>,
+}
+
+impl Read for Cable {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        if self.cut.load(Ordering::SeqCst) {
+            std::thread::sleep(Duration::from_millis(2));
+            return Err(io::ErrorKind::TimedOut.into());
+        }
+        self.port.read(buf)
+    }
+}
+
+impl Write for Cable {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        if self.cut.load(Ordering::SeqCst) {
+            return Ok(buf.len());
+        }
+        self.port.write(buf)
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        self.port.flush()
+    }
+}
+
+fn cable(path: &str) -> (Cable, Arc<AtomicBool>) {
+    let port = serialport::new(path, 57_600)
+        .timeout(Duration::from_millis(2))
+        .open()
+        .unwrap_or_else(|e| panic!("open {path}: {e}"));
+    let cut = Arc::new(AtomicBool::new(false));
+    (
+        Cable {
+            port,
+            cut: Arc::clone(&cut),
+        },
+        cut,
+    )
+}
+
+#[test]
+fn the_mecom_device_can_move_between_threads() {
+    fn assert_send<T: Send>() {}
+    assert_send::<MecomDevice>();
+}
+
+#[test]
+fn current_mode_connects_configures_and_drives_a_touch() {
+    let clock = clock();
+    let pty = PtyFirmware::spawn(Box::new(emulator(2)), Arc::clone(&clock)).unwrap_or_else(|e| panic!("pty: {e}"));
+    let device = MecomDevice::open_serial(pty.path(), &config(MecomMode::Current), Arc::clone(&clock))
+        .unwrap_or_else(|e| panic!("open: {e}"));
+    assert_eq!(device.channel_count(), 2, "instances found by ?VM");
+    assert_eq!(device.identity()[0].1, "thermode-TEC EMU G01");
+    let start = status(&pty);
+    let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
+    let first = control.tick(&[23.0, 23.0]);
+    let first = first.iter().map(ok).collect::<Vec<_>>();
+    let last = control.run(3.0, &[40.0, 23.0]);
+    let end = status(&pty);
+    let stats = control.device.stats();
+    println!(
+        "MeCom over a pty, 2 channels, 2 × (1 write + 5 reads) a cycle: {} cycles, last {:.2} ms, longest {:.2} ms, \
+         mean request round trip {:.3} ms; plate {:.2} → {:.2} °C",
+        stats.cycles,
+        stats.last_cycle_s * 1e3,
+        stats.max_cycle_s * 1e3,
+        stats.mean_round_trip_s * 1e3,
+        start.plate_c[0],
+        end.plate_c[0]
+    );
+    let heated = ok(&last[0]);
+    assert!(
+        end.plate_c[0] > start.plate_c[0] + 5.0,
+        "plate {} → {}",
+        start.plate_c[0],
+        end.plate_c[0]
+    );
+    assert!(
+        heated.sensor_c > first[0].sensor_c + 5.0 && heated.sample_seq > first[0].sample_seq + 20,
+        "readings {:?} → {heated:?}",
+        first[0]
+    );
+    assert!(heated.current_a > 0.0, "the device's own current reading {heated:?}");
+    assert!(
+        (ok(&last[1]).sensor_c - first[1].sensor_c).abs() < 2.0,
+        "channel 1 {:?}",
+        last[1]
+    );
+    assert!(end.output_on[0], "channel 0 output off while heating");
+    assert_eq!((stats.timeouts, stats.bad_answers), (0, 0), "{stats:?}");
+    drop(control);
+    let off = wait_for(1.0, || !status(&pty).output_on[0] && status(&pty).applied_a[0] == 0.0);
+    assert!(
+        off.is_some(),
+        "dropping the device left the output on: {:?}",
+        status(&pty)
+    );
+}
+
+/// The emulator in the test's own thread behind a port: what the host writes is handed to it at once; reads return
+/// its answers (or time out after a millisecond, the emulator's time running on).
+struct InProcess {
+    emu: Arc<Mutex<MecomEmulator<KronModel>>>,
+    answers: VecDeque<u8>,
+    clock: Arc<dyn Clock>,
+}
+
+impl Read for InProcess {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        if self.answers.is_empty() {
+            std::thread::sleep(Duration::from_millis(1));
+            let mut out = Vec::new();
+            if let Ok(mut emu) = self.emu.lock() {
+                emu.advance_to(self.clock.now_s(), &mut out);
+            }
+            self.answers.extend(out);
+            return Err(io::ErrorKind::TimedOut.into());
+        }
+        let n = buf.len().min(self.answers.len());
+        for (slot, byte) in buf.iter_mut().zip(self.answers.drain(..n)) {
+            *slot = byte;
+        }
+        Ok(n)
+    }
+}
+
+impl Write for InProcess {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let mut out = Vec::new();
+        if let Ok(mut emu) = self.emu.lock() {
+            emu.receive(buf, self.clock.now_s(), &mut out);
+        }
+        self.answers.extend(out);
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+#[test]
+fn connect_sets_the_devices_own_protection() {
+    let clock = clock();
+    let emu = Arc::new(Mutex::new(emulator(2)));
+    let port = InProcess {
+        emu: Arc::clone(&emu),
+        answers: VecDeque::new(),
+        clock: Arc::clone(&clock),
+    };
+    let config = MecomConfig {
+        current_limit_a: 1.5,
+        ..config(MecomMode::Current)
+    };
+    let device = MecomDevice::open("mecom:in-process", Box::new(port), &config, Arc::clone(&clock))
+        .unwrap_or_else(|e| panic!("open: {e}"));
+    {
+        let emu = emu.lock().unwrap_or_else(|e| panic!("{e}"));
+        for ch in 0..2 {
+            assert_eq!(emu.current_limit_a(ch), Some(1.5), "current limitation of channel {ch}");
+            assert_eq!(
+                emu.error_thresholds_c(ch),
+                Some((10.0, 48.0)),
+                "object error thresholds of {ch}"
+            );
+            assert_eq!(emu.restart_delay_s(ch), Some(0.0), "auto-restart of {ch}");
+            assert!(!emu.output_on(ch), "output of {ch} on before any command");
+        }
+        assert_eq!(emu.watchdog_s(), 0.25_f32 as f64, "communication watchdog");
+    }
+    // The live current is clamped to the limitation the host set, whatever the command.
+    let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
+    control.run(0.5, &[45.0, 23.0]);
+    let peak_a = emu.lock().map(|e| e.status().applied_a[0]).unwrap_or_default();
+    println!("requested up to {LIMIT_A} A, device limitation 1.5 A, delivered {peak_a:.3} A");
+    assert!(peak_a > 0.5 && peak_a <= 1.5 + 1e-6, "delivered {peak_a} A");
+}
+
+#[test]
+fn temperature_mode_follows_the_shaped_setpoint_and_off_disables_the_output() {
+    let clock = clock();
+    let pty = PtyFirmware::spawn(Box::new(emulator(1)), Arc::clone(&clock)).unwrap_or_else(|e| panic!("pty: {e}"));
+    let device = MecomDevice::open_serial(pty.path(), &config(MecomMode::Temperature), Arc::clone(&clock))
+        .unwrap_or_else(|e| panic!("open: {e}"));
+    let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
+    let last = control.run(5.0, &[36.0]);
+    let reading = ok(&last[0]);
+    let plate_c = status(&pty).plate_c[0];
+    println!(
+        "temperature mode: target 36 °C, after 5 s sensor {:.2} °C, plate {plate_c:.2} °C",
+        reading.sensor_c
+    );
+    assert!((reading.sensor_c - 36.0).abs() < 1.0, "sensor {} °C", reading.sensor_c);
+    assert!(status(&pty).output_on[0]);
+    control
+        .device
+        .apply(0, &DriveCommand::off())
+        .unwrap_or_else(|e| panic!("off: {e}"));
+    let off = wait_for(1.0, || !status(&pty).output_on[0]);
+    assert!(off.is_some(), "a command without a set-point left the output on");
+}
+
+#[test]
+fn a_host_that_vanishes_trips_the_devices_watchdog_and_a_reconnect_resets_it() {
+    let clock = clock();
+    let pty = PtyFirmware::spawn(Box::new(emulator(1)), Arc::clone(&clock)).unwrap_or_else(|e| panic!("pty: {e}"));
+    let (port, cut) = cable(pty.path());
+    let device = MecomDevice::open(
+        "mecom:cable",
+        Box::new(port),
+        &config(MecomMode::Current),
+        Arc::clone(&clock),
+    )
+    .unwrap_or_else(|e| panic!("open: {e}"));
+    let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
+    control.run(0.5, &[45.0]);
+    assert!(status(&pty).applied_a[0] > 0.5, "not heating: {:?}", status(&pty));
+    cut.store(true, Ordering::SeqCst);
+    let cut_at = clock.now_s();
+    let tripped = wait_for(2.0, || status(&pty).error == Some(183));
+    let s = status(&pty);
+    println!(
+        "cable pulled while heating: device error 183 after {tripped:?} s (watchdog 0.25 s), current {} A",
+        s.applied_a[0]
+    );
+    assert!(tripped.is_some() && s.applied_a[0] == 0.0 && !s.output_on[0], "{s:?}");
+    let failed = wait_for(3.0, || control.device.read(0).is_err());
+    assert!(failed.is_some(), "readings go on with the cable pulled");
+    match control.device.read(0) {
+        Err(DeviceError::Link(message)) => assert!(message.contains("not answered"), "{message}"),
+        other => panic!("expected a link error, got {other:?}"),
+    }
+    println!("host-side link error after {:.3} s", clock.now_s() - cut_at);
+    drop(control);
+    // A new session finds the device in its error state and resets it.
+    let device = MecomDevice::open_serial(pty.path(), &config(MecomMode::Current), Arc::clone(&clock))
+        .unwrap_or_else(|e| panic!("reopen: {e}"));
+    assert_eq!(device.stats().reset_at_connect, Some(183));
+    assert_eq!(status(&pty).error, None);
+}
+
+#[test]
+fn a_silent_device_gives_a_clear_error_and_the_drop_does_not_hang() {
+    let clock = clock();
+    let pty = PtyFirmware::spawn(Box::new(emulator(1)), Arc::clone(&clock)).unwrap_or_else(|e| panic!("pty: {e}"));
+    let mut device = MecomDevice::open_serial(pty.path(), &config(MecomMode::Current), Arc::clone(&clock))
+        .unwrap_or_else(|e| panic!("open: {e}"));
+    ok(&device.read(0));
+    pty.control().set_mute(true);
+    let failed = wait_for(3.0, || device.read(0).is_err());
+    assert!(failed.is_some(), "a silent device still reads");
+    let message = device.read(0).err().map(|e| e.to_string()).unwrap_or_default();
+    println!("silent device: read fails after {failed:?} s: {message}");
+    assert!(message.contains("no answer"), "{message}");
+    assert!(device.all_off().is_err(), "all-off confirmed by a silent device");
+    let start = std::time::Instant::now();
+    drop(device);
+    assert!(start.elapsed().as_secs_f64() < 3.0, "drop took {:?}", start.elapsed());
+}
+
+#[test]
+fn corrupted_answers_are_dropped_and_the_link_goes_on() {
+    let clock = clock();
+    let pty = PtyFirmware::spawn(Box::new(emulator(1)), Arc::clone(&clock)).unwrap_or_else(|e| panic!("pty: {e}"));
+    let device = MecomDevice::open_serial(pty.path(), &config(MecomMode::Current), Arc::clone(&clock))
+        .unwrap_or_else(|e| panic!("open: {e}"));
+    pty.control().set_corrupt_one_in(7);
+    let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
+    let last = control.run(1.5, &[38.0]);
+    let stats = control.device.stats();
+    println!("every 7th answer corrupted: {stats:?}");
+    assert!(stats.rx.crc_errors + stats.rx.malformed > 10, "{stats:?}");
+    assert!(stats.repeats > 10, "{stats:?}");
+    assert!(ok(&last[0]).sensor_c > 24.0, "{:?}", last[0]);
+}
+
+#[test]
+fn mecom_over_tcp() {
+    let clock = clock();
+    let tcp = TcpFirmware::spawn(Box::new(emulator(1)), "127.0.0.1:0", Arc::clone(&clock))
+        .unwrap_or_else(|e| panic!("tcp: {e}"));
+    let address = tcp.address().to_string();
+    let device = MecomDevice::open_tcp(&address, &config(MecomMode::Current), Arc::clone(&clock))
+        .unwrap_or_else(|e| panic!("open: {e}"));
+    let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
+    let first = ok(&control.tick(&[23.0])[0]);
+    let last = ok(&control.run(1.5, &[40.0])[0]);
+    let stats = control.device.stats();
+    println!(
+        "MeCom over TCP loopback: mean request round trip {:.3} ms, cycle {:.2} ms; sensor {:.2} → {:.2} °C",
+        stats.mean_round_trip_s * 1e3,
+        stats.last_cycle_s * 1e3,
+        first.sensor_c,
+        last.sensor_c
+    );
+    assert!(last.sensor_c > first.sensor_c + 3.0, "{first:?} → {last:?}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+
+    /// Random bytes into both frame decoders, the payload parsers and the emulator: no panic, and frames decoded
+    /// from noise have a good CRC (the decoder never hands out an unchecked frame).
+    #[test]
+    fn random_bytes_never_panic_any_mecom_decoder(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
+        for control in [DEVICE_CONTROL, HOST_CONTROL] {
+            let mut decoder = FrameDecoder::new(control);
+            decoder.feed(&bytes, |result| {
+                if let Ok(frame) = result {
+                    let _ = Request::parse(&frame.payload);
+                    let _ = check_answer(&Request::Read { id: 1000, instance: 1 }, 0, &frame.payload);
+                    let _ = check_answer(&Request::Meta { id: 1000, instance: 1 }, 0, &frame.payload);
+                }
+            });
+        }
+        let text = String::from_utf8_lossy(&bytes);
+        let _ = Request::parse(&text);
+        let mut emu = emulator(1);
+        let mut out = Vec::new();
+        emu.receive(&bytes, 0.01, &mut out);
+    }
+
+    /// Valid host frames with random parameters never make the emulator panic, and each is answered.
+    #[test]
+    fn random_requests_are_answered(id in any::<u16>(), instance in any::<u8>(), value in any::<u32>()) {
+        let mut emu = emulator(2);
+        let mut bytes = Vec::new();
+        for (seq, request) in [
+            Request::Read { id, instance },
+            Request::Meta { id, instance },
+            Request::Set { id, instance, value },
+        ].iter().enumerate() {
+            thermode_link::mecom::frame::encode_frame(HOST_CONTROL, 1, seq as u16, &request.payload(), &mut bytes);
+        }
+        let mut out = Vec::new();
+        emu.receive(&bytes, 0.01, &mut out);
+        let mut decoder = FrameDecoder::new(DEVICE_CONTROL);
+        let mut answers = 0;
+        decoder.feed(&out, |r| { if r.is_ok() { answers += 1; } });
+        prop_assert_eq!(answers, 3);
+    }
+}

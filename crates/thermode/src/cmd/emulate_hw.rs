@@ -1,0 +1,94 @@
+//! `thermode emulate --protocol mecom|tcs2`: the device side of a Meerstetter TEC controller (MeCom, on a
+//! pseudo-terminal or `--tcp ADDR`) or of a QST.Lab TCS II stimulator (on a pseudo-terminal), with the simulated
+//! display behind it, so `--device mecom:PATH`, `mecom-tcp:HOST:PORT` and `tcs2:PATH` work without hardware.
+//!
+//! The first line on standard output is what the host connects to (a pseudo-terminal path, or the TCP address with
+//! the port picked), flushed at once; the emulator then runs in real time until the process is ended.
+
+use std::io::Write;
+use std::sync::Arc;
+
+use anyhow::{bail, Result};
+use clap::ValueEnum;
+use thermode_device::{DefaultFinger, SimulatedDisplay};
+use thermode_link::emulator::RunEnd;
+use thermode_link::firmware::{Firmware, PtyFirmware, TcpFirmware};
+use thermode_link::mecom::emulator::{MecomEmulator, MecomEmulatorConfig};
+use thermode_link::tcs2::emulator::{Tcs2Emulator, Tcs2EmulatorConfig};
+use thermode_platform::{Clock, MonotonicClock};
+
+use super::emulate::EmulateArgs;
+use crate::resolve;
+
+/// The protocol `thermode emulate` speaks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Protocol {
+    /// thermode's own protocol (`docs/protocol.md`).
+    Own,
+    /// A Meerstetter TEC controller (MeCom).
+    Mecom,
+    /// A QST.Lab TCS II stimulator.
+    Tcs2,
+}
+
+/// Runs the MeCom or TCS II emulator of `args`.
+pub fn run(args: &EmulateArgs) -> Result<()> {
+    let (channels, device_file, seed) = args.plant();
+    let device = resolve::device_config(device_file)?;
+    let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device, channels, seed)?;
+    let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
+    let (firmware, what, spelling): (Box<dyn Firmware>, String, &str) = match args.protocol {
+        Protocol::Mecom => {
+            let config = MecomEmulatorConfig {
+                address: args.address,
+                ..MecomEmulatorConfig::default()
+            };
+            let emulator = MecomEmulator::new(display, config)?;
+            let what = format!(
+                "a MeCom TEC controller at address {}, {channels} instances",
+                args.address
+            );
+            let spelling = if args.tcp.is_some() { "mecom-tcp:" } else { "mecom:" };
+            (Box::new(emulator), what, spelling)
+        }
+        Protocol::Tcs2 => {
+            if args.tcp.is_some() {
+                bail!("--tcp is for --protocol mecom only");
+            }
+            let config = Tcs2EmulatorConfig {
+                forced_stream_hz: args.stream_hz,
+                ..Tcs2EmulatorConfig::default()
+            };
+            let emulator = Tcs2Emulator::new(display, config)?;
+            (
+                Box::new(emulator),
+                format!("a TCS II stimulator, {channels} zones"),
+                "tcs2:",
+            )
+        }
+        Protocol::Own => bail!("the own protocol is emulated by `thermode emulate` itself"),
+    };
+    let mut stdout = std::io::stdout().lock();
+    let end = if let Some(bind) = &args.tcp {
+        let tcp = TcpFirmware::spawn(firmware, bind, clock)?;
+        writeln!(stdout, "{}", tcp.address()).and_then(|()| stdout.flush())?;
+        drop(stdout);
+        eprintln!(
+            "thermode emulate: {what}; connect with --device {spelling}{}",
+            tcp.address()
+        );
+        tcp.wait()?
+    } else {
+        let pty = PtyFirmware::spawn(firmware, clock)?;
+        writeln!(stdout, "{}", pty.path()).and_then(|()| stdout.flush())?;
+        drop(stdout);
+        eprintln!(
+            "thermode emulate: {what}; connect with --device {spelling}{}",
+            pty.path()
+        );
+        pty.wait()?
+    };
+    match end {
+        RunEnd::Stopped | RunEnd::PortClosed | RunEnd::HostClosed => Ok(()),
+    }
+}

@@ -1,0 +1,96 @@
+//! `thermode emulate --protocol mecom|tcs2` and a display chosen with `--device mecom:…`, `mecom-tcp:…` and
+//! `tcs2:…`: each emulator spawned as a user would, `thermode bench` run on it (touches through the WebSocket,
+//! the envelope and the backend), and refused spellings.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+
+/// A child killed and reaped when dropped.
+struct Process(Child);
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// `thermode emulate` with `args`; returns it and the first line it printed (where to connect).
+fn emulate(args: &[&str]) -> (Process, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .arg("emulate")
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap_or_else(|e| panic!("spawn emulate: {e}"));
+    let stdout = child.stdout.take().unwrap_or_else(|| panic!("emulate stdout"));
+    let mut line = String::new();
+    BufReader::new(stdout)
+        .read_line(&mut line)
+        .unwrap_or_else(|e| panic!("read the emulator's address: {e}"));
+    (Process(child), line.trim().to_string())
+}
+
+/// `thermode bench` for one second at 100 Hz on `device`; its standard error.
+fn bench_on(device: &str) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args(["bench", "--device", device, "--rate", "100", "--duration", "1"])
+        .output()
+        .unwrap_or_else(|e| panic!("run bench: {e}"));
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(
+        out.status.success(),
+        "bench --device {device} failed ({:?}): {stderr}",
+        out.status.code()
+    );
+    stderr
+}
+
+#[test]
+fn bench_runs_on_the_mecom_emulator_in_both_modes() {
+    let (_emulator, pty) = emulate(&["--protocol", "mecom", "--channels", "2"]);
+    assert!(pty.starts_with("/dev/"), "pty {pty}");
+    let stderr = bench_on(&format!("mecom:{pty}"));
+    assert!(
+        stderr.contains(&format!("display on mecom:{pty}, 2 channels")),
+        "{stderr}"
+    );
+    let stderr = bench_on(&format!("mecom:{pty}?mode=temperature&channels=0:1"));
+    assert!(stderr.contains("1 channel"), "{stderr}");
+}
+
+#[test]
+fn bench_runs_on_the_mecom_emulator_over_tcp() {
+    let (_emulator, address) = emulate(&["--protocol", "mecom", "--channels", "1", "--tcp", "127.0.0.1:0"]);
+    assert!(address.starts_with("127.0.0.1:"), "address {address}");
+    let stderr = bench_on(&format!("mecom-tcp:{address}"));
+    assert!(stderr.contains("display on mecom-tcp:"), "{stderr}");
+}
+
+#[test]
+fn bench_runs_on_the_tcs2_emulator() {
+    let (_emulator, pty) = emulate(&["--protocol", "tcs2", "--channels", "3", "--stream-hz", "50"]);
+    let stderr = bench_on(&format!("tcs2:{pty}?zones=3"));
+    assert!(stderr.contains("3 channels"), "{stderr}");
+}
+
+#[test]
+fn bad_hardware_spellings_are_refused_with_the_reason() {
+    super::expect_error(
+        &["bench", "--device", "mecom:/dev/null?mode=fast", "--duration", "1"],
+        "mode=\"fast\": use current or temperature",
+    );
+    super::expect_error(
+        &["bench", "--device", "tcs2:/dev/null?zones=9", "--duration", "1"],
+        "a display has 1 to 5 channels",
+    );
+    super::expect_error(
+        &["bench", "--device", "usb:/dev/null", "--duration", "1"],
+        "--device must be",
+    );
+    super::expect_error(
+        &["emulate", "--protocol", "tcs2", "--tcp", "127.0.0.1:0"],
+        "--tcp is for --protocol mecom only",
+    );
+}
