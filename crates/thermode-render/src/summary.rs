@@ -7,7 +7,8 @@
 //! - Skin and truth are read where the renderer's target lives ([`RenderSpec::receptor_depth_m`]): at the skin
 //!   surface for the fv renderer, at the centre of the simulated finger's epidermis (Kron's T1) for the kron
 //!   renderer, in the simulated finger on the display, in the truth and in the actuator-limit run alike.
-//! - RMS skin error: √(mean of (skin − target)²) over the rows with 0 < t ≤ 5 s, 5 < t ≤ 90 s, and 0 < t ≤ 90 s.
+//! - RMS skin error: √(mean of (skin − target)²) over the rows with 0 < t ≤ 5 s, 5 < t ≤ 90 s, and 0 < t ≤ 90 s (90 s
+//!   or the run's duration if shorter, [`Summary::window_end_s`]; the labels follow it).
 //! - RMS against the truth: the same for skin − truth over 0 < t ≤ 90 s.
 //! - RMS display tracking: true plate minus the shaped set-point held over the tick, over 0 < t ≤ 90 s.
 //! - Direction: T0 is the target at the touch; the target drops (cooling) if T0 − min target ≥ max target − T0,
@@ -70,6 +71,10 @@ pub struct Summary {
     pub controller: String,
     /// The renderer (`fv`, `kron`).
     pub renderer: String,
+    /// End of the windows the run covers \[s\]: its duration after the touch, at most [`FULL_WINDOW_S`] (90). The
+    /// fields named `…_90_…` cover 0 (or 5) to this time, and the table and the JSON name them after it
+    /// ([`Summary::window_label`]).
+    pub window_end_s: f64,
     /// RMS of skin − target over 0 < t ≤ 5 s.
     pub rms_skin_0_5_c: Option<f64>,
     /// RMS of skin − target over 5 < t ≤ 90 s.
@@ -412,6 +417,7 @@ pub fn summarise(
         material: spec.material.name.clone(),
         controller: controller.to_string(),
         renderer: spec.pipeline.renderer.name().to_string(),
+        window_end_s: spec.duration_s.min(FULL_WINDOW_S),
         rms_skin_0_5_c: rms(&t.skin_c, &t.target_skin_c, 0.0, EARLY_WINDOW_S),
         rms_skin_5_90_c: rms(&t.skin_c, &t.target_skin_c, EARLY_WINDOW_S, FULL_WINDOW_S),
         rms_skin_0_90_c: rms(&t.skin_c, &t.target_skin_c, 0.0, FULL_WINDOW_S),
@@ -432,16 +438,48 @@ pub fn summarise(
     }
 }
 
-/// A fixed-width text table of summaries, one row per run.
+impl Summary {
+    /// The end of the windows as the labels spell it: `90` for a full run, `10` for `--duration 10`, `7.5` for
+    /// 7.5 s (the shortest decimal that reads back as the number).
+    pub fn window_label(&self) -> String {
+        format!("{}", self.window_end_s)
+    }
+
+    /// The JSON key of a field, following the windows actually used: `rms_skin_5_90_c` becomes `rms_skin_5_10_c`
+    /// for a 10 s run (and likewise `rms_skin_0_90_c`, `rms_truth_0_90_c`); other keys are unchanged.
+    pub fn json_key(&self, field: &str) -> String {
+        match field.strip_suffix("_90_c") {
+            Some(stem) if field.starts_with("rms_") => format!("{stem}_{}_c", self.window_label().replace('.', "p")),
+            _ => field.to_string(),
+        }
+    }
+}
+
+/// A fixed-width text table of summaries, one row per run. The window labels follow the first summary's windows
+/// (`rms5-10` for 10 s runs); runs of different lengths get one table each.
 pub fn summary_table(summaries: &[Summary]) -> String {
+    let mut out = String::new();
+    let mut rest = summaries;
+    while let Some(first) = rest.first() {
+        let same = rest.iter().take_while(|s| s.window_end_s == first.window_end_s).count();
+        out.push_str(&table_of(&rest[..same]));
+        rest = &rest[same..];
+    }
+    out
+}
+
+fn table_of(summaries: &[Summary]) -> String {
+    let end = summaries
+        .first()
+        .map_or_else(|| format!("{FULL_WINDOW_S}"), Summary::window_label);
     let mut out = format!(
         "{:<10} {:<6} {:<4} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7} {:>7} {:>7}  {}\n",
         "material",
         "ctrl",
         "rend",
         "rms0-5",
-        "rms5-90",
-        "rms0-90",
+        format!("rms5-{end}"),
+        format!("rms0-{end}"),
         "floor",
         "rmsTruth",
         "rmsDisp",
@@ -472,18 +510,61 @@ pub fn summary_table(summaries: &[Summary]) -> String {
             s.first_fault.as_deref().unwrap_or("-"),
         ));
     }
-    out.push_str(
-        "(°C and s; rms = root mean square of skin − target over 0–5, 5–90, 0–90 s after contact; floor = rms0-90 of \
-         an ideal controller at the actuator and safety-envelope limits (drive, set-point rate, display range); rmsTruth, rmsDisp = of skin − truth and of plate − set-point over \
-         0–90 s; overshoot = largest skin excursion beyond the target during contact; lag = skin minus target time at half of the \
-         target's drop; limit = the same for the ideal controller; ratio = lag/limit)\n",
-    );
+    out.push_str(&format!(
+        "(°C and s; rms = root mean square of skin − target over 0–5, 5–{end}, 0–{end} s after contact; floor = \
+         rms0-{end} of an ideal controller at the actuator and safety-envelope limits (drive, set-point rate, display \
+         range); rmsTruth, rmsDisp = of skin − truth and of plate − set-point over 0–{end} s; overshoot = largest skin \
+         excursion beyond the target during contact; lag = skin minus target time at half of the target's drop; \
+         limit = the same for the ideal controller; ratio = lag/limit)\n",
+    ));
     out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn labels_and_json_keys_follow_the_windows_actually_used() {
+        let summary = |end: f64| Summary {
+            material: "wood".into(),
+            controller: "model".into(),
+            renderer: "fv".into(),
+            window_end_s: end,
+            rms_skin_0_5_c: Some(0.1),
+            rms_skin_5_90_c: Some(0.2),
+            rms_skin_0_90_c: Some(0.3),
+            rms_truth_0_90_c: None,
+            rms_display_tracking_c: None,
+            overshoot_c: 0.0,
+            cooling: true,
+            contact_target_c: 30.0,
+            target_drop_c: 2.0,
+            half_level_c: 29.0,
+            target_half_time_s: None,
+            skin_half_time_s: None,
+            lag_s: None,
+            actuator_limit_lag_s: None,
+            actuator_limit_rms_c: None,
+            first_fault: None,
+            first_fault_time_s: None,
+        };
+        let (short, full, odd) = (summary(10.0), summary(90.0), summary(7.5));
+        assert_eq!(short.json_key("rms_skin_5_90_c"), "rms_skin_5_10_c");
+        assert_eq!(short.json_key("rms_truth_0_90_c"), "rms_truth_0_10_c");
+        assert_eq!(short.json_key("overshoot_c"), "overshoot_c");
+        assert_eq!(full.json_key("rms_skin_0_90_c"), "rms_skin_0_90_c");
+        assert_eq!(odd.json_key("rms_skin_0_90_c"), "rms_skin_0_7p5_c");
+        let table = summary_table(&[short, full]);
+        assert!(
+            table.contains("rms5-10") && table.contains("over 0–5, 5–10, 0–10 s"),
+            "{table}"
+        );
+        assert!(
+            table.contains("rms5-90") && table.contains("over 0–5, 5–90, 0–90 s"),
+            "{table}"
+        );
+    }
 
     #[test]
     fn rms_of_a_known_difference() {

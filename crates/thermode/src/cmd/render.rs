@@ -14,7 +14,7 @@ use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, Render
 use thermode_plot::write_figure;
 use thermode_render::figure::figure3;
 use thermode_render::run::{render_all, write_csv, DEFAULT_DURATION_S, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ};
-use thermode_render::summary::summary_table;
+use thermode_render::summary::{summary_table, Summary};
 use thermode_render::RenderSpec;
 
 use crate::output::{print_stdout, write_atomically};
@@ -148,11 +148,30 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         let summaries: Vec<_> = runs.iter().map(|r| r.summary.clone()).collect();
         let text = match args.format {
             FormatArg::Text => summary_table(&summaries),
-            FormatArg::Json => serde_json::to_string_pretty(&summaries)? + "\n",
+            FormatArg::Json => serde_json::to_string_pretty(&summaries_json(&summaries)?)? + "\n",
         };
         print_stdout(&text)?;
     }
     Ok(())
+}
+
+/// The summaries as JSON objects whose window keys follow the windows actually used (`rms_skin_5_10_c` for a 10 s
+/// run; [`Summary::json_key`]).
+fn summaries_json(summaries: &[Summary]) -> Result<Vec<serde_json::Value>> {
+    summaries
+        .iter()
+        .map(|s| {
+            let serde_json::Value::Object(fields) = serde_json::to_value(s)? else {
+                anyhow::bail!("a summary is not a JSON object");
+            };
+            Ok(serde_json::Value::Object(
+                fields
+                    .into_iter()
+                    .map(|(key, value)| (s.json_key(&key), value))
+                    .collect(),
+            ))
+        })
+        .collect()
 }
 
 fn pid_gains(args: &RenderArgs, device: &DeviceConfig) -> Result<PidGains> {
