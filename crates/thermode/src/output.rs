@@ -1,16 +1,56 @@
 //! Writing files the CLI produces through the one atomic writer (`thermode_platform::write_atomically`: temporary
 //! file beside the target, synced, renamed, folder synced; a device or FIFO is written in place), so that an error
 //! never leaves half a file behind, and printing to standard output without panicking on a closed pipe.
+//!
+//! One convention for every command: `-` as an output file means standard output; a device or FIFO is written in
+//! place, never replaced; and every output of a command is checked ([`check_outputs`]) before the command does its
+//! work, so that a bad second path (an unwritable plot) cannot leave the first output (the CSV) behind.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use thermode_platform::WriteError;
 
-/// Writes the bytes produced by `fill` to `path` atomically; errors name `path`.
+/// Whether `path` names standard output (`-`).
+pub fn is_stdout(path: &Path) -> bool {
+    path.as_os_str() == "-"
+}
+
+/// Checks, before any work is done, that every output in `outputs` (option name, path) can be written: `-`
+/// (standard output) always can; otherwise the folder must exist and take a new file (probed by creating and
+/// removing one), and a path that exists must not be a folder. Errors name the option and the path.
+pub fn check_outputs(outputs: &[(&str, Option<&Path>)]) -> Result<()> {
+    for (option, path) in outputs {
+        let Some(path) = path.filter(|p| !is_stdout(p)) else {
+            continue;
+        };
+        if path.is_dir() {
+            bail!("{option} {}: is a folder, not a file", path.display());
+        }
+        let folder = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        let probe = folder.join(format!(".thermode-probe-{}", std::process::id()));
+        File::options()
+            .write(true)
+            .create_new(true)
+            .open(&probe)
+            .and_then(|_| std::fs::remove_file(&probe))
+            .with_context(|| format!("{option} {}: cannot write in {}", path.display(), folder.display()))?;
+    }
+    Ok(())
+}
+
+/// Writes the bytes produced by `fill` to `path` atomically (to standard output for `-`); errors name `path`.
 pub fn write_atomically(path: &Path, fill: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
+    if is_stdout(path) {
+        let mut bytes = Vec::new();
+        fill(&mut bytes)?;
+        return print_stdout(&String::from_utf8_lossy(&bytes));
+    }
     let fill_file = |tmp: &Path| -> Result<()> {
         let file = File::options().write(true).create(true).truncate(true).open(tmp)?;
         let mut writer = BufWriter::new(file);

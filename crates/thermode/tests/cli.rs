@@ -691,3 +691,32 @@ fn a_sigkilled_serve_leaves_a_whole_ledger_with_the_dose_it_reported() {
     ]);
     assert!(out.contains("dose reset channel 0"), "{out}");
 }
+
+#[test]
+fn dash_is_standard_output_and_a_bad_second_output_leaves_nothing_behind() {
+    let out = thermode(&["simulate", "--material", "wood", "--duration", "1", "--out", "-"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let csv = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        csv.starts_with("time_s,"),
+        "standard output is not the CSV: {}",
+        &csv[..80.min(csv.len())]
+    );
+    assert!(!Path::new("-").exists(), "a file named `-` was written");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let csv_path = dir.path().join("x.csv");
+    let csv_arg = csv_path.to_str().expect("utf-8");
+    expect_error(
+        &[
+            "simulate",
+            "--material",
+            "wood",
+            "--out",
+            csv_arg,
+            "--plot",
+            "/nonexistent-dir/p.png",
+        ],
+        "--plot /nonexistent-dir/p.png: cannot write in /nonexistent-dir",
+    );
+    assert!(!csv_path.exists(), "the CSV was left behind");
+}

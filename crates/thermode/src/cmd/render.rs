@@ -17,7 +17,7 @@ use thermode_render::run::{render_all, write_csv, DEFAULT_DURATION_S, DEFAULT_PR
 use thermode_render::summary::{summary_table, Summary};
 use thermode_render::RenderSpec;
 
-use crate::output::{print_stdout, write_atomically};
+use crate::output::{check_outputs, is_stdout, print_stdout, write_atomically};
 use crate::resolve;
 
 /// The controller(s) to run.
@@ -110,7 +110,7 @@ pub struct RenderArgs {
     /// Seed of the simulated sensor noise.
     #[arg(long, value_name = "N", default_value_t = thermode_render::run::DEFAULT_SEED)]
     seed: u64,
-    /// Write every tick of every run as CSV.
+    /// Write every tick of every run as CSV; `-`: standard output (the summary then goes to standard error).
     #[arg(long, value_name = "FILE.csv")]
     out: Option<PathBuf>,
     /// Draw the paper's Figure 3 for the simulated system (.svg or .png).
@@ -127,6 +127,7 @@ pub struct RenderArgs {
 /// Runs `thermode render`.
 pub fn run(args: &RenderArgs) -> Result<()> {
     let specs = specs(args)?;
+    check_outputs(&[("--out", args.out.as_deref()), ("--plot", args.plot.as_deref())])?;
     let runs = render_all(&specs).context("rendering")?;
     for run in &runs {
         if let Some(fault) = &run.summary.first_fault {
@@ -150,7 +151,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             FormatArg::Text => summary_table(&summaries),
             FormatArg::Json => serde_json::to_string_pretty(&summaries_json(&summaries)?)? + "\n",
         };
-        print_stdout(&text)?;
+        if args.out.as_deref().is_some_and(is_stdout) {
+            // The CSV is on standard output: the summary goes to standard error.
+            eprint!("{text}");
+        } else {
+            print_stdout(&text)?;
+        }
     }
     Ok(())
 }

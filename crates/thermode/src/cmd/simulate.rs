@@ -12,7 +12,7 @@ use thermode_model::simulate::{simulate, Initial, ModelKind, SimulationSpec, Tra
 use thermode_plot::{write_figure, Figure, Panel, Series, SeriesStyle};
 use thermode_render::figure::EARLY_WINDOW_S;
 
-use crate::output::{print_stdout, write_atomically};
+use crate::output::{check_outputs, is_stdout, print_stdout, write_atomically};
 use crate::resolve;
 
 /// The skin model to run.
@@ -73,7 +73,7 @@ pub struct SimulateArgs {
     /// Conductance between the model's receptor node and the display plate for the display inverse [W/m²K].
     #[arg(long = "display-conductance", value_name = "W_M2K", default_value_t = thermode_model::inverse::DEFAULT_DISPLAY_CONDUCTANCE_W_M2K, allow_negative_numbers = true)]
     display_conductance: f64,
-    /// Write the trajectory as CSV (one row per step; a `material` column names the material).
+    /// Write the trajectory as CSV (one row per step; a `material` column names the material); `-`: standard output.
     #[arg(long, value_name = "FILE.csv")]
     out: Option<PathBuf>,
     /// Draw skin temperature against time (.svg or .png).
@@ -117,6 +117,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             specs.len()
         );
     }
+    check_outputs(&[("--out", args.out.as_deref()), ("--plot", args.plot.as_deref())])?;
     let mut traces = Vec::with_capacity(specs.len());
     for spec in specs {
         let trace = simulate(&spec).with_context(|| format!("simulating {}", spec.material.name))?;
@@ -129,7 +130,13 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     if let Some(path) = &args.plot {
         write_plot(path, &traces, args.model)?;
     }
-    print_stdout(&summary(&traces))
+    // With the CSV on standard output the summary goes to standard error, so the CSV stays parseable.
+    if args.out.as_deref().is_some_and(is_stdout) {
+        eprint!("{}", summary(&traces));
+        Ok(())
+    } else {
+        print_stdout(&summary(&traces))
+    }
 }
 
 fn write_csv(path: &Path, traces: &[(Material, Trace)]) -> Result<()> {
