@@ -9,6 +9,7 @@ pub mod ws;
 
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use axum::extract::{Request, State};
 use axum::http::{header, HeaderValue, StatusCode};
@@ -19,9 +20,12 @@ use axum::{Json, Router};
 use serde_json::{json, Value};
 
 use crate::command::CommandSender;
+use crate::interlock::Interlock;
+use crate::recorder::{RecordErrorPolicy, RecordState, RecordStatus};
 use crate::snapshot::{Mode, Shared};
 use access::Access;
 use protocol::{ApiError, ErrorCode, RequestLimits};
+use thermode_platform::Clock;
 
 /// The dashboard page (one static file, inline script, hand-drawn canvas plots).
 pub const DASHBOARD_HTML: &str = include_str!("../dashboard.html");
@@ -113,11 +117,12 @@ impl NetLimits {
 pub struct OscCounters {
     /// Datagrams received.
     pub packets: AtomicU64,
-    /// Messages applied.
+    /// Messages the control loop applied (counted when the loop answers).
     pub applied: AtomicU64,
     /// Datagrams that are not valid OSC (ignored).
     pub malformed: AtomicU64,
-    /// Valid OSC messages refused (unknown address, channel or material, bad value, queue full).
+    /// Valid OSC messages refused: by the validation (unknown address, channel or material, bad value), by a full
+    /// queue, or by the control loop (a faulted channel, a failed recording…).
     pub refused: AtomicU64,
     /// Messages dropped by the rate limit.
     pub rate_limited: AtomicU64,
@@ -139,7 +144,6 @@ pub struct Info {
 }
 
 /// State shared by the handlers.
-#[derive(Debug)]
 pub struct App {
     pub(crate) commands: CommandSender,
     pub(crate) shared: Arc<Shared>,
@@ -148,9 +152,28 @@ pub struct App {
     pub(crate) access: Access,
     pub(crate) info: Info,
     pub(crate) osc: Arc<OscCounters>,
-    pub(crate) recorded_rows: Option<Arc<AtomicU64>>,
+    /// The recording, if any.
+    pub(crate) recording: Option<Arc<RecordStatus>>,
+    /// What a failed recording does.
+    pub(crate) record_policy: RecordErrorPolicy,
+    /// The interlock the loop obeys (tripped by a failed recording under the policy `stop`).
+    pub(crate) interlock: Arc<Interlock>,
+    /// The loop's clock (disconnect times are on it).
+    pub(crate) clock: Arc<dyn Clock>,
+    /// Longest wait for the loop's answer: the configured reply timeout, at least two loop periods.
+    pub(crate) reply_wait: Duration,
     pub(crate) clients: AtomicUsize,
     pub(crate) next_client: AtomicU64,
+}
+
+impl std::fmt::Debug for App {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("App")
+            .field("limits", &self.limits)
+            .field("net", &self.net)
+            .field("info", &self.info)
+            .finish_non_exhaustive()
+    }
 }
 
 /// The router with every route behind the access check.
@@ -271,7 +294,11 @@ pub fn status_json(app: &App) -> Value {
             "ticks": s.ticks,
             "skipped_publishes": app.shared.skipped_publishes(),
         },
-        "commands": {"applied": snapshot.commands_applied, "refused": snapshot.commands_refused},
+        "commands": {
+            "applied": snapshot.commands_applied,
+            "refused": snapshot.commands_refused,
+            "withdrawn": snapshot.commands_withdrawn,
+        },
         "device_errors": snapshot.device_errors,
         "clients": app.clients.load(Ordering::Relaxed),
         "auth": {"token_required": app.access.token_required()},
@@ -291,10 +318,32 @@ pub fn status_json(app: &App) -> Value {
             "rate_limited": count(&osc.rate_limited),
             "last_error": osc_last_error,
         },
-        "recording": app.info.recording.as_ref().map(|path| json!({
-            "path": path,
-            "rows": app.recorded_rows.as_ref().map_or(0, |r| r.load(Ordering::Relaxed)),
-            "dropped_ticks": app.shared.dropped_records(),
-        })),
+        "recording": app.recording.as_ref().map(|r| recording_json(app, r)),
+        "interlock": {
+            "engaged": app.interlock.engaged(),
+            "trips": app.interlock.trips(),
+            "reason": app.interlock.reason(),
+        },
+    })
+}
+
+/// `/api/status` `recording`: the file, `state` (`ok` or `failed`), the `error`, the rows in the file, and what the
+/// policy does.
+pub fn recording_json(app: &App, r: &RecordStatus) -> Value {
+    let state = match r.state() {
+        RecordState::Ok => "ok",
+        RecordState::Failed => "failed",
+    };
+    json!({
+        "path": r.path().display().to_string(),
+        "state": state,
+        "error": r.error(),
+        "rows_written": r.rows_written(),
+        "rows": r.rows_written(),
+        "bytes_written": r.bytes_written(),
+        "rows_lost": r.rows_lost(),
+        "dropped_ticks": app.shared.dropped_records(),
+        "on_error": app.record_policy.name(),
+        "stimuli_refused": r.state() == RecordState::Failed && app.interlock.engaged(),
     })
 }

@@ -243,7 +243,7 @@ fn a_disconnected_clients_contacts_are_released_exactly_after_the_grace_period()
     rig.ask(touch(1, "wood", Owner::Client(7))).expect("client 7 touches 1");
     rig.ask(touch(2, "wood", Owner::Client(7))).expect("client 7 touches 2");
     rig.ask(touch(3, "steel", Owner::Osc)).expect("osc touches 3");
-    let gone = rig.ask(Command::ClientGone { client: 7 }).expect("gone");
+    let gone = rig.ask(Command::ClientGone { client: 7, at_s: None }).expect("gone");
     let release_at = rig.snapshot().channels[1].release_at_s.expect("a pending release");
     assert!(
         (release_at - (gone.time_s + grace_s)).abs() < 1e-12,
