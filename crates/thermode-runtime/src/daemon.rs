@@ -257,6 +257,11 @@ impl Daemon {
             reply_wait: Duration::from_secs_f64(server.net.reply_timeout_s.max(2.0 * config.loop_config.period_s())),
             clients: AtomicUsize::new(0),
             next_client: AtomicU64::new(1),
+            http: Arc::new(crate::api::server::HttpCounters::default()),
+            http_cap: crate::api::server::fitted_cap(
+                server.net.max_http_connections,
+                thermode_platform::rt::open_files_limit(),
+            ),
         });
         let runtime = start_network(app, http, osc)?;
         Ok(Daemon {
@@ -478,9 +483,8 @@ fn start_network(
     let http = tokio::net::TcpListener::from_std(http).map_err(io_error)?;
     let osc = osc.map(tokio::net::UdpSocket::from_std).transpose().map_err(io_error)?;
     let routes = router(app.clone());
-    runtime.spawn(async move {
-        let _ = axum::serve(http, routes).await;
-    });
+    let (net, cap, counters) = (app.net.clone(), app.http_cap, app.http.clone());
+    runtime.spawn(crate::api::server::serve(http, routes, net, cap, counters));
     if let Some(socket) = osc {
         runtime.spawn(crate::osc::serve(socket, app));
     }

@@ -5,6 +5,7 @@
 pub mod access;
 pub mod limit;
 pub mod protocol;
+pub mod server;
 pub mod ws;
 
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
@@ -42,14 +43,23 @@ pub struct NetLimits {
     pub burst: f64,
     /// Most simultaneous WebSocket connections. Default 32.
     pub max_connections: usize,
+    /// Most simultaneous HTTP connections, WebSockets included \[connections\]. Default 128; lowered at start-up
+    /// to the open-files limit less 64 (see [`server`]). At the cap a new connection replaces the oldest idle one.
+    pub max_http_connections: usize,
+    /// A request head must be complete within this time of the connection's start, or of the first byte of a later
+    /// request \[s\]. Default 5; at most 10.
+    pub header_timeout_s: f64,
+    /// A kept-alive HTTP connection with no request for this long is closed \[s\]. Default 10.
+    pub http_idle_timeout_s: f64,
     /// Longest wait for the control loop's answer \[s\]. Default 1.
     pub reply_timeout_s: f64,
     /// A connection from which nothing (not even a pong) arrives for this long is closed \[s\]. Default 20.
     pub idle_timeout_s: f64,
-    /// Interval of the server's pings \[s\]. Default 5.
+    /// Interval of the server's pings \[s\]. Default 1.
     pub ping_interval_s: f64,
-    /// A send that cannot complete for this long closes the connection (a client that stopped reading) \[s\].
-    /// Default 5.
+    /// A client that stopped reading is closed: a send that cannot complete for this long, or a ping left
+    /// unanswered for this long \[s\]. Default 5 (so a client that stops reading is closed within 5 s plus one ping
+    /// interval).
     pub send_timeout_s: f64,
     /// Sustained OSC messages per second (all senders together). Default 200.
     pub osc_messages_per_s: f64,
@@ -64,9 +74,12 @@ impl Default for NetLimits {
             requests_per_s: 50.0,
             burst: 100.0,
             max_connections: 32,
+            max_http_connections: 128,
+            header_timeout_s: 5.0,
+            http_idle_timeout_s: 10.0,
             reply_timeout_s: 1.0,
             idle_timeout_s: 20.0,
-            ping_interval_s: 5.0,
+            ping_interval_s: 1.0,
             send_timeout_s: 5.0,
             osc_messages_per_s: 200.0,
             osc_burst: 400.0,
@@ -82,6 +95,7 @@ impl NetLimits {
             ("idle_timeout_s", self.idle_timeout_s),
             ("ping_interval_s", self.ping_interval_s),
             ("send_timeout_s", self.send_timeout_s),
+            ("http_idle_timeout_s", self.http_idle_timeout_s),
         ];
         let rates = [
             ("requests_per_s", self.requests_per_s),
@@ -107,6 +121,18 @@ impl NetLimits {
             return Err(crate::error::RuntimeError::Config(
                 "max_connections must be ≥ 1 and hard_message_bytes ≥ 1024".into(),
             ));
+        }
+        if self.max_http_connections <= self.max_connections {
+            return Err(crate::error::RuntimeError::Config(format!(
+                "max_http_connections ({}) must exceed max_connections ({}): WebSockets are HTTP connections too",
+                self.max_http_connections, self.max_connections
+            )));
+        }
+        if !(self.header_timeout_s.is_finite() && self.header_timeout_s > 0.0 && self.header_timeout_s <= 10.0) {
+            return Err(crate::error::RuntimeError::Config(format!(
+                "header_timeout_s = {} s must lie in (0, 10]",
+                self.header_timeout_s
+            )));
         }
         Ok(())
     }
@@ -164,6 +190,10 @@ pub struct App {
     pub(crate) reply_wait: Duration,
     pub(crate) clients: AtomicUsize,
     pub(crate) next_client: AtomicU64,
+    /// What the HTTP server did.
+    pub(crate) http: Arc<server::HttpCounters>,
+    /// The HTTP connection cap in force (fitted to the open-files limit).
+    pub(crate) http_cap: usize,
 }
 
 impl std::fmt::Debug for App {
@@ -194,6 +224,10 @@ pub(crate) fn error_response(status: StatusCode, error: &ApiError) -> Response {
 }
 
 async fn check_access(State(app): State<Arc<App>>, request: Request, next: Next) -> Response {
+    if request.headers().get_all(header::HOST).iter().count() > 1 {
+        let e = ApiError::new(ErrorCode::BadValue, "a request must have exactly one Host header");
+        return error_response(StatusCode::BAD_REQUEST, &e);
+    }
     match app.access.check(request.headers(), request.uri().query()) {
         Ok(()) => next.run(request).await,
         Err(e) if e.code == ErrorCode::Unauthorized => {
@@ -301,6 +335,17 @@ pub fn status_json(app: &App) -> Value {
         },
         "device_errors": snapshot.device_errors,
         "clients": app.clients.load(Ordering::Relaxed),
+        "http": {
+            "open": count(&app.http.open),
+            "max_connections": app.http_cap,
+            "header_timeout_s": app.net.header_timeout_s,
+            "idle_timeout_s": app.net.http_idle_timeout_s,
+            "accepted": count(&app.http.accepted),
+            "evicted": count(&app.http.evicted),
+            "timed_out": count(&app.http.timed_out),
+            "refused": count(&app.http.refused),
+            "accept_errors": count(&app.http.accept_errors),
+        },
         "auth": {"token_required": app.access.token_required()},
         "limits": protocol::merged(json!({
             "max_message_bytes": app.limits.max_message_bytes,

@@ -17,6 +17,7 @@ use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
 use axum::extract::State;
 use axum::http::{HeaderMap, StatusCode};
 use axum::response::Response;
+use axum::Extension;
 use serde_json::{json, Value};
 use tokio::sync::watch;
 use tokio::time::{interval, timeout, Instant, Interval, MissedTickBehavior};
@@ -44,7 +45,12 @@ pub fn valid_websocket_key(key: &[u8]) -> bool {
 }
 
 /// `GET /api/ws`: upgrades, unless the key is malformed or the connection limit is reached.
-pub async fn upgrade(State(app): State<Arc<App>>, headers: HeaderMap, ws: WebSocketUpgrade) -> Response {
+pub async fn upgrade(
+    State(app): State<Arc<App>>,
+    connection: Option<Extension<Arc<super::server::Slot>>>,
+    headers: HeaderMap,
+    ws: WebSocketUpgrade,
+) -> Response {
     let keys: Vec<&[u8]> = headers
         .get_all("sec-websocket-key")
         .iter()
@@ -65,6 +71,9 @@ pub async fn upgrade(State(app): State<Arc<App>>, headers: HeaderMap, ws: WebSoc
             format!("at most {} WebSocket connections", app.net.max_connections),
         );
         return error_response(StatusCode::SERVICE_UNAVAILABLE, &e);
+    }
+    if let Some(Extension(connection)) = connection {
+        connection.upgraded();
     }
     let hard = app.net.hard_message_bytes;
     ws.max_message_size(hard)

@@ -626,20 +626,27 @@ fn stopping_the_loop_switches_every_drive_off() {
 #[test]
 fn a_command_withdrawn_after_its_wait_is_answered_busy_and_never_applied() {
     let rig = Rig::new(2, trackers(), LoopConfig::default());
-    let answer = rig.handle.commands().request(touch(0, "wood", Owner::Script)).expect("queued");
+    let answer = rig
+        .handle
+        .commands()
+        .request(touch(0, "wood", Owner::Script))
+        .expect("queued");
     // The clock does not move: the loop never takes the command within the wait.
     let reply = common::client_runtime().block_on(answer.wait(std::time::Duration::from_millis(50)));
     assert!(matches!(reply, Err(CommandError::Busy)), "{reply:?}");
     rig.step(3);
     let s = rig.snapshot();
-    assert_eq!(&*s.channels[0].label, "air", "a withdrawn command must not happen later");
     assert_eq!(
-        (s.commands_withdrawn, s.commands_applied),
-        (1, 0),
-        "withdrawn, applied"
+        &*s.channels[0].label, "air",
+        "a withdrawn command must not happen later"
     );
+    assert_eq!((s.commands_withdrawn, s.commands_applied), (1, 0), "withdrawn, applied");
     // A command the loop has taken is answered, however late the waiter is.
-    let answer = rig.handle.commands().request(touch(1, "wood", Owner::Script)).expect("queued");
+    let answer = rig
+        .handle
+        .commands()
+        .request(touch(1, "wood", Owner::Script))
+        .expect("queued");
     rig.step(1);
     let reply = common::client_runtime().block_on(answer.wait(std::time::Duration::ZERO));
     assert!(reply.is_ok(), "{reply:?}");
@@ -658,7 +665,9 @@ fn stop_all_jumps_the_queue_and_cancels_what_was_sent_before_it() {
         .map(|i| commands.request(touch(i % 3, "wood", Owner::Osc)).expect("queued"))
         .collect();
     let stop = commands.request(Command::StopAll).expect("stop queued");
-    let after = commands.request(touch(2, "steel", Owner::Script)).expect("queued after the stop");
+    let after = commands
+        .request(touch(2, "steel", Owner::Script))
+        .expect("queued after the stop");
     let before = rig.snapshot().tick;
     rig.step(1);
     let applied = stop.blocking_recv().expect("answer").expect("stop applied");
@@ -668,7 +677,10 @@ fn stop_all_jumps_the_queue_and_cancels_what_was_sent_before_it() {
         let reply = answer.blocking_recv().expect("answer");
         assert!(matches!(reply, Err(CommandError::Cancelled)), "flood {i}: {reply:?}");
     }
-    assert!(after.blocking_recv().expect("answer").is_ok(), "sent after the stop: applied");
+    assert!(
+        after.blocking_recv().expect("answer").is_ok(),
+        "sent after the stop: applied"
+    );
     let s = rig.snapshot();
     assert_eq!(
         (&*s.channels[0].label, &*s.channels[1].label, &*s.channels[2].label),
@@ -684,13 +696,18 @@ fn at_one_hertz_a_disconnect_under_a_flood_releases_within_the_grace_period() {
         release_after_disconnect_s: 2.0,
         ..LoopConfig::default()
     };
-    assert_eq!(config.commands_per_tick(), config.command_queue_len, "the whole queue drains per tick");
+    assert_eq!(
+        config.commands_per_tick(),
+        config.command_queue_len,
+        "the whole queue drains per tick"
+    );
     let device = SpyDevice::new(2);
     let clock = Arc::new(ManualClock::new());
     let handle = LoopHandle::spawn(config, Box::new(device), trackers(), clock.clone(), Vec::new()).expect("loop");
     let wait_tick = |t: f64| {
         assert!(
-            common::wait_until(10.0, || handle.snapshot().time_s >= t - 1e-9 && handle.snapshot().stats.ticks > 0),
+            common::wait_until(10.0, || handle.snapshot().time_s >= t - 1e-9
+                && handle.snapshot().stats.ticks > 0),
             "tick at {t} s"
         )
     };
@@ -712,7 +729,11 @@ fn at_one_hertz_a_disconnect_under_a_flood_releases_within_the_grace_period() {
     clock.set(2.0);
     wait_tick(2.0);
     let s = handle.snapshot();
-    assert_eq!(s.channels[0].release_at_s, Some(disconnect_s + 2.0), "the grace runs from the disconnect");
+    assert_eq!(
+        s.channels[0].release_at_s,
+        Some(disconnect_s + 2.0),
+        "the grace runs from the disconnect"
+    );
     clock.set(3.0);
     wait_tick(3.0);
     let s = handle.snapshot();

@@ -10,3 +10,4 @@ mod loop_core;
 mod recording;
 mod security;
 mod serial;
+mod service;
