@@ -137,6 +137,7 @@ pub struct LoopHandle {
     channel_count: usize,
     limits: Vec<StimulusLimits>,
     config: LoopConfig,
+    link: Option<Arc<thermode_device::LinkHealth>>,
 }
 
 /// What the loop thread reports once its engines are built: the published state and each channel's limits.
@@ -172,6 +173,7 @@ impl LoopHandle {
                 "a device of {count} channels (1 to {MAX_CHANNELS})"
             )));
         }
+        let link = device.link_health();
         let (queue, queue_receiver) = sync_channel(config.command_queue_len);
         let (urgent, urgent_receiver) = sync_channel(URGENT_QUEUE_LEN);
         let receiver = CommandReceiver {
@@ -227,7 +229,13 @@ impl LoopHandle {
             channel_count: count,
             limits,
             config,
+            link,
         })
+    }
+
+    /// The health of the device's link, for a device with one (a serial display).
+    pub fn link_health(&self) -> Option<Arc<thermode_device::LinkHealth>> {
+        self.link.clone()
     }
 
     /// Each channel's stimulus limits, as its engine reported them (the loop enforces them).

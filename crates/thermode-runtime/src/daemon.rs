@@ -262,6 +262,7 @@ impl Daemon {
                 server.net.max_http_connections,
                 thermode_platform::rt::open_files_limit(),
             ),
+            link: control.link_health(),
         });
         let runtime = start_network(app, http, osc)?;
         Ok(Daemon {
@@ -350,6 +351,23 @@ impl Daemon {
                 ));
             }
         }
+        if let Some(link) = self.control.as_ref().and_then(LoopHandle::link_health) {
+            let (failures, reconnects) = (link.failures(), link.reconnects());
+            if failures > seen.link_failures {
+                seen.link_failures = failures;
+                lines.push(format!(
+                    "thermode: device link DOWN: {}; reconnecting with back-off (every channel faulted, 0 A)",
+                    link.error().unwrap_or_default()
+                ));
+            }
+            if reconnects > seen.link_reconnects {
+                seen.link_reconnects = reconnects;
+                lines.push(format!(
+                    "thermode: device link back up (reconnection {reconnects}); channels resume once their faults are \
+                     cleared (clear_fault)"
+                ));
+            }
+        }
         lines
     }
 
@@ -409,6 +427,8 @@ impl Daemon {
 #[derive(Debug, Default)]
 struct Notices {
     recording_failed: bool,
+    link_failures: u64,
+    link_reconnects: u64,
 }
 
 impl Drop for Daemon {

@@ -9,6 +9,9 @@ use std::process::{Command, Output};
 #[cfg(unix)]
 #[path = "cli/serve_on_emulator.rs"]
 mod serve_on_emulator;
+#[cfg(unix)]
+#[path = "cli/service.rs"]
+mod service;
 
 fn thermode(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_thermode"))

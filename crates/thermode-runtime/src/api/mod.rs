@@ -194,6 +194,8 @@ pub struct App {
     pub(crate) http: Arc<server::HttpCounters>,
     /// The HTTP connection cap in force (fitted to the open-files limit).
     pub(crate) http_cap: usize,
+    /// The device's link, if it has one.
+    pub(crate) link: Option<Arc<thermode_device::LinkHealth>>,
 }
 
 impl std::fmt::Debug for App {
@@ -364,6 +366,13 @@ pub fn status_json(app: &App) -> Value {
             "last_error": osc_last_error,
         },
         "recording": app.recording.as_ref().map(|r| recording_json(app, r)),
+        "link": app.link.as_ref().map(|l| json!({
+            "state": if l.is_up() { "up" } else { "down" },
+            "reconnects": l.reconnects(),
+            "failures": l.failures(),
+            "attempts": l.attempts(),
+            "error": l.error(),
+        })),
         "interlock": {
             "engaged": app.interlock.engaged(),
             "trips": app.interlock.trips(),
