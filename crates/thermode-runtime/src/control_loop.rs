@@ -37,6 +37,7 @@ use crate::interlock::Interlock;
 use crate::limits::StimulusLimits;
 use crate::snapshot::{ChannelStatus, LoopStats, Mode, RecordRow, Shared, Snapshot, TickRecord};
 use crate::stats::Window;
+use thermode_platform::rt::Realtime;
 use thermode_platform::Clock;
 use thermode_platform::{Tick, Ticker};
 
@@ -69,6 +70,10 @@ pub struct LoopConfig {
     /// Length of the loop-statistics window \[s\]. Default 10; the window holds at most
     /// [`MAX_STATS_WINDOW_TICKS`] ticks.
     pub stats_window_s: f64,
+    /// Ask for real-time scheduling (`SCHED_FIFO` at [`thermode_platform::rt::DEFAULT_FIFO_PRIORITY`]) for the loop
+    /// thread and locked memory for the process, where the system grants them ([`LoopHandle::realtime`] says what
+    /// was obtained). Default false (`thermode serve` asks unless `--no-realtime`).
+    pub realtime: bool,
 }
 
 impl Default for LoopConfig {
@@ -78,6 +83,7 @@ impl Default for LoopConfig {
             release_after_disconnect_s: 2.0,
             command_queue_len: 1024,
             stats_window_s: 10.0,
+            realtime: false,
         }
     }
 }
@@ -138,10 +144,12 @@ pub struct LoopHandle {
     limits: Vec<StimulusLimits>,
     config: LoopConfig,
     link: Option<Arc<thermode_device::LinkHealth>>,
+    realtime: Realtime,
 }
 
-/// What the loop thread reports once its engines are built: the published state and each channel's limits.
-type Started = Result<(Arc<Shared>, Vec<StimulusLimits>), RuntimeError>;
+/// What the loop thread reports once its engines are built: the published state, each channel's limits, and what
+/// real-time treatment it obtained.
+type Started = Result<(Arc<Shared>, Vec<StimulusLimits>, Realtime), RuntimeError>;
 
 impl LoopHandle {
     /// Starts the loop on its own thread. `engines` builds one engine per device channel on that thread. Each of
@@ -205,7 +213,13 @@ impl LoopHandle {
                         }
                     };
                     let limits = control.slots.iter().map(|s| s.limits).collect();
-                    let _ = ready.send(Ok((control.shared.clone(), limits)));
+                    // After the engines are built (they allocate), before the first tick.
+                    let realtime = if config.realtime {
+                        thermode_platform::rt::request_realtime(thermode_platform::rt::DEFAULT_FIFO_PRIORITY, true)
+                    } else {
+                        Realtime::not_requested("not requested")
+                    };
+                    let _ = ready.send(Ok((control.shared.clone(), limits, realtime)));
                     Some(control.run(clock.as_ref(), ticker, &stop))
                 })
                 .map_err(|source| RuntimeError::Io {
@@ -213,7 +227,7 @@ impl LoopHandle {
                     source,
                 })?
         };
-        let (shared, limits) = match started.recv() {
+        let (shared, limits, realtime) = match started.recv() {
             Ok(result) => result?,
             Err(_) => {
                 return Err(RuntimeError::Config(
@@ -230,7 +244,13 @@ impl LoopHandle {
             limits,
             config,
             link,
+            realtime,
         })
+    }
+
+    /// What real-time treatment the loop thread obtained (scheduling, locked memory).
+    pub fn realtime(&self) -> &Realtime {
+        &self.realtime
     }
 
     /// The health of the device's link, for a device with one (a serial display).

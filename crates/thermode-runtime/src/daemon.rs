@@ -263,6 +263,7 @@ impl Daemon {
                 thermode_platform::rt::open_files_limit(),
             ),
             link: control.link_health(),
+            realtime: control.realtime().clone(),
         });
         let runtime = start_network(app, http, osc)?;
         Ok(Daemon {
@@ -310,6 +311,11 @@ impl Daemon {
     /// A sender for the loop's command queue (the demo script uses it).
     pub fn commands(&self) -> Option<CommandSender> {
         self.control.as_ref().map(LoopHandle::commands)
+    }
+
+    /// What real-time treatment the control loop obtained.
+    pub fn realtime(&self) -> Option<thermode_platform::rt::Realtime> {
+        self.control.as_ref().map(|c| c.realtime().clone())
     }
 
     /// A copy of the loop's newest snapshot.

@@ -196,6 +196,8 @@ pub struct App {
     pub(crate) http_cap: usize,
     /// The device's link, if it has one.
     pub(crate) link: Option<Arc<thermode_device::LinkHealth>>,
+    /// What real-time treatment the loop obtained.
+    pub(crate) realtime: thermode_platform::rt::Realtime,
 }
 
 impl std::fmt::Debug for App {
@@ -329,6 +331,13 @@ pub fn status_json(app: &App) -> Value {
             "missed_deadlines": s.missed_deadlines,
             "ticks": s.ticks,
             "skipped_publishes": app.shared.skipped_publishes(),
+            "realtime": {
+                "scheduling": if app.realtime.fifo_priority.is_some() { "SCHED_FIFO" } else { "normal" },
+                "priority": app.realtime.fifo_priority,
+                "scheduling_error": app.realtime.scheduling_error,
+                "memory_locked": app.realtime.memory_locked,
+                "memory_error": app.realtime.memory_error,
+            },
         },
         "commands": {
             "applied": snapshot.commands_applied,

@@ -260,3 +260,23 @@ fn an_osc_touch_the_loop_refuses_is_counted_as_refused() {
         get_json(addr, "/api/status")["osc"]["applied"].as_u64() > before["applied"].as_u64()
     }));
 }
+
+#[test]
+fn the_status_says_what_real_time_treatment_the_loop_got_and_the_http_limits() {
+    let daemon = start(test_config(), SpyDevice::new(1), trackers());
+    let status = get_json(daemon.http_addr(), "/api/status");
+    let rt = &status["loop"]["realtime"];
+    assert_eq!(
+        rt["scheduling"], "normal",
+        "not asked for by default in the library: {rt}"
+    );
+    assert_eq!(rt["memory_locked"], false, "{rt}");
+    assert_eq!(rt["scheduling_error"], "not requested", "{rt}");
+    let http = &status["http"];
+    let defaults = NetLimits::default();
+    assert_eq!(http["header_timeout_s"], defaults.header_timeout_s, "{http}");
+    assert_eq!(http["idle_timeout_s"], defaults.http_idle_timeout_s, "{http}");
+    assert!(defaults.header_timeout_s <= 10.0);
+    let cap = http["max_connections"].as_u64().unwrap_or(0);
+    assert!(cap > 0 && cap <= defaults.max_http_connections as u64, "{http}");
+}

@@ -108,6 +108,10 @@ pub struct ServeArgs {
     /// Stop after this many seconds (default: run until interrupted).
     #[arg(long, value_name = "S")]
     pub duration: Option<f64>,
+    /// Do not ask for real-time scheduling (SCHED_FIFO) of the control loop and locked memory. By default both are
+    /// asked for and used where the system grants them (the banner and /api/status say whether it did).
+    #[arg(long = "no-realtime")]
+    pub no_realtime: bool,
 }
 
 /// A display ready for the loop.
@@ -212,6 +216,7 @@ pub fn start(args: &ServeArgs) -> Result<Daemon> {
         loop_config: LoopConfig {
             rate_hz: args.rate,
             release_after_disconnect_s: args.release_after,
+            realtime: !args.no_realtime,
             ..LoopConfig::default()
         },
         server,
@@ -252,6 +257,9 @@ fn print_banner(daemon: &Daemon, description: &str, args: &ServeArgs) {
             OnRecordError::Continue => "on a write error stimuli go on unrecorded",
         };
         println!("  recording  {} ({policy})", path.display());
+    }
+    if let Some(realtime) = daemon.realtime() {
+        println!("  real time  {}", realtime.describe());
     }
     if args.token.is_some() {
         println!("  clients must present the token (Authorization: Bearer … or ?token=…)");
