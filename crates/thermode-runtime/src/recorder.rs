@@ -7,8 +7,8 @@
 //! written ([`RecordStatus::rows_written`]).
 //!
 //! A write that fails (a full disk, a quota, an I/O error) or writes only part of its rows leaves the file cut back
-//! to its last whole row: the file always ends with a newline and holds exactly [`RecordStatus::rows_written`]
-//! rows. The recording then stops for the session ([`RecordState::Failed`], with the error): the status says so at
+//! to its last whole row (the whole rows that made it are kept and counted): the file always ends with a newline
+//! and holds exactly [`RecordStatus::rows_written`] rows. The recording then stops for the session ([`RecordState::Failed`], with the error): the status says so at
 //! once, the writer trips the [`Interlock`] it was given (the daemon's policy `stop`: every stimulus released, new ones
 //! refused until an operator acknowledges), and it keeps taking the loop's records (counted as lost,
 //! [`RecordStatus::rows_lost`]) so the loop never sees a full queue. When the loop stops, the writer syncs the file
@@ -359,6 +359,8 @@ struct Rows {
     buffer: Vec<u8>,
     buffered_rows: u64,
     len: u64,
+    /// The buffer begins with the header line (not a row).
+    header_buffered: bool,
 }
 
 impl Rows {
@@ -387,19 +389,31 @@ impl Rows {
                 status.bytes_written.store(self.len, Ordering::SeqCst);
             }
             Err(e) => {
-                status.rows_lost.fetch_add(self.buffered_rows, Ordering::SeqCst);
-                if done > 0 {
-                    // Part of the rows reached the file: cut back to the last whole row.
-                    if let Err(cut) = self.file.cut_to(self.len) {
-                        self.clear();
-                        return Err(std::io::Error::new(
+                // What reached the file: keep its whole rows, cut off the partial one.
+                let keep = self.buffer[..done]
+                    .iter()
+                    .rposition(|&b| b == b'\n')
+                    .map_or(0, |i| i + 1);
+                let lines = self.buffer[..keep].iter().filter(|&&b| b == b'\n').count() as u64;
+                let kept_rows = lines.saturating_sub(u64::from(self.header_buffered && keep > 0));
+                let mut result = Err(e);
+                if done > keep {
+                    if let Err(cut) = self.file.cut_to(self.len + keep as u64) {
+                        let e = result.err().unwrap_or_else(|| std::io::Error::other("write failed"));
+                        result = Err(std::io::Error::new(
                             e.kind(),
                             format!("{e}; cutting the file back to its last whole row failed too: {cut}"),
                         ));
                     }
                 }
+                self.len += keep as u64;
+                status.rows_written.fetch_add(kept_rows, Ordering::SeqCst);
+                status.bytes_written.store(self.len, Ordering::SeqCst);
+                status
+                    .rows_lost
+                    .fetch_add(self.buffered_rows.saturating_sub(kept_rows), Ordering::SeqCst);
                 self.clear();
-                return Err(e);
+                return result;
             }
         }
         self.clear();
@@ -409,6 +423,7 @@ impl Rows {
     fn clear(&mut self) {
         self.buffer.clear();
         self.buffered_rows = 0;
+        self.header_buffered = false;
     }
 }
 
@@ -425,6 +440,7 @@ fn write_session(
         buffer: Vec::with_capacity(WRITE_CHUNK_BYTES + 4096),
         buffered_rows: 0,
         len: 0,
+        header_buffered: true,
     };
     rows.buffer.extend_from_slice(CSV_HEADER.as_bytes());
     rows.buffer.push(b'\n');

@@ -190,7 +190,6 @@ fn a_file_that_fills_up_keeps_whole_rows_counts_only_them_and_trips_the_interloc
     let (rows, newline) = rows_on_disk(&path);
     assert!(newline, "the file ends with a whole row");
     assert_eq!(rows, status.rows_written(), "rows counted = rows in the file");
-    assert_eq!(rows % 3, 0, "whole ticks: {rows} rows of 3 channels");
     assert!(status.bytes_written() <= 3000, "{} bytes", status.bytes_written());
     handle.stop();
     drop(handle);
