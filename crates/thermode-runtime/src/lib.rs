@@ -10,9 +10,12 @@
 //! - [`limits`]: what a channel accepts as a stimulus ([`StimulusLimits`], from the envelope it runs); the loop and
 //!   the API enforce them and `/api/status` publishes them.
 //! - [`snapshot`]: what the loop publishes (per-channel telemetry, loop statistics).
-//! - [`recorder`]: `--record DIR`, one CSV per session, written by its own thread.
+//! - [`recorder`]: `--record DIR`, one CSV per session, written by its own thread; a write error is reported
+//!   everywhere and, under the policy `stop`, trips the [`interlock`] (every stimulus released, new ones refused
+//!   until an operator acknowledges).
 //! - [`api`]: HTTP (`/`, `/api/status`, `/api/materials`) and the WebSocket contact API (`/api/ws`), with access
-//!   control (token, Host and Origin checks) and limits; [`osc`]: the same commands over OSC/UDP.
+//!   control (token, Host and Origin checks) and limits, served by an own accept loop that slow clients cannot
+//!   starve ([`api::server`]); [`osc`]: the same commands over OSC/UDP.
 //! - [`daemon`]: starts and stops all of it ([`Daemon`]); [`mod@bench`]: loop jitter and touch-to-drive latency.
 //!
 //! The network side talks to the loop only through the bounded queue and the snapshot. The protocol is documented
