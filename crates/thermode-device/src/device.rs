@@ -77,6 +77,12 @@ pub trait Device {
         }
         first
     }
+
+    /// The health of the link to a real display (up or down, reconnections), shared with whoever reports it;
+    /// `None` for a device without a link (the default).
+    fn link_health(&self) -> Option<std::sync::Arc<crate::LinkHealth>> {
+        None
+    }
 }
 
 /// The simulated display: up to [`MAX_CHANNELS`] identical, independent channels, each with its own finger and its
@@ -275,5 +281,9 @@ impl<D: Device> Device for RecordingDevice<D> {
         if now_s.is_finite() && now_s > self.time_s {
             self.time_s = now_s;
         }
+    }
+
+    fn link_health(&self) -> Option<std::sync::Arc<crate::LinkHealth>> {
+        self.inner.link_health()
     }
 }

@@ -43,6 +43,7 @@ pub mod config;
 pub mod device;
 pub mod error;
 pub mod finger;
+pub mod link;
 pub mod sensor;
 
 pub use channel::{ChannelState, Fault, HeatFlows, Polarity, SimulatedChannel, MAX_SUBSTEP_S};
@@ -50,6 +51,7 @@ pub use config::DeviceConfig;
 pub use device::{Device, Reading, RecordedCommand, RecordingDevice, SimulatedDisplay, MAX_CHANNELS};
 pub use error::{DeviceCut, DeviceError};
 pub use finger::{default_finger, DefaultFinger, PlateFinger};
+pub use link::LinkHealth;
 pub use sensor::{Pt100, SensorCondition, SensorSample, SENSOR_OPEN_READING_C, SENSOR_SHORT_READING_C};
 
 /// The default device file (`devices/default.toml`): equal to [`DeviceConfig::default`].

@@ -24,10 +24,20 @@
 //!   released (`ClearFault`) only once the host commands 0 A on every channel; a channel's over- or
 //!   under-temperature cut only once the host commands 0 A on every cut channel (and the device releases it only
 //!   once its plate is back inside).
+//! - **Recovery** (a port opened by path): when a write fails (times out: the device stopped reading), the port
+//!   fails or vanishes (the device was unplugged, the emulator ended), or no report arrives for
+//!   [`SerialConfig::reconnect_after_silence_s`], the link is *down*: the port is closed and a thread of its own
+//!   re-opens the same path and repeats the handshake, with back-off (0.5 s doubling to
+//!   [`SerialConfig::reconnect_backoff_max_s`]), stale bytes in either direction discarded. The control loop is
+//!   never blocked: the new link is adopted at its next read. Meanwhile every read fails (so the envelope faults
+//!   every channel and holds it at 0 A), and after the new handshake the channels stay faulted until the operator
+//!   clears them. [`LinkHealth`] (via [`Device::link_health`]) says whether the link is up and how often it came
+//!   back.
 //! - **Stopping**: [`Device::all_off`] sends `AllOff` (every drive 0 A at once); so does dropping the device.
 
 use std::io::{self, Read, Write};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TryRecvError};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -40,7 +50,7 @@ use crate::protocol::{
     encode_frame, to_milliamps, ChannelFaults, DeviceMessage, DriveFrame, Frame, HostMessage, Identify, LinkCounters,
     NackCode, SensorReport, StreamDecoder, DEFAULT_BAUD_RATE, DELIMITER,
 };
-use thermode_device::{Device, DeviceCut, DeviceError, Reading, MAX_CHANNELS};
+use thermode_device::{Device, DeviceCut, DeviceError, LinkHealth, Reading, MAX_CHANNELS};
 
 /// The prefix of a serial device specification: `serial:PATH`.
 pub const SERIAL_PREFIX: &str = "serial:";
@@ -76,6 +86,12 @@ pub struct SerialConfig {
     /// Read timeout of the background reader \[s\], in (0, 0.1]; also how long dropping the device may wait for it.
     /// Default 0.005.
     pub read_poll_s: f64,
+    /// No report for this long takes the link down and starts a reconnection (a port opened by path) \[s\], in
+    /// (0, 60]. Default 1.
+    pub reconnect_after_silence_s: f64,
+    /// Longest wait between two reconnection attempts \[s\] (the wait starts at 0.5 s and doubles), in
+    /// \[0.5, 60\]. Default 5.
+    pub reconnect_backoff_max_s: f64,
 }
 
 impl Default for SerialConfig {
@@ -87,6 +103,8 @@ impl Default for SerialConfig {
             drive_interval_s: 0.005,
             write_timeout_s: 0.05,
             read_poll_s: 0.005,
+            reconnect_after_silence_s: 1.0,
+            reconnect_backoff_max_s: 5.0,
         }
     }
 }
@@ -111,12 +129,29 @@ impl SerialConfig {
             ),
             ("serial write_timeout_s [s]", self.write_timeout_s, Rule::Positive, 1.0),
             ("serial read_poll_s [s]", self.read_poll_s, Rule::Positive, 0.1),
+            (
+                "serial reconnect_after_silence_s [s]",
+                self.reconnect_after_silence_s,
+                Rule::Positive,
+                60.0,
+            ),
+            (
+                "serial reconnect_backoff_max_s [s]",
+                self.reconnect_backoff_max_s,
+                Rule::Positive,
+                60.0,
+            ),
         ];
         for (name, value, lower, max) in checks {
             lower.check(name, value)?;
             Rule::Within { min: 0.0, max }.check(name, value)?;
         }
         Rule::Positive.check("serial baud_rate [bit/s]", f64::from(self.baud_rate))?;
+        Rule::Within {
+            min: FIRST_BACKOFF_S,
+            max: 60.0,
+        }
+        .check("serial reconnect_backoff_max_s [s]", self.reconnect_backoff_max_s)?;
         Ok(())
     }
 }
@@ -296,6 +331,42 @@ pub struct SerialDevice {
     last_clear_s: f64,
     tx: SerialStats,
     failed: Option<String>,
+    /// Re-opening the port after a failure (only for a port opened by path).
+    recovery: Option<Recovery>,
+    /// Added to a link's sample numbers, so they keep rising across reconnections (a restarted device counts from
+    /// 0 again, and the envelope takes only rising numbers as fresh).
+    seq_base: [u64; MAX_CHANNELS],
+    /// The last sample number handed out per channel.
+    seq_seen: [u64; MAX_CHANNELS],
+    health: Arc<LinkHealth>,
+}
+
+/// The first wait between reconnection attempts \[s\]; it doubles up to [`SerialConfig::reconnect_backoff_max_s`].
+pub const FIRST_BACKOFF_S: f64 = 0.5;
+
+/// The device's side of its reconnector thread.
+struct Recovery {
+    /// Asks the thread for a new link.
+    wanted: SyncSender<()>,
+    /// Links the thread made (opened and handshaken).
+    fresh: Receiver<SerialDevice>,
+    /// Ends the thread.
+    stop: Arc<AtomicBool>,
+    /// The link is down and a new one has been asked for.
+    down: bool,
+}
+
+/// A writer for a link that is down: every write fails.
+struct Closed;
+
+impl Write for Closed {
+    fn write(&mut self, _: &[u8]) -> io::Result<usize> {
+        Err(io::Error::new(io::ErrorKind::NotConnected, "the serial link is down"))
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
 }
 
 impl std::fmt::Debug for SerialDevice {
@@ -311,15 +382,39 @@ impl std::fmt::Debug for SerialDevice {
 
 impl SerialDevice {
     /// Opens the serial port at `path` (raw, 8N1, `config.baud_rate`) and performs the handshake. Reading times
-    /// are on `clock`: give it the clock of the control loop.
+    /// are on `clock`: give it the clock of the control loop. A failed link is re-opened on the same path (see the
+    /// module documentation).
     pub fn open(path: &str, config: &SerialConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
+        let mut device = SerialDevice::open_once(path, config, clock.clone())?;
+        let (wanted, requests) = sync_channel(1);
+        let (made, fresh) = sync_channel(1);
+        let stop = Arc::new(AtomicBool::new(false));
+        {
+            let (path, config, stop, health) = (path.to_string(), *config, stop.clone(), device.health.clone());
+            std::thread::Builder::new()
+                .name("thermode-serial-reconnect".to_string())
+                .spawn(move || reconnect(&path, &config, &clock, &requests, &made, &stop, &health))
+                .map_err(|e| DeviceError::Link(format!("cannot start the serial reconnector: {e}")))?;
+        }
+        device.recovery = Some(Recovery {
+            wanted,
+            fresh,
+            stop,
+            down: false,
+        });
+        Ok(device)
+    }
+
+    /// Opens the port and performs the handshake, without recovery.
+    fn open_once(path: &str, config: &SerialConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
         config.validate()?;
         let link = |what: &str, e: serialport::Error| DeviceError::Link(format!("{what} {path}: {e}"));
         let port = serialport::new(path, config.baud_rate)
             .timeout(Duration::from_secs_f64(config.read_poll_s))
             .open()
             .map_err(|e| link("cannot open serial port", e))?;
-        let _ = port.clear(serialport::ClearBuffer::Input);
+        // Stale bytes in either direction (an earlier session's frames) are discarded.
+        let _ = port.clear(serialport::ClearBuffer::All);
         let mut writer = port.try_clone().map_err(|e| link("cannot share serial port", e))?;
         writer
             .set_timeout(Duration::from_secs_f64(config.write_timeout_s))
@@ -392,9 +487,103 @@ impl SerialDevice {
             last_clear_s: f64::NEG_INFINITY,
             tx: SerialStats::default(),
             failed: None,
+            recovery: None,
+            seq_base: [0; MAX_CHANNELS],
+            seq_seen: [0; MAX_CHANNELS],
+            health: Arc::new(LinkHealth::new()),
         };
         device.handshake()?;
         Ok(device)
+    }
+
+    /// Watches the link of a port opened by path: adopts a link the reconnector made, and takes a failed or silent
+    /// link down (closing the port and asking for a new one). Never blocks.
+    fn supervise(&mut self) {
+        let Some(recovery) = &mut self.recovery else {
+            return;
+        };
+        if recovery.down {
+            match recovery.fresh.try_recv() {
+                Ok(fresh) => self.adopt(fresh),
+                Err(TryRecvError::Empty | TryRecvError::Disconnected) => {}
+            }
+            return;
+        }
+        let now = self.clock.now_s();
+        let reason = self.failed.clone().or_else(|| {
+            let state = self.shared.lock().ok()?;
+            if let Some(error) = &state.error {
+                return Some(error.clone());
+            }
+            let silent_s = now - state.last_report.map_or(f64::NEG_INFINITY, |r| r.received_s);
+            (silent_s > self.config.reconnect_after_silence_s).then(|| {
+                format!(
+                    "no report for {silent_s:.1} s (more than {} s)",
+                    self.config.reconnect_after_silence_s
+                )
+            })
+        });
+        if let Some(reason) = reason {
+            self.take_down(&reason);
+        }
+    }
+
+    /// Closes the port (so the same path can be opened again) and asks the reconnector for a new link.
+    fn take_down(&mut self, reason: &str) {
+        let message = format!("{}: link down: {reason}", self.name);
+        self.health.down(message.clone());
+        self.failed = Some(message);
+        self.writer = Box::new(Closed);
+        self.stop.store(true, Ordering::SeqCst);
+        // The reader thread ends within its read timeout and closes its end of the port; not waited for here.
+        drop(self.reader.take());
+        if let Some(recovery) = &mut self.recovery {
+            recovery.down = true;
+            let _ = recovery.wanted.try_send(());
+        }
+    }
+
+    /// Takes over a freshly opened and handshaken link. Every held current starts at 0 A; the engines keep their
+    /// faults until the operator clears them.
+    fn adopt(&mut self, mut fresh: SerialDevice) {
+        if fresh.identify.channel_count != self.identify.channel_count {
+            let error = format!(
+                "{}: the device now has {} channels, not {}: not adopted",
+                self.name, fresh.identify.channel_count, self.identify.channel_count
+            );
+            self.health.set_error(error);
+            fresh.failed = Some("not adopted".into());
+            if let Some(recovery) = &mut self.recovery {
+                let _ = recovery.wanted.try_send(());
+            }
+            return;
+        }
+        std::mem::swap(&mut self.writer, &mut fresh.writer);
+        std::mem::swap(&mut self.shared, &mut fresh.shared);
+        std::mem::swap(&mut self.stop, &mut fresh.stop);
+        std::mem::swap(&mut self.reader, &mut fresh.reader);
+        self.join_reader = true;
+        self.identify = fresh.identify;
+        self.tx_seq = fresh.tx_seq;
+        self.pending_ma = [0; MAX_CHANNELS];
+        self.sent_ma = [0; MAX_CHANNELS];
+        self.round = 0;
+        self.dirty = false;
+        self.last_drive_s = f64::NEG_INFINITY;
+        self.last_sent_s = fresh.last_sent_s;
+        self.last_clear_s = fresh.last_clear_s;
+        for (base, seen) in self.seq_base.iter_mut().zip(self.seq_seen) {
+            *base = seen + 1;
+        }
+        self.failed = None;
+        // `fresh` now holds the old link's remains: dropped without a frame and without waiting for its reader.
+        fresh.failed = Some("replaced".into());
+        fresh.join_reader = false;
+        drop(fresh);
+        if let Some(recovery) = &mut self.recovery {
+            recovery.down = false;
+        }
+        self.health.reconnected();
     }
 
     /// `Hello` until `Identify`, then `ClearFault` until a report shows the drives released.
@@ -619,7 +808,7 @@ impl SerialDevice {
     }
 
     /// The reading of `channel` from the shared state, or why there is none.
-    fn reading(&self, channel: usize) -> Result<Reading, DeviceError> {
+    fn reading(&mut self, channel: usize) -> Result<Reading, DeviceError> {
         let now = self.clock.now_s();
         let state = self.lock()?;
         if let Some(error) = &state.error {
@@ -646,15 +835,18 @@ impl SerialDevice {
                 self.name
             )));
         }
-        let track = &state.tracks[channel];
+        let track = state.tracks[channel];
+        drop(state);
         if let Some(cut) = cut_of(track.faults) {
             return Err(DeviceError::Cut { channel, cut });
         }
+        let sample_seq = self.seq_base[channel] + track.sample_seq;
+        self.seq_seen[channel] = sample_seq;
         Ok(Reading {
             sensor_c: track.sensor_c,
             hot_side_c: track.hot_side_c,
             time_s: track.time_s,
-            sample_seq: track.sample_seq,
+            sample_seq,
             current_a: track.current_a,
         })
     }
@@ -688,8 +880,15 @@ impl Device for SerialDevice {
 
     fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
         self.check_channel(channel)?;
+        if channel == 0 {
+            self.supervise();
+        }
         self.keep_alive()?;
         self.reading(channel)
+    }
+
+    fn link_health(&self) -> Option<Arc<LinkHealth>> {
+        Some(self.health.clone())
     }
 
     /// A real device runs in real time: nothing to do.
@@ -709,8 +908,49 @@ fn cut_of(faults: ChannelFaults) -> Option<DeviceCut> {
     )
 }
 
+/// The reconnector thread: on each request, re-opens `path` and repeats the handshake until it succeeds (waiting
+/// [`FIRST_BACKOFF_S`] before the first attempt, doubling up to the configured maximum), then hands the new link
+/// over.
+fn reconnect(
+    path: &str,
+    config: &SerialConfig,
+    clock: &Arc<dyn Clock>,
+    requests: &Receiver<()>,
+    made: &SyncSender<SerialDevice>,
+    stop: &AtomicBool,
+    health: &LinkHealth,
+) {
+    while requests.recv().is_ok() {
+        // The first wait also lets the old port's reader close its end and a restarting device get going.
+        let mut wait_s = FIRST_BACKOFF_S;
+        loop {
+            let until = Instant::now() + Duration::from_secs_f64(wait_s);
+            while Instant::now() < until {
+                if stop.load(Ordering::SeqCst) {
+                    return;
+                }
+                std::thread::sleep(Duration::from_millis(10));
+            }
+            health.attempt();
+            match SerialDevice::open_once(path, config, clock.clone()) {
+                Ok(device) => {
+                    if made.send(device).is_err() {
+                        return;
+                    }
+                    break;
+                }
+                Err(e) => health.set_error(format!("reconnecting to {path}: {e}")),
+            }
+            wait_s = (wait_s * 2.0).min(config.reconnect_backoff_max_s);
+        }
+    }
+}
+
 impl Drop for SerialDevice {
     fn drop(&mut self) {
+        if let Some(recovery) = &self.recovery {
+            recovery.stop.store(true, Ordering::SeqCst);
+        }
         if self.failed.is_none() {
             let _ = self.send(&HostMessage::AllOff);
         }

@@ -40,6 +40,10 @@ pub struct BenchConfig {
     pub duration_s: f64,
     /// Interval between touches (each is released half-way) \[s\]. Default 0.5.
     pub touch_interval_s: f64,
+    /// WebSocket clients subscribed to telemetry at the fastest rate (100 Hz), reading everything. Default 0.
+    pub subscribers: usize,
+    /// Ask for real-time scheduling and locked memory for the loop ([`LoopConfig::realtime`]). Default false.
+    pub realtime: bool,
 }
 
 impl Default for BenchConfig {
@@ -48,6 +52,8 @@ impl Default for BenchConfig {
             rate_hz: 1000.0,
             duration_s: 10.0,
             touch_interval_s: 0.5,
+            subscribers: 0,
+            realtime: false,
         }
     }
 }
@@ -118,6 +124,12 @@ pub struct BenchReport {
     pub touch_drive_changed_ticks: Spread,
     /// Touch sent → start of the tick that changed the drive \[periods\].
     pub touch_drive_changed_periods: Spread,
+    /// Telemetry subscribers during the run.
+    pub subscribers: usize,
+    /// Telemetry messages they received.
+    pub telemetry_messages: u64,
+    /// What real-time treatment the loop obtained.
+    pub realtime: String,
 }
 
 impl std::fmt::Display for BenchReport {
@@ -138,8 +150,20 @@ impl std::fmt::Display for BenchReport {
         };
         writeln!(
             f,
-            "loop: {} Hz, {} channels, {:.1} s: {} ticks, {} missed deadlines, {} dropped records",
-            self.rate_hz, self.channels, self.duration_s, self.ticks, self.missed_deadlines, self.dropped_records
+            "loop: {} Hz, {} channels, {:.1} s: {} ticks, {} missed deadlines ({:.2} %), {} dropped records",
+            self.rate_hz,
+            self.channels,
+            self.duration_s,
+            self.ticks,
+            self.missed_deadlines,
+            100.0 * self.missed_deadlines as f64 / (self.ticks + self.missed_deadlines).max(1) as f64,
+            self.dropped_records
+        )?;
+        writeln!(f, "  real time         {}", self.realtime)?;
+        writeln!(
+            f,
+            "  subscribers       {} at 100 Hz, {} telemetry messages received",
+            self.subscribers, self.telemetry_messages
         )?;
         writeln!(f, "  period deviation  {}", us(&self.period_deviation_s))?;
         writeln!(f, "  wake lateness     {}", us(&self.lateness_s))?;
@@ -199,17 +223,24 @@ pub fn run(
     let daemon_config = DaemonConfig {
         loop_config: LoopConfig {
             rate_hz: config.rate_hz,
+            realtime: config.realtime,
             ..LoopConfig::default()
         },
         server: ServerConfig {
             port: 0,
             osc_port: None,
+            net: crate::api::NetLimits {
+                max_connections: config.subscribers + 1,
+                max_http_connections: (config.subscribers + 1).max(127) + 1,
+                ..crate::api::NetLimits::default()
+            },
             ..ServerConfig::default()
         },
         device_label: "bench".into(),
         ..DaemonConfig::default()
     };
     let daemon = Daemon::start_with_taps(daemon_config, device, engines, clock.clone(), vec![tap])?;
+    let realtime = daemon.realtime().map(|r| r.describe()).unwrap_or_default();
     let sent = drive_client(&daemon, config, channels, clock.as_ref());
     let snapshot = daemon.snapshot();
     let dropped_records = daemon.dropped_records();
@@ -217,10 +248,13 @@ pub fn run(
     let rows = collector
         .join()
         .map_err(|_| RuntimeError::Config("bench collector panicked".into()))?;
-    let sent = sent?;
+    let (sent, telemetry_messages) = sent?;
     let stats = snapshot.map(|s| s.stats).unwrap_or_default();
     let mut report = report(config, channels, &rows, &sent, stats);
     report.dropped_records = dropped_records;
+    report.subscribers = config.subscribers;
+    report.telemetry_messages = telemetry_messages;
+    report.realtime = realtime;
     Ok(report)
 }
 
@@ -242,13 +276,14 @@ fn collect(records: Receiver<TickRecord>) -> Vec<Row> {
     rows
 }
 
-/// Touches and releases over a WebSocket for the run's duration; returns when each touch was sent.
+/// Touches and releases over a WebSocket for the run's duration, with `config.subscribers` telemetry subscribers
+/// reading alongside; returns when each touch was sent and how many telemetry messages the subscribers received.
 fn drive_client(
     daemon: &Daemon,
     config: &BenchConfig,
     channels: usize,
     clock: &dyn Clock,
-) -> Result<Vec<Sent>, RuntimeError> {
+) -> Result<(Vec<Sent>, u64), RuntimeError> {
     let io = |e: std::io::Error| RuntimeError::Io {
         context: "bench client".into(),
         source: e,
@@ -258,11 +293,31 @@ fn drive_client(
         .build()
         .map_err(io)?;
     let url = format!("ws://{}/api/ws", daemon.http_addr());
+    let received = Arc::new(std::sync::atomic::AtomicU64::new(0));
     runtime.block_on(async {
+        let mut subscribers = Vec::new();
+        for id in 0..config.subscribers {
+            let (mut sub, _) = tokio_tungstenite::connect_async(url.as_str())
+                .await
+                .map_err(|e| io(std::io::Error::other(e.to_string())))?;
+            let text = format!(r#"{{"type":"subscribe","id":{id},"rate_hz":100}}"#);
+            sub.send(Message::Text(text.into()))
+                .await
+                .map_err(|e| io(std::io::Error::other(e.to_string())))?;
+            let received = received.clone();
+            subscribers.push(tokio::spawn(async move {
+                while let Some(Ok(message)) = sub.next().await {
+                    if message.is_text() {
+                        received.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    }
+                }
+            }));
+        }
         let (mut ws, _) = tokio_tungstenite::connect_async(url.as_str())
             .await
             .map_err(|e| io(std::io::Error::other(e.to_string())))?;
         tokio::time::sleep(Duration::from_millis(500)).await; // settle
+        received.store(0, std::sync::atomic::Ordering::Relaxed);
         let start_s = clock.now_s();
         let mut sent = Vec::new();
         let mut k = 0usize;
@@ -283,7 +338,10 @@ fn drive_client(
             k += 1;
         }
         let _ = ws.close(None).await;
-        Ok(sent)
+        for subscriber in subscribers {
+            subscriber.abort();
+        }
+        Ok((sent, received.load(std::sync::atomic::Ordering::Relaxed)))
     })
 }
 
@@ -338,6 +396,9 @@ fn report(
         touch_applied_ticks: Spread::of(&applied),
         touch_drive_changed_ticks: Spread::of(&changed),
         touch_drive_changed_periods: Spread::of(&changed_periods),
+        subscribers: 0,
+        telemetry_messages: 0,
+        realtime: String::new(),
     }
 }
 

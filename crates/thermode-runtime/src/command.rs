@@ -1,9 +1,21 @@
 //! Commands from the network side to the control loop, and the loop's answers. Commands travel through a bounded
 //! queue ([`CommandSender`]); every command has been validated before it enters the queue, and the loop checks it
 //! again against the same limits ([`crate::limits::StimulusLimits`]). A reply (if asked for) comes back on a one-shot channel.
+//!
+//! Two lanes: [`Command::StopAll`] and [`Command::ClientGone`] travel on a small lane of their own
+//! ([`URGENT_QUEUE_LEN`]) that the loop empties first at every tick, so neither ever waits behind a flood of other
+//! commands. Every command carries a sequence number: a stop-all cancels every command sent before it that the loop
+//! has not applied yet ([`CommandError::Cancelled`]), so nothing sent before a stop outlives it.
+//!
+//! Honest answers: a request ([`CommandSender::request`]) gives an [`Answer`]. [`Answer::wait`] waits a bounded
+//! time; when the time is over it withdraws the command, unless the loop has already taken it (then it waits for
+//! that tick's answer, which follows within the tick). So [`CommandError::Busy`] always means that nothing was
+//! queued, or that what was queued was withdrawn and will never be applied.
 
+use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError};
 use std::sync::Arc;
+use std::time::Duration;
 
 use serde::Serialize;
 use thermode_model::materials::Material;
@@ -63,6 +75,9 @@ pub enum Command {
     ClientGone {
         /// The connection number.
         client: u64,
+        /// Loop time at which it disconnected \[s\] (the grace period runs from here); `None`: the time of the tick
+        /// that applies this command.
+        at_s: Option<f64>,
     },
 }
 
@@ -161,9 +176,17 @@ pub enum CommandError {
         /// The reason.
         cause: EngineError,
     },
-    /// The command queue is full (the loop is overloaded); try again.
-    #[error("the control loop's command queue is full; try again")]
+    /// The command queue is full (the loop is overloaded), or the loop did not take the command in time and it was
+    /// withdrawn: nothing was applied and nothing will be; try again.
+    #[error("the control loop is busy; nothing was applied; try again")]
     Busy,
+    /// A stop-all sent after this command was applied first: this command was cancelled, nothing changed.
+    #[error("cancelled by a stop_all sent after it; nothing was applied")]
+    Cancelled,
+    /// The recording failed and the daemon's policy is to stop: every stimulus was released and new ones are
+    /// refused until an operator acknowledges the failure (`ack_recording`).
+    #[error("the recording failed: stimuli are refused until an operator acknowledges it (ack_recording)")]
+    RecordingFailed,
     /// The control loop has stopped.
     #[error("the control loop has stopped")]
     Stopped,
@@ -172,6 +195,34 @@ pub enum CommandError {
 /// The loop's answer to one command.
 pub type Reply = Result<Applied, CommandError>;
 
+/// Capacity of the urgent lane (stop-all, client gone) \[commands\]; the loop empties it at every tick.
+pub const URGENT_QUEUE_LEN: usize = 256;
+
+/// A request's claim: still waiting, taken by the loop, or withdrawn by the requester.
+const CLAIM_PENDING: u8 = 0;
+const CLAIM_TAKEN: u8 = 1;
+const CLAIM_WITHDRAWN: u8 = 2;
+
+/// Who gets to decide a request's fate: the loop (it takes it) or the requester (it withdraws it), whoever is first.
+#[derive(Debug, Default)]
+pub struct Claim(AtomicU8);
+
+impl Claim {
+    /// The loop takes the command; false if the requester withdrew it first (the loop must then skip it).
+    pub(crate) fn take(&self) -> bool {
+        self.0
+            .compare_exchange(CLAIM_PENDING, CLAIM_TAKEN, Ordering::AcqRel, Ordering::Acquire)
+            .is_ok()
+    }
+
+    /// The requester withdraws the command; false if the loop took it first.
+    fn withdraw(&self) -> bool {
+        self.0
+            .compare_exchange(CLAIM_PENDING, CLAIM_WITHDRAWN, Ordering::AcqRel, Ordering::Acquire)
+            .is_ok()
+    }
+}
+
 /// A command and where to send the answer.
 #[derive(Debug)]
 pub struct Queued {
@@ -179,41 +230,93 @@ pub struct Queued {
     pub command: Command,
     /// Where the answer goes (`None`: nobody waits).
     pub reply: Option<oneshot::Sender<Reply>>,
+    /// The requester's claim (`None`: the command cannot be withdrawn).
+    pub claim: Option<Arc<Claim>>,
+    /// Sequence number, in the order commands were sent (both lanes).
+    pub seq: u64,
+}
+
+/// The loop's answer to a request, to be awaited.
+#[derive(Debug)]
+pub struct Answer {
+    receiver: oneshot::Receiver<Reply>,
+    claim: Arc<Claim>,
+}
+
+impl Answer {
+    /// Waits for the answer without a time limit (threads outside an async runtime, tests).
+    pub fn blocking_recv(self) -> Result<Reply, oneshot::error::RecvError> {
+        self.receiver.blocking_recv()
+    }
+
+    /// Waits up to `wait` for the answer. When the time is over the command is withdrawn, unless the loop has taken
+    /// it already; then the answer of that tick is awaited (it follows within the tick). `Err(Busy)` means the loop
+    /// never applied the command and never will; `Err(Stopped)` that the loop stopped.
+    pub async fn wait(mut self, wait: Duration) -> Reply {
+        match tokio::time::timeout(wait, &mut self.receiver).await {
+            Ok(Ok(reply)) => reply,
+            Ok(Err(_)) => Err(CommandError::Stopped),
+            Err(_) if self.claim.withdraw() => Err(CommandError::Busy),
+            Err(_) => self.receiver.await.unwrap_or(Err(CommandError::Stopped)),
+        }
+    }
 }
 
 /// The sending end of the loop's bounded command queue. Cheap to clone; never blocks.
 #[derive(Debug, Clone)]
 pub struct CommandSender {
     queue: SyncSender<Queued>,
+    urgent: SyncSender<Queued>,
+    next_seq: Arc<AtomicU64>,
 }
 
 impl CommandSender {
-    pub(crate) fn new(queue: SyncSender<Queued>) -> Self {
-        CommandSender { queue }
+    pub(crate) fn new(queue: SyncSender<Queued>, urgent: SyncSender<Queued>) -> Self {
+        CommandSender {
+            queue,
+            urgent,
+            next_seq: Arc::new(AtomicU64::new(1)),
+        }
     }
 
     /// Queues `command` without waiting for the loop; refused when the queue is full or the loop has stopped.
     pub fn send(&self, command: Command) -> Result<(), CommandError> {
-        self.push(Queued { command, reply: None })
+        self.push(command, None, None)
     }
 
-    /// Queues `command` and returns the receiver of the loop's answer.
-    pub fn request(&self, command: Command) -> Result<oneshot::Receiver<Reply>, CommandError> {
-        let (reply, answer) = oneshot::channel();
-        self.push(Queued {
+    /// Queues `command` and returns the loop's [`Answer`].
+    pub fn request(&self, command: Command) -> Result<Answer, CommandError> {
+        let (reply, receiver) = oneshot::channel();
+        let claim = Arc::new(Claim::default());
+        self.push(command, Some(reply), Some(claim.clone()))?;
+        Ok(Answer { receiver, claim })
+    }
+
+    fn push(
+        &self,
+        command: Command,
+        reply: Option<oneshot::Sender<Reply>>,
+        claim: Option<Arc<Claim>>,
+    ) -> Result<(), CommandError> {
+        let lane = match command {
+            Command::StopAll | Command::ClientGone { .. } => &self.urgent,
+            _ => &self.queue,
+        };
+        let queued = Queued {
             command,
-            reply: Some(reply),
-        })?;
-        Ok(answer)
-    }
-
-    fn push(&self, queued: Queued) -> Result<(), CommandError> {
-        self.queue.try_send(queued).map_err(|e| match e {
+            reply,
+            claim,
+            seq: self.next_seq.fetch_add(1, Ordering::Relaxed),
+        };
+        lane.try_send(queued).map_err(|e| match e {
             TrySendError::Full(_) => CommandError::Busy,
             TrySendError::Disconnected(_) => CommandError::Stopped,
         })
     }
 }
 
-/// The receiving end, owned by the loop.
-pub(crate) type CommandReceiver = Receiver<Queued>;
+/// The receiving ends, owned by the loop: the urgent lane and the ordinary queue.
+pub(crate) struct CommandReceiver {
+    pub(crate) urgent: Receiver<Queued>,
+    pub(crate) queue: Receiver<Queued>,
+}

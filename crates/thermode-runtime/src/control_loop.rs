@@ -2,9 +2,11 @@
 //!
 //! Loop time is the clock's time at each tick's deadline, so a real device stamping its readings with the same clock
 //! (a serial device is handed the loop's clock) and the envelope agree. Per tick, in order: the device's physics advance to the
-//! tick's time (simulated devices); queued commands are
-//! applied (at most [`MAX_COMMANDS_PER_TICK`]); contacts of disconnected clients whose grace period is over are
-//! released; each channel is read, its engine ticks (renderer → controller → safety envelope) and the gated drive
+//! tick's time (simulated devices); a newly tripped [`Interlock`] stops all; the urgent lane (stop-all, client gone)
+//! is emptied, then queued commands are applied (at most [`LoopConfig::commands_per_tick`]: [`MAX_COMMANDS_PER_TICK`]
+//! at 1 kHz, proportionally more at lower rates, so the whole queue drains within a period at 62.5 Hz and below);
+//! contacts of disconnected clients whose grace period ends before the next tick are released (never later than
+//! the grace period, at most one period earlier); each channel is read, its engine ticks (renderer → controller → safety envelope) and the gated drive
 //! is applied; the snapshot is published (`try_lock`, never waiting) and a [`TickRecord`] goes to the recorder
 //! queue (never waiting; a full queue drops and counts the record).
 //!
@@ -26,12 +28,16 @@ use std::thread::JoinHandle;
 use thermode_device::{Device, DeviceError, Reading, MAX_CHANNELS};
 use thermode_safety::{DoseLedger, DriveCommand, FaultCode};
 
-use crate::command::{Applied, Command, CommandError, CommandReceiver, CommandSender, Owner, Queued, Reply};
+use crate::command::{
+    Applied, Command, CommandError, CommandReceiver, CommandSender, Owner, Queued, Reply, URGENT_QUEUE_LEN,
+};
 use crate::engine::{ChannelEngine, EngineError, EngineFactory, Stimulus};
 use crate::error::RuntimeError;
+use crate::interlock::Interlock;
 use crate::limits::StimulusLimits;
 use crate::snapshot::{ChannelStatus, LoopStats, Mode, RecordRow, Shared, Snapshot, TickRecord};
 use crate::stats::Window;
+use thermode_platform::rt::Realtime;
 use thermode_platform::Clock;
 use thermode_platform::{Tick, Ticker};
 
@@ -39,7 +45,8 @@ use thermode_platform::{Tick, Ticker};
 pub const MAX_RATE_HZ: f64 = thermode_model::limits::LOOP_RATE.max;
 /// Lowest loop rate \[Hz\]: the bottom of [`thermode_model::limits::LOOP_RATE`].
 pub const MIN_RATE_HZ: f64 = thermode_model::limits::LOOP_RATE.min;
-/// Most commands applied in one tick; the rest wait for the next tick.
+/// Most ordinary commands applied in one tick at 1 kHz; at lower rates proportionally more (see
+/// [`LoopConfig::commands_per_tick`]); the rest wait for the next tick.
 pub const MAX_COMMANDS_PER_TICK: usize = 64;
 /// Longest loop-statistics window \[ticks\] (10 s at 1 kHz).
 pub const MAX_STATS_WINDOW_TICKS: usize = 10_000;
@@ -63,6 +70,10 @@ pub struct LoopConfig {
     /// Length of the loop-statistics window \[s\]. Default 10; the window holds at most
     /// [`MAX_STATS_WINDOW_TICKS`] ticks.
     pub stats_window_s: f64,
+    /// Ask for real-time scheduling (`SCHED_FIFO` at [`thermode_platform::rt::DEFAULT_FIFO_PRIORITY`]) for the loop
+    /// thread and locked memory for the process, where the system grants them ([`LoopHandle::realtime`] says what
+    /// was obtained). Default false (`thermode serve` asks unless `--no-realtime`).
+    pub realtime: bool,
 }
 
 impl Default for LoopConfig {
@@ -72,6 +83,7 @@ impl Default for LoopConfig {
             release_after_disconnect_s: 2.0,
             command_queue_len: 1024,
             stats_window_s: 10.0,
+            realtime: false,
         }
     }
 }
@@ -108,6 +120,14 @@ impl LoopConfig {
         1.0 / self.rate_hz
     }
 
+    /// Most ordinary commands applied per tick: [`MAX_COMMANDS_PER_TICK`] per millisecond of period, at least
+    /// [`MAX_COMMANDS_PER_TICK`], at most the queue length (64 at 1 kHz, 640 at 100 Hz, the whole default queue at
+    /// 62.5 Hz and below).
+    pub fn commands_per_tick(&self) -> usize {
+        let per_ms = (MAX_COMMANDS_PER_TICK as f64 * self.period_s() * 1000.0).ceil() as usize;
+        per_ms.clamp(MAX_COMMANDS_PER_TICK, self.command_queue_len.max(MAX_COMMANDS_PER_TICK))
+    }
+
     fn stats_window_ticks(&self) -> usize {
         ((self.stats_window_s * self.rate_hz).ceil() as usize).clamp(1, MAX_STATS_WINDOW_TICKS)
     }
@@ -123,10 +143,13 @@ pub struct LoopHandle {
     channel_count: usize,
     limits: Vec<StimulusLimits>,
     config: LoopConfig,
+    link: Option<Arc<thermode_device::LinkHealth>>,
+    realtime: Realtime,
 }
 
-/// What the loop thread reports once its engines are built: the published state and each channel's limits.
-type Started = Result<(Arc<Shared>, Vec<StimulusLimits>), RuntimeError>;
+/// What the loop thread reports once its engines are built: the published state, each channel's limits, and what
+/// real-time treatment it obtained.
+type Started = Result<(Arc<Shared>, Vec<StimulusLimits>, Realtime), RuntimeError>;
 
 impl LoopHandle {
     /// Starts the loop on its own thread. `engines` builds one engine per device channel on that thread. Each of
@@ -139,6 +162,18 @@ impl LoopHandle {
         clock: Arc<dyn Clock>,
         feeds: Vec<SyncSender<TickRecord>>,
     ) -> Result<LoopHandle, RuntimeError> {
+        LoopHandle::spawn_with_interlock(config, device, engines, clock, feeds, Arc::new(Interlock::new()))
+    }
+
+    /// As [`LoopHandle::spawn`], with an [`Interlock`] the loop obeys (the daemon's recorder trips it).
+    pub fn spawn_with_interlock(
+        config: LoopConfig,
+        device: Box<dyn Device + Send>,
+        engines: EngineFactory,
+        clock: Arc<dyn Clock>,
+        feeds: Vec<SyncSender<TickRecord>>,
+        interlock: Arc<Interlock>,
+    ) -> Result<LoopHandle, RuntimeError> {
         config.validate()?;
         let count = device.channel_count();
         if count == 0 || count > MAX_CHANNELS {
@@ -146,7 +181,13 @@ impl LoopHandle {
                 "a device of {count} channels (1 to {MAX_CHANNELS})"
             )));
         }
-        let (queue, receiver) = sync_channel(config.command_queue_len);
+        let link = device.link_health();
+        let (queue, queue_receiver) = sync_channel(config.command_queue_len);
+        let (urgent, urgent_receiver) = sync_channel(URGENT_QUEUE_LEN);
+        let receiver = CommandReceiver {
+            urgent: urgent_receiver,
+            queue: queue_receiver,
+        };
         let (ready, started) = sync_channel::<Started>(1);
         let stop = Arc::new(AtomicBool::new(false));
         let thread = {
@@ -156,7 +197,7 @@ impl LoopHandle {
                 .spawn(move || {
                     let built = engines(count)
                         .map_err(RuntimeError::Engine)
-                        .and_then(|engines| ControlLoop::new(&config, device, engines, receiver, feeds));
+                        .and_then(|engines| ControlLoop::new(&config, device, engines, receiver, feeds, interlock));
                     let control = match built {
                         Ok(control) => control,
                         Err(e) => {
@@ -172,7 +213,13 @@ impl LoopHandle {
                         }
                     };
                     let limits = control.slots.iter().map(|s| s.limits).collect();
-                    let _ = ready.send(Ok((control.shared.clone(), limits)));
+                    // After the engines are built (they allocate), before the first tick.
+                    let realtime = if config.realtime {
+                        thermode_platform::rt::request_realtime(thermode_platform::rt::DEFAULT_FIFO_PRIORITY, true)
+                    } else {
+                        Realtime::not_requested("not requested")
+                    };
+                    let _ = ready.send(Ok((control.shared.clone(), limits, realtime)));
                     Some(control.run(clock.as_ref(), ticker, &stop))
                 })
                 .map_err(|source| RuntimeError::Io {
@@ -180,7 +227,7 @@ impl LoopHandle {
                     source,
                 })?
         };
-        let (shared, limits) = match started.recv() {
+        let (shared, limits, realtime) = match started.recv() {
             Ok(result) => result?,
             Err(_) => {
                 return Err(RuntimeError::Config(
@@ -189,14 +236,26 @@ impl LoopHandle {
             }
         };
         Ok(LoopHandle {
-            commands: CommandSender::new(queue),
+            commands: CommandSender::new(queue, urgent),
             shared,
             stop,
             thread: Some(thread),
             channel_count: count,
             limits,
             config,
+            link,
+            realtime,
         })
+    }
+
+    /// What real-time treatment the loop thread obtained (scheduling, locked memory).
+    pub fn realtime(&self) -> &Realtime {
+        &self.realtime
+    }
+
+    /// The health of the device's link, for a device with one (a serial display).
+    pub fn link_health(&self) -> Option<Arc<thermode_device::LinkHealth>> {
+        self.link.clone()
     }
 
     /// Each channel's stimulus limits, as its engine reported them (the loop enforces them).
@@ -266,6 +325,7 @@ struct Slot {
 struct Counters {
     applied: u64,
     refused: u64,
+    withdrawn: u64,
     device_errors: u64,
 }
 
@@ -283,6 +343,13 @@ struct ControlLoop {
     stats: LoopStats,
     counters: Counters,
     release_after_s: f64,
+    period_s: f64,
+    commands_per_tick: usize,
+    /// Commands sent before this sequence number are cancelled (a stop-all with this number was applied).
+    cancel_before_seq: u64,
+    interlock: Arc<Interlock>,
+    /// The interlock's trips already acted on.
+    interlock_trips: u64,
     air: Arc<str>,
     last_woke_s: Option<f64>,
     next_stats_s: f64,
@@ -305,6 +372,7 @@ impl ControlLoop {
         engines: Vec<Box<dyn ChannelEngine>>,
         commands: CommandReceiver,
         feeds: Vec<SyncSender<TickRecord>>,
+        interlock: Arc<Interlock>,
     ) -> Result<Self, RuntimeError> {
         if engines.len() != device.channel_count() {
             return Err(RuntimeError::Config(format!(
@@ -340,6 +408,7 @@ impl ControlLoop {
             stats,
             commands_applied: 0,
             commands_refused: 0,
+            commands_withdrawn: 0,
             device_errors: 0,
             running: true,
         }));
@@ -351,12 +420,17 @@ impl ControlLoop {
             commands,
             shared,
             feeds,
-            answers: Vec::with_capacity(MAX_COMMANDS_PER_TICK),
+            answers: Vec::with_capacity(config.commands_per_tick() + URGENT_QUEUE_LEN),
             periods: Window::new(window),
             work: Window::new(window),
             stats,
             counters: Counters::default(),
             release_after_s: config.release_after_disconnect_s,
+            period_s: config.period_s(),
+            commands_per_tick: config.commands_per_tick(),
+            cancel_before_seq: 0,
+            interlock_trips: interlock.trips(),
+            interlock,
             air,
             last_woke_s: None,
             next_stats_s: STATS_REFRESH_S,
@@ -384,6 +458,11 @@ impl ControlLoop {
         // and the envelope share one time base.
         self.device.poll(time_s);
         self.time_s = time_s;
+        let trips = self.interlock.trips();
+        if trips != self.interlock_trips {
+            self.interlock_trips = trips;
+            self.stop_all();
+        }
         self.drain_commands(tick.index);
         self.expire_leases();
         for channel in 0..self.slots.len() {
@@ -448,23 +527,51 @@ impl ControlLoop {
         status.telemetry = telemetry;
     }
 
+    /// The urgent lane first (all of it), then at most `commands_per_tick` ordinary commands.
     fn drain_commands(&mut self, tick: u64) {
-        for _ in 0..MAX_COMMANDS_PER_TICK {
-            let request = match self.commands.try_recv() {
-                Ok(request) => request,
+        for _ in 0..URGENT_QUEUE_LEN {
+            match self.commands.urgent.try_recv() {
+                Ok(request) => self.take(request, tick),
+                Err(TryRecvError::Empty | TryRecvError::Disconnected) => break,
+            }
+        }
+        for _ in 0..self.commands_per_tick {
+            match self.commands.queue.try_recv() {
+                Ok(request) => self.take(request, tick),
                 Err(TryRecvError::Empty | TryRecvError::Disconnected) => return,
-            };
-            let Queued { command, reply } = request;
-            let answer = self.apply(command, tick);
-            match answer {
-                Ok(_) => self.counters.applied += 1,
-                Err(_) => self.counters.refused += 1,
             }
-            if let Some(reply) = reply {
-                // Answered after this tick's snapshot is published, so a client that got "ok" sees the change in
-                // the status. Capacity MAX_COMMANDS_PER_TICK is reserved: no allocation.
-                self.answers.push((reply, answer));
+        }
+    }
+
+    /// Applies one queued command unless its requester withdrew it or a later stop-all cancelled it.
+    fn take(&mut self, request: Queued, tick: u64) {
+        let Queued {
+            command,
+            reply,
+            claim,
+            seq,
+        } = request;
+        if claim.is_some_and(|claim| !claim.take()) {
+            // The requester gave up waiting and was told "busy": it must not happen now.
+            self.counters.withdrawn += 1;
+            return;
+        }
+        let answer = if seq < self.cancel_before_seq {
+            Err(CommandError::Cancelled)
+        } else {
+            if matches!(command, Command::StopAll) {
+                self.cancel_before_seq = seq;
             }
+            self.apply(command, tick)
+        };
+        match answer {
+            Ok(_) => self.counters.applied += 1,
+            Err(_) => self.counters.refused += 1,
+        }
+        if let Some(reply) = reply {
+            // Answered after this tick's snapshot is published, so a client that got "ok" sees the change in
+            // the status. Capacity for every command a tick can take is reserved: no allocation.
+            self.answers.push((reply, answer));
         }
     }
 
@@ -490,6 +597,9 @@ impl ControlLoop {
                     }
                 };
                 self.usable(channel)?;
+                if self.interlock.engaged() {
+                    return Err(CommandError::RecordingFailed);
+                }
                 self.set(channel, stimulus)?;
                 let status = &mut self.status[channel];
                 (status.label, status.mode, status.object_c, status.direct) = (label, mode, object_c, direct);
@@ -512,19 +622,9 @@ impl ControlLoop {
                 cleared.map_err(|cause| CommandError::FaultPersists { channel, cause })?;
                 self.status[channel].telemetry.fault = None;
             }
-            Command::StopAll => {
-                for channel in 0..self.slots.len() {
-                    self.release(channel);
-                    self.status[channel].held_off = true;
-                    let slot = &mut self.slots[channel];
-                    let engine = &mut slot.engine;
-                    if !slot.failed && catch_unwind(AssertUnwindSafe(|| engine.hold())).is_err() {
-                        slot.failed = true;
-                    }
-                }
-            }
-            Command::ClientGone { client } => {
-                let at_s = self.time_s + self.release_after_s;
+            Command::StopAll => self.stop_all(),
+            Command::ClientGone { client, at_s } => {
+                let at_s = at_s.unwrap_or(self.time_s).min(self.time_s) + self.release_after_s;
                 for status in &mut self.status {
                     if status.owner == Owner::Client(client) && status.mode != Mode::Air {
                         status.release_at_s = Some(at_s);
@@ -533,6 +633,19 @@ impl ControlLoop {
             }
         }
         Ok(applied)
+    }
+
+    /// Releases every channel and holds its drive at 0 A until its next command.
+    fn stop_all(&mut self) {
+        for channel in 0..self.slots.len() {
+            self.release(channel);
+            self.status[channel].held_off = true;
+            let slot = &mut self.slots[channel];
+            let engine = &mut slot.engine;
+            if !slot.failed && catch_unwind(AssertUnwindSafe(|| engine.hold())).is_err() {
+                slot.failed = true;
+            }
+        }
     }
 
     fn exists(&self, channel: usize) -> Result<(), CommandError> {
@@ -593,9 +706,12 @@ impl ControlLoop {
         (status.owner, status.release_at_s, status.held_off) = (Owner::Nobody, None, !accepted);
     }
 
+    /// Releases the contacts whose release time comes before the next tick (so a release is never later than its
+    /// time, and at most one period earlier).
     fn expire_leases(&mut self) {
+        let horizon_s = self.time_s + self.period_s * (1.0 - 1e-6);
         for channel in 0..self.status.len() {
-            if self.status[channel].release_at_s.is_some_and(|at| self.time_s >= at) {
+            if self.status[channel].release_at_s.is_some_and(|at| horizon_s > at) {
                 self.release(channel);
             }
         }
@@ -674,6 +790,7 @@ impl ControlLoop {
         snapshot.stats = self.stats;
         snapshot.commands_applied = self.counters.applied;
         snapshot.commands_refused = self.counters.refused;
+        snapshot.commands_withdrawn = self.counters.withdrawn;
         snapshot.device_errors = self.counters.device_errors;
         snapshot.running = running;
     }

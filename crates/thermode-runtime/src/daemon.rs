@@ -3,7 +3,8 @@
 //! the loop first (every drive to 0 A at once), then the network side, then the recorder (flushed and synced).
 //!
 //! Security rules applied here, before anything listens: a non-loopback bind address needs a token
-//! ([`RuntimeError::InsecureBind`] otherwise), and OSC, which cannot carry a token, listens only on loopback binds.
+//! ([`RuntimeError::InsecureBind`] otherwise). OSC cannot carry a token: it listens only on loopback binds, and when
+//! a token is set not at all unless [`ServerConfig::osc_without_token`] asks for it (then on loopback only).
 //!
 //! With a state directory ([`DaemonConfig::state_dir`]) the thermal dose survives restarts ([`crate::ledger`]): the
 //! directory is locked, its ledger read (a corrupt or unreadable one refuses the start: [`RuntimeError::Ledger`])
@@ -26,8 +27,9 @@ use crate::command::CommandSender;
 use crate::control_loop::{LoopConfig, LoopHandle};
 use crate::engine::{with_restored_doses, EngineFactory};
 use crate::error::RuntimeError;
+use crate::interlock::Interlock;
 use crate::ledger::{DoseWriter, StateDir};
-use crate::recorder::Recorder;
+use crate::recorder::{RecordErrorPolicy, RecordState, RecordStatus, Recorder};
 use crate::snapshot::Snapshot;
 use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
 use thermode_platform::Clock;
@@ -46,9 +48,13 @@ pub struct ServerConfig {
     pub bind: IpAddr,
     /// HTTP/WebSocket port; 0 picks a free one. Default [`DEFAULT_PORT`].
     pub port: u16,
-    /// OSC port (0 picks a free one), or `None` for no OSC. Default `Some(`[`DEFAULT_OSC_PORT`]`)`. Ignored (OSC
-    /// off) on a non-loopback bind.
+    /// OSC port (0 picks a free one), or `None` for no OSC. Default `Some(`[`DEFAULT_OSC_PORT`]`)`. OSC cannot
+    /// carry the token: it is off when a token is set (unless [`ServerConfig::osc_without_token`]), and it listens
+    /// on loopback only.
     pub osc_port: Option<u16>,
+    /// Listen for OSC even though a token is set (OSC itself is not authenticated): on loopback only (127.0.0.1,
+    /// or `::1` on an IPv6 loopback bind). Default false.
+    pub osc_without_token: bool,
     /// The shared secret every request must present; required on non-loopback binds. Printable ASCII without
     /// spaces, 1 to 256 characters. Default none.
     pub token: Option<String>,
@@ -72,6 +78,7 @@ impl Default for ServerConfig {
             bind: IpAddr::V4(Ipv4Addr::LOCALHOST),
             port: DEFAULT_PORT,
             osc_port: Some(DEFAULT_OSC_PORT),
+            osc_without_token: false,
             token: None,
             allowed_origins: Vec::new(),
             net: NetLimits::default(),
@@ -108,9 +115,28 @@ impl ServerConfig {
         Ok(())
     }
 
-    /// Whether OSC will listen.
+    /// Whether OSC will listen: a port is given, and either no token is set and the bind is loopback, or a token is
+    /// set and [`ServerConfig::osc_without_token`] asks for OSC all the same (it then listens on loopback).
     pub fn osc_enabled(&self) -> bool {
-        self.osc_port.is_some() && self.bind.is_loopback()
+        match (&self.osc_port, &self.token) {
+            (None, _) => false,
+            (Some(_), None) => self.bind.is_loopback(),
+            (Some(_), Some(_)) => self.osc_without_token,
+        }
+    }
+
+    /// OSC listens without authentication while a token protects everything else (say so loudly).
+    pub fn osc_unauthenticated(&self) -> bool {
+        self.osc_enabled() && self.token.is_some()
+    }
+
+    /// The address OSC binds: the bind address when it is loopback, else the loopback of its family.
+    fn osc_bind(&self) -> IpAddr {
+        match self.bind {
+            ip if ip.is_loopback() => ip,
+            IpAddr::V6(_) if !self.bind.is_unspecified() => IpAddr::V6(std::net::Ipv6Addr::LOCALHOST),
+            _ => IpAddr::V4(Ipv4Addr::LOCALHOST),
+        }
     }
 }
 
@@ -123,6 +149,10 @@ pub struct DaemonConfig {
     pub server: ServerConfig,
     /// Directory for the session CSV, if recording.
     pub record_dir: Option<PathBuf>,
+    /// What a failed recording does. Default [`RecordErrorPolicy::Stop`].
+    pub record_policy: RecordErrorPolicy,
+    /// Largest session file \[bytes\]; a recording that reaches it fails as on a full disk. Default none.
+    pub record_max_bytes: Option<u64>,
     /// The device as shown in `/api/status` (e.g. `sim`).
     pub device_label: String,
     /// A name per channel (e.g. the fingers), or empty.
@@ -140,8 +170,10 @@ pub struct StopReport {
     pub all_off: Option<Result<(), DeviceError>>,
     /// Loop time of the last tick \[s\].
     pub last_tick_s: f64,
-    /// Rows recorded (flushed and synced), if recording.
+    /// Rows recorded (written, whole, flushed and synced), if recording.
     pub rows: Option<u64>,
+    /// Why the recording failed, if it did (the file then holds `rows` whole rows).
+    pub recording_error: Option<String>,
 }
 
 /// A running daemon.
@@ -152,6 +184,9 @@ pub struct Daemon {
     recorder: Option<Recorder>,
     dose_writer: Option<DoseWriter>,
     ledger_path: Option<PathBuf>,
+    recording: Option<Arc<RecordStatus>>,
+    interlock: Arc<Interlock>,
+    notices: std::sync::Mutex<Notices>,
     http_addr: SocketAddr,
     osc_addr: Option<SocketAddr>,
     token: Option<String>,
@@ -193,7 +228,7 @@ impl Daemon {
         let http = bind_tcp(SocketAddr::new(server.bind, server.port))?;
         let http_addr = local_addr(&http, server.bind)?;
         let osc = match server.osc_port.filter(|_| server.osc_enabled()) {
-            Some(port) => Some(bind_udp(SocketAddr::new(server.bind, port))?),
+            Some(port) => Some(bind_udp(SocketAddr::new(server.osc_bind(), port))?),
             None => None,
         };
         let osc_addr = osc
@@ -204,9 +239,11 @@ impl Daemon {
                 context: "OSC socket".into(),
                 source,
             })?;
+        let interlock = Arc::new(Interlock::new());
         let recorder = match &config.record_dir {
             Some(dir) => {
-                let (recorder, feed) = Recorder::start(dir)?;
+                let trips = (config.record_policy == RecordErrorPolicy::Stop).then(|| interlock.clone());
+                let (recorder, feed) = Recorder::start_with(dir, config.record_max_bytes, trips)?;
                 taps.push(feed);
                 Some(recorder)
             }
@@ -219,7 +256,15 @@ impl Daemon {
             }
             None => engines,
         };
-        let control = LoopHandle::spawn(config.loop_config.clone(), device, engines, clock, taps)?;
+        let recording = recorder.as_ref().map(Recorder::status);
+        let control = LoopHandle::spawn_with_interlock(
+            config.loop_config.clone(),
+            device,
+            engines,
+            clock.clone(),
+            taps,
+            interlock.clone(),
+        )?;
         let ledger_path = ledger.as_ref().map(|(state, _)| state.ledger_path());
         let dose_writer = match ledger {
             Some((state, saved)) => {
@@ -247,10 +292,21 @@ impl Daemon {
                 recording: recorder.as_ref().map(|r| r.path().display().to_string()),
             },
             osc: Arc::new(OscCounters::default()),
-            recorded_rows: recorder.as_ref().map(Recorder::rows_counter),
             dose_ledger: dose_writer.as_ref().map(DoseWriter::status),
+            recording: recording.clone(),
+            record_policy: config.record_policy,
+            interlock: interlock.clone(),
+            clock,
+            reply_wait: Duration::from_secs_f64(server.net.reply_timeout_s.max(2.0 * config.loop_config.period_s())),
             clients: AtomicUsize::new(0),
             next_client: AtomicU64::new(1),
+            http: Arc::new(crate::api::server::HttpCounters::default()),
+            http_cap: crate::api::server::fitted_cap(
+                server.net.max_http_connections,
+                thermode_platform::rt::open_files_limit(),
+            ),
+            link: control.link_health(),
+            realtime: control.realtime().clone(),
         });
         let runtime = start_network(app, http, osc)?;
         Ok(Daemon {
@@ -259,6 +315,9 @@ impl Daemon {
             recorder,
             dose_writer,
             ledger_path,
+            recording,
+            interlock,
+            notices: std::sync::Mutex::new(Notices::default()),
             http_addr,
             osc_addr,
             token: server.token.clone(),
@@ -304,9 +363,68 @@ impl Daemon {
         self.control.as_ref().map(LoopHandle::commands)
     }
 
+    /// What real-time treatment the control loop obtained.
+    pub fn realtime(&self) -> Option<thermode_platform::rt::Realtime> {
+        self.control.as_ref().map(|c| c.realtime().clone())
+    }
+
     /// A copy of the loop's newest snapshot.
     pub fn snapshot(&self) -> Option<Snapshot> {
         self.control.as_ref().map(LoopHandle::snapshot)
+    }
+
+    /// The recording's shared state, when recording.
+    pub fn recording(&self) -> Option<Arc<RecordStatus>> {
+        self.recording.clone()
+    }
+
+    /// The interlock the loop obeys.
+    pub fn interlock(&self) -> Arc<Interlock> {
+        self.interlock.clone()
+    }
+
+    /// What the operator must be told since the last call, one line each (a failed recording; the device link going
+    /// down and coming back). `thermode serve` prints them on standard error.
+    pub fn take_notices(&self) -> Vec<String> {
+        let mut lines = Vec::new();
+        let Ok(mut seen) = self.notices.lock() else {
+            return lines;
+        };
+        if let Some(r) = &self.recording {
+            if r.state() == RecordState::Failed && !seen.recording_failed {
+                seen.recording_failed = true;
+                let what = if self.interlock.engaged() {
+                    "every stimulus released; new ones are refused until an operator acknowledges \
+                     (ack_recording, or the dashboard's button)"
+                } else {
+                    "stimuli go on unrecorded (--on-record-error continue)"
+                };
+                lines.push(format!(
+                    "thermode: recording to {} FAILED: {}; {} rows written, the file ends with a whole row; {what}",
+                    r.path().display(),
+                    r.error().unwrap_or_default(),
+                    r.rows_written(),
+                ));
+            }
+        }
+        if let Some(link) = self.control.as_ref().and_then(LoopHandle::link_health) {
+            let (failures, reconnects) = (link.failures(), link.reconnects());
+            if failures > seen.link_failures {
+                seen.link_failures = failures;
+                lines.push(format!(
+                    "thermode: device link DOWN: {}; reconnecting with back-off (every channel faulted, 0 A)",
+                    link.error().unwrap_or_default()
+                ));
+            }
+            if reconnects > seen.link_reconnects {
+                seen.link_reconnects = reconnects;
+                lines.push(format!(
+                    "thermode: device link back up (reconnection {reconnects}); channels resume once their faults are \
+                     cleared (clear_fault)"
+                ));
+            }
+        }
+        lines
     }
 
     /// Tick records the recorder or a tap could not take (their queue was full).
@@ -318,7 +436,14 @@ impl Daemon {
     /// side, then the dose ledger (its final write holds the loop's last tick) and the recorder (every queued row
     /// written, flushed and synced). Returns the rows recorded, if recording.
     pub fn shutdown(mut self) -> Result<Option<u64>, RuntimeError> {
-        self.stop_parts().map(|report| report.rows)
+        let report = self.stop_parts()?;
+        match report.recording_error {
+            Some(error) => Err(RuntimeError::Io {
+                context: format!("the recording failed ({} rows written)", report.rows.unwrap_or(0)),
+                source: std::io::Error::other(error),
+            }),
+            None => Ok(report.rows),
+        }
     }
 
     /// As [`Daemon::shutdown`], with what the stop did.
@@ -331,6 +456,7 @@ impl Daemon {
             all_off: None,
             last_tick_s: f64::NAN,
             rows: None,
+            recording_error: None,
         };
         if let Some(mut control) = self.control.take() {
             report.all_off = control.stop();
@@ -340,10 +466,27 @@ impl Daemon {
             runtime.shutdown_timeout(Duration::from_millis(500));
         }
         let ledger = self.dose_writer.take().map(DoseWriter::finish).transpose();
-        report.rows = self.recorder.take().map(Recorder::finish).transpose()?;
+        if let Some(recorder) = self.recorder.take() {
+            let status = recorder.status();
+            match recorder.finish() {
+                Ok(rows) => report.rows = Some(rows),
+                Err(e) => {
+                    report.rows = Some(status.rows_written());
+                    report.recording_error = Some(e.to_string());
+                }
+            }
+        }
         ledger?;
         Ok(report)
     }
+}
+
+/// What [`Daemon::take_notices`] has told already.
+#[derive(Debug, Default)]
+struct Notices {
+    recording_failed: bool,
+    link_failures: u64,
+    link_reconnects: u64,
 }
 
 impl Drop for Daemon {
@@ -418,9 +561,8 @@ fn start_network(
     let http = tokio::net::TcpListener::from_std(http).map_err(io_error)?;
     let osc = osc.map(tokio::net::UdpSocket::from_std).transpose().map_err(io_error)?;
     let routes = router(app.clone());
-    runtime.spawn(async move {
-        let _ = axum::serve(http, routes).await;
-    });
+    let (net, cap, counters) = (app.net.clone(), app.http_cap, app.http.clone());
+    runtime.spawn(crate::api::server::serve(http, routes, net, cap, counters));
     if let Some(socket) = osc {
         runtime.spawn(crate::osc::serve(socket, app));
     }

@@ -10,11 +10,14 @@
 //! - [`limits`]: what a channel accepts as a stimulus ([`StimulusLimits`], from the envelope it runs); the loop and
 //!   the API enforce them and `/api/status` publishes them.
 //! - [`snapshot`]: what the loop publishes (per-channel telemetry, loop statistics).
-//! - [`recorder`]: `--record DIR`, one CSV per session, written by its own thread.
+//! - [`recorder`]: `--record DIR`, one CSV per session, written by its own thread; a write error is reported
+//!   everywhere and, under the policy `stop`, trips the [`interlock`] (every stimulus released, new ones refused
+//!   until an operator acknowledges).
 //! - [`ledger`]: the dose ledger of a state directory, so that each channel's thermal dose survives restarts
 //!   (`--state-dir DIR`; `thermode dose show` and `thermode dose reset`).
 //! - [`api`]: HTTP (`/`, `/api/status`, `/api/materials`) and the WebSocket contact API (`/api/ws`), with access
-//!   control (token, Host and Origin checks) and limits; [`osc`]: the same commands over OSC/UDP.
+//!   control (token, Host and Origin checks) and limits, served by an own accept loop that slow clients cannot
+//!   starve ([`api::server`]); [`osc`]: the same commands over OSC/UDP.
 //! - [`daemon`]: starts and stops all of it ([`Daemon`]); [`mod@bench`]: loop jitter and touch-to-drive latency.
 //!
 //! The network side talks to the loop only through the bounded queue and the snapshot. The protocol is documented
@@ -48,6 +51,7 @@ pub mod control_loop;
 pub mod daemon;
 pub mod engine;
 pub mod error;
+pub mod interlock;
 pub mod ledger;
 pub mod limits;
 pub mod osc;
@@ -60,5 +64,6 @@ pub use control_loop::{LoopConfig, LoopHandle, MAX_RATE_HZ};
 pub use daemon::{Daemon, DaemonConfig, ServerConfig, StopReport, DEFAULT_OSC_PORT, DEFAULT_PORT};
 pub use engine::{ChannelEngine, EngineError, EngineFactory, Stimulus, Telemetry, TrackingEngine};
 pub use error::RuntimeError;
+pub use interlock::Interlock;
 pub use limits::StimulusLimits;
 pub use snapshot::{ChannelStatus, LoopStats, Mode, Snapshot, TickRecord};

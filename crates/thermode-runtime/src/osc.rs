@@ -8,9 +8,11 @@
 //! - `/thermode/stop` (or `/thermode/stop_all`) — stop all.
 //!
 //! Same validation as the WebSocket API: a touch or set-point becomes the same [`Command`] through the same
-//! [`protocol::stimulus_command`], so both refuse the same stimuli with the same message. OSC has no replies and no authentication: malformed datagrams are
-//! ignored and counted, refused messages are counted (the last reason is in `/api/status`). OSC listens only when
-//! the daemon is bound to a loopback address.
+//! [`protocol::stimulus_command`], so both refuse the same stimuli with the same message. OSC has no replies and no
+//! authentication: malformed datagrams are ignored and counted; every message is counted once the control loop has
+//! answered it, as applied or as refused (a refusal by the validation, a full queue, or the loop itself: a faulted
+//! channel, a failed recording); the last reason is in `/api/status`. OSC listens only on loopback, and when the
+//! daemon has a token not at all unless asked to (`--osc-without-token`).
 
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
@@ -19,7 +21,7 @@ use tokio::net::UdpSocket;
 
 use crate::api::limit::TokenBucket;
 use crate::api::protocol::{self, ApiError, ErrorCode};
-use crate::api::App;
+use crate::api::{App, OscCounters};
 use crate::command::{Command, Owner};
 use crate::engine::Stimulus;
 
@@ -239,20 +241,34 @@ pub async fn serve(socket: UdpSocket, app: Arc<App>) {
                 counters.rate_limited.fetch_add(1, Ordering::Relaxed);
                 continue;
             }
-            let result = to_command(message, &app).and_then(|command| {
-                app.commands
-                    .send(command)
-                    .map_err(|e| ApiError::new(ErrorCode::Busy, e.to_string()))
-            });
-            match result {
-                Ok(()) => counters.applied.fetch_add(1, Ordering::Relaxed),
-                Err(e) => {
-                    if let Ok(mut last) = counters.last_error.lock() {
-                        *last = Some(format!("{} {}: {}", message.address, e.code.as_str(), e.message));
-                    }
-                    counters.refused.fetch_add(1, Ordering::Relaxed)
+            let queued = to_command(message, &app)
+                .and_then(|command| app.commands.request(command).map_err(crate::api::ws::loop_error));
+            match queued {
+                Ok(answer) => {
+                    // Counted when the loop answers (within the reply wait; a withdrawn command is refused as busy).
+                    let (counters, address, wait) = (app.osc.clone(), message.address.clone(), app.reply_wait);
+                    tokio::spawn(async move {
+                        let reply = answer.wait(wait).await.map_err(crate::api::ws::loop_error);
+                        count(&counters, &address, reply.map(|_| ()));
+                    });
                 }
-            };
+                Err(e) => count(counters, &message.address, Err(e)),
+            }
+        }
+    }
+}
+
+/// Counts one message's outcome (and keeps the last refusal's reason).
+fn count(counters: &OscCounters, address: &str, outcome: Result<(), ApiError>) {
+    match outcome {
+        Ok(()) => {
+            counters.applied.fetch_add(1, Ordering::Relaxed);
+        }
+        Err(e) => {
+            if let Ok(mut last) = counters.last_error.lock() {
+                *last = Some(format!("{address} {}: {}", e.code.as_str(), e.message));
+            }
+            counters.refused.fetch_add(1, Ordering::Relaxed);
         }
     }
 }

@@ -107,6 +107,8 @@ pub struct Snapshot {
     pub commands_applied: u64,
     /// Commands refused by the loop since the start.
     pub commands_refused: u64,
+    /// Commands withdrawn by their requester before the loop took them (answered `busy`, never applied).
+    pub commands_withdrawn: u64,
     /// Failed device reads or writes since the start.
     pub device_errors: u64,
     /// The loop is running (false once it stopped).

@@ -11,6 +11,9 @@ use std::process::{Command, Output};
 mod python_packages;
 #[path = "cli/serve_on_emulator.rs"]
 mod serve_on_emulator;
+#[cfg(unix)]
+#[path = "cli/service.rs"]
+mod service;
 
 // MeCom and TCS II emulators with `bench` on them.
 #[cfg(unix)]

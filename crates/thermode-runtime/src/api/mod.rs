@@ -5,10 +5,12 @@
 pub mod access;
 pub mod limit;
 pub mod protocol;
+pub mod server;
 pub mod ws;
 
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use axum::extract::{Request, State};
 use axum::http::{header, HeaderValue, StatusCode};
@@ -19,10 +21,13 @@ use axum::{Json, Router};
 use serde_json::{json, Value};
 
 use crate::command::CommandSender;
+use crate::interlock::Interlock;
 use crate::ledger::WriterStatus;
+use crate::recorder::{RecordErrorPolicy, RecordState, RecordStatus};
 use crate::snapshot::{Mode, Shared};
 use access::Access;
 use protocol::{ApiError, ErrorCode, RequestLimits};
+use thermode_platform::Clock;
 
 /// The dashboard page (one static file, inline script, hand-drawn canvas plots).
 pub const DASHBOARD_HTML: &str = include_str!("../dashboard.html");
@@ -39,14 +44,23 @@ pub struct NetLimits {
     pub burst: f64,
     /// Most simultaneous WebSocket connections. Default 32.
     pub max_connections: usize,
+    /// Most simultaneous HTTP connections, WebSockets included \[connections\]. Default 128; lowered at start-up
+    /// to the open-files limit less 64 (see [`server`]). At the cap a new connection replaces the oldest idle one.
+    pub max_http_connections: usize,
+    /// A request head must be complete within this time of the connection's start, or of the first byte of a later
+    /// request \[s\]. Default 5; at most 10.
+    pub header_timeout_s: f64,
+    /// A kept-alive HTTP connection with no request for this long is closed \[s\]. Default 10.
+    pub http_idle_timeout_s: f64,
     /// Longest wait for the control loop's answer \[s\]. Default 1.
     pub reply_timeout_s: f64,
     /// A connection from which nothing (not even a pong) arrives for this long is closed \[s\]. Default 20.
     pub idle_timeout_s: f64,
-    /// Interval of the server's pings \[s\]. Default 5.
+    /// Interval of the server's pings \[s\]. Default 1.
     pub ping_interval_s: f64,
-    /// A send that cannot complete for this long closes the connection (a client that stopped reading) \[s\].
-    /// Default 5.
+    /// A client that stopped reading is closed: a send that cannot complete for this long, or a ping left
+    /// unanswered for this long \[s\]. Default 5 (so a client that stops reading is closed within 5 s plus one ping
+    /// interval).
     pub send_timeout_s: f64,
     /// Sustained OSC messages per second (all senders together). Default 200.
     pub osc_messages_per_s: f64,
@@ -61,9 +75,12 @@ impl Default for NetLimits {
             requests_per_s: 50.0,
             burst: 100.0,
             max_connections: 32,
+            max_http_connections: 128,
+            header_timeout_s: 5.0,
+            http_idle_timeout_s: 10.0,
             reply_timeout_s: 1.0,
             idle_timeout_s: 20.0,
-            ping_interval_s: 5.0,
+            ping_interval_s: 1.0,
             send_timeout_s: 5.0,
             osc_messages_per_s: 200.0,
             osc_burst: 400.0,
@@ -79,6 +96,7 @@ impl NetLimits {
             ("idle_timeout_s", self.idle_timeout_s),
             ("ping_interval_s", self.ping_interval_s),
             ("send_timeout_s", self.send_timeout_s),
+            ("http_idle_timeout_s", self.http_idle_timeout_s),
         ];
         let rates = [
             ("requests_per_s", self.requests_per_s),
@@ -105,6 +123,18 @@ impl NetLimits {
                 "max_connections must be ≥ 1 and hard_message_bytes ≥ 1024".into(),
             ));
         }
+        if self.max_http_connections <= self.max_connections {
+            return Err(crate::error::RuntimeError::Config(format!(
+                "max_http_connections ({}) must exceed max_connections ({}): WebSockets are HTTP connections too",
+                self.max_http_connections, self.max_connections
+            )));
+        }
+        if !(self.header_timeout_s.is_finite() && self.header_timeout_s > 0.0 && self.header_timeout_s <= 10.0) {
+            return Err(crate::error::RuntimeError::Config(format!(
+                "header_timeout_s = {} s must lie in (0, 10]",
+                self.header_timeout_s
+            )));
+        }
         Ok(())
     }
 }
@@ -114,11 +144,12 @@ impl NetLimits {
 pub struct OscCounters {
     /// Datagrams received.
     pub packets: AtomicU64,
-    /// Messages applied.
+    /// Messages the control loop applied (counted when the loop answers).
     pub applied: AtomicU64,
     /// Datagrams that are not valid OSC (ignored).
     pub malformed: AtomicU64,
-    /// Valid OSC messages refused (unknown address, channel or material, bad value, queue full).
+    /// Valid OSC messages refused: by the validation (unknown address, channel or material, bad value), by a full
+    /// queue, or by the control loop (a faulted channel, a failed recording…).
     pub refused: AtomicU64,
     /// Messages dropped by the rate limit.
     pub rate_limited: AtomicU64,
@@ -140,7 +171,6 @@ pub struct Info {
 }
 
 /// State shared by the handlers.
-#[derive(Debug)]
 pub struct App {
     pub(crate) commands: CommandSender,
     pub(crate) shared: Arc<Shared>,
@@ -149,10 +179,38 @@ pub struct App {
     pub(crate) access: Access,
     pub(crate) info: Info,
     pub(crate) osc: Arc<OscCounters>,
-    pub(crate) recorded_rows: Option<Arc<AtomicU64>>,
+    /// The dose ledger of the state directory, if any.
     pub(crate) dose_ledger: Option<Arc<WriterStatus>>,
+    /// The recording, if any.
+    pub(crate) recording: Option<Arc<RecordStatus>>,
+    /// What a failed recording does.
+    pub(crate) record_policy: RecordErrorPolicy,
+    /// The interlock the loop obeys (tripped by a failed recording under the policy `stop`).
+    pub(crate) interlock: Arc<Interlock>,
+    /// The loop's clock (disconnect times are on it).
+    pub(crate) clock: Arc<dyn Clock>,
+    /// Longest wait for the loop's answer: the configured reply timeout, at least two loop periods.
+    pub(crate) reply_wait: Duration,
     pub(crate) clients: AtomicUsize,
     pub(crate) next_client: AtomicU64,
+    /// What the HTTP server did.
+    pub(crate) http: Arc<server::HttpCounters>,
+    /// The HTTP connection cap in force (fitted to the open-files limit).
+    pub(crate) http_cap: usize,
+    /// The device's link, if it has one.
+    pub(crate) link: Option<Arc<thermode_device::LinkHealth>>,
+    /// What real-time treatment the loop obtained.
+    pub(crate) realtime: thermode_platform::rt::Realtime,
+}
+
+impl std::fmt::Debug for App {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("App")
+            .field("limits", &self.limits)
+            .field("net", &self.net)
+            .field("info", &self.info)
+            .finish_non_exhaustive()
+    }
 }
 
 /// The router with every route behind the access check.
@@ -173,6 +231,10 @@ pub(crate) fn error_response(status: StatusCode, error: &ApiError) -> Response {
 }
 
 async fn check_access(State(app): State<Arc<App>>, request: Request, next: Next) -> Response {
+    if request.headers().get_all(header::HOST).iter().count() > 1 {
+        let e = ApiError::new(ErrorCode::BadValue, "a request must have exactly one Host header");
+        return error_response(StatusCode::BAD_REQUEST, &e);
+    }
     match app.access.check(request.headers(), request.uri().query()) {
         Ok(()) => next.run(request).await,
         Err(e) if e.code == ErrorCode::Unauthorized => {
@@ -272,10 +334,32 @@ pub fn status_json(app: &App) -> Value {
             "missed_deadlines": s.missed_deadlines,
             "ticks": s.ticks,
             "skipped_publishes": app.shared.skipped_publishes(),
+            "realtime": {
+                "scheduling": if app.realtime.fifo_priority.is_some() { "SCHED_FIFO" } else { "normal" },
+                "priority": app.realtime.fifo_priority,
+                "scheduling_error": app.realtime.scheduling_error,
+                "memory_locked": app.realtime.memory_locked,
+                "memory_error": app.realtime.memory_error,
+            },
         },
-        "commands": {"applied": snapshot.commands_applied, "refused": snapshot.commands_refused},
+        "commands": {
+            "applied": snapshot.commands_applied,
+            "refused": snapshot.commands_refused,
+            "withdrawn": snapshot.commands_withdrawn,
+        },
         "device_errors": snapshot.device_errors,
         "clients": app.clients.load(Ordering::Relaxed),
+        "http": {
+            "open": count(&app.http.open),
+            "max_connections": app.http_cap,
+            "header_timeout_s": app.net.header_timeout_s,
+            "idle_timeout_s": app.net.http_idle_timeout_s,
+            "accepted": count(&app.http.accepted),
+            "evicted": count(&app.http.evicted),
+            "timed_out": count(&app.http.timed_out),
+            "refused": count(&app.http.refused),
+            "accept_errors": count(&app.http.accept_errors),
+        },
         "auth": {"token_required": app.access.token_required()},
         "limits": protocol::merged(json!({
             "max_message_bytes": app.limits.max_message_bytes,
@@ -293,10 +377,13 @@ pub fn status_json(app: &App) -> Value {
             "rate_limited": count(&osc.rate_limited),
             "last_error": osc_last_error,
         },
-        "recording": app.info.recording.as_ref().map(|path| json!({
-            "path": path,
-            "rows": app.recorded_rows.as_ref().map_or(0, |r| r.load(Ordering::Relaxed)),
-            "dropped_ticks": app.shared.dropped_records(),
+        "recording": app.recording.as_ref().map(|r| recording_json(app, r)),
+        "link": app.link.as_ref().map(|l| json!({
+            "state": if l.is_up() { "up" } else { "down" },
+            "reconnects": l.reconnects(),
+            "failures": l.failures(),
+            "attempts": l.attempts(),
+            "error": l.error(),
         })),
         "dose_ledger": app.dose_ledger.as_ref().map(|w| json!({
             "path": w.path.display().to_string(),
@@ -304,5 +391,31 @@ pub fn status_json(app: &App) -> Value {
             "errors": count(&w.errors),
             "last_error": w.last_error.lock().map(|e| e.clone()).unwrap_or(None),
         })),
+        "interlock": {
+            "engaged": app.interlock.engaged(),
+            "trips": app.interlock.trips(),
+            "reason": app.interlock.reason(),
+        },
+    })
+}
+
+/// `/api/status` `recording`: the file, `state` (`ok` or `failed`), the `error`, the rows in the file, and what the
+/// policy does.
+pub fn recording_json(app: &App, r: &RecordStatus) -> Value {
+    let state = match r.state() {
+        RecordState::Ok => "ok",
+        RecordState::Failed => "failed",
+    };
+    json!({
+        "path": r.path().display().to_string(),
+        "state": state,
+        "error": r.error(),
+        "rows_written": r.rows_written(),
+        "rows": r.rows_written(),
+        "bytes_written": r.bytes_written(),
+        "rows_lost": r.rows_lost(),
+        "dropped_ticks": app.shared.dropped_records(),
+        "on_error": app.record_policy.name(),
+        "stimuli_refused": r.state() == RecordState::Failed && app.interlock.engaged(),
     })
 }

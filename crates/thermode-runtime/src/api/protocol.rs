@@ -48,6 +48,10 @@ pub enum ErrorCode {
     Busy,
     /// Too many WebSocket connections.
     TooManyConnections,
+    /// A `stop_all` sent after this request was applied first; nothing changed.
+    Cancelled,
+    /// The recording failed and the policy is `stop`: stimuli are refused until `ack_recording`.
+    RecordingFailed,
 }
 
 impl ErrorCode {
@@ -68,6 +72,8 @@ impl ErrorCode {
             ErrorCode::DeviceFault => "device_fault",
             ErrorCode::Busy => "busy",
             ErrorCode::TooManyConnections => "too_many_connections",
+            ErrorCode::Cancelled => "cancelled",
+            ErrorCode::RecordingFailed => "recording_failed",
         }
     }
 }
@@ -144,6 +150,8 @@ pub enum ApiRequest {
     Unsubscribe,
     /// The daemon's status.
     Status,
+    /// An operator acknowledges a failed recording: stimuli are accepted again.
+    AckRecording,
 }
 
 /// Parses and validates one text message from `owner`. Returns the `id` to answer with (null when there is none or
@@ -223,10 +231,12 @@ fn parse_object(map: &Map<String, Value>, limits: &RequestLimits, owner: Owner) 
         }
         "unsubscribe" => return fields.only(&[]).map(|()| ApiRequest::Unsubscribe),
         "status" => return fields.only(&[]).map(|()| ApiRequest::Status),
+        "ack_recording" => return fields.only(&[]).map(|()| ApiRequest::AckRecording),
         other => Err(ApiError::new(
             ErrorCode::UnknownType,
             format!(
-                "unknown request type {:?}; known: touch, release, setpoint, clear_fault, stop_all, subscribe, unsubscribe, status",
+                "unknown request type {:?}; known: touch, release, setpoint, clear_fault, stop_all, subscribe, unsubscribe, \
+                 status, ack_recording",
                 truncate(other)
             ),
         ))?,

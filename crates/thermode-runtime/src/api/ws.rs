@@ -1,25 +1,33 @@
 //! The WebSocket endpoint `/api/ws`: one task per connection that reads requests, answers each with the same
-//! `id`, streams telemetry to subscribers, pings, and on disconnect tells the loop, which releases the client's
-//! contacts after the grace period.
+//! `id`, streams telemetry to subscribers, sends events (a failed recording), pings, and on disconnect tells the
+//! loop, which releases the client's contacts after the grace period.
 //!
 //! Limits: messages above the soft size limit get `too_large`; frames above the hard limit close the connection;
 //! each connection has a token-bucket rate limit (`rate_limited`); a client that sends nothing for the idle timeout
-//! or does not take our messages within the send timeout is disconnected.
+//! is disconnected; so is a client that stops reading: a send that cannot complete within the send timeout, or a
+//! ping (one every ping interval) not answered within the send timeout. A text frame that is not UTF-8 is
+//! answered with the close code 1007. The handshake needs a well-formed `Sec-WebSocket-Key` (16 bytes in base64).
 
+use std::collections::VecDeque;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 use std::time::Duration;
 
-use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
+use axum::extract::ws::{CloseFrame, Message, WebSocket, WebSocketUpgrade};
 use axum::extract::State;
-use axum::http::StatusCode;
+use axum::http::{HeaderMap, StatusCode};
 use axum::response::Response;
+use axum::Extension;
 use serde_json::{json, Value};
+use tokio::sync::watch;
 use tokio::time::{interval, timeout, Instant, Interval, MissedTickBehavior};
 
 use super::protocol::{self, ApiError, ApiRequest, ErrorCode};
-use super::{error_response, status_json, App};
+use super::{error_response, recording_json, status_json, App};
 use crate::command::{Command, CommandError, Owner};
+
+/// The close code for a text frame that is not UTF-8 (RFC 6455 §7.4.1: invalid frame payload data).
+pub const CLOSE_INVALID_PAYLOAD: u16 = 1007;
 
 /// Counts a connection for as long as it lives.
 struct ConnectionSlot(Arc<App>);
@@ -30,8 +38,31 @@ impl Drop for ConnectionSlot {
     }
 }
 
-/// `GET /api/ws`: upgrades, unless the connection limit is reached.
-pub async fn upgrade(State(app): State<Arc<App>>, ws: WebSocketUpgrade) -> Response {
+/// Whether `key` is a valid `Sec-WebSocket-Key`: the base64 of 16 bytes (24 characters, ending in `==`).
+pub fn valid_websocket_key(key: &[u8]) -> bool {
+    let b64 = |c: &u8| c.is_ascii_alphanumeric() || *c == b'+' || *c == b'/';
+    key.len() == 24 && key[..22].iter().all(b64) && key.ends_with(b"==") && b"AQgw".contains(&key[21])
+}
+
+/// `GET /api/ws`: upgrades, unless the key is malformed or the connection limit is reached.
+pub async fn upgrade(
+    State(app): State<Arc<App>>,
+    connection: Option<Extension<Arc<super::server::Slot>>>,
+    headers: HeaderMap,
+    ws: WebSocketUpgrade,
+) -> Response {
+    let keys: Vec<&[u8]> = headers
+        .get_all("sec-websocket-key")
+        .iter()
+        .map(|v| v.as_bytes())
+        .collect();
+    if keys.len() != 1 || !valid_websocket_key(keys[0]) {
+        let e = ApiError::new(
+            ErrorCode::BadValue,
+            "Sec-WebSocket-Key must be one header holding 16 bytes in base64",
+        );
+        return error_response(StatusCode::BAD_REQUEST, &e);
+    }
     let previous = app.clients.fetch_add(1, Ordering::Relaxed);
     let slot = ConnectionSlot(app.clone());
     if previous >= app.net.max_connections {
@@ -40,6 +71,9 @@ pub async fn upgrade(State(app): State<Arc<App>>, ws: WebSocketUpgrade) -> Respo
             format!("at most {} WebSocket connections", app.net.max_connections),
         );
         return error_response(StatusCode::SERVICE_UNAVAILABLE, &e);
+    }
+    if let Some(Extension(connection)) = connection {
+        connection.upgraded();
     }
     let hard = app.net.hard_message_bytes;
     ws.max_message_size(hard)
@@ -60,12 +94,18 @@ struct Connection {
     subscription: Option<Interval>,
     origin: Instant,
     last_heard: Instant,
+    /// Pings sent and not yet answered: (sequence number, when sent).
+    pings: VecDeque<(u64, Instant)>,
+    next_ping: u64,
+    /// The recording's (failures, acknowledgements) as last told to this client.
+    recording: Option<watch::Receiver<(u64, u64)>>,
 }
 
 impl Connection {
     fn new(app: Arc<App>, socket: WebSocket, client: u64) -> Self {
         let bucket = super::limit::TokenBucket::new(app.net.requests_per_s, app.net.burst);
         let now = Instant::now();
+        let recording = app.recording.as_ref().map(|r| r.subscribe());
         Connection {
             app,
             socket,
@@ -74,6 +114,9 @@ impl Connection {
             subscription: None,
             origin: now,
             last_heard: now,
+            pings: VecDeque::new(),
+            next_ping: 0,
+            recording,
         }
     }
 
@@ -85,6 +128,7 @@ impl Connection {
                 message = self.socket.recv() => self.on_message(message).await,
                 _ = tick(&mut self.subscription) => self.send_telemetry().await,
                 _ = ping.tick() => self.ping().await,
+                event = changed(&mut self.recording) => self.send_event(event).await,
             };
             if !open {
                 break;
@@ -97,8 +141,19 @@ impl Connection {
 
     /// Handles one received item; false when the connection is over.
     async fn on_message(&mut self, message: Option<Result<Message, axum::Error>>) -> bool {
-        let Some(Ok(message)) = message else {
-            return false;
+        let message = match message {
+            Some(Ok(message)) => message,
+            Some(Err(e)) => {
+                if is_invalid_utf8(e) {
+                    let frame = CloseFrame {
+                        code: CLOSE_INVALID_PAYLOAD,
+                        reason: "a text frame must be UTF-8".into(),
+                    };
+                    let _ = self.send_message(Message::Close(Some(frame))).await;
+                }
+                return false;
+            }
+            None => return false,
         };
         self.last_heard = Instant::now();
         match message {
@@ -110,7 +165,16 @@ impl Connection {
                 let e = ApiError::new(ErrorCode::BadJson, "binary frames are not supported; send JSON text");
                 self.send(e.to_json(&Value::Null)).await
             }
-            Message::Ping(_) | Message::Pong(_) => true,
+            Message::Pong(payload) => {
+                if let Ok(bytes) = <[u8; 8]>::try_from(payload.as_ref()) {
+                    let answered = u64::from_be_bytes(bytes);
+                    while self.pings.front().is_some_and(|(seq, _)| *seq <= answered) {
+                        self.pings.pop_front();
+                    }
+                }
+                true
+            }
+            Message::Ping(_) => true,
             Message::Close(_) => false,
         }
     }
@@ -147,6 +211,17 @@ impl Connection {
                 self.subscription = None;
                 Ok(protocol::ok_reply(id, "unsubscribe", json!({})))
             }
+            ApiRequest::AckRecording => {
+                let acknowledged = self.app.interlock.acknowledge();
+                if let (true, Some(recording)) = (acknowledged, &self.app.recording) {
+                    recording.acknowledged();
+                }
+                let mut extra = json!({"acknowledged": acknowledged});
+                if let (Value::Object(map), Some(recording)) = (&mut extra, &self.app.recording) {
+                    map.insert("recording".into(), recording_json(&self.app, recording));
+                }
+                Ok(protocol::ok_reply(id, "ack_recording", extra))
+            }
             ApiRequest::Status => {
                 let mut status = status_json(&self.app);
                 if let Value::Object(map) = &mut status {
@@ -163,11 +238,36 @@ impl Connection {
         self.send(protocol::telemetry_message(&snapshot)).await
     }
 
+    /// Closes a connection that sent nothing for the idle timeout, or left a ping unanswered for the send timeout
+    /// (it stopped reading); else pings.
     async fn ping(&mut self) -> bool {
         if self.last_heard.elapsed().as_secs_f64() > self.app.net.idle_timeout_s {
             return false;
         }
-        self.send_message(Message::Ping(Vec::new().into())).await
+        let unanswered = self.pings.front().map(|(_, sent)| sent.elapsed().as_secs_f64());
+        if unanswered.is_some_and(|s| s > self.app.net.send_timeout_s) {
+            return false;
+        }
+        let seq = self.next_ping;
+        self.next_ping += 1;
+        self.pings.push_back((seq, Instant::now()));
+        self.send_message(Message::Ping(seq.to_be_bytes().to_vec().into()))
+            .await
+    }
+
+    /// Tells the client the recording failed, or that an operator acknowledged the failure.
+    async fn send_event(&mut self, event: Option<&'static str>) -> bool {
+        let (Some(event), Some(recording)) = (event, self.app.recording.clone()) else {
+            // The recorder is gone (the daemon is stopping): no more events.
+            self.recording = None;
+            return true;
+        };
+        let message = json!({
+            "type": "event",
+            "event": event,
+            "recording": recording_json(&self.app, &recording),
+        });
+        self.send(message).await
     }
 
     async fn send(&mut self, value: Value) -> bool {
@@ -180,10 +280,11 @@ impl Connection {
     }
 }
 
-/// Tells the loop a client is gone (retrying while the queue is full: its contacts must be released).
+/// Tells the loop a client is gone, and when (retrying while the urgent lane is full: its contacts must be released).
 async fn goodbye(app: &App, client: u64) {
+    let at_s = Some(app.clock.now_s());
     for _ in 0..1000 {
-        match app.commands.send(Command::ClientGone { client }) {
+        match app.commands.send(Command::ClientGone { client, at_s }) {
             Err(CommandError::Busy) => tokio::time::sleep(Duration::from_millis(5)).await,
             _ => return,
         }
@@ -194,17 +295,7 @@ async fn goodbye(app: &App, client: u64) {
 async fn to_loop(app: &App, command: Command, id: &Value) -> Result<Value, ApiError> {
     let (name, extra) = (command.name(), protocol::command_reply_fields(&command));
     let answer = app.commands.request(command).map_err(loop_error)?;
-    let wait = Duration::from_secs_f64(app.net.reply_timeout_s);
-    let applied = match timeout(wait, answer).await {
-        Ok(Ok(reply)) => reply.map_err(loop_error)?,
-        Ok(Err(_)) => return Err(loop_error(CommandError::Stopped)),
-        Err(_) => {
-            return Err(ApiError::new(
-                ErrorCode::Busy,
-                "the control loop did not answer in time; the command may still be applied",
-            ))
-        }
-    };
+    let applied = answer.wait(app.reply_wait).await.map_err(loop_error)?;
     let mut reply = protocol::ok_reply(id, name, extra);
     if let Value::Object(map) = &mut reply {
         map.insert("tick".into(), json!(applied.tick));
@@ -223,13 +314,40 @@ async fn tick(subscription: &mut Option<Interval>) {
     }
 }
 
+/// Waits for the recording's next change: `recording_failed` or `recording_acknowledged`; forever without a
+/// recording; `None` once the recorder is gone.
+async fn changed(recording: &mut Option<watch::Receiver<(u64, u64)>>) -> Option<&'static str> {
+    let Some(receiver) = recording else {
+        return std::future::pending().await;
+    };
+    let before = *receiver.borrow_and_update();
+    receiver.changed().await.ok()?;
+    let after = *receiver.borrow_and_update();
+    Some(if after.0 != before.0 {
+        "recording_failed"
+    } else {
+        "recording_acknowledged"
+    })
+}
+
+/// Whether a receive error is a text frame that is not UTF-8.
+fn is_invalid_utf8(e: axum::Error) -> bool {
+    let inner = e.into_inner();
+    matches!(
+        inner.downcast_ref::<tokio_tungstenite::tungstenite::Error>(),
+        Some(tokio_tungstenite::tungstenite::Error::Utf8(_))
+    )
+}
+
 /// The API error for a loop refusal.
-fn loop_error(e: CommandError) -> ApiError {
+pub(crate) fn loop_error(e: CommandError) -> ApiError {
     let code = match &e {
         CommandError::UnknownChannel { .. } => ErrorCode::UnknownChannel,
         CommandError::Faulted { .. } | CommandError::FaultPersists { .. } => ErrorCode::DeviceFault,
         CommandError::Rejected { .. } => ErrorCode::BadValue,
         CommandError::Busy | CommandError::Stopped => ErrorCode::Busy,
+        CommandError::Cancelled => ErrorCode::Cancelled,
+        CommandError::RecordingFailed => ErrorCode::RecordingFailed,
     };
     ApiError::new(code, e.to_string())
 }

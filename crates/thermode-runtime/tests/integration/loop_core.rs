@@ -244,7 +244,7 @@ fn a_disconnected_clients_contacts_are_released_exactly_after_the_grace_period()
     rig.ask(touch(1, "wood", Owner::Client(7))).expect("client 7 touches 1");
     rig.ask(touch(2, "wood", Owner::Client(7))).expect("client 7 touches 2");
     rig.ask(touch(3, "steel", Owner::Osc)).expect("osc touches 3");
-    let gone = rig.ask(Command::ClientGone { client: 7 }).expect("gone");
+    let gone = rig.ask(Command::ClientGone { client: 7, at_s: None }).expect("gone");
     let release_at = rig.snapshot().channels[1].release_at_s.expect("a pending release");
     assert!(
         (release_at - (gone.time_s + grace_s)).abs() < 1e-12,
@@ -630,4 +630,125 @@ fn stopping_the_loop_switches_every_drive_off() {
         assert_eq!(last.current_a, 0.0, "channel {channel}'s last command");
     }
     assert!(!rig.handle.snapshot().running);
+}
+
+#[test]
+fn a_command_withdrawn_after_its_wait_is_answered_busy_and_never_applied() {
+    let rig = Rig::new(2, trackers(), LoopConfig::default());
+    let answer = rig
+        .handle
+        .commands()
+        .request(touch(0, "wood", Owner::Script))
+        .expect("queued");
+    // The clock does not move: the loop never takes the command within the wait.
+    let reply = common::client_runtime().block_on(answer.wait(std::time::Duration::from_millis(50)));
+    assert!(matches!(reply, Err(CommandError::Busy)), "{reply:?}");
+    rig.step(3);
+    let s = rig.snapshot();
+    assert_eq!(
+        &*s.channels[0].label, "air",
+        "a withdrawn command must not happen later"
+    );
+    assert_eq!((s.commands_withdrawn, s.commands_applied), (1, 0), "withdrawn, applied");
+    // A command the loop has taken is answered, however late the waiter is.
+    let answer = rig
+        .handle
+        .commands()
+        .request(touch(1, "wood", Owner::Script))
+        .expect("queued");
+    rig.step(1);
+    let reply = common::client_runtime().block_on(answer.wait(std::time::Duration::ZERO));
+    assert!(reply.is_ok(), "{reply:?}");
+}
+
+#[test]
+fn stop_all_jumps_the_queue_and_cancels_what_was_sent_before_it() {
+    let config = LoopConfig {
+        command_queue_len: 2000,
+        ..LoopConfig::default()
+    };
+    let rig = Rig::new(3, trackers(), config);
+    let commands = rig.handle.commands();
+    // More than a tick's budget of ordinary commands, then a stop.
+    let flood: Vec<_> = (0..1500)
+        .map(|i| commands.request(touch(i % 3, "wood", Owner::Osc)).expect("queued"))
+        .collect();
+    let stop = commands.request(Command::StopAll).expect("stop queued");
+    let after = commands
+        .request(touch(2, "steel", Owner::Script))
+        .expect("queued after the stop");
+    let before = rig.snapshot().tick;
+    rig.step(1);
+    let applied = stop.blocking_recv().expect("answer").expect("stop applied");
+    assert_eq!(applied.tick, before + 1, "the stop is applied at the very next tick");
+    rig.step(3);
+    for (i, answer) in flood.into_iter().enumerate() {
+        let reply = answer.blocking_recv().expect("answer");
+        assert!(matches!(reply, Err(CommandError::Cancelled)), "flood {i}: {reply:?}");
+    }
+    assert!(
+        after.blocking_recv().expect("answer").is_ok(),
+        "sent after the stop: applied"
+    );
+    let s = rig.snapshot();
+    assert_eq!(
+        (&*s.channels[0].label, &*s.channels[1].label, &*s.channels[2].label),
+        ("air", "air", "steel")
+    );
+}
+
+#[test]
+fn at_one_hertz_a_disconnect_under_a_flood_releases_within_the_grace_period() {
+    const RATE_HZ: f64 = 1.0;
+    let config = LoopConfig {
+        rate_hz: RATE_HZ,
+        release_after_disconnect_s: 2.0,
+        ..LoopConfig::default()
+    };
+    assert_eq!(
+        config.commands_per_tick(),
+        config.command_queue_len,
+        "the whole queue drains per tick"
+    );
+    let device = SpyDevice::new(2);
+    let clock = Arc::new(ManualClock::new());
+    let handle = LoopHandle::spawn(config, Box::new(device), trackers(), clock.clone(), Vec::new()).expect("loop");
+    let wait_tick = |t: f64| {
+        assert!(
+            common::wait_until(10.0, || handle.snapshot().time_s >= t - 1e-9
+                && handle.snapshot().stats.ticks > 0),
+            "tick at {t} s"
+        )
+    };
+    wait_tick(0.0);
+    let commands = handle.commands();
+    let touched = commands.request(touch(0, "copper", Owner::Client(3))).expect("queued");
+    clock.set(1.0);
+    wait_tick(1.0);
+    touched.blocking_recv().expect("answer").expect("touch applied");
+    // A full queue of OSC commands, then the client vanishes at 1.3 s.
+    while commands.send(Command::Release { channel: 1 }).is_ok() {}
+    let disconnect_s = 1.3;
+    commands
+        .send(Command::ClientGone {
+            client: 3,
+            at_s: Some(disconnect_s),
+        })
+        .expect("the urgent lane takes it although the queue is full");
+    clock.set(2.0);
+    wait_tick(2.0);
+    let s = handle.snapshot();
+    assert_eq!(
+        s.channels[0].release_at_s,
+        Some(disconnect_s + 2.0),
+        "the grace runs from the disconnect"
+    );
+    clock.set(3.0);
+    wait_tick(3.0);
+    let s = handle.snapshot();
+    assert_eq!(
+        &*s.channels[0].label, "air",
+        "released at {} s, no later than the disconnect at {disconnect_s} s + 2 s",
+        s.time_s
+    );
 }

@@ -11,3 +11,4 @@ mod loop_core;
 mod recording;
 mod security;
 mod serial;
+mod service;

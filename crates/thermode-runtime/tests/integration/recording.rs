@@ -126,3 +126,199 @@ fn a_second_session_in_the_same_second_gets_its_own_file() {
     a.finish().expect("finish a");
     b.finish().expect("finish b");
 }
+
+/// The rows of a session file (the header excluded), and whether it ends with a newline.
+fn rows_on_disk(path: &std::path::Path) -> (u64, bool) {
+    let bytes = std::fs::read(path).expect("read CSV");
+    let lines = bytes.iter().filter(|&&b| b == b'\n').count() as u64;
+    (lines.saturating_sub(1), bytes.last() == Some(&b'\n'))
+}
+
+#[test]
+fn a_file_that_fills_up_keeps_whole_rows_counts_only_them_and_trips_the_interlock() {
+    use thermode_runtime::recorder::{QuotaFile, RecordState};
+    use thermode_runtime::Interlock;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let path = dir.path().join("full.csv");
+    let file = std::fs::File::create(&path).expect("file");
+    // 3000 bytes: the header and a few ticks fit, then a write is cut short as on a full disk.
+    let interlock = Arc::new(Interlock::new());
+    let (recorder, feed) = Recorder::start_on(
+        path.clone(),
+        Box::new(QuotaFile::new(file, 3000)),
+        Some(interlock.clone()),
+    )
+    .expect("recorder");
+    let status = recorder.status();
+    let clock = Arc::new(ManualClock::new());
+    let mut handle = LoopHandle::spawn_with_interlock(
+        LoopConfig::default(),
+        Box::new(SpyDevice::new(3)),
+        trackers(),
+        clock.clone(),
+        vec![feed],
+        interlock.clone(),
+    )
+    .expect("loop");
+    assert!(
+        common::wait_until(10.0, || handle.snapshot().stats.ticks >= 1),
+        "first tick"
+    );
+    for k in 1..400u64 {
+        clock.set(k as f64 * PERIOD_S);
+        let want = clock.now_s();
+        assert!(
+            common::wait_until(10.0, || handle.snapshot().time_s >= want),
+            "tick {k}"
+        );
+    }
+    // The writer writes at least every 0.5 s of real time.
+    assert!(
+        common::wait_until(10.0, || status.state() == RecordState::Failed),
+        "the recording never failed: {} rows, {} bytes",
+        status.rows_written(),
+        status.bytes_written()
+    );
+    let error = status.error().unwrap_or_default();
+    assert!(error.contains("3000 bytes"), "error names the quota: {error}");
+    assert!(interlock.engaged(), "the failure trips the interlock");
+    clock.set(400.0 * PERIOD_S);
+    assert!(
+        common::wait_until(10.0, || handle.snapshot().channels.iter().all(|c| c.held_off)),
+        "the next tick stops all"
+    );
+    let (rows, newline) = rows_on_disk(&path);
+    assert!(newline, "the file ends with a whole row");
+    assert_eq!(rows, status.rows_written(), "rows counted = rows in the file");
+    assert!(status.bytes_written() <= 3000, "{} bytes", status.bytes_written());
+    handle.stop();
+    drop(handle);
+    let finished = recorder.finish();
+    assert!(finished.is_err(), "finish reports the error: {finished:?}");
+    assert_eq!(rows_on_disk(&path), (rows, true), "nothing written after the failure");
+    assert!(status.rows_lost() > 0, "rows after the failure are counted as lost");
+}
+
+#[test]
+fn a_disk_that_is_full_from_the_start_fails_at_the_header() {
+    use thermode_runtime::recorder::RecordState;
+    let Ok(full) = std::fs::OpenOptions::new().write(true).open("/dev/full") else {
+        eprintln!("SKIPPED: no /dev/full on this system");
+        return;
+    };
+    let (recorder, feed) = Recorder::start_on("/dev/full".into(), Box::new(full), None).expect("recorder");
+    let status = recorder.status();
+    assert!(common::wait_until(10.0, || status.state() == RecordState::Failed));
+    assert_eq!(status.rows_written(), 0);
+    let error = status.error().unwrap_or_default();
+    assert!(error.to_lowercase().contains("space"), "ENOSPC: {error}");
+    drop(feed);
+    assert!(recorder.finish().is_err());
+}
+
+#[test]
+fn a_failed_recording_stops_every_stimulus_until_acknowledged_and_says_so_everywhere() {
+    use thermode_runtime::recorder::RecordErrorPolicy;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut config = common::test_config();
+    config.record_dir = Some(dir.path().to_path_buf());
+    config.record_max_bytes = Some(16 * 1024);
+    assert_eq!(config.record_policy, RecordErrorPolicy::Stop, "the default policy");
+    let daemon = common::start(config, SpyDevice::new(2), trackers());
+    let addr = daemon.http_addr();
+    let path = daemon.recording_path().expect("recording");
+    common::client_runtime().block_on(async {
+        let mut ws = common::ws_connect(addr, "").await;
+        let r = common::ask(
+            &mut ws,
+            r#"{"type":"setpoint","id":1,"channel":0,"temp_c":36,"rate_c_s":2}"#,
+        )
+        .await;
+        assert_eq!(r["type"], "ok", "{r}");
+        // 2 channels at 100 Hz fill 16 KiB in under a second; the event reaches every client.
+        let event = loop {
+            let m = common::next_json(&mut ws).await;
+            if m["type"] == "event" {
+                break m;
+            }
+        };
+        assert_eq!(event["event"], "recording_failed", "{event}");
+        assert_eq!(event["recording"]["state"], "failed", "{event}");
+        assert_eq!(event["recording"]["stimuli_refused"], true, "{event}");
+        let status = common::get_json(addr, "/api/status");
+        let recording = &status["recording"];
+        assert_eq!(recording["state"], "failed", "{recording}");
+        assert!(
+            recording["error"].as_str().is_some_and(|e| e.contains("16384 bytes")),
+            "{recording}"
+        );
+        let (rows, newline) = rows_on_disk(&path);
+        assert!(newline, "the file ends with a whole row");
+        assert_eq!(
+            recording["rows_written"].as_u64(),
+            Some(rows),
+            "{recording} vs {rows} rows in the file"
+        );
+        assert!(
+            common::wait_until(5.0, || {
+                let s = common::get_json(addr, "/api/status");
+                s["contacts"] == serde_json::json!([]) && s["channels"][0]["held_off"] == true
+            }),
+            "every stimulus released and held off"
+        );
+        let refused = common::ask(&mut ws, r#"{"type":"touch","id":2,"channel":1,"material":"wood"}"#).await;
+        assert_eq!(
+            (refused["type"].as_str(), refused["code"].as_str()),
+            (Some("error"), Some("recording_failed")),
+            "{refused}"
+        );
+        let released = common::ask(&mut ws, r#"{"type":"release","id":3,"channel":1}"#).await;
+        assert_eq!(released["type"], "ok", "a release is never refused: {released}");
+        let ack = common::ask(&mut ws, r#"{"type":"ack_recording","id":4}"#).await;
+        assert_eq!(
+            (ack["type"].as_str(), ack["acknowledged"].as_bool()),
+            (Some("ok"), Some(true)),
+            "{ack}"
+        );
+        let again = common::ask(&mut ws, r#"{"type":"touch","id":5,"channel":1,"material":"wood"}"#).await;
+        assert_eq!(again["type"], "ok", "accepted after the acknowledgement: {again}");
+        let status = common::get_json(addr, "/api/status");
+        assert_eq!(status["recording"]["state"], "failed", "the recording stays failed");
+        assert_eq!(status["interlock"]["engaged"], false, "{}", status["interlock"]);
+    });
+    let notices = daemon.take_notices();
+    assert!(
+        notices.len() == 1 && notices[0].contains("FAILED") && notices[0].contains(&path.display().to_string()),
+        "{notices:?}"
+    );
+    assert!(daemon.take_notices().is_empty(), "told once");
+    let report = daemon.stop().expect("stop");
+    assert!(report.recording_error.is_some(), "the stop reports the error");
+    assert_eq!(report.rows, Some(rows_on_disk(&path).0));
+}
+
+#[test]
+fn with_the_policy_continue_a_failed_recording_is_reported_and_stimuli_go_on() {
+    use thermode_runtime::recorder::RecordErrorPolicy;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut config = common::test_config();
+    config.record_dir = Some(dir.path().to_path_buf());
+    config.record_max_bytes = Some(4 * 1024);
+    config.record_policy = RecordErrorPolicy::Continue;
+    let daemon = common::start(config, SpyDevice::new(2), trackers());
+    let addr = daemon.http_addr();
+    assert!(
+        common::wait_until(10.0, || common::get_json(addr, "/api/status")["recording"]["state"]
+            == "failed"),
+        "the failure shows"
+    );
+    let status = common::get_json(addr, "/api/status");
+    assert_eq!(status["recording"]["on_error"], "continue");
+    assert_eq!(status["recording"]["stimuli_refused"], false);
+    common::client_runtime().block_on(async {
+        let mut ws = common::ws_connect(addr, "").await;
+        let r = common::ask(&mut ws, r#"{"type":"touch","id":1,"channel":1,"material":"wood"}"#).await;
+        assert_eq!(r["type"], "ok", "{r}");
+    });
+    assert!(daemon.take_notices()[0].contains("--on-record-error continue"));
+}

@@ -75,3 +75,144 @@ fn the_daemon_renders_through_the_serial_protocol_and_survives_a_vanished_port()
     );
     daemon.shutdown().expect("clean shutdown");
 }
+
+/// A running emulator of `channels` channels on a pseudo-terminal.
+fn emulator(channels: usize, seed: u64) -> PtyEmulator {
+    let display =
+        SimulatedDisplay::<DefaultFinger>::fingertips(&DeviceConfig::default(), channels, seed).expect("display");
+    let emulator = Emulator::new(display, EmulatorConfig::default()).expect("emulator");
+    PtyEmulator::spawn(emulator, Arc::new(MonotonicClock::new())).expect("pseudo-terminal")
+}
+
+/// Points the symbolic link `link` at `target` (atomically, as `thermode emulate --link` does).
+fn point(link: &std::path::Path, target: &str) {
+    let tmp = link.with_extension("new");
+    let _ = std::fs::remove_file(&tmp);
+    std::os::unix::fs::symlink(target, &tmp).expect("symlink");
+    std::fs::rename(&tmp, link).expect("rename");
+}
+
+/// Clears every channel's fault, then asks channel 0 for a direct set-point and returns its sensor after 1.5 s.
+async fn clear_and_render(ws: &mut common::Ws, channels: usize, id: &mut u64) -> (f64, f64) {
+    for channel in 0..channels {
+        let mut cleared = false;
+        for _ in 0..100 {
+            *id += 1;
+            let r = ask(
+                ws,
+                &format!(r#"{{"type":"clear_fault","id":{id},"channel":{channel}}}"#),
+            )
+            .await;
+            if r["type"] == "ok" {
+                cleared = true;
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        assert!(cleared, "clear_fault on channel {channel} never succeeded");
+    }
+    *id += 1;
+    let s = ask(ws, &format!(r#"{{"type":"status","id":{id}}}"#)).await;
+    let before = channel(&s, 0)["sensor_c"].as_f64().expect("sensor");
+    *id += 1;
+    let r = ask(
+        ws,
+        &format!(r#"{{"type":"setpoint","id":{id},"channel":0,"temp_c":38,"rate_c_s":5}}"#),
+    )
+    .await;
+    assert_eq!(r["type"], "ok", "{r}");
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    *id += 1;
+    let s = ask(ws, &format!(r#"{{"type":"status","id":{id}}}"#)).await;
+    let after = channel(&s, 0)["sensor_c"].as_f64().expect("sensor");
+    *id += 1;
+    let r = ask(ws, &format!(r#"{{"type":"release","id":{id},"channel":0}}"#)).await;
+    assert_eq!(r["type"], "ok", "{r}");
+    (before, after)
+}
+
+#[test]
+fn the_link_recovers_from_a_silent_device_and_from_an_emulator_restarted_on_the_same_path() {
+    use thermode_link::emulator::LinkFaults;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let link = dir.path().join("thermode-port");
+    let first = emulator(2, 3);
+    point(&link, first.path());
+    let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
+    let serial =
+        SerialDevice::open(link.to_str().expect("path"), &SerialConfig::default(), clock.clone()).expect("handshake");
+    let mut config = test_config();
+    config.device_label = format!("serial:{}", link.display());
+    let daemon = Daemon::start(config, Box::new(serial), pipelines(), clock).expect("daemon");
+    let addr = daemon.http_addr();
+    let link_state = || get_json(addr, "/api/status")["link"].clone();
+    assert_eq!(link_state()["state"], "up", "{}", link_state());
+    client_runtime().block_on(async {
+        let mut ws = ws_connect(addr, "").await;
+        let mut id = 0;
+        // 1. The device falls silent for 2.5 s (as a stopped emulator does), then answers again.
+        first.control().set_link_faults(LinkFaults {
+            mute: true,
+            ..LinkFaults::default()
+        });
+        assert!(
+            common::wait_until(10.0, || link_state()["state"] == "down"),
+            "{}",
+            link_state()
+        );
+        let s = get_json(addr, "/api/status");
+        assert!(
+            (0..2).all(|i| channel(&s, i)["current_a"] == 0.0 && channel(&s, i)["link_ok"] == false),
+            "every drive off while the link is down: {}",
+            s["channels"]
+        );
+        tokio::time::sleep(Duration::from_millis(1500)).await;
+        first.control().set_link_faults(LinkFaults::default());
+        assert!(
+            common::wait_until(20.0, || link_state()["state"] == "up"
+                && link_state()["reconnects"] == 1),
+            "{}",
+            link_state()
+        );
+        let s = get_json(addr, "/api/status");
+        assert!(
+            (0..2).all(|i| channel(&s, i)["fault"] != 0 && !channel(&s, i)["fault"].is_null()),
+            "channels stay faulted until cleared: {}",
+            s["channels"]
+        );
+        let (before, after) = clear_and_render(&mut ws, 2, &mut id).await;
+        assert!(
+            after > before + 0.5,
+            "renders again after the reconnection: {before} → {after} °C"
+        );
+        // 2. The emulator ends; a new one starts on the same path.
+        first.control().close_port();
+        drop(first);
+        assert!(
+            common::wait_until(10.0, || link_state()["state"] == "down"),
+            "{}",
+            link_state()
+        );
+        let second = emulator(2, 4);
+        point(&link, second.path());
+        assert!(
+            common::wait_until(20.0, || link_state()["state"] == "up"
+                && link_state()["reconnects"] == 2),
+            "{}",
+            link_state()
+        );
+        let (before, after) = clear_and_render(&mut ws, 2, &mut id).await;
+        assert!(
+            after > before + 0.5,
+            "renders on the new emulator: {before} → {after} °C"
+        );
+        let notices = daemon.take_notices();
+        assert!(
+            notices.iter().filter(|l| l.contains("link DOWN")).count() == 1
+                && notices.iter().any(|l| l.contains("back up")),
+            "{notices:?}"
+        );
+        drop(second);
+    });
+    daemon.shutdown().expect("clean shutdown");
+}

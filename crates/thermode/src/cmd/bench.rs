@@ -35,6 +35,12 @@ pub struct BenchArgs {
     /// Output format.
     #[arg(long, value_enum, default_value = "text")]
     pub format: BenchFormat,
+    /// WebSocket clients subscribed to telemetry at 100 Hz during the run.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub subscribers: usize,
+    /// Ask for real-time scheduling (SCHED_FIFO) of the loop and locked memory, as `serve` does by default.
+    #[arg(long)]
+    pub realtime: bool,
 }
 
 /// Runs `thermode bench`.
@@ -53,6 +59,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let config = BenchConfig {
         rate_hz: args.rate,
         duration_s: args.duration,
+        subscribers: args.subscribers,
+        realtime: args.realtime,
         ..BenchConfig::default()
     };
     let report = bench::run(&config, display.device, display.engines)?;

@@ -82,6 +82,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     println!("demo: a touch every few seconds; watch the dashboard");
     let mut next = 0usize;
     let ended = serve::run_for(args.serve.duration, &signals, |elapsed_s| {
+        serve::print_notices(&daemon);
         let Some(commands) = &commands else {
             return;
         };

@@ -7,7 +7,9 @@
 //! emulator then runs in real time (1 kHz firmware tick, reports every `--report-ms`) until the process is ended.
 //! Link faults can be injected for tests of the host: corrupted bytes and dropped frames. `--trace FILE` writes the
 //! true plate of every channel at every firmware tick (CSV, whole rows written and flushed tick by tick, so a reader
-//! can follow it live and a killed emulator leaves no torn row).
+//! can follow it live and a killed emulator leaves no torn row). `--link PATH` publishes the pseudo-terminal under a
+//! stable path (a symbolic link, replaced atomically), so a restarted emulator is found where the host looks for it
+//! (`serve --device serial:PATH` re-opens the same path when its link fails).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -62,6 +64,20 @@ pub struct EmulateArgs {
     /// TCS II only: stream temperature lines at this rate [Hz] even when muted (a test of the host).
     #[arg(long = "stream-hz", value_name = "HZ")]
     pub stream_hz: Option<f64>,
+    /// Also publish the pseudo-terminal as the symbolic link PATH (replaced if it exists; removed at a clean end),
+    /// so a host opening PATH finds a restarted emulator there.
+    #[arg(long, value_name = "PATH")]
+    link: Option<PathBuf>,
+}
+
+/// Points the symbolic link `link` at `target`, replacing whatever is there in one step (rename).
+fn publish_link(link: &std::path::Path, target: &str) -> Result<()> {
+    let mut tmp = link.as_os_str().to_owned();
+    tmp.push(format!(".{}.tmp", std::process::id()));
+    let tmp = PathBuf::from(tmp);
+    let _ = std::fs::remove_file(&tmp);
+    std::os::unix::fs::symlink(target, &tmp).with_context(|| format!("cannot create the link {}", tmp.display()))?;
+    std::fs::rename(&tmp, link).with_context(|| format!("cannot publish the link {}", link.display()))
 }
 
 impl EmulateArgs {
@@ -96,9 +112,13 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
         emulator.trace_to(Box::new(file));
     }
     let pty = PtyEmulator::spawn(emulator, Arc::new(MonotonicClock::new()))?;
+    if let Some(link) = &args.link {
+        publish_link(link, pty.path())?;
+    }
     let mut stdout = std::io::stdout().lock();
     writeln!(stdout, "{}", pty.path()).and_then(|()| stdout.flush())?;
     drop(stdout);
+    let path = pty.path().to_string();
     eprintln!(
         "thermode emulate: {} channels, watchdog {} ms, a report every {} ms; connect with --device serial:{}",
         args.channels,
@@ -106,7 +126,17 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
         args.report_ms,
         pty.path()
     );
-    match pty.wait()? {
+    if let Some(link) = &args.link {
+        eprintln!("thermode emulate: published as {}", link.display());
+    }
+    let ended = pty.wait();
+    if let Some(link) = &args.link {
+        // Removed only while it still points at this emulator's pseudo-terminal.
+        if std::fs::read_link(link).is_ok_and(|target| target.as_os_str() == path.as_str()) {
+            let _ = std::fs::remove_file(link);
+        }
+    }
+    match ended? {
         RunEnd::Stopped | RunEnd::PortClosed | RunEnd::HostClosed => Ok(()),
     }
 }

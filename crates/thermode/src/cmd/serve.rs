@@ -17,6 +17,7 @@ use thermode_link::spec::{is_hardware, open_hardware, HardwareContext};
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::engine::pipeline_engines;
+use thermode_runtime::recorder::RecordErrorPolicy;
 use thermode_runtime::{Daemon, DaemonConfig, EngineFactory, LoopConfig, ServerConfig};
 
 use crate::resolve;
@@ -29,6 +30,15 @@ pub enum ControllerArg {
     Model,
     /// The paper's PID with the tuned gains of the display.
     Pid,
+}
+
+/// What a failed recording does (`--on-record-error`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OnRecordError {
+    /// Release every stimulus and refuse new ones until an operator acknowledges (ack_recording, dashboard).
+    Stop,
+    /// Report the failure everywhere and go on without recording.
+    Continue,
 }
 
 /// How the display is set up (shared by serve, demo and bench).
@@ -77,6 +87,10 @@ pub struct ServeArgs {
     /// Do not listen for OSC.
     #[arg(long = "no-osc")]
     pub no_osc: bool,
+    /// With --token, listen for OSC all the same: OSC carries no token, so it then listens on loopback only and
+    /// anyone on this machine can drive the display through it.
+    #[arg(long = "osc-without-token")]
+    pub osc_without_token: bool,
     /// Shared secret every client must present (`Authorization: Bearer T` or `?token=T`); required off loopback.
     #[arg(long, value_name = "T")]
     pub token: Option<String>,
@@ -86,6 +100,14 @@ pub struct ServeArgs {
     /// Write one CSV per session (one row per tick per channel) into this directory.
     #[arg(long, value_name = "DIR")]
     pub record: Option<PathBuf>,
+    /// When the recording cannot be written (a full disk): `stop` releases every stimulus and refuses new ones until
+    /// an operator acknowledges; `continue` goes on unrecorded. Both report it on stderr, in /api/status, on the
+    /// dashboard and to every WebSocket client.
+    #[arg(long = "on-record-error", value_enum, default_value = "stop")]
+    pub on_record_error: OnRecordError,
+    /// Largest session file [bytes]; reaching it fails the recording as a full disk would.
+    #[arg(long = "record-max-bytes", value_name = "BYTES")]
+    pub record_max_bytes: Option<u64>,
     /// Release a disconnected client's contacts after this grace period [s].
     #[arg(long = "release-after", value_name = "S", default_value_t = 2.0)]
     pub release_after: f64,
@@ -96,6 +118,10 @@ pub struct ServeArgs {
     /// [default: $XDG_STATE_HOME/thermode, else ~/.local/state/thermode].
     #[arg(long = "state-dir", value_name = "DIR")]
     pub state_dir: Option<PathBuf>,
+    /// Do not ask for real-time scheduling (SCHED_FIFO) of the control loop and locked memory. By default both are
+    /// asked for and used where the system grants them (the banner and /api/status say whether it did).
+    #[arg(long = "no-realtime")]
+    pub no_realtime: bool,
 }
 
 /// A display ready for the loop.
@@ -195,6 +221,7 @@ pub fn start(args: &ServeArgs) -> Result<Daemon> {
         bind: args.bind,
         port: args.port,
         osc_port: (!args.no_osc).then_some(args.osc_port),
+        osc_without_token: args.osc_without_token,
         token: args.token.clone(),
         allowed_origins: args.allow_origin.clone(),
         ..ServerConfig::default()
@@ -206,10 +233,16 @@ pub fn start(args: &ServeArgs) -> Result<Daemon> {
         loop_config: LoopConfig {
             rate_hz: args.rate,
             release_after_disconnect_s: args.release_after,
+            realtime: !args.no_realtime,
             ..LoopConfig::default()
         },
         server,
         record_dir: args.record.clone(),
+        record_policy: match args.on_record_error {
+            OnRecordError::Stop => RecordErrorPolicy::Stop,
+            OnRecordError::Continue => RecordErrorPolicy::Continue,
+        },
+        record_max_bytes: args.record_max_bytes,
         device_label: display.label,
         channel_names: display.names.clone(),
         state_dir: Some(super::dose::state_dir(args.state_dir.as_deref())?),
@@ -225,12 +258,26 @@ fn print_banner(daemon: &Daemon, description: &str, args: &ServeArgs) {
     println!("  dashboard  {}", daemon.dashboard_url());
     println!("  WebSocket  ws://{addr}/api/ws");
     match daemon.osc_addr() {
+        Some(osc) if args.token.is_some() => println!(
+            "  OSC        udp://{osc}  WARNING: OSC carries no token; anyone on this machine can drive the display \
+             through it (--osc-without-token)"
+        ),
         Some(osc) => println!("  OSC        udp://{osc}"),
         None if args.no_osc => println!("  OSC        off"),
+        None if args.token.is_some() => {
+            println!("  OSC        off (OSC carries no token; --osc-without-token enables it on loopback)")
+        }
         None => println!("  OSC        off (OSC has no authentication: it listens on loopback binds only)"),
     }
     if let Some(path) = daemon.recording_path() {
-        println!("  recording  {}", path.display());
+        let policy = match args.on_record_error {
+            OnRecordError::Stop => "on a write error every stimulus stops until acknowledged",
+            OnRecordError::Continue => "on a write error stimuli go on unrecorded",
+        };
+        println!("  recording  {} ({policy})", path.display());
+    }
+    if let Some(realtime) = daemon.realtime() {
+        println!("  real time  {}", realtime.describe());
     }
     if let Some(path) = daemon.ledger_path() {
         println!("  dose       {}", path.display());
@@ -283,8 +330,14 @@ pub fn run_for(duration_s: Option<f64>, signals: &StopSignals, mut every_100ms: 
 pub fn finish(daemon: Daemon, ended: Ended) -> Result<()> {
     let path = daemon.recording_path();
     let report = daemon.stop()?;
-    let recorded = match (&path, report.rows) {
-        (Some(path), Some(rows)) => format!("; {rows} rows recorded to {} (flushed and synced)", path.display()),
+    let recorded = match (&path, report.rows, &report.recording_error) {
+        (Some(path), Some(rows), Some(error)) => {
+            format!(
+                "; the recording FAILED ({error}): {rows} whole rows in {}",
+                path.display()
+            )
+        }
+        (Some(path), Some(rows), None) => format!("; {rows} rows recorded to {} (flushed and synced)", path.display()),
         _ => String::new(),
     };
     match ended {
@@ -303,6 +356,9 @@ pub fn finish(daemon: Daemon, ended: Ended) -> Result<()> {
             if let (Some(path), Some(rows)) = (path, report.rows) {
                 println!("recorded {rows} rows to {}", path.display());
             }
+            if let Some(error) = &report.recording_error {
+                eprintln!("thermode: the recording failed: {error}");
+            }
         }
     }
     match report.all_off {
@@ -311,10 +367,17 @@ pub fn finish(daemon: Daemon, ended: Ended) -> Result<()> {
     }
 }
 
+/// Prints what the operator must know now (a failed recording, the device link), one line each on stderr.
+pub fn print_notices(daemon: &Daemon) {
+    for line in daemon.take_notices() {
+        eprintln!("{line}");
+    }
+}
+
 /// Runs `thermode serve`.
 pub fn run(args: &ServeArgs) -> Result<()> {
     let signals = StopSignals::install()?;
     let daemon = start(args)?;
-    let ended = run_for(args.duration, &signals, |_| {})?;
+    let ended = run_for(args.duration, &signals, |_| print_notices(&daemon))?;
     finish(daemon, ended)
 }

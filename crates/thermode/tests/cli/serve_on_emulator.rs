@@ -31,14 +31,14 @@ const SIGNAL_TO_OFF_S: f64 = 0.020;
 /// The loop period of `serve` at its default 100 Hz \[s\].
 const LOOP_TICK_S: f64 = 0.01;
 /// Generous limit for anything that waits on the other processes (liveness only) \[s\].
-const LIVENESS_S: f64 = 60.0;
+pub(crate) const LIVENESS_S: f64 = 60.0;
 
-fn binary() -> &'static str {
+pub(crate) fn binary() -> &'static str {
     env!("CARGO_BIN_EXE_thermode")
 }
 
 /// A child process killed (SIGKILL) and reaped when dropped, so a failing test leaves nothing running.
-struct Process(Child);
+pub(crate) struct Process(pub(crate) Child);
 
 impl Drop for Process {
     fn drop(&mut self) {
@@ -47,7 +47,7 @@ impl Drop for Process {
     }
 }
 
-fn signal(child: &Child, signal: Signal) {
+pub(crate) fn signal(child: &Child, signal: Signal) {
     let pid = Pid::from_raw(i32::try_from(child.id()).unwrap_or_else(|e| panic!("pid: {e}")));
     kill(pid, signal).unwrap_or_else(|e| panic!("kill {signal}: {e}"));
 }
@@ -147,7 +147,7 @@ fn serve(pty: &str, device_file: Option<&Path>, record: Option<&Path>) -> Serve 
 }
 
 /// An OSC message of float arguments.
-fn osc(address: &str, args: &[f32]) -> Vec<u8> {
+pub(crate) fn osc(address: &str, args: &[f32]) -> Vec<u8> {
     fn padded(mut bytes: Vec<u8>) -> Vec<u8> {
         bytes.push(0);
         while !bytes.len().is_multiple_of(4) {
@@ -173,7 +173,7 @@ fn setpoint(osc_port: u16, channel: usize, temp_c: f32, rate_c_s: f32) {
 }
 
 /// `GET /api/status` as JSON.
-fn status(http_port: u16) -> serde_json::Value {
+pub(crate) fn status(http_port: u16) -> serde_json::Value {
     let mut stream = TcpStream::connect(("127.0.0.1", http_port)).unwrap_or_else(|e| panic!("connect: {e}"));
     write!(
         stream,
