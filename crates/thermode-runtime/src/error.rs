@@ -34,7 +34,7 @@ pub enum RuntimeError {
     #[error("device: {0}")]
     Device(#[from] DeviceError),
     /// A socket could not be bound.
-    #[error("cannot listen on {addr}: {source}")]
+    #[error("cannot listen on {addr}{}: {source}", bind_hint(source))]
     Bind {
         /// The address.
         addr: String,
@@ -53,4 +53,14 @@ pub enum RuntimeError {
         /// The operating system's reason.
         source: std::io::Error,
     },
+}
+
+/// What to do about a port that is taken: the usual cause is another thermode daemon.
+fn bind_hint(source: &std::io::Error) -> &'static str {
+    if source.kind() == std::io::ErrorKind::AddrInUse {
+        " (another program, perhaps another `thermode serve` or `thermode demo`, holds this port; stop it, or choose \
+         another with --port or --osc-port, 0 for a free one)"
+    } else {
+        ""
+    }
 }

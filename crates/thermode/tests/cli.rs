@@ -723,3 +723,47 @@ fn dash_is_standard_output_and_a_bad_second_output_leaves_nothing_behind() {
     );
     assert!(!csv_path.exists(), "the CSV was left behind");
 }
+
+#[test]
+fn serve_checks_its_options_before_opening_ports_and_says_who_holds_a_port() {
+    let state = tempfile::tempdir().expect("tempdir");
+    let state_arg = state.path().to_str().expect("utf-8");
+    let out = thermode(&[
+        "serve",
+        "--duration=-1",
+        "--port",
+        "0",
+        "--no-osc",
+        "--state-dir",
+        state_arg,
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        !stdout.contains("dashboard") && !stdout.contains("running"),
+        "banner before the refusal: {stdout}"
+    );
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("a port");
+    let port = taken.local_addr().expect("address").port().to_string();
+    let out = thermode(&[
+        "serve",
+        "--port",
+        &port,
+        "--no-osc",
+        "--duration",
+        "0",
+        "--state-dir",
+        state_arg,
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("another `thermode serve` or `thermode demo`"),
+        "{stderr}"
+    );
+    assert_eq!(
+        stderr.matches("os error").count(),
+        1,
+        "the cause is printed once: {stderr}"
+    );
+}

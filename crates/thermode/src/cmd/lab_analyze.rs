@@ -18,7 +18,7 @@ use crate::output::print_stdout;
 /// Output format of `thermode lab analyze`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ReportFormat {
-    /// Print the analysis JSON to standard output (it is also written to `<out>/analysis.json`).
+    /// Print the analysis JSON to standard output (also written to `<out>/analysis.json` if `--out` is given).
     Json,
     /// Write `<out>/report.md` and print its path.
     Md,
@@ -33,9 +33,10 @@ pub struct LabAnalyzeArgs {
     /// identified, and optionally excluded (true/false/1/0); other columns are kept.
     #[arg(required = true, num_args = 1..)]
     files: Vec<PathBuf>,
-    /// Output folder (created if missing; files of the same names are replaced).
-    #[arg(long, default_value = "lab-report")]
-    out: PathBuf,
+    /// Output folder (created if missing; files of the same names are replaced). Default for `md` and `html`:
+    /// `lab-report` in the current folder; `json` writes no file unless it is given.
+    #[arg(long)]
+    out: Option<PathBuf>,
     /// Report format.
     #[arg(long, value_enum, default_value = "md")]
     format: ReportFormat,
@@ -44,6 +45,9 @@ pub struct LabAnalyzeArgs {
     #[arg(long)]
     curves: Vec<PathBuf>,
 }
+
+/// Where `md` and `html` reports go without `--out`: `lab-report` in the current folder.
+pub const DEFAULT_REPORT_DIR: &str = "lab-report";
 
 /// Runs `thermode lab analyze`.
 pub fn run(args: &LabAnalyzeArgs) -> Result<()> {
@@ -56,10 +60,16 @@ pub fn run(args: &LabAnalyzeArgs) -> Result<()> {
         ReportFormat::Md => [LabFormat::Markdown],
         ReportFormat::Html => [LabFormat::Html],
     };
-    let written = analysis::write_outputs(&result, &args.out, &formats)?;
-    match args.format {
-        ReportFormat::Json => print_stdout(&(serde_json::to_string_pretty(&result)? + "\n")),
-        ReportFormat::Md | ReportFormat::Html => {
+    match (args.format, &args.out) {
+        (ReportFormat::Json, out) => {
+            if let Some(out) = out {
+                analysis::write_outputs(&result, out, &formats)?;
+            }
+            print_stdout(&(serde_json::to_string_pretty(&result)? + "\n"))
+        }
+        (ReportFormat::Md | ReportFormat::Html, out) => {
+            let out = out.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_REPORT_DIR));
+            let written = analysis::write_outputs(&result, &out, &formats)?;
             let report = written.first().context("no report was written")?;
             print_stdout(&format!("{}\n", report.display()))
         }

@@ -216,6 +216,8 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Displ
 
 /// Starts the daemon of `args` and prints where it listens.
 pub fn start(args: &ServeArgs) -> Result<Daemon> {
+    // Every option is checked before a port is opened or a device touched.
+    check_duration(args.duration)?;
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
     let server = ServerConfig {
         bind: args.bind,
@@ -300,14 +302,18 @@ pub enum Ended {
     Signal(&'static str),
 }
 
+/// `--duration`: a finite number of seconds ≥ 0, if given.
+fn check_duration(duration_s: Option<f64>) -> Result<()> {
+    match duration_s {
+        Some(d) if !(d.is_finite() && d >= 0.0) => bail!("--duration must be a finite number of seconds ≥ 0, not {d}"),
+        _ => Ok(()),
+    }
+}
+
 /// Runs until `duration_s` has passed (forever without one) or a stop signal arrives, calling `every_100ms` in
 /// between; a signal ends the wait at once.
 pub fn run_for(duration_s: Option<f64>, signals: &StopSignals, mut every_100ms: impl FnMut(f64)) -> Result<Ended> {
-    if let Some(d) = duration_s {
-        if !(d.is_finite() && d >= 0.0) {
-            bail!("--duration must be a finite number of seconds ≥ 0, not {d}");
-        }
-    }
+    check_duration(duration_s)?;
     let start = Instant::now();
     let step = Duration::from_millis(100);
     loop {
