@@ -5,14 +5,22 @@
 //! - `/thermode/channel/<i>/touch s [f]` — touch the named material, optionally at an object temperature \[°C\];
 //! - `/thermode/channel/<i>/setpoint f f` — direct mode: temperature \[°C\] and rate \[°C/s\];
 //! - `/thermode/channel/<i>/release` — release (arguments ignored, so a button's `1.0` works);
-//! - `/thermode/stop` (or `/thermode/stop_all`) — stop all.
+//! - `/thermode/stop` (or `/thermode/stop_all`) — stop all;
+//! - `/thermode/all/<action>` or `/thermode/channel/*/<action>` — `touch`, `setpoint` or `release` on every channel
+//!   (validated for every channel before any is queued);
+//! - `/thermode/subscribe f [i]` — telemetry at that rate \[Hz\] and fault events, to the sender or to the given
+//!   port on its host, until `/thermode/unsubscribe [i]` or [`SUBSCRIPTION_TTL_S`] without a renewal; at most
+//!   [`MAX_SUBSCRIBERS`], from loopback only. Sent by a task of the network runtime from the published snapshot,
+//!   never by the loop: `/thermode/channel/<i>/telemetry f f f f f i` (target skin, skin, sensor, plate estimate
+//!   \[°C\], current \[A\], fault code) and `/thermode/channel/<i>/fault i s` (code and description; 0 `cleared`).
 //!
 //! Same validation as the WebSocket API: a touch or set-point becomes the same [`Command`] through the same
-//! [`protocol::stimulus_command`], so both refuse the same stimuli with the same message. OSC has no replies and no
-//! authentication: malformed datagrams are ignored and counted; every message is counted once the control loop has
-//! answered it, as applied or as refused (a refusal by the validation, a full queue, or the loop itself: a faulted
-//! channel, a failed recording); the last reason is in `/api/status`. OSC listens only on loopback, and when the
-//! daemon has a token not at all unless asked to (`--osc-without-token`).
+//! [`protocol::stimulus_command`], so both refuse the same stimuli with the same message. OSC commands have no
+//! replies (only a subscription is answered) and no authentication: malformed datagrams are ignored and counted;
+//! every message is counted once the control loop has answered it, as applied or as refused (a refusal by the
+//! validation, a full queue, or the loop itself: a faulted channel, a failed recording); the last reason is in
+//! `/api/status`. OSC listens only on loopback, and when the daemon has a token not at all unless asked to
+//! (`--osc-without-token`).
 
 use std::net::SocketAddr;
 use std::sync::atomic::Ordering;
