@@ -1,13 +1,13 @@
-//! OSC both ways on a running daemon (real clock): a subscriber receives telemetry at about its rate and fault
-//! events, stops receiving after unsubscribing or when its subscription expires; the subscriber cap; the
-//! all-channels addresses.
+//! OSC both ways on a running daemon (real clock): a subscriber receives telemetry at about its rate and fault events
+//! (latched and cleared), stops receiving after unsubscribing or when its subscription expires; the subscriber cap;
+//! the all-channels addresses.
 
 use crate::common;
 
 use std::net::{SocketAddr, UdpSocket};
 use std::time::{Duration, Instant};
 
-use common::{get_json, pipelines, start, test_config, SpyDevice};
+use common::{ask, client_runtime, get_json, pipelines, start, test_config, ws_connect, SpyDevice};
 use thermode_device::Fault;
 use thermode_runtime::osc::{decode, encode, OscArg, OscMessage, MAX_SUBSCRIBERS};
 use thermode_safety::FaultCode;
@@ -103,6 +103,26 @@ fn a_subscriber_receives_telemetry_at_its_rate_and_fault_events_until_it_unsubsc
     );
     let faulted = receive_until(&socket, 5.0, |m| m.address == "/thermode/channel/1/telemetry").expect("telemetry");
     assert_eq!(faulted.args[5], OscArg::Int(code), "{faulted:?}");
+
+    control.lock().expect("control").clear.push(1);
+    let last_reply = client_runtime().block_on(async {
+        let mut ws = ws_connect(daemon.http_addr(), "").await;
+        let mut reply = serde_json::Value::Null;
+        for id in 0..50 {
+            reply = ask(&mut ws, &format!(r#"{{"type":"clear_fault","id":{id},"channel":1}}"#)).await;
+            if reply["type"] == "ok" {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+        reply
+    });
+    assert_eq!(
+        last_reply["type"], "ok",
+        "the fault clears once the sensor is back: {last_reply}"
+    );
+    let event = receive_until(&socket, 5.0, |m| m.address == "/thermode/channel/1/fault").expect("a clear event");
+    assert_eq!(event.args, [OscArg::Int(0), OscArg::Str("cleared".into())], "{event:?}");
 
     socket
         .send_to(&encode("/thermode/unsubscribe", &[]), osc)
