@@ -5,25 +5,37 @@
 //! - `/thermode/channel/<i>/touch s [f]` — touch the named material, optionally at an object temperature \[°C\];
 //! - `/thermode/channel/<i>/setpoint f f` — direct mode: temperature \[°C\] and rate \[°C/s\];
 //! - `/thermode/channel/<i>/release` — release (arguments ignored, so a button's `1.0` works);
-//! - `/thermode/stop` (or `/thermode/stop_all`) — stop all.
+//! - `/thermode/stop` (or `/thermode/stop_all`) — stop all;
+//! - `/thermode/all/<action>` or `/thermode/channel/*/<action>` — `touch`, `setpoint` or `release` on every channel
+//!   (validated for every channel before any is queued);
+//! - `/thermode/subscribe f [i]` — telemetry at that rate \[Hz\] and fault events, to the sender or to the given
+//!   port on its host, until `/thermode/unsubscribe [i]` or [`SUBSCRIPTION_TTL_S`] without a renewal; at most
+//!   [`MAX_SUBSCRIBERS`], from loopback only. Sent by a task of the network runtime from the published snapshot,
+//!   never by the loop: `/thermode/channel/<i>/telemetry f f f f f i` (target skin, skin, sensor, plate estimate
+//!   \[°C\], current \[A\], fault code) and `/thermode/channel/<i>/fault i s` (code and description; 0 `cleared`).
 //!
 //! Same validation as the WebSocket API: a touch or set-point becomes the same [`Command`] through the same
-//! [`protocol::stimulus_command`], so both refuse the same stimuli with the same message. OSC has no replies and no
-//! authentication: malformed datagrams are ignored and counted; every message is counted once the control loop has
-//! answered it, as applied or as refused (a refusal by the validation, a full queue, or the loop itself: a faulted
-//! channel, a failed recording); the last reason is in `/api/status`. OSC listens only on loopback, and when the
-//! daemon has a token not at all unless asked to (`--osc-without-token`).
+//! [`protocol::stimulus_command`], so both refuse the same stimuli with the same message. OSC commands have no
+//! replies (only a subscription is answered) and no authentication: malformed datagrams are ignored and counted;
+//! every message is counted once the control loop has answered it, as applied or as refused (a refusal by the
+//! validation, a full queue, or the loop itself: a faulted channel, a failed recording); the last reason is in
+//! `/api/status`. OSC listens only on loopback, and when the daemon has a token not at all unless asked to
+//! (`--osc-without-token`).
 
+use std::net::SocketAddr;
 use std::sync::atomic::Ordering;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use tokio::net::UdpSocket;
+use tokio::time::Instant;
 
 use crate::api::limit::TokenBucket;
 use crate::api::protocol::{self, ApiError, ErrorCode};
 use crate::api::{App, OscCounters};
 use crate::command::{Command, Owner};
 use crate::engine::Stimulus;
+use crate::snapshot::ChannelStatus;
 
 /// Largest datagram read \[bytes\]; longer ones are truncated and so malformed.
 pub const MAX_PACKET_BYTES: usize = 8192;
@@ -166,17 +178,24 @@ fn read_string(rest: &mut &[u8]) -> Result<String, Malformed> {
     Ok(text)
 }
 
-/// What an OSC message asks for.
-fn to_command(message: &OscMessage, app: &App) -> Result<Command, ApiError> {
+/// What an OSC message asks for: one command, or one per channel for the all-channels addresses
+/// (`/thermode/channel/*/…` and `/thermode/all/…`).
+fn to_commands(message: &OscMessage, app: &App) -> Result<Vec<Command>, ApiError> {
     let parts: Vec<&str> = message.address.split('/').collect();
+    let every_channel = |action: &str| {
+        (0..app.limits.channel_count)
+            .map(|channel| channel_command(channel, action, &message.args, app))
+            .collect::<Result<Vec<_>, _>>()
+    };
     match parts.as_slice() {
-        ["", "thermode", "stop" | "stop_all"] => Ok(Command::StopAll),
+        ["", "thermode", "stop" | "stop_all"] => Ok(vec![Command::StopAll]),
+        ["", "thermode", "all", action] | ["", "thermode", "channel", "*", action] => every_channel(action),
         ["", "thermode", "channel", index, action] => {
             let index: i64 = index
                 .parse()
                 .map_err(|_| ApiError::new(ErrorCode::UnknownChannel, format!("channel {index:?} is not a number")))?;
             let channel = protocol::channel_index(index, app.limits.channel_count)?;
-            channel_command(channel, action, &message.args, app)
+            Ok(vec![channel_command(channel, action, &message.args, app)?])
         }
         _ => Err(ApiError::new(
             ErrorCode::UnknownType,
@@ -218,13 +237,182 @@ fn channel_command(channel: usize, action: &str, args: &[OscArg], app: &App) -> 
     }
 }
 
-/// Receives datagrams until the runtime stops.
+/// How long a subscription lasts unless renewed (by sending `/thermode/subscribe` again) \[s\]: the default of
+/// [`crate::api::NetLimits::osc_subscription_ttl_s`].
+pub const SUBSCRIPTION_TTL_S: f64 = 10.0;
+/// Most OSC subscribers at once; a further one is refused until one leaves or expires.
+pub const MAX_SUBSCRIBERS: usize = 8;
+/// Longest the sender sleeps between looks at the faults and the subscriptions' expiry \[s\].
+const FAULT_POLL_S: f64 = 0.05;
+
+/// One OSC client receiving telemetry and fault events.
+#[derive(Debug)]
+struct Subscriber {
+    /// Where its datagrams go.
+    to: SocketAddr,
+    period: Duration,
+    next_due: Instant,
+    expires: Instant,
+    /// The fault code last sent per channel (0: none); a change is sent as a fault event.
+    faults_sent: Vec<u16>,
+}
+
+type Subscribers = Arc<Mutex<Vec<Subscriber>>>;
+
+/// Subscribes (or renews) `from`, or the port its second argument names on the same host: the acknowledgement
+/// and where it goes.
+fn subscribe(
+    message: &OscMessage,
+    from: SocketAddr,
+    app: &App,
+    subscribers: &Subscribers,
+) -> Result<(SocketAddr, Vec<u8>), ApiError> {
+    if !from.ip().is_loopback() {
+        return Err(ApiError::new(
+            ErrorCode::BadValue,
+            "OSC subscribers must be on loopback",
+        ));
+    }
+    let rate_hz = message
+        .args
+        .first()
+        .and_then(OscArg::as_f64)
+        .ok_or_else(|| ApiError::new(ErrorCode::BadValue, "argument 0 (rate in Hz) must be a number"))?;
+    let max_hz = app.limits.max_subscribe_hz;
+    if !(protocol::MIN_SUBSCRIBE_HZ..=max_hz).contains(&rate_hz) {
+        return Err(ApiError::new(
+            ErrorCode::BadValue,
+            format!("rate {rate_hz} Hz outside {}..={max_hz} Hz", protocol::MIN_SUBSCRIBE_HZ),
+        ));
+    }
+    let to = reply_address(message.args.get(1), from)?;
+    let now = Instant::now();
+    let ttl_s = app.net.osc_subscription_ttl_s;
+    let expires = now + Duration::from_secs_f64(ttl_s);
+    let period = Duration::from_secs_f64(1.0 / rate_hz);
+    let mut list = subscribers.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Some(known) = list.iter_mut().find(|s| s.to == to) {
+        known.expires = expires;
+        if known.period != period {
+            known.period = period;
+            known.next_due = now;
+        }
+    } else if list.len() >= MAX_SUBSCRIBERS {
+        return Err(ApiError::new(
+            ErrorCode::Busy,
+            format!("{MAX_SUBSCRIBERS} OSC subscribers already; unsubscribe one or let it expire"),
+        ));
+    } else {
+        list.push(Subscriber {
+            to,
+            period,
+            next_due: now,
+            expires,
+            faults_sent: vec![0; app.limits.channel_count],
+        });
+    }
+    app.osc.subscribers.store(list.len(), Ordering::Relaxed);
+    let ack = encode(
+        "/thermode/subscribed",
+        &[OscArg::Float(rate_hz as f32), OscArg::Float(ttl_s as f32)],
+    );
+    Ok((to, ack))
+}
+
+/// The sender's address, or the port `port` names on the sender's host.
+fn reply_address(port: Option<&OscArg>, from: SocketAddr) -> Result<SocketAddr, ApiError> {
+    let Some(port) = port else { return Ok(from) };
+    port.as_f64()
+        .filter(|p| p.fract() == 0.0 && (1.0..=65535.0).contains(p))
+        .map(|p| SocketAddr::new(from.ip(), p as u16))
+        .ok_or_else(|| ApiError::new(ErrorCode::BadValue, "argument 1 (port) must be an integer in 1..=65535"))
+}
+
+fn unsubscribe(message: &OscMessage, from: SocketAddr, app: &App, subscribers: &Subscribers) -> Result<(), ApiError> {
+    let to = reply_address(message.args.first(), from)?;
+    let mut list = subscribers.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    list.retain(|s| s.to != to);
+    app.osc.subscribers.store(list.len(), Ordering::Relaxed);
+    Ok(())
+}
+
+/// Sends telemetry and fault events to the subscribers, from the network runtime (the loop only publishes its
+/// snapshot): at each subscriber's rate one `/thermode/channel/<i>/telemetry` per channel, and within
+/// [`FAULT_POLL_S`] of a fault latching or clearing a `/thermode/channel/<i>/fault`. Datagrams that cannot be sent at
+/// once are dropped, never waited for.
+async fn send_to_subscribers(socket: Arc<UdpSocket>, app: Arc<App>, subscribers: Subscribers) {
+    let poll = Duration::from_secs_f64(FAULT_POLL_S);
+    loop {
+        let wake = {
+            let now = Instant::now();
+            let Ok(mut list) = subscribers.lock() else { return };
+            list.retain(|s| s.expires > now);
+            app.osc.subscribers.store(list.len(), Ordering::Relaxed);
+            list.iter().map(|s| s.next_due).fold(now + poll, Instant::min)
+        };
+        tokio::time::sleep_until(wake).await;
+        let mut out: Vec<(SocketAddr, Vec<u8>)> = Vec::new();
+        {
+            let Ok(mut list) = subscribers.lock() else { return };
+            if list.is_empty() {
+                continue;
+            }
+            let snapshot = app.shared.snapshot();
+            let now = Instant::now();
+            for sub in list.iter_mut() {
+                for (status, sent) in snapshot.channels.iter().zip(sub.faults_sent.iter_mut()) {
+                    let fault = status.telemetry.fault;
+                    let code = fault.map_or(0, |f| f.code());
+                    if code != *sent {
+                        *sent = code;
+                        let description = fault.map_or("cleared", |f| f.description());
+                        let address = format!("/thermode/channel/{}/fault", status.channel);
+                        let args = [OscArg::Int(i32::from(code)), OscArg::Str(description.into())];
+                        out.push((sub.to, encode(&address, &args)));
+                    }
+                }
+                if now >= sub.next_due {
+                    for status in &snapshot.channels {
+                        out.push((sub.to, telemetry_message(status)));
+                    }
+                    sub.next_due += sub.period;
+                    if sub.next_due < now {
+                        sub.next_due = now + sub.period;
+                    }
+                }
+            }
+        }
+        for (to, packet) in out {
+            if socket.try_send_to(&packet, to).is_ok() {
+                app.osc.sent.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+}
+
+/// `/thermode/channel/<i>/telemetry f f f f f i`: target skin, skin, sensor, plate estimate \[°C\], current \[A\]
+/// (floats, NaN where the JSON telemetry has null) and the latched fault code (0: none).
+fn telemetry_message(status: &ChannelStatus) -> Vec<u8> {
+    let t = &status.telemetry;
+    let address = format!("/thermode/channel/{}/telemetry", status.channel);
+    let mut args: Vec<OscArg> = [t.target_skin_c, t.skin_c, t.sensor_c, t.plate_estimate_c, t.current_a]
+        .iter()
+        .map(|&v| OscArg::Float(v as f32))
+        .collect();
+    args.push(OscArg::Int(i32::from(t.fault.map_or(0, |f| f.code()))));
+    encode(&address, &args)
+}
+
+/// Receives datagrams until the runtime stops (and runs the subscribers' sender beside it).
 pub async fn serve(socket: UdpSocket, app: Arc<App>) {
+    let socket = Arc::new(socket);
+    let subscribers: Subscribers = Arc::default();
+    tokio::spawn(send_to_subscribers(socket.clone(), app.clone(), subscribers.clone()));
     let mut buffer = vec![0u8; MAX_PACKET_BYTES];
     let mut bucket = TokenBucket::new(app.net.osc_messages_per_s, app.net.osc_burst);
     let origin = tokio::time::Instant::now();
     loop {
-        let Ok((len, _from)) = socket.recv_from(&mut buffer).await else {
+        let Ok((len, from)) = socket.recv_from(&mut buffer).await else {
             continue;
         };
         let counters = &app.osc;
@@ -241,18 +429,54 @@ pub async fn serve(socket: UdpSocket, app: Arc<App>) {
                 counters.rate_limited.fetch_add(1, Ordering::Relaxed);
                 continue;
             }
-            let queued = to_command(message, &app)
-                .and_then(|command| app.commands.request(command).map_err(crate::api::ws::loop_error));
-            match queued {
-                Ok(answer) => {
-                    // Counted when the loop answers (within the reply wait; a withdrawn command is refused as busy).
-                    let (counters, address, wait) = (app.osc.clone(), message.address.clone(), app.reply_wait);
-                    tokio::spawn(async move {
-                        let reply = answer.wait(wait).await.map_err(crate::api::ws::loop_error);
-                        count(&counters, &address, reply.map(|_| ()));
-                    });
+            match message.address.as_str() {
+                "/thermode/subscribe" => {
+                    let (to, reply) = match subscribe(message, from, &app, &subscribers) {
+                        Ok(ack) => {
+                            count(counters, &message.address, Ok(()));
+                            ack
+                        }
+                        Err(e) => {
+                            let args = [OscArg::Str(e.code.as_str().into()), OscArg::Str(e.message.clone())];
+                            count(counters, &message.address, Err(e));
+                            (from, encode("/thermode/error", &args))
+                        }
+                    };
+                    if socket.try_send_to(&reply, to).is_ok() {
+                        counters.sent.fetch_add(1, Ordering::Relaxed);
+                    }
+                    continue;
                 }
-                Err(e) => count(counters, &message.address, Err(e)),
+                "/thermode/unsubscribe" => {
+                    count(
+                        counters,
+                        &message.address,
+                        unsubscribe(message, from, &app, &subscribers),
+                    );
+                    continue;
+                }
+                _ => {}
+            }
+            let commands = match to_commands(message, &app) {
+                Ok(commands) => commands,
+                Err(e) => {
+                    count(counters, &message.address, Err(e));
+                    continue;
+                }
+            };
+            for command in commands {
+                match app.commands.request(command).map_err(crate::api::ws::loop_error) {
+                    Ok(answer) => {
+                        // Counted when the loop answers (within the reply wait; a withdrawn command is refused as
+                        // busy).
+                        let (counters, address, wait) = (app.osc.clone(), message.address.clone(), app.reply_wait);
+                        tokio::spawn(async move {
+                            let reply = answer.wait(wait).await.map_err(crate::api::ws::loop_error);
+                            count(&counters, &address, reply.map(|_| ()));
+                        });
+                    }
+                    Err(e) => count(counters, &message.address, Err(e)),
+                }
             }
         }
     }

@@ -66,6 +66,9 @@ pub struct NetLimits {
     pub osc_messages_per_s: f64,
     /// OSC burst. Default 400.
     pub osc_burst: f64,
+    /// An OSC telemetry subscription not renewed for this long ends \[s\]. Default 10
+    /// ([`crate::osc::SUBSCRIPTION_TTL_S`]).
+    pub osc_subscription_ttl_s: f64,
 }
 
 impl Default for NetLimits {
@@ -84,6 +87,7 @@ impl Default for NetLimits {
             send_timeout_s: 5.0,
             osc_messages_per_s: 200.0,
             osc_burst: 400.0,
+            osc_subscription_ttl_s: crate::osc::SUBSCRIPTION_TTL_S,
         }
     }
 }
@@ -97,6 +101,7 @@ impl NetLimits {
             ("ping_interval_s", self.ping_interval_s),
             ("send_timeout_s", self.send_timeout_s),
             ("http_idle_timeout_s", self.http_idle_timeout_s),
+            ("osc_subscription_ttl_s", self.osc_subscription_ttl_s),
         ];
         let rates = [
             ("requests_per_s", self.requests_per_s),
@@ -153,6 +158,10 @@ pub struct OscCounters {
     pub refused: AtomicU64,
     /// Messages dropped by the rate limit.
     pub rate_limited: AtomicU64,
+    /// OSC telemetry subscribers now (expired ones leave within a fraction of a second).
+    pub subscribers: AtomicUsize,
+    /// OSC datagrams sent to subscribers (telemetry, fault events, acknowledgements).
+    pub sent: AtomicU64,
     /// The last refusal, for the status page.
     pub last_error: Mutex<Option<String>>,
 }
@@ -375,6 +384,8 @@ pub fn status_json(app: &App) -> Value {
             "malformed": count(&osc.malformed),
             "refused": count(&osc.refused),
             "rate_limited": count(&osc.rate_limited),
+            "subscribers": osc.subscribers.load(Ordering::Relaxed),
+            "sent": count(&osc.sent),
             "last_error": osc_last_error,
         },
         "recording": app.recording.as_ref().map(|r| recording_json(app, r)),

@@ -8,6 +8,7 @@ mod dashboard;
 mod dose;
 mod example_client;
 mod loop_core;
+mod osc;
 mod recording;
 mod security;
 mod serial;
