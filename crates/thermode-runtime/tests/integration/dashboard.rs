@@ -164,6 +164,14 @@ fn the_dashboard_touches_plots_and_stops_in_a_real_browser() {
     }
     let daemon = start(test_config(), SpyDevice::new(5), pipelines());
     let addr = daemon.http_addr();
+    // The daemon runs a while before the page opens: its history back-fills the plots.
+    std::thread::sleep(Duration::from_millis(1500));
+    let history = get_json(addr, "/api/history");
+    assert!(
+        history["time_s"].as_array().is_some_and(|t| t.len() >= 5),
+        "the daemon keeps a history: {history}"
+    );
+    assert_eq!(history["channels"].as_array().map(Vec::len), Some(5));
     let tmp = tempfile::tempdir().expect("temp dir");
     let (_browser, devtools_port) = launch(&tmp.path().join("profile"));
     let devtools = std::net::SocketAddr::from(([127, 0, 0, 1], devtools_port));
@@ -186,6 +194,11 @@ fn the_dashboard_touches_plots_and_stops_in_a_real_browser() {
         assert!(
             cdp.wait_for(live, 30.0).await,
             "the page connected and receives telemetry"
+        );
+        let backfilled = cdp.eval("thermodeState.historyPoints").await;
+        assert!(
+            backfilled.as_u64().is_some_and(|n| n >= 5),
+            "the plots were back-filled from /api/history on load: {backfilled}"
         );
         assert_eq!(cdp.eval("document.querySelectorAll('canvas').length").await, json!(5));
         assert_eq!(
