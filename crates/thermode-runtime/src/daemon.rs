@@ -307,6 +307,7 @@ impl Daemon {
             ),
             link: control.link_health(),
             realtime: control.realtime().clone(),
+            history: Arc::new(crate::api::history::History::default()),
         });
         let runtime = start_network(app, http, osc)?;
         Ok(Daemon {
@@ -563,6 +564,7 @@ fn start_network(
     let routes = router(app.clone());
     let (net, cap, counters) = (app.net.clone(), app.http_cap, app.http.clone());
     runtime.spawn(crate::api::server::serve(http, routes, net, cap, counters));
+    runtime.spawn(crate::api::history::sample(app.shared.clone(), app.history.clone()));
     if let Some(socket) = osc {
         runtime.spawn(crate::osc::serve(socket, app));
     }

@@ -3,6 +3,7 @@
 //! bounded command queue and the published snapshot.
 
 pub mod access;
+pub mod history;
 pub mod limit;
 pub mod protocol;
 pub mod server;
@@ -210,6 +211,8 @@ pub struct App {
     pub(crate) link: Option<Arc<thermode_device::LinkHealth>>,
     /// What real-time treatment the loop obtained.
     pub(crate) realtime: thermode_platform::rt::Realtime,
+    /// The last seconds of telemetry (`/api/history`), filled off the loop thread.
+    pub(crate) history: Arc<history::History>,
 }
 
 impl std::fmt::Debug for App {
@@ -228,6 +231,7 @@ pub fn router(app: Arc<App>) -> Router {
         .route("/", get(dashboard))
         .route("/api/status", get(status))
         .route("/api/materials", get(materials))
+        .route("/api/history", get(history_route))
         .route("/api/ws", get(ws::upgrade))
         .fallback(not_found)
         .layer(middleware::from_fn_with_state(app.clone(), check_access))
@@ -276,6 +280,10 @@ async fn status(State(app): State<Arc<App>>) -> Json<Value> {
     Json(status_json(&app))
 }
 
+async fn history_route(State(app): State<Arc<App>>) -> Json<Value> {
+    Json(app.history.to_json())
+}
+
 async fn materials() -> Json<Value> {
     Json(protocol::materials_json())
 }
@@ -283,7 +291,7 @@ async fn materials() -> Json<Value> {
 async fn not_found() -> Response {
     let e = ApiError::new(
         ErrorCode::UnknownType,
-        "no such route; see /, /api/status, /api/materials, /api/ws",
+        "no such route; see /, /api/status, /api/materials, /api/history, /api/ws",
     );
     error_response(StatusCode::NOT_FOUND, &e)
 }

@@ -164,6 +164,14 @@ fn the_dashboard_touches_plots_and_stops_in_a_real_browser() {
     }
     let daemon = start(test_config(), SpyDevice::new(5), pipelines());
     let addr = daemon.http_addr();
+    // The daemon runs a while before the page opens: its history back-fills the plots.
+    std::thread::sleep(Duration::from_millis(1500));
+    let history = get_json(addr, "/api/history");
+    assert!(
+        history["time_s"].as_array().is_some_and(|t| t.len() >= 5),
+        "the daemon keeps a history: {history}"
+    );
+    assert_eq!(history["channels"].as_array().map(Vec::len), Some(5));
     let tmp = tempfile::tempdir().expect("temp dir");
     let (_browser, devtools_port) = launch(&tmp.path().join("profile"));
     let devtools = std::net::SocketAddr::from(([127, 0, 0, 1], devtools_port));
@@ -186,6 +194,11 @@ fn the_dashboard_touches_plots_and_stops_in_a_real_browser() {
         assert!(
             cdp.wait_for(live, 30.0).await,
             "the page connected and receives telemetry"
+        );
+        let backfilled = cdp.eval("thermodeState.historyPoints").await;
+        assert!(
+            backfilled.as_u64().is_some_and(|n| n >= 5),
+            "the plots were back-filled from /api/history on load: {backfilled}"
         );
         assert_eq!(cdp.eval("document.querySelectorAll('canvas').length").await, json!(5));
         assert_eq!(
@@ -223,6 +236,43 @@ fn the_dashboard_touches_plots_and_stops_in_a_real_browser() {
             "the API reports the page's touch"
         );
         assert_eq!(status["contacts"].as_array().map(Vec::len), Some(1));
+        // Units, the plain-language loop health and no Clear without a fault.
+        let units = "document.querySelector('#nums-0').textContent.includes('°C') && \
+                     document.querySelector('#nums-0').textContent.includes(' A') && \
+                     document.querySelector('.legend').textContent.includes('s')";
+        assert!(cdp.wait_for(units, 5.0).await, "the numbers carry units");
+        let health = "/^Loop (healthy|strained|failing)$/.test(document.getElementById('health').textContent) && \
+                      document.getElementById('health').title.includes('missed')";
+        assert!(
+            cdp.wait_for(health, 5.0).await,
+            "the loop health badge with its figures on hover"
+        );
+        assert_eq!(
+            cdp.eval("document.getElementById('clear-0').style.display").await,
+            json!("none"),
+            "Clear is hidden without a fault"
+        );
+        // A material other than the first on channel 1; after a reload its picker shows it.
+        let other = cdp
+            .eval(
+                "const o = document.getElementById('material-1'); o.value = o.options[o.options.length - 1].value; \
+                 document.getElementById('touch-1').click(); o.value",
+            )
+            .await;
+        let other = other.as_str().expect("a material").to_string();
+        assert_ne!(other, "aluminium");
+        let touched = format!("document.getElementById('contact-1').textContent === '{other}'");
+        assert!(cdp.wait_for(&touched, 10.0).await, "channel 1 touches {other}");
+        cdp.call("Page.reload", json!({})).await;
+        assert!(cdp.wait_for(live, 30.0).await, "the page reconnects after a reload");
+        let pickers = format!(
+            "document.getElementById('material-0').value === 'aluminium' && \
+             document.getElementById('material-1').value === '{other}'"
+        );
+        assert!(
+            cdp.wait_for(&pickers, 10.0).await,
+            "after a reload the pickers show the touched materials"
+        );
         let shot = cdp.call("Page.captureScreenshot", json!({"format": "png"})).await;
         let png = base64_decode(shot["data"].as_str().expect("screenshot data"));
         cdp.eval("document.getElementById('stop-all').click(); true").await;
