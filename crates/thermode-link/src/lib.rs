@@ -21,6 +21,7 @@ pub mod emulator;
 pub mod firmware;
 pub mod guard;
 pub mod mecom;
+mod port;
 pub mod protocol;
 pub mod serial;
 pub mod spec;

@@ -273,39 +273,26 @@ impl Shared {
 }
 
 /// The reader thread: decodes everything the port delivers into `shared` until `stop` or a port error.
-fn read_port(mut port: Box<dyn Read + Send>, shared: Arc<Mutex<Shared>>, stop: Arc<AtomicBool>, clock: Arc<dyn Clock>) {
+fn read_port(port: Box<dyn Read + Send>, shared: Arc<Mutex<Shared>>, stop: Arc<AtomicBool>, clock: Arc<dyn Clock>) {
     let mut decoder = StreamDecoder::<DeviceMessage>::new();
-    let mut buf = [0u8; 1024];
-    while !stop.load(Ordering::SeqCst) {
-        let failure = match port.read(&mut buf) {
-            Ok(0) => Some("the serial port reached its end (closed)".to_string()),
-            Ok(n) => {
-                let received_s = clock.now_s();
-                let Ok(mut state) = shared.lock() else {
-                    return;
-                };
-                decoder.feed(&buf[..n], |result| {
-                    if let Ok(frame) = result {
-                        state.take(frame, received_s);
-                    }
-                });
-                state.stats.rx = *decoder.counters();
-                None
-            }
-            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
-                std::thread::sleep(Duration::from_millis(1));
-                None
-            }
-            Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::Interrupted) => None,
-            Err(e) => Some(format!("serial port read failed: {e}")),
+    let received = |bytes: &[u8], received_s: f64| {
+        let Ok(mut state) = shared.lock() else {
+            return false;
         };
-        if let Some(message) = failure {
-            if let Ok(mut state) = shared.lock() {
-                state.error = Some(message);
+        decoder.feed(bytes, |result| {
+            if let Ok(frame) = result {
+                state.take(frame, received_s);
             }
-            return;
+        });
+        state.stats.rx = *decoder.counters();
+        true
+    };
+    let failed = |message| {
+        if let Ok(mut state) = shared.lock() {
+            state.error = Some(message);
         }
-    }
+    };
+    crate::port::read_until_stopped(port, &stop, clock.as_ref(), 1024, received, failed);
 }
 
 /// A display behind a serial port. See the module documentation.

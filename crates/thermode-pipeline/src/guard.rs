@@ -44,10 +44,9 @@ impl PlateGuard {
     /// previous update and with `finger` on the plate. A reading the observer refuses (non-finite numbers, time
     /// not moving forward) leaves the estimate as it was: the envelope latches its own fault on such a reading.
     pub fn update(&mut self, now_s: f64, reading: &Reading, applied_current_a: f64, finger: Finger) {
-        let dt_s = self.last_time_s.map_or(f64::NAN, |t| now_s - t);
         let tick = ObserverTick {
             // The first update only initialises the estimate from the readings; its dt is not used.
-            dt_s: if self.last_time_s.is_none() { 1.0 } else { dt_s },
+            dt_s: self.last_time_s.map_or(1.0, |t| now_s - t),
             applied_current_a,
             finger,
             sensor_c: reading.sensor_c,

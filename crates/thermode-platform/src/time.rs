@@ -214,17 +214,23 @@ pub fn civil_date(unix_s: f64) -> String {
     format!("{year:04}-{month:02}-{day:02}")
 }
 
+/// The UTC date and time of day of `unix_s` (whole seconds since 1970): (year, month, day, hour, minute, second).
+fn utc_parts(unix_s: i64) -> (i64, u32, u32, i64, i64, i64) {
+    let (year, month, day) = civil_from_days(unix_s.div_euclid(86_400));
+    let rem = unix_s.rem_euclid(86_400);
+    (year, month, day, rem / 3600, (rem % 3600) / 60, rem % 60)
+}
+
 /// The UTC date and time of day of `unix_s` as `YYYYMMDD-HHMMSS` (for file names).
 pub fn utc_stamp(unix_s: f64) -> String {
-    let secs = unix_s.floor() as i64;
-    let (year, month, day) = civil_from_days(secs.div_euclid(86_400));
-    let rem = secs.rem_euclid(86_400);
-    format!(
-        "{year:04}{month:02}{day:02}-{:02}{:02}{:02}",
-        rem / 3600,
-        (rem % 3600) / 60,
-        rem % 60
-    )
+    let (year, month, day, hour, minute, second) = utc_parts(unix_s.floor() as i64);
+    format!("{year:04}{month:02}{day:02}-{hour:02}{minute:02}{second:02}")
+}
+
+/// `unix_s` (s since 1970, UTC) as `YYYY-MM-DDTHH:MM:SSZ` (ISO 8601, for logs and ledgers).
+pub fn utc_iso8601(unix_s: i64) -> String {
+    let (year, month, day, hour, minute, second) = utc_parts(unix_s);
+    format!("{year:04}-{month:02}-{day:02}T{hour:02}:{minute:02}:{second:02}Z")
 }
 
 /// Why a [`Ticker`] was refused.

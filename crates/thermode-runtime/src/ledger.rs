@@ -37,7 +37,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
-use thermode_platform::{civil_from_days, write_bytes_atomically};
+use thermode_platform::{utc_iso8601, write_bytes_atomically};
 use thermode_safety::DoseLedger;
 use thiserror::Error;
 
@@ -476,18 +476,6 @@ fn describe(dose: &DoseLedger, updated_utc: &str) -> String {
 pub fn utc_now() -> String {
     let unix_s = SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_secs());
     utc_iso8601(unix_s as i64)
-}
-
-/// `unix_s` (s since 1970, UTC) as `YYYY-MM-DDTHH:MM:SSZ`.
-pub fn utc_iso8601(unix_s: i64) -> String {
-    let (year, month, day) = civil_from_days(unix_s.div_euclid(86_400));
-    let rem = unix_s.rem_euclid(86_400);
-    format!(
-        "{year:04}-{month:02}-{day:02}T{:02}:{:02}:{:02}Z",
-        rem / 3600,
-        (rem % 3600) / 60,
-        rem % 60
-    )
 }
 
 /// Takes the exclusive advisory lock without waiting: `Ok(false)` if another holds it.

@@ -21,7 +21,7 @@
 //! - **Errors** ([`DeviceError::Link`]): no temperature line for longer than [`Tcs2Config::link_timeout_s`], a port
 //!   that fails, or a zone in error (`Q`).
 
-use std::io::{self, Read, Write};
+use std::io::{Read, Write};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
@@ -154,34 +154,22 @@ struct Shared {
     error: Option<String>,
 }
 
-fn read_port(mut port: Box<dyn Read + Send>, shared: Arc<Mutex<Shared>>, stop: Arc<AtomicBool>, clock: Arc<dyn Clock>) {
+/// The reader thread: splits what the stimulator sends into lines for `shared` until `stop` or a port error.
+fn read_port(port: Box<dyn Read + Send>, shared: Arc<Mutex<Shared>>, stop: Arc<AtomicBool>, clock: Arc<dyn Clock>) {
     let mut decoder = LineDecoder::new();
-    let mut buf = [0u8; 512];
-    while !stop.load(Ordering::SeqCst) {
-        let failure = match port.read(&mut buf) {
-            Ok(0) => Some("the serial port reached its end (closed)".to_string()),
-            Ok(n) => {
-                let now_s = clock.now_s();
-                let Ok(mut state) = shared.lock() else {
-                    return;
-                };
-                decoder.feed(&buf[..n], |line| state.take(line, now_s));
-                None
-            }
-            Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
-                std::thread::sleep(Duration::from_millis(1));
-                None
-            }
-            Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::Interrupted) => None,
-            Err(e) => Some(format!("serial port read failed: {e}")),
+    let received = |bytes: &[u8], now_s: f64| {
+        let Ok(mut state) = shared.lock() else {
+            return false;
         };
-        if let Some(message) = failure {
-            if let Ok(mut state) = shared.lock() {
-                state.error = Some(message);
-            }
-            return;
+        decoder.feed(bytes, |line| state.take(line, now_s));
+        true
+    };
+    let failed = |message| {
+        if let Ok(mut state) = shared.lock() {
+            state.error = Some(message);
         }
-    }
+    };
+    crate::port::read_until_stopped(port, &stop, clock.as_ref(), 512, received, failed);
 }
 
 impl Shared {
