@@ -29,7 +29,7 @@ use crate::engine::{with_restored_doses, EngineFactory};
 use crate::error::RuntimeError;
 use crate::interlock::Interlock;
 use crate::ledger::{DoseWriter, StateDir};
-use crate::recorder::{RecordErrorPolicy, RecordState, RecordStatus, Recorder};
+use crate::recorder::{RecordErrorPolicy, RecordState, RecordStatus, Recorder, RESUME_FAILED};
 use crate::snapshot::Snapshot;
 use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
 use thermode_platform::Clock;
@@ -392,19 +392,33 @@ impl Daemon {
             return lines;
         };
         if let Some(r) = &self.recording {
-            if r.state() == RecordState::Failed && !seen.recording_failed {
-                seen.recording_failed = true;
-                let what = if self.interlock.engaged() {
+            let events = *r.subscribe().borrow();
+            if events.failures > seen.recording_failures && r.state() == RecordState::Failed {
+                seen.recording_failures = events.failures;
+                let error = r.error().unwrap_or_default();
+                let what = if error.starts_with(RESUME_FAILED) {
+                    "the acknowledgement stands (stimuli allowed, unrecorded); acknowledge again to retry"
+                } else if self.interlock.engaged() {
                     "every stimulus released; new ones are refused until an operator acknowledges \
-                     (ack_recording, or the dashboard's button)"
+                     (ack_recording, or the dashboard's button), which also goes on in a new file"
                 } else {
-                    "stimuli go on unrecorded (--on-record-error continue)"
+                    "stimuli go on unrecorded (--on-record-error continue); an acknowledgement (ack_recording) \
+                     goes on in a new file"
                 };
                 lines.push(format!(
                     "thermode: recording to {} FAILED: {}; {} rows written, the file ends with a whole row; {what}",
                     r.path().display(),
-                    r.error().unwrap_or_default(),
+                    error,
                     r.rows_written(),
+                ));
+            }
+            if events.resumptions > seen.recording_resumptions {
+                seen.recording_resumptions = events.resumptions;
+                lines.push(format!(
+                    "thermode: recording goes on in {} (segment {}); rows produced meanwhile are lost ({} so far)",
+                    r.path().display(),
+                    r.segment(),
+                    r.rows_lost(),
                 ));
             }
         }
@@ -485,7 +499,9 @@ impl Daemon {
 /// What [`Daemon::take_notices`] has told already.
 #[derive(Debug, Default)]
 struct Notices {
-    recording_failed: bool,
+    /// The recording's failures and resumptions already told.
+    recording_failures: u64,
+    recording_resumptions: u64,
     link_failures: u64,
     link_reconnects: u64,
 }

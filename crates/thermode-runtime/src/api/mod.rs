@@ -425,8 +425,15 @@ pub fn recording_json(app: &App, r: &RecordStatus) -> Value {
         RecordState::Ok => "ok",
         RecordState::Failed => "failed",
     };
+    let earlier: Vec<Value> = r
+        .earlier_files()
+        .into_iter()
+        .map(|(path, rows)| json!({"path": path.display().to_string(), "rows_written": rows}))
+        .collect();
     json!({
         "path": r.path().display().to_string(),
+        "segment": r.segment(),
+        "earlier_files": earlier,
         "state": state,
         "error": r.error(),
         "rows_written": r.rows_written(),
