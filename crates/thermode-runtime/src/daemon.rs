@@ -240,10 +240,18 @@ impl Daemon {
                 source,
             })?;
         let interlock = Arc::new(Interlock::new());
+        let mut start_notices = Vec::new();
         let recorder = match &config.record_dir {
             Some(dir) => {
                 let trips = (config.record_policy == RecordErrorPolicy::Stop).then(|| interlock.clone());
                 let (recorder, feed) = Recorder::start_with(dir, config.record_max_bytes, trips)?;
+                for (path, bytes) in recorder.repaired() {
+                    start_notices.push(format!(
+                        "thermode: {} ended in a torn row (a daemon killed mid-write): cut back to its last whole row \
+                         ({bytes} bytes removed)",
+                        path.display()
+                    ));
+                }
                 taps.push(feed);
                 Some(recorder)
             }
@@ -318,7 +326,10 @@ impl Daemon {
             ledger_path,
             recording,
             interlock,
-            notices: std::sync::Mutex::new(Notices::default()),
+            notices: std::sync::Mutex::new(Notices {
+                pending: start_notices,
+                ..Notices::default()
+            }),
             http_addr,
             osc_addr,
             token: server.token.clone(),
@@ -391,6 +402,7 @@ impl Daemon {
         let Ok(mut seen) = self.notices.lock() else {
             return lines;
         };
+        lines.append(&mut seen.pending);
         if let Some(r) = &self.recording {
             let events = *r.subscribe().borrow();
             if events.failures > seen.recording_failures && r.state() == RecordState::Failed {
@@ -499,6 +511,8 @@ impl Daemon {
 /// What [`Daemon::take_notices`] has told already.
 #[derive(Debug, Default)]
 struct Notices {
+    /// Lines from the start, not told yet.
+    pending: Vec<String>,
     /// The recording's failures and resumptions already told.
     recording_failures: u64,
     recording_resumptions: u64,

@@ -316,6 +316,8 @@ pub type SegmentOpener = Box<dyn FnMut(usize) -> std::io::Result<(PathBuf, Box<d
 pub struct Recorder {
     status: Arc<RecordStatus>,
     thread: Option<JoinHandle<Result<(), std::io::Error>>>,
+    /// Earlier session files in the directory that ended in a torn row, and the bytes cut from each.
+    repaired: Vec<(PathBuf, u64)>,
 }
 
 impl Recorder {
@@ -336,6 +338,7 @@ impl Recorder {
             context: format!("cannot create the recording directory {}", dir.display()),
             source,
         })?;
+        let repaired = repair_torn_sessions(dir);
         let stem = session_stem();
         let (path, file) = create_session_file(dir, &stem)?;
         // The new file's name is durable once its directory is synced.
@@ -355,7 +358,9 @@ impl Recorder {
             sync_dir(&dir);
             Ok((path, wrap(file)))
         });
-        Recorder::start_on(path, first, interlock, Some(opener))
+        let (mut recorder, feed) = Recorder::start_on(path, first, interlock, Some(opener))?;
+        recorder.repaired = repaired;
+        Ok((recorder, feed))
     }
 
     /// A recorder writing to `file`, shown as `path`, going on after an acknowledged failure in the files `opener`
@@ -386,6 +391,7 @@ impl Recorder {
         let recorder = Recorder {
             status,
             thread: Some(thread),
+            repaired: Vec::new(),
         };
         Ok((recorder, feed))
     }
@@ -393,6 +399,12 @@ impl Recorder {
     /// The file being written.
     pub fn path(&self) -> PathBuf {
         self.status.path()
+    }
+
+    /// Earlier session files of the directory that a killed daemon left ending in a torn row (a write cut short
+    /// at a page boundary by SIGKILL), each cut back to its last whole row at this start, with the bytes cut.
+    pub fn repaired(&self) -> &[(PathBuf, u64)] {
+        &self.repaired
     }
 
     /// The shared state of the recording (for the status page).
@@ -438,7 +450,12 @@ fn create_session_file(dir: &Path, stem: &str) -> Result<(PathBuf, File), Runtim
         };
         let path = dir.join(name);
         match OpenOptions::new().write(true).create_new(true).open(&path) {
-            Ok(file) => return Ok((path, file)),
+            Ok(file) => {
+                // Held while the file is written (released when the process ends, however it ends): a daemon that
+                // starts on the same directory leaves a live file alone (see `repair_torn_sessions`).
+                let _ = file.try_lock();
+                return Ok((path, file));
+            }
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
             Err(source) => {
                 return Err(RuntimeError::Io {
@@ -452,6 +469,42 @@ fn create_session_file(dir: &Path, stem: &str) -> Result<(PathBuf, File), Runtim
         "{} already holds 1000 session files named {stem}",
         dir.display()
     )))
+}
+
+/// Cuts every `session_*.csv` of `dir` that does not end with a newline back to its last whole row (a daemon
+/// killed in the middle of a write can leave part of a row: the kernel may stop a write to a file at a page
+/// boundary for a fatal signal). Returns the files cut and the bytes cut from each; files it cannot read or cut, and
+/// files another daemon is writing (it holds their lock), are left alone.
+fn repair_torn_sessions(dir: &Path) -> Vec<(PathBuf, u64)> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut repaired = Vec::new();
+    for path in entries.filter_map(|e| e.ok().map(|e| e.path())) {
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        if !(name.starts_with("session_") && name.ends_with(".csv")) {
+            continue;
+        }
+        if let Some(cut) = cut_torn_tail(&path) {
+            repaired.push((path, cut));
+        }
+    }
+    repaired.sort();
+    repaired
+}
+
+/// Cuts `path` back to just after its last newline when it does not end with one: the bytes cut.
+fn cut_torn_tail(path: &Path) -> Option<u64> {
+    let file = OpenOptions::new().read(true).write(true).open(path).ok()?;
+    file.try_lock().ok()?;
+    let bytes = std::fs::read(path).ok()?;
+    if bytes.is_empty() || bytes.last() == Some(&b'\n') {
+        return None;
+    }
+    let keep = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+    file.set_len(keep as u64).ok()?;
+    file.sync_all().ok()?;
+    Some((bytes.len() - keep) as u64)
 }
 
 /// Syncs a directory (best effort: not every platform or file system can).

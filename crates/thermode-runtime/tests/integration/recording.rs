@@ -414,3 +414,57 @@ fn after_an_acknowledgement_a_failed_recording_goes_on_in_a_new_file() {
         "rows between the failure and the acknowledgement are lost"
     );
 }
+
+#[test]
+fn a_torn_row_left_by_a_killed_daemon_is_cut_back_at_the_next_start_but_a_live_file_is_left_alone() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let torn = dir.path().join("session_20260101-000000.csv");
+    let whole = dir.path().join("session_20260101-000001.csv");
+    let live = dir.path().join("session_20260101-000002.csv");
+    let other = dir.path().join("notes.csv");
+    let rows = format!("{CSV_HEADER}\n0.000000,0,0,,air,32.0000\n");
+    for path in [&torn, &live, &other] {
+        std::fs::write(path, format!("{rows}0.010000,0,0,,ai")).expect("write");
+    }
+    std::fs::write(&whole, &rows).expect("write");
+    // Another daemon still writing holds its file's lock.
+    let writer = std::fs::OpenOptions::new().write(true).open(&live).expect("open");
+    writer.try_lock().expect("lock");
+    let (recorder, feed) = Recorder::start(dir.path()).expect("recorder");
+    assert_eq!(
+        recorder.repaired(),
+        &[(torn.clone(), "0.010000,0,0,,ai".len() as u64)],
+        "only the torn, unlocked session file is repaired"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&torn).expect("read"),
+        rows,
+        "cut to its last whole row"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&whole).expect("read"),
+        rows,
+        "a whole file untouched"
+    );
+    assert!(
+        std::fs::read_to_string(&live).expect("read").ends_with(",ai"),
+        "a live file untouched"
+    );
+    assert!(
+        std::fs::read_to_string(&other).expect("read").ends_with(",ai"),
+        "not a session file"
+    );
+    drop(feed);
+    recorder.finish().expect("finish");
+    // The daemon tells the operator.
+    std::fs::write(&torn, format!("{rows}0.0")).expect("write");
+    let mut config = common::test_config();
+    config.record_dir = Some(dir.path().to_path_buf());
+    let daemon = common::start(config, SpyDevice::new(1), trackers());
+    let notices = daemon.take_notices();
+    assert!(
+        notices.len() == 1 && notices[0].contains("torn row") && notices[0].contains(&torn.display().to_string()),
+        "{notices:?}"
+    );
+    daemon.stop().expect("stop");
+}
