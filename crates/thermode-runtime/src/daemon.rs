@@ -273,6 +273,7 @@ impl Daemon {
             taps,
             interlock.clone(),
         )?;
+        let realtime_loop = control.realtime().cpu.is_some();
         let ledger_path = ledger.as_ref().map(|(state, _)| state.ledger_path());
         let dose_writer = match ledger {
             Some((state, saved)) => {
@@ -317,7 +318,7 @@ impl Daemon {
             realtime: control.realtime().clone(),
             history: Arc::new(crate::api::history::History::default()),
         });
-        let runtime = start_network(app, http, osc)?;
+        let runtime = start_network(app, http, osc, realtime_loop)?;
         Ok(Daemon {
             runtime: Some(runtime),
             control: Some(control),
@@ -574,16 +575,20 @@ fn start_network(
     app: Arc<App>,
     http: TcpListener,
     osc: Option<UdpSocket>,
+    keep_off_loop_cpu: bool,
 ) -> Result<tokio::runtime::Runtime, RuntimeError> {
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .thread_name("thermode-net")
-        .enable_all()
-        .build()
-        .map_err(|source| RuntimeError::Io {
-            context: "cannot start the network runtime".into(),
-            source,
-        })?;
+    let mut builder = tokio::runtime::Builder::new_multi_thread();
+    builder.worker_threads(2).thread_name("thermode-net").enable_all();
+    if let Some(cpus) = keep_off_loop_cpu.then(crate::control_loop::network_cpus).flatten() {
+        // Their socket traffic raises soft interrupts on the CPU that sends it: keep it off the loop's.
+        builder.on_thread_start(move || {
+            let _ = thermode_platform::rt::pin_current_thread(&cpus);
+        });
+    }
+    let runtime = builder.build().map_err(|source| RuntimeError::Io {
+        context: "cannot start the network runtime".into(),
+        source,
+    })?;
     let io_error = |source| RuntimeError::Io {
         context: "cannot register the listening sockets".into(),
         source,

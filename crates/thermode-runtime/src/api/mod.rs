@@ -357,6 +357,7 @@ pub fn status_json(app: &App) -> Value {
                 "scheduling_error": app.realtime.scheduling_error,
                 "memory_locked": app.realtime.memory_locked,
                 "memory_error": app.realtime.memory_error,
+                "cpu": app.realtime.cpu,
             },
         },
         "commands": {
