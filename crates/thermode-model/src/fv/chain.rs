@@ -139,6 +139,14 @@ const D: f64 = GAMMA / 2.0;
 /// BDF2 stage: T₁ = A·T_γ − B·T₀ + d·h·F(T₁).
 const A: f64 = 1.0 / (GAMMA * (2.0 - GAMMA));
 const B: f64 = (1.0 - GAMMA) * (1.0 - GAMMA) / (GAMMA * (2.0 - GAMMA));
+/// Weight w = √2/4 of the first two stages in TR-BDF2 written as a Runge–Kutta method (b = (w, w, d)).
+const W: f64 = std::f64::consts::SQRT_2 / 4.0;
+/// Hosea & Shampine (1996) embedded error estimate: `h·Σ (b − b̂)_i F_i` with the third-order companion
+/// b̂ = ((1 − w)/3, (3w + 1)/3, d/3), so the coefficients of F(T₀), F(T_γ) and F(T₁) are these three (they sum to
+/// zero, so constant sources cancel).
+const E0: f64 = (4.0 * W - 1.0) / 3.0;
+const E1: f64 = -1.0 / 3.0;
+const E2: f64 = 2.0 * D / 3.0;
 
 /// Pre-allocated buffers and the cached elimination.
 #[derive(Debug, Clone)]
@@ -156,6 +164,15 @@ pub(crate) struct Work {
     /// The next state, swapped with the model's state after a step.
     pub next_skin: Vec<f64>,
     pub next_object: Vec<f64>,
+    /// Net heat into every cell at the start and at the end of the last step with an error estimate [W/m²] (for
+    /// the Hermite dense output of adaptive stepping).
+    pub flux_start_skin: Vec<f64>,
+    pub flux_start_object: Vec<f64>,
+    pub flux_end_skin: Vec<f64>,
+    pub flux_end_object: Vec<f64>,
+    /// The filtered local error estimate of the last such step \[K\].
+    err_skin: Vec<f64>,
+    err_object: Vec<f64>,
 }
 
 impl Work {
@@ -173,6 +190,12 @@ impl Work {
             key: None,
             next_skin: s(),
             next_object: o(),
+            flux_start_skin: s(),
+            flux_start_object: o(),
+            flux_end_skin: s(),
+            flux_end_object: o(),
+            err_skin: s(),
+            err_object: o(),
         }
     }
 
@@ -309,6 +332,69 @@ impl<'a> Bodies<'a> {
         work.stage_skin = stage_skin;
         work.stage_object = stage_object;
         flows
+    }
+
+    /// The Hosea–Shampine local error estimate of the TR-BDF2 step of `h` \[s\] just made by [`Self::advance`] from
+    /// (`skin`, `object`) to (`new_skin`, `new_object`) (its stage still in `work`): `(C − d h J)⁻¹ · h·(E0·F(T₀) +
+    /// E1·F(T_γ) + E2·F(T₁))`, filtered by the step's own matrix so that it stays bounded for stiff components
+    /// (Shampine's filter). Returns the largest magnitude over all cells \[K\]; also leaves F(T₀) and F(T₁) in
+    /// `work.flux_start_*` and `work.flux_end_*` for dense output. Uses the cached elimination of the step.
+    pub fn tr_bdf2_error(
+        &self,
+        h: f64,
+        (skin, object): (&[f64], &[f64]),
+        (new_skin, new_object): (&[f64], &[f64]),
+        work: &mut Work,
+    ) -> f64 {
+        let dh = D * h;
+        self.factor(1.0, dh, work);
+        let (mut fs0, mut fo0) = (
+            std::mem::take(&mut work.flux_start_skin),
+            std::mem::take(&mut work.flux_start_object),
+        );
+        let (mut fs1, mut fo1) = (
+            std::mem::take(&mut work.flux_end_skin),
+            std::mem::take(&mut work.flux_end_object),
+        );
+        self.net_flux(skin, object, &mut fs0, &mut fo0);
+        self.net_flux(new_skin, new_object, &mut fs1, &mut fo1);
+        let coupled = self.coupled().is_some();
+        for ((r, a), b) in work.rhs_skin.iter_mut().zip(&fs0).zip(&fs1) {
+            *r = h * (E0 * a + E2 * b);
+        }
+        if coupled {
+            for ((r, a), b) in work.rhs_object.iter_mut().zip(&fo0).zip(&fo1) {
+                *r = h * (E0 * a + E2 * b);
+            }
+        }
+        let (stage_skin, stage_object) = (
+            std::mem::take(&mut work.stage_skin),
+            std::mem::take(&mut work.stage_object),
+        );
+        self.add_net_flux(work, &stage_skin, &stage_object, h * E1);
+        let (mut err_skin, mut err_object) = (std::mem::take(&mut work.err_skin), std::mem::take(&mut work.err_object));
+        self.solve(work, dh, &mut err_skin, &mut err_object);
+        let largest = |v: &[f64]| v.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+        let mut error = largest(&err_skin);
+        if coupled {
+            error = error.max(largest(&err_object));
+        }
+        (work.stage_skin, work.stage_object) = (stage_skin, stage_object);
+        (work.err_skin, work.err_object) = (err_skin, err_object);
+        (work.flux_start_skin, work.flux_start_object) = (fs0, fo0);
+        (work.flux_end_skin, work.flux_end_object) = (fs1, fo1);
+        error
+    }
+
+    /// Net heat into every cell at a state, F(T) [W/m²], into (`out_skin`, `out_object`) (the object only in contact).
+    fn net_flux(&self, skin: &[f64], object: &[f64], out_skin: &mut [f64], out_object: &mut [f64]) {
+        let (skin_in, object_in) = self.side_fluxes(skin, object);
+        out_skin.iter_mut().for_each(|f| *f = 0.0);
+        add_flux(self.skin, skin, skin_in, 1.0, out_skin);
+        if let Some((o, _)) = self.coupled() {
+            out_object.iter_mut().for_each(|f| *f = 0.0);
+            add_flux(o, object, object_in, 1.0, out_object);
+        }
     }
 
     /// Solves the steady state F(T) = 0 into (`to_skin`, `to_object`). The caller guarantees that the system is

@@ -29,6 +29,7 @@
 //! [`simulate_contact`] runs one contact on one grid; [`simulate_contact_converged`] refines grid and step together
 //! until the surface temperature trajectory no longer changes by more than a tolerance.
 
+mod adaptive;
 mod chain;
 mod grid;
 mod model;
@@ -36,6 +37,7 @@ mod run;
 #[cfg(test)]
 mod tests;
 
+pub use adaptive::StepCounts;
 pub use grid::MAX_CELLS;
 pub use model::{EnergyLedger, FvModel};
 pub use run::{
@@ -47,6 +49,9 @@ use crate::limits;
 use crate::params::{BadValue, Rule};
 
 const ORIGIN: &str = "fv model";
+
+/// Default local error tolerance of adaptive stepping \[K\] ([`FvConfig::tolerance_c`]).
+pub const DEFAULT_TOLERANCE_C: f64 = 2e-5;
 
 /// What lies below the deepest skin layer.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -145,9 +150,16 @@ pub struct FvConfig {
     pub growth: f64,
     /// Largest cell width \[m\], ≥ `surface_cell_m`. Default 5e-4 (0.5 mm).
     pub max_cell_m: f64,
-    /// Largest internal time step of [`simulate_contact`] \[s\]; an output interval is split into equal steps no
-    /// longer than this. Default 0.01 s. ([`FvModel::step`] takes its step directly.)
+    /// Largest internal time step of [`simulate_contact`] with fixed steps (`tolerance_c` = `None`) \[s\]; an output
+    /// interval is split into equal steps no longer than this. Default 0.01 s. ([`FvModel::step`] takes its step
+    /// directly.)
     pub max_step_s: f64,
+    /// Local error tolerance of the adaptive time stepping of [`simulate_contact`] \[K\]: every TR-BDF2 step is
+    /// held to a Hosea–Shampine error estimate (largest over all cells) of at most this, and the output rows are
+    /// interpolated between steps. `None` = fixed steps of `max_step_s` (with the chosen `scheme`). Default
+    /// `Some(`[`DEFAULT_TOLERANCE_C`]`)`; not changed by [`FvConfig::refined`] (it bounds the time error, which does
+    /// not depend on the grid). Adaptive stepping is always TR-BDF2, whatever `scheme` says.
+    pub tolerance_c: Option<f64>,
     /// Boundary below the deepest skin layer. Default [`DeepBoundary::Insulated`].
     pub deep_boundary: DeepBoundary,
     /// Boundary at the object's far side. Default [`FarSide::Insulated`].
@@ -166,6 +178,7 @@ impl Default for FvConfig {
             growth: 1.15,
             max_cell_m: 5e-4,
             max_step_s: 0.01,
+            tolerance_c: Some(DEFAULT_TOLERANCE_C),
             deep_boundary: DeepBoundary::Insulated,
             far_side: FarSide::Insulated,
             contact_resistance_m2k_w: 0.0,
@@ -194,6 +207,9 @@ impl FvConfig {
         Rule::Positive.check("surface_cell_m", self.surface_cell_m).at(ORIGIN)?;
         Rule::Positive.check("max_cell_m", self.max_cell_m).at(ORIGIN)?;
         Rule::Positive.check("max_step_s", self.max_step_s).at(ORIGIN)?;
+        if let Some(tolerance_c) = self.tolerance_c {
+            Rule::Positive.check("tolerance_c", tolerance_c).at(ORIGIN)?;
+        }
         Rule::NonNegative
             .check("contact_resistance_m2k_w", self.contact_resistance_m2k_w)
             .at(ORIGIN)?;

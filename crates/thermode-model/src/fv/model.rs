@@ -338,6 +338,81 @@ impl FvModel {
         self.plate.get_mut().forget_offset();
     }
 
+    /// Attempts one TR-BDF2 step of `dt_s` \[s\] in `env` with the Hosea & Shampine (1996) embedded estimate of
+    /// its local error, whatever [`TimeScheme`] the model was built with. The step is taken (state, environment and
+    /// energy ledger advance, as with [`Self::step`]) only if the estimate is at most `tolerance_c` \[K\];
+    /// otherwise the model is left unchanged. Returns the estimate: the largest over all cells of the filtered
+    /// error `(C − d·h·J)⁻¹·h·Σ(b − b̂)ᵢF(Tᵢ)` \[K\]. Never allocates; reuses the cached elimination while the step
+    /// and the environment stay bit-identical. `dt_s` and `env` must be valid as for [`Self::step`].
+    pub fn step_with_error(&mut self, dt_s: f64, env: FvEnvironment, tolerance_c: f64) -> f64 {
+        let side = self.side(env);
+        let bodies = Bodies::new(&self.skin, self.object.as_ref(), side);
+        let contact = matches!(side, Side::Contact { .. });
+        let work = self.work.get_mut();
+        let mut next_skin = std::mem::take(&mut work.next_skin);
+        let mut next_object = std::mem::take(&mut work.next_object);
+        let state = (self.skin_t.as_slice(), self.object_t.as_slice());
+        let flows = bodies.advance(
+            TimeScheme::TrBdf2,
+            dt_s,
+            state,
+            (&mut next_skin, &mut next_object),
+            work,
+        );
+        let error_c = bodies.tr_bdf2_error(dt_s, state, (&next_skin, &next_object), work);
+        if error_c <= tolerance_c {
+            std::mem::swap(&mut self.skin_t, &mut next_skin);
+            if contact {
+                std::mem::swap(&mut self.object_t, &mut next_object);
+            }
+            self.ledger.record(flows);
+            self.env = env;
+            self.plate.get_mut().forget_offset();
+        }
+        let work = self.work.get_mut();
+        work.next_skin = next_skin;
+        work.next_object = next_object;
+        error_c
+    }
+
+    /// Sets `probe`'s state to the cubic Hermite interpolant at `theta` ∈ \[0, 1\] of the last step of `dt_s`
+    /// \[s\] taken by [`Self::step_with_error`] (its start state and F(T₀), its end state and F(T₁)): fourth-order
+    /// accurate in the step, one order above the step's local error. `probe` must be a clone of this model (same
+    /// grid); its environment becomes this model's.
+    pub(super) fn interpolate_last_step(&self, theta: f64, dt_s: f64, probe: &mut FvModel) {
+        let work = self.work.borrow();
+        let (t2, t3) = (theta * theta, theta * theta * theta);
+        let h00 = 2.0 * t3 - 3.0 * t2 + 1.0;
+        let h10 = (t3 - 2.0 * t2 + theta) * dt_s;
+        let h01 = -2.0 * t3 + 3.0 * t2;
+        let h11 = (t3 - t2) * dt_s;
+        let hermite = |out: &mut [f64], start: &[f64], end: &[f64], f0: &[f64], f1: &[f64], capacity: &[f64]| {
+            for i in 0..out.len() {
+                out[i] = h00 * start[i] + h01 * end[i] + (h10 * f0[i] + h11 * f1[i]) / capacity[i];
+            }
+        };
+        hermite(
+            &mut probe.skin_t,
+            &work.next_skin,
+            &self.skin_t,
+            &work.flux_start_skin,
+            &work.flux_end_skin,
+            &self.skin.capacity,
+        );
+        if let (FvEnvironment::Object, Some(object)) = (self.env, self.object.as_ref()) {
+            hermite(
+                &mut probe.object_t,
+                &work.next_object,
+                &self.object_t,
+                &work.flux_start_object,
+                &work.flux_end_object,
+                &object.capacity,
+            );
+        }
+        probe.env = self.env;
+        probe.plate.get_mut().forget_offset();
+    }
+
     /// Sets the steady state in `env` (solving the steady tridiagonal system directly). In
     /// [`FvEnvironment::Object`] skin and object are solved together. Errors if `env` is invalid, there is no object
     /// to touch, or no steady state exists (nothing holds the temperature: no perfusion, insulated deep boundary, and
