@@ -200,11 +200,7 @@ fn run_fixed(model: &mut FvModel, spec: &ContactSpec, max_step_s: f64, run: &mut
     let mut previous_s = 0.0;
     for k in 1..=intervals {
         let time_s = row_time_s(spec, k, intervals);
-        let interval_s = if k == intervals {
-            time_s - previous_s
-        } else {
-            spec.output_dt_s
-        };
+        let interval_s = interval_length_s(spec, k, intervals, previous_s);
         let steps = (interval_s / max_step_s - 1e-9).ceil().max(1.0) as usize;
         let h = interval_s / steps as f64;
         run.step_s = run.step_s.max(h);
@@ -215,6 +211,18 @@ fn run_fixed(model: &mut FvModel, spec: &ContactSpec, max_step_s: f64, run: &mut
         let face = model.object_face_c().unwrap_or(spec.object_c);
         run.record(model, time_s, face);
         previous_s = time_s;
+    }
+}
+
+/// The length of output interval `k` of `intervals` \[s\], starting at `previous_s`: the output interval itself,
+/// bit for bit, unless it is the last one and the duration is not a whole number of output intervals (to 1e-9
+/// relative), when it is what is left of the duration.
+fn interval_length_s(spec: &ContactSpec, k: usize, intervals: usize, previous_s: f64) -> f64 {
+    let left_s = spec.duration_s - previous_s;
+    if k < intervals || (left_s - spec.output_dt_s).abs() <= 1e-9 * spec.output_dt_s {
+        spec.output_dt_s
+    } else {
+        left_s
     }
 }
 
@@ -351,4 +359,43 @@ fn max_difference(a: &[f64], b: &[f64]) -> f64 {
         .zip(b)
         .map(|(x, y)| (x - y).abs())
         .fold(0.0, |m, d| if d.is_nan() || m.is_nan() { f64::NAN } else { m.max(d) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn levels_ahead_jumps_only_when_the_next_level_cannot_converge() {
+        // Change 0.004 < 4 × 0.005: the next level is predicted to converge.
+        assert_eq!(levels_ahead(0.016, None, 0.005), 1);
+        // 0.32 needs 64× less: three levels at the second-order ratio 4.
+        assert_eq!(levels_ahead(0.32, None, 0.005), 3);
+        // An observed ratio of 2 (first order) needs six.
+        assert_eq!(levels_ahead(0.32, Some(0.64), 0.005), 6);
+        assert_eq!(levels_ahead(f64::NAN, Some(0.1), 0.005), 1);
+        assert_eq!(levels_ahead(1e9, None, 0.005), 8, "capped");
+    }
+
+    #[test]
+    fn last_interval_is_the_output_interval_unless_the_duration_is_not_a_multiple() {
+        let spec = ContactSpec {
+            duration_s: 0.5,
+            output_dt_s: 0.01,
+            ..ContactSpec::default()
+        };
+        let intervals = spec.intervals();
+        assert_eq!(intervals, 50);
+        let previous_s = 49.0 * 0.01;
+        assert_eq!(
+            interval_length_s(&spec, intervals, intervals, previous_s).to_bits(),
+            0.01f64.to_bits()
+        );
+        let spec = ContactSpec {
+            duration_s: 0.505,
+            ..spec
+        };
+        let last = interval_length_s(&spec, spec.intervals(), spec.intervals(), 0.5);
+        assert!((last - 0.005).abs() < 1e-12, "last interval {last}");
+    }
 }
