@@ -7,8 +7,10 @@
 //! 1.75}: a step that is equal in intent to the previous one is equal in bits, so it reuses the cached elimination
 //! of the matrix (the cache is keyed on the step's bits).
 
-use super::FvEnvironment;
 use super::FvModel;
+use super::{bad, FvEnvironment, ORIGIN};
+use crate::error::{At, ParamError};
+use crate::params::Rule;
 
 /// The first step after the touch \[s\] (the controller grows it from there; the jump at the touch needs it small).
 const FIRST_STEP_S: f64 = 1.0 / 1_048_576.0;
@@ -102,6 +104,53 @@ pub(super) fn integrate(
         h = next_step(step_s, error_c, tolerance_c, MAX_STEP_S);
     }
     (counts, largest_step_s)
+}
+
+impl FvModel {
+    /// Advances the model by `duration_s` \[s\] in `env` with error-controlled adaptive TR-BDF2 steps (local error
+    /// estimate at most `tolerance_c` \[K\] per step, see [`FvModel::step_with_error`]) and calls `row(state, t)` at
+    /// every time `t` of `row_times_s` (seconds from now, increasing, in (0, `duration_s`\]; others are skipped) with
+    /// the state interpolated there (cubic Hermite within the step, one order above its local error): read any
+    /// observable of `state` ([`FvModel::surface_c`], [`FvModel::skin_temperature_at_depth_c`], …). The model
+    /// ends exactly `duration_s` later, its energy ledger advanced by every step. Allocates one copy of the model
+    /// (the interpolation probe); stepping itself does not allocate. Errors if `env`, `duration_s` (positive,
+    /// finite, at most [`crate::limits::DURATION`]) or `tolerance_c` (positive, finite) are invalid; a state that
+    /// becomes non-finite stops the stepping early (and shows as non-finite values).
+    pub fn advance_adaptive(
+        &mut self,
+        env: FvEnvironment,
+        duration_s: f64,
+        tolerance_c: f64,
+        row_times_s: impl IntoIterator<Item = f64>,
+        mut row: impl FnMut(&FvModel, f64),
+    ) -> Result<StepCounts, ParamError> {
+        env.validate()?;
+        Rule::Positive.check("duration_s", duration_s).at(ORIGIN)?;
+        crate::limits::DURATION
+            .rule()
+            .check("duration_s", duration_s)
+            .at(ORIGIN)?;
+        Rule::Positive.check("tolerance_c", tolerance_c).at(ORIGIN)?;
+        if env == FvEnvironment::Object && self.object_cells() == 0 {
+            return Err(bad(
+                "duration_s",
+                duration_s,
+                "cannot advance in contact: the model has no object",
+            ));
+        }
+        let mut probe = self.clone();
+        let mut times = row_times_s.into_iter().filter(|t| *t > 0.0 && *t <= duration_s);
+        let (counts, _) = integrate(
+            self,
+            env,
+            (0.0, duration_s),
+            tolerance_c,
+            &mut times,
+            &mut probe,
+            &mut row,
+        );
+        Ok(counts)
+    }
 }
 
 #[cfg(test)]
