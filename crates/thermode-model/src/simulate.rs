@@ -117,7 +117,7 @@ pub struct SimulationSpec {
     /// [`MAX_FV_LEVEL`]; `None` (default) refines until converged ([`fv::simulate_contact_converged`]), `Some(L)`
     /// runs level L alone, without a convergence check (for benchmarks and convergence studies).
     pub fv_level: Option<u32>,
-    /// fv only: local error tolerance of the adaptive time steps [K] ([`fv::FvConfig::tolerance_c`]). Default
+    /// fv only: local error tolerance of the adaptive time steps \[K\] ([`fv::FvConfig::tolerance_c`]). Default
     /// [`fv::DEFAULT_TOLERANCE_C`].
     pub fv_tolerance_c: f64,
 }
