@@ -38,7 +38,7 @@ OUTPUT_DT_S = 0.01
 AMBIENT_C = 23.0
 OBJECT_C = 23.0
 CONTACT_RESISTANCE = 1e-3
-TIGHT = 1e-10  # rtol = atol of the reference runs
+TIGHT = 1e-9  # rtol = atol of the reference runs
 THERMODE_TIGHT_K = 1e-9  # thermode's local error tolerance of the agreement run
 BDF_RTOLS = [1e-3, 3e-4, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6, 3e-7, 1e-7, 3e-8, 1e-8]
 

@@ -47,6 +47,19 @@ pub(super) fn next_step(h_s: f64, error_c: f64, tolerance_c: f64, max_step_s: f6
     ladder_floor((h_s * factor).min(max_step_s))
 }
 
+/// Where an output row lies in the adaptive steps.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct RowAt {
+    /// Fraction of the last step at which the row lies, in \[0, 1\].
+    pub theta: f64,
+    /// Length of the last step \[s\].
+    pub step_s: f64,
+    /// Time of the row \[s\].
+    pub time_s: f64,
+    /// Number of the last step (1 for the first accepted step).
+    pub step: usize,
+}
+
 /// Counts of an adaptive run.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct StepCounts {
@@ -57,17 +70,17 @@ pub struct StepCounts {
 }
 
 /// Advances `model` in `env` from `start_s` to `end_s` \[s\] with steps of local error at most `tolerance_c` \[K\],
-/// starting with a step of [`FIRST_STEP_S`]; calls `row(probe)` with the interpolated state at every time of
-/// `row_times_s` (increasing, in (`start_s`, `end_s`]) as the steps pass it. `probe` must be a clone of `model`.
-/// Returns the counts and the longest step taken \[s\].
+/// starting with a step of [`FIRST_STEP_S`]; calls `row(model, at)` at every time of `row_times_s` (increasing,
+/// in (`start_s`, `end_s`]) as the steps pass it, `at` saying where in the step just taken it lies (read the state
+/// there with [`FvModel::interpolate_last_step`] or [`FvModel::last_step_ends`]). Returns the counts and the
+/// longest step taken \[s\].
 pub(super) fn integrate(
     model: &mut FvModel,
     env: FvEnvironment,
     (start_s, end_s): (f64, f64),
     tolerance_c: f64,
     row_times_s: &mut dyn Iterator<Item = f64>,
-    probe: &mut FvModel,
-    row: &mut dyn FnMut(&FvModel, f64),
+    row: &mut dyn FnMut(&FvModel, RowAt),
 ) -> (StepCounts, f64) {
     let mut largest_step_s = 0.0f64;
     let mut counts = StepCounts::default();
@@ -96,8 +109,13 @@ pub(super) fn integrate(
         };
         while let Some(t) = pending.filter(|t| *t <= done_s) {
             let theta = ((t - time_s) / step_s).clamp(0.0, 1.0);
-            model.interpolate_last_step(theta, step_s, probe);
-            row(probe, t);
+            let at = RowAt {
+                theta,
+                step_s,
+                time_s: t,
+                step: counts.accepted,
+            };
+            row(model, at);
             pending = row_times_s.next();
         }
         time_s = done_s;
@@ -140,15 +158,11 @@ impl FvModel {
         }
         let mut probe = self.clone();
         let mut times = row_times_s.into_iter().filter(|t| *t > 0.0 && *t <= duration_s);
-        let (counts, _) = integrate(
-            self,
-            env,
-            (0.0, duration_s),
-            tolerance_c,
-            &mut times,
-            &mut probe,
-            &mut row,
-        );
+        let mut at_row = |model: &FvModel, at: RowAt| {
+            model.interpolate_last_step(at.theta, at.step_s, &mut probe);
+            row(&probe, at.time_s);
+        };
+        let (counts, _) = integrate(self, env, (0.0, duration_s), tolerance_c, &mut times, &mut at_row);
         Ok(counts)
     }
 }

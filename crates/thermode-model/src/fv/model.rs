@@ -50,6 +50,68 @@ impl EnergyLedger {
     }
 }
 
+/// A scalar's values \[unit\] and rates \[unit/s\] at both ends of a step, for cubic Hermite interpolation.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(super) struct Ends {
+    pub start: f64,
+    pub end: f64,
+    pub start_rate: f64,
+    pub end_rate: f64,
+}
+
+impl Ends {
+    fn constant(value: f64) -> Self {
+        Ends {
+            start: value,
+            end: value,
+            start_rate: 0.0,
+            end_rate: 0.0,
+        }
+    }
+
+    /// The cubic Hermite interpolant at `theta` ∈ \[0, 1\] of a step of `step_s` \[s\].
+    pub fn at(&self, theta: f64, step_s: f64) -> f64 {
+        let [h00, h10, h01, h11] = hermite_weights(theta, step_s);
+        h00 * self.start + h01 * self.end + h10 * self.start_rate + h11 * self.end_rate
+    }
+}
+
+/// The cubic Hermite weights of (start value, start rate, end value, end rate) at `theta` of a step of `step_s`
+/// \[s\] (the rate weights include the step).
+fn hermite_weights(theta: f64, step_s: f64) -> [f64; 4] {
+    let (t2, t3) = (theta * theta, theta * theta * theta);
+    [
+        2.0 * t3 - 3.0 * t2 + 1.0,
+        (t3 - 2.0 * t2 + theta) * step_s,
+        -2.0 * t3 + 3.0 * t2,
+        (t3 - t2) * step_s,
+    ]
+}
+
+/// What a contact run records, at both ends of the last adaptive step (see [`FvModel::last_step_ends`]).
+#[derive(Debug, Clone)]
+pub(super) struct StepEnds {
+    /// Temperature of the skin's surface cell \[°C\].
+    pub skin0: Ends,
+    /// Temperature of the object's contact cell \[°C\].
+    pub object0: Ends,
+    /// Heat Σ C·T of every skin layer \[J/m²\].
+    pub layer_heat: Vec<Ends>,
+    /// Capacity Σ C of every skin layer \[J/(m²·K)\].
+    pub layer_capacity: Vec<f64>,
+}
+
+impl StepEnds {
+    pub fn new(layers: usize) -> Self {
+        StepEnds {
+            skin0: Ends::default(),
+            object0: Ends::default(),
+            layer_heat: vec![Ends::default(); layers],
+            layer_capacity: vec![0.0; layers],
+        }
+    }
+}
+
 /// The finite-volume finger, optionally with a touched object. See the [module documentation](super).
 ///
 /// A new model is uniform at the arterial temperature, in air at that temperature; set an initial state with
@@ -381,11 +443,7 @@ impl FvModel {
     /// grid); its environment becomes this model's.
     pub(super) fn interpolate_last_step(&self, theta: f64, dt_s: f64, probe: &mut FvModel) {
         let work = self.work.borrow();
-        let (t2, t3) = (theta * theta, theta * theta * theta);
-        let h00 = 2.0 * t3 - 3.0 * t2 + 1.0;
-        let h10 = (t3 - 2.0 * t2 + theta) * dt_s;
-        let h01 = -2.0 * t3 + 3.0 * t2;
-        let h11 = (t3 - t2) * dt_s;
+        let [h00, h10, h01, h11] = hermite_weights(theta, dt_s);
         let hermite = |out: &mut [f64], start: &[f64], end: &[f64], f0: &[f64], f1: &[f64], capacity: &[f64]| {
             for i in 0..out.len() {
                 out[i] = h00 * start[i] + h01 * end[i] + (h10 * f0[i] + h11 * f1[i]) / capacity[i];
@@ -411,6 +469,59 @@ impl FvModel {
         }
         probe.env = self.env;
         probe.plate.get_mut().forget_offset();
+    }
+
+    /// Number of skin layers.
+    pub(super) fn layer_count(&self) -> usize {
+        self.layer_count
+    }
+
+    /// The values and rates at both ends of the last step taken by [`Self::step_with_error`] of what a contact run
+    /// records: the surface cells of skin and object and the heat Σ C·T of every skin layer.
+    pub(super) fn last_step_ends(&self, out: &mut StepEnds) {
+        let work = self.work.borrow();
+        let capacity = &self.skin.capacity;
+        out.skin0 = Ends {
+            start: work.next_skin[0],
+            end: self.skin_t[0],
+            start_rate: work.flux_start_skin[0] / capacity[0],
+            end_rate: work.flux_end_skin[0] / capacity[0],
+        };
+        out.object0 = match (self.env, self.object.as_ref()) {
+            (FvEnvironment::Object, Some(object)) => Ends {
+                start: work.next_object[0],
+                end: self.object_t[0],
+                start_rate: work.flux_start_object[0] / object.capacity[0],
+                end_rate: work.flux_end_object[0] / object.capacity[0],
+            },
+            _ => Ends::constant(self.object_t.first().copied().unwrap_or(0.0)),
+        };
+        out.layer_heat.iter_mut().for_each(|e| *e = Ends::default());
+        out.layer_capacity.iter_mut().for_each(|c| *c = 0.0);
+        for (i, &layer) in self.skin.layer.iter().enumerate() {
+            let heat = &mut out.layer_heat[layer];
+            heat.start += capacity[i] * work.next_skin[i];
+            heat.end += capacity[i] * self.skin_t[i];
+            heat.start_rate += work.flux_start_skin[i];
+            heat.end_rate += work.flux_end_skin[i];
+            out.layer_capacity[layer] += capacity[i];
+        }
+    }
+
+    /// Skin surface temperature \[°C\], object face temperature \[°C\] and heat flux out of the skin \[W/m²\]
+    /// in the current environment for given temperatures of the surface cells of skin and object \[°C\] (as
+    /// [`Self::surface_c`], [`Self::object_face_c`] and [`Self::surface_heat_flux_w_m2`] compute them from the
+    /// state).
+    pub(super) fn contact_observables(&self, skin0_c: f64, object0_c: f64) -> (f64, f64, f64) {
+        let (flux_w_m2, face_c) = match (self.side(self.env), self.object.as_ref()) {
+            (Side::Contact { g }, Some(object)) => {
+                let q = g * (skin0_c - object0_c);
+                (q, object0_c + q * object.half_resistance())
+            }
+            (Side::Contact { g }, None) => (g * (skin0_c - object0_c), object0_c),
+            (Side::Fixed { g, temp_c }, _) => (g * (skin0_c - temp_c), object0_c),
+        };
+        (skin0_c - flux_w_m2 * self.skin.half_resistance(), face_c, flux_w_m2)
     }
 
     /// Sets the steady state in `env` (solving the steady tridiagonal system directly). In

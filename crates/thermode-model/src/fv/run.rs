@@ -1,7 +1,8 @@
 //! Contact runs: a finger resting in air touches an object at t = 0; one run on one grid ([`simulate_contact`]) or
 //! refined until the answer no longer depends on the grid ([`simulate_contact_converged`]).
 
-use super::adaptive::{self, StepCounts};
+use super::adaptive::{self, RowAt, StepCounts};
+use super::model::StepEnds;
 use super::{bad, FvConfig, FvEnvironment, FvModel};
 use crate::error::{At, ParamError};
 use crate::limits;
@@ -128,6 +129,24 @@ pub struct ContactRun {
 }
 
 impl ContactRun {
+    /// Records the row `at` in the last step from the step's end values `ends`.
+    fn record_interpolated(&mut self, model: &FvModel, ends: &StepEnds, at: RowAt) {
+        let (theta, step_s, time_s) = (at.theta, at.step_s, at.time_s);
+        let (skin0, object0) = (ends.skin0.at(theta, step_s), ends.object0.at(theta, step_s));
+        let (surface_c, face_c, flux_w_m2) = model.contact_observables(skin0, object0);
+        self.time_s.push(time_s);
+        self.surface_c.push(surface_c);
+        self.object_face_c.push(face_c);
+        self.heat_flux_w_m2.push(flux_w_m2);
+        let means = ends
+            .layer_heat
+            .iter()
+            .zip(&ends.layer_capacity)
+            .map(|(heat, capacity)| heat.at(theta, step_s) / capacity)
+            .collect();
+        self.layer_mean_c.push(means);
+    }
+
     fn record(&mut self, model: &FvModel, time_s: f64, object_face_c: f64) {
         self.time_s.push(time_s);
         self.surface_c.push(model.surface_c());
@@ -226,14 +245,20 @@ fn interval_length_s(spec: &ContactSpec, k: usize, intervals: usize, previous_s:
     }
 }
 
-/// Adaptive steps ([`super::adaptive`]), rows interpolated between them.
+/// Adaptive steps ([`super::adaptive`]), rows interpolated between them. Every recorded quantity is linear in the
+/// state, so the rows interpolate the quantities themselves (cubic Hermite from their values and rates at both ends
+/// of the step, [`FvModel::last_step_ends`], gathered once per step): O(layers) per row, O(cells) per step.
 fn run_adaptive(model: &mut FvModel, spec: &ContactSpec, tolerance_c: f64, run: &mut ContactRun) {
     let intervals = spec.intervals();
-    let mut probe = model.clone();
     let mut times = (1..=intervals).map(|k| row_time_s(spec, k, intervals));
-    let mut record = |probe: &FvModel, time_s: f64| {
-        let face = probe.object_face_c().unwrap_or(spec.object_c);
-        run.record(probe, time_s, face);
+    let mut ends = StepEnds::new(model.layer_count());
+    let mut gathered_step = 0;
+    let mut record = |model: &FvModel, at: RowAt| {
+        if at.step != gathered_step {
+            model.last_step_ends(&mut ends);
+            gathered_step = at.step;
+        }
+        run.record_interpolated(model, &ends, at);
     };
     let (counts, largest_s) = adaptive::integrate(
         model,
@@ -241,7 +266,6 @@ fn run_adaptive(model: &mut FvModel, spec: &ContactSpec, tolerance_c: f64, run: 
         (0.0, spec.duration_s),
         tolerance_c,
         &mut times,
-        &mut probe,
         &mut record,
     );
     run.steps = counts;

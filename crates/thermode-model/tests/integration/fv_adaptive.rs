@@ -254,3 +254,63 @@ fn reruns_are_bit_identical_and_equal_steps_share_their_bits() {
         model.surface_c()
     );
 }
+
+#[test]
+fn contact_rows_equal_the_interpolated_state_of_advance_adaptive() {
+    // simulate_contact interpolates the recorded quantities directly; advance_adaptive interpolates the whole
+    // state and reads it. Same steps, same interpolant: equal to rounding.
+    let skin = Skin::fingertip();
+    let stone = materials::find("stone").unwrap();
+    let config = FvConfig {
+        contact_resistance_m2k_w: 1e-3,
+        ..FvConfig::default()
+    };
+    let spec = ContactSpec {
+        duration_s: 12.0,
+        output_dt_s: 0.05,
+        object_c: 40.0,
+        ..ContactSpec::default()
+    };
+    let run = simulate_contact(&skin, &stone, &config, &spec).unwrap();
+    let mut model = FvModel::new(&skin, Some(&stone), &config).unwrap();
+    model.set_steady_in_air(spec.ambient_c).unwrap();
+    model.touch(spec.object_c).unwrap();
+    let times: Vec<f64> = run.time_s[1..].to_vec();
+    let mut rows = Vec::new();
+    let counts = model
+        .advance_adaptive(
+            FvEnvironment::Object,
+            spec.duration_s,
+            config.tolerance_c.unwrap(),
+            times,
+            |m, t| {
+                rows.push((
+                    t,
+                    m.surface_c(),
+                    m.object_face_c().unwrap(),
+                    m.surface_heat_flux_w_m2(),
+                    m.layer_means_c(),
+                ))
+            },
+        )
+        .unwrap();
+    assert_eq!(counts, run.steps);
+    assert_eq!(rows.len(), run.time_s.len() - 1);
+    for (k, (t, surface, face, flux, means)) in rows.iter().enumerate() {
+        let row = k + 1;
+        assert_eq!(*t, run.time_s[row]);
+        let pairs = [
+            (*surface, run.surface_c[row], 1e-10),
+            (*face, run.object_face_c[row], 1e-10),
+            (*flux, run.heat_flux_w_m2[row], 1e-6),
+        ];
+        for (a, b, tol) in pairs {
+            assert!((a - b).abs() <= tol, "t = {t} s: state interpolant {a} vs recorded {b}");
+        }
+        for (a, b) in means.iter().zip(&run.layer_mean_c[row]) {
+            assert!((a - b).abs() <= 1e-10, "t = {t} s: layer mean {a} vs {b}");
+        }
+    }
+    // The model ends exactly at the duration, as the run's last row.
+    assert!((model.surface_c() - run.surface_c[run.surface_c.len() - 1]).abs() <= 1e-10);
+}
