@@ -438,11 +438,12 @@ fn render_summary_json_reports_the_judged_metrics_and_the_csv_has_the_documented
         time[0] < 0.0 && time.contains(&0.0),
         "time_s must be negative before contact and 0 at contact"
     );
-    // Default finger and fv renderer: truth and target coincide.
+    // Default finger and fv renderer: the truth (converged fv) and the target (the renderer's coarse fv, one step
+    // per tick) are the same physics and differ only by the renderer's discretisation, a few hundredths of a °C.
     let truth = column(&header, &rows, "truth_skin_c");
     let target = column(&header, &rows, "target_skin_c");
     for (row, (a, b)) in truth.iter().zip(&target).enumerate() {
-        assert!((a - b).abs() < 1e-9, "row {row}: truth {a}, target {b}");
+        assert!((a - b).abs() < 0.15, "row {row}: truth {a}, target {b}");
     }
     expect_error(&["render", "--material", "unobtainium"], "unknown material");
 }
