@@ -26,8 +26,15 @@
 //! Both conserve energy exactly: every step reports the heat that crossed each boundary, consistent with the
 //! scheme, in an [`EnergyLedger`].
 //!
-//! [`simulate_contact`] runs one contact on one grid; [`simulate_contact_converged`] refines grid and step together
-//! until the surface temperature trajectory no longer changes by more than a tolerance.
+//! Error-controlled adaptive stepping ([`FvModel::step_with_error`], [`FvModel::advance_adaptive`], the default of
+//! [`simulate_contact`] through [`FvConfig::tolerance_c`]): every TR-BDF2 step is held to the Hosea & Shampine
+//! (1996) embedded estimate of its local error, filtered by the step's own matrix; rows between steps come from the
+//! step's cubic Hermite interpolant; step lengths are quantised so that equal steps are equal in bits and reuse
+//! the cached elimination (see `adaptive.rs`).
+//!
+//! [`simulate_contact`] runs one contact on one grid; [`simulate_contact_converged`] refines the grid (and the fixed
+//! step, if fixed) until the surface temperature trajectory no longer changes by more than a tolerance, skipping
+//! levels that cannot converge.
 
 mod adaptive;
 mod chain;
@@ -189,7 +196,9 @@ impl Default for FvConfig {
 
 impl FvConfig {
     /// The configuration refined `levels` times: each level halves the cell-width rule everywhere (surface width,
-    /// growth excess g − 1 and maximum width, so about twice the cells) and halves the largest time step.
+    /// growth excess g − 1 and maximum width, so about twice the cells) and halves the largest fixed time step
+    /// (`max_step_s`). The adaptive tolerance (`tolerance_c`) is kept: it bounds the time error, which does not
+    /// depend on the grid.
     pub fn refined(&self, levels: u32) -> FvConfig {
         let factor = 0.5f64.powi(levels as i32);
         FvConfig {

@@ -356,7 +356,13 @@ pub fn simulate_contact_converged(
         }
         let ahead = levels_ahead(change, last_change, refinement.tolerance_c);
         let next = (level + ahead).min(refinement.max_refinements);
-        previous = if next == level + 1 { run } else { run_at(next - 1)? };
+        // At most two runs are held at once (what `SimulationSpec::result_bytes` budgets for).
+        if next == level + 1 {
+            previous = run;
+        } else {
+            drop(run);
+            previous = run_at(next - 1)?;
+        }
         last_change = if next == level + 1 { Some(change) } else { None };
         level = next;
     }
