@@ -161,6 +161,8 @@ pub(crate) struct Work {
     pivot0: (f64, f64),
     /// The matrix the cached elimination belongs to: κ, θh, side conductance, contact flag (as bits).
     key: Option<[u64; 4]>,
+    /// Number of eliminations made (cache misses), for diagnostics.
+    pub eliminations: usize,
     /// The next state, swapped with the model's state after a step.
     pub next_skin: Vec<f64>,
     pub next_object: Vec<f64>,
@@ -188,6 +190,7 @@ impl Work {
             stage_object: o(),
             pivot0: (0.0, 0.0),
             key: None,
+            eliminations: 0,
             next_skin: s(),
             next_object: o(),
             flux_start_skin: s(),
@@ -464,6 +467,7 @@ impl<'a> Bodies<'a> {
         };
         work.pivot0 = (skin_pivot, object_pivot);
         work.key = Some(key);
+        work.eliminations += 1;
     }
 
     /// Solves with the eliminated matrix; overwrites the rhs buffers.

@@ -471,6 +471,13 @@ impl FvModel {
         probe.plate.get_mut().forget_offset();
     }
 
+    /// Number of eliminations (factorisations) of the step matrix since the model was built: a step whose length,
+    /// scheme stage and environment equal the previous one's, bit for bit, reuses the cached elimination and adds
+    /// none. A diagnostic of step-length hygiene (see [`FvConfig::tolerance_c`](super::FvConfig::tolerance_c)).
+    pub fn factorisations(&self) -> usize {
+        self.work.borrow().eliminations
+    }
+
     /// Number of skin layers.
     pub(super) fn layer_count(&self) -> usize {
         self.layer_count

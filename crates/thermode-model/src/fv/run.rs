@@ -126,6 +126,8 @@ pub struct ContactRun {
     pub step_s: f64,
     /// Internal steps taken and rejected (none rejected with fixed steps).
     pub steps: StepCounts,
+    /// Eliminations (factorisations) of the step matrix during the contact ([`FvModel::factorisations`]).
+    pub factorisations: usize,
 }
 
 impl ContactRun {
@@ -192,13 +194,16 @@ pub fn simulate_contact(
         object_cells: model.object_cells(),
         step_s: 0.0,
         steps: StepCounts::default(),
+        factorisations: 0,
     };
     run.record(&model, 0.0, spec.object_c);
     model.touch(spec.object_c)?;
+    let before = model.factorisations();
     match config.tolerance_c {
         Some(tolerance_c) => run_adaptive(&mut model, spec, tolerance_c, &mut run),
         None => run_fixed(&mut model, spec, config.max_step_s, &mut run),
     }
+    run.factorisations = model.factorisations() - before;
     Ok(run)
 }
 
