@@ -40,8 +40,8 @@ pub struct ContactSpec {
     pub initial: InitialState,
     /// Contact duration \[s\]. Default 10.
     pub duration_s: f64,
-    /// Interval between output rows \[s\]. Default 0.01. Internal steps are no longer than
-    /// [`FvConfig::max_step_s`].
+    /// Interval between output rows \[s\]. Default 0.01. With fixed steps every interval is split into equal
+    /// steps no longer than [`FvConfig::max_step_s`]; adaptive steps ignore it (rows are interpolated).
     pub output_dt_s: f64,
 }
 
@@ -283,8 +283,8 @@ pub struct Refinement {
     /// Largest change of the surface temperature trajectory between two successive refinements that counts as
     /// converged \[°C\]. Default 0.005.
     pub tolerance_c: f64,
-    /// Most refinements after the first run (each doubles the cells and halves the step, so costs about four times
-    /// the previous run). Default 5.
+    /// Most refinements after the first run (each doubles the cells, so with adaptive steps costs about twice the
+    /// previous run; with fixed steps it also halves the step, about four times). Default 5.
     pub max_refinements: u32,
 }
 
