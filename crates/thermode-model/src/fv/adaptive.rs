@@ -16,6 +16,10 @@ use crate::params::Rule;
 const FIRST_STEP_S: f64 = 1.0 / 1_048_576.0;
 /// The longest step \[s\]: keeps the interpolated rows between steps within the error the steps are held to.
 pub(super) const MAX_STEP_S: f64 = 2.0;
+/// The shortest step the controller may propose after a rejection \[s\]: a tolerance that needs shorter steps is
+/// refused as unreachable (stepping stops with an error). Far below any physical time scale of skin and objects
+/// (the most diffusive object in range, 0.1 mm cells at 25 m²/s, needs about 1e-12 s at the touch).
+const MIN_STEP_S: f64 = 1e-16;
 /// Safety factor of the step-size controller.
 const SAFETY: f64 = 0.9;
 /// Largest growth and shrink of the step from one attempt to the next.
@@ -81,7 +85,7 @@ pub(super) fn integrate(
     tolerance_c: f64,
     row_times_s: &mut dyn Iterator<Item = f64>,
     row: &mut dyn FnMut(&FvModel, RowAt),
-) -> (StepCounts, f64) {
+) -> Result<(StepCounts, f64), ParamError> {
     let mut largest_step_s = 0.0f64;
     let mut counts = StepCounts::default();
     let mut time_s = start_s;
@@ -92,12 +96,16 @@ pub(super) fn integrate(
         let step_s = if time_s + h >= end_s { end_s - time_s } else { h };
         let error_c = model.step_with_error(step_s, env, tolerance_c);
         if !error_c.is_finite() {
-            // A non-finite state cannot become finite by shortening the step: stop rather than loop forever.
-            break;
+            // A non-finite state cannot become finite by shortening the step: stop with an error.
+            return Err(stalled(time_s, step_s, error_c, tolerance_c));
         }
         if error_c > tolerance_c {
             counts.rejected += 1;
             h = next_step(step_s, error_c, tolerance_c, MAX_STEP_S);
+            if h < MIN_STEP_S {
+                // A tolerance that needs steps below the floor cannot be met: stop rather than loop on.
+                return Err(stalled(time_s, step_s, error_c, tolerance_c));
+            }
             continue;
         }
         counts.accepted += 1;
@@ -121,7 +129,18 @@ pub(super) fn integrate(
         time_s = done_s;
         h = next_step(step_s, error_c, tolerance_c, MAX_STEP_S);
     }
-    (counts, largest_step_s)
+    Ok((counts, largest_step_s))
+}
+
+/// The error of an adaptive run that cannot go on at `time_s` \[s\].
+fn stalled(time_s: f64, step_s: f64, error_c: f64, tolerance_c: f64) -> ParamError {
+    ParamError::Invalid {
+        origin: ORIGIN.to_string(),
+        message: format!(
+            "adaptive stepping stalled at t = {time_s} s: a step of {step_s} s has a local error estimate of \
+             {error_c} K against the tolerance {tolerance_c} K (non-finite state, or a tolerance too tight)"
+        ),
+    }
 }
 
 impl FvModel {
@@ -132,8 +151,9 @@ impl FvModel {
     /// observable of `state` ([`FvModel::surface_c`], [`FvModel::skin_temperature_at_depth_c`], …). The model
     /// ends exactly `duration_s` later, its energy ledger advanced by every step. Allocates one copy of the model
     /// (the interpolation probe); stepping itself does not allocate. Errors if `env`, `duration_s` (positive,
-    /// finite, at most [`crate::limits::DURATION`]) or `tolerance_c` (positive, finite) are invalid; a state that
-    /// becomes non-finite stops the stepping early (and shows as non-finite values).
+    /// finite, at most [`crate::limits::DURATION`]) or `tolerance_c` (positive, finite) are invalid, or if stepping
+    /// stalls (a non-finite state, or a tolerance that needs steps below 1e-16 s): the model is then left where
+    /// it stopped.
     pub fn advance_adaptive(
         &mut self,
         env: FvEnvironment,
@@ -162,7 +182,7 @@ impl FvModel {
             model.interpolate_last_step(at.theta, at.step_s, &mut probe);
             row(&probe, at.time_s);
         };
-        let (counts, _) = integrate(self, env, (0.0, duration_s), tolerance_c, &mut times, &mut at_row);
+        let (counts, _) = integrate(self, env, (0.0, duration_s), tolerance_c, &mut times, &mut at_row)?;
         Ok(counts)
     }
 }

@@ -200,7 +200,7 @@ pub fn simulate_contact(
     model.touch(spec.object_c)?;
     let before = model.factorisations();
     match config.tolerance_c {
-        Some(tolerance_c) => run_adaptive(&mut model, spec, tolerance_c, &mut run),
+        Some(tolerance_c) => run_adaptive(&mut model, spec, tolerance_c, &mut run)?,
         None => run_fixed(&mut model, spec, config.max_step_s, &mut run),
     }
     run.factorisations = model.factorisations() - before;
@@ -253,7 +253,12 @@ fn interval_length_s(spec: &ContactSpec, k: usize, intervals: usize, previous_s:
 /// Adaptive steps ([`super::adaptive`]), rows interpolated between them. Every recorded quantity is linear in the
 /// state, so the rows interpolate the quantities themselves (cubic Hermite from their values and rates at both ends
 /// of the step, [`FvModel::last_step_ends`], gathered once per step): O(layers) per row, O(cells) per step.
-fn run_adaptive(model: &mut FvModel, spec: &ContactSpec, tolerance_c: f64, run: &mut ContactRun) {
+fn run_adaptive(
+    model: &mut FvModel,
+    spec: &ContactSpec,
+    tolerance_c: f64,
+    run: &mut ContactRun,
+) -> Result<(), ParamError> {
     let intervals = spec.intervals();
     let mut times = (1..=intervals).map(|k| row_time_s(spec, k, intervals));
     let mut ends = StepEnds::new(model.layer_count());
@@ -272,9 +277,10 @@ fn run_adaptive(model: &mut FvModel, spec: &ContactSpec, tolerance_c: f64, run: 
         tolerance_c,
         &mut times,
         &mut record,
-    );
+    )?;
     run.steps = counts;
     run.step_s = largest_s;
+    Ok(())
 }
 
 /// When [`simulate_contact_converged`] stops refining.

@@ -328,3 +328,28 @@ fn contact_rows_equal_the_interpolated_state_of_advance_adaptive() {
     // The model ends exactly at the duration, as the run's last row.
     assert!((model.surface_c() - run.surface_c[run.surface_c.len() - 1]).abs() <= 1e-10);
 }
+
+#[test]
+fn an_unreachable_tolerance_is_an_error_not_a_hang() {
+    let config = FvConfig {
+        tolerance_c: Some(1e-300),
+        ..FvConfig::default()
+    };
+    let spec = ContactSpec {
+        duration_s: 1.0,
+        ..ContactSpec::default()
+    };
+    let stone = materials::find("stone").unwrap();
+    let err = simulate_contact(&Skin::fingertip(), &stone, &config, &spec).unwrap_err();
+    assert!(err.to_string().contains("stalled"), "{err}");
+    let mut model = FvModel::new(&Skin::fingertip(), Some(&stone), &FvConfig::default()).unwrap();
+    model.touch(23.0).unwrap();
+    let err = model
+        .advance_adaptive(FvEnvironment::Object, 1.0, 1e-300, [0.5], |_, _| {})
+        .unwrap_err();
+    assert!(err.to_string().contains("stalled"), "{err}");
+    let bad = model.advance_adaptive(FvEnvironment::Object, f64::NAN, 1e-5, [0.5], |_, _| {});
+    assert!(bad.is_err(), "NaN duration accepted");
+    let bad = model.advance_adaptive(FvEnvironment::Object, 1.0, -1.0, [0.5], |_, _| {});
+    assert!(bad.is_err(), "negative tolerance accepted");
+}
