@@ -28,9 +28,13 @@ import sys
 import tempfile
 import time
 
-import numpy as np
-import scipy.sparse as sp
-from scipy.integrate import solve_ivp
+try:
+    import numpy as np
+    import scipy.sparse as sp
+    import scipy.sparse.linalg  # noqa: F401  (sp.linalg.spsolve)
+    from scipy.integrate import solve_ivp
+except ImportError as missing:
+    sys.exit(f"fv_scipy: needs numpy and scipy ({missing}); e.g. python3 -m pip install numpy scipy")
 
 AGREE_C = 1e-6
 DURATION_S = 90.0
