@@ -153,6 +153,9 @@ const E2: f64 = 2.0 * D / 3.0;
 pub(crate) struct Work {
     inv_skin: Vec<f64>,
     inv_object: Vec<f64>,
+    /// Elimination multipliers θh·g_i / pivot_{i+1} (one fewer than cells): one multiply-add per cell and sweep.
+    mult_skin: Vec<f64>,
+    mult_object: Vec<f64>,
     rhs_skin: Vec<f64>,
     rhs_object: Vec<f64>,
     stage_skin: Vec<f64>,
@@ -184,6 +187,8 @@ impl Work {
         Work {
             inv_skin: s(),
             inv_object: o(),
+            mult_skin: s(),
+            mult_object: o(),
             rhs_skin: s(),
             rhs_object: o(),
             stage_skin: s(),
@@ -460,9 +465,15 @@ impl<'a> Bodies<'a> {
         if work.key == Some(key) {
             return;
         }
-        let skin_pivot = eliminate(self.skin, kappa, theta_h, self.side.g(), &mut work.inv_skin);
+        let skin_pivot = eliminate(
+            self.skin,
+            kappa,
+            theta_h,
+            self.side.g(),
+            (&mut work.inv_skin, &mut work.mult_skin),
+        );
         let object_pivot = match self.coupled() {
-            Some((o, g)) => eliminate(o, kappa, theta_h, g, &mut work.inv_object),
+            Some((o, g)) => eliminate(o, kappa, theta_h, g, (&mut work.inv_object, &mut work.mult_object)),
             None => 0.0,
         };
         work.pivot0 = (skin_pivot, object_pivot);
@@ -472,28 +483,33 @@ impl<'a> Bodies<'a> {
 
     /// Solves with the eliminated matrix; overwrites the rhs buffers.
     fn solve(&self, work: &mut Work, theta_h: f64, to_skin: &mut [f64], to_object: &mut [f64]) {
-        forward(self.skin, theta_h, &work.inv_skin, &mut work.rhs_skin);
+        forward(&work.mult_skin, &mut work.rhs_skin);
         let skin0 = match self.coupled() {
-            Some((o, g)) => {
-                forward(o, theta_h, &work.inv_object, &mut work.rhs_object);
+            Some((_, g)) => {
+                forward(&work.mult_object, &mut work.rhs_object);
                 let (ps, po) = work.pivot0;
                 let c = theta_h * g;
                 let (rs, ro) = (work.rhs_skin[0], work.rhs_object[0]);
                 let det = ps * po - c * c;
                 let object0 = (ro * ps + c * rs) / det;
-                backward(o, theta_h, &work.inv_object, &work.rhs_object, object0, to_object);
+                backward(
+                    (&work.inv_object, &work.mult_object),
+                    &work.rhs_object,
+                    object0,
+                    to_object,
+                );
                 (rs * po + c * ro) / det
             }
             None => work.rhs_skin[0] * work.inv_skin[0],
         };
-        backward(self.skin, theta_h, &work.inv_skin, &work.rhs_skin, skin0, to_skin);
+        backward((&work.inv_skin, &work.mult_skin), &work.rhs_skin, skin0, to_skin);
     }
 }
 
 /// Thomas elimination from the far end towards cell 0 of the matrix with diagonal
-/// κC_i + θh(g_{i−1} + g_i + p_i [+ g_end] [+ g_side]) and off-diagonal −θh g_i. Stores inverse pivots; returns
-/// the pivot of cell 0.
-fn eliminate(arm: &Arm, kappa: f64, theta_h: f64, side_g: f64, inv_pivot: &mut [f64]) -> f64 {
+/// κC_i + θh(g_{i−1} + g_i + p_i [+ g_end] [+ g_side]) and off-diagonal −θh g_i. Stores inverse pivots and the
+/// multipliers θh·g_i/pivot_{i+1}; returns the pivot of cell 0.
+fn eliminate(arm: &Arm, kappa: f64, theta_h: f64, side_g: f64, (inv_pivot, mult): (&mut [f64], &mut [f64])) -> f64 {
     let n = arm.len();
     let mut pivot = 0.0;
     for i in (0..n).rev() {
@@ -502,7 +518,8 @@ fn eliminate(arm: &Arm, kappa: f64, theta_h: f64, side_g: f64, inv_pivot: &mut [
         let diag = kappa * arm.capacity[i] + theta_h * (inward + outward + arm.perfusion[i]);
         pivot = if i + 1 < n {
             let c = theta_h * arm.link[i];
-            diag - c * c * inv_pivot[i + 1]
+            mult[i] = c * inv_pivot[i + 1];
+            diag - c * mult[i]
         } else {
             diag
         };
@@ -511,18 +528,18 @@ fn eliminate(arm: &Arm, kappa: f64, theta_h: f64, side_g: f64, inv_pivot: &mut [
     pivot
 }
 
-/// Forward sweep of the right-hand side (far end → cell 0), in place.
-fn forward(arm: &Arm, theta_h: f64, inv_pivot: &[f64], rhs: &mut [f64]) {
-    for i in (0..arm.len() - 1).rev() {
-        rhs[i] += theta_h * arm.link[i] * rhs[i + 1] * inv_pivot[i + 1];
+/// Forward sweep of the right-hand side (far end → cell 0), in place: one multiply-add per cell.
+fn forward(mult: &[f64], rhs: &mut [f64]) {
+    for i in (0..rhs.len() - 1).rev() {
+        rhs[i] += mult[i] * rhs[i + 1];
     }
 }
 
-/// Back substitution (cell 0 → far end) given the value of cell 0.
-fn backward(arm: &Arm, theta_h: f64, inv_pivot: &[f64], rhs: &[f64], first: f64, out: &mut [f64]) {
+/// Back substitution (cell 0 → far end) given the value of cell 0: T_{i+1} = r_{i+1}/pivot_{i+1} + m_i·T_i.
+fn backward((inv_pivot, mult): (&[f64], &[f64]), rhs: &[f64], first: f64, out: &mut [f64]) {
     out[0] = first;
-    for i in 0..arm.len() - 1 {
-        out[i + 1] = (rhs[i + 1] + theta_h * arm.link[i] * out[i]) * inv_pivot[i + 1];
+    for i in 0..out.len() - 1 {
+        out[i + 1] = rhs[i + 1] * inv_pivot[i + 1] + mult[i] * out[i];
     }
 }
 
