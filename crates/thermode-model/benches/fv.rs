@@ -1,11 +1,13 @@
 //! Criterion benchmarks of the finite-volume model: steps per second on the default grid with the fingertip in
 //! contact with aluminium (1 cm, R_c = 1e-3), for both schemes and for the display-inverse pair
-//! (`receptor_affine` + `step_on_plate`), and the time of one grid-converged 90 s contact simulation.
+//! (`receptor_affine` + `step_on_plate`), the time of one grid-converged 90 s contact simulation, and one 90 s
+//! contact (rows every 10 ms, adaptive steps at the default tolerance) on each grid level 0 to 4 — the workload
+//! `scripts/peer/fv_scipy.py` times against SciPy's BDF.
 #![allow(missing_docs)] // criterion_main! generates an undocumented `main`
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use thermode_model::fv::{
-    simulate_contact_converged, ContactSpec, FvConfig, FvEnvironment, FvModel, Refinement, TimeScheme,
+    simulate_contact, simulate_contact_converged, ContactSpec, FvConfig, FvEnvironment, FvModel, Refinement, TimeScheme,
 };
 use thermode_model::inverse::PlateCoupled;
 use thermode_model::materials;
@@ -66,5 +68,28 @@ fn converged_run(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, steps, converged_run);
+fn contact_by_level(c: &mut Criterion) {
+    let skin = Skin::fingertip();
+    let aluminium = materials::find("aluminium").expect("aluminium is in the library");
+    let spec = ContactSpec {
+        duration_s: 90.0,
+        output_dt_s: 0.01,
+        ..ContactSpec::default()
+    };
+    let mut group = c.benchmark_group("fv_contact_aluminium_90s");
+    group.sample_size(10);
+    for level in 0..=4 {
+        let config = FvConfig {
+            contact_resistance_m2k_w: 1e-3,
+            ..FvConfig::default()
+        }
+        .refined(level);
+        group.bench_function(format!("level_{level}"), |b| {
+            b.iter(|| simulate_contact(&skin, &aluminium, black_box(&config), &spec))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, steps, converged_run, contact_by_level);
 criterion_main!(benches);

@@ -113,7 +113,18 @@ pub struct SimulationSpec {
     pub contact_resistance_m2k_w: Option<f64>,
     /// Finger–display contact conductance G_d of the display inverse [W/(m²·K)]. Default 800.
     pub display_conductance_w_m2k: f64,
+    /// fv only: the grid, as refinements of the default grid ([`fv::FvConfig::refined`]), at most
+    /// [`MAX_FV_LEVEL`]; `None` (default) refines until converged ([`fv::simulate_contact_converged`]), `Some(L)`
+    /// runs level L alone, without a convergence check (for benchmarks and convergence studies).
+    pub fv_level: Option<u32>,
+    /// fv only: local error tolerance of the adaptive time steps \[K\] ([`fv::FvConfig::tolerance_c`]). Default
+    /// [`fv::DEFAULT_TOLERANCE_C`].
+    pub fv_tolerance_c: f64,
 }
+
+/// The finest fv grid level [`SimulationSpec::fv_level`] accepts (about 2 300 cells with the default fingertip and
+/// a 1 cm object).
+pub const MAX_FV_LEVEL: u32 = 6;
 
 impl SimulationSpec {
     /// The defaults above for `material`.
@@ -129,6 +140,8 @@ impl SimulationSpec {
             initial: Initial::Steady,
             contact_resistance_m2k_w: None,
             display_conductance_w_m2k: DEFAULT_DISPLAY_CONDUCTANCE_W_M2K,
+            fv_level: None,
+            fv_tolerance_c: fv::DEFAULT_TOLERANCE_C,
         }
     }
 
@@ -196,8 +209,29 @@ impl SimulationSpec {
                 ));
             }
         }
+        self.validate_fv_options()?;
         self.skin.validate(ORIGIN)?;
         self.material.validate(ORIGIN)
+    }
+
+    /// The fv grid level (at most [`MAX_FV_LEVEL`]) and tolerance (positive), and neither set for another model.
+    fn validate_fv_options(&self) -> Result<(), ParamError> {
+        Rule::Positive.check("fv_tolerance_c", self.fv_tolerance_c).at(ORIGIN)?;
+        if let Some(level) = self.fv_level {
+            Rule::AtMost {
+                max: f64::from(MAX_FV_LEVEL),
+                what: "the finest fv grid level",
+            }
+            .check("fv_level", f64::from(level))
+            .at(ORIGIN)?;
+        }
+        let default_tolerance = self.fv_tolerance_c == fv::DEFAULT_TOLERANCE_C;
+        if self.model != ModelKind::Fv && (self.fv_level.is_some() || !default_tolerance) {
+            return Err(invalid(
+                "the fv grid level and tolerance apply to the fv model only; use --model fv".into(),
+            ));
+        }
+        Ok(())
     }
 
     /// Number of output rows: one per output time (see [`Trace::time_s`]). Meaningful for a spec whose duration
@@ -399,6 +433,7 @@ fn fv_resting_finger(spec: &SimulationSpec, config: &FvConfig) -> Result<FvModel
 fn simulate_fv(spec: &SimulationSpec) -> Result<Trace, ParamError> {
     let base = FvConfig {
         contact_resistance_m2k_w: spec.contact_resistance(),
+        tolerance_c: Some(spec.fv_tolerance_c),
         ..FvConfig::default()
     };
     let contact = fv::ContactSpec {
@@ -408,8 +443,12 @@ fn simulate_fv(spec: &SimulationSpec) -> Result<Trace, ParamError> {
         duration_s: spec.duration_s,
         output_dt_s: spec.dt_s,
     };
-    let (run, resolution) =
-        fv::simulate_contact_converged(&spec.skin, &spec.material, &base, &contact, &fv::Refinement::default())?;
+    let (run, resolution) = match spec.fv_level {
+        None => {
+            fv::simulate_contact_converged(&spec.skin, &spec.material, &base, &contact, &fv::Refinement::default())?
+        }
+        Some(level) => fv_at_level(spec, &base, &contact, level)?,
+    };
     let config = base.refined(resolution.refinements);
     let mut display = DisplayInverse::new(fv_resting_finger(spec, &config)?, spec.display_conductance_w_m2k)?;
     let mut setpoint = Vec::with_capacity(run.time_s.len());
@@ -417,7 +456,14 @@ fn simulate_fv(spec: &SimulationSpec) -> Result<Trace, ParamError> {
     setpoint.push(resting_display_c(run.surface_c[0], run.heat_flux_w_m2[0], spec));
     display_finger.push(display.receptor_c());
     for (k, pair) in run.time_s.windows(2).enumerate() {
-        let h = pair[1] - pair[0];
+        // The output interval itself, bit for bit, unless it is a shorter last one: equal steps keep the display
+        // inverse's cached plate sensitivity (a difference of output times varies in the last bit).
+        let difference = pair[1] - pair[0];
+        let h = if (difference - spec.dt_s).abs() <= 1e-9 * spec.dt_s {
+            spec.dt_s
+        } else {
+            difference
+        };
         let setpoint_c = display.setpoint_c(run.surface_c[k + 1], h);
         display.advance(h, setpoint_c);
         setpoint.push(setpoint_c);
@@ -433,20 +479,48 @@ fn simulate_fv(spec: &SimulationSpec) -> Result<Trace, ParamError> {
     columns.push(("display_setpoint_c".into(), setpoint));
     columns.push(("display_finger_c".into(), display_finger));
     let resolution = format!(
-        "fv, {} skin + {} object cells, first cell {:.1} µm, step {:.4} ms, {} refinements, last change {:.4} °C{}",
+        "fv, {} skin + {} object cells, first cell {:.1} µm, {} adaptive steps (longest {:.4} ms), {} refinements, \
+         last change {:.4} °C{}",
         resolution.skin_cells,
         resolution.object_cells,
         resolution.surface_cell_m * 1e6,
+        run.steps.accepted,
         resolution.step_s * 1e3,
         resolution.refinements,
         resolution.max_change_c,
-        if resolution.converged { "" } else { " (NOT converged)" }
+        match (spec.fv_level, resolution.converged) {
+            (Some(_), _) => " (fixed grid level: convergence not checked)",
+            (None, true) => "",
+            (None, false) => " (NOT converged)",
+        }
     );
     Ok(Trace {
         time_s: run.time_s,
         columns,
         resolution,
     })
+}
+
+/// One fv run on the default grid refined `level` times, with its resolution (no convergence check: the change
+/// is reported as NaN and `converged` as false).
+fn fv_at_level(
+    spec: &SimulationSpec,
+    base: &FvConfig,
+    contact: &fv::ContactSpec,
+    level: u32,
+) -> Result<(fv::ContactRun, fv::Resolution), ParamError> {
+    let config = base.refined(level);
+    let run = fv::simulate_contact(&spec.skin, &spec.material, &config, contact)?;
+    let resolution = fv::Resolution {
+        refinements: level,
+        skin_cells: run.skin_cells,
+        object_cells: run.object_cells,
+        surface_cell_m: config.surface_cell_m,
+        step_s: run.step_s,
+        max_change_c: f64::NAN,
+        converged: false,
+    };
+    Ok((run, resolution))
 }
 
 fn simulate_semi_infinite(spec: &SimulationSpec) -> Result<Trace, ParamError> {
@@ -576,6 +650,36 @@ mod tests {
         s.dt_s = 2.0;
         s.duration_s = 1.0;
         assert!(simulate(&s).is_err());
+    }
+
+    #[test]
+    fn fv_grid_level_and_tolerance_are_checked_and_used() {
+        let refused = |change: &dyn Fn(&mut SimulationSpec), model: ModelKind, what: &str| {
+            let mut s = spec(model, "wood");
+            s.duration_s = 1.0;
+            change(&mut s);
+            let err = simulate(&s).err().map(|e| e.to_string());
+            assert!(err.as_deref().is_some_and(|e| e.contains(what)), "{what}: {err:?}");
+        };
+        refused(&|s| s.fv_level = Some(MAX_FV_LEVEL + 1), ModelKind::Fv, "fv_level");
+        refused(&|s| s.fv_tolerance_c = 0.0, ModelKind::Fv, "fv_tolerance_c");
+        refused(&|s| s.fv_tolerance_c = f64::NAN, ModelKind::Fv, "fv_tolerance_c");
+        refused(&|s| s.fv_level = Some(1), ModelKind::Kron, "fv model only");
+        refused(&|s| s.fv_tolerance_c = 1e-4, ModelKind::SemiInfinite, "fv model only");
+        // A fixed level runs that level: its cell count is the level's, whatever convergence would pick.
+        let mut s = spec(ModelKind::Fv, "wood");
+        s.duration_s = 1.0;
+        s.fv_level = Some(0);
+        let coarse = simulate(&s).unwrap();
+        s.fv_level = Some(2);
+        let fine = simulate(&s).unwrap();
+        assert!(
+            coarse.resolution.contains("31 skin + 41 object"),
+            "{}",
+            coarse.resolution
+        );
+        assert!(fine.resolution.contains("2 refinements"), "{}", fine.resolution);
+        assert!(fine.resolution.contains("not checked"), "{}", fine.resolution);
     }
 
     #[test]

@@ -6,6 +6,7 @@
 //!   to the actuator limit).
 //! - [`tune`]: the PID tuner behind `thermode tune` (Nelder–Mead in log-gain space, materials in parallel), composed
 //!   of the pipeline's stages.
+//! - [`truth`]: the ground truth of a render, converged in grid and time.
 //! - [`figure`]: the paper's Figure 3 for the simulated system.
 //! - [`error`]: [`RenderError`], refused runs and settings.
 //!
@@ -17,6 +18,7 @@ pub mod figure;
 pub mod nelder_mead;
 pub mod run;
 pub mod summary;
+pub mod truth;
 pub mod tune;
 
 pub use error::RenderError;

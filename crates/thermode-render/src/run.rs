@@ -17,11 +17,14 @@
 //!   (default [`PLANT_SUBSTEP_S`]), the gated drive held. The plant's backward Euler is first order; 2 ms keeps its
 //!   error below half the sensor's 0.01 °C resolution (test `plant_substep_convergence` in
 //!   `tests/integration/run.rs`; figures in `docs/design-choices.md`).
-//! - Truth: the simulated finger touching the real material under the reference fv physics (light-touch contact
-//!   resistance [`LIGHT_TOUCH_RESISTANCE_M2K_W`]), stepped with the same steps as the renderer. With the default
-//!   finger and the fv renderer it is the renderer's target itself (the pipeline's calibration at the touch,
-//!   [`PipelineConfig::calibrate_finger_at_touch`], leaves a finger that matches the model as it is; a different
-//!   finger gets a target computed for it, while the truth is that finger's own contact).
+//! - Truth: the simulated finger touching the real material under the reference fv physics, converged in grid and
+//!   time to 0.005 °C at every row, its contact resistance 1/G with G the simulated finger's contact conductance
+//!   (see [`crate::truth`]). The renderer's target is the same physics on the renderer's coarse grid, one step per
+//!   tick, with the light-touch resistance [`LIGHT_TOUCH_RESISTANCE_M2K_W`]: with the default finger and display
+//!   they differ only by the renderer's discretisation (a few hundredths of a °C at the first rows after a touch;
+//!   the pipeline's calibration at the touch, [`PipelineConfig::calibrate_finger_at_touch`], leaves a finger that
+//!   matches the model as it is; a different finger gets a target computed for it, while the truth is that
+//!   finger's own contact).
 //! - Receptor depth: the target is the renderer's receptor — the skin surface for the fv renderer, the epidermis
 //!   centre T1 (depth Δx₁/2) for the kron renderer — so the simulated finger on the display (`skin_c`) and the
 //!   truth (`truth_skin_c`) are read at that same depth ([`RenderSpec::receptor_depth_m`]): at the surface for fv
@@ -51,6 +54,7 @@ use thermode_model::Rule;
 
 use crate::error::RenderError;
 use crate::summary::{actuator_limit, summarise, Summary};
+use crate::truth::truth_skin_c;
 use thermode_pipeline::pipeline::{ChannelPipeline, PipelineConfig, Telemetry};
 use thermode_pipeline::renderer::{fv_config, Renderer, RendererKind, LIGHT_TOUCH_RESISTANCE_M2K_W};
 use thermode_pipeline::stimulus::Stimulus;
@@ -386,8 +390,9 @@ pub fn resting_plant(spec: &RenderSpec) -> Result<Plant, RenderError> {
     Ok(plant)
 }
 
-/// The ground truth of `spec`: the simulated finger with the real material under the reference physics, at rest
-/// in air (an fv renderer of the finger's skin with the light-touch contact resistance).
+/// A live fv renderer of the simulated finger's skin with the light-touch contact resistance on the default grid,
+/// at rest in air: the ground truth before it was converged (stepped once per tick on the coarse grid, 0.02–0.09 °C
+/// off at the first rows after a touch). Runs now use [`truth_skin_c`].
 pub fn truth_renderer(spec: &RenderSpec) -> Result<Renderer, RenderError> {
     let grid = fv_config(LIGHT_TOUCH_RESISTANCE_M2K_W);
     Ok(Renderer::new(
@@ -442,7 +447,7 @@ pub fn render_all(specs: &[RenderSpec]) -> Result<Vec<RenderRun>, RenderError> {
 pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<RenderRun, RenderError> {
     spec.validate()?;
     let mut plant = resting_plant(spec)?;
-    let mut truth = truth_renderer(spec)?;
+    let (truth, _) = truth_skin_c(spec)?;
     let (pre, contact_ticks, release) = spec.tick_counts();
     let dt = spec.tick_s();
     let depth_m = spec.receptor_depth_m();
@@ -453,10 +458,9 @@ pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<R
         material: spec.material.clone(),
         object_c: spec.object_temperature_c(),
     };
-    for k in 0..pre + contact_ticks {
+    for (k, &truth_c) in truth.iter().enumerate().take(pre + contact_ticks) {
         if k == pre {
             pipeline.set_stimulus(touch.clone())?;
-            truth.touch(&spec.material, spec.object_temperature_c())?;
             at_contact = Some(ContactState {
                 target_c: pipeline.renderer().receptor_c(),
                 skin_c: finger_at_depth_c(plant.channel(0)?, depth_m),
@@ -465,12 +469,9 @@ pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<R
         }
         if release.is_some_and(|r| k == pre + r) {
             pipeline.set_stimulus(Stimulus::Air)?;
-            truth.release();
         }
         let telemetry = tick(&mut pipeline, &mut plant, start_s + k as f64 * dt, dt, spec.substeps())?;
-        truth.step(dt);
         let time_s = (k + 1) as f64 * dt - pre as f64 * dt;
-        let truth_c = truth_at_depth_c(&truth, depth_m);
         trajectory.record(time_s, truth_c, &telemetry, &plant, depth_m);
     }
     let contact = at_contact.ok_or_else(|| RenderError::Invalid("the run never reached the touch".into()))?;
@@ -500,16 +501,6 @@ pub fn finger_at_depth_c(channel: &SimulatedChannel<FvModel>, depth_m: f64) -> f
         channel.state().receptor_c
     } else {
         channel.finger().temperature_at_depth_c(depth_m)
-    }
-}
-
-/// The truth at `depth_m` \[m\] below the skin surface \[°C\]: its receptor (the surface) at depth 0, otherwise
-/// [`Renderer::skin_temperature_at_depth_c`].
-fn truth_at_depth_c(truth: &Renderer, depth_m: f64) -> f64 {
-    if depth_m == 0.0 {
-        truth.receptor_c()
-    } else {
-        truth.skin_temperature_at_depth_c(depth_m)
     }
 }
 

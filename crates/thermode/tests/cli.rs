@@ -239,6 +239,35 @@ fn bad_input_gets_a_clear_message_and_exit_code_2() {
 }
 
 #[test]
+fn simulate_fv_level_runs_one_grid_and_bad_levels_or_tolerances_are_refused() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let csv = dir.path().join("fv.csv");
+    let out = csv.to_str().expect("path");
+    let base = ["simulate", "--model", "fv", "--material", "wood", "--duration", "2"];
+    fn with<'a>(base: &[&'a str], extra: &[&'a str]) -> Vec<&'a str> {
+        base.iter().chain(extra).copied().collect()
+    }
+    let run = thermode(&with(
+        &base,
+        &["--fv-level", "1", "--fv-tolerance", "1e-4", "--out", out],
+    ));
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("62 skin + 81 object cells") && stderr.contains("convergence not checked"),
+        "level 1 of the default grid: {stderr}"
+    );
+    let (header, rows) = read_csv(&csv);
+    assert_eq!(rows.len(), 201, "rows every 10 ms over 2 s");
+    let surface = column(&header, &rows, "skin_surface_c");
+    assert!(surface.iter().all(|c| (20.0..37.0).contains(c)), "{surface:?}");
+    expect_error(&with(&base, &["--fv-level", "7"]), "fv_level");
+    expect_error(&with(&base, &["--fv-tolerance", "0"]), "fv_tolerance_c");
+    expect_error(&with(&base, &["--fv-tolerance", "nan"]), "fv_tolerance_c");
+    expect_error(&["simulate", "--material", "wood", "--fv-level", "2"], "--model fv");
+}
+
+#[test]
 fn unphysical_input_is_refused_with_its_range_and_writes_nothing() {
     let dir = tempfile::tempdir().expect("tempdir");
     let csv = dir.path().join("out.csv");
@@ -438,11 +467,12 @@ fn render_summary_json_reports_the_judged_metrics_and_the_csv_has_the_documented
         time[0] < 0.0 && time.contains(&0.0),
         "time_s must be negative before contact and 0 at contact"
     );
-    // Default finger and fv renderer: truth and target coincide.
+    // Default finger and fv renderer: the truth (converged fv) and the target (the renderer's coarse fv, one step
+    // per tick) are the same physics and differ only by the renderer's discretisation, a few hundredths of a °C.
     let truth = column(&header, &rows, "truth_skin_c");
     let target = column(&header, &rows, "target_skin_c");
     for (row, (a, b)) in truth.iter().zip(&target).enumerate() {
-        assert!((a - b).abs() < 1e-9, "row {row}: truth {a}, target {b}");
+        assert!((a - b).abs() < 0.15, "row {row}: truth {a}, target {b}");
     }
     expect_error(&["render", "--material", "unobtainium"], "unknown material");
 }

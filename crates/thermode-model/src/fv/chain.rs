@@ -139,12 +139,23 @@ const D: f64 = GAMMA / 2.0;
 /// BDF2 stage: T₁ = A·T_γ − B·T₀ + d·h·F(T₁).
 const A: f64 = 1.0 / (GAMMA * (2.0 - GAMMA));
 const B: f64 = (1.0 - GAMMA) * (1.0 - GAMMA) / (GAMMA * (2.0 - GAMMA));
+/// Weight w = √2/4 of the first two stages in TR-BDF2 written as a Runge–Kutta method (b = (w, w, d)).
+const W: f64 = std::f64::consts::SQRT_2 / 4.0;
+/// Hosea & Shampine (1996) embedded error estimate: `h·Σ (b − b̂)_i F_i` with the third-order companion
+/// b̂ = ((1 − w)/3, (3w + 1)/3, d/3), so the coefficients of F(T₀), F(T_γ) and F(T₁) are these three (they sum to
+/// zero, so constant sources cancel).
+const E0: f64 = (4.0 * W - 1.0) / 3.0;
+const E1: f64 = -1.0 / 3.0;
+const E2: f64 = 2.0 * D / 3.0;
 
 /// Pre-allocated buffers and the cached elimination.
 #[derive(Debug, Clone)]
 pub(crate) struct Work {
     inv_skin: Vec<f64>,
     inv_object: Vec<f64>,
+    /// Elimination multipliers θh·g_i / pivot_{i+1} (one fewer than cells): one multiply-add per cell and sweep.
+    mult_skin: Vec<f64>,
+    mult_object: Vec<f64>,
     rhs_skin: Vec<f64>,
     rhs_object: Vec<f64>,
     stage_skin: Vec<f64>,
@@ -153,9 +164,20 @@ pub(crate) struct Work {
     pivot0: (f64, f64),
     /// The matrix the cached elimination belongs to: κ, θh, side conductance, contact flag (as bits).
     key: Option<[u64; 4]>,
+    /// Number of eliminations made (cache misses), for diagnostics.
+    pub eliminations: usize,
     /// The next state, swapped with the model's state after a step.
     pub next_skin: Vec<f64>,
     pub next_object: Vec<f64>,
+    /// Net heat into every cell at the start and at the end of the last step with an error estimate [W/m²] (for
+    /// the Hermite dense output of adaptive stepping).
+    pub flux_start_skin: Vec<f64>,
+    pub flux_start_object: Vec<f64>,
+    pub flux_end_skin: Vec<f64>,
+    pub flux_end_object: Vec<f64>,
+    /// The filtered local error estimate of the last such step \[K\].
+    err_skin: Vec<f64>,
+    err_object: Vec<f64>,
 }
 
 impl Work {
@@ -165,14 +187,23 @@ impl Work {
         Work {
             inv_skin: s(),
             inv_object: o(),
+            mult_skin: s(),
+            mult_object: o(),
             rhs_skin: s(),
             rhs_object: o(),
             stage_skin: s(),
             stage_object: o(),
             pivot0: (0.0, 0.0),
             key: None,
+            eliminations: 0,
             next_skin: s(),
             next_object: o(),
+            flux_start_skin: s(),
+            flux_start_object: o(),
+            flux_end_skin: s(),
+            flux_end_object: o(),
+            err_skin: s(),
+            err_object: o(),
         }
     }
 
@@ -311,6 +342,69 @@ impl<'a> Bodies<'a> {
         flows
     }
 
+    /// The Hosea–Shampine local error estimate of the TR-BDF2 step of `h` \[s\] just made by [`Self::advance`] from
+    /// (`skin`, `object`) to (`new_skin`, `new_object`) (its stage still in `work`): `(C − d h J)⁻¹ · h·(E0·F(T₀) +
+    /// E1·F(T_γ) + E2·F(T₁))`, filtered by the step's own matrix so that it stays bounded for stiff components
+    /// (Shampine's filter). Returns the largest magnitude over all cells \[K\]; also leaves F(T₀) and F(T₁) in
+    /// `work.flux_start_*` and `work.flux_end_*` for dense output. Uses the cached elimination of the step.
+    pub fn tr_bdf2_error(
+        &self,
+        h: f64,
+        (skin, object): (&[f64], &[f64]),
+        (new_skin, new_object): (&[f64], &[f64]),
+        work: &mut Work,
+    ) -> f64 {
+        let dh = D * h;
+        self.factor(1.0, dh, work);
+        let (mut fs0, mut fo0) = (
+            std::mem::take(&mut work.flux_start_skin),
+            std::mem::take(&mut work.flux_start_object),
+        );
+        let (mut fs1, mut fo1) = (
+            std::mem::take(&mut work.flux_end_skin),
+            std::mem::take(&mut work.flux_end_object),
+        );
+        self.net_flux(skin, object, &mut fs0, &mut fo0);
+        self.net_flux(new_skin, new_object, &mut fs1, &mut fo1);
+        let coupled = self.coupled().is_some();
+        for ((r, a), b) in work.rhs_skin.iter_mut().zip(&fs0).zip(&fs1) {
+            *r = h * (E0 * a + E2 * b);
+        }
+        if coupled {
+            for ((r, a), b) in work.rhs_object.iter_mut().zip(&fo0).zip(&fo1) {
+                *r = h * (E0 * a + E2 * b);
+            }
+        }
+        let (stage_skin, stage_object) = (
+            std::mem::take(&mut work.stage_skin),
+            std::mem::take(&mut work.stage_object),
+        );
+        self.add_net_flux(work, &stage_skin, &stage_object, h * E1);
+        let (mut err_skin, mut err_object) = (std::mem::take(&mut work.err_skin), std::mem::take(&mut work.err_object));
+        self.solve(work, dh, &mut err_skin, &mut err_object);
+        let largest = |v: &[f64]| v.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+        let mut error = largest(&err_skin);
+        if coupled {
+            error = error.max(largest(&err_object));
+        }
+        (work.stage_skin, work.stage_object) = (stage_skin, stage_object);
+        (work.err_skin, work.err_object) = (err_skin, err_object);
+        (work.flux_start_skin, work.flux_start_object) = (fs0, fo0);
+        (work.flux_end_skin, work.flux_end_object) = (fs1, fo1);
+        error
+    }
+
+    /// Net heat into every cell at a state, F(T) [W/m²], into (`out_skin`, `out_object`) (the object only in contact).
+    fn net_flux(&self, skin: &[f64], object: &[f64], out_skin: &mut [f64], out_object: &mut [f64]) {
+        let (skin_in, object_in) = self.side_fluxes(skin, object);
+        out_skin.iter_mut().for_each(|f| *f = 0.0);
+        add_flux(self.skin, skin, skin_in, 1.0, out_skin);
+        if let Some((o, _)) = self.coupled() {
+            out_object.iter_mut().for_each(|f| *f = 0.0);
+            add_flux(o, object, object_in, 1.0, out_object);
+        }
+    }
+
     /// Solves the steady state F(T) = 0 into (`to_skin`, `to_object`). The caller guarantees that the system is
     /// grounded (some conductance to a held temperature or perfusion), otherwise the result is not finite.
     pub fn steady(&self, (to_skin, to_object): (&mut [f64], &mut [f64]), work: &mut Work) {
@@ -371,39 +465,51 @@ impl<'a> Bodies<'a> {
         if work.key == Some(key) {
             return;
         }
-        let skin_pivot = eliminate(self.skin, kappa, theta_h, self.side.g(), &mut work.inv_skin);
+        let skin_pivot = eliminate(
+            self.skin,
+            kappa,
+            theta_h,
+            self.side.g(),
+            (&mut work.inv_skin, &mut work.mult_skin),
+        );
         let object_pivot = match self.coupled() {
-            Some((o, g)) => eliminate(o, kappa, theta_h, g, &mut work.inv_object),
+            Some((o, g)) => eliminate(o, kappa, theta_h, g, (&mut work.inv_object, &mut work.mult_object)),
             None => 0.0,
         };
         work.pivot0 = (skin_pivot, object_pivot);
         work.key = Some(key);
+        work.eliminations += 1;
     }
 
     /// Solves with the eliminated matrix; overwrites the rhs buffers.
     fn solve(&self, work: &mut Work, theta_h: f64, to_skin: &mut [f64], to_object: &mut [f64]) {
-        forward(self.skin, theta_h, &work.inv_skin, &mut work.rhs_skin);
+        forward(&work.mult_skin, &mut work.rhs_skin);
         let skin0 = match self.coupled() {
-            Some((o, g)) => {
-                forward(o, theta_h, &work.inv_object, &mut work.rhs_object);
+            Some((_, g)) => {
+                forward(&work.mult_object, &mut work.rhs_object);
                 let (ps, po) = work.pivot0;
                 let c = theta_h * g;
                 let (rs, ro) = (work.rhs_skin[0], work.rhs_object[0]);
                 let det = ps * po - c * c;
                 let object0 = (ro * ps + c * rs) / det;
-                backward(o, theta_h, &work.inv_object, &work.rhs_object, object0, to_object);
+                backward(
+                    (&work.inv_object, &work.mult_object),
+                    &work.rhs_object,
+                    object0,
+                    to_object,
+                );
                 (rs * po + c * ro) / det
             }
             None => work.rhs_skin[0] * work.inv_skin[0],
         };
-        backward(self.skin, theta_h, &work.inv_skin, &work.rhs_skin, skin0, to_skin);
+        backward((&work.inv_skin, &work.mult_skin), &work.rhs_skin, skin0, to_skin);
     }
 }
 
 /// Thomas elimination from the far end towards cell 0 of the matrix with diagonal
-/// κC_i + θh(g_{i−1} + g_i + p_i [+ g_end] [+ g_side]) and off-diagonal −θh g_i. Stores inverse pivots; returns
-/// the pivot of cell 0.
-fn eliminate(arm: &Arm, kappa: f64, theta_h: f64, side_g: f64, inv_pivot: &mut [f64]) -> f64 {
+/// κC_i + θh(g_{i−1} + g_i + p_i [+ g_end] [+ g_side]) and off-diagonal −θh g_i. Stores inverse pivots and the
+/// multipliers θh·g_i/pivot_{i+1}; returns the pivot of cell 0.
+fn eliminate(arm: &Arm, kappa: f64, theta_h: f64, side_g: f64, (inv_pivot, mult): (&mut [f64], &mut [f64])) -> f64 {
     let n = arm.len();
     let mut pivot = 0.0;
     for i in (0..n).rev() {
@@ -412,7 +518,8 @@ fn eliminate(arm: &Arm, kappa: f64, theta_h: f64, side_g: f64, inv_pivot: &mut [
         let diag = kappa * arm.capacity[i] + theta_h * (inward + outward + arm.perfusion[i]);
         pivot = if i + 1 < n {
             let c = theta_h * arm.link[i];
-            diag - c * c * inv_pivot[i + 1]
+            mult[i] = c * inv_pivot[i + 1];
+            diag - c * mult[i]
         } else {
             diag
         };
@@ -421,18 +528,18 @@ fn eliminate(arm: &Arm, kappa: f64, theta_h: f64, side_g: f64, inv_pivot: &mut [
     pivot
 }
 
-/// Forward sweep of the right-hand side (far end → cell 0), in place.
-fn forward(arm: &Arm, theta_h: f64, inv_pivot: &[f64], rhs: &mut [f64]) {
-    for i in (0..arm.len() - 1).rev() {
-        rhs[i] += theta_h * arm.link[i] * rhs[i + 1] * inv_pivot[i + 1];
+/// Forward sweep of the right-hand side (far end → cell 0), in place: one multiply-add per cell.
+fn forward(mult: &[f64], rhs: &mut [f64]) {
+    for i in (0..rhs.len() - 1).rev() {
+        rhs[i] += mult[i] * rhs[i + 1];
     }
 }
 
-/// Back substitution (cell 0 → far end) given the value of cell 0.
-fn backward(arm: &Arm, theta_h: f64, inv_pivot: &[f64], rhs: &[f64], first: f64, out: &mut [f64]) {
+/// Back substitution (cell 0 → far end) given the value of cell 0: T_{i+1} = r_{i+1}/pivot_{i+1} + m_i·T_i.
+fn backward((inv_pivot, mult): (&[f64], &[f64]), rhs: &[f64], first: f64, out: &mut [f64]) {
     out[0] = first;
-    for i in 0..arm.len() - 1 {
-        out[i + 1] = (rhs[i + 1] + theta_h * arm.link[i] * out[i]) * inv_pivot[i + 1];
+    for i in 0..out.len() - 1 {
+        out[i + 1] = rhs[i + 1] * inv_pivot[i + 1] + mult[i] * out[i];
     }
 }
 

@@ -26,9 +26,17 @@
 //! Both conserve energy exactly: every step reports the heat that crossed each boundary, consistent with the
 //! scheme, in an [`EnergyLedger`].
 //!
-//! [`simulate_contact`] runs one contact on one grid; [`simulate_contact_converged`] refines grid and step together
-//! until the surface temperature trajectory no longer changes by more than a tolerance.
+//! Error-controlled adaptive stepping ([`FvModel::step_with_error`], [`FvModel::advance_adaptive`], the default of
+//! [`simulate_contact`] through [`FvConfig::tolerance_c`]): every TR-BDF2 step is held to the Hosea & Shampine
+//! (1996) embedded estimate of its local error, filtered by the step's own matrix; rows between steps come from the
+//! step's cubic Hermite interpolant; step lengths are quantised so that equal steps are equal in bits and reuse
+//! the cached elimination (see `adaptive.rs`).
+//!
+//! [`simulate_contact`] runs one contact on one grid; [`simulate_contact_converged`] refines the grid (and the fixed
+//! step, if fixed) until the surface temperature trajectory no longer changes by more than a tolerance, skipping
+//! levels that cannot converge.
 
+mod adaptive;
 mod chain;
 mod grid;
 mod model;
@@ -36,6 +44,7 @@ mod run;
 #[cfg(test)]
 mod tests;
 
+pub use adaptive::StepCounts;
 pub use grid::MAX_CELLS;
 pub use model::{EnergyLedger, FvModel};
 pub use run::{
@@ -47,6 +56,9 @@ use crate::limits;
 use crate::params::{BadValue, Rule};
 
 const ORIGIN: &str = "fv model";
+
+/// Default local error tolerance of adaptive stepping \[K\] ([`FvConfig::tolerance_c`]).
+pub const DEFAULT_TOLERANCE_C: f64 = 2e-5;
 
 /// What lies below the deepest skin layer.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -145,9 +157,16 @@ pub struct FvConfig {
     pub growth: f64,
     /// Largest cell width \[m\], ≥ `surface_cell_m`. Default 5e-4 (0.5 mm).
     pub max_cell_m: f64,
-    /// Largest internal time step of [`simulate_contact`] \[s\]; an output interval is split into equal steps no
-    /// longer than this. Default 0.01 s. ([`FvModel::step`] takes its step directly.)
+    /// Largest internal time step of [`simulate_contact`] with fixed steps (`tolerance_c` = `None`) \[s\]; an output
+    /// interval is split into equal steps no longer than this. Default 0.01 s. ([`FvModel::step`] takes its step
+    /// directly.)
     pub max_step_s: f64,
+    /// Local error tolerance of the adaptive time stepping of [`simulate_contact`] \[K\]: every TR-BDF2 step is
+    /// held to a Hosea–Shampine error estimate (largest over all cells) of at most this, and the output rows are
+    /// interpolated between steps. `None` = fixed steps of `max_step_s` (with the chosen `scheme`). Default
+    /// `Some(`[`DEFAULT_TOLERANCE_C`]`)`; not changed by [`FvConfig::refined`] (it bounds the time error, which does
+    /// not depend on the grid). Adaptive stepping is always TR-BDF2, whatever `scheme` says.
+    pub tolerance_c: Option<f64>,
     /// Boundary below the deepest skin layer. Default [`DeepBoundary::Insulated`].
     pub deep_boundary: DeepBoundary,
     /// Boundary at the object's far side. Default [`FarSide::Insulated`].
@@ -166,6 +185,7 @@ impl Default for FvConfig {
             growth: 1.15,
             max_cell_m: 5e-4,
             max_step_s: 0.01,
+            tolerance_c: Some(DEFAULT_TOLERANCE_C),
             deep_boundary: DeepBoundary::Insulated,
             far_side: FarSide::Insulated,
             contact_resistance_m2k_w: 0.0,
@@ -176,7 +196,9 @@ impl Default for FvConfig {
 
 impl FvConfig {
     /// The configuration refined `levels` times: each level halves the cell-width rule everywhere (surface width,
-    /// growth excess g − 1 and maximum width, so about twice the cells) and halves the largest time step.
+    /// growth excess g − 1 and maximum width, so about twice the cells) and halves the largest fixed time step
+    /// (`max_step_s`). The adaptive tolerance (`tolerance_c`) is kept: it bounds the time error, which does not
+    /// depend on the grid.
     pub fn refined(&self, levels: u32) -> FvConfig {
         let factor = 0.5f64.powi(levels as i32);
         FvConfig {
@@ -194,6 +216,9 @@ impl FvConfig {
         Rule::Positive.check("surface_cell_m", self.surface_cell_m).at(ORIGIN)?;
         Rule::Positive.check("max_cell_m", self.max_cell_m).at(ORIGIN)?;
         Rule::Positive.check("max_step_s", self.max_step_s).at(ORIGIN)?;
+        if let Some(tolerance_c) = self.tolerance_c {
+            Rule::Positive.check("tolerance_c", tolerance_c).at(ORIGIN)?;
+        }
         Rule::NonNegative
             .check("contact_resistance_m2k_w", self.contact_resistance_m2k_w)
             .at(ORIGIN)?;

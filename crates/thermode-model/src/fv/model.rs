@@ -50,6 +50,68 @@ impl EnergyLedger {
     }
 }
 
+/// A scalar's values \[unit\] and rates \[unit/s\] at both ends of a step, for cubic Hermite interpolation.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub(super) struct Ends {
+    pub start: f64,
+    pub end: f64,
+    pub start_rate: f64,
+    pub end_rate: f64,
+}
+
+impl Ends {
+    fn constant(value: f64) -> Self {
+        Ends {
+            start: value,
+            end: value,
+            start_rate: 0.0,
+            end_rate: 0.0,
+        }
+    }
+
+    /// The cubic Hermite interpolant at `theta` ∈ \[0, 1\] of a step of `step_s` \[s\].
+    pub fn at(&self, theta: f64, step_s: f64) -> f64 {
+        let [h00, h10, h01, h11] = hermite_weights(theta, step_s);
+        h00 * self.start + h01 * self.end + h10 * self.start_rate + h11 * self.end_rate
+    }
+}
+
+/// The cubic Hermite weights of (start value, start rate, end value, end rate) at `theta` of a step of `step_s`
+/// \[s\] (the rate weights include the step).
+fn hermite_weights(theta: f64, step_s: f64) -> [f64; 4] {
+    let (t2, t3) = (theta * theta, theta * theta * theta);
+    [
+        2.0 * t3 - 3.0 * t2 + 1.0,
+        (t3 - 2.0 * t2 + theta) * step_s,
+        -2.0 * t3 + 3.0 * t2,
+        (t3 - t2) * step_s,
+    ]
+}
+
+/// What a contact run records, at both ends of the last adaptive step (see [`FvModel::last_step_ends`]).
+#[derive(Debug, Clone)]
+pub(super) struct StepEnds {
+    /// Temperature of the skin's surface cell \[°C\].
+    pub skin0: Ends,
+    /// Temperature of the object's contact cell \[°C\].
+    pub object0: Ends,
+    /// Heat Σ C·T of every skin layer \[J/m²\].
+    pub layer_heat: Vec<Ends>,
+    /// Capacity Σ C of every skin layer \[J/(m²·K)\].
+    pub layer_capacity: Vec<f64>,
+}
+
+impl StepEnds {
+    pub fn new(layers: usize) -> Self {
+        StepEnds {
+            skin0: Ends::default(),
+            object0: Ends::default(),
+            layer_heat: vec![Ends::default(); layers],
+            layer_capacity: vec![0.0; layers],
+        }
+    }
+}
+
 /// The finite-volume finger, optionally with a touched object. See the [module documentation](super).
 ///
 /// A new model is uniform at the arterial temperature, in air at that temperature; set an initial state with
@@ -336,6 +398,137 @@ impl FvModel {
         self.ledger.record(flows);
         self.env = env;
         self.plate.get_mut().forget_offset();
+    }
+
+    /// Attempts one TR-BDF2 step of `dt_s` \[s\] in `env` with the Hosea & Shampine (1996) embedded estimate of
+    /// its local error, whatever [`TimeScheme`] the model was built with. The step is taken (state, environment and
+    /// energy ledger advance, as with [`Self::step`]) only if the estimate is at most `tolerance_c` \[K\];
+    /// otherwise the model is left unchanged. Returns the estimate: the largest over all cells of the filtered
+    /// error `(C − d·h·J)⁻¹·h·Σ(b − b̂)ᵢF(Tᵢ)` \[K\]. Never allocates; reuses the cached elimination while the step
+    /// and the environment stay bit-identical. `dt_s` and `env` must be valid as for [`Self::step`].
+    pub fn step_with_error(&mut self, dt_s: f64, env: FvEnvironment, tolerance_c: f64) -> f64 {
+        let side = self.side(env);
+        let bodies = Bodies::new(&self.skin, self.object.as_ref(), side);
+        let contact = matches!(side, Side::Contact { .. });
+        let work = self.work.get_mut();
+        let mut next_skin = std::mem::take(&mut work.next_skin);
+        let mut next_object = std::mem::take(&mut work.next_object);
+        let state = (self.skin_t.as_slice(), self.object_t.as_slice());
+        let flows = bodies.advance(
+            TimeScheme::TrBdf2,
+            dt_s,
+            state,
+            (&mut next_skin, &mut next_object),
+            work,
+        );
+        let error_c = bodies.tr_bdf2_error(dt_s, state, (&next_skin, &next_object), work);
+        if error_c <= tolerance_c {
+            std::mem::swap(&mut self.skin_t, &mut next_skin);
+            if contact {
+                std::mem::swap(&mut self.object_t, &mut next_object);
+            }
+            self.ledger.record(flows);
+            self.env = env;
+            self.plate.get_mut().forget_offset();
+        }
+        let work = self.work.get_mut();
+        work.next_skin = next_skin;
+        work.next_object = next_object;
+        error_c
+    }
+
+    /// Sets `probe`'s state to the cubic Hermite interpolant at `theta` ∈ \[0, 1\] of the last step of `dt_s`
+    /// \[s\] taken by [`Self::step_with_error`] (its start state and F(T₀), its end state and F(T₁)): fourth-order
+    /// accurate in the step, one order above the step's local error. `probe` must be a clone of this model (same
+    /// grid); its environment becomes this model's.
+    pub(super) fn interpolate_last_step(&self, theta: f64, dt_s: f64, probe: &mut FvModel) {
+        let work = self.work.borrow();
+        let [h00, h10, h01, h11] = hermite_weights(theta, dt_s);
+        let hermite = |out: &mut [f64], start: &[f64], end: &[f64], f0: &[f64], f1: &[f64], capacity: &[f64]| {
+            for i in 0..out.len() {
+                out[i] = h00 * start[i] + h01 * end[i] + (h10 * f0[i] + h11 * f1[i]) / capacity[i];
+            }
+        };
+        hermite(
+            &mut probe.skin_t,
+            &work.next_skin,
+            &self.skin_t,
+            &work.flux_start_skin,
+            &work.flux_end_skin,
+            &self.skin.capacity,
+        );
+        if let (FvEnvironment::Object, Some(object)) = (self.env, self.object.as_ref()) {
+            hermite(
+                &mut probe.object_t,
+                &work.next_object,
+                &self.object_t,
+                &work.flux_start_object,
+                &work.flux_end_object,
+                &object.capacity,
+            );
+        }
+        probe.env = self.env;
+        probe.plate.get_mut().forget_offset();
+    }
+
+    /// Number of eliminations (factorisations) of the step matrix since the model was built: a step whose length,
+    /// scheme stage and environment equal the previous one's, bit for bit, reuses the cached elimination and adds
+    /// none. A diagnostic of step-length hygiene (see [`FvConfig::tolerance_c`](super::FvConfig::tolerance_c)).
+    pub fn factorisations(&self) -> usize {
+        self.work.borrow().eliminations
+    }
+
+    /// Number of skin layers.
+    pub(super) fn layer_count(&self) -> usize {
+        self.layer_count
+    }
+
+    /// The values and rates at both ends of the last step taken by [`Self::step_with_error`] of what a contact run
+    /// records: the surface cells of skin and object and the heat Σ C·T of every skin layer.
+    pub(super) fn last_step_ends(&self, out: &mut StepEnds) {
+        let work = self.work.borrow();
+        let capacity = &self.skin.capacity;
+        out.skin0 = Ends {
+            start: work.next_skin[0],
+            end: self.skin_t[0],
+            start_rate: work.flux_start_skin[0] / capacity[0],
+            end_rate: work.flux_end_skin[0] / capacity[0],
+        };
+        out.object0 = match (self.env, self.object.as_ref()) {
+            (FvEnvironment::Object, Some(object)) => Ends {
+                start: work.next_object[0],
+                end: self.object_t[0],
+                start_rate: work.flux_start_object[0] / object.capacity[0],
+                end_rate: work.flux_end_object[0] / object.capacity[0],
+            },
+            _ => Ends::constant(self.object_t.first().copied().unwrap_or(0.0)),
+        };
+        out.layer_heat.iter_mut().for_each(|e| *e = Ends::default());
+        out.layer_capacity.iter_mut().for_each(|c| *c = 0.0);
+        for (i, &layer) in self.skin.layer.iter().enumerate() {
+            let heat = &mut out.layer_heat[layer];
+            heat.start += capacity[i] * work.next_skin[i];
+            heat.end += capacity[i] * self.skin_t[i];
+            heat.start_rate += work.flux_start_skin[i];
+            heat.end_rate += work.flux_end_skin[i];
+            out.layer_capacity[layer] += capacity[i];
+        }
+    }
+
+    /// Skin surface temperature \[°C\], object face temperature \[°C\] and heat flux out of the skin \[W/m²\]
+    /// in the current environment for given temperatures of the surface cells of skin and object \[°C\] (as
+    /// [`Self::surface_c`], [`Self::object_face_c`] and [`Self::surface_heat_flux_w_m2`] compute them from the
+    /// state).
+    pub(super) fn contact_observables(&self, skin0_c: f64, object0_c: f64) -> (f64, f64, f64) {
+        let (flux_w_m2, face_c) = match (self.side(self.env), self.object.as_ref()) {
+            (Side::Contact { g }, Some(object)) => {
+                let q = g * (skin0_c - object0_c);
+                (q, object0_c + q * object.half_resistance())
+            }
+            (Side::Contact { g }, None) => (g * (skin0_c - object0_c), object0_c),
+            (Side::Fixed { g, temp_c }, _) => (g * (skin0_c - temp_c), object0_c),
+        };
+        (skin0_c - flux_w_m2 * self.skin.half_resistance(), face_c, flux_w_m2)
     }
 
     /// Sets the steady state in `env` (solving the steady tridiagonal system directly). In

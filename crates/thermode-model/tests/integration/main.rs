@@ -1,5 +1,6 @@
 //! The crate's integration tests in one binary (one link instead of one per file keeps the test build short).
 
+mod fv_adaptive;
 mod fv_depth;
 mod fv_physics;
 mod fv_replace_object;

@@ -11,3 +11,4 @@ mod pipeline;
 mod props;
 mod run;
 mod true_plate;
+mod truth;

@@ -1,5 +1,5 @@
-//! Offline rendering against the simulated display: the ground truth equals the target when the simulated finger
-//! is the controller's model; the renderers agree with the model crate's own contact simulations; the display
+//! Offline rendering against the simulated display: the ground truth (converged) and the fv renderer's target
+//! (coarse) differ only by the renderer's discretisation when the simulated finger is the controller's model; the renderers agree with the model crate's own contact simulations; the display
 //! inverse makes the finger model on the display follow the target exactly whenever the envelope does not limit
 //! the set-point (paper eq. 7 through the whole pipeline); no controller beats the actuator limit; the plant
 //! substep converges; a run is bit-for-bit reproducible from its seed; and the tuner's shortcut reproduces the
@@ -18,7 +18,7 @@ use thermode_render::{render, tune};
 const PAPER: [&str; 5] = ["aluminium", "steel", "stone", "wood", "rubber"];
 
 #[test]
-fn truth_equals_target_for_the_default_finger_with_the_fv_renderer() {
+fn truth_and_target_differ_only_by_the_renderers_discretisation_for_the_default_finger() {
     let mut specs: Vec<_> = PAPER
         .iter()
         .map(|m| spec(ShippedDisplay::Default, ControllerKind::Model, m))
@@ -32,10 +32,13 @@ fn truth_equals_target_for_the_default_finger_with_the_fv_renderer() {
         let t = &run.trajectory;
         let rows = ((run.spec.pre_contact_s + run.spec.duration_s) * run.spec.rate_hz).round() as usize;
         assert_eq!(t.len(), rows, "{}: rows", run.spec.material.name);
+        // The target is the same physics on the renderer's coarse grid with one step per tick: 0.02–0.09 °C off
+        // the converged truth at the first rows after a touch (issue 13), less later. 0.15 °C bounds it with margin
+        // and still catches a truth of another contact, finger or material (degrees apart at the touch).
         for row in 0..t.len() {
             let (truth, target) = (t.truth_skin_c[row], t.target_skin_c[row]);
             assert!(
-                (truth - target).abs() <= 1e-9,
+                (truth - target).abs() <= 0.15,
                 "{} at t = {} s: truth {truth} vs target {target}",
                 run.spec.material.name,
                 t.time_s[row]
@@ -74,8 +77,10 @@ fn the_fv_renderer_follows_the_model_crates_contact_simulation() {
     let mut s = spec(ShippedDisplay::Default, ControllerKind::Model, "wood");
     s.duration_s = 10.0;
     let run = render(&s).unwrap_or_else(|e| panic!("{e}"));
+    // The renderer steps once per tick: the same fixed steps (not the adaptive default).
     let config = FvConfig {
         contact_resistance_m2k_w: LIGHT_TOUCH_RESISTANCE_M2K_W,
+        tolerance_c: None,
         ..FvConfig::default()
     };
     let contact = ContactSpec {

@@ -62,8 +62,11 @@ pub enum FormatArg {
 #[derive(Args, Debug)]
 pub struct RenderArgs {
     /// Material from the library (see `thermode materials`); repeatable; `all-paper` = the paper's five.
-    #[arg(long = "material", value_name = "NAME", required = true)]
+    #[arg(long = "material", value_name = "NAME", required_unless_present = "material_files")]
     materials: Vec<String>,
+    /// A material file (TOML, the format of `simulate --material-file` and `thermode materials`); repeatable.
+    #[arg(long = "material-file", value_name = "FILE")]
+    material_files: Vec<PathBuf>,
     /// Controller.
     #[arg(long, value_enum, default_value = "model")]
     controller: ControllerArg,
@@ -196,7 +199,7 @@ fn pid_gains(args: &RenderArgs, device: &DeviceConfig) -> Result<PidGains> {
 
 /// One render spec per controller and material, controllers outermost.
 fn specs(args: &RenderArgs) -> Result<Vec<RenderSpec>> {
-    let materials = resolve::materials(&args.materials, &[])?;
+    let materials = resolve::materials(&args.materials, &args.material_files)?;
     let device = resolve::device_config(args.device_file.as_deref())?;
     let gains = pid_gains(args, &device)?;
     let hardware = match &args.plant_device {
@@ -287,6 +290,42 @@ mod tests {
         assert_eq!(rate(&[]), (60.0, 150.0));
         assert_eq!(rate(&["--max-rate", "300"]), (300.0, 750.0));
         assert_eq!(rate(&["--max-rate", "5"]), (5.0, 50.0));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_material_file_is_rendered_alone_or_after_library_materials() {
+        let dir = std::env::temp_dir().join(format!("thermode-render-material-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("{e}"));
+        let file = dir.join("walnut.toml");
+        let text = "name = \"walnut\"\nconductivity_w_mk = 0.15\ndensity_kg_m3 = 650\nspecific_heat_j_kgk = 1600\n";
+        std::fs::write(&file, text).unwrap_or_else(|e| panic!("{e}"));
+        let path = file.to_string_lossy().to_string();
+        let alone = specs(&parse(&["--material-file", &path])).unwrap_or_else(|e| panic!("{e:#}"));
+        assert_eq!(alone.len(), 1);
+        assert_eq!(
+            (alone[0].material.name.as_str(), alone[0].material.conductivity_w_mk),
+            ("walnut", 0.15)
+        );
+        let both = specs(&parse(&["--material", "wood", "--material-file", &path])).unwrap_or_else(|e| panic!("{e:#}"));
+        let names: Vec<&str> = both.iter().map(|s| s.material.name.as_str()).collect();
+        assert_eq!(names, ["wood", "walnut"]);
+        std::fs::write(
+            &file,
+            "name = \"bad\"\nconductivity_w_mk = -1\ndensity_kg_m3 = 650\nspecific_heat_j_kgk = 1600\n",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let err = specs(&parse(&["--material-file", &path]))
+            .err()
+            .map(|e| format!("{e:#}"));
+        assert!(err.as_deref().is_some_and(|e| e.contains("conductivity")), "{err:?}");
+        let missing = specs(&parse(&["--material-file", "/nonexistent/m.toml"]))
+            .err()
+            .map(|e| format!("{e:#}"));
+        assert!(
+            missing.as_deref().is_some_and(|e| e.contains("cannot read")),
+            "{missing:?}"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 

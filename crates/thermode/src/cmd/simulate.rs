@@ -73,6 +73,13 @@ pub struct SimulateArgs {
     /// Conductance between the model's receptor node and the display plate for the display inverse [W/m²K].
     #[arg(long = "display-conductance", value_name = "W_M2K", default_value_t = thermode_model::inverse::DEFAULT_DISPLAY_CONDUCTANCE_W_M2K, allow_negative_numbers = true)]
     display_conductance: f64,
+    /// fv only: run the default grid refined N times (each level about doubles the cells), without the
+    /// convergence check; default: refine until converged.
+    #[arg(long = "fv-level", value_name = "N")]
+    fv_level: Option<u32>,
+    /// fv only: local error tolerance of the adaptive time steps [K].
+    #[arg(long = "fv-tolerance", value_name = "K", default_value_t = thermode_model::fv::DEFAULT_TOLERANCE_C, allow_negative_numbers = true)]
+    fv_tolerance: f64,
     /// Write the trajectory as CSV (one row per step; a `material` column names the material); `-`: standard output.
     #[arg(long, value_name = "FILE.csv")]
     out: Option<PathBuf>,
@@ -101,6 +108,8 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
             initial,
             contact_resistance_m2k_w: args.contact_resistance,
             display_conductance_w_m2k: args.display_conductance,
+            fv_level: args.fv_level,
+            fv_tolerance_c: args.fv_tolerance,
             ..SimulationSpec::new(args.model.into(), material)
         })
         .collect();
