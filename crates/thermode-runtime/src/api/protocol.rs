@@ -152,6 +152,13 @@ pub enum ApiRequest {
     Status,
     /// An operator acknowledges a failed recording: stimuli are accepted again.
     AckRecording,
+    /// A client's event marker (forwarded to the LSL marker stream under `serve --lsl`).
+    Marker {
+        /// The text (at most [`crate::lsl::MAX_MARKER_CHARS`] characters, no NUL).
+        text: String,
+        /// The channel it concerns, if any.
+        channel: Option<usize>,
+    },
 }
 
 /// Parses and validates one text message from `owner`. Returns the `id` to answer with (null when there is none or
@@ -232,16 +239,37 @@ fn parse_object(map: &Map<String, Value>, limits: &RequestLimits, owner: Owner) 
         "unsubscribe" => return fields.only(&[]).map(|()| ApiRequest::Unsubscribe),
         "status" => return fields.only(&[]).map(|()| ApiRequest::Status),
         "ack_recording" => return fields.only(&[]).map(|()| ApiRequest::AckRecording),
+        "marker" => return parse_marker(&fields, limits),
         other => Err(ApiError::new(
             ErrorCode::UnknownType,
             format!(
                 "unknown request type {:?}; known: touch, release, setpoint, clear_fault, stop_all, subscribe, unsubscribe, \
-                 status, ack_recording",
+                 status, ack_recording, marker",
                 truncate(other)
             ),
         ))?,
     };
     Ok(ApiRequest::Command(command))
+}
+
+fn parse_marker(fields: &Fields, limits: &RequestLimits) -> Result<ApiRequest, ApiError> {
+    fields.only(&["text", "channel"])?;
+    let text = fields.string("text")?;
+    let max = crate::lsl::MAX_MARKER_CHARS;
+    if text.chars().count() > max || text.contains('\0') {
+        return Err(ApiError::new(
+            ErrorCode::BadValue,
+            format!("`text` must be at most {max} characters without NUL"),
+        ));
+    }
+    let channel = match fields.map.get("channel") {
+        None => None,
+        Some(_) => Some(fields.channel(limits.channel_count)?),
+    };
+    Ok(ApiRequest::Marker {
+        text: text.to_string(),
+        channel,
+    })
 }
 
 fn parse_touch(fields: &Fields, limits: &RequestLimits, owner: Owner) -> Result<Command, ApiError> {
