@@ -546,7 +546,14 @@ fn start_lsl(
     config: &DaemonConfig,
     channels: usize,
     clock: &dyn Clock,
-) -> Result<(LslStreams, std::sync::mpsc::SyncSender<crate::snapshot::TickRecord>, MarkerSender), RuntimeError> {
+) -> Result<
+    (
+        LslStreams,
+        std::sync::mpsc::SyncSender<crate::snapshot::TickRecord>,
+        MarkerSender,
+    ),
+    RuntimeError,
+> {
     let lsl = LslConfig {
         rate_hz: config.loop_config.rate_hz,
         channels,

@@ -9,6 +9,10 @@ use std::process::{Command, Output};
 #[cfg(unix)]
 #[path = "cli/python_packages.rs"]
 mod python_packages;
+// `serve --lsl` (the streams themselves: python/lsl with pylsl).
+#[cfg(unix)]
+#[path = "cli/lsl.rs"]
+mod lsl;
 #[path = "cli/serve_on_emulator.rs"]
 mod serve_on_emulator;
 #[cfg(unix)]

@@ -603,6 +603,35 @@ mod tests {
     }
 
     #[test]
+    fn a_marker_with_and_without_channel_and_its_refusals() {
+        match parse_text(r#"{"type":"marker","id":1,"text":"trial 3 start","channel":2}"#).1 {
+            Ok(ApiRequest::Marker { text, channel }) => {
+                assert_eq!((text.as_str(), channel), ("trial 3 start", Some(2)))
+            }
+            other => panic!("expected a marker, got {other:?}"),
+        }
+        assert!(matches!(
+            parse_text(r#"{"type":"marker","id":1,"text":"x"}"#).1,
+            Ok(ApiRequest::Marker { channel: None, .. })
+        ));
+        assert_eq!(code_of(r#"{"type":"marker","id":1}"#), Some("missing_field"));
+        assert_eq!(
+            code_of(r#"{"type":"marker","id":1,"text":"x","channel":9}"#),
+            Some("unknown_channel")
+        );
+        assert_eq!(code_of(r#"{"type":"marker","id":1,"text":7}"#), Some("bad_value"));
+        assert_eq!(
+            code_of(r#"{"type":"marker","id":1,"text":"x","colour":1}"#),
+            Some("unknown_field")
+        );
+        let long = format!(
+            r#"{{"type":"marker","id":1,"text":"{}"}}"#,
+            "a".repeat(crate::lsl::MAX_MARKER_CHARS + 1)
+        );
+        assert_eq!(code_of(&long), Some("bad_value"));
+    }
+
+    #[test]
     fn a_touch_by_name_and_by_properties() {
         let (id, touch) = parse_text(r#"{"type":"touch","id":7,"channel":1,"material":"Aluminum","object_temp_c":30}"#);
         assert_eq!(id, json!(7));

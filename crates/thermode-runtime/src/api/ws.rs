@@ -300,7 +300,10 @@ fn marker(app: &App, text: String, channel: Option<usize>, id: &Value) -> Result
         Some(markers) => {
             let lsl_time_s = markers.clock().lsl_time_s(time_s);
             if !markers.send(crate::lsl::ClientMarker { time_s, text, channel }) {
-                return Err(ApiError::new(ErrorCode::Busy, "the LSL marker queue is full; nothing was sent"));
+                return Err(ApiError::new(
+                    ErrorCode::Busy,
+                    "the LSL marker queue is full; nothing was sent",
+                ));
             }
             Some(lsl_time_s)
         }

@@ -99,7 +99,9 @@ pub struct Liblsl {
 
 impl std::fmt::Debug for Liblsl {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Liblsl").field("path", &self.path).finish_non_exhaustive()
+        f.debug_struct("Liblsl")
+            .field("path", &self.path)
+            .finish_non_exhaustive()
     }
 }
 
@@ -305,7 +307,9 @@ unsafe impl Send for Outlet {}
 
 impl std::fmt::Debug for Outlet {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Outlet").field("channels", &self.channels).finish_non_exhaustive()
+        f.debug_struct("Outlet")
+            .field("channels", &self.channels)
+            .finish_non_exhaustive()
     }
 }
 

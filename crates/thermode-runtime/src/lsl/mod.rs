@@ -343,7 +343,11 @@ pub fn events(previous: &[RecordRow], rows: &[RecordRow]) -> Vec<String> {
     if previous.len() != rows.len() {
         return out;
     }
-    if previous.iter().zip(rows).any(|(before, now)| now.held_off && !before.held_off) {
+    if previous
+        .iter()
+        .zip(rows)
+        .any(|(before, now)| now.held_off && !before.held_off)
+    {
         out.push(json!({"event": "stop"}).to_string());
     }
     for (channel, (before, now)) in previous.iter().zip(rows).enumerate() {
@@ -381,4 +385,104 @@ fn stimulus_event(channel: usize, before: &RecordRow, now: &RecordRow) -> Option
         Mode::Air => json!({"event": "release", "channel": channel}),
     };
     Some(event.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::snapshot::EMPTY_TELEMETRY;
+    use thermode_safety::FaultCode;
+
+    fn row(mode: Mode, label: &str) -> RecordRow {
+        RecordRow {
+            label: Arc::from(label),
+            mode,
+            object_c: (mode == Mode::Touch).then_some(23.0),
+            direct: (mode == Mode::Direct).then_some((36.0, 2.0)),
+            held_off: false,
+            telemetry: EMPTY_TELEMETRY,
+        }
+    }
+
+    fn kinds(events: &[String]) -> Vec<String> {
+        events
+            .iter()
+            .map(|e| {
+                serde_json::from_str::<serde_json::Value>(e).unwrap()["event"]
+                    .as_str()
+                    .unwrap()
+                    .to_string()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_first_tick_and_an_unchanged_tick_have_no_events() {
+        let rows = vec![row(Mode::Air, "air"), row(Mode::Touch, "wood")];
+        assert!(events(&[], &rows).is_empty());
+        assert!(events(&rows, &rows).is_empty());
+    }
+
+    #[test]
+    fn touch_setpoint_release_stop_and_faults_are_named_per_channel() {
+        let before = vec![row(Mode::Air, "air"), row(Mode::Touch, "wood"), row(Mode::Air, "air")];
+        let mut now = vec![
+            row(Mode::Touch, "aluminium"),
+            row(Mode::Air, "air"),
+            row(Mode::Direct, "direct"),
+        ];
+        now[2].telemetry.fault = Some(FaultCode::SensorOpen);
+        now[1].held_off = true;
+        let got = events(&before, &now);
+        assert_eq!(
+            kinds(&got),
+            ["stop", "touch", "release", "setpoint", "fault"],
+            "{got:?}"
+        );
+        let touch: serde_json::Value = serde_json::from_str(&got[1]).unwrap();
+        assert_eq!(touch["channel"], 0);
+        assert_eq!(touch["material"], "aluminium");
+        let fault: serde_json::Value = serde_json::from_str(&got[4]).unwrap();
+        assert_eq!(fault["code"], FaultCode::SensorOpen.code());
+        let cleared = events(
+            &now,
+            &[
+                row(Mode::Touch, "aluminium"),
+                row(Mode::Air, "air"),
+                row(Mode::Direct, "direct"),
+            ],
+        );
+        assert_eq!(kinds(&cleared), ["fault_cleared"], "{cleared:?}");
+    }
+
+    #[test]
+    fn a_new_setpoint_while_in_direct_mode_is_an_event() {
+        let before = vec![row(Mode::Direct, "direct")];
+        let mut now = before.clone();
+        now[0].direct = Some((30.0, 1.0));
+        assert_eq!(kinds(&events(&before, &now)), ["setpoint"]);
+    }
+
+    #[test]
+    fn the_telemetry_stream_labels_five_fields_per_channel_with_units() {
+        let spec = telemetry_spec(&LslConfig {
+            channels: 2,
+            ..LslConfig::default()
+        });
+        assert_eq!(spec.channels.len(), 10);
+        assert_eq!(spec.channels[6].label, "ch1_skin_c");
+        assert_eq!(spec.channels[9].unit, "A");
+        assert_eq!(spec.rate_hz, 100.0);
+        assert_eq!(marker_spec(&LslConfig::default()).rate_hz, 0.0);
+    }
+
+    #[test]
+    fn a_missing_library_is_a_clear_error_naming_what_was_tried() {
+        let error = Liblsl::open(std::path::Path::new("/nonexistent/liblsl.so")).unwrap_err();
+        let text = error.to_string();
+        assert!(
+            text.contains("/nonexistent/liblsl.so") && text.contains("THERMODE_LIBLSL"),
+            "{text}"
+        );
+    }
 }
