@@ -20,8 +20,9 @@
 //! whose labels collide are refused. The session label is the session date without dashes (`20261123`).
 //!
 //! Onsets: a session CSV holds no clock of its own today, so a trial's `onset` is the sum of the previous trials'
-//! presentation and response times (the time on task, without the breaks between trials); a CSV column
-//! `onset_s` (seconds from the session start), when present, is used instead.
+//! presentation and response times (the time on task, without the breaks between trials); when the CSV has a clock
+//! column ([`ONSET_COLUMNS`], e.g. monotonic seconds at each trial's start), the onset is that clock relative to
+//! the first trial instead.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
@@ -43,6 +44,16 @@ pub const STIM_COLUMNS: [&str; 5] = [
     "setpoint_c",
     "requested_setpoint_c",
 ];
+/// Session CSV columns that give a trial's onset \[s\] on a clock of the session, in order of preference; the
+/// first present is used, relative to its first row.
+pub const ONSET_COLUMNS: [&str; 4] = [
+    "onset_s",
+    "trial_onset_s",
+    "stimulus_onset_s",
+    "trial_start_monotonic_s",
+];
+/// Session CSV columns of the response time \[s\], in order of preference (thermode's and PsychoPy's names).
+pub const RESPONSE_TIME_COLUMNS: [&str; 2] = ["response_time_s", "key_resp.rt"];
 /// Names of a curve's time column \[s\], in order of preference.
 pub const TIME_COLUMNS: [&str; 3] = ["time_s", "t_s", "time"];
 
@@ -410,11 +421,18 @@ fn write_events(root: &Path, session: &Session) -> Result<usize, ExportError> {
         tsv.push_str(name);
     }
     tsv.push('\n');
+    let onset_column = ONSET_COLUMNS.iter().find(|c| column(c).is_some());
+    let first_onset_s = onset_column.and_then(|c| rows.first().and_then(|r| number(r, c)));
     let mut elapsed_s = 0.0;
     for row in &rows {
         let duration = number(row, "presentation_s").or(presentation_s);
-        let onset = number(row, "onset_s").unwrap_or(elapsed_s);
-        elapsed_s = onset + duration.unwrap_or(0.0) + number(row, "response_time_s").unwrap_or(0.0);
+        let clocked = onset_column
+            .and_then(|c| number(row, c))
+            .zip(first_onset_s)
+            .map(|(t, t0)| t - t0);
+        let onset = clocked.unwrap_or(elapsed_s);
+        let response_s = RESPONSE_TIME_COLUMNS.iter().find_map(|c| number(row, c)).unwrap_or(0.0);
+        elapsed_s = onset + duration.unwrap_or(0.0) + response_s;
         let kind = column("condition")
             .and_then(|i| row.get(i))
             .map_or("trial".into(), |v| tsv_field(v));
@@ -446,7 +464,8 @@ fn events_sidecar(columns: &[&String]) -> Value {
         "onset".into(),
         json!({"Description": "Start of the presentation: seconds of time on task from the session start (the \
                                previous trials' presentation and response times; breaks not counted), or the \
-                               session CSV's onset_s where it has one", "Units": "s"}),
+                               session CSV's own trial clock relative to the first trial where it has one",
+                "Units": "s"}),
     );
     map.insert(
         "duration".into(),
