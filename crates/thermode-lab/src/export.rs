@@ -701,6 +701,96 @@ mod tests {
         assert_eq!(sampling_hz(&[1.0]), None);
     }
 
+    /// A data folder with one session of three 30 s trials answered after 2 s, and a 50 Hz trial curve beside it.
+    fn data_folder(dir: &Path) {
+        let sidecar = json!({"format": "thermode-lab session 1", "participant": "P-01", "experiment": "paper",
+                             "session_date": "2026-11-23", "csv_file": "P-01_paper_2026-11-23.csv",
+                             "condition_order": ["real", "simulated"]});
+        fs::write(dir.join("P-01_paper_2026-11-23.json"), sidecar.to_string()).unwrap();
+        let mut csv = String::from("participant,trial,condition,presented,response_time_s,presentation_s\n");
+        for (trial, condition) in [(1, "real"), (2, "real"), (3, "simulated")] {
+            csv.push_str(&format!("P-01,{trial},{condition},wood,2.0,30.0\n"));
+        }
+        fs::write(dir.join("P-01_paper_2026-11-23.csv"), csv).unwrap();
+        let curves = dir.join("P-01_paper_2026-11-23_curves");
+        fs::create_dir(&curves).unwrap();
+        let mut curve = String::from("time_s,target_skin_c,sensor_c,material\n");
+        for i in 0..100 {
+            curve.push_str(&format!(
+                "{},{},{},wood\n",
+                f64::from(i) * 0.02,
+                32.0 - f64::from(i) * 0.01,
+                30.0
+            ));
+        }
+        fs::write(curves.join("trial001.csv"), curve).unwrap();
+    }
+
+    fn export_into(data: &Path, out: &Path) -> BidsSummary {
+        export_bids(&BidsOptions {
+            data_dir: data.to_path_buf(),
+            out_dir: out.to_path_buf(),
+            recordings: Vec::new(),
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn onsets_are_time_on_task_and_curves_split_into_stim_and_physio() {
+        let root = tempfile::tempdir().unwrap();
+        data_folder(root.path());
+        let out = root.path().join("bids");
+        let summary = export_into(root.path(), &out);
+        assert_eq!(
+            (summary.subjects, summary.sessions, summary.trials, summary.signals),
+            (1, 1, 3, 2)
+        );
+        let beh = out.join("sub-P01/ses-20261123/beh");
+        let events = fs::read_to_string(beh.join("sub-P01_ses-20261123_task-paper_events.tsv")).unwrap();
+        let onsets: Vec<f64> = events
+            .lines()
+            .skip(1)
+            .map(|l| l.split('\t').next().unwrap().parse().unwrap())
+            .collect();
+        // Each trial: 30 s of presentation, then 2 s to answer.
+        assert_eq!(onsets, [0.0, 32.0, 64.0], "onsets");
+        assert!(
+            events.lines().nth(3).unwrap().starts_with("64\t30\tsimulated\t"),
+            "{events}"
+        );
+        let stim: Value = serde_json::from_str(
+            &fs::read_to_string(beh.join("sub-P01_ses-20261123_task-paper_recording-trial001_stim.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(stim["Columns"], json!(["target_skin_c"]));
+        assert!(
+            (stim["SamplingFrequency"].as_f64().unwrap() - 50.0).abs() < 1e-9,
+            "{stim}"
+        );
+        let physio = beh.join("sub-P01_ses-20261123_task-paper_recording-trial001_physio.json");
+        assert_eq!(
+            serde_json::from_str::<Value>(&fs::read_to_string(physio).unwrap()).unwrap()["Columns"],
+            json!(["sensor_c"])
+        );
+    }
+
+    #[test]
+    fn the_same_data_export_to_the_same_bytes_and_a_used_folder_is_refused() {
+        let root = tempfile::tempdir().unwrap();
+        data_folder(root.path());
+        let (a, b) = (root.path().join("a"), root.path().join("b"));
+        export_into(root.path(), &a);
+        export_into(root.path(), &b);
+        let gz = "sub-P01/ses-20261123/beh/sub-P01_ses-20261123_task-paper_recording-trial001_stim.tsv.gz";
+        assert_eq!(fs::read(a.join(gz)).unwrap(), fs::read(b.join(gz)).unwrap());
+        let again = export_bids(&BidsOptions {
+            data_dir: root.path().to_path_buf(),
+            out_dir: a.clone(),
+            recordings: Vec::new(),
+        });
+        assert!(matches!(again, Err(ExportError::NotEmpty(_))), "{again:?}");
+    }
+
     #[test]
     fn tsv_fields_are_never_empty_and_never_split() {
         assert_eq!(tsv_field(""), "n/a");
