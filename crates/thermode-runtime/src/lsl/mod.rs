@@ -22,7 +22,7 @@
 
 pub mod ffi;
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -142,6 +142,9 @@ impl MarkerSender {
 #[derive(Debug)]
 pub struct LslStreams {
     thread: Option<JoinHandle<()>>,
+    /// Set when the streams are dropped without [`LslStreams::finish`] (a start that failed later): the thread
+    /// ends without waiting for the loop's feed to close.
+    stop: Arc<AtomicBool>,
     clock: LslClock,
     counters: Arc<LslCounters>,
     library: String,
@@ -166,7 +169,9 @@ impl LslStreams {
         let (feed, ticks) = sync_channel(LSL_QUEUE_TICKS);
         let (queue, client_markers) = sync_channel(MARKER_QUEUE_LEN);
         let counters = Arc::new(LslCounters::default());
+        let stop = Arc::new(AtomicBool::new(false));
         let pusher = Pusher {
+            stop: stop.clone(),
             telemetry,
             markers,
             clock: lsl_clock,
@@ -182,6 +187,7 @@ impl LslStreams {
             })?;
         let streams = LslStreams {
             thread: Some(thread),
+            stop,
             clock: lsl_clock,
             counters,
             library: lib.path().to_string(),
@@ -223,6 +229,7 @@ impl LslStreams {
 
 impl Drop for LslStreams {
     fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
         self.join();
     }
 }
@@ -275,6 +282,7 @@ fn description_fields(config: &LslConfig) -> Vec<(String, String)> {
 
 /// The streaming thread's state.
 struct Pusher {
+    stop: Arc<AtomicBool>,
     telemetry: Outlet,
     markers: Outlet,
     clock: LslClock,
@@ -289,6 +297,7 @@ impl Pusher {
         loop {
             match ticks.recv_timeout(Duration::from_millis(20)) {
                 Ok(record) => self.tick(&record),
+                Err(RecvTimeoutError::Timeout) if self.stop.load(Ordering::Relaxed) => break,
                 Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => break,
             }
