@@ -1,6 +1,7 @@
 //! What the operating system grants a real-time process: real-time scheduling for the control-loop thread
-//! (`SCHED_FIFO`), memory locked in RAM (`mlockall`, so no page fault stalls a tick), and the open-files limit the
-//! network side sizes its connection cap from. Each is asked for, never assumed: the answer ([`Realtime`]) is
+//! (`SCHED_FIFO`), memory locked in RAM (`mlockall`, so no page fault stalls a tick), a CPU of its own for the loop
+//! (the other threads, whose network traffic raises soft interrupts on the CPU that sends it, kept off it), and the
+//! open-files limit the network side sizes its connection cap from. Each is asked for, never assumed: the answer ([`Realtime`]) is
 //! published, and a refusal leaves the process as it was.
 //!
 //! Linux only (`libc`); elsewhere every request is refused with "not supported on this platform".
@@ -17,6 +18,8 @@ pub struct Realtime {
     pub memory_locked: bool,
     /// Why memory was not locked (or not asked for).
     pub memory_error: Option<String>,
+    /// The CPU the thread is pinned to, when it has one to itself (see [`split_cpus`]).
+    pub cpu: Option<usize>,
 }
 
 impl Realtime {
@@ -27,6 +30,7 @@ impl Realtime {
             scheduling_error: Some(reason.to_string()),
             memory_locked: false,
             memory_error: Some(reason.to_string()),
+            cpu: None,
         }
     }
 
@@ -42,7 +46,10 @@ impl Realtime {
             (false, Some(e)) => format!("memory not locked ({e})"),
             (false, None) => "memory not locked".to_string(),
         };
-        format!("{scheduling}, {memory}")
+        match self.cpu {
+            Some(cpu) => format!("{scheduling}, {memory}, alone on CPU {cpu}"),
+            None => format!("{scheduling}, {memory}"),
+        }
     }
 }
 
@@ -71,6 +78,52 @@ pub fn request_realtime(priority: i32, lock_memory: bool) -> Realtime {
         scheduling_error,
         memory_locked,
         memory_error,
+        cpu: None,
+    }
+}
+
+/// The CPUs the process may run on: the last one for the real-time loop and the others for every other thread, when
+/// there are at least two; `None` otherwise (or where affinity is not supported).
+pub fn split_cpus() -> Option<(usize, Vec<usize>)> {
+    let mut cpus = allowed_cpus();
+    let loop_cpu = cpus.pop()?;
+    (!cpus.is_empty()).then_some((loop_cpu, cpus))
+}
+
+/// Pins the calling thread to `cpus` (an error when refused or unsupported).
+pub fn pin_current_thread(cpus: &[usize]) -> Result<(), String> {
+    set_affinity(cpus)
+}
+
+#[cfg(target_os = "linux")]
+fn allowed_cpus() -> Vec<usize> {
+    // SAFETY: an all-zero cpu_set_t is a valid empty set.
+    let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
+    // SAFETY: pid 0 is the calling thread; the size is that of the set we own, which the call fills.
+    let rc = unsafe { libc::sched_getaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &mut set) };
+    if rc != 0 {
+        return Vec::new();
+    }
+    (0..libc::CPU_SETSIZE as usize)
+        // SAFETY: `cpu` is below CPU_SETSIZE, inside the set.
+        .filter(|&cpu| unsafe { libc::CPU_ISSET(cpu, &set) })
+        .collect()
+}
+
+#[cfg(target_os = "linux")]
+fn set_affinity(cpus: &[usize]) -> Result<(), String> {
+    // SAFETY: an all-zero cpu_set_t is a valid empty set.
+    let mut set: libc::cpu_set_t = unsafe { std::mem::zeroed() };
+    for &cpu in cpus.iter().filter(|&&cpu| cpu < libc::CPU_SETSIZE as usize) {
+        // SAFETY: `cpu` is below CPU_SETSIZE, inside the set we own.
+        unsafe { libc::CPU_SET(cpu, &mut set) };
+    }
+    // SAFETY: pid 0 is the calling thread; `set` is a valid set of the size given, read only.
+    let rc = unsafe { libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(format!("CPU affinity refused: {}", std::io::Error::last_os_error()))
     }
 }
 
@@ -150,6 +203,16 @@ fn lock_all_memory() -> Result<(), String> {
     Err("not supported on this platform".into())
 }
 
+#[cfg(not(target_os = "linux"))]
+fn allowed_cpus() -> Vec<usize> {
+    Vec::new()
+}
+
+#[cfg(not(target_os = "linux"))]
+fn set_affinity(_cpus: &[usize]) -> Result<(), String> {
+    Err("not supported on this platform".into())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -166,5 +229,16 @@ mod tests {
             .describe()
             .contains("normal scheduling (off)"));
         assert!(open_files_limit().is_none_or(|n| n > 0));
+    }
+
+    #[test]
+    fn the_loop_cpu_is_apart_from_the_others() {
+        if let Some((loop_cpu, others)) = split_cpus() {
+            assert!(
+                !others.is_empty() && !others.contains(&loop_cpu),
+                "{loop_cpu} vs {others:?}"
+            );
+            assert!(allowed_cpus().contains(&loop_cpu));
+        }
     }
 }

@@ -189,6 +189,101 @@ impl std::fmt::Display for BenchReport {
     }
 }
 
+/// The timer's floor: a thread that only sleeps to the same deadlines, with the same real-time request, and does
+/// nothing else. What it misses, the machine misses whatever the loop does (`thermode bench --floor`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FloorReport {
+    /// Rate \[Hz\].
+    pub rate_hz: f64,
+    /// Measured run \[s\].
+    pub duration_s: f64,
+    /// Ticks woken.
+    pub ticks: u64,
+    /// Deadlines missed (no wake of their own).
+    pub missed_deadlines: u64,
+    /// |period − nominal| \[s\].
+    pub period_deviation_s: Spread,
+    /// Wake time − deadline \[s\].
+    pub lateness_s: Spread,
+    /// What real-time treatment the thread obtained.
+    pub realtime: String,
+}
+
+impl std::fmt::Display for FloorReport {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let us = |s: &Spread| {
+            format!(
+                "p50 {:8.1} µs   p99 {:8.1} µs   max {:8.1} µs",
+                s.p50 * 1e6,
+                s.p99 * 1e6,
+                s.max * 1e6
+            )
+        };
+        let all = (self.ticks + self.missed_deadlines).max(1) as f64;
+        writeln!(
+            f,
+            "timer floor: {} Hz, {:.1} s, an empty loop: {} ticks, {} missed deadlines ({:.2} %)",
+            self.rate_hz,
+            self.duration_s,
+            self.ticks,
+            self.missed_deadlines,
+            100.0 * self.missed_deadlines as f64 / all
+        )?;
+        writeln!(f, "  real time         {}", self.realtime)?;
+        writeln!(f, "  period deviation  {}", us(&self.period_deviation_s))?;
+        write!(f, "  wake lateness     {}", us(&self.lateness_s))
+    }
+}
+
+/// Measures the timer's floor at `rate_hz` for `duration_s` \[s\], asking for real-time scheduling when `realtime`.
+pub fn timer_floor(rate_hz: f64, duration_s: f64, realtime: bool) -> Result<FloorReport, RuntimeError> {
+    if !(rate_hz.is_finite() && (1.0..=10_000.0).contains(&rate_hz)) {
+        return Err(RuntimeError::Config("the floor's rate must lie in 1..=10000 Hz".into()));
+    }
+    if !(duration_s.is_finite() && (0.1..=3600.0).contains(&duration_s)) {
+        return Err(RuntimeError::Config("bench duration must lie in 0.1..=3600 s".into()));
+    }
+    let thread = std::thread::Builder::new()
+        .name("thermode-floor".into())
+        .spawn(move || {
+            let obtained = if realtime {
+                crate::control_loop::request_realtime_alone()
+            } else {
+                thermode_platform::rt::Realtime::not_requested("not asked (--realtime)")
+            };
+            let clock = MonotonicClock::new();
+            let period_s = 1.0 / rate_hz;
+            let stop = std::sync::atomic::AtomicBool::new(false);
+            let mut ticker = thermode_platform::Ticker::new(period_s, clock.now_s() + period_s)
+                .map_err(|e| RuntimeError::Config(e.to_string()))?;
+            let (mut wakes, mut lateness) = (Vec::new(), Vec::new());
+            while let Some(tick) = ticker.wait(&clock, &stop) {
+                wakes.push(tick.woke_s);
+                lateness.push(tick.woke_s - tick.scheduled_s);
+                if tick.scheduled_s - ticker.start_s() >= duration_s {
+                    break;
+                }
+            }
+            let deviation: Vec<f64> = wakes.windows(2).map(|w| (w[1] - w[0] - period_s).abs()).collect();
+            Ok(FloorReport {
+                rate_hz,
+                duration_s,
+                ticks: wakes.len() as u64,
+                missed_deadlines: ticker.missed_total(),
+                period_deviation_s: Spread::of(&deviation),
+                lateness_s: Spread::of(&lateness),
+                realtime: obtained.describe(),
+            })
+        });
+    let thread = thread.map_err(|source| RuntimeError::Io {
+        context: "cannot start the floor thread".into(),
+        source,
+    })?;
+    thread
+        .join()
+        .unwrap_or_else(|_| Err(RuntimeError::Config("the floor thread panicked".into())))
+}
+
 /// A touch sent by the bench client.
 #[derive(Debug, Clone, Copy)]
 struct Sent {
@@ -292,6 +387,10 @@ fn drive_client(
         .enable_all()
         .build()
         .map_err(io)?;
+    // The clients stand for other processes: off the loop's CPU, as the daemon's network threads are.
+    if let Some(cpus) = config.realtime.then(crate::control_loop::network_cpus).flatten() {
+        let _ = thermode_platform::rt::pin_current_thread(&cpus);
+    }
     let url = format!("ws://{}/api/ws", daemon.http_addr());
     let received = Arc::new(std::sync::atomic::AtomicU64::new(0));
     runtime.block_on(async {

@@ -215,7 +215,7 @@ impl LoopHandle {
                     let limits = control.slots.iter().map(|s| s.limits).collect();
                     // After the engines are built (they allocate), before the first tick.
                     let realtime = if config.realtime {
-                        thermode_platform::rt::request_realtime(thermode_platform::rt::DEFAULT_FIFO_PRIORITY, true)
+                        request_realtime_alone()
                     } else {
                         Realtime::not_requested("not requested")
                     };
@@ -838,4 +838,22 @@ fn claim(status: &mut ChannelStatus, owner: Owner) {
     status.owner = owner;
     status.release_at_s = None;
     status.held_off = false;
+}
+
+/// Real-time scheduling and locked memory for the calling (loop) thread, and the last CPU to itself when there are
+/// two or more (the network threads keep off it: see [`network_cpus`]).
+pub(crate) fn request_realtime_alone() -> Realtime {
+    let mut realtime = thermode_platform::rt::request_realtime(thermode_platform::rt::DEFAULT_FIFO_PRIORITY, true);
+    if let Some((loop_cpu, _)) = thermode_platform::rt::split_cpus() {
+        if thermode_platform::rt::pin_current_thread(&[loop_cpu]).is_ok() {
+            realtime.cpu = Some(loop_cpu);
+        }
+    }
+    realtime
+}
+
+/// The CPUs for every thread but a real-time loop's (all but the last, when there are two or more; see
+/// [`LoopConfig::realtime`]).
+pub fn network_cpus() -> Option<Vec<usize>> {
+    thermode_platform::rt::split_cpus().map(|(_, others)| others)
 }

@@ -30,7 +30,7 @@ use crate::error::RuntimeError;
 use crate::interlock::Interlock;
 use crate::ledger::{DoseWriter, StateDir};
 use crate::lsl::{LslConfig, LslCounters, LslStreams, MarkerSender};
-use crate::recorder::{RecordErrorPolicy, RecordState, RecordStatus, Recorder};
+use crate::recorder::{RecordErrorPolicy, RecordState, RecordStatus, Recorder, RESUME_FAILED};
 use crate::snapshot::Snapshot;
 use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
 use thermode_platform::Clock;
@@ -245,10 +245,18 @@ impl Daemon {
                 source,
             })?;
         let interlock = Arc::new(Interlock::new());
+        let mut start_notices = Vec::new();
         let recorder = match &config.record_dir {
             Some(dir) => {
                 let trips = (config.record_policy == RecordErrorPolicy::Stop).then(|| interlock.clone());
                 let (recorder, feed) = Recorder::start_with(dir, config.record_max_bytes, trips)?;
+                for (path, bytes) in recorder.repaired() {
+                    start_notices.push(format!(
+                        "thermode: {} ended in a torn row (a daemon killed mid-write): cut back to its last whole row \
+                         ({bytes} bytes removed)",
+                        path.display()
+                    ));
+                }
                 taps.push(feed);
                 Some(recorder)
             }
@@ -266,7 +274,7 @@ impl Daemon {
                 let (streams, feed, markers) = start_lsl(wanted, &config, device.channel_count(), clock.as_ref())?;
                 taps.push(feed);
                 if let Some(recorder) = &recorder {
-                    write_lsl_sidecar(recorder.path(), &streams, &wanted.name)?;
+                    write_lsl_sidecar(&recorder.path(), &streams, &wanted.name)?;
                 }
                 (Some(streams), Some(markers))
             }
@@ -281,6 +289,7 @@ impl Daemon {
             taps,
             interlock.clone(),
         )?;
+        let realtime_loop = control.realtime().cpu.is_some();
         let ledger_path = ledger.as_ref().map(|(state, _)| state.ledger_path());
         let dose_writer = match ledger {
             Some((state, saved)) => {
@@ -331,7 +340,7 @@ impl Daemon {
                 counters: s.counters(),
             }),
         });
-        let runtime = start_network(app, http, osc)?;
+        let runtime = start_network(app, http, osc, realtime_loop)?;
         Ok(Daemon {
             runtime: Some(runtime),
             control: Some(control),
@@ -341,7 +350,10 @@ impl Daemon {
             ledger_path,
             recording,
             interlock,
-            notices: std::sync::Mutex::new(Notices::default()),
+            notices: std::sync::Mutex::new(Notices {
+                pending: start_notices,
+                ..Notices::default()
+            }),
             http_addr,
             osc_addr,
             token: server.token.clone(),
@@ -414,20 +426,35 @@ impl Daemon {
         let Ok(mut seen) = self.notices.lock() else {
             return lines;
         };
+        lines.append(&mut seen.pending);
         if let Some(r) = &self.recording {
-            if r.state() == RecordState::Failed && !seen.recording_failed {
-                seen.recording_failed = true;
-                let what = if self.interlock.engaged() {
+            let events = *r.subscribe().borrow();
+            if events.failures > seen.recording_failures && r.state() == RecordState::Failed {
+                seen.recording_failures = events.failures;
+                let error = r.error().unwrap_or_default();
+                let what = if error.starts_with(RESUME_FAILED) {
+                    "the acknowledgement stands (stimuli allowed, unrecorded); acknowledge again to retry"
+                } else if self.interlock.engaged() {
                     "every stimulus released; new ones are refused until an operator acknowledges \
-                     (ack_recording, or the dashboard's button)"
+                     (ack_recording, or the dashboard's button), which also goes on in a new file"
                 } else {
-                    "stimuli go on unrecorded (--on-record-error continue)"
+                    "stimuli go on unrecorded (--on-record-error continue); an acknowledgement (ack_recording) \
+                     goes on in a new file"
                 };
                 lines.push(format!(
                     "thermode: recording to {} FAILED: {}; {} rows written, the file ends with a whole row; {what}",
                     r.path().display(),
-                    r.error().unwrap_or_default(),
+                    error,
                     r.rows_written(),
+                ));
+            }
+            if events.resumptions > seen.recording_resumptions {
+                seen.recording_resumptions = events.resumptions;
+                lines.push(format!(
+                    "thermode: recording goes on in {} (segment {}); rows produced meanwhile are lost ({} so far)",
+                    r.path().display(),
+                    r.segment(),
+                    r.rows_lost(),
                 ));
             }
         }
@@ -518,7 +545,11 @@ impl Daemon {
 /// What [`Daemon::take_notices`] has told already.
 #[derive(Debug, Default)]
 struct Notices {
-    recording_failed: bool,
+    /// Lines from the start, not told yet.
+    pending: Vec<String>,
+    /// The recording's failures and resumptions already told.
+    recording_failures: u64,
+    recording_resumptions: u64,
     link_failures: u64,
     link_reconnects: u64,
 }
@@ -632,16 +663,20 @@ fn start_network(
     app: Arc<App>,
     http: TcpListener,
     osc: Option<UdpSocket>,
+    keep_off_loop_cpu: bool,
 ) -> Result<tokio::runtime::Runtime, RuntimeError> {
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .thread_name("thermode-net")
-        .enable_all()
-        .build()
-        .map_err(|source| RuntimeError::Io {
-            context: "cannot start the network runtime".into(),
-            source,
-        })?;
+    let mut builder = tokio::runtime::Builder::new_multi_thread();
+    builder.worker_threads(2).thread_name("thermode-net").enable_all();
+    if let Some(cpus) = keep_off_loop_cpu.then(crate::control_loop::network_cpus).flatten() {
+        // Their socket traffic raises soft interrupts on the CPU that sends it: keep it off the loop's.
+        builder.on_thread_start(move || {
+            let _ = thermode_platform::rt::pin_current_thread(&cpus);
+        });
+    }
+    let runtime = builder.build().map_err(|source| RuntimeError::Io {
+        context: "cannot start the network runtime".into(),
+        source,
+    })?;
     let io_error = |source| RuntimeError::Io {
         context: "cannot register the listening sockets".into(),
         source,

@@ -8,11 +8,17 @@
 //!
 //! A write that fails (a full disk, a quota, an I/O error) or writes only part of its rows leaves the file cut back
 //! to its last whole row (the whole rows that made it are kept and counted): the file always ends with a newline
-//! and holds exactly [`RecordStatus::rows_written`] rows. The recording then stops for the session ([`RecordState::Failed`], with the error): the status says so at
-//! once, the writer trips the [`Interlock`] it was given (the daemon's policy `stop`: every stimulus released, new ones
-//! refused until an operator acknowledges), and it keeps taking the loop's records (counted as lost,
-//! [`RecordStatus::rows_lost`]) so the loop never sees a full queue. When the loop stops, the writer syncs the file
-//! and its directory ([`Recorder::finish`]).
+//! and holds exactly [`RecordStatus::rows_written`] rows. The recording then stops ([`RecordState::Failed`], with the
+//! error): the status says so at once, the writer trips the [`Interlock`] it was given (the daemon's policy `stop`:
+//! every stimulus released, new ones refused until an operator acknowledges), and it keeps taking the loop's records
+//! (counted as lost, [`RecordStatus::rows_lost`]) so the loop never sees a full queue.
+//!
+//! An operator's acknowledgement ([`RecordStatus::request_resume`]) asks the writer to go on in a new file, the next
+//! *segment* (`<session>_seg2.csv`, `_seg3`…, each with its header): the failed file is left as it is (whole rows), the
+//! status then shows the new file, its rows and the earlier files. If the new file cannot be written either (the disk
+//! is still full), the recording stays failed with that error, an empty new file is removed, and the interlock is not
+//! tripped again for it (the operator has just acknowledged this failure); the next acknowledgement tries again. When
+//! the loop stops, the writer syncs the file and its directory ([`Recorder::finish`]).
 //!
 //! Columns (the `render` CSV names and conventions): `time_s, channel, contact, material, mode, target_skin_c,
 //! skin_c, display_setpoint_c, sensor_c, current_a, hot_side_c, fault` — `time_s` is loop time (the daemon clock's
@@ -23,7 +29,7 @@ use std::borrow::Cow;
 use std::fs::{File, OpenOptions};
 use std::io::{Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -45,6 +51,9 @@ pub const WRITE_CHUNK_BYTES: usize = 64 * 1024;
 /// The CSV header.
 pub const CSV_HEADER: &str =
     "time_s,channel,contact,material,mode,target_skin_c,skin_c,display_setpoint_c,sensor_c,current_a,hot_side_c,fault";
+
+/// How the error of a failed resumption (a new file that cannot be written either) begins.
+pub const RESUME_FAILED: &str = "cannot go on in a new file";
 
 /// What the daemon does when the recording fails.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -78,33 +87,60 @@ pub enum RecordState {
 /// The recording's state, shared by the writer, the status page and the WebSocket events.
 #[derive(Debug)]
 pub struct RecordStatus {
-    path: PathBuf,
+    path: Mutex<PathBuf>,
     rows_written: AtomicU64,
     bytes_written: AtomicU64,
     rows_lost: AtomicU64,
     error: Mutex<Option<String>>,
-    /// (failures, acknowledgements), bumped at each; WebSocket connections watch it to send their events.
-    changed: watch::Sender<(u64, u64)>,
+    /// The files of earlier segments and the rows each holds.
+    earlier: Mutex<Vec<(PathBuf, u64)>>,
+    /// An acknowledgement asked the writer to go on in a new file.
+    resume_requested: AtomicBool,
+    /// Failures, acknowledgements and resumptions, bumped at each; WebSocket connections watch it for their events.
+    changed: watch::Sender<RecordEvents>,
+}
+
+/// Counts of what happened to a recording, for those who report it as events.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RecordEvents {
+    /// Writes that failed (and resumptions that could not start).
+    pub failures: u64,
+    /// Operator acknowledgements.
+    pub acknowledgements: u64,
+    /// Segments begun after a failure.
+    pub resumptions: u64,
 }
 
 impl RecordStatus {
     fn new(path: PathBuf) -> Self {
         RecordStatus {
-            path,
+            path: Mutex::new(path),
             rows_written: AtomicU64::new(0),
             bytes_written: AtomicU64::new(0),
             rows_lost: AtomicU64::new(0),
             error: Mutex::new(None),
-            changed: watch::Sender::new((0, 0)),
+            earlier: Mutex::new(Vec::new()),
+            resume_requested: AtomicBool::new(false),
+            changed: watch::Sender::new(RecordEvents::default()),
         }
     }
 
-    /// The session file.
-    pub fn path(&self) -> &Path {
-        &self.path
+    /// The file being written (the current segment's).
+    pub fn path(&self) -> PathBuf {
+        self.path.lock().map(|p| p.clone()).unwrap_or_default()
     }
 
-    /// Rows in the file (written, whole; the header not counted).
+    /// The segment being written: 1 for the session's first file, 2 after the first resumption, …
+    pub fn segment(&self) -> usize {
+        self.earlier_files().len() + 1
+    }
+
+    /// The files of earlier segments, each with the rows it holds.
+    pub fn earlier_files(&self) -> Vec<(PathBuf, u64)> {
+        self.earlier.lock().map(|e| e.clone()).unwrap_or_default()
+    }
+
+    /// Rows in the current file (written, whole; the header not counted).
     pub fn rows_written(&self) -> u64 {
         self.rows_written.load(Ordering::SeqCst)
     }
@@ -133,21 +169,43 @@ impl RecordStatus {
         self.error.lock().ok().and_then(|e| e.clone())
     }
 
-    /// A receiver of the (failures, acknowledgements) counts: it sees every failure and every acknowledgement.
-    pub fn subscribe(&self) -> watch::Receiver<(u64, u64)> {
+    /// A receiver of the event counts: it sees every failure, acknowledgement and resumption.
+    pub fn subscribe(&self) -> watch::Receiver<RecordEvents> {
         self.changed.subscribe()
     }
 
-    /// An operator acknowledged the failure (for the events; the interlock itself is acknowledged separately).
-    pub fn acknowledged(&self) {
-        self.changed.send_modify(|(_, acks)| *acks += 1);
+    /// An operator acknowledged the failure: counted for the events, and, while the recording is failed, the writer
+    /// is asked to go on in a new file (the interlock itself is acknowledged separately).
+    pub fn request_resume(&self) {
+        if self.state() == RecordState::Failed {
+            self.resume_requested.store(true, Ordering::SeqCst);
+        }
+        self.changed.send_modify(|e| e.acknowledgements += 1);
+    }
+
+    fn take_resume_request(&self) -> bool {
+        self.resume_requested.swap(false, Ordering::SeqCst)
     }
 
     fn fail(&self, error: String) {
         if let Ok(mut slot) = self.error.lock() {
-            slot.get_or_insert(error);
+            *slot = Some(error);
         }
-        self.changed.send_modify(|(failures, _)| *failures += 1);
+        self.changed.send_modify(|e| e.failures += 1);
+    }
+
+    /// The writer goes on in `path`: the current file joins the earlier ones and the error is cleared.
+    fn resumed(&self, path: PathBuf) {
+        let previous = self.path.lock().map(|mut p| std::mem::replace(&mut *p, path));
+        if let (Ok(previous), Ok(mut earlier)) = (previous, self.earlier.lock()) {
+            earlier.push((previous, self.rows_written()));
+        }
+        self.rows_written.store(0, Ordering::SeqCst);
+        self.bytes_written.store(0, Ordering::SeqCst);
+        if let Ok(mut slot) = self.error.lock() {
+            *slot = None;
+        }
+        self.changed.send_modify(|e| e.resumptions += 1);
     }
 }
 
@@ -177,42 +235,70 @@ impl SessionFile for File {
     }
 }
 
-/// A file that takes at most `max_bytes` and then fails as a full disk does: the write that crosses the quota
-/// writes what fits, the next one fails with `StorageFull` (`--record-max-bytes`).
-#[derive(Debug)]
-pub struct QuotaFile<F> {
-    inner: F,
+/// A disk's worth of bytes shared by a recording's files (`--record-max-bytes`).
+#[derive(Debug, Clone)]
+pub struct Quota {
     max_bytes: u64,
-    len: u64,
+    /// Bytes held by the files under this quota.
+    used: Arc<AtomicU64>,
 }
 
-impl<F: SessionFile> QuotaFile<F> {
-    /// `inner`, empty, limited to `max_bytes` \[bytes\].
-    pub fn new(inner: F, max_bytes: u64) -> Self {
+impl Quota {
+    /// `max_bytes` \[bytes\], none used.
+    pub fn new(max_bytes: u64) -> Self {
+        Quota {
+            max_bytes,
+            used: Arc::new(AtomicU64::new(0)),
+        }
+    }
+
+    /// `inner`, empty, under this quota.
+    pub fn file<F: SessionFile>(&self, inner: F) -> QuotaFile<F> {
         QuotaFile {
             inner,
-            max_bytes,
+            quota: self.clone(),
             len: 0,
         }
     }
 }
 
+/// A file under a [`Quota`] that fails as a full disk does once the quota is used up: the write that crosses it
+/// writes what fits, the next one fails with `StorageFull`.
+#[derive(Debug)]
+pub struct QuotaFile<F> {
+    inner: F,
+    quota: Quota,
+    len: u64,
+}
+
+impl<F: SessionFile> QuotaFile<F> {
+    /// `inner`, empty, alone under a quota of `max_bytes` \[bytes\].
+    pub fn new(inner: F, max_bytes: u64) -> Self {
+        Quota::new(max_bytes).file(inner)
+    }
+}
+
 impl<F: SessionFile> SessionFile for QuotaFile<F> {
     fn write_some(&mut self, bytes: &[u8]) -> std::io::Result<usize> {
-        let room = usize::try_from(self.max_bytes.saturating_sub(self.len)).unwrap_or(usize::MAX);
+        let used = self.quota.used.load(Ordering::SeqCst);
+        let room = usize::try_from(self.quota.max_bytes.saturating_sub(used)).unwrap_or(usize::MAX);
         if room == 0 && !bytes.is_empty() {
             return Err(std::io::Error::new(
                 std::io::ErrorKind::StorageFull,
-                format!("the recording's quota of {} bytes is used up", self.max_bytes),
+                format!("the recording's quota of {} bytes is used up", self.quota.max_bytes),
             ));
         }
         let n = self.inner.write_some(&bytes[..bytes.len().min(room)])?;
         self.len += n as u64;
+        self.quota.used.fetch_add(n as u64, Ordering::SeqCst);
         Ok(n)
     }
 
     fn cut_to(&mut self, len: u64) -> std::io::Result<()> {
         self.inner.cut_to(len)?;
+        self.quota
+            .used
+            .fetch_sub(self.len.saturating_sub(len), Ordering::SeqCst);
         self.len = len;
         Ok(())
     }
@@ -222,11 +308,16 @@ impl<F: SessionFile> SessionFile for QuotaFile<F> {
     }
 }
 
+/// Opens the file of the next segment (given its number: 2, 3, …): its path and the file, or why not.
+pub type SegmentOpener = Box<dyn FnMut(usize) -> std::io::Result<(PathBuf, Box<dyn SessionFile>)> + Send>;
+
 /// A running recorder.
 #[derive(Debug)]
 pub struct Recorder {
     status: Arc<RecordStatus>,
     thread: Option<JoinHandle<Result<(), std::io::Error>>>,
+    /// Earlier session files in the directory that ended in a torn row, and the bytes cut from each.
+    repaired: Vec<(PathBuf, u64)>,
 }
 
 impl Recorder {
@@ -236,8 +327,8 @@ impl Recorder {
         Recorder::start_with(dir, None, None)
     }
 
-    /// As [`Recorder::start`]; the file takes at most `max_bytes` (then fails as a full disk would), and a failure
-    /// trips `interlock` (the policy `stop`).
+    /// As [`Recorder::start`]; the files take at most `max_bytes` together (then fail as a full disk would), and a
+    /// failure trips `interlock` (the policy `stop`).
     pub fn start_with(
         dir: &Path,
         max_bytes: Option<u64>,
@@ -247,29 +338,51 @@ impl Recorder {
             context: format!("cannot create the recording directory {}", dir.display()),
             source,
         })?;
-        let (path, file) = create_session_file(dir, &session_stem())?;
+        let repaired = repair_torn_sessions(dir);
+        let stem = session_stem();
+        let (path, file) = create_session_file(dir, &stem)?;
         // The new file's name is durable once its directory is synced.
         sync_dir(dir);
-        let file: Box<dyn SessionFile> = match max_bytes {
-            Some(max) => Box::new(QuotaFile::new(file, max)),
-            None => Box::new(file),
+        let quota = max_bytes.map(Quota::new);
+        let wrap = move |file: File| -> Box<dyn SessionFile> {
+            match &quota {
+                Some(quota) => Box::new(quota.file(file)),
+                None => Box::new(file),
+            }
         };
-        Recorder::start_on(path, file, interlock)
+        let first = wrap(file);
+        let dir = dir.to_path_buf();
+        let opener: SegmentOpener = Box::new(move |segment| {
+            let (path, file) =
+                create_session_file(&dir, &format!("{stem}_seg{segment}")).map_err(std::io::Error::other)?;
+            sync_dir(&dir);
+            Ok((path, wrap(file)))
+        });
+        let (mut recorder, feed) = Recorder::start_on(path, first, interlock, Some(opener))?;
+        recorder.repaired = repaired;
+        Ok((recorder, feed))
     }
 
-    /// A recorder writing to `file`, shown as `path` (tests and drills: a file that fails on purpose).
+    /// A recorder writing to `file`, shown as `path`, going on after an acknowledged failure in the files `opener`
+    /// gives (tests and drills: a file that fails on purpose).
     pub fn start_on(
         path: PathBuf,
         file: Box<dyn SessionFile>,
         interlock: Option<Arc<Interlock>>,
+        opener: Option<SegmentOpener>,
     ) -> Result<(Recorder, SyncSender<TickRecord>), RuntimeError> {
         let (feed, queue) = sync_channel(RECORD_QUEUE_TICKS);
         let status = Arc::new(RecordStatus::new(path));
         let thread = {
             let status = status.clone();
+            let session = Session {
+                status,
+                interlock,
+                opener,
+            };
             std::thread::Builder::new()
                 .name("thermode-recorder".into())
-                .spawn(move || write_session(file, queue, &status, interlock.as_deref()))
+                .spawn(move || session.write(file, queue))
                 .map_err(|source| RuntimeError::Io {
                     context: "cannot start the recorder thread".into(),
                     source,
@@ -278,13 +391,20 @@ impl Recorder {
         let recorder = Recorder {
             status,
             thread: Some(thread),
+            repaired: Vec::new(),
         };
         Ok((recorder, feed))
     }
 
-    /// The session file.
-    pub fn path(&self) -> &Path {
+    /// The file being written.
+    pub fn path(&self) -> PathBuf {
         self.status.path()
+    }
+
+    /// Earlier session files of the directory that a killed daemon left ending in a torn row (a write cut short
+    /// at a page boundary by SIGKILL), each cut back to its last whole row at this start, with the bytes cut.
+    pub fn repaired(&self) -> &[(PathBuf, u64)] {
+        &self.repaired
     }
 
     /// The shared state of the recording (for the status page).
@@ -330,7 +450,12 @@ fn create_session_file(dir: &Path, stem: &str) -> Result<(PathBuf, File), Runtim
         };
         let path = dir.join(name);
         match OpenOptions::new().write(true).create_new(true).open(&path) {
-            Ok(file) => return Ok((path, file)),
+            Ok(file) => {
+                // Held while the file is written (released when the process ends, however it ends): a daemon that
+                // starts on the same directory leaves a live file alone (see `repair_torn_sessions`).
+                let _ = file.try_lock();
+                return Ok((path, file));
+            }
             Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
             Err(source) => {
                 return Err(RuntimeError::Io {
@@ -344,6 +469,42 @@ fn create_session_file(dir: &Path, stem: &str) -> Result<(PathBuf, File), Runtim
         "{} already holds 1000 session files named {stem}",
         dir.display()
     )))
+}
+
+/// Cuts every `session_*.csv` of `dir` that does not end with a newline back to its last whole row (a daemon
+/// killed in the middle of a write can leave part of a row: the kernel may stop a write to a file at a page
+/// boundary for a fatal signal). Returns the files cut and the bytes cut from each; files it cannot read or cut, and
+/// files another daemon is writing (it holds their lock), are left alone.
+fn repair_torn_sessions(dir: &Path) -> Vec<(PathBuf, u64)> {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return Vec::new();
+    };
+    let mut repaired = Vec::new();
+    for path in entries.filter_map(|e| e.ok().map(|e| e.path())) {
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        if !(name.starts_with("session_") && name.ends_with(".csv")) {
+            continue;
+        }
+        if let Some(cut) = cut_torn_tail(&path) {
+            repaired.push((path, cut));
+        }
+    }
+    repaired.sort();
+    repaired
+}
+
+/// Cuts `path` back to just after its last newline when it does not end with one: the bytes cut.
+fn cut_torn_tail(path: &Path) -> Option<u64> {
+    let file = OpenOptions::new().read(true).write(true).open(path).ok()?;
+    file.try_lock().ok()?;
+    let bytes = std::fs::read(path).ok()?;
+    if bytes.is_empty() || bytes.last() == Some(&b'\n') {
+        return None;
+    }
+    let keep = bytes.iter().rposition(|&b| b == b'\n').map_or(0, |i| i + 1);
+    file.set_len(keep as u64).ok()?;
+    file.sync_all().ok()?;
+    Some((bytes.len() - keep) as u64)
 }
 
 /// Syncs a directory (best effort: not every platform or file system can).
@@ -370,18 +531,7 @@ impl Rows {
         if self.buffer.is_empty() {
             return Ok(());
         }
-        let mut done = 0;
-        let result = loop {
-            if done == self.buffer.len() {
-                break Ok(());
-            }
-            match self.file.write_some(&self.buffer[done..]) {
-                Ok(0) => break Err(std::io::Error::from(std::io::ErrorKind::WriteZero)),
-                Ok(n) => done += n,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) => break Err(e),
-            }
-        };
+        let (done, result) = write_fully(self.file.as_mut(), &self.buffer);
         match result {
             Ok(()) => {
                 self.len += self.buffer.len() as u64;
@@ -427,66 +577,134 @@ impl Rows {
     }
 }
 
-/// The writer thread: rows until the feed closes, written at least every [`FLUSH_INTERVAL_S`]. On a failure it
-/// reports (status, interlock) and goes on draining the feed without writing.
-fn write_session(
-    file: Box<dyn SessionFile>,
-    queue: Receiver<TickRecord>,
-    status: &RecordStatus,
-    interlock: Option<&Interlock>,
-) -> Result<(), std::io::Error> {
-    let mut rows = Rows {
-        file,
-        buffer: Vec::with_capacity(WRITE_CHUNK_BYTES + 4096),
-        buffered_rows: 0,
-        len: 0,
-        header_buffered: true,
-    };
-    rows.buffer.extend_from_slice(CSV_HEADER.as_bytes());
-    rows.buffer.push(b'\n');
-    let mut failure: Option<std::io::Error> = None;
-    let write_out = |rows: &mut Rows, failure: &mut Option<std::io::Error>| {
-        if let Err(e) = rows.write_out(status) {
-            let message = e.to_string();
-            // The interlock first: whoever learns of the failure from the status sees stimuli refused already.
-            if let Some(interlock) = interlock {
-                interlock.trip(format!("recording to {} failed: {message}", status.path().display()));
-            }
-            status.fail(message);
-            *failure = Some(e);
-        }
-    };
-    write_out(&mut rows, &mut failure);
-    let interval = Duration::from_secs_f64(FLUSH_INTERVAL_S);
-    let mut last_write = Instant::now();
-    loop {
-        let open = match queue.recv_timeout(interval) {
-            Ok(record) if failure.is_some() => {
-                status
-                    .rows_lost
-                    .fetch_add(record.channels().len() as u64, Ordering::SeqCst);
-                true
-            }
-            Ok(record) => {
-                write_record(&mut rows.buffer, &record)?;
-                rows.buffered_rows += record.channels().len() as u64;
-                true
-            }
-            Err(RecvTimeoutError::Timeout) => true,
-            Err(RecvTimeoutError::Disconnected) => false,
-        };
-        let due = last_write.elapsed() >= interval || rows.buffer.len() >= WRITE_CHUNK_BYTES || !open;
-        if failure.is_none() && due {
-            write_out(&mut rows, &mut failure);
-            last_write = Instant::now();
-        }
-        if !open {
-            break;
+/// Writes all of `bytes` (retrying short writes): how many were written, and the error that stopped it.
+fn write_fully(file: &mut dyn SessionFile, bytes: &[u8]) -> (usize, std::io::Result<()>) {
+    let mut done = 0;
+    while done < bytes.len() {
+        match file.write_some(&bytes[done..]) {
+            Ok(0) => return (done, Err(std::io::Error::from(std::io::ErrorKind::WriteZero))),
+            Ok(n) => done += n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return (done, Err(e)),
         }
     }
-    match failure {
-        Some(e) => Err(e),
-        None => rows.file.sync(),
+    (done, Ok(()))
+}
+
+impl Rows {
+    /// A file and a buffer holding the header, ready for rows.
+    fn new(file: Box<dyn SessionFile>) -> Self {
+        let mut buffer = Vec::with_capacity(WRITE_CHUNK_BYTES + 4096);
+        buffer.extend_from_slice(CSV_HEADER.as_bytes());
+        buffer.push(b'\n');
+        Rows {
+            file,
+            buffer,
+            buffered_rows: 0,
+            len: 0,
+            header_buffered: true,
+        }
+    }
+}
+
+/// What the writer thread reports to: the status, the interlock it trips, and where later segments go.
+struct Session {
+    status: Arc<RecordStatus>,
+    interlock: Option<Arc<Interlock>>,
+    opener: Option<SegmentOpener>,
+}
+
+impl Session {
+    /// The writer thread: rows until the feed closes, written at least every [`FLUSH_INTERVAL_S`]. On a failure it
+    /// reports (status, interlock) and goes on draining the feed without writing, until an acknowledgement lets it
+    /// go on in a new file.
+    fn write(mut self, file: Box<dyn SessionFile>, queue: Receiver<TickRecord>) -> Result<(), std::io::Error> {
+        let mut rows = Rows::new(file);
+        let mut failure = self.write_out(&mut rows);
+        let interval = Duration::from_secs_f64(FLUSH_INTERVAL_S);
+        let mut last_write = Instant::now();
+        loop {
+            if failure.is_some() && self.status.take_resume_request() {
+                if let Some(next) = self.next_segment() {
+                    (rows, failure) = (next, None);
+                }
+            }
+            let open = match queue.recv_timeout(interval) {
+                Ok(record) if failure.is_some() => {
+                    let lost = record.channels().len() as u64;
+                    self.status.rows_lost.fetch_add(lost, Ordering::SeqCst);
+                    true
+                }
+                Ok(record) => {
+                    write_record(&mut rows.buffer, &record)?;
+                    rows.buffered_rows += record.channels().len() as u64;
+                    true
+                }
+                Err(RecvTimeoutError::Timeout) => true,
+                Err(RecvTimeoutError::Disconnected) => false,
+            };
+            let due = last_write.elapsed() >= interval || rows.buffer.len() >= WRITE_CHUNK_BYTES || !open;
+            if failure.is_none() && due {
+                failure = self.write_out(&mut rows);
+                last_write = Instant::now();
+            }
+            if !open {
+                break;
+            }
+        }
+        match failure {
+            Some(e) => Err(e),
+            None => rows.file.sync(),
+        }
+    }
+
+    /// Writes the buffer; a failure is reported at once (the interlock first: whoever learns of it from the
+    /// status sees stimuli refused already) and returned.
+    fn write_out(&self, rows: &mut Rows) -> Option<std::io::Error> {
+        let e = rows.write_out(&self.status).err()?;
+        let message = e.to_string();
+        if let Some(interlock) = &self.interlock {
+            interlock.trip(format!(
+                "recording to {} failed: {message}",
+                self.status.path().display()
+            ));
+        }
+        self.status.fail(message);
+        Some(e)
+    }
+
+    /// Opens the next segment's file and writes its header: the rows to go on with, or `None` (the recording
+    /// stays failed with the reason; the interlock is not tripped again, as the operator has just acknowledged).
+    fn next_segment(&mut self) -> Option<Rows> {
+        let segment = self.status.segment() + 1;
+        let Some(opener) = self.opener.as_mut() else {
+            self.status
+                .fail(format!("{RESUME_FAILED}: this recording has nowhere to open one"));
+            return None;
+        };
+        let (path, mut file) = match opener(segment) {
+            Ok(opened) => opened,
+            Err(e) => {
+                self.status.fail(format!("{RESUME_FAILED}: {e}"));
+                return None;
+            }
+        };
+        let header = format!("{CSV_HEADER}\n");
+        if let (_, Err(e)) = write_fully(file.as_mut(), header.as_bytes()) {
+            drop(file);
+            // Nothing of the new file is worth keeping.
+            let _ = std::fs::remove_file(&path);
+            let shown = path.display();
+            self.status.fail(format!("{RESUME_FAILED} ({shown}): {e}"));
+            return None;
+        }
+        self.status.resumed(path);
+        self.status.bytes_written.store(header.len() as u64, Ordering::SeqCst);
+        let mut rows = Rows::new(file);
+        rows.len = header.len() as u64;
+        rows.buffer.clear();
+        rows.header_buffered = false;
+        Some(rows)
     }
 }
 

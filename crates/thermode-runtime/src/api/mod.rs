@@ -361,6 +361,7 @@ pub fn status_json(app: &App) -> Value {
                 "scheduling_error": app.realtime.scheduling_error,
                 "memory_locked": app.realtime.memory_locked,
                 "memory_error": app.realtime.memory_error,
+                "cpu": app.realtime.cpu,
             },
         },
         "commands": {
@@ -437,8 +438,15 @@ pub fn recording_json(app: &App, r: &RecordStatus) -> Value {
         RecordState::Ok => "ok",
         RecordState::Failed => "failed",
     };
+    let earlier: Vec<Value> = r
+        .earlier_files()
+        .into_iter()
+        .map(|(path, rows)| json!({"path": path.display().to_string(), "rows_written": rows}))
+        .collect();
     json!({
         "path": r.path().display().to_string(),
+        "segment": r.segment(),
+        "earlier_files": earlier,
         "state": state,
         "error": r.error(),
         "rows_written": r.rows_written(),

@@ -25,6 +25,7 @@ use tokio::time::{interval, timeout, Instant, Interval, MissedTickBehavior};
 use super::protocol::{self, ApiError, ApiRequest, ErrorCode};
 use super::{error_response, recording_json, status_json, App};
 use crate::command::{Command, CommandError, Owner};
+use crate::recorder::{RecordEvents, RecordState};
 
 /// The close code for a text frame that is not UTF-8 (RFC 6455 §7.4.1: invalid frame payload data).
 pub const CLOSE_INVALID_PAYLOAD: u16 = 1007;
@@ -97,8 +98,8 @@ struct Connection {
     /// Pings sent and not yet answered: (sequence number, when sent).
     pings: VecDeque<(u64, Instant)>,
     next_ping: u64,
-    /// The recording's (failures, acknowledgements) as last told to this client.
-    recording: Option<watch::Receiver<(u64, u64)>>,
+    /// The recording's event counts as last told to this client.
+    recording: Option<watch::Receiver<RecordEvents>>,
 }
 
 impl Connection {
@@ -212,9 +213,13 @@ impl Connection {
                 Ok(protocol::ok_reply(id, "unsubscribe", json!({})))
             }
             ApiRequest::AckRecording => {
-                let acknowledged = self.app.interlock.acknowledge();
-                if let (true, Some(recording)) = (acknowledged, &self.app.recording) {
-                    recording.acknowledged();
+                let mut acknowledged = self.app.interlock.acknowledge();
+                if let Some(recording) = &self.app.recording {
+                    // Also under the policy `continue` (no interlock): a failed recording goes on in a new file.
+                    acknowledged |= recording.state() == RecordState::Failed;
+                    if acknowledged {
+                        recording.request_resume();
+                    }
                 }
                 let mut extra = json!({"acknowledged": acknowledged});
                 if let (Value::Object(map), Some(recording)) = (&mut extra, &self.app.recording) {
@@ -338,15 +343,17 @@ async fn tick(subscription: &mut Option<Interval>) {
 
 /// Waits for the recording's next change: `recording_failed` or `recording_acknowledged`; forever without a
 /// recording; `None` once the recorder is gone.
-async fn changed(recording: &mut Option<watch::Receiver<(u64, u64)>>) -> Option<&'static str> {
+async fn changed(recording: &mut Option<watch::Receiver<RecordEvents>>) -> Option<&'static str> {
     let Some(receiver) = recording else {
         return std::future::pending().await;
     };
     let before = *receiver.borrow_and_update();
     receiver.changed().await.ok()?;
     let after = *receiver.borrow_and_update();
-    Some(if after.0 != before.0 {
+    Some(if after.failures != before.failures {
         "recording_failed"
+    } else if after.resumptions != before.resumptions {
+        "recording_resumed"
     } else {
         "recording_acknowledged"
     })

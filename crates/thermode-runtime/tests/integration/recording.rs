@@ -147,6 +147,7 @@ fn a_file_that_fills_up_keeps_whole_rows_counts_only_them_and_trips_the_interloc
         path.clone(),
         Box::new(QuotaFile::new(file, 3000)),
         Some(interlock.clone()),
+        None,
     )
     .expect("recorder");
     let status = recorder.status();
@@ -206,7 +207,7 @@ fn a_disk_that_is_full_from_the_start_fails_at_the_header() {
         eprintln!("SKIPPED: no /dev/full on this system");
         return;
     };
-    let (recorder, feed) = Recorder::start_on("/dev/full".into(), Box::new(full), None).expect("recorder");
+    let (recorder, feed) = Recorder::start_on("/dev/full".into(), Box::new(full), None, None).expect("recorder");
     let status = recorder.status();
     assert!(common::wait_until(10.0, || status.state() == RecordState::Failed));
     assert_eq!(status.rows_written(), 0);
@@ -243,6 +244,11 @@ fn a_failed_recording_stops_every_stimulus_until_acknowledged_and_says_so_everyw
             }
         };
         assert_eq!(event["event"], "recording_failed", "{event}");
+        let notices = daemon.take_notices();
+        assert!(
+            notices.len() == 1 && notices[0].contains("FAILED") && notices[0].contains(&path.display().to_string()),
+            "{notices:?}"
+        );
         assert_eq!(event["recording"]["state"], "failed", "{event}");
         assert_eq!(event["recording"]["stimuli_refused"], true, "{event}");
         let status = common::get_json(addr, "/api/status");
@@ -282,13 +288,24 @@ fn a_failed_recording_stops_every_stimulus_until_acknowledged_and_says_so_everyw
         );
         let again = common::ask(&mut ws, r#"{"type":"touch","id":5,"channel":1,"material":"wood"}"#).await;
         assert_eq!(again["type"], "ok", "accepted after the acknowledgement: {again}");
+        // The acknowledgement asks for a new file; the quota (a full disk) is still used up, so it stays failed,
+        // says why, removes the empty new file, and does not trip the interlock again.
+        assert!(
+            common::wait_until(5.0, || common::get_json(addr, "/api/status")["recording"]["error"]
+                .as_str()
+                .is_some_and(|e| e.contains("cannot go on in a new file"))),
+            "the failed resumption shows"
+        );
         let status = common::get_json(addr, "/api/status");
         assert_eq!(status["recording"]["state"], "failed", "the recording stays failed");
+        assert_eq!(status["recording"]["segment"], 1, "{}", status["recording"]);
         assert_eq!(status["interlock"]["engaged"], false, "{}", status["interlock"]);
     });
+    let csv_files = std::fs::read_dir(dir.path()).expect("dir").count();
+    assert_eq!(csv_files, 1, "the empty second file is removed");
     let notices = daemon.take_notices();
     assert!(
-        notices.len() == 1 && notices[0].contains("FAILED") && notices[0].contains(&path.display().to_string()),
+        notices.len() == 1 && notices[0].contains("cannot go on in a new file") && notices[0].contains("stands"),
         "{notices:?}"
     );
     assert!(daemon.take_notices().is_empty(), "told once");
@@ -321,4 +338,133 @@ fn with_the_policy_continue_a_failed_recording_is_reported_and_stimuli_go_on() {
         assert_eq!(r["type"], "ok", "{r}");
     });
     assert!(daemon.take_notices()[0].contains("--on-record-error continue"));
+}
+
+#[test]
+fn after_an_acknowledgement_a_failed_recording_goes_on_in_a_new_file() {
+    use thermode_runtime::recorder::{QuotaFile, RecordState, SegmentOpener, SessionFile};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let first_path = dir.path().join("session.csv");
+    let file = std::fs::File::create(&first_path).expect("file");
+    let next_dir = dir.path().to_path_buf();
+    let opener: SegmentOpener = Box::new(move |segment| {
+        let path = next_dir.join(format!("session_seg{segment}.csv"));
+        let file: Box<dyn SessionFile> = Box::new(std::fs::File::create(&path)?);
+        Ok((path, file))
+    });
+    let quota = Box::new(QuotaFile::new(file, 3000));
+    let (recorder, feed) = Recorder::start_on(first_path.clone(), quota, None, Some(opener)).expect("recorder");
+    let status = recorder.status();
+    let clock = Arc::new(ManualClock::new());
+    let mut handle = LoopHandle::spawn(
+        LoopConfig::default(),
+        Box::new(SpyDevice::new(2)),
+        trackers(),
+        clock.clone(),
+        vec![feed],
+    )
+    .expect("loop");
+    let mut tick = 0u64;
+    let mut run_until = |done: &dyn Fn() -> bool, what: &str| {
+        while !done() {
+            tick += 1;
+            assert!(tick < 20_000, "{what}: never happened");
+            clock.set(tick as f64 * PERIOD_S);
+            let want = clock.now_s();
+            assert!(
+                common::wait_until(10.0, || handle.snapshot().time_s >= want),
+                "tick {tick}"
+            );
+            if tick.is_multiple_of(50) {
+                // The writer writes at least every 0.5 s of real time.
+                std::thread::sleep(std::time::Duration::from_millis(100));
+            }
+        }
+    };
+    assert!(
+        common::wait_until(10.0, || handle.snapshot().stats.ticks >= 1),
+        "first tick"
+    );
+    run_until(&|| status.state() == RecordState::Failed, "the first file failing");
+    let failed_rows = status.rows_written();
+    status.request_resume();
+    run_until(&|| status.state() == RecordState::Ok, "going on in a new file");
+    run_until(&|| status.rows_written() >= 100, "rows in the new file");
+    handle.stop();
+    drop(handle);
+    let rows = recorder.finish().expect("the second file is whole");
+    let second_path = dir.path().join("session_seg2.csv");
+    assert_eq!(status.path(), second_path);
+    assert_eq!(status.segment(), 2);
+    assert_eq!(status.earlier_files(), vec![(first_path.clone(), failed_rows)]);
+    assert_eq!(
+        rows_on_disk(&first_path),
+        (failed_rows, true),
+        "the first file as it failed"
+    );
+    assert_eq!(
+        rows_on_disk(&second_path),
+        (rows, true),
+        "rows counted = rows in the new file"
+    );
+    let text = std::fs::read_to_string(&second_path).expect("read");
+    assert_eq!(text.lines().next(), Some(CSV_HEADER), "the new file has its header");
+    assert!(
+        status.rows_lost() > 0,
+        "rows between the failure and the acknowledgement are lost"
+    );
+}
+
+#[test]
+fn a_torn_row_left_by_a_killed_daemon_is_cut_back_at_the_next_start_but_a_live_file_is_left_alone() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let torn = dir.path().join("session_20260101-000000.csv");
+    let whole = dir.path().join("session_20260101-000001.csv");
+    let live = dir.path().join("session_20260101-000002.csv");
+    let other = dir.path().join("notes.csv");
+    let rows = format!("{CSV_HEADER}\n0.000000,0,0,,air,32.0000\n");
+    for path in [&torn, &live, &other] {
+        std::fs::write(path, format!("{rows}0.010000,0,0,,ai")).expect("write");
+    }
+    std::fs::write(&whole, &rows).expect("write");
+    // Another daemon still writing holds its file's lock.
+    let writer = std::fs::OpenOptions::new().write(true).open(&live).expect("open");
+    writer.try_lock().expect("lock");
+    let (recorder, feed) = Recorder::start(dir.path()).expect("recorder");
+    assert_eq!(
+        recorder.repaired(),
+        &[(torn.clone(), "0.010000,0,0,,ai".len() as u64)],
+        "only the torn, unlocked session file is repaired"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&torn).expect("read"),
+        rows,
+        "cut to its last whole row"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&whole).expect("read"),
+        rows,
+        "a whole file untouched"
+    );
+    assert!(
+        std::fs::read_to_string(&live).expect("read").ends_with(",ai"),
+        "a live file untouched"
+    );
+    assert!(
+        std::fs::read_to_string(&other).expect("read").ends_with(",ai"),
+        "not a session file"
+    );
+    drop(feed);
+    recorder.finish().expect("finish");
+    // The daemon tells the operator.
+    std::fs::write(&torn, format!("{rows}0.0")).expect("write");
+    let mut config = common::test_config();
+    config.record_dir = Some(dir.path().to_path_buf());
+    let daemon = common::start(config, SpyDevice::new(1), trackers());
+    let notices = daemon.take_notices();
+    assert!(
+        notices.len() == 1 && notices[0].contains("torn row") && notices[0].contains(&torn.display().to_string()),
+        "{notices:?}"
+    );
+    daemon.stop().expect("stop");
 }

@@ -41,10 +41,19 @@ pub struct BenchArgs {
     /// Ask for real-time scheduling (SCHED_FIFO) of the loop and locked memory, as `serve` does by default.
     #[arg(long)]
     pub realtime: bool,
+    /// Measure the machine's timer floor instead: a thread that only sleeps to the same deadlines (same rate,
+    /// duration and real-time request) and does nothing else. What it misses, no loop on this machine can meet.
+    #[arg(long)]
+    pub floor: bool,
 }
 
 /// Runs `thermode bench`.
 pub fn run(args: &BenchArgs) -> Result<()> {
+    if args.floor {
+        eprintln!("bench: the timer floor at {} Hz for {} s …", args.rate, args.duration);
+        let report = bench::timer_floor(args.rate, args.duration, args.realtime)?;
+        return print_report(&report, args.format);
+    }
     let mut display_args = args.display.clone();
     if display_args.device == "sim" {
         // The simulated display at its largest; a real display has the channels it reports.
@@ -64,9 +73,13 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         ..BenchConfig::default()
     };
     let report = bench::run(&config, display.device, display.engines)?;
-    let text = match args.format {
+    print_report(&report, args.format)
+}
+
+fn print_report<R: std::fmt::Display + serde::Serialize>(report: &R, format: BenchFormat) -> Result<()> {
+    let text = match format {
         BenchFormat::Text => format!("{report}\n"),
-        BenchFormat::Json => serde_json::to_string_pretty(&report)? + "\n",
+        BenchFormat::Json => serde_json::to_string_pretty(report)? + "\n",
     };
     print_stdout(&text)
 }

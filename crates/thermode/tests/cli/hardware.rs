@@ -94,3 +94,36 @@ fn bad_hardware_spellings_are_refused_with_the_reason() {
         "--tcp is for --protocol mecom only",
     );
 }
+
+#[test]
+fn bench_floor_measures_an_empty_loop_and_refuses_impossible_rates() {
+    let out = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args([
+            "bench",
+            "--floor",
+            "--rate",
+            "200",
+            "--duration",
+            "0.5",
+            "--format",
+            "json",
+        ])
+        .output()
+        .unwrap_or_else(|e| panic!("run bench --floor: {e}"));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout} {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_str(&stdout).unwrap_or_else(|e| panic!("{e}: {stdout}"));
+    let (ticks, missed) = (report["ticks"].as_u64(), report["missed_deadlines"].as_u64());
+    // 0.5 s at 200 Hz: 100 deadlines (and the first), each either woken or counted as missed.
+    let deadlines = ticks.zip(missed).map(|(t, m)| t + m);
+    assert!(deadlines.is_some_and(|d| (100..=102).contains(&d)), "{report}");
+    let out = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args(["bench", "--floor", "--rate", "NaN"])
+        .output()
+        .unwrap_or_else(|e| panic!("run bench --floor: {e}"));
+    assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
+}
