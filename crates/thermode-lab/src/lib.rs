@@ -7,6 +7,7 @@
 //! - [`analysis`]: reads session CSVs (one row per trial, PsychoPy-like) and curve CSVs, computes every number of the
 //!   paper's section 4 ([`analysis::analyze`], [`analysis::analyze_curves`]) and writes JSON, Markdown and HTML
 //!   reports with figures ([`analysis::write_outputs`]).
+//! - [`export`]: `lab export --bids`, the sessions and recordings as a BIDS data set.
 //! - [`error`]: the typed error [`LabError`] shared by the lab's modules.
 //! - [`design`]: experiment files (TOML); [`plan`]: the counterbalanced trial plan (Williams designs);
 //!   [`session`]: durable session CSVs and sidecars; [`runner`]: the trial runner and its stimulus, clock, console
@@ -15,6 +16,7 @@
 pub mod analysis;
 pub mod design;
 pub mod error;
+pub mod export;
 pub mod participant;
 pub mod plan;
 pub mod runner;

@@ -730,11 +730,17 @@ impl ControlLoop {
                 Some(s) => RecordRow {
                     label: s.label.clone(),
                     mode: s.mode,
+                    object_c: s.object_c,
+                    direct: s.direct,
+                    held_off: s.held_off,
                     telemetry: s.telemetry,
                 },
                 None => RecordRow {
                     label: self.air.clone(),
                     mode: Mode::Air,
+                    object_c: None,
+                    direct: None,
+                    held_off: false,
                     telemetry: crate::snapshot::EMPTY_TELEMETRY,
                 },
             }),

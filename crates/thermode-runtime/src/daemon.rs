@@ -29,6 +29,7 @@ use crate::engine::{with_restored_doses, EngineFactory};
 use crate::error::RuntimeError;
 use crate::interlock::Interlock;
 use crate::ledger::{DoseWriter, StateDir};
+use crate::lsl::{LslConfig, LslCounters, LslStreams, MarkerSender};
 use crate::recorder::{RecordErrorPolicy, RecordState, RecordStatus, Recorder, RESUME_FAILED};
 use crate::snapshot::Snapshot;
 use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
@@ -157,6 +158,9 @@ pub struct DaemonConfig {
     pub device_label: String,
     /// A name per channel (e.g. the fingers), or empty.
     pub channel_names: Vec<String>,
+    /// Lab Streaming Layer outlets (`serve --lsl`), or `None` (then liblsl is never loaded). The daemon fills in
+    /// the rate, the channel count and the device label. Default `None`.
+    pub lsl: Option<LslConfig>,
     /// The state directory of the dose ledger ([`crate::ledger`]), or `None`: then each channel's dose lives only
     /// as long as the daemon (tests, the bench). Default `None`; `thermode serve` always gives one.
     pub state_dir: Option<PathBuf>,
@@ -182,6 +186,7 @@ pub struct Daemon {
     runtime: Option<tokio::runtime::Runtime>,
     control: Option<LoopHandle>,
     recorder: Option<Recorder>,
+    lsl: Option<LslStreams>,
     dose_writer: Option<DoseWriter>,
     ledger_path: Option<PathBuf>,
     recording: Option<Arc<RecordStatus>>,
@@ -264,6 +269,17 @@ impl Daemon {
             }
             None => engines,
         };
+        let (lsl, markers) = match &config.lsl {
+            Some(wanted) => {
+                let (streams, feed, markers) = start_lsl(wanted, &config, device.channel_count(), clock.as_ref())?;
+                taps.push(feed);
+                if let Some(recorder) = &recorder {
+                    write_lsl_sidecar(&recorder.path(), &streams, &wanted.name)?;
+                }
+                (Some(streams), Some(markers))
+            }
+            None => (None, None),
+        };
         let recording = recorder.as_ref().map(Recorder::status);
         let control = LoopHandle::spawn_with_interlock(
             config.loop_config.clone(),
@@ -317,12 +333,19 @@ impl Daemon {
             link: control.link_health(),
             realtime: control.realtime().clone(),
             history: Arc::new(crate::api::history::History::default()),
+            markers,
+            lsl: lsl.as_ref().map(|s| LslInfo {
+                library: s.library().to_string(),
+                clock: s.clock(),
+                counters: s.counters(),
+            }),
         });
         let runtime = start_network(app, http, osc, realtime_loop)?;
         Ok(Daemon {
             runtime: Some(runtime),
             control: Some(control),
             recorder,
+            lsl,
             dose_writer,
             ledger_path,
             recording,
@@ -455,6 +478,13 @@ impl Daemon {
         lines
     }
 
+    /// The LSL streams' counters and clock mapping, when `--lsl` is on.
+    pub fn lsl(&self) -> Option<(crate::lsl::LslClock, Arc<LslCounters>, String)> {
+        self.lsl
+            .as_ref()
+            .map(|s| (s.clock(), s.counters(), s.library().to_string()))
+    }
+
     /// Tick records the recorder or a tap could not take (their queue was full).
     pub fn dropped_records(&self) -> u64 {
         self.control.as_ref().map_or(0, |c| c.shared().dropped_records())
@@ -493,6 +523,9 @@ impl Daemon {
         if let Some(runtime) = self.runtime.take() {
             runtime.shutdown_timeout(Duration::from_millis(500));
         }
+        if let Some(lsl) = self.lsl.take() {
+            lsl.finish();
+        }
         let ledger = self.dose_writer.take().map(DoseWriter::finish).transpose();
         if let Some(recorder) = self.recorder.take() {
             let status = recorder.status();
@@ -525,6 +558,61 @@ impl Drop for Daemon {
     fn drop(&mut self) {
         let _ = self.stop_parts();
     }
+}
+
+/// What `/api/status` says of the LSL streams.
+#[derive(Debug, Clone)]
+pub(crate) struct LslInfo {
+    /// Where liblsl was loaded from.
+    pub library: String,
+    /// Loop time to LSL clock.
+    pub clock: crate::lsl::LslClock,
+    /// The streaming thread's counters.
+    pub counters: Arc<LslCounters>,
+}
+
+/// Starts the LSL streams for a device of `channels` channels at the loop's rate.
+fn start_lsl(
+    wanted: &LslConfig,
+    config: &DaemonConfig,
+    channels: usize,
+    clock: &dyn Clock,
+) -> Result<
+    (
+        LslStreams,
+        std::sync::mpsc::SyncSender<crate::snapshot::TickRecord>,
+        MarkerSender,
+    ),
+    RuntimeError,
+> {
+    let lsl = LslConfig {
+        rate_hz: config.loop_config.rate_hz,
+        channels,
+        device: config.device_label.clone(),
+        ..wanted.clone()
+    };
+    Ok(LslStreams::start(&lsl, clock)?)
+}
+
+/// Writes `<recording stem>.lsl.json` beside the session CSV: the LSL clock and the loop clock at the same instant
+/// and their offset (`lsl_time_s = time_s + lsl_offset_s` for the CSV's `time_s`).
+fn write_lsl_sidecar(csv: &Path, streams: &LslStreams, name: &str) -> Result<(), RuntimeError> {
+    let clock = streams.clock();
+    let text = serde_json::json!({
+        "recording": csv.file_name().map(|n| n.to_string_lossy().into_owned()),
+        "lsl_clock_at_start_s": clock.lsl_at_start_s,
+        "loop_time_at_start_s": clock.loop_at_start_s,
+        "lsl_offset_s": clock.offset_s,
+        "alignment": "lsl_time_s = time_s + lsl_offset_s (time_s: the recording's loop time column)",
+        "telemetry_stream": format!("{name} telemetry"),
+        "marker_stream": format!("{name} markers"),
+        "liblsl": streams.library(),
+    });
+    let path = csv.with_extension("lsl.json");
+    std::fs::write(&path, format!("{text:#}\n")).map_err(|source| RuntimeError::Io {
+        context: format!("cannot write {}", path.display()),
+        source,
+    })
 }
 
 /// What the API checks requests against: the stimulus limits are those the loop's engines enforce.

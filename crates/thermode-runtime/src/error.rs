@@ -45,6 +45,9 @@ pub enum RuntimeError {
     /// another process): the daemon refuses to start rather than forget a dose.
     #[error("dose ledger: {0}")]
     Ledger(#[from] LedgerError),
+    /// `--lsl` was asked for but Lab Streaming Layer cannot be used (liblsl missing or unusable).
+    #[error("Lab Streaming Layer: {0}")]
+    Lsl(#[from] crate::lsl::LslError),
     /// Another I/O failure (recording directory, thread start).
     #[error("{context}: {source}")]
     Io {

@@ -18,6 +18,8 @@
 //! - [`api`]: HTTP (`/`, `/api/status`, `/api/materials`) and the WebSocket contact API (`/api/ws`), with access
 //!   control (token, Host and Origin checks) and limits, served by an own accept loop that slow clients cannot
 //!   starve ([`api::server`]); [`osc`]: the same commands over OSC/UDP.
+//! - [`lsl`]: `serve --lsl`, Lab Streaming Layer outlets (telemetry and markers) through liblsl loaded at run
+//!   time, fed off the loop thread.
 //! - [`daemon`]: starts and stops all of it ([`Daemon`]); [`mod@bench`]: loop jitter and touch-to-drive latency.
 //!
 //! The network side talks to the loop only through the bounded queue and the snapshot. The protocol is documented
@@ -54,6 +56,7 @@ pub mod error;
 pub mod interlock;
 pub mod ledger;
 pub mod limits;
+pub mod lsl;
 pub mod osc;
 pub mod recorder;
 pub mod snapshot;

@@ -122,6 +122,12 @@ pub struct RecordRow {
     pub label: Arc<str>,
     /// What the channel renders.
     pub mode: Mode,
+    /// Object temperature of the contact \[°C\] (touch only).
+    pub object_c: Option<f64>,
+    /// Direct-mode target \[°C\] and rate \[°C/s\] (direct only).
+    pub direct: Option<(f64, f64)>,
+    /// After stop-all: the drive is held at 0 A until the channel's next command.
+    pub held_off: bool,
     /// The numbers.
     pub telemetry: Telemetry,
 }

@@ -64,6 +64,8 @@ enum LabCommand {
     Run(cmd::lab_run::LabRunArgs),
     /// Analyse session CSVs the way the paper did (rates, ratio table, χ², confusion correlation, figures).
     Analyze(cmd::lab_analyze::LabAnalyzeArgs),
+    /// Export the lab's sessions and recordings as a BIDS data set (events, continuous signals, sidecars).
+    Export(cmd::lab_export::LabExportArgs),
 }
 
 fn main() -> ExitCode {
@@ -76,6 +78,7 @@ fn main() -> ExitCode {
         Command::Materials(args) => cmd::materials::run(args),
         Command::Simulate(args) => cmd::simulate::run(args),
         Command::Lab(LabCommand::Analyze(args)) => cmd::lab_analyze::run(args),
+        Command::Lab(LabCommand::Export(args)) => cmd::lab_export::run(args),
         Command::Lab(LabCommand::Plan(args)) => cmd::lab_plan::run(args),
         Command::Lab(LabCommand::Run(args)) => cmd::lab_run::run(args),
         Command::Render(args) => cmd::render::run(args),

@@ -9,6 +9,14 @@ use std::process::{Command, Output};
 #[cfg(unix)]
 #[path = "cli/python_packages.rs"]
 mod python_packages;
+// `lab export --bids`, checked by the reference validator.
+#[cfg(unix)]
+#[path = "cli/bids.rs"]
+mod bids;
+// `serve --lsl` (the streams themselves: python/lsl with pylsl).
+#[cfg(unix)]
+#[path = "cli/lsl.rs"]
+mod lsl;
 #[path = "cli/serve_on_emulator.rs"]
 mod serve_on_emulator;
 #[cfg(unix)]

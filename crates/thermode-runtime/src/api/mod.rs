@@ -213,6 +213,10 @@ pub struct App {
     pub(crate) realtime: thermode_platform::rt::Realtime,
     /// The last seconds of telemetry (`/api/history`), filled off the loop thread.
     pub(crate) history: Arc<history::History>,
+    /// Where client markers go (`serve --lsl`), or `None`.
+    pub(crate) markers: Option<crate::lsl::MarkerSender>,
+    /// The LSL streams, for `/api/status`.
+    pub(crate) lsl: Option<crate::daemon::LslInfo>,
 }
 
 impl std::fmt::Debug for App {
@@ -398,6 +402,14 @@ pub fn status_json(app: &App) -> Value {
             "last_error": osc_last_error,
         },
         "recording": app.recording.as_ref().map(|r| recording_json(app, r)),
+        "lsl": app.lsl.as_ref().map(|l| json!({
+            "library": l.library,
+            "lsl_offset_s": l.clock.offset_s,
+            "lsl_clock_at_start_s": l.clock.lsl_at_start_s,
+            "samples": count(&l.counters.samples),
+            "markers": count(&l.counters.markers),
+            "failed": count(&l.counters.failed),
+        })),
         "link": app.link.as_ref().map(|l| json!({
             "state": if l.is_up() { "up" } else { "down" },
             "reconnects": l.reconnects(),

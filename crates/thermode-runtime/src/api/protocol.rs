@@ -152,6 +152,13 @@ pub enum ApiRequest {
     Status,
     /// An operator acknowledges a failed recording: stimuli are accepted again.
     AckRecording,
+    /// A client's event marker (forwarded to the LSL marker stream under `serve --lsl`).
+    Marker {
+        /// The text (at most [`crate::lsl::MAX_MARKER_CHARS`] characters, no NUL).
+        text: String,
+        /// The channel it concerns, if any.
+        channel: Option<usize>,
+    },
 }
 
 /// Parses and validates one text message from `owner`. Returns the `id` to answer with (null when there is none or
@@ -232,16 +239,37 @@ fn parse_object(map: &Map<String, Value>, limits: &RequestLimits, owner: Owner) 
         "unsubscribe" => return fields.only(&[]).map(|()| ApiRequest::Unsubscribe),
         "status" => return fields.only(&[]).map(|()| ApiRequest::Status),
         "ack_recording" => return fields.only(&[]).map(|()| ApiRequest::AckRecording),
+        "marker" => return parse_marker(&fields, limits),
         other => Err(ApiError::new(
             ErrorCode::UnknownType,
             format!(
                 "unknown request type {:?}; known: touch, release, setpoint, clear_fault, stop_all, subscribe, unsubscribe, \
-                 status, ack_recording",
+                 status, ack_recording, marker",
                 truncate(other)
             ),
         ))?,
     };
     Ok(ApiRequest::Command(command))
+}
+
+fn parse_marker(fields: &Fields, limits: &RequestLimits) -> Result<ApiRequest, ApiError> {
+    fields.only(&["text", "channel"])?;
+    let text = fields.string("text")?;
+    let max = crate::lsl::MAX_MARKER_CHARS;
+    if text.chars().count() > max || text.contains('\0') {
+        return Err(ApiError::new(
+            ErrorCode::BadValue,
+            format!("`text` must be at most {max} characters without NUL"),
+        ));
+    }
+    let channel = match fields.map.get("channel") {
+        None => None,
+        Some(_) => Some(fields.channel(limits.channel_count)?),
+    };
+    Ok(ApiRequest::Marker {
+        text: text.to_string(),
+        channel,
+    })
 }
 
 fn parse_touch(fields: &Fields, limits: &RequestLimits, owner: Owner) -> Result<Command, ApiError> {
@@ -572,6 +600,35 @@ mod tests {
 
     fn code_of(text: &str) -> Option<&'static str> {
         parse_text(text).1.err().map(|e| e.code.as_str())
+    }
+
+    #[test]
+    fn a_marker_with_and_without_channel_and_its_refusals() {
+        match parse_text(r#"{"type":"marker","id":1,"text":"trial 3 start","channel":2}"#).1 {
+            Ok(ApiRequest::Marker { text, channel }) => {
+                assert_eq!((text.as_str(), channel), ("trial 3 start", Some(2)))
+            }
+            other => panic!("expected a marker, got {other:?}"),
+        }
+        assert!(matches!(
+            parse_text(r#"{"type":"marker","id":1,"text":"x"}"#).1,
+            Ok(ApiRequest::Marker { channel: None, .. })
+        ));
+        assert_eq!(code_of(r#"{"type":"marker","id":1}"#), Some("missing_field"));
+        assert_eq!(
+            code_of(r#"{"type":"marker","id":1,"text":"x","channel":9}"#),
+            Some("unknown_channel")
+        );
+        assert_eq!(code_of(r#"{"type":"marker","id":1,"text":7}"#), Some("bad_value"));
+        assert_eq!(
+            code_of(r#"{"type":"marker","id":1,"text":"x","colour":1}"#),
+            Some("unknown_field")
+        );
+        let long = format!(
+            r#"{{"type":"marker","id":1,"text":"{}"}}"#,
+            "a".repeat(crate::lsl::MAX_MARKER_CHARS + 1)
+        );
+        assert_eq!(code_of(&long), Some("bad_value"));
     }
 
     #[test]

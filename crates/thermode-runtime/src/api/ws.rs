@@ -227,6 +227,7 @@ impl Connection {
                 }
                 Ok(protocol::ok_reply(id, "ack_recording", extra))
             }
+            ApiRequest::Marker { text, channel } => marker(&self.app, text, channel, id),
             ApiRequest::Status => {
                 let mut status = status_json(&self.app);
                 if let Value::Object(map) = &mut status {
@@ -294,6 +295,27 @@ async fn goodbye(app: &App, client: u64) {
             _ => return,
         }
     }
+}
+
+/// A client marker: stamped with the loop clock now, forwarded to the LSL marker stream when there is one;
+/// answered with the loop time (and the LSL time under `--lsl`).
+fn marker(app: &App, text: String, channel: Option<usize>, id: &Value) -> Result<Value, ApiError> {
+    let time_s = app.clock.now_s();
+    let lsl_time_s = match &app.markers {
+        Some(markers) => {
+            let lsl_time_s = markers.clock().lsl_time_s(time_s);
+            if !markers.send(crate::lsl::ClientMarker { time_s, text, channel }) {
+                return Err(ApiError::new(
+                    ErrorCode::Busy,
+                    "the LSL marker queue is full; nothing was sent",
+                ));
+            }
+            Some(lsl_time_s)
+        }
+        None => None,
+    };
+    let extra = json!({"channel": channel, "time_s": time_s, "lsl_time_s": lsl_time_s, "lsl": lsl_time_s.is_some()});
+    Ok(protocol::ok_reply(id, "marker", extra))
 }
 
 /// Sends `command` to the loop and waits (bounded) for its answer.

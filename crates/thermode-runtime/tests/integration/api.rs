@@ -557,3 +557,45 @@ fn the_status_reports_the_rendering_rate_of_the_device_file() {
         assert_eq!(reply["code"], "bad_value", "{reply}");
     });
 }
+
+#[test]
+fn a_marker_without_lsl_is_acknowledged_with_the_loop_time_between_two_ticks() {
+    let daemon = start(test_config(), SpyDevice::new(2), pipelines());
+    let addr = daemon.http_addr();
+    client_runtime().block_on(async {
+        let mut ws = ws_connect(addr, "").await;
+        let before = ask(&mut ws, r#"{"type":"release","id":1,"channel":0}"#).await;
+        let r = ask(
+            &mut ws,
+            r#"{"type":"marker","id":2,"text":"trial 1 start","channel":1}"#,
+        )
+        .await;
+        assert_eq!(
+            (r["type"].as_str(), r["request"].as_str(), r["channel"].as_u64()),
+            (Some("ok"), Some("marker"), Some(1)),
+            "{r}"
+        );
+        assert_eq!(
+            (r["lsl"].as_bool(), r["lsl_time_s"].is_null()),
+            (Some(false), true),
+            "{r}"
+        );
+        let after = ask(&mut ws, r#"{"type":"release","id":3,"channel":0}"#).await;
+        let (t0, t, t1) = (
+            before["time_s"].as_f64().unwrap(),
+            r["time_s"].as_f64().unwrap(),
+            after["time_s"].as_f64().unwrap(),
+        );
+        // The marker's loop time lies between the ticks that applied the requests sent before and after it (one
+        // period of slack on each side: a reply's time is its tick's deadline, the marker's the clock when received).
+        let period = 0.01;
+        assert!(
+            t0 - period <= t && t <= t1 + period,
+            "marker at {t} s, outside [{t0}, {t1}] s"
+        );
+        let r = ask(&mut ws, r#"{"type":"marker","id":4,"text":"x","channel":7}"#).await;
+        assert_eq!(r["code"], "unknown_channel", "{r}");
+    });
+    let status = get_json(addr, "/api/status");
+    assert!(status["lsl"].is_null(), "no LSL without --lsl: {}", status["lsl"]);
+}

@@ -6,6 +6,7 @@ pub mod dose;
 pub mod emulate;
 pub mod emulate_hw;
 pub mod lab_analyze;
+pub mod lab_export;
 pub mod lab_plan;
 pub mod lab_run;
 pub mod materials;

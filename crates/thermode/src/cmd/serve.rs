@@ -17,6 +17,7 @@ use thermode_link::spec::{is_hardware, open_hardware, HardwareContext};
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::engine::pipeline_engines;
+use thermode_runtime::lsl::LslConfig;
 use thermode_runtime::recorder::RecordErrorPolicy;
 use thermode_runtime::{Daemon, DaemonConfig, EngineFactory, LoopConfig, ServerConfig};
 
@@ -122,6 +123,14 @@ pub struct ServeArgs {
     /// asked for and used where the system grants them (the banner and /api/status say whether it did).
     #[arg(long = "no-realtime")]
     pub no_realtime: bool,
+    /// Publish Lab Streaming Layer streams: `thermode telemetry` (every channel's target, skin, sensor, set-point and
+    /// current at the loop rate) and `thermode markers` (touch, release, set-point, stop, fault and client markers).
+    /// Loads liblsl at start (THERMODE_LIBLSL, PYLSL_LIB, the system's, then the pylsl package's; docs/api.md).
+    #[arg(long)]
+    pub lsl: bool,
+    /// Name prefix of the LSL streams (with --lsl).
+    #[arg(long = "lsl-name", value_name = "NAME", default_value = "thermode", requires = "lsl")]
+    pub lsl_name: String,
 }
 
 /// A display ready for the loop.
@@ -248,6 +257,11 @@ pub fn start(args: &ServeArgs) -> Result<Daemon> {
         device_label: display.label,
         channel_names: display.names.clone(),
         state_dir: Some(super::dose::state_dir(args.state_dir.as_deref())?),
+        lsl: args.lsl.then(|| LslConfig {
+            name: args.lsl_name.clone(),
+            source_id: args.lsl_name.clone(),
+            ..LslConfig::default()
+        }),
     };
     let daemon = Daemon::start(config, display.device, display.engines, clock)?;
     print_banner(&daemon, &display.description, args);
@@ -277,6 +291,12 @@ fn print_banner(daemon: &Daemon, description: &str, args: &ServeArgs) {
             OnRecordError::Continue => "on a write error stimuli go on unrecorded",
         };
         println!("  recording  {} ({policy})", path.display());
+    }
+    if let Some((clock, _, library)) = daemon.lsl() {
+        println!(
+            "  LSL        streams \"{0} telemetry\" and \"{0} markers\" (liblsl {library}; LSL clock = loop time + {1:.6} s)",
+            args.lsl_name, clock.offset_s
+        );
     }
     if let Some(realtime) = daemon.realtime() {
         println!("  real time  {}", realtime.describe());

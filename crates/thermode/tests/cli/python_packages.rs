@@ -1,5 +1,6 @@
 //! The Python packages (`python/thermode-client`, `python/psychopy-thermode`) tested with pytest against this
-//! build's `thermode serve`. They need `websockets` and `pytest`; CI installs both and sets
+//! build's `thermode serve`, and `serve --lsl` judged by a pylsl inlet (`python/lsl`, which also needs `pylsl`). They
+//! need `websockets` and `pytest`; CI installs both (and pylsl) and sets
 //! `THERMODE_REQUIRE_PYTHON_TESTS=1`, so there a missing module fails the test. Elsewhere it is skipped with a
 //! message saying how to run it.
 

@@ -121,12 +121,22 @@ fn serve_with(args: &[&str]) -> (Process, u16, std::sync::mpsc::Receiver<String>
     let child = Command::new(binary())
         .arg("serve")
         .args(["--port", "0"])
+        .arg("--state-dir")
+        .arg(own_state_dir())
         .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap_or_else(|e| panic!("spawn serve: {e}"));
     banner(child)
+}
+
+/// A state directory of this daemon's own: the default one is locked by whichever daemon holds it, so tests run in
+/// parallel (or any other `thermode serve` on the machine) would refuse each other's start.
+fn own_state_dir() -> std::path::PathBuf {
+    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    std::env::temp_dir().join(format!("thermode-cli-state-{}-{n}", std::process::id()))
 }
 
 fn banner(mut child: Child) -> (Process, u16, std::sync::mpsc::Receiver<String>) {

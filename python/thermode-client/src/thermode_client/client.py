@@ -121,6 +121,14 @@ class Client:
         """Release every channel and hold every drive at 0 A until that channel's next command."""
         return self.request({"type": "stop_all"})
 
+    def marker(self, text: str, channel: Optional[int] = None) -> Reply:
+        """Send an event marker (e.g. a trial start). The daemon answers with its loop `time_s` [s] when it took the
+        marker (and `lsl_time_s` under `serve --lsl`, where the marker joins the LSL marker stream)."""
+        message: Json = {"type": "marker", "text": text}
+        if channel is not None:
+            message["channel"] = channel
+        return self.request(message)
+
     def subscribe(self, rate_hz: float, count: Optional[int] = None, timeout_s: Optional[float] = None) -> Iterator[Telemetry]:
         """Telemetry at `rate_hz` (0.01–100, at most the loop rate): yields frames until `count` have arrived (or
         forever), then unsubscribes. `timeout_s`: longest wait for one frame (default: the client's timeout)."""

@@ -1,0 +1,799 @@
+//! `thermode lab export --bids DIR`: the lab's sessions and recordings as a BIDS data set (Brain Imaging Data
+//! Structure, behavioural data type).
+//!
+//! What is written ([`export_bids`]):
+//! - `dataset_description.json`, `README`, `participants.tsv` and `participants.json`;
+//! - per session (a session sidecar `*.json` of format `thermode-lab session …` in the data folder, with its CSV):
+//!   `sub-<participant>/ses-<date>/beh/sub-…_ses-…_task-<experiment>_events.tsv` — one row per trial: `onset`,
+//!   `duration` (the presentation), `trial_type` (the condition), then every column of the session CSV as it is —
+//!   and its JSON sidecar describing each column;
+//! - continuous signals: every curve CSV in a folder beside the session CSV whose name starts with the session's
+//!   stem (per-trial measured curves), and every recording assigned to a participant with
+//!   [`BidsOptions::recordings`] (`serve --record` files), as `…_recording-<name>_stim.tsv.gz` (what the display
+//!   was asked to show: target and set-point columns) and `…_recording-<name>_physio.tsv.gz` (what the plate and
+//!   finger did: sensor, skin, current, …), each with its JSON sidecar (`SamplingFrequency`, `StartTime`,
+//!   `Columns`). A recording in long form (a `channel` column, one row per tick per channel) is made wide
+//!   (`ch<c>_<column>`);
+//! - `sourcedata/thermode/`: the original session CSVs and sidecars, unchanged (BIDS validators ignore it).
+//!
+//! Labels: BIDS labels are letters and digits only, so `P-01` becomes `P01`; two participants (or experiments)
+//! whose labels collide are refused. The session label is the session date without dashes (`20261123`).
+//!
+//! Onsets: a session CSV holds no clock of its own today, so a trial's `onset` is the sum of the previous trials'
+//! presentation and response times (the time on task, without the breaks between trials); when the CSV has a clock
+//! column ([`ONSET_COLUMNS`], e.g. monotonic seconds at each trial's start), the onset is that clock relative to
+//! the first trial instead.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fs;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use flate2::write::GzEncoder;
+use flate2::Compression;
+use serde_json::{json, Map, Value};
+use thiserror::Error;
+
+/// The BIDS version the export follows.
+pub const BIDS_VERSION: &str = "1.9.0";
+/// Columns of a curve that go to `_stim` (what the display was asked to show); the others go to `_physio`.
+pub const STIM_COLUMNS: [&str; 5] = [
+    "target_skin_c",
+    "target_c",
+    "display_setpoint_c",
+    "setpoint_c",
+    "requested_setpoint_c",
+];
+/// Session CSV columns that give a trial's onset \[s\] on a clock of the session, in order of preference; the
+/// first present is used, relative to its first row.
+pub const ONSET_COLUMNS: [&str; 4] = [
+    "onset_s",
+    "trial_onset_s",
+    "stimulus_onset_s",
+    "trial_start_monotonic_s",
+];
+/// Session CSV columns of the response time \[s\], in order of preference (thermode's and PsychoPy's names).
+pub const RESPONSE_TIME_COLUMNS: [&str; 2] = ["response_time_s", "key_resp.rt"];
+/// Names of a curve's time column \[s\], in order of preference.
+pub const TIME_COLUMNS: [&str; 3] = ["time_s", "t_s", "time"];
+
+/// Why the export failed.
+#[derive(Debug, Error)]
+pub enum ExportError {
+    /// A file or folder could not be read or written.
+    #[error("{}: {error}", path.display())]
+    Io {
+        /// The file or folder.
+        path: PathBuf,
+        /// The operating system's error.
+        error: std::io::Error,
+    },
+    /// A CSV or JSON file cannot be read as what it should be.
+    #[error("{}: {message}", path.display())]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// Two names map to the same BIDS label, or a name has no letter or digit.
+    #[error("BIDS label: {0}")]
+    Label(String),
+    /// The output folder exists and is not empty.
+    #[error("{}: the output folder is not empty; give a new or empty folder", .0.display())]
+    NotEmpty(PathBuf),
+    /// A recording is assigned to a participant without a session.
+    #[error("recording {}: participant {participant:?} has no session in the data folder", path.display())]
+    UnknownParticipant {
+        /// The recording.
+        path: PathBuf,
+        /// The participant named.
+        participant: String,
+    },
+}
+
+fn io(path: &Path) -> impl FnOnce(std::io::Error) -> ExportError + '_ {
+    move |error| ExportError::Io {
+        path: path.to_path_buf(),
+        error,
+    }
+}
+
+fn invalid(path: &Path, message: impl Into<String>) -> ExportError {
+    ExportError::Invalid {
+        path: path.to_path_buf(),
+        message: message.into(),
+    }
+}
+
+/// What to export and where.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BidsOptions {
+    /// The lab's data folder (session CSVs and sidecars, as `lab run` writes them).
+    pub data_dir: PathBuf,
+    /// The BIDS folder to write (created; must be new or empty).
+    pub out_dir: PathBuf,
+    /// Recordings (`serve --record` CSVs) and the participant each belongs to (added to that participant's first
+    /// session). Default none.
+    pub recordings: Vec<(String, PathBuf)>,
+}
+
+/// What was written.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct BidsSummary {
+    /// Subjects.
+    pub subjects: usize,
+    /// Sessions (events files).
+    pub sessions: usize,
+    /// Trials (events rows).
+    pub trials: usize,
+    /// Continuous signal files (`_stim` and `_physio`).
+    pub signals: usize,
+}
+
+/// One session found in the data folder.
+#[derive(Debug, Clone)]
+struct Session {
+    participant: String,
+    experiment: String,
+    date: String,
+    csv: PathBuf,
+    sidecar: PathBuf,
+    meta: Value,
+}
+
+impl Session {
+    fn subject(&self) -> Result<String, ExportError> {
+        label(&self.participant)
+    }
+
+    fn label(&self) -> String {
+        self.date.chars().filter(char::is_ascii_alphanumeric).collect()
+    }
+
+    /// `sub-X_ses-Y_task-Z`.
+    fn prefix(&self) -> Result<String, ExportError> {
+        Ok(format!(
+            "sub-{}_ses-{}_task-{}",
+            self.subject()?,
+            self.label(),
+            label(&self.experiment)?
+        ))
+    }
+
+    fn beh_dir(&self, root: &Path) -> Result<PathBuf, ExportError> {
+        Ok(root
+            .join(format!("sub-{}", self.subject()?))
+            .join(format!("ses-{}", self.label()))
+            .join("beh"))
+    }
+}
+
+/// A BIDS label of `name`: its letters and digits.
+pub fn label(name: &str) -> Result<String, ExportError> {
+    let label: String = name.chars().filter(char::is_ascii_alphanumeric).collect();
+    if label.is_empty() {
+        return Err(ExportError::Label(format!("{name:?} has no letter or digit")));
+    }
+    Ok(label)
+}
+
+/// Writes the BIDS data set of `options` (module documentation).
+pub fn export_bids(options: &BidsOptions) -> Result<BidsSummary, ExportError> {
+    let sessions = find_sessions(&options.data_dir)?;
+    if sessions.is_empty() {
+        return Err(invalid(
+            &options.data_dir,
+            "no lab session (a `*.json` session sidecar with its CSV) here",
+        ));
+    }
+    check_labels(&sessions)?;
+    prepare_out(&options.out_dir)?;
+    let root = options.out_dir.as_path();
+    write_dataset_files(root, &sessions)?;
+    let mut summary = BidsSummary {
+        subjects: sessions
+            .iter()
+            .map(|s| s.participant.clone())
+            .collect::<BTreeSet<_>>()
+            .len(),
+        ..BidsSummary::default()
+    };
+    for session in &sessions {
+        summary.trials += write_events(root, session)?;
+        summary.sessions += 1;
+        for curve in session_curves(session)? {
+            summary.signals += write_signals(root, session, &curve)?;
+        }
+        copy_source(root, session)?;
+    }
+    for (participant, path) in &options.recordings {
+        let session =
+            sessions
+                .iter()
+                .find(|s| s.participant == *participant)
+                .ok_or_else(|| ExportError::UnknownParticipant {
+                    path: path.clone(),
+                    participant: participant.clone(),
+                })?;
+        summary.signals += write_signals(root, session, path)?;
+    }
+    Ok(summary)
+}
+
+/// Every session (sidecar + CSV) in `dir`, sorted by participant, date and experiment.
+fn find_sessions(dir: &Path) -> Result<Vec<Session>, ExportError> {
+    let mut sessions = Vec::new();
+    for entry in fs::read_dir(dir).map_err(io(dir))? {
+        let path = entry.map_err(io(dir))?.path();
+        if path.extension().is_some_and(|e| e == "json") {
+            if let Some(session) = read_session(&path)? {
+                sessions.push(session);
+            }
+        }
+    }
+    sessions.sort_by(|a, b| (&a.participant, &a.date, &a.experiment).cmp(&(&b.participant, &b.date, &b.experiment)));
+    Ok(sessions)
+}
+
+/// The session of a sidecar, or `None` for a JSON file that is not a session sidecar.
+fn read_session(path: &Path) -> Result<Option<Session>, ExportError> {
+    let text = fs::read_to_string(path).map_err(io(path))?;
+    let Ok(meta) = serde_json::from_str::<Value>(&text) else {
+        return Ok(None);
+    };
+    let format = meta.get("format").and_then(Value::as_str).unwrap_or_default();
+    if !format.starts_with("thermode-lab session") {
+        return Ok(None);
+    }
+    let field = |key: &str| {
+        meta.get(key)
+            .and_then(Value::as_str)
+            .map(str::to_string)
+            .ok_or_else(|| invalid(path, format!("session sidecar without `{key}`")))
+    };
+    let csv_name = field("csv_file")?;
+    let csv = path.with_file_name(&csv_name);
+    if !csv.is_file() {
+        return Err(invalid(path, format!("its session CSV {csv_name} is missing")));
+    }
+    Ok(Some(Session {
+        participant: field("participant")?,
+        experiment: field("experiment")?,
+        date: field("session_date")?,
+        csv,
+        sidecar: path.to_path_buf(),
+        meta,
+    }))
+}
+
+/// Refuses two participants (or experiments) with one label, and two sessions with one file name.
+fn check_labels(sessions: &[Session]) -> Result<(), ExportError> {
+    let mut seen: BTreeMap<String, String> = BTreeMap::new();
+    for name in sessions.iter().flat_map(|s| [&s.participant, &s.experiment]) {
+        let label = label(name)?;
+        if let Some(other) = seen.insert(label.clone(), name.clone()) {
+            if other != *name {
+                return Err(ExportError::Label(format!(
+                    "{other:?} and {name:?} both become {label:?}"
+                )));
+            }
+        }
+    }
+    let mut prefixes = BTreeSet::new();
+    for session in sessions {
+        if !prefixes.insert(session.prefix()?) {
+            return Err(ExportError::Label(format!(
+                "two sessions of {} on {} in {}",
+                session.participant, session.date, session.experiment
+            )));
+        }
+    }
+    Ok(())
+}
+
+fn prepare_out(dir: &Path) -> Result<(), ExportError> {
+    if dir.exists() && fs::read_dir(dir).map_err(io(dir))?.next().is_some() {
+        return Err(ExportError::NotEmpty(dir.to_path_buf()));
+    }
+    fs::create_dir_all(dir).map_err(io(dir))
+}
+
+fn write_text(path: &Path, text: &str) -> Result<(), ExportError> {
+    if let Some(parent) = path.parent() {
+        fs::create_dir_all(parent).map_err(io(parent))?;
+    }
+    fs::write(path, text).map_err(io(path))
+}
+
+fn write_json(path: &Path, value: &Value) -> Result<(), ExportError> {
+    write_text(path, &format!("{value:#}\n"))
+}
+
+/// `dataset_description.json`, `README`, `participants.tsv` and `.json`.
+fn write_dataset_files(root: &Path, sessions: &[Session]) -> Result<(), ExportError> {
+    let experiments: BTreeSet<&str> = sessions.iter().map(|s| s.experiment.as_str()).collect();
+    let names: Vec<&str> = experiments.into_iter().collect();
+    let description = json!({
+        "Name": format!("thermode lab: {}", names.join(", ")),
+        "BIDSVersion": BIDS_VERSION,
+        "DatasetType": "raw",
+        "GeneratedBy": [{"Name": "thermode", "Version": env!("CARGO_PKG_VERSION"),
+                         "Description": "thermode lab export --bids"}],
+    });
+    write_json(&root.join("dataset_description.json"), &description)?;
+    write_text(&root.join("README"), &readme(sessions, &names))?;
+    write_participants(root, sessions)
+}
+
+fn readme(sessions: &[Session], experiments: &[&str]) -> String {
+    format!(
+        "thermode lab data set\n=====================\n\nMaterial-identification sessions with a thermal display \
+         (experiments: {}), {} session(s), exported by `thermode lab export --bids` (thermode {}).\n\n\
+         Each session is `sub-<participant>/ses-<date>/beh/*_events.tsv`: one row per trial, `onset` in seconds of \
+         time on task (the sum of the previous trials' presentation and response times; the breaks between trials \
+         are not counted), `duration` the presentation, `trial_type` the condition (real contact or the display), \
+         and every column of thermode's session CSV. Continuous signals, where recorded, are `*_stim.tsv.gz` (what \
+         the display was asked to show) and `*_physio.tsv.gz` (what the plate and finger did). The original files \
+         are in `sourcedata/thermode/`.\n",
+        experiments.join(", "),
+        sessions.len(),
+        env!("CARGO_PKG_VERSION")
+    )
+}
+
+fn write_participants(root: &Path, sessions: &[Session]) -> Result<(), ExportError> {
+    let mut rows = BTreeMap::new();
+    for session in sessions {
+        let order = session
+            .meta
+            .get("condition_order")
+            .and_then(Value::as_array)
+            .map(|a| a.iter().filter_map(Value::as_str).collect::<Vec<_>>().join("-"))
+            .filter(|o| !o.is_empty())
+            .unwrap_or_else(|| "n/a".into());
+        rows.entry(session.subject()?)
+            .or_insert((session.participant.clone(), order));
+    }
+    let mut tsv = String::from("participant_id\tsource_id\tcondition_order\n");
+    for (subject, (source, order)) in &rows {
+        tsv.push_str(&format!("sub-{subject}\t{}\t{}\n", tsv_field(source), tsv_field(order)));
+    }
+    write_text(&root.join("participants.tsv"), &tsv)?;
+    let sidecar = json!({
+        "participant_id": {"Description": "BIDS label of the participant (the lab's identifier without punctuation)"},
+        "source_id": {"Description": "The participant's identifier in thermode's session files"},
+        "condition_order": {"Description": "The order of the conditions for this participant (counterbalanced)"},
+    });
+    write_json(&root.join("participants.json"), &sidecar)
+}
+
+/// A value as a TSV field: empty is `n/a`, tabs and line ends become spaces.
+fn tsv_field(value: &str) -> String {
+    let value = value.trim();
+    if value.is_empty() {
+        return "n/a".into();
+    }
+    value.replace(['\t', '\n', '\r'], " ")
+}
+
+/// A CSV as its header and rows.
+fn read_csv(path: &Path) -> Result<(Vec<String>, Vec<Vec<String>>), ExportError> {
+    let mut reader = csv::ReaderBuilder::new()
+        .comment(Some(b'#'))
+        .from_path(path)
+        .map_err(|e| invalid(path, e.to_string()))?;
+    let header = reader
+        .headers()
+        .map_err(|e| invalid(path, e.to_string()))?
+        .iter()
+        .map(|h| h.trim().to_string())
+        .collect();
+    let mut rows = Vec::new();
+    for record in reader.records() {
+        let record = record.map_err(|e| invalid(path, e.to_string()))?;
+        rows.push(record.iter().map(str::to_string).collect());
+    }
+    Ok((header, rows))
+}
+
+/// Writes a session's `_events.tsv` and `.json`; returns its trials.
+fn write_events(root: &Path, session: &Session) -> Result<usize, ExportError> {
+    let (header, rows) = read_csv(&session.csv)?;
+    let column = |name: &str| header.iter().position(|h| h == name);
+    let number = |row: &[String], name: &str| {
+        column(name)
+            .and_then(|i| row.get(i))
+            .and_then(|v| v.parse::<f64>().ok())
+    };
+    let presentation_s = session
+        .meta
+        .pointer("/experiment_toml")
+        .and_then(Value::as_str)
+        .and_then(presentation_of);
+    let kept: Vec<&String> = header
+        .iter()
+        .filter(|h| !matches!(h.as_str(), "onset" | "duration" | "trial_type"))
+        .collect();
+    let mut tsv = String::from("onset\tduration\ttrial_type");
+    for name in &kept {
+        tsv.push('\t');
+        tsv.push_str(name);
+    }
+    tsv.push('\n');
+    let onset_column = ONSET_COLUMNS.iter().find(|c| column(c).is_some());
+    let first_onset_s = onset_column.and_then(|c| rows.first().and_then(|r| number(r, c)));
+    let mut elapsed_s = 0.0;
+    for row in &rows {
+        let duration = number(row, "presentation_s").or(presentation_s);
+        let clocked = onset_column
+            .and_then(|c| number(row, c))
+            .zip(first_onset_s)
+            .map(|(t, t0)| t - t0);
+        let onset = clocked.unwrap_or(elapsed_s);
+        let response_s = RESPONSE_TIME_COLUMNS.iter().find_map(|c| number(row, c)).unwrap_or(0.0);
+        elapsed_s = onset + duration.unwrap_or(0.0) + response_s;
+        let kind = column("condition")
+            .and_then(|i| row.get(i))
+            .map_or("trial".into(), |v| tsv_field(v));
+        let duration = duration.map_or("n/a".into(), |d| format!("{d}"));
+        tsv.push_str(&format!("{onset}\t{duration}\t{kind}"));
+        for name in &kept {
+            let value = header.iter().position(|h| h == *name).and_then(|i| row.get(i));
+            tsv.push('\t');
+            tsv.push_str(&tsv_field(value.map_or("", String::as_str)));
+        }
+        tsv.push('\n');
+    }
+    let dir = session.beh_dir(root)?;
+    let prefix = session.prefix()?;
+    write_text(&dir.join(format!("{prefix}_events.tsv")), &tsv)?;
+    write_json(&dir.join(format!("{prefix}_events.json")), &events_sidecar(&kept))?;
+    Ok(rows.len())
+}
+
+/// The experiment file's `presentation_s`, if it has one.
+fn presentation_of(toml_text: &str) -> Option<f64> {
+    let value: toml::Value = toml::from_str(toml_text).ok()?;
+    value.get("presentation_s")?.as_float()
+}
+
+fn events_sidecar(columns: &[&String]) -> Value {
+    let mut map = Map::new();
+    map.insert(
+        "onset".into(),
+        json!({"Description": "Start of the presentation: seconds of time on task from the session start (the \
+                               previous trials' presentation and response times; breaks not counted), or the \
+                               session CSV's own trial clock relative to the first trial where it has one",
+                "Units": "s"}),
+    );
+    map.insert(
+        "duration".into(),
+        json!({"Description": "Duration of the presentation", "Units": "s"}),
+    );
+    map.insert(
+        "trial_type".into(),
+        json!({"Description": "The condition", "Levels": {
+            "real": "The participant touched the real material",
+            "simulated": "The thermal display rendered the material"}}),
+    );
+    for name in columns {
+        map.insert((*name).clone(), column_description(name));
+    }
+    map.insert(
+        "StimulusPresentation".into(),
+        json!({"SoftwareName": "thermode", "SoftwareVersion": env!("CARGO_PKG_VERSION")}),
+    );
+    Value::Object(map)
+}
+
+/// The description of a session CSV column (units from the name's suffix).
+fn column_description(name: &str) -> Value {
+    let known = match name {
+        "participant" => "Participant identifier in thermode's files",
+        "experiment" => "Experiment name",
+        "session_date" => "Date the session started",
+        "seed" => "The design's seed",
+        "software_version" => "thermode version that recorded the row",
+        "trial" => "Trial number within the session",
+        "block" => "Block (condition) number",
+        "repetition" => "Repetition of the material within the block",
+        "condition" => "real (touch the material) or simulated (the display renders it)",
+        "position" => "Position within the block",
+        "presented" => "The material presented",
+        "identified" => "The material the participant named",
+        "response_key" => "The answer as option number (1-based)",
+        "response_time_s" => "Time from the end of the presentation to the answer",
+        "presentation_s" => "Measured duration of the presentation",
+        "finger_baseline_c" => "The session's finger baseline temperature",
+        "finger_start_c" => "Finger temperature before the touch",
+        "finger_end_c" => "Finger temperature at the end of the presentation",
+        "excluded" => "Whether the exclusion rule discarded the trial",
+        "exclusion_reason" => "Why the trial was excluded",
+        _ => "Column of thermode's session CSV (see thermode's documentation)",
+    };
+    let units = if name.ends_with("_s") {
+        Some("s")
+    } else if name.ends_with("_c") {
+        Some("degC")
+    } else {
+        None
+    };
+    match units {
+        Some(units) => json!({"Description": known, "Units": units}),
+        None => json!({"Description": known}),
+    }
+}
+
+/// Curve CSVs in folders beside the session CSV named after its stem.
+fn session_curves(session: &Session) -> Result<Vec<PathBuf>, ExportError> {
+    let Some(stem) = session.csv.file_stem().map(|s| s.to_string_lossy().into_owned()) else {
+        return Ok(Vec::new());
+    };
+    let dir = session.csv.parent().unwrap_or(Path::new("."));
+    let mut curves = Vec::new();
+    for entry in fs::read_dir(dir).map_err(io(dir))? {
+        let path = entry.map_err(io(dir))?.path();
+        let named = path.file_name().is_some_and(|n| n.to_string_lossy().starts_with(&stem));
+        if path.is_dir() && named {
+            for inner in fs::read_dir(&path).map_err(io(&path))? {
+                let file = inner.map_err(io(&path))?.path();
+                if file.extension().is_some_and(|e| e == "csv") {
+                    curves.push(file);
+                }
+            }
+        }
+    }
+    curves.sort();
+    Ok(curves)
+}
+
+/// A curve as wide numeric columns on one time base.
+#[derive(Debug, Clone, PartialEq)]
+struct Curve {
+    times_s: Vec<f64>,
+    columns: Vec<String>,
+    rows: Vec<Vec<Option<f64>>>,
+}
+
+/// Reads a curve CSV: its time column, every numeric column; long form (`channel`) made wide.
+fn read_curve(path: &Path) -> Result<Curve, ExportError> {
+    let (header, rows) = read_csv(path)?;
+    let time = TIME_COLUMNS
+        .iter()
+        .find_map(|t| header.iter().position(|h| h == t))
+        .ok_or_else(|| invalid(path, format!("no time column ({})", TIME_COLUMNS.join(", "))))?;
+    let channel = header.iter().position(|h| h == "channel");
+    let numeric: Vec<usize> = (0..header.len())
+        .filter(|&i| i != time && Some(i) != channel)
+        .filter(|&i| rows.iter().any(|r| r.get(i).is_some_and(|v| v.parse::<f64>().is_ok())))
+        .filter(|&i| {
+            rows.iter()
+                .all(|r| r.get(i).is_none_or(|v| v.is_empty() || v.parse::<f64>().is_ok()))
+        })
+        .collect();
+    let mut by_time: BTreeMap<u64, BTreeMap<String, Option<f64>>> = BTreeMap::new();
+    let mut columns = BTreeSet::new();
+    for row in &rows {
+        let t: f64 = row[time]
+            .parse()
+            .map_err(|_| invalid(path, format!("time {:?} is not a number", row[time])))?;
+        let prefix = channel.map_or(String::new(), |c| format!("ch{}_", row[c]));
+        let slot = by_time.entry(t.to_bits()).or_default();
+        for &i in &numeric {
+            let name = format!("{prefix}{}", header[i]);
+            columns.insert(name.clone());
+            slot.insert(name, row.get(i).and_then(|v| v.parse::<f64>().ok()));
+        }
+    }
+    let columns: Vec<String> = columns.into_iter().collect();
+    let mut times: Vec<(f64, BTreeMap<String, Option<f64>>)> =
+        by_time.into_iter().map(|(bits, v)| (f64::from_bits(bits), v)).collect();
+    times.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let rows = times
+        .iter()
+        .map(|(_, values)| columns.iter().map(|c| values.get(c).copied().flatten()).collect())
+        .collect();
+    Ok(Curve {
+        times_s: times.iter().map(|(t, _)| *t).collect(),
+        columns,
+        rows,
+    })
+}
+
+/// The sampling rate of `times_s` \[Hz\]: one over the median step.
+fn sampling_hz(times_s: &[f64]) -> Option<f64> {
+    let mut steps: Vec<f64> = times_s.windows(2).map(|w| w[1] - w[0]).filter(|d| *d > 0.0).collect();
+    if steps.is_empty() {
+        return None;
+    }
+    steps.sort_by(f64::total_cmp);
+    // Rounded to a microhertz: the steps of printed times carry rounding noise (0.01 s steps give 99.99999… Hz).
+    Some((1e6 / steps[steps.len() / 2]).round() / 1e6)
+}
+
+/// Writes a curve as `_stim` and `_physio` files of `session`; returns the files written.
+fn write_signals(root: &Path, session: &Session, path: &Path) -> Result<usize, ExportError> {
+    let curve = read_curve(path)?;
+    let rate_hz = sampling_hz(&curve.times_s).ok_or_else(|| invalid(path, "fewer than two time points"))?;
+    let name = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let recording = label(&name)?;
+    let dir = session.beh_dir(root)?;
+    let prefix = format!("{}_recording-{recording}", session.prefix()?);
+    let is_stim = |c: &String| STIM_COLUMNS.iter().any(|s| c == s || c.ends_with(&format!("_{s}")));
+    let mut written = 0;
+    for (suffix, stim) in [("stim", true), ("physio", false)] {
+        let chosen: Vec<usize> = (0..curve.columns.len())
+            .filter(|&i| is_stim(&curve.columns[i]) == stim)
+            .collect();
+        if chosen.is_empty() {
+            continue;
+        }
+        let file = dir.join(format!("{prefix}_{suffix}.tsv.gz"));
+        write_gzip_tsv(&file, &curve, &chosen)?;
+        let columns: Vec<&str> = chosen.iter().map(|&i| curve.columns[i].as_str()).collect();
+        let sidecar = json!({
+            "SamplingFrequency": rate_hz,
+            "StartTime": curve.times_s[0],
+            "Columns": columns,
+            "Source": path.file_name().map(|n| n.to_string_lossy().into_owned()),
+            "Description": "thermode curve; StartTime is the source's own time base (loop time of the daemon \
+                            for a serve recording, time from the touch for a trial curve), not the events' onsets",
+        });
+        write_json(&dir.join(format!("{prefix}_{suffix}.json")), &sidecar)?;
+        written += 1;
+    }
+    Ok(written)
+}
+
+/// The chosen columns, tab-separated, no header, gzip (no name or time in the gzip header: same data, same bytes).
+fn write_gzip_tsv(path: &Path, curve: &Curve, chosen: &[usize]) -> Result<(), ExportError> {
+    if let Some(parent) = path.parent() {
+        fs::create_dir_all(parent).map_err(io(parent))?;
+    }
+    let file = fs::File::create(path).map_err(io(path))?;
+    let mut gz = GzEncoder::new(std::io::BufWriter::new(file), Compression::default());
+    for row in &curve.rows {
+        let line: Vec<String> = chosen
+            .iter()
+            .map(|&i| {
+                row[i]
+                    .filter(|v| v.is_finite())
+                    .map_or("n/a".into(), |v| format!("{v}"))
+            })
+            .collect();
+        writeln!(gz, "{}", line.join("\t")).map_err(io(path))?;
+    }
+    let mut out = gz.finish().map_err(io(path))?;
+    out.flush().map_err(io(path))
+}
+
+/// Copies the session's CSV and sidecar to `sourcedata/thermode/`.
+fn copy_source(root: &Path, session: &Session) -> Result<(), ExportError> {
+    let dir = root.join("sourcedata").join("thermode");
+    fs::create_dir_all(&dir).map_err(io(&dir))?;
+    for file in [&session.csv, &session.sidecar] {
+        if let Some(name) = file.file_name() {
+            fs::copy(file, dir.join(name)).map_err(io(file))?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn labels_keep_letters_and_digits_only() {
+        assert_eq!(label("P-01_a").unwrap(), "P01a");
+        assert!(label("--").is_err());
+    }
+
+    #[test]
+    fn the_sampling_rate_is_one_over_the_median_step() {
+        let times: Vec<f64> = (0..101).map(|i| f64::from(i) * 0.01).collect();
+        let rate = sampling_hz(&times).unwrap();
+        assert!((rate - 100.0).abs() < 1e-6, "rate {rate} Hz, want 100 Hz");
+        assert_eq!(sampling_hz(&[1.0]), None);
+    }
+
+    /// A data folder with one session of three 30 s trials answered after 2 s, and a 50 Hz trial curve beside it.
+    fn data_folder(dir: &Path) {
+        let sidecar = json!({"format": "thermode-lab session 1", "participant": "P-01", "experiment": "paper",
+                             "session_date": "2026-11-23", "csv_file": "P-01_paper_2026-11-23.csv",
+                             "condition_order": ["real", "simulated"]});
+        fs::write(dir.join("P-01_paper_2026-11-23.json"), sidecar.to_string()).unwrap();
+        let mut csv = String::from("participant,trial,condition,presented,response_time_s,presentation_s\n");
+        for (trial, condition) in [(1, "real"), (2, "real"), (3, "simulated")] {
+            csv.push_str(&format!("P-01,{trial},{condition},wood,2.0,30.0\n"));
+        }
+        fs::write(dir.join("P-01_paper_2026-11-23.csv"), csv).unwrap();
+        let curves = dir.join("P-01_paper_2026-11-23_curves");
+        fs::create_dir(&curves).unwrap();
+        let mut curve = String::from("time_s,target_skin_c,sensor_c,material\n");
+        for i in 0..100 {
+            curve.push_str(&format!(
+                "{},{},{},wood\n",
+                f64::from(i) * 0.02,
+                32.0 - f64::from(i) * 0.01,
+                30.0
+            ));
+        }
+        fs::write(curves.join("trial001.csv"), curve).unwrap();
+    }
+
+    fn export_into(data: &Path, out: &Path) -> BidsSummary {
+        export_bids(&BidsOptions {
+            data_dir: data.to_path_buf(),
+            out_dir: out.to_path_buf(),
+            recordings: Vec::new(),
+        })
+        .unwrap()
+    }
+
+    #[test]
+    fn onsets_are_time_on_task_and_curves_split_into_stim_and_physio() {
+        let root = tempfile::tempdir().unwrap();
+        data_folder(root.path());
+        let out = root.path().join("bids");
+        let summary = export_into(root.path(), &out);
+        assert_eq!(
+            (summary.subjects, summary.sessions, summary.trials, summary.signals),
+            (1, 1, 3, 2)
+        );
+        let beh = out.join("sub-P01/ses-20261123/beh");
+        let events = fs::read_to_string(beh.join("sub-P01_ses-20261123_task-paper_events.tsv")).unwrap();
+        let onsets: Vec<f64> = events
+            .lines()
+            .skip(1)
+            .map(|l| l.split('\t').next().unwrap().parse().unwrap())
+            .collect();
+        // Each trial: 30 s of presentation, then 2 s to answer.
+        assert_eq!(onsets, [0.0, 32.0, 64.0], "onsets");
+        assert!(
+            events.lines().nth(3).unwrap().starts_with("64\t30\tsimulated\t"),
+            "{events}"
+        );
+        let stim: Value = serde_json::from_str(
+            &fs::read_to_string(beh.join("sub-P01_ses-20261123_task-paper_recording-trial001_stim.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(stim["Columns"], json!(["target_skin_c"]));
+        assert!(
+            (stim["SamplingFrequency"].as_f64().unwrap() - 50.0).abs() < 1e-9,
+            "{stim}"
+        );
+        let physio = beh.join("sub-P01_ses-20261123_task-paper_recording-trial001_physio.json");
+        assert_eq!(
+            serde_json::from_str::<Value>(&fs::read_to_string(physio).unwrap()).unwrap()["Columns"],
+            json!(["sensor_c"])
+        );
+    }
+
+    #[test]
+    fn the_same_data_export_to_the_same_bytes_and_a_used_folder_is_refused() {
+        let root = tempfile::tempdir().unwrap();
+        data_folder(root.path());
+        let (a, b) = (root.path().join("a"), root.path().join("b"));
+        export_into(root.path(), &a);
+        export_into(root.path(), &b);
+        let gz = "sub-P01/ses-20261123/beh/sub-P01_ses-20261123_task-paper_recording-trial001_stim.tsv.gz";
+        assert_eq!(fs::read(a.join(gz)).unwrap(), fs::read(b.join(gz)).unwrap());
+        let again = export_bids(&BidsOptions {
+            data_dir: root.path().to_path_buf(),
+            out_dir: a.clone(),
+            recordings: Vec::new(),
+        });
+        assert!(matches!(again, Err(ExportError::NotEmpty(_))), "{again:?}");
+    }
+
+    #[test]
+    fn tsv_fields_are_never_empty_and_never_split() {
+        assert_eq!(tsv_field(""), "n/a");
+        assert_eq!(tsv_field("a\tb\nc"), "a b c");
+    }
+}
