@@ -4,6 +4,7 @@
 //! Also: gating (limit, heating/cooling refused at the limits), set-point shaping, and the thermal dose measured
 //! through the envelope against hand-computed CEM43 values.
 
+use thermode_safety::dose::DOSE_COOLDOWN_RATE_C_PER_S;
 use thermode_safety::{
     DoseLedger, DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, MeasuredOnly, Measurement, PlateForecast,
     PlateNow, SafetyEnvelope,
@@ -368,8 +369,14 @@ fn dose_time_limit_lowers_the_maximum_and_a_hot_display_after_the_grace_is_a_fau
         "lockout {} s after reaching 44 °C",
         t_lock - t0
     );
-    // Locked with little CEM43 spent (7 s at 44 °C = 0.23 of 10 CEM43-min): the maximum is 43 − 0.5 °C.
-    assert_eq!(rig.env.effective_max_c(), 42.5);
+    // Locked with little CEM43 spent (7 s at 44 °C = 0.23 of 10 CEM43-min): the maximum is 43 − 0.5 °C, less the
+    // anticipation's look one tick ahead (5 °C/s · 1 tick).
+    let locked_max_c = 42.5 - DOSE_COOLDOWN_RATE_C_PER_S * DT_S;
+    assert!(
+        (rig.env.effective_max_c() - locked_max_c).abs() < 1e-9,
+        "{} vs {locked_max_c}",
+        rig.env.effective_max_c()
+    );
     let late_s = t - t_lock - config.dose_lockout_grace_s;
     assert!(
         late_s > 0.0 && late_s <= DT_S + 1e-9,
@@ -394,7 +401,11 @@ fn dose_time_limit_lowers_the_maximum_and_a_hot_display_after_the_grace_is_a_fau
         rig.tick += 1;
     }
     let sp = last.unwrap();
-    assert_eq!(sp.setpoint_c, 42.5, "set-point capped below 43 °C under the lockout");
+    assert!(
+        (sp.setpoint_c - locked_max_c).abs() < 1e-9,
+        "set-point {} capped below 43 °C under the lockout ({locked_max_c})",
+        sp.setpoint_c
+    );
     assert!(sp.limited_by.dose_lockout && sp.limited_by.clamped_high);
 }
 
@@ -430,11 +441,13 @@ fn cem43_budget_lowers_the_maximum_at_the_analytic_times() {
         (t_lock - 15.0).abs() <= DT_S + 1e-9,
         "CEM43 budget used at {t_lock} s, analytic 15 s"
     );
-    // At the lockout the ceiling is the landing temperature (one tick of dose past the budget moves it by 2 mK).
+    // At the lockout the ceiling is the landing temperature less the look one tick ahead (5 °C/s · 1 tick; one
+    // tick of dose past the budget moves it by 2 mK more).
     let max_c = rig.env.effective_max_c();
+    let hand_c = landing_c - DOSE_COOLDOWN_RATE_C_PER_S * DT_S;
     assert!(
-        (max_c - landing_c).abs() < 0.003,
-        "ceiling {max_c} at the lockout, hand {landing_c}"
+        (max_c - hand_c).abs() < 0.003,
+        "ceiling {max_c} at the lockout, hand {hand_c}"
     );
     // Cool to 38 °C at 10 °C/s; the ceiling is then 43 + ln((1.025 − D)/10)/ln 4 for the dose D spent: heating
     // 0.1 °C below it is allowed, at it refused.
