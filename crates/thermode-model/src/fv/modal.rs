@@ -158,9 +158,11 @@ impl ModalFv {
     }
 
     /// The full model with the current state (the modal state is written into its cells first; O(cells²) after
-    /// fast steps). Drop the guard before stepping.
+    /// fast steps). Several guards may be held at once (only a step, which needs `&mut self`, makes the cells stale).
     pub fn model(&self) -> Ref<'_, FvModel> {
-        self.core.borrow_mut().sync();
+        if !self.core.borrow().synced {
+            self.core.borrow_mut().sync();
+        }
         Ref::map(self.core.borrow(), |core| &core.full)
     }
 
@@ -244,7 +246,10 @@ impl PlateCoupled for ModalFv {
             conductance_w_m2k,
             temperature_c: 0.0,
         };
-        let mut core = self.core.borrow_mut();
+        let Ok(mut core) = self.core.try_borrow_mut() else {
+            // A guard from `model()` is held: the full model is in sync and answers.
+            return self.core.borrow().full.receptor_affine(dt_s, conductance_w_m2k);
+        };
         if !core.enabled {
             return core.full.receptor_affine(dt_s, conductance_w_m2k);
         }
