@@ -6,7 +6,7 @@
 //! so the outer half of the epidermis lies in series ([`PlateFinger::receptor_conductance_w_m2k`]).
 
 use thermode_device::PlateFinger;
-use thermode_model::fv::{FvConfig, FvModel};
+use thermode_model::fv::{FvConfig, FvModel, ModalFv};
 use thermode_model::inverse::DisplayInverse;
 use thermode_model::kron::{KronEnvironment, KronModel};
 use thermode_model::{ParamError, Skin};
@@ -20,8 +20,8 @@ use crate::renderer::RendererKind;
 pub enum DisplayFinger {
     /// The three-layer finger (kron renderer).
     Kron(DisplayInverse<KronModel>),
-    /// The finite-volume finger (fv renderer).
-    Fv(DisplayInverse<FvModel>),
+    /// The finite-volume finger (fv renderer), on the modal fast path where it applies ([`ModalFv`]).
+    Fv(DisplayInverse<ModalFv>),
 }
 
 impl DisplayFinger {
@@ -48,7 +48,7 @@ impl DisplayFinger {
                 let mut model = FvModel::new(skin, None, config)?;
                 model.set_steady_in_air(ambient_c)?;
                 let g = model.receptor_conductance_w_m2k(surface_contact_w_m2k);
-                Ok(DisplayFinger::Fv(DisplayInverse::new(model, g)?))
+                Ok(DisplayFinger::Fv(DisplayInverse::new(ModalFv::new(model), g)?))
             }
         }
     }

@@ -3,7 +3,8 @@
 //!
 //! - [`RendererKind::Fv`] (default): the finite-volume finger and object (`model.md` §3) with a light-touch contact
 //!   resistance (default [`LIGHT_TOUCH_RESISTANCE_M2K_W`]); the object has its heat capacity, so effusivity counts.
-//!   The receptor is the skin surface.
+//!   The receptor is the skin surface. Stepped on the modal fast path ([`ModalFv`]: exact in time for the model's
+//!   equations, selected automatically for grids of at most `MODAL_MAX_CELLS` cells).
 //! - [`RendererKind::Kron`]: the paper's three-layer model (eq. 1–6); the object is held at its temperature and only
 //!   its conductivity and thickness count. The receptor is the epidermis centre T1.
 //!
@@ -11,7 +12,7 @@
 //! (uniform at the object temperature) and keeps the finger's own temperature field; a release returns it to air;
 //! a change of material during contact is a new touch of the new material. Stepping never allocates.
 
-use thermode_model::fv::{FvConfig, FvEnvironment, FvModel};
+use thermode_model::fv::{FvConfig, FvEnvironment, FvModel, ModalFv};
 use thermode_model::kron::{KronEnvironment, KronModel};
 use thermode_model::{Material, ParamError, Skin};
 
@@ -74,8 +75,8 @@ pub enum Renderer {
     },
     /// The finite-volume finger (with the touched object once touched).
     Fv {
-        /// The model.
-        model: FvModel,
+        /// The model, on the modal fast path where it applies.
+        model: ModalFv,
         /// Air or the object.
         env: FvEnvironment,
         /// The grid and contact resistance used for every touched object.
@@ -107,7 +108,7 @@ impl Renderer {
                 let mut model = FvModel::new(skin, None, config)?;
                 model.set_steady_in_air(ambient_c)?;
                 Ok(Renderer::Fv {
-                    model,
+                    model: ModalFv::new(model),
                     env: FvEnvironment::Air { ambient_c },
                     config: config.clone(),
                     ambient_c,

@@ -49,7 +49,7 @@ pub const MAX_BASES: usize = 4;
 pub const MAX_STEP_TABLES: usize = 4;
 
 /// What a configuration's matrix depends on: contact or not, the surface conductance (bits), the perfusion scale
-/// (bits) and the object's generation (bumped when it is replaced).
+/// (bits) and, in contact, the object's generation (bumped when it is replaced).
 type BasisKey = (bool, u64, u64, u64);
 
 /// The modal decomposition of one configuration.
@@ -77,9 +77,10 @@ struct Basis {
 }
 
 /// The factors of one step length `h` in one configuration.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 struct StepTable {
-    h_bits: u64,
+    /// The step length \[s\].
+    h_s: f64,
     /// e^{−λ_j h}.
     decay: Vec<f64>,
     /// φ_j f_j and φ_j β_j with φ_j = (1 − e^{−λ_j h})/λ_j (h when λ_j = 0).
@@ -147,6 +148,8 @@ impl ModalFv {
             generation: 0,
             cells,
         };
+        let mut core = core;
+        core.prepare(core.env);
         ModalFv {
             core: RefCell::new(core),
         }
@@ -195,9 +198,14 @@ impl ModalFv {
         self.model().skin_temperature_at_depth_c(depth_m)
     }
 
-    /// [`FvModel::touch`]: the object becomes uniform at `object_c` \[°C\] and the environment the object.
+    /// [`FvModel::touch`]: the object becomes uniform at `object_c` \[°C\] and the environment the object. On the
+    /// fast path the contact configuration is made ready here (decomposed on the first touch of an object, with the
+    /// factors of the step lengths in use), so the steps that follow do not allocate.
     pub fn touch(&mut self, object_c: f64) -> Result<(), ParamError> {
-        self.core.get_mut().change_state(|m| m.touch(object_c))
+        let core = self.core.get_mut();
+        core.change_state(|m| m.touch(object_c))?;
+        core.prepare(FvEnvironment::Object);
+        Ok(())
     }
 
     /// [`FvModel::set_steady_in_air`].
@@ -215,10 +223,11 @@ impl ModalFv {
         self.core.get_mut().change_state(|m| m.set_skin_uniform(temperature_c))
     }
 
-    /// [`FvModel::replace_object`]; forgets the cached contact configurations.
+    /// [`FvModel::replace_object`]; the cached contact configurations no longer apply (those in air or on a plate
+    /// do).
     pub fn replace_object(&mut self, object: Option<&Material>, config: &FvConfig) -> Result<(), ParamError> {
         let core = self.core.get_mut();
-        core.change_matrix(|m| m.replace_object(object, config))?;
+        core.change_state(|m| m.replace_object(object, config))?;
         core.generation += 1;
         core.cells = vec![0.0; core.full.skin_cells() + core.full.object_cells()];
         core.enabled &= core.cells.len() <= MODAL_MAX_CELLS;
@@ -283,6 +292,13 @@ impl PlateCoupled for ModalFv {
 }
 
 impl Core {
+    /// Makes `env`'s configuration active ahead of a step (on the fast path).
+    fn prepare(&mut self, env: FvEnvironment) {
+        if self.enabled {
+            let _ = self.activate(env);
+        }
+    }
+
     /// The step: on the fast path the modal update in `env`'s configuration, else the full model's.
     fn step(&mut self, dt_s: f64, env: FvEnvironment) {
         let active = if self.enabled { self.activate(env) } else { None };
@@ -368,12 +384,8 @@ impl Core {
         let g = match side {
             Side::Fixed { g, .. } | Side::Contact { g } => g,
         };
-        let key = (
-            contact,
-            g.to_bits(),
-            self.full.perfusion_scale().to_bits(),
-            self.generation,
-        );
+        let generation = if contact { self.generation } else { 0 };
+        let key = (contact, g.to_bits(), self.full.perfusion_scale().to_bits(), generation);
         if let Some(b) = self.active.filter(|&b| self.bases[b].key == key) {
             return Some(b);
         }
@@ -386,11 +398,24 @@ impl Core {
         Some(b)
     }
 
-    /// Decomposes the configuration and caches it (replacing the oldest beyond [`MAX_BASES`]).
+    /// Decomposes the configuration and caches it (replacing the oldest beyond [`MAX_BASES`]), with the factors of
+    /// the step lengths the other configurations have (the steps that will most likely follow).
     fn build_basis(&mut self, key: BasisKey, side: Side) -> Option<usize> {
         let (skin, object) = self.full.arms();
         let object = if key.0 { object } else { None };
-        let basis = Basis::new(key, skin, object, side)?;
+        let mut basis = Basis::new(key, skin, object, side)?;
+        let known = self
+            .bases
+            .iter()
+            .rev()
+            .flat_map(|b| b.steps.iter().rev().map(|t| t.h_s));
+        for h_s in known {
+            if basis.steps.len() < MAX_STEP_TABLES && !basis.steps.iter().any(|t| same_step(t.h_s, h_s)) {
+                let mut table = StepTable::default();
+                basis.fill_step_table(h_s, &mut table);
+                basis.steps.push(table);
+            }
+        }
         if self.bases.len() >= MAX_BASES {
             self.bases.remove(0);
         }
@@ -417,20 +442,32 @@ impl Core {
         self.synced = true;
     }
 
-    /// The index of the step table of `dt_s` in basis `b`, building it if needed.
+    /// The index of the step table of `dt_s` in basis `b`, building it if needed (in place of the oldest beyond
+    /// [`MAX_STEP_TABLES`], reusing its storage).
     fn step_table(&mut self, b: usize, dt_s: f64) -> usize {
         let basis = &mut self.bases[b];
-        let h_bits = dt_s.to_bits();
-        if let Some(t) = basis.steps.iter().rposition(|t| t.h_bits == h_bits) {
+        if let Some(t) = basis.steps.iter().rposition(|t| same_step(t.h_s, dt_s)) {
             return t;
         }
         if basis.steps.len() >= MAX_STEP_TABLES {
-            basis.steps.remove(0);
+            let mut oldest = basis.steps.remove(0);
+            basis.fill_step_table(dt_s, &mut oldest);
+            basis.steps.push(oldest);
+        } else {
+            let mut table = StepTable::default();
+            basis.fill_step_table(dt_s, &mut table);
+            basis.steps.push(table);
         }
-        let table = basis.step_table(dt_s);
-        basis.steps.push(table);
         basis.steps.len() - 1
     }
+}
+
+/// Whether a step of `a` \[s\] may use the factors of a step of `b` \[s\]: equal to 1e-9 relative. Tick lengths
+/// computed as differences of clock times differ in the last bits; using the factors of `b` for `a` changes a step's
+/// result by at most 1e-9 of the step's change (far below the stated bound), and keeps a jittering tick from
+/// rebuilding its factors every tick.
+fn same_step(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-9 * b.abs()
 }
 
 impl Basis {
@@ -478,26 +515,31 @@ impl Basis {
         })
     }
 
-    /// The exact zero-order-hold factors of a step of `h` \[s\].
-    fn step_table(&self, h: f64) -> StepTable {
-        let decay: Vec<f64> = self.rate_per_s.iter().map(|l| (-l * h).exp()).collect();
-        let phi: Vec<f64> = self
-            .rate_per_s
-            .iter()
-            .map(|&l| if l == 0.0 { h } else { -(-l * h).exp_m1() / l })
-            .collect();
-        let drive: Vec<f64> = phi.iter().zip(&self.forcing).map(|(p, f)| p * f).collect();
-        let drive_input: Vec<f64> = phi.iter().zip(&self.input).map(|(p, b)| p * b).collect();
-        let row_decay = self.surface_row.iter().zip(&decay).map(|(r, a)| r * a).collect();
-        StepTable {
-            h_bits: h.to_bits(),
-            out_const: dot(&self.surface_row, &drive),
-            out_input: dot(&self.surface_row, &drive_input) + self.surface_input,
-            decay,
-            drive,
-            drive_input,
-            row_decay,
-        }
+    /// Fills `table` with the exact zero-order-hold factors of a step of `h` \[s\] (no allocation when `table`
+    /// already has room for this basis).
+    fn fill_step_table(&self, h: f64, table: &mut StepTable) {
+        let refill = |v: &mut Vec<f64>, values: &mut dyn Iterator<Item = f64>| {
+            v.clear();
+            v.extend(values);
+        };
+        let rates = &self.rate_per_s;
+        refill(&mut table.decay, &mut rates.iter().map(|l| (-l * h).exp()));
+        let phi = |l: f64| if l == 0.0 { h } else { -(-l * h).exp_m1() / l };
+        refill(
+            &mut table.drive,
+            &mut rates.iter().zip(&self.forcing).map(|(&l, f)| phi(l) * f),
+        );
+        refill(
+            &mut table.drive_input,
+            &mut rates.iter().zip(&self.input).map(|(&l, b)| phi(l) * b),
+        );
+        table.row_decay.clear();
+        table
+            .row_decay
+            .extend(self.surface_row.iter().zip(&table.decay).map(|(r, a)| r * a));
+        table.h_s = h;
+        table.out_const = dot(&self.surface_row, &table.drive);
+        table.out_input = dot(&self.surface_row, &table.drive_input) + self.surface_input;
     }
 }
 
