@@ -6,7 +6,7 @@
 //! so the outer half of the epidermis lies in series ([`PlateFinger::receptor_conductance_w_m2k`]).
 
 use thermode_device::PlateFinger;
-use thermode_model::fv::{FvConfig, FvModel, ModalFv};
+use thermode_model::fv::{FvConfig, FvEnvironment, FvModel, ModalFv};
 use thermode_model::inverse::DisplayInverse;
 use thermode_model::kron::{KronEnvironment, KronModel};
 use thermode_model::{ParamError, Skin};
@@ -48,7 +48,30 @@ impl DisplayFinger {
                 let mut model = FvModel::new(skin, None, config)?;
                 model.set_steady_in_air(ambient_c)?;
                 let g = model.receptor_conductance_w_m2k(surface_contact_w_m2k);
-                Ok(DisplayFinger::Fv(DisplayInverse::new(ModalFv::new(model), g)?))
+                let mut model = ModalFv::new(model);
+                model.prepare(FvEnvironment::Plate {
+                    conductance_w_m2k: g,
+                    temperature_c: ambient_c,
+                });
+                Ok(DisplayFinger::Fv(DisplayInverse::new(model, g)?))
+            }
+        }
+    }
+
+    /// Switches the fv finger's modal fast path on (where the grid allows it; the default) or off (the full model
+    /// steps every tick). No effect on the Kron finger.
+    pub fn set_fv_fast_path(&mut self, enabled: bool) {
+        if let DisplayFinger::Fv(inverse) = self {
+            if inverse.model().fast_path() != enabled {
+                let mut model = inverse.model().clone();
+                model.set_fast_path(enabled);
+                model.prepare(FvEnvironment::Plate {
+                    conductance_w_m2k: inverse.conductance_w_m2k(),
+                    temperature_c: model.surface_c(),
+                });
+                if let Ok(switched) = DisplayInverse::new(model, inverse.conductance_w_m2k()) {
+                    *inverse = switched;
+                }
             }
         }
     }

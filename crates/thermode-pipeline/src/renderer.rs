@@ -153,7 +153,16 @@ impl Renderer {
         Ok(())
     }
 
-    /// Advances the finger by `dt_s` \[s\] (finite and positive; the caller checks). Never allocates.
+    /// Switches the fv renderer's modal fast path on (where the grid allows it; the default) or off (the full model
+    /// steps every tick). No effect on the kron renderer.
+    pub fn set_fv_fast_path(&mut self, enabled: bool) {
+        if let Renderer::Fv { model, .. } = self {
+            model.set_fast_path(enabled);
+        }
+    }
+
+    /// Advances the finger by `dt_s` \[s\] (finite and positive; the caller checks). Never allocates once a
+    /// configuration (air, or contact with the touched object) and the step length are cached (see [`ModalFv`]).
     pub fn step(&mut self, dt_s: f64) {
         match self {
             Renderer::Kron { model, env, .. } => model.step(dt_s, env),

@@ -72,8 +72,11 @@ struct Basis {
     /// Receptor (surface face temperature) = surface_row · z + surface_input · u.
     surface_row: Vec<f64>,
     surface_input: f64,
-    /// Per-step factors, most recently built last.
+    /// Per-step factors: [`MAX_STEP_TABLES`] slots with their storage allocated when the basis is built (a slot
+    /// not yet used has a NaN step length), refilled round-robin.
     steps: Vec<StepTable>,
+    /// The slot the next new step length goes to.
+    next_slot: usize,
 }
 
 /// The factors of one step length `h` in one configuration.
@@ -153,6 +156,24 @@ impl ModalFv {
         ModalFv {
             core: RefCell::new(core),
         }
+    }
+
+    /// Makes the configuration of `env` ready (decomposed and the state projected onto it) without stepping, so
+    /// that the first step in it does not allocate: a display finger prepares its plate configuration when it is
+    /// built. Does nothing off the fast path.
+    pub fn prepare(&mut self, env: FvEnvironment) {
+        self.core.get_mut().prepare(env);
+    }
+
+    /// Switches the fast path on (where the grid allows it: at most [`MODAL_MAX_CELLS`] cells) or off (every call
+    /// goes to the full model). The state is kept.
+    pub fn set_fast_path(&mut self, enabled: bool) {
+        let core = self.core.get_mut();
+        core.sync();
+        core.active = None;
+        core.enabled = enabled && core.cells.len() <= MODAL_MAX_CELLS;
+        let env = core.env;
+        core.prepare(env);
     }
 
     /// Whether the fast path is in use.
@@ -404,16 +425,11 @@ impl Core {
         let (skin, object) = self.full.arms();
         let object = if key.0 { object } else { None };
         let mut basis = Basis::new(key, skin, object, side)?;
-        let known = self
-            .bases
-            .iter()
-            .rev()
-            .flat_map(|b| b.steps.iter().rev().map(|t| t.h_s));
-        for h_s in known {
-            if basis.steps.len() < MAX_STEP_TABLES && !basis.steps.iter().any(|t| same_step(t.h_s, h_s)) {
-                let mut table = StepTable::default();
-                basis.fill_step_table(h_s, &mut table);
-                basis.steps.push(table);
+        let known = self.bases.iter().rev().flat_map(|b| b.steps.iter().map(|t| t.h_s));
+        for h_s in known.filter(|h| h.is_finite()) {
+            let filled = basis.steps.iter().filter(|t| t.h_s.is_finite()).count();
+            if filled < MAX_STEP_TABLES && !basis.steps.iter().any(|t| same_step(t.h_s, h_s)) {
+                basis.fill_slot(h_s);
             }
         }
         if self.bases.len() >= MAX_BASES {
@@ -442,23 +458,14 @@ impl Core {
         self.synced = true;
     }
 
-    /// The index of the step table of `dt_s` in basis `b`, building it if needed (in place of the oldest beyond
-    /// [`MAX_STEP_TABLES`], reusing its storage).
+    /// The index of the step table of `dt_s` in basis `b`, filling a slot if needed (round-robin, in the storage
+    /// allocated with the basis).
     fn step_table(&mut self, b: usize, dt_s: f64) -> usize {
         let basis = &mut self.bases[b];
-        if let Some(t) = basis.steps.iter().rposition(|t| same_step(t.h_s, dt_s)) {
+        if let Some(t) = basis.steps.iter().position(|t| same_step(t.h_s, dt_s)) {
             return t;
         }
-        if basis.steps.len() >= MAX_STEP_TABLES {
-            let mut oldest = basis.steps.remove(0);
-            basis.fill_step_table(dt_s, &mut oldest);
-            basis.steps.push(oldest);
-        } else {
-            let mut table = StepTable::default();
-            basis.fill_step_table(dt_s, &mut table);
-            basis.steps.push(table);
-        }
-        basis.steps.len() - 1
+        basis.fill_slot(dt_s)
     }
 }
 
@@ -511,8 +518,19 @@ impl Basis {
             input,
             surface_row,
             surface_input,
-            steps: Vec::new(),
+            steps: (0..MAX_STEP_TABLES).map(|_| StepTable::empty(n)).collect(),
+            next_slot: 0,
         })
+    }
+
+    /// Fills the next slot with the factors of a step of `h` \[s\]; returns its index.
+    fn fill_slot(&mut self, h: f64) -> usize {
+        let slot = self.next_slot;
+        self.next_slot = (slot + 1) % MAX_STEP_TABLES;
+        let mut table = std::mem::take(&mut self.steps[slot]);
+        self.fill_step_table(h, &mut table);
+        self.steps[slot] = table;
+        slot
     }
 
     /// Fills `table` with the exact zero-order-hold factors of a step of `h` \[s\] (no allocation when `table`
@@ -540,6 +558,22 @@ impl Basis {
         table.h_s = h;
         table.out_const = dot(&self.surface_row, &table.drive);
         table.out_input = dot(&self.surface_row, &table.drive_input) + self.surface_input;
+    }
+}
+
+impl StepTable {
+    /// An unused slot with room for `n` modes.
+    fn empty(n: usize) -> StepTable {
+        let room = || Vec::with_capacity(n);
+        StepTable {
+            h_s: f64::NAN,
+            decay: room(),
+            drive: room(),
+            drive_input: room(),
+            row_decay: room(),
+            out_const: 0.0,
+            out_input: 0.0,
+        }
     }
 }
 
