@@ -672,3 +672,70 @@ fn surface_input_c(env: FvEnvironment) -> f64 {
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
+
+#[cfg(test)]
+mod tests {
+    //! The caches: configurations reused across touch and release, step factors shared by jittering tick lengths,
+    //! and the forced-off path.
+
+    use super::*;
+    use crate::materials;
+    use crate::skin::Skin;
+
+    fn touching_wood() -> ModalFv {
+        let wood = materials::find("wood").unwrap();
+        let mut model = FvModel::new(&Skin::fingertip(), Some(&wood), &FvConfig::default()).unwrap();
+        model.set_steady_in_air(23.0).unwrap();
+        ModalFv::new(model)
+    }
+
+    fn air() -> FvEnvironment {
+        FvEnvironment::Air { ambient_c: 23.0 }
+    }
+
+    #[test]
+    fn touch_and_release_reuse_two_configurations() {
+        let mut fast = touching_wood();
+        for _ in 0..5 {
+            fast.touch(30.0).unwrap();
+            fast.step(0.01, FvEnvironment::Object);
+            fast.step(0.01, air());
+        }
+        let core = fast.core.borrow();
+        assert_eq!(core.bases.len(), 2, "air and contact, built once each");
+        let used = |b: &Basis| b.steps.iter().filter(|t| t.h_s.is_finite()).count();
+        assert!(core.bases.iter().all(|b| used(b) == 1), "one step length in each");
+    }
+
+    #[test]
+    fn jittering_step_lengths_share_their_factors() {
+        // Tick lengths computed as differences of clock times: 0.01 ± a few ulps.
+        let mut fast = touching_wood();
+        let mut jittered = fast.clone();
+        for k in 1..200u32 {
+            let dt_s = f64::from(k + 1) * 0.01 - f64::from(k) * 0.01;
+            jittered.step(dt_s, air());
+            fast.step(0.01, air());
+        }
+        let used = jittered.core.borrow().bases[0]
+            .steps
+            .iter()
+            .filter(|t| t.h_s.is_finite())
+            .count();
+        assert_eq!(used, 1, "jittered steps filled {used} step tables");
+        let difference = (jittered.surface_c() - fast.surface_c()).abs();
+        assert!(difference < 1e-12, "jittered vs exact steps differ by {difference} °C");
+    }
+
+    #[test]
+    fn forced_off_never_builds_a_configuration() {
+        let mut fast = touching_wood();
+        fast.set_fast_path(false);
+        fast.touch(30.0).unwrap();
+        fast.step(0.01, FvEnvironment::Object);
+        let _ = fast.receptor_affine(0.01, 800.0);
+        fast.step_on_plate(0.01, 800.0, 35.0);
+        assert!(!fast.fast_path());
+        assert!(fast.core.borrow().active.is_none());
+    }
+}
