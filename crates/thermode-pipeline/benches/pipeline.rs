@@ -6,14 +6,14 @@
 //!
 //! The group `physics_true` is the physics-true pipeline — fv renderer, fv display finger and the fv finger on the
 //! plant — before and after the modal fast path: `*_full_fv` steps the full finite-volume model in all three
-//! (`PipelineConfig::fv_fast_path` off, the plant's finger an `FvModel`), `*_modal` uses the fast path in all three
+//! (`PipelineConfig::fv_fast_path = None`, the plant's finger an `FvModel`), `*_modal` uses the fast path in all three
 //! (the plant's finger a `ModalFv`). The other groups use the pipeline's default (fast path on) with an `FvModel`
 //! or Kron finger on the plant.
 #![allow(missing_docs)] // criterion_main! generates an undocumented `main`
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use thermode_device::{default_finger, Device, DeviceConfig, PlateFinger, SimulatedDisplay};
-use thermode_model::fv::{FvModel, ModalFv};
+use thermode_model::fv::{FvModel, ModalFv, ModalStepping};
 use thermode_model::kron::KronModel;
 use thermode_pipeline::{ChannelPipeline, ControllerKind, PipelineConfig, RendererKind, ShippedDisplay, Stimulus};
 
@@ -21,11 +21,15 @@ const STEPS: u64 = 1000;
 const DT_S: f64 = 1e-3;
 
 fn pipeline(renderer: RendererKind, controller: ControllerKind) -> ChannelPipeline {
-    pipeline_with(renderer, controller, true)
+    pipeline_with(renderer, controller, Some(ModalStepping::Exact))
 }
 
 /// The pipeline touching aluminium, with the fv fast path on or off.
-fn pipeline_with(renderer: RendererKind, controller: ControllerKind, fv_fast_path: bool) -> ChannelPipeline {
+fn pipeline_with(
+    renderer: RendererKind,
+    controller: ControllerKind,
+    fv_fast_path: Option<ModalStepping>,
+) -> ChannelPipeline {
     let mut config = PipelineConfig::new(DeviceConfig::default(), controller);
     config.renderer = renderer;
     config.fv_fast_path = fv_fast_path;
@@ -118,10 +122,10 @@ fn pipeline_only(c: &mut Criterion, name: &str, renderer: RendererKind, controll
 fn physics_true(c: &mut Criterion) {
     for (controller_name, controller) in controllers() {
         let full = FvModel::fingertip().unwrap_or_else(|e| panic!("{e}"));
-        let before = pipeline_with(RendererKind::Fv, controller, false);
+        let before = pipeline_with(RendererKind::Fv, controller, None);
         closed_loop(c, "physics_true", &format!("{controller_name}_full_fv"), before, full);
         let modal = ModalFv::fingertip().unwrap_or_else(|e| panic!("{e}"));
-        let after = pipeline_with(RendererKind::Fv, controller, true);
+        let after = pipeline_with(RendererKind::Fv, controller, Some(ModalStepping::Exact));
         closed_loop(c, "physics_true", &format!("{controller_name}_modal"), after, modal);
     }
 }

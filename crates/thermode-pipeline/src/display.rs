@@ -6,7 +6,7 @@
 //! so the outer half of the epidermis lies in series ([`PlateFinger::receptor_conductance_w_m2k`]).
 
 use thermode_device::PlateFinger;
-use thermode_model::fv::{FvConfig, FvEnvironment, FvModel, ModalFv};
+use thermode_model::fv::{FvConfig, FvEnvironment, FvModel, ModalFv, ModalStepping};
 use thermode_model::inverse::DisplayInverse;
 use thermode_model::kron::{KronEnvironment, KronModel};
 use thermode_model::{ParamError, Skin};
@@ -58,13 +58,16 @@ impl DisplayFinger {
         }
     }
 
-    /// Switches the fv finger's modal fast path on (where the grid allows it; the default) or off (the full model
-    /// steps every tick). No effect on the Kron finger.
-    pub fn set_fv_fast_path(&mut self, enabled: bool) {
+    /// Puts the fv finger on the modal fast path with `stepping` (where the grid allows it; the default is
+    /// [`ModalStepping::Exact`]) or, with `None`, off it (the full model steps every tick). No effect on the Kron
+    /// finger.
+    pub fn set_fv_fast_path(&mut self, stepping: Option<ModalStepping>) {
         if let DisplayFinger::Fv(inverse) = self {
-            if inverse.model().fast_path() != enabled {
+            let (fast, current) = (inverse.model().fast_path(), inverse.model().stepping());
+            if fast != stepping.is_some() || (fast && Some(current) != stepping) {
                 let mut model = inverse.model().clone();
-                model.set_fast_path(enabled);
+                model.set_stepping(stepping.unwrap_or_default());
+                model.set_fast_path(stepping.is_some());
                 model.prepare(FvEnvironment::Plate {
                     conductance_w_m2k: inverse.conductance_w_m2k(),
                     temperature_c: model.surface_c(),

@@ -36,7 +36,7 @@
 
 use thermode_control::{ControlInput, Controller, Finger};
 use thermode_device::{DeviceConfig, Reading};
-use thermode_model::fv::{FvConfig, FvModel};
+use thermode_model::fv::{FvConfig, FvModel, ModalStepping};
 use thermode_model::kron::calibrate_to_surface;
 use thermode_model::limits::CONTACT_RESISTANCE;
 use thermode_model::{Material, Rule, Skin};
@@ -122,11 +122,13 @@ pub struct PipelineConfig {
     /// ([`ChannelPipeline::set_stimulus`]). Default true; without a controller that learns an unknown heat
     /// ([`Controller::unknown_heat_w`], e.g. the paper's PID) nothing is calibrated.
     pub calibrate_finger_at_touch: bool,
-    /// Whether the fv renderer and the fv display finger step on the modal fast path ([`ModalFv`](thermode_model::fv::ModalFv): exact in time
-    /// for the finite-volume equations, within 0.005 °C of the full model time-converged; selected where the grid
-    /// allows it). Default true; false steps the full model (TR-BDF2, one step per tick) as before the fast path,
-    /// for comparisons and benchmarks.
-    pub fv_fast_path: bool,
+    /// How the fv renderer and the fv display finger step: on the modal fast path
+    /// ([`ModalFv`](thermode_model::fv::ModalFv), selected where the grid allows it) with
+    /// [`ModalStepping::Exact`] (default: exact in time for the finite-volume equations, within 0.005 °C of the full
+    /// model converged in time) or [`ModalStepping::Scheme`] (the full model's TR-BDF2 step per tick reproduced to
+    /// rounding), or `None`: the full model, one TR-BDF2 step per tick, as before the fast path (for comparisons
+    /// and benchmarks).
+    pub fv_fast_path: Option<ModalStepping>,
 }
 
 impl PipelineConfig {
@@ -141,7 +143,7 @@ impl PipelineConfig {
             ambient_c: 23.0,
             contact_resistance_m2k_w: LIGHT_TOUCH_RESISTANCE_M2K_W,
             calibrate_finger_at_touch: true,
-            fv_fast_path: true,
+            fv_fast_path: Some(ModalStepping::Exact),
         }
     }
 
@@ -316,7 +318,7 @@ struct FingerModels {
     ambient_c: f64,
     contact_w_m2k: f64,
     grid: FvConfig,
-    fast_path: bool,
+    fast_path: Option<ModalStepping>,
 }
 
 impl std::fmt::Debug for ChannelPipeline {

@@ -12,7 +12,7 @@
 //! (uniform at the object temperature) and keeps the finger's own temperature field; a release returns it to air;
 //! a change of material during contact is a new touch of the new material. Stepping never allocates.
 
-use thermode_model::fv::{FvConfig, FvEnvironment, FvModel, ModalFv};
+use thermode_model::fv::{FvConfig, FvEnvironment, FvModel, ModalFv, ModalStepping};
 use thermode_model::kron::{KronEnvironment, KronModel};
 use thermode_model::{Material, ParamError, Skin};
 
@@ -153,11 +153,13 @@ impl Renderer {
         Ok(())
     }
 
-    /// Switches the fv renderer's modal fast path on (where the grid allows it; the default) or off (the full model
-    /// steps every tick). No effect on the kron renderer.
-    pub fn set_fv_fast_path(&mut self, enabled: bool) {
+    /// Puts the fv renderer on the modal fast path with `stepping` (where the grid allows it; the default is
+    /// [`ModalStepping::Exact`]) or, with `None`, off it (the full model steps every tick). No effect on the kron
+    /// renderer.
+    pub fn set_fv_fast_path(&mut self, stepping: Option<ModalStepping>) {
         if let Renderer::Fv { model, .. } = self {
-            model.set_fast_path(enabled);
+            model.set_stepping(stepping.unwrap_or_default());
+            model.set_fast_path(stepping.is_some());
         }
     }
 

@@ -39,7 +39,7 @@ mod tests;
 mod tridiagonal;
 
 pub use grid::MAX_CELLS;
-pub use modal::{ModalFv, MAX_BASES, MAX_STEP_TABLES, MODAL_MAX_CELLS};
+pub use modal::{ModalFv, ModalStepping, MAX_BASES, MAX_STEP_TABLES, MODAL_MAX_CELLS};
 pub use model::{EnergyLedger, FvModel};
 pub use run::{
     simulate_contact, simulate_contact_converged, ContactRun, ContactSpec, InitialState, Refinement, Resolution,

@@ -39,7 +39,7 @@ use std::cell::{Ref, RefCell};
 use super::chain::{Arm, Side};
 use super::model::FvModel;
 use super::tridiagonal::symmetric_tridiagonal_eigen;
-use super::{FvConfig, FvEnvironment};
+use super::{FvConfig, FvEnvironment, TimeScheme};
 use crate::error::ParamError;
 use crate::inverse::PlateCoupled;
 use crate::materials::Material;
@@ -52,6 +52,48 @@ pub const MAX_BASES: usize = 4;
 pub const MAX_STEP_TABLES: usize = 4;
 /// Relative difference below which two step lengths share their factors: 1e-7 (see `same_step`).
 const SAME_STEP_RELATIVE: f64 = 1e-7;
+
+/// How [`ModalFv`] advances each mode over a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ModalStepping {
+    /// Exactly, with the surface input held over the step: `e^{−λh}`, the solution of the finite-volume equations
+    /// (default; what the pipeline uses).
+    #[default]
+    Exact,
+    /// With the full model's own time scheme (TR-BDF2 or backward Euler) applied to each mode: reproduces
+    /// [`FvModel::step`] with one step per call to rounding (about 1e-12 °C), at the fast path's cost. For a caller
+    /// that must keep the full model's per-step results.
+    Scheme,
+}
+
+/// TR-BDF2's constants, as the full model's solver defines them: γ = 2 − √2, d = γ/2, and the BDF2 stage
+/// T₁ = A·T_γ − B·T₀ + d·h·F(T₁).
+const GAMMA: f64 = 2.0 - std::f64::consts::SQRT_2;
+const TR_D: f64 = GAMMA / 2.0;
+const TR_A: f64 = 1.0 / (GAMMA * (2.0 - GAMMA));
+const TR_B: f64 = (1.0 - GAMMA) * (1.0 - GAMMA) / (GAMMA * (2.0 - GAMMA));
+
+/// A mode's factors over a step of `h` \[s\] at rate `rate_per_s`: (decay, φ) in `z ← decay·z + φ·(f + β u)`.
+fn mode_factors(stepping: ModalStepping, scheme: TimeScheme, rate_per_s: f64, h: f64) -> (f64, f64) {
+    let l = rate_per_s;
+    match (stepping, scheme) {
+        (ModalStepping::Exact, _) => {
+            let phi = if l == 0.0 { h } else { -(-l * h).exp_m1() / l };
+            ((-l * h).exp(), phi)
+        }
+        (ModalStepping::Scheme, TimeScheme::BackwardEuler) => {
+            let m = 1.0 + h * l;
+            (1.0 / m, h / m)
+        }
+        (ModalStepping::Scheme, TimeScheme::TrBdf2) => {
+            // Trapezoid to γh: (1 + dhλ) y_γ = (1 − dhλ) y₀ + 2dh g; BDF2: (1 + dhλ) y₁ = A y_γ − B y₀ + dh g.
+            let dh = TR_D * h;
+            let m = 1.0 + dh * l;
+            let (stage_decay, stage_phi) = ((1.0 - dh * l) / m, 2.0 * dh / m);
+            ((TR_A * stage_decay - TR_B) / m, (TR_A * stage_phi + dh) / m)
+        }
+    }
+}
 
 /// What a configuration's matrix depends on: contact or not, the surface conductance (bits), the perfusion scale
 /// (bits) and, in contact, the object's generation (bumped when it is replaced).
@@ -77,6 +119,9 @@ struct Basis {
     /// Receptor (surface face temperature) = surface_row · z + surface_input · u.
     surface_row: Vec<f64>,
     surface_input: f64,
+    /// How the modes advance, and the full model's scheme (for [`ModalStepping::Scheme`]).
+    stepping: ModalStepping,
+    scheme: TimeScheme,
     /// Per-step factors: [`MAX_STEP_TABLES`] slots with their storage allocated when the basis is built (a slot
     /// not yet used has a NaN step length), refilled round-robin.
     steps: Vec<StepTable>,
@@ -115,6 +160,8 @@ struct Core {
     full: FvModel,
     /// Whether the fast path is used at all.
     enabled: bool,
+    /// How the modes advance.
+    stepping: ModalStepping,
     bases: Vec<Basis>,
     /// Index of the basis `z` belongs to.
     active: Option<usize>,
@@ -149,6 +196,7 @@ impl ModalFv {
             surface_c: model.surface_c(),
             full: model,
             enabled,
+            stepping: ModalStepping::Exact,
             bases: Vec::new(),
             active: None,
             z: Vec::new(),
@@ -179,6 +227,24 @@ impl ModalFv {
         core.enabled = enabled && core.cells.len() <= MODAL_MAX_CELLS;
         let env = core.env;
         core.prepare(env);
+    }
+
+    /// Sets how the modes advance ([`ModalStepping::Exact`] unless set); forgets the cached step factors.
+    pub fn set_stepping(&mut self, stepping: ModalStepping) {
+        let core = self.core.get_mut();
+        if core.stepping != stepping {
+            core.sync();
+            core.active = None;
+            core.bases.clear();
+            core.stepping = stepping;
+            let env = core.env;
+            core.prepare(env);
+        }
+    }
+
+    /// How the modes advance.
+    pub fn stepping(&self) -> ModalStepping {
+        self.core.borrow().stepping
     }
 
     /// Whether the fast path is in use.
@@ -416,9 +482,12 @@ impl Core {
             return Some(b);
         }
         self.sync();
-        let b = match self.bases.iter().position(|basis| basis.key == key) {
-            Some(b) => b,
-            None => self.build_basis(key, side)?,
+        let found = self.bases.iter().position(|basis| basis.key == key);
+        let Some(b) = found.or_else(|| self.build_basis(key, side)) else {
+            // The decomposition failed (non-finite coefficients): the full model from now on, rather than a failed
+            // O(cells³) attempt every step.
+            self.enabled = false;
+            return None;
         };
         self.project(b);
         Some(b)
@@ -429,7 +498,7 @@ impl Core {
     fn build_basis(&mut self, key: BasisKey, side: Side) -> Option<usize> {
         let (skin, object) = self.full.arms();
         let object = if key.0 { object } else { None };
-        let mut basis = Basis::new(key, skin, object, side)?;
+        let mut basis = Basis::new(key, (skin, object), side, self.stepping, self.full.time_scheme())?;
         let known = self.bases.iter().rev().flat_map(|b| b.steps.iter().map(|t| t.h_s));
         for h_s in known.filter(|h| h.is_finite()) {
             let filled = basis.steps.iter().filter(|t| t.h_s.is_finite()).count();
@@ -486,7 +555,13 @@ fn same_step(a: f64, b: f64) -> bool {
 impl Basis {
     /// The decomposition of the skin (and, in contact, the object) connected as `side`; `None` if the eigen solver
     /// does not converge.
-    fn new(key: BasisKey, skin: &Arm, object: Option<&Arm>, side: Side) -> Option<Basis> {
+    fn new(
+        key: BasisKey,
+        (skin, object): (&Arm, Option<&Arm>),
+        side: Side,
+        stepping: ModalStepping,
+        scheme: TimeScheme,
+    ) -> Option<Basis> {
         let chain = Chain::new(skin, object, side);
         let n = chain.capacity.len();
         let scaled_diag: Vec<f64> = (0..n).map(|i| chain.diagonal[i] / chain.capacity[i]).collect();
@@ -524,6 +599,8 @@ impl Basis {
             input,
             surface_row,
             surface_input,
+            stepping,
+            scheme,
             steps: (0..MAX_STEP_TABLES).map(|_| StepTable::empty(n)).collect(),
             next_slot: 0,
         })
@@ -547,8 +624,9 @@ impl Basis {
             v.extend(values);
         };
         let rates = &self.rate_per_s;
-        refill(&mut table.decay, &mut rates.iter().map(|l| (-l * h).exp()));
-        let phi = |l: f64| if l == 0.0 { h } else { -(-l * h).exp_m1() / l };
+        let factors = |l: f64| mode_factors(self.stepping, self.scheme, l, h);
+        refill(&mut table.decay, &mut rates.iter().map(|&l| factors(l).0));
+        let phi = |l: f64| factors(l).1;
         refill(
             &mut table.drive,
             &mut rates.iter().zip(&self.forcing).map(|(&l, f)| phi(l) * f),

@@ -791,6 +791,11 @@ impl FvModel {
         self.side(env)
     }
 
+    /// The time-stepping scheme.
+    pub(crate) fn time_scheme(&self) -> TimeScheme {
+        self.scheme
+    }
+
     /// Sets the cell temperatures (the object's only if `object_c` is not empty) and the environment, as a step
     /// would leave them (the energy ledger is not touched).
     pub(crate) fn load_state(&mut self, skin_c: &[f64], object_c: &[f64], env: FvEnvironment) {

@@ -2,9 +2,9 @@
 //! against the full model time-converged on the same grid over touch/release sequences and plate step inputs, for
 //! several materials and contact resistances; second-order convergence of the full model's TR-BDF2 towards it;
 //! steady states; conservation of energy in a closed system; determinism; the forced-off path equal to the full
-//! model.
+//! model; the scheme-matched stepping equal to the full model stepped once per tick.
 
-use thermode_model::fv::{DeepBoundary, FarSide, FvConfig, FvEnvironment, FvModel, ModalFv};
+use thermode_model::fv::{DeepBoundary, FarSide, FvConfig, FvEnvironment, FvModel, ModalFv, ModalStepping, TimeScheme};
 use thermode_model::inverse::PlateCoupled;
 use thermode_model::materials::{self, Material};
 use thermode_model::{Skin, SkinLayer};
@@ -338,4 +338,44 @@ fn replacing_the_object_and_recalibrating_rebuild_the_configuration() {
         worst <= BOUND_C,
         "fast vs full {worst} °C after replacing the object or perfusion"
     );
+}
+
+#[test]
+fn scheme_stepping_reproduces_the_full_model_step_by_step() {
+    // The full model's own scheme applied to each mode is the full model's step, to rounding: a sharp check of the
+    // decomposition (eigenvalues, eigenvectors, forcing and read-out), for both schemes, in contact and in air.
+    for scheme in [TimeScheme::TrBdf2, TimeScheme::BackwardEuler] {
+        for name in ["aluminium", "wood"] {
+            let config = FvConfig {
+                contact_resistance_m2k_w: 1e-3,
+                scheme,
+                ..FvConfig::default()
+            };
+            let object = material(name);
+            let mut full = FvModel::new(&Skin::fingertip(), Some(&object), &config).unwrap_or_else(|e| panic!("{e}"));
+            full.set_steady_in_air(AIR_C).unwrap_or_else(|e| panic!("{e}"));
+            let mut fast = ModalFv::new(full.clone());
+            fast.set_stepping(ModalStepping::Scheme);
+            let mut env = FvEnvironment::Air { ambient_c: AIR_C };
+            let mut worst = 0.0f64;
+            for tick in 0..TICKS {
+                if let Some(&(_, event_c)) = SEQUENCE.iter().find(|(at, _)| *at == tick) {
+                    if let Some(object_c) = event_c {
+                        full.touch(object_c).unwrap_or_else(|e| panic!("{e}"));
+                        fast.touch(object_c).unwrap_or_else(|e| panic!("{e}"));
+                    }
+                    env = environment(event_c);
+                }
+                full.step(TICK_S, env);
+                fast.step(TICK_S, env);
+                worst = worst.max((fast.surface_c() - full.surface_c()).abs());
+            }
+            let cells = cell_difference(&fast.model(), &full);
+            println!("{scheme:?}, {name}: scheme-matched fast vs full per tick: surface {worst:.1e} °C, cells {cells:.1e} °C");
+            assert!(
+                worst < 1e-9 && cells < 1e-9,
+                "{scheme:?}, {name}: scheme-matched fast path vs full model: surface {worst} °C, cells {cells} °C"
+            );
+        }
+    }
 }
