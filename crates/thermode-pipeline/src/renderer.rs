@@ -206,3 +206,60 @@ impl Renderer {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    //! The fv renderer on its fast path against the full model it replaces, over a touch, a release and a touch of
+    //! another material.
+
+    use super::*;
+
+    /// The receptor trace of an fv renderer with `stepping` at a `dt_s` tick over touch aluminium (0.3 s), release
+    /// (0.2 s), touch wood (0.3 s).
+    fn trace(stepping: Option<ModalStepping>, dt_s: f64) -> Vec<f64> {
+        let config = fv_config(LIGHT_TOUCH_RESISTANCE_M2K_W);
+        let mut renderer = Renderer::new(RendererKind::Fv, &Skin::fingertip(), 23.0, &config).unwrap();
+        renderer.set_fv_fast_path(stepping);
+        let material = |name: &str| thermode_model::materials::find(name).unwrap();
+        let mut out = Vec::new();
+        let ticks = |s: f64| (s / dt_s).round() as usize;
+        let mut run = |renderer: &mut Renderer, n: usize| {
+            for _ in 0..n {
+                renderer.step(dt_s);
+                out.push(renderer.receptor_c());
+            }
+        };
+        renderer.touch(&material("aluminium"), 23.0).unwrap();
+        run(&mut renderer, ticks(0.3));
+        renderer.release();
+        run(&mut renderer, ticks(0.2));
+        renderer.touch(&material("wood"), 30.0).unwrap();
+        run(&mut renderer, ticks(0.3));
+        out
+    }
+
+    fn largest_difference(a: &[f64], b: &[f64]) -> f64 {
+        a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+    }
+
+    #[test]
+    fn scheme_stepping_keeps_the_full_models_targets() {
+        let (full, scheme) = (trace(None, 0.01), trace(Some(ModalStepping::Scheme), 0.01));
+        let difference = largest_difference(&full, &scheme);
+        assert!(
+            difference < 1e-9,
+            "scheme-matched fast path vs full model: {difference} °C"
+        );
+    }
+
+    #[test]
+    fn exact_stepping_is_within_the_bound_of_the_full_model_at_a_1_ms_tick() {
+        // At 1 ms the full model's own time error (TR-BDF2, one step per tick) is about 1.3e-3 °C just after a touch.
+        let (full, exact) = (trace(None, 0.001), trace(Some(ModalStepping::Exact), 0.001));
+        let difference = largest_difference(&full, &exact);
+        assert!(
+            difference <= 0.005,
+            "exact fast path vs full model at 1 ms: {difference} °C (bound 0.005)"
+        );
+    }
+}
