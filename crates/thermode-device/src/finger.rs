@@ -8,7 +8,7 @@
 //! conductance 2/(Δx₁/k₁ + Δx_env/k_env): G = 1/(Δx₁/(2k₁) + 1/h_c). [`PlateFinger`] gives that mapping, so both
 //! models feel the same physical contact.
 
-use thermode_model::fv::{FvConfig, FvModel};
+use thermode_model::fv::{FvConfig, FvModel, ModalFv};
 use thermode_model::inverse::PlateCoupled;
 use thermode_model::kron::{KronModel, DEFAULT_AMBIENT_C};
 use thermode_model::{ParamError, Skin};
@@ -70,5 +70,21 @@ impl PlateFinger for FvModel {
         let mut finger = FvModel::new(&Skin::fingertip(), None, &FvConfig::default())?;
         finger.set_steady_in_air(DEFAULT_AMBIENT_C)?;
         Ok(finger)
+    }
+}
+
+impl PlateFinger for ModalFv {
+    fn receptor_conductance_w_m2k(&self, surface_contact_w_m2k: f64) -> f64 {
+        surface_contact_w_m2k
+    }
+
+    /// [`ModalFv::skin_temperature_at_depth_c`] (reconstructs the cells after fast steps).
+    fn temperature_at_depth_c(&self, depth_m: f64) -> f64 {
+        self.skin_temperature_at_depth_c(depth_m)
+    }
+
+    /// The [`FvModel`] fingertip on the modal fast path.
+    fn fingertip() -> Result<Self, ParamError> {
+        Ok(ModalFv::new(<FvModel as PlateFinger>::fingertip()?))
     }
 }

@@ -3,10 +3,17 @@
 //! plant advanced once per tick), the finger touching aluminium. The plant's finger is the finite-volume finger
 //! (the reference physics, as `thermode render` uses it) and, for the cheapest configuration, the paper's Kron
 //! finger. The pipeline alone (without the plant) is measured too, to show where the time goes.
+//!
+//! The group `physics_true` is the physics-true pipeline — fv renderer, fv display finger and the fv finger on the
+//! plant — before and after the modal fast path: `*_full_fv` steps the full finite-volume model in all three
+//! (`PipelineConfig::fv_fast_path = None`, the plant's finger an `FvModel`), `*_modal` uses the fast path in all three
+//! (the plant's finger a `ModalFv`). The other groups use the pipeline's default (fast path on) with an `FvModel`
+//! or Kron finger on the plant.
 #![allow(missing_docs)] // criterion_main! generates an undocumented `main`
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
 use thermode_device::{default_finger, Device, DeviceConfig, PlateFinger, SimulatedDisplay};
+use thermode_model::fv::{FvModel, ModalFv, ModalStepping};
 use thermode_model::kron::KronModel;
 use thermode_pipeline::{ChannelPipeline, ControllerKind, PipelineConfig, RendererKind, ShippedDisplay, Stimulus};
 
@@ -14,8 +21,18 @@ const STEPS: u64 = 1000;
 const DT_S: f64 = 1e-3;
 
 fn pipeline(renderer: RendererKind, controller: ControllerKind) -> ChannelPipeline {
+    pipeline_with(renderer, controller, Some(ModalStepping::Exact))
+}
+
+/// The pipeline touching aluminium, with the fv fast path on or off.
+fn pipeline_with(
+    renderer: RendererKind,
+    controller: ControllerKind,
+    fv_fast_path: Option<ModalStepping>,
+) -> ChannelPipeline {
     let mut config = PipelineConfig::new(DeviceConfig::default(), controller);
     config.renderer = renderer;
+    config.fv_fast_path = fv_fast_path;
     let mut pipeline = ChannelPipeline::new(&config).unwrap_or_else(|e| panic!("{e}"));
     let aluminium = thermode_model::materials::find("aluminium").unwrap_or_else(|e| panic!("{e}"));
     pipeline
@@ -49,10 +66,20 @@ fn full_loop<F: PlateFinger>(
     controller: ControllerKind,
     finger: F,
 ) {
-    let mut pipeline = pipeline(renderer, controller);
+    closed_loop(c, "pipeline_and_plant", name, pipeline(renderer, controller), finger);
+}
+
+/// `STEPS` ticks of `pipeline` closed over the simulated display with `finger` on it, in `group_name`.
+fn closed_loop<F: PlateFinger>(
+    c: &mut Criterion,
+    group_name: &str,
+    name: &str,
+    mut pipeline: ChannelPipeline,
+    finger: F,
+) {
     let mut plant = plant(finger);
     let mut now_s = plant.time_s();
-    let mut group = c.benchmark_group("pipeline_and_plant");
+    let mut group = c.benchmark_group(group_name);
     group.throughput(Throughput::Elements(STEPS));
     group.bench_function(name, |b| {
         b.iter(|| {
@@ -91,7 +118,20 @@ fn pipeline_only(c: &mut Criterion, name: &str, renderer: RendererKind, controll
     group.finish();
 }
 
+/// The physics-true pipeline before (full fv everywhere) and after (modal fast path everywhere).
+fn physics_true(c: &mut Criterion) {
+    for (controller_name, controller) in controllers() {
+        let full = FvModel::fingertip().unwrap_or_else(|e| panic!("{e}"));
+        let before = pipeline_with(RendererKind::Fv, controller, None);
+        closed_loop(c, "physics_true", &format!("{controller_name}_full_fv"), before, full);
+        let modal = ModalFv::fingertip().unwrap_or_else(|e| panic!("{e}"));
+        let after = pipeline_with(RendererKind::Fv, controller, Some(ModalStepping::Exact));
+        closed_loop(c, "physics_true", &format!("{controller_name}_modal"), after, modal);
+    }
+}
+
 fn benches(c: &mut Criterion) {
+    physics_true(c);
     for (controller_name, controller) in controllers() {
         for (renderer_name, renderer) in [("kron", RendererKind::Kron), ("fv", RendererKind::Fv)] {
             let name = format!("{renderer_name}_renderer_{controller_name}_fv_plant");

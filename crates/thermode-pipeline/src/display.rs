@@ -6,7 +6,7 @@
 //! so the outer half of the epidermis lies in series ([`PlateFinger::receptor_conductance_w_m2k`]).
 
 use thermode_device::PlateFinger;
-use thermode_model::fv::{FvConfig, FvModel};
+use thermode_model::fv::{FvConfig, FvEnvironment, FvModel, ModalFv, ModalStepping};
 use thermode_model::inverse::DisplayInverse;
 use thermode_model::kron::{KronEnvironment, KronModel};
 use thermode_model::{ParamError, Skin};
@@ -20,8 +20,8 @@ use crate::renderer::RendererKind;
 pub enum DisplayFinger {
     /// The three-layer finger (kron renderer).
     Kron(DisplayInverse<KronModel>),
-    /// The finite-volume finger (fv renderer).
-    Fv(DisplayInverse<FvModel>),
+    /// The finite-volume finger (fv renderer), on the modal fast path where it applies ([`ModalFv`]).
+    Fv(DisplayInverse<ModalFv>),
 }
 
 impl DisplayFinger {
@@ -48,7 +48,33 @@ impl DisplayFinger {
                 let mut model = FvModel::new(skin, None, config)?;
                 model.set_steady_in_air(ambient_c)?;
                 let g = model.receptor_conductance_w_m2k(surface_contact_w_m2k);
+                let mut model = ModalFv::new(model);
+                model.prepare(FvEnvironment::Plate {
+                    conductance_w_m2k: g,
+                    temperature_c: ambient_c,
+                });
                 Ok(DisplayFinger::Fv(DisplayInverse::new(model, g)?))
+            }
+        }
+    }
+
+    /// Puts the fv finger on the modal fast path with `stepping` (where the grid allows it; the default is
+    /// [`ModalStepping::Exact`]) or, with `None`, off it (the full model steps every tick). No effect on the Kron
+    /// finger.
+    pub fn set_fv_fast_path(&mut self, stepping: Option<ModalStepping>) {
+        if let DisplayFinger::Fv(inverse) = self {
+            let (fast, current) = (inverse.model().fast_path(), inverse.model().stepping());
+            if fast != stepping.is_some() || (fast && Some(current) != stepping) {
+                let mut model = inverse.model().clone();
+                model.set_stepping(stepping.unwrap_or_default());
+                model.set_fast_path(stepping.is_some());
+                model.prepare(FvEnvironment::Plate {
+                    conductance_w_m2k: inverse.conductance_w_m2k(),
+                    temperature_c: model.surface_c(),
+                });
+                if let Ok(switched) = DisplayInverse::new(model, inverse.conductance_w_m2k()) {
+                    *inverse = switched;
+                }
             }
         }
     }

@@ -36,7 +36,7 @@
 
 use thermode_control::{ControlInput, Controller, Finger};
 use thermode_device::{DeviceConfig, Reading};
-use thermode_model::fv::{FvConfig, FvModel};
+use thermode_model::fv::{FvConfig, FvModel, ModalStepping};
 use thermode_model::kron::calibrate_to_surface;
 use thermode_model::limits::CONTACT_RESISTANCE;
 use thermode_model::{Material, Rule, Skin};
@@ -122,6 +122,13 @@ pub struct PipelineConfig {
     /// ([`ChannelPipeline::set_stimulus`]). Default true; without a controller that learns an unknown heat
     /// ([`Controller::unknown_heat_w`], e.g. the paper's PID) nothing is calibrated.
     pub calibrate_finger_at_touch: bool,
+    /// How the fv renderer and the fv display finger step: on the modal fast path
+    /// ([`ModalFv`](thermode_model::fv::ModalFv), selected where the grid allows it) with
+    /// [`ModalStepping::Exact`] (default: exact in time for the finite-volume equations, within 0.005 °C of the full
+    /// model converged in time) or [`ModalStepping::Scheme`] (the full model's TR-BDF2 step per tick reproduced to
+    /// rounding), or `None`: the full model, one TR-BDF2 step per tick, as before the fast path (for comparisons
+    /// and benchmarks).
+    pub fv_fast_path: Option<ModalStepping>,
 }
 
 impl PipelineConfig {
@@ -136,6 +143,7 @@ impl PipelineConfig {
             ambient_c: 23.0,
             contact_resistance_m2k_w: LIGHT_TOUCH_RESISTANCE_M2K_W,
             calibrate_finger_at_touch: true,
+            fv_fast_path: Some(ModalStepping::Exact),
         }
     }
 
@@ -310,6 +318,7 @@ struct FingerModels {
     ambient_c: f64,
     contact_w_m2k: f64,
     grid: FvConfig,
+    fast_path: Option<ModalStepping>,
 }
 
 impl std::fmt::Debug for ChannelPipeline {
@@ -337,9 +346,13 @@ impl SetpointStage {
     pub fn new(config: &PipelineConfig) -> Result<Self, PipelineError> {
         let grid = fv_config(config.contact_resistance_m2k_w);
         let contact_w_m2k = config.device.plate.contact_conductance_w_m2k;
+        let mut renderer = Renderer::new(config.renderer, &config.skin, config.ambient_c, &grid)?;
+        let mut display = DisplayFinger::new(config.renderer, &config.skin, config.ambient_c, contact_w_m2k, &grid)?;
+        renderer.set_fv_fast_path(config.fv_fast_path);
+        display.set_fv_fast_path(config.fv_fast_path);
         Ok(SetpointStage {
-            renderer: Renderer::new(config.renderer, &config.skin, config.ambient_c, &grid)?,
-            display: DisplayFinger::new(config.renderer, &config.skin, config.ambient_c, contact_w_m2k, &grid)?,
+            renderer,
+            display,
             mode: Mode::Render,
             min_request_horizon_s: 1.0 / config.device.sensor.sample_rate_hz,
         })
@@ -560,6 +573,7 @@ impl ChannelPipeline {
                 ambient_c: config.ambient_c,
                 contact_w_m2k: config.device.plate.contact_conductance_w_m2k,
                 grid: fv_config(config.contact_resistance_m2k_w),
+                fast_path: config.fv_fast_path,
             }),
             rest_heat: RestHeat::default(),
             receptor_offset_c: 0.0,
@@ -795,8 +809,10 @@ impl FingerModels {
                 self.skin.with_perfusion_scaled(scale)
             }
         };
-        let renderer = Renderer::new(self.kind, &skin, self.ambient_c, &self.grid).ok()?;
-        let display = DisplayFinger::new(self.kind, &skin, self.ambient_c, self.contact_w_m2k, &self.grid).ok()?;
+        let mut renderer = Renderer::new(self.kind, &skin, self.ambient_c, &self.grid).ok()?;
+        let mut display = DisplayFinger::new(self.kind, &skin, self.ambient_c, self.contact_w_m2k, &self.grid).ok()?;
+        renderer.set_fv_fast_path(self.fast_path);
+        display.set_fv_fast_path(self.fast_path);
         Some((renderer, display))
     }
 }

@@ -39,13 +39,16 @@
 mod adaptive;
 mod chain;
 mod grid;
+mod modal;
 mod model;
 mod run;
 #[cfg(test)]
 mod tests;
+mod tridiagonal;
 
 pub use adaptive::StepCounts;
 pub use grid::MAX_CELLS;
+pub use modal::{ModalFv, ModalStepping, MAX_BASES, MAX_STEP_TABLES, MODAL_MAX_CELLS};
 pub use model::{EnergyLedger, FvModel};
 pub use run::{
     simulate_contact, simulate_contact_converged, ContactRun, ContactSpec, InitialState, Refinement, Resolution,

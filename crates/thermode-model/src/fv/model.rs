@@ -972,6 +972,35 @@ fn build_arm(
     arm
 }
 
+/// Access for the modal fast path ([`super::modal`]), kept apart from the stepping code.
+impl FvModel {
+    /// The skin arm and the object arm (if any).
+    pub(crate) fn arms(&self) -> (&Arm, Option<&Arm>) {
+        (&self.skin, self.object.as_ref())
+    }
+
+    /// The solver's view of `env` (see `side`).
+    pub(crate) fn solver_side(&self, env: FvEnvironment) -> Side {
+        self.side(env)
+    }
+
+    /// The time-stepping scheme.
+    pub(crate) fn time_scheme(&self) -> TimeScheme {
+        self.scheme
+    }
+
+    /// Sets the cell temperatures (the object's only if `object_c` is not empty) and the environment, as a step
+    /// would leave them (the energy ledger is not touched).
+    pub(crate) fn load_state(&mut self, skin_c: &[f64], object_c: &[f64], env: FvEnvironment) {
+        self.skin_t.copy_from_slice(skin_c);
+        if !object_c.is_empty() {
+            self.object_t.copy_from_slice(object_c);
+        }
+        self.env = env;
+        self.plate.get_mut().forget_offset();
+    }
+}
+
 #[cfg(test)]
 mod plate_cache_tests {
     //! The cached display-inverse step against the plain step in a plate environment (the computation before

@@ -2,6 +2,7 @@
 
 mod fv_adaptive;
 mod fv_depth;
+mod fv_modal;
 mod fv_physics;
 mod fv_replace_object;
 mod kron_physics;

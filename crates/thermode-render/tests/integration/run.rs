@@ -77,9 +77,12 @@ fn the_fv_renderer_follows_the_model_crates_contact_simulation() {
     let mut s = spec(ShippedDisplay::Default, ControllerKind::Model, "wood");
     s.duration_s = 10.0;
     let run = render(&s).unwrap_or_else(|e| panic!("{e}"));
-    // The renderer steps once per tick: the same fixed steps (not the adaptive default).
+    // The renderer steps on the modal fast path, exact in time for the finite-volume equations; the reference is
+    // the full model on the same grid converged in time (100 steps per 10 ms row). The stated bound of the fast
+    // path is 0.005 °C; the difference is rounding plus the reference's time error (about 1e-5 °C).
     let config = FvConfig {
         contact_resistance_m2k_w: LIGHT_TOUCH_RESISTANCE_M2K_W,
+        max_step_s: 1e-4,
         tolerance_c: None,
         ..FvConfig::default()
     };
@@ -96,8 +99,8 @@ fn the_fv_renderer_follows_the_model_crates_contact_simulation() {
     for k in 1..reference.time_s.len() {
         let (got_c, want_c) = (t.target_skin_c[first + k - 1], reference.surface_c[k]);
         assert!(
-            (got_c - want_c).abs() < 1e-9,
-            "t = {} s: fv renderer {got_c} vs simulate_contact {want_c}",
+            (got_c - want_c).abs() <= 0.005,
+            "t = {} s: fv renderer {got_c} vs simulate_contact {want_c} (time-converged)",
             reference.time_s[k]
         );
     }
