@@ -805,3 +805,89 @@ fn serve_checks_its_options_before_opening_ports_and_says_who_holds_a_port() {
         "the cause is printed once: {stderr}"
     );
 }
+
+/// Every file of `dir`, by name, with its bytes.
+fn files_of(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+        .expect("read dir")
+        .map(|e| {
+            let path = e.expect("entry").path();
+            let name = path
+                .file_name()
+                .map(|n| n.to_string_lossy().to_string())
+                .unwrap_or_default();
+            (name, std::fs::read(&path).expect("read file"))
+        })
+        .collect();
+    files.sort();
+    files
+}
+
+#[test]
+fn lab_run_batches_participants_with_output_independent_of_the_thread_count() {
+    let experiment = concat!(env!("CARGO_MANIFEST_DIR"), "/../thermode-lab/experiments/paper.toml");
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let base = |dir: &Path| -> Vec<String> {
+        [
+            "lab",
+            "run",
+            "--experiment",
+            experiment,
+            "--observer",
+            "--time-scale",
+            "0",
+            "--data-dir",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .chain([dir.display().to_string()])
+        .collect()
+    };
+    let run = |dir: &Path, extra: &[&str]| -> String {
+        let mut args = base(dir);
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        expect_success(&args).replace(&dir.display().to_string(), "DIR")
+    };
+    let who = ["--participant", "P01", "--participant", "P02", "--participant", "P03"];
+    let (one, three, single) = (
+        tmp.path().join("one"),
+        tmp.path().join("three"),
+        tmp.path().join("single"),
+    );
+    let out_one = run(&one, &[&who[..], &["--jobs", "1"]].concat());
+    let out_three = run(&three, &[&who[..], &["--jobs", "3"]].concat());
+    assert_eq!(
+        out_one, out_three,
+        "the printed output does not depend on the thread count"
+    );
+    assert!(
+        out_one.contains("== P03") && out_one.contains("session complete"),
+        "{out_one}"
+    );
+    assert_eq!(files_of(&one), files_of(&three), "nor do the session files");
+    for p in ["P01", "P02", "P03"] {
+        run(&single, &["--participant", p]);
+    }
+    assert_eq!(
+        files_of(&single),
+        files_of(&one),
+        "a batch writes what single runs write"
+    );
+    assert_eq!(files_of(&one).len(), 6, "a CSV and a sidecar per participant");
+    let keyboard = [
+        "lab",
+        "run",
+        "--experiment",
+        experiment,
+        "--participant",
+        "P01",
+        "--participant",
+        "P02",
+    ];
+    expect_error(&keyboard, "only with --simulated-participant");
+    let mut zero = base(tmp.path());
+    zero.extend(["--all-participants", "--jobs", "0"].map(String::from));
+    let zero: Vec<&str> = zero.iter().map(String::as_str).collect();
+    expect_error(&zero, "--jobs 0");
+}

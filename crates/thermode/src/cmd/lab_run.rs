@@ -12,8 +12,15 @@
 //!
 //! The simulated participant's references are real contact under the same stimulus (its `real` curves), so that its
 //! calibration to the paper's 66 % holds for the real trials it will see.
+//!
+//! With the simulated participant, several participants (`--participant` repeated, or `--all-participants`) run as
+//! one batch on `--jobs` threads: each participant's files are exactly those of a run of its own, and the printed
+//! output is each participant's in design order, whatever the thread count.
 
+use std::io::{BufRead, Write};
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
 
 use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
@@ -63,9 +70,16 @@ pub struct LabRunArgs {
     /// Experiment file (TOML), as for `thermode lab plan`.
     #[arg(long)]
     experiment: PathBuf,
-    /// Participant identifier from the design (default P01, P02, …); letters, digits, `_` and `-` only.
-    #[arg(long)]
-    participant: String,
+    /// Participant identifier from the design (default P01, P02, …); letters, digits, `_` and `-` only. Repeat it
+    /// (with `--simulated-participant`) to run several as one batch.
+    #[arg(long, required_unless_present = "all_participants")]
+    participant: Vec<String>,
+    /// Every participant of the design, as one batch (needs `--simulated-participant`).
+    #[arg(long, conflicts_with = "participant")]
+    all_participants: bool,
+    /// Threads of a batch of participants (default: the available parallelism); the output does not depend on it.
+    #[arg(long, value_name = "N")]
+    jobs: Option<usize>,
     /// Folder of the session files `<participant>_<experiment>_<date>.csv` and `.json` (created if missing).
     #[arg(long, default_value = "data")]
     data_dir: PathBuf,
@@ -96,44 +110,171 @@ pub struct LabRunArgs {
 /// Runs `thermode lab run`.
 pub fn run(args: &LabRunArgs) -> Result<()> {
     let experiment = ExperimentFile::load(&args.experiment)?;
-    participant_plan(&experiment, &args.participant)?;
     if !(args.time_scale.is_finite() && args.time_scale >= 0.0) {
         bail!(
             "--time-scale {}: must be a finite number of at least 0",
             args.time_scale
         );
     }
-    let clock = MonotonicClock::new();
-    let design = &experiment.experiment;
-    let (mut stimulus, references, description) = stimulus(args, design)?;
-    let (mut responder, answers): (Box<dyn Responder>, String) = if args.simulated_participant {
+    let participants = if args.all_participants {
+        experiment.experiment.participant_ids.clone()
+    } else {
+        args.participant.clone()
+    };
+    for participant in &participants {
+        participant_plan(&experiment, participant)?;
+    }
+    let mut stdout = std::io::stdout();
+    match participants.as_slice() {
+        [one] => {
+            let prepared = prepare(args, &experiment.experiment, &mut stdout)?;
+            session(args, &experiment, one, &prepared, std::io::stdin().lock(), &mut stdout)
+        }
+        _ => run_batch(args, &experiment, &participants),
+    }
+}
+
+/// What every participant's session starts from: the prepared stimulus, the responder and their descriptions.
+struct Prepared {
+    stimulus: PreparedStimulus,
+    /// The calibrated simulated participant (`None`: keyboard or responses file).
+    simulated: Option<SimulatedParticipant>,
+    answers: String,
+    description: serde_json::Value,
+}
+
+/// A stimulus ready to present, copied for each session.
+enum PreparedStimulus {
+    Model(Box<ModelStimulus>),
+    Display(Box<DisplayStimulus>),
+}
+
+impl PreparedStimulus {
+    fn fresh(&self) -> Box<dyn Stimulus> {
+        match self {
+            PreparedStimulus::Model(s) => Box::new(s.as_ref().clone()),
+            PreparedStimulus::Display(s) => Box::new(s.as_ref().clone()),
+        }
+    }
+}
+
+/// Prepares the stimulus and calibrates the simulated participant (once for a batch), messages to `out`.
+fn prepare(args: &LabRunArgs, design: &Experiment, out: &mut dyn Write) -> Result<Prepared> {
+    let (stimulus, references, description) = stimulus(args, design, out)?;
+    let (simulated, answers) = if args.simulated_participant {
         let mut simulated = SimulatedParticipant::new(design.response_options.clone(), references, design.seed);
         let calibration = simulated.calibrate(PAPER_REAL_IDENTIFICATION_RATE, CALIBRATION_SAMPLES, CALIBRATION_SEED)?;
-        println!(
+        writeln!(
+            out,
             "simulated participant: perceptual noise {:.4} (real contact identified {:.1} % on the calibration sample)",
             calibration.noise_sd,
             100.0 * calibration.rate
-        );
-        (
-            Box::new(simulated),
-            format!("simulated participant, noise {:.4}", calibration.noise_sd),
-        )
+        )?;
+        let answers = format!("simulated participant, noise {:.4}", calibration.noise_sd);
+        (Some(simulated), answers)
     } else if let Some(path) = &args.responses {
-        let scripted = ScriptedResponses::load(path, &design.response_options, design.trials_per_participant())?;
-        (Box::new(scripted), format!("responses file {}", path.display()))
+        (None, format!("responses file {}", path.display()))
     } else {
-        (Box::new(InteractiveResponder), "keyboard".to_string())
+        (None, "keyboard".to_string())
+    };
+    Ok(Prepared {
+        stimulus,
+        simulated,
+        answers,
+        description,
+    })
+}
+
+/// What a session of a batch printed, and how it ended.
+type SessionOutput = (Vec<u8>, Result<()>);
+
+/// Runs several participants on `--jobs` threads, each into its own output, printed in design order.
+fn run_batch(args: &LabRunArgs, experiment: &ExperimentFile, participants: &[String]) -> Result<()> {
+    if !args.simulated_participant {
+        bail!("several participants run only with --simulated-participant (keyboard and --responses answer for one)");
+    }
+    let jobs = match args.jobs {
+        Some(0) => bail!("--jobs 0: at least one thread"),
+        Some(n) => n,
+        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+    }
+    .min(participants.len().max(1));
+    let prepared = prepare(args, &experiment.experiment, &mut std::io::stdout())?;
+    let next = AtomicUsize::new(0);
+    let results: Vec<Mutex<Option<SessionOutput>>> = participants.iter().map(|_| Mutex::new(None)).collect();
+    std::thread::scope(|scope| {
+        for _ in 0..jobs {
+            scope.spawn(|| loop {
+                let index = next.fetch_add(1, Ordering::SeqCst);
+                let Some(participant) = participants.get(index) else {
+                    break;
+                };
+                let mut out = Vec::new();
+                let result = session(args, experiment, participant, &prepared, std::io::empty(), &mut out);
+                if let Ok(mut slot) = results[index].lock() {
+                    *slot = Some((out, result));
+                }
+            });
+        }
+    });
+    let mut stdout = std::io::stdout().lock();
+    let mut failed = Vec::new();
+    for (participant, slot) in participants.iter().zip(results) {
+        let (out, result) = slot
+            .into_inner()
+            .ok()
+            .flatten()
+            .unwrap_or_else(|| (Vec::new(), Err(anyhow::anyhow!("its thread stopped"))));
+        writeln!(stdout, "== {participant}")?;
+        stdout.write_all(&out)?;
+        if let Err(e) = result {
+            writeln!(stdout, "{participant}: FAILED: {e:#}")?;
+            failed.push(format!("{participant}: {e:#}"));
+        }
+    }
+    stdout.flush()?;
+    if !failed.is_empty() {
+        bail!(
+            "{} of {} participants failed: {}",
+            failed.len(),
+            participants.len(),
+            failed.join("; ")
+        );
+    }
+    Ok(())
+}
+
+/// Runs one participant's session from `prepared`, prompts and messages to `out`, answers (keyboard) from `input`.
+fn session(
+    args: &LabRunArgs,
+    experiment: &ExperimentFile,
+    participant: &str,
+    prepared: &Prepared,
+    input: impl BufRead,
+    out: &mut dyn Write,
+) -> Result<()> {
+    let clock = MonotonicClock::new();
+    let design = &experiment.experiment;
+    let mut stimulus = prepared.stimulus.fresh();
+    let mut responder: Box<dyn Responder> = match (&prepared.simulated, &args.responses) {
+        (Some(simulated), _) => Box::new(simulated.clone()),
+        (None, Some(path)) => Box::new(ScriptedResponses::load(
+            path,
+            &design.response_options,
+            design.trials_per_participant(),
+        )?),
+        (None, None) => Box::new(InteractiveResponder),
     };
     let device = json!({
-        "stimulus": description,
-        "answers": answers,
+        "stimulus": prepared.description,
+        "answers": prepared.answers,
         "time_scale": args.time_scale,
     });
     let interactive = !args.simulated_participant && args.responses.is_none();
-    let mut console = TerminalConsole::new(std::io::stdin().lock(), std::io::stdout());
+    let mut console = TerminalConsole::new(input, out);
     Runner {
-        experiment: &experiment,
-        participant: &args.participant,
+        experiment,
+        participant,
         data_dir: &args.data_dir,
         device,
         stimulus: stimulus.as_mut(),
@@ -152,7 +293,8 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
 fn stimulus(
     args: &LabRunArgs,
     design: &Experiment,
-) -> Result<(Box<dyn Stimulus>, Vec<CurveFeatures>, serde_json::Value)> {
+    out: &mut dyn Write,
+) -> Result<(PreparedStimulus, Vec<CurveFeatures>, serde_json::Value)> {
     let options: Vec<Material> = design
         .response_options
         .iter()
@@ -174,7 +316,7 @@ fn stimulus(
                 )?)?);
             }
             let description = stimulus.describe();
-            Ok((Box::new(stimulus), references, description))
+            Ok((PreparedStimulus::Model(Box::new(stimulus)), references, description))
         }
         StimulusArg::Display => {
             let device = resolve::device_config(args.device_file.as_deref())?;
@@ -182,11 +324,12 @@ fn stimulus(
             let mut stimulus = DisplayStimulus::new(setup, args.finger_drift_sd_c, design.seed)?;
             let mut materials: Vec<Material> = design.materials.iter().map(|n| find(n)).collect::<Result<_, _>>()?;
             materials.extend(options.iter().cloned());
-            println!(
+            writeln!(
+                out,
                 "rendering {} material(s) on the simulated display ({} controller)…",
                 design.materials.len(),
                 stimulus.setup().pipeline.controller.name()
-            );
+            )?;
             stimulus.prepare(&materials, design.presentation_s)?;
             let mut references = Vec::with_capacity(options.len());
             for material in &options {
@@ -199,7 +342,7 @@ fn stimulus(
                 Some(path) => json!(path.display().to_string()),
                 None => json!("built-in default display"),
             };
-            Ok((Box::new(stimulus), references, description))
+            Ok((PreparedStimulus::Display(Box::new(stimulus)), references, description))
         }
     }
 }
