@@ -11,6 +11,7 @@
 //! The link to a display, the daemon's control loop and the lab's trial runner all take their time from a
 //! `&dyn Clock`, so a recorded run can be replayed on a [`ManualClock`] bit for bit.
 
+pub mod csv_text;
 pub mod fs;
 pub mod rt;
 pub mod time;

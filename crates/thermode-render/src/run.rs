@@ -47,6 +47,7 @@ use std::io::Write;
 use thermode_device::{Device, DeviceConfig, PlateFinger, SimulatedChannel, SimulatedDisplay};
 use thermode_model::fv::{FvConfig, FvModel};
 use thermode_model::{BadValue, Material, Skin};
+use thermode_platform::csv_text;
 use thermode_safety::FaultCode;
 
 use thermode_model::limits::{self, CONTACT_CONDUCTANCE, DURATION, OBJECT_TEMPERATURE, TICK_RATE};
@@ -553,13 +554,14 @@ pub const CSV_HEADER: [&str; 18] = [
 /// T1, depth Δx₁/2) with `renderer` = `kron` ([`RenderSpec::receptor_depth_m`]). `model_skin_c` is the
 /// pipeline's own display-finger model at its receptor (the same node as the target).
 pub fn write_csv(runs: &[RenderRun], sink: &mut dyn Write) -> Result<(), csv::Error> {
-    let mut writer = csv::Writer::from_writer(sink);
-    writer.write_record(CSV_HEADER)?;
-    let mut record: Vec<String> = Vec::with_capacity(CSV_HEADER.len());
+    /// The CSV goes to `sink` in chunks of this many bytes (64 KiB).
+    const CHUNK_BYTES: usize = 64 * 1024;
+    let mut out = Vec::with_capacity(CHUNK_BYTES + 4096);
+    out.extend_from_slice(CSV_HEADER.join(",").as_bytes());
+    out.push(b'\n');
     for run in runs {
         let t = &run.trajectory;
         for row in 0..t.len() {
-            record.clear();
             for column in [
                 &t.time_s,
                 &t.truth_skin_c,
@@ -574,18 +576,35 @@ pub fn write_csv(runs: &[RenderRun], sink: &mut dyn Write) -> Result<(), csv::Er
                 &t.current_a,
                 &t.hot_side_c,
             ] {
-                record.push(column[row].to_string());
+                csv_text::push_f64(&mut out, column[row]);
+                out.push(b',');
             }
-            record.push(u8::from(t.contact[row]).to_string());
-            record.push(t.fault[row].map_or(String::new(), |f| f.code().to_string()));
-            record.push(run.spec.material.name.clone());
-            record.push(run.summary.controller.clone());
-            record.push(run.spec.pipeline.renderer.name().to_string());
-            record.push(t.fault[row].map_or(String::new(), |f| f.description().to_string()));
-            writer.write_record(&record)?;
+            out.push(if t.contact[row] { b'1' } else { b'0' });
+            out.push(b',');
+            if let Some(fault) = t.fault[row] {
+                out.extend_from_slice(fault.code().to_string().as_bytes());
+            }
+            for text in [
+                run.spec.material.name.as_str(),
+                run.summary.controller.as_str(),
+                run.spec.pipeline.renderer.name(),
+            ] {
+                out.push(b',');
+                csv_text::push_field(&mut out, text);
+            }
+            out.push(b',');
+            if let Some(fault) = t.fault[row] {
+                csv_text::push_field(&mut out, fault.description());
+            }
+            out.push(b'\n');
+            if out.len() >= CHUNK_BYTES {
+                sink.write_all(&out)?;
+                out.clear();
+            }
         }
     }
-    writer.flush()?;
+    sink.write_all(&out)?;
+    sink.flush()?;
     Ok(())
 }
 

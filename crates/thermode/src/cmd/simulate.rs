@@ -9,6 +9,7 @@ use clap::{Args, ValueEnum};
 use thermode_model::limits;
 use thermode_model::materials::Material;
 use thermode_model::simulate::{simulate, Initial, ModelKind, SimulationSpec, Trace};
+use thermode_platform::csv_text;
 use thermode_plot::{write_figure, Figure, Panel, Series, SeriesStyle};
 use thermode_render::figure::EARLY_WINDOW_S;
 
@@ -150,26 +151,36 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
 
 fn write_csv(path: &Path, traces: &[(Material, Trace)]) -> Result<()> {
     let (_, first) = &traces[0];
-    let mut header = vec!["time_s".to_string()];
-    header.extend(first.columns.iter().map(|(name, _)| name.clone()));
-    header.push("material".into());
+    let mut header = vec!["time_s"];
+    header.extend(first.columns.iter().map(|(name, _)| name.as_str()));
+    header.push("material");
     write_atomically(path, |sink| {
-        let mut writer = csv::Writer::from_writer(sink);
-        writer.write_record(&header)?;
-        let mut record = Vec::with_capacity(header.len());
+        let mut row = Vec::with_capacity(CSV_CHUNK_BYTES + 4096);
+        row.extend_from_slice(header.join(",").as_bytes());
+        row.push(b'\n');
         for (material, trace) in traces {
-            for (row, time_s) in trace.time_s.iter().enumerate() {
-                record.clear();
-                record.push(time_s.to_string());
-                record.extend(trace.columns.iter().map(|(_, values)| values[row].to_string()));
-                record.push(material.name.clone());
-                writer.write_record(&record)?;
+            for (index, time_s) in trace.time_s.iter().enumerate() {
+                csv_text::push_f64(&mut row, *time_s);
+                for (_, values) in &trace.columns {
+                    row.push(b',');
+                    csv_text::push_f64(&mut row, values[index]);
+                }
+                row.push(b',');
+                csv_text::push_field(&mut row, &material.name);
+                row.push(b'\n');
+                if row.len() >= CSV_CHUNK_BYTES {
+                    sink.write_all(&row)?;
+                    row.clear();
+                }
             }
         }
-        writer.flush()?;
+        sink.write_all(&row)?;
         Ok(())
     })
 }
+
+/// The CSV goes to its file in chunks of this many bytes (64 KiB).
+const CSV_CHUNK_BYTES: usize = 64 * 1024;
 
 fn write_plot(path: &Path, traces: &[(Material, Trace)], model: ModelArg) -> Result<()> {
     let mut series = Vec::new();
