@@ -9,6 +9,16 @@
 //! - optional `repetition` — rows with the same (file, condition, material, repetition) form one curve; without the
 //!   column, one file holds one curve per (condition, material).
 //!
+//! The CSVs thermode writes are read as they are, without a `condition` column:
+//! - a `render` CSV (`truth_skin_c` and `skin_c`, no `channel`): per (material, controller, renderer), the real
+//!   curve is `truth_skin_c` (the simulated finger touching the real material) and the simulated curve `skin_c`
+//!   (the same finger on the display), over the rows in contact (`contact` 1; time since the first of them); the
+//!   controller and renderer name the repetition, so a `--controller both` file averages both controllers;
+//! - a `serve --record` file (`channel`, `contact`, `target_skin_c` and `skin_c`): every touch of every channel
+//!   (consecutive rows in contact with one material) is one repetition, its time counted from the touch; the real
+//!   curve is `target_skin_c` (the renderer's finger on the real material), the simulated one `skin_c` (the finger
+//!   model on the display).
+//!
 //! Per material, all curves of both conditions are resampled by linear interpolation onto one uniform grid over the
 //! time span they share (from the latest start to the earliest end), with a step no finer than the coarsest curve's
 //! mean sampling interval; the mean curve of a condition is the mean of its repetitions on that grid. Reported: the
@@ -160,6 +170,11 @@ fn read_curve_file(
     resolver: &mut MaterialResolver,
     by_material: &mut ByMaterial,
 ) -> Result<String, LabError> {
+    if table.optional_column("condition")?.is_none() {
+        if let Some(paired) = PairedColumns::of(table)? {
+            return read_paired_file(table, &paired, resolver, by_material);
+        }
+    }
     let cols = CurveColumns::of(table)?;
     let temperature_name = table.header[cols.temperature].clone();
     let mut curves: BTreeMap<CurveKey, (MaterialInfo, Vec<(f64, f64)>)> = BTreeMap::new();
@@ -196,6 +211,135 @@ fn read_curve_file(
         entry.1.push(Curve { condition, samples });
     }
     Ok(temperature_name)
+}
+
+/// Columns of a thermode CSV that holds both conditions side by side (a `render` CSV or a `serve --record` file).
+struct PairedColumns {
+    time: usize,
+    real: usize,
+    simulated: usize,
+    material: usize,
+    contact: Option<usize>,
+    /// `serve --record`: the channel column (curves are touches per channel).
+    channel: Option<usize>,
+    /// `render`: the columns naming a repetition (controller, renderer).
+    repetition: Vec<usize>,
+}
+
+impl PairedColumns {
+    fn of(table: &CsvTable) -> Result<Option<PairedColumns>, LabError> {
+        let channel = table.optional_column("channel")?;
+        let real_name = if channel.is_some() {
+            "target_skin_c"
+        } else {
+            "truth_skin_c"
+        };
+        let (Some(real), Some(simulated)) = (table.optional_column(real_name)?, table.optional_column("skin_c")?)
+        else {
+            return Ok(None);
+        };
+        let mut repetition = Vec::new();
+        for name in ["controller", "renderer"] {
+            repetition.extend(table.optional_column(name)?);
+        }
+        Ok(Some(PairedColumns {
+            time: table.column("time_s")?,
+            real,
+            simulated,
+            material: table.column("material")?,
+            contact: table.optional_column("contact")?,
+            channel,
+            repetition,
+        }))
+    }
+}
+
+/// One curve being read from a paired file: its material and samples of both conditions.
+struct PairedCurve {
+    material: MaterialInfo,
+    start_s: f64,
+    real: Vec<(f64, f64)>,
+    simulated: Vec<(f64, f64)>,
+}
+
+/// Adds the curves of a `render` CSV or a `serve --record` file (see the module documentation).
+fn read_paired_file(
+    table: &CsvTable,
+    cols: &PairedColumns,
+    resolver: &mut MaterialResolver,
+    by_material: &mut ByMaterial,
+) -> Result<String, LabError> {
+    let mut finished: Vec<PairedCurve> = Vec::new();
+    // The curve being read per key: (channel or repetition names) -> curve.
+    let mut open: BTreeMap<String, PairedCurve> = BTreeMap::new();
+    for (line, fields) in &table.rows {
+        let line = *line;
+        let key = match cols.channel {
+            Some(i) => fields[i].trim().to_string(),
+            None => cols
+                .repetition
+                .iter()
+                .map(|&i| fields[i].trim())
+                .collect::<Vec<_>>()
+                .join("/"),
+        };
+        let in_contact = cols.contact.is_none_or(|i| fields[i].trim() == "1");
+        let material_name = fields[cols.material].trim();
+        let continues = open.get(&key).is_some_and(|c| c.material.name == material_name);
+        if !in_contact || material_name.is_empty() || !continues {
+            // A release, or a new material on this key, ends the curve being read.
+            finished.extend(open.remove(&key));
+        }
+        if !in_contact || material_name.is_empty() {
+            continue;
+        }
+        let time_s = finite(table, line, "time_s", &fields[cols.time])?;
+        let real_c = finite(table, line, &table.header[cols.real], &fields[cols.real])?;
+        let simulated_c = finite(table, line, &table.header[cols.simulated], &fields[cols.simulated])?;
+        if !open.contains_key(&key) {
+            let material = resolver.resolve_at(table, line, "material", &fields[cols.material])?;
+            open.insert(
+                key.clone(),
+                PairedCurve {
+                    material,
+                    start_s: time_s,
+                    real: Vec::new(),
+                    simulated: Vec::new(),
+                },
+            );
+        }
+        if let Some(curve) = open.get_mut(&key) {
+            let t = time_s - curve.start_s;
+            if curve.real.last().is_some_and(|&(last, _)| t <= last) {
+                return Err(table.bad_value(line, "time_s", &fields[cols.time], "time must increase within a curve"));
+            }
+            curve.real.push((t, real_c));
+            curve.simulated.push((t, simulated_c));
+        }
+    }
+    finished.extend(open.into_values());
+    let mut added = 0;
+    for curve in finished.into_iter().filter(|c| c.real.len() >= 2) {
+        let entry = by_material
+            .entry(curve.material.name.clone())
+            .or_insert_with(|| (curve.material.clone(), Vec::new()));
+        entry.1.push(Curve {
+            condition: Condition::Real,
+            samples: curve.real,
+        });
+        entry.1.push(Curve {
+            condition: Condition::Simulated,
+            samples: curve.simulated,
+        });
+        added += 1;
+    }
+    if added == 0 {
+        return Err(LabError::NoData(format!(
+            "{}: no contact of at least 2 samples to compare",
+            table.file.display()
+        )));
+    }
+    Ok(format!("{} (real) / skin_c (simulated)", table.header[cols.real]))
 }
 
 fn finite(table: &CsvTable, line: u64, column: &str, text: &str) -> Result<f64, LabError> {

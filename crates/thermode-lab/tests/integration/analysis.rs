@@ -805,3 +805,78 @@ fn curve_files_without_repetition_column_and_bad_curves() {
         "{err}"
     );
 }
+
+#[test]
+fn render_csvs_and_serve_recordings_are_read_as_thermode_writes_them() {
+    // A render CSV: before the touch (contact 0) and after a release the rows are not part of the curve; truth
+    // T = 32 − 0.5 t and the display's finger 0.3 °C warmer over 0…10 s (every 0.1 s): RMS and endpoint 0.3,
+    // slopes −0.5.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut render =
+        "time_s,truth_skin_c,target_skin_c,skin_c,contact,fault,material,controller,renderer\n".to_string();
+    for k in -5..=110i32 {
+        let t = f64::from(k) * 0.1;
+        let contact = u8::from((0..=100).contains(&k));
+        let truth = if contact == 1 { 32.0 - 0.5 * t } else { 32.0 };
+        render.push_str(&format!(
+            "{t},{truth},{truth},{},{contact},,wood,model,fv\n",
+            truth + 0.3
+        ));
+    }
+    let curves = analysis::analyze_curves(&[write(dir.path(), "render.csv", &render)]).expect("render CSV");
+    let wood = &curves.materials[0];
+    assert_eq!((wood.material.as_str(), wood.start_s, wood.end_s), ("wood", 0.0, 10.0));
+    close(wood.rms_difference_c.expect("rms"), 0.3, 1e-9, "render RMS");
+    let real = wood.real.as_ref().expect("real");
+    close(real.initial_slope_c_per_s.expect("slope"), -0.5, 1e-9, "real slope");
+    assert!(
+        curves.temperature_columns[0].starts_with("truth_skin_c"),
+        "{:?}",
+        curves.temperature_columns
+    );
+    // A serve recording: channel 0 touches aluminium twice (from 1 s and from 5 s, 2 s each), channel 1 wood once
+    // (from 2 s); every touch is one repetition with its own time from the touch: the target falls 1 °C/s, the
+    // display's finger lags 0.2 °C.
+    let mut record =
+        "time_s,channel,contact,material,mode,target_skin_c,skin_c,display_setpoint_c,sensor_c,current_a,hot_side_c,fault\n"
+            .to_string();
+    for k in 0..=800i32 {
+        let t = f64::from(k) * 0.01;
+        for (channel, material, start) in [(0, "aluminium", 1.0), (0, "aluminium", 5.0), (1, "wood", 2.0)] {
+            let since = t - start;
+            let touching = (0.0..2.0).contains(&since);
+            let other_touch =
+                channel == 0 && ((start == 1.0 && (5.0..7.0).contains(&t)) || (start == 5.0 && !touching));
+            if other_touch || (channel == 0 && start == 5.0 && (1.0..3.0).contains(&t)) {
+                continue;
+            }
+            let (contact, name, mode, target) = if touching {
+                (1, material, "touch", 32.0 - since)
+            } else {
+                (0, "", "air", 32.0)
+            };
+            record.push_str(&format!(
+                "{t:.6},{channel},{contact},{name},{mode},{target},{},30,30,0,25,\n",
+                target + 0.2
+            ));
+        }
+    }
+    let curves = analysis::analyze_curves(&[write(dir.path(), "session.csv", &record)]).expect("recording");
+    let names: Vec<&str> = curves.materials.iter().map(|m| m.material.as_str()).collect();
+    assert_eq!(names, ["aluminium", "wood"], "by conductivity");
+    let aluminium = &curves.materials[0];
+    assert_eq!(aluminium.real.as_ref().map(|c| c.repetitions), Some(2), "two touches");
+    assert_eq!(aluminium.start_s, 0.0, "time from each touch");
+    close(aluminium.rms_difference_c.expect("rms"), 0.2, 1e-9, "recording RMS");
+    close(
+        aluminium
+            .real
+            .as_ref()
+            .and_then(|c| c.initial_slope_c_per_s)
+            .expect("slope"),
+        -1.0,
+        1e-9,
+        "target slope",
+    );
+    assert!(curves.temperature_columns[0].starts_with("target_skin_c"));
+}
