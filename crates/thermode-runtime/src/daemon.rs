@@ -269,6 +269,9 @@ impl Daemon {
             }
             None => engines,
         };
+        if let Some(recorder) = &recorder {
+            write_clock_sidecar(&recorder.path(), clock.as_ref())?;
+        }
         let (lsl, markers) = match &config.lsl {
             Some(wanted) => {
                 let (streams, feed, markers) = start_lsl(wanted, &config, device.channel_count(), clock.as_ref())?;
@@ -592,6 +595,31 @@ fn start_lsl(
         ..wanted.clone()
     };
     Ok(LslStreams::start(&lsl, clock)?)
+}
+
+/// Writes `<recording stem>.clock.json` beside the session CSV: what its `time_s` column is (the daemon's loop
+/// clock, monotonic seconds) and the wall-clock time (UTC, ISO 8601 and Unix seconds) of its zero, so that a lab can
+/// align the recording with EEG or other streams (`unix_time_s = loop_time_zero_unix_s + time_s`). The session's
+/// later segment files (`_seg2`, …) share the same clock.
+fn write_clock_sidecar(csv: &Path, clock: &dyn Clock) -> Result<(), RuntimeError> {
+    let (now_s, unix_s) = (clock.now_s(), clock.unix_time_s());
+    let zero_unix_s = unix_s - now_s;
+    let whole_s = zero_unix_s.floor();
+    let iso = thermode_platform::utc_iso8601(whole_s as i64);
+    let millis = (((zero_unix_s - whole_s) * 1000.0).floor() as u32).min(999);
+    let text = serde_json::json!({
+        "recording": csv.file_name().map(|n| n.to_string_lossy().into_owned()),
+        "time_s": "loop time: monotonic seconds of the daemon's clock (CLOCK_MONOTONIC), about 0 at the start",
+        "loop_time_zero_utc": format!("{}.{millis:03}Z", iso.trim_end_matches('Z')),
+        "loop_time_zero_unix_s": zero_unix_s,
+        "measured_at_loop_time_s": now_s,
+        "alignment": "unix_time_s = loop_time_zero_unix_s + time_s; with --lsl see the .lsl.json beside it",
+    });
+    let path = csv.with_extension("clock.json");
+    std::fs::write(&path, format!("{text:#}\n")).map_err(|source| RuntimeError::Io {
+        context: format!("cannot write {}", path.display()),
+        source,
+    })
 }
 
 /// Writes `<recording stem>.lsl.json` beside the session CSV: the LSL clock and the loop clock at the same instant
