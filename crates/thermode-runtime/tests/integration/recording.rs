@@ -303,7 +303,10 @@ fn a_failed_recording_stops_every_stimulus_until_acknowledged_and_says_so_everyw
     });
     let csv_files = std::fs::read_dir(dir.path())
         .expect("dir")
-        .filter(|e| e.as_ref().is_ok_and(|e| e.path().extension().is_some_and(|x| x == "csv")))
+        .filter(|e| {
+            e.as_ref()
+                .is_ok_and(|e| e.path().extension().is_some_and(|x| x == "csv"))
+        })
         .count();
     assert_eq!(csv_files, 1, "the empty second file is removed");
     // The clock sidecar: the wall-clock time of the loop's zero.
@@ -311,7 +314,10 @@ fn a_failed_recording_stops_every_stimulus_until_acknowledged_and_says_so_everyw
     let sidecar: serde_json::Value = serde_json::from_str(&sidecar).expect("JSON");
     assert!(sidecar["loop_time_zero_unix_s"].as_f64().is_some(), "{sidecar}");
     let utc = sidecar["loop_time_zero_utc"].as_str().unwrap_or_default();
-    assert!(utc.len() == 24 && utc.ends_with('Z') && utc.as_bytes()[10] == b'T', "ISO 8601: {utc}");
+    assert!(
+        utc.len() == 24 && utc.ends_with('Z') && utc.as_bytes()[10] == b'T',
+        "ISO 8601: {utc}"
+    );
     let notices = daemon.take_notices();
     assert!(
         notices.len() == 1 && notices[0].contains("cannot go on in a new file") && notices[0].contains("stands"),
