@@ -145,7 +145,7 @@ struct StepTable {
     out_input: f64,
 }
 
-/// The finite-volume model with the modal fast path. See the [module documentation](self).
+/// The finite-volume model with the modal fast path (see `docs/performance.md` for the method and its bound).
 ///
 /// Wraps an [`FvModel`] (grid, parameters, and the state whenever the full model is read) and mirrors the parts of
 /// its interface that a renderer or a finger on a display steps every tick. Cloning copies the cached bases.
