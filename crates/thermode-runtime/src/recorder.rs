@@ -626,6 +626,8 @@ impl Session {
         loop {
             if failure.is_some() && self.status.take_resume_request() {
                 if let Some(next) = self.next_segment() {
+                    // The failed file keeps its whole rows: make them durable before leaving it.
+                    let _ = rows.file.sync();
                     (rows, failure) = (next, None);
                 }
             }
