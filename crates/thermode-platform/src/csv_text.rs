@@ -1,7 +1,7 @@
 //! Fast CSV text: numbers and fields appended to a byte buffer without allocating, for the large CSVs of `simulate`
 //! and `render` (a 90 s run at 1 ms is 90 000 rows). [`push_f64`] writes exactly what Rust's `{}` writes for an `f64`
-//! (the shortest digits that read back as the same number, never an exponent), from the `ryu` digits; [`push_fixed`]
-//! exactly what `{:.N}` writes; [`push_field`] quotes a text field as the `csv` crate does (only when needed).
+//! (the shortest digits that read back as the same number, never an exponent), from the `ryu` digits; [`push_field`]
+//! quotes a text field as the `csv` crate does (only when needed).
 
 use std::fmt::Write as _;
 
@@ -79,49 +79,6 @@ fn push_expanded(out: &mut Vec<u8>, mantissa: &[u8], exponent: &[u8]) {
     }
 }
 
-/// Appends `x` as `format!("{x:.decimals$}")` would write it (`decimals` at most 9).
-pub fn push_fixed(out: &mut Vec<u8>, x: f64, decimals: usize) {
-    const SCALE: [f64; 10] = [1.0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9];
-    let Some(&scale) = SCALE.get(decimals) else {
-        push_fixed_slow(out, x, decimals);
-        return;
-    };
-    let scaled = (x * scale).abs();
-    // Integer arithmetic only where the scaled value is exact enough to round without doubt: far from a tie
-    // (x·10^N carries at most half an ulp of error) and below 2^52; everything else is left to the formatter.
-    let fraction = scaled - scaled.floor();
-    if !x.is_finite() || scaled >= 4.0e15 || (fraction - 0.5).abs() <= 4.0 * f64::EPSILON * scaled.max(1.0) {
-        push_fixed_slow(out, x, decimals);
-        return;
-    }
-    let units = scaled.round() as u64;
-    if x.is_sign_negative() {
-        out.push(b'-');
-    }
-    let mut digits = itoa::Buffer::new();
-    let text = digits.format(units).as_bytes();
-    if decimals == 0 {
-        out.extend_from_slice(text);
-        return;
-    }
-    if text.len() <= decimals {
-        out.extend_from_slice(b"0.");
-        out.extend(std::iter::repeat_n(b'0', decimals - text.len()));
-        out.extend_from_slice(text);
-    } else {
-        let (whole, fraction) = text.split_at(text.len() - decimals);
-        out.extend_from_slice(whole);
-        out.push(b'.');
-        out.extend_from_slice(fraction);
-    }
-}
-
-fn push_fixed_slow(out: &mut Vec<u8>, x: f64, decimals: usize) {
-    let mut text = String::new();
-    let _ = write!(text, "{x:.decimals$}");
-    out.extend_from_slice(text.as_bytes());
-}
-
 fn push_display(out: &mut Vec<u8>, x: f64) {
     let mut text = String::new();
     let _ = write!(text, "{x}");
@@ -155,12 +112,6 @@ mod tests {
         String::from_utf8(out).unwrap_or_default()
     }
 
-    fn fixed_text(x: f64, decimals: usize) -> String {
-        let mut out = Vec::new();
-        push_fixed(&mut out, x, decimals);
-        String::from_utf8(out).unwrap_or_default()
-    }
-
     #[test]
     fn edge_values_are_written_as_display_writes_them() {
         for x in [
@@ -183,18 +134,6 @@ mod tests {
         ] {
             assert_eq!(f64_text(x), format!("{x}"), "{x:e}");
         }
-        for (x, n) in [
-            (0.5, 0),
-            (1.5, 0),
-            (2.5, 0),
-            (-0.0, 3),
-            (-0.0001, 3),
-            (0.125, 2),
-            (1e20, 4),
-            (f64::NAN, 4),
-        ] {
-            assert_eq!(fixed_text(x, n), format!("{x:.n$}"), "{x:e} to {n}");
-        }
     }
 
     proptest::proptest! {
@@ -207,18 +146,6 @@ mod tests {
             let x = f64::from_bits(bits);
             proptest::prop_assert_eq!(f64_text(x), format!("{}", x));
             proptest::prop_assert_eq!(f64_text(y), format!("{}", y));
-        }
-
-        /// Numbers of the sizes thermode writes, and exact ties at every precision: the same text as `{:.N}`.
-        #[test]
-        fn fixed_decimals_are_written_as_format_writes_them(
-            x in -1.0e6..1.0e6f64,
-            units in -10_000_000i64..10_000_000,
-            decimals in 0usize..10,
-        ) {
-            proptest::prop_assert_eq!(fixed_text(x, decimals), format!("{:.*}", decimals, x));
-            let tie = (units as f64 + 0.5) / 10f64.powi(decimals as i32);
-            proptest::prop_assert_eq!(fixed_text(tie, decimals), format!("{:.*}", decimals, tie));
         }
     }
 

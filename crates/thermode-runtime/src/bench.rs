@@ -74,6 +74,16 @@ pub struct Spread {
 }
 
 impl Spread {
+    /// `p50 … µs   p99 … µs   max … µs` of a spread of seconds.
+    fn micros(&self) -> String {
+        format!(
+            "p50 {:8.1} µs   p99 {:8.1} µs   max {:8.1} µs",
+            self.p50 * 1e6,
+            self.p99 * 1e6,
+            self.max * 1e6
+        )
+    }
+
     /// The spread of `values` (NaN ignored; all zero when empty).
     pub fn of(values: &[f64]) -> Spread {
         let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
@@ -134,14 +144,6 @@ pub struct BenchReport {
 
 impl std::fmt::Display for BenchReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let us = |s: &Spread| {
-            format!(
-                "p50 {:8.1} µs   p99 {:8.1} µs   max {:8.1} µs",
-                s.p50 * 1e6,
-                s.p99 * 1e6,
-                s.max * 1e6
-            )
-        };
         let ticks = |s: &Spread| {
             format!(
                 "min {:5.2}   p50 {:5.2}   max {:5.2}   (n = {})",
@@ -156,7 +158,7 @@ impl std::fmt::Display for BenchReport {
             self.duration_s,
             self.ticks,
             self.missed_deadlines,
-            100.0 * self.missed_deadlines as f64 / (self.ticks + self.missed_deadlines).max(1) as f64,
+            missed_percent(self.ticks, self.missed_deadlines),
             self.dropped_records
         )?;
         writeln!(f, "  real time         {}", self.realtime)?;
@@ -165,8 +167,8 @@ impl std::fmt::Display for BenchReport {
             "  subscribers       {} at 100 Hz, {} telemetry messages received",
             self.subscribers, self.telemetry_messages
         )?;
-        writeln!(f, "  period deviation  {}", us(&self.period_deviation_s))?;
-        writeln!(f, "  wake lateness     {}", us(&self.lateness_s))?;
+        writeln!(f, "  period deviation  {}", self.period_deviation_s.micros())?;
+        writeln!(f, "  wake lateness     {}", self.lateness_s.micros())?;
         writeln!(
             f,
             "  work per tick     p50 {:8.1} µs   p99 {:8.1} µs   max {:8.1} µs",
@@ -211,15 +213,6 @@ pub struct FloorReport {
 
 impl std::fmt::Display for FloorReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let us = |s: &Spread| {
-            format!(
-                "p50 {:8.1} µs   p99 {:8.1} µs   max {:8.1} µs",
-                s.p50 * 1e6,
-                s.p99 * 1e6,
-                s.max * 1e6
-            )
-        };
-        let all = (self.ticks + self.missed_deadlines).max(1) as f64;
         writeln!(
             f,
             "timer floor: {} Hz, {:.1} s, an empty loop: {} ticks, {} missed deadlines ({:.2} %)",
@@ -227,12 +220,25 @@ impl std::fmt::Display for FloorReport {
             self.duration_s,
             self.ticks,
             self.missed_deadlines,
-            100.0 * self.missed_deadlines as f64 / all
+            missed_percent(self.ticks, self.missed_deadlines)
         )?;
         writeln!(f, "  real time         {}", self.realtime)?;
-        writeln!(f, "  period deviation  {}", us(&self.period_deviation_s))?;
-        write!(f, "  wake lateness     {}", us(&self.lateness_s))
+        writeln!(f, "  period deviation  {}", self.period_deviation_s.micros())?;
+        write!(f, "  wake lateness     {}", self.lateness_s.micros())
     }
+}
+
+/// Missed deadlines as a percentage of all deadlines (woken or missed).
+fn missed_percent(ticks: u64, missed: u64) -> f64 {
+    100.0 * missed as f64 / (ticks + missed).max(1) as f64
+}
+
+/// The period deviation |wake-to-wake − `period_s`| and the lateness (wake − deadline) of `(woke_s, deadline_s)`
+/// pairs in order \[s\].
+fn timing(wakes: &[(f64, f64)], period_s: f64) -> (Spread, Spread) {
+    let deviation: Vec<f64> = wakes.windows(2).map(|w| (w[1].0 - w[0].0 - period_s).abs()).collect();
+    let lateness: Vec<f64> = wakes.iter().map(|(woke_s, deadline_s)| woke_s - deadline_s).collect();
+    (Spread::of(&deviation), Spread::of(&lateness))
 }
 
 /// Measures the timer's floor at `rate_hz` for `duration_s` \[s\], asking for real-time scheduling when `realtime`.
@@ -256,22 +262,21 @@ pub fn timer_floor(rate_hz: f64, duration_s: f64, realtime: bool) -> Result<Floo
             let stop = std::sync::atomic::AtomicBool::new(false);
             let mut ticker = thermode_platform::Ticker::new(period_s, clock.now_s() + period_s)
                 .map_err(|e| RuntimeError::Config(e.to_string()))?;
-            let (mut wakes, mut lateness) = (Vec::new(), Vec::new());
+            let mut wakes = Vec::new();
             while let Some(tick) = ticker.wait(&clock, &stop) {
-                wakes.push(tick.woke_s);
-                lateness.push(tick.woke_s - tick.scheduled_s);
+                wakes.push((tick.woke_s, tick.scheduled_s));
                 if tick.scheduled_s - ticker.start_s() >= duration_s {
                     break;
                 }
             }
-            let deviation: Vec<f64> = wakes.windows(2).map(|w| (w[1] - w[0] - period_s).abs()).collect();
+            let (period_deviation_s, lateness_s) = timing(&wakes, period_s);
             Ok(FloorReport {
                 rate_hz,
                 duration_s,
                 ticks: wakes.len() as u64,
                 missed_deadlines: ticker.missed_total(),
-                period_deviation_s: Spread::of(&deviation),
-                lateness_s: Spread::of(&lateness),
+                period_deviation_s,
+                lateness_s,
                 realtime: obtained.describe(),
             })
         });
@@ -452,11 +457,8 @@ fn report(
     stats: crate::snapshot::LoopStats,
 ) -> BenchReport {
     let period_s = 1.0 / config.rate_hz;
-    let deviations: Vec<f64> = rows
-        .windows(2)
-        .map(|w| ((w[1].woke_s - w[0].woke_s) - period_s).abs())
-        .collect();
-    let lateness: Vec<f64> = rows.iter().map(|r| r.woke_s - r.deadline_s).collect();
+    let wakes: Vec<(f64, f64)> = rows.iter().map(|r| (r.woke_s, r.deadline_s)).collect();
+    let (period_deviation_s, lateness_s) = timing(&wakes, period_s);
     let mut applied = Vec::new();
     let mut changed = Vec::new();
     let mut changed_periods = Vec::new();
@@ -487,8 +489,8 @@ fn report(
         ticks: stats.ticks,
         missed_deadlines: stats.missed_deadlines,
         dropped_records: 0,
-        period_deviation_s: Spread::of(&deviations),
-        lateness_s: Spread::of(&lateness),
+        period_deviation_s,
+        lateness_s,
         work_p50_s: stats.work.p50_s,
         work_p99_s: stats.work.p99_s,
         work_max_s: stats.work.max_s,

@@ -389,12 +389,26 @@ impl FvModel {
             (&mut next_skin, &mut next_object),
             work,
         );
-        std::mem::swap(&mut self.skin_t, &mut next_skin);
-        if contact {
-            std::mem::swap(&mut self.object_t, &mut next_object);
-        }
+        self.accept(&mut next_skin, &mut next_object, contact, flows, env);
+        let work = self.work.get_mut();
         work.next_skin = next_skin;
         work.next_object = next_object;
+    }
+
+    /// Takes a computed step: its end state (swapped in; the object's only in contact), energy flows and
+    /// environment.
+    fn accept(
+        &mut self,
+        next_skin: &mut Vec<f64>,
+        next_object: &mut Vec<f64>,
+        contact: bool,
+        flows: StepFlows,
+        env: FvEnvironment,
+    ) {
+        std::mem::swap(&mut self.skin_t, next_skin);
+        if contact {
+            std::mem::swap(&mut self.object_t, next_object);
+        }
         self.ledger.record(flows);
         self.env = env;
         self.plate.get_mut().forget_offset();
@@ -423,13 +437,7 @@ impl FvModel {
         );
         let error_c = bodies.tr_bdf2_error(dt_s, state, (&next_skin, &next_object), work);
         if error_c <= tolerance_c {
-            std::mem::swap(&mut self.skin_t, &mut next_skin);
-            if contact {
-                std::mem::swap(&mut self.object_t, &mut next_object);
-            }
-            self.ledger.record(flows);
-            self.env = env;
-            self.plate.get_mut().forget_offset();
+            self.accept(&mut next_skin, &mut next_object, contact, flows, env);
         }
         let work = self.work.get_mut();
         work.next_skin = next_skin;

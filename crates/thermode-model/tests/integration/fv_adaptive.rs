@@ -6,30 +6,11 @@
 use thermode_model::fv::{simulate_contact, ContactSpec, FvConfig, FvEnvironment, FvModel, InitialState};
 use thermode_model::materials::{self, Material};
 use thermode_model::semi_infinite::surface_temperature_c;
-use thermode_model::{Blood, Skin, SkinLayer};
+use thermode_model::Skin;
+
+use super::fv_physics::homogeneous_skin;
 
 const SKIN_C: f64 = 33.0;
-
-/// A homogeneous skin 30 mm thick without perfusion: semi-infinite over 10 s (heat penetrates about 1 mm).
-fn homogeneous_skin() -> Skin {
-    Skin {
-        layers: vec![SkinLayer {
-            name: "skin".into(),
-            thickness_m: 0.03,
-            conductivity_w_mk: 0.37,
-            density_kg_m3: 1100.0,
-            specific_heat_j_kgk: 3500.0,
-            perfusion_per_s: 0.0,
-            metabolic_w_m3: 0.0,
-        }],
-        blood: Blood {
-            arterial_c: 36.8,
-            density_kg_m3: 1060.0,
-            specific_heat_j_kgk: 3800.0,
-        },
-        air_convection_w_m2k: 10.0,
-    }
-}
 
 /// A slab of `material` 8 diffusion lengths over 10 s thick (at least 1 cm): semi-infinite over the run.
 fn thick(material: &str) -> Material {

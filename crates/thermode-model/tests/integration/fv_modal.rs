@@ -263,6 +263,16 @@ fn closed_contact_conserves_energy_and_settles_at_the_mixing_temperature() {
     );
 }
 
+/// The schedule of the bit-identity test at `tick`: whether the object is touched now, and the environment.
+fn touch_schedule(tick: usize) -> (bool, FvEnvironment) {
+    let env = if (10..80).contains(&tick) {
+        FvEnvironment::Object
+    } else {
+        FvEnvironment::Air { ambient_c: AIR_C }
+    };
+    (tick == 10, env)
+}
+
 #[test]
 fn runs_are_bit_identical_and_the_forced_off_path_is_the_full_model() {
     let object = material("steel");
@@ -270,14 +280,10 @@ fn runs_are_bit_identical_and_the_forced_off_path_is_the_full_model() {
         let mut fast = ModalFv::with_fast_path(finger_touching(&object, 1e-3), enabled);
         let mut trace = Vec::new();
         for tick in 0..120 {
-            if tick == 10 {
+            let (touch, env) = touch_schedule(tick);
+            if touch {
                 fast.touch(25.0).unwrap_or_else(|e| panic!("{e}"));
             }
-            let env = if (10..80).contains(&tick) {
-                FvEnvironment::Object
-            } else {
-                FvEnvironment::Air { ambient_c: AIR_C }
-            };
             fast.step(TICK_S, env);
             trace.push(fast.surface_c().to_bits());
         }
@@ -287,14 +293,10 @@ fn runs_are_bit_identical_and_the_forced_off_path_is_the_full_model() {
     let mut full = finger_touching(&object, 1e-3);
     let mut want = Vec::new();
     for tick in 0..120 {
-        if tick == 10 {
+        let (touch, env) = touch_schedule(tick);
+        if touch {
             full.touch(25.0).unwrap_or_else(|e| panic!("{e}"));
         }
-        let env = if (10..80).contains(&tick) {
-            FvEnvironment::Object
-        } else {
-            FvEnvironment::Air { ambient_c: AIR_C }
-        };
         full.step(TICK_S, env);
         want.push(full.surface_c().to_bits());
     }

@@ -17,7 +17,7 @@ const TIMES_S: [f64; 5] = [0.5, 1.0, 2.0, 5.0, 10.0];
 const STEP_S: f64 = 0.01;
 
 /// A homogeneous skin 30 mm thick without perfusion: semi-infinite over 10 s (heat penetrates about 1 mm).
-fn homogeneous_skin() -> Skin {
+pub(crate) fn homogeneous_skin() -> Skin {
     Skin {
         layers: vec![SkinLayer {
             name: "skin".into(),
