@@ -55,7 +55,8 @@ pub const SESSION_COLUMNS: [&str; 20] = [
     "exclusion_reason",
 ];
 
-/// The columns that hold measured durations (they differ between two runs of the same plan).
+/// The columns that hold measured durations (they differ between two runs of the same plan on a person or a
+/// display in real time; a simulation at time scale 0 writes them identically).
 pub const TIMING_COLUMNS: [&str; 2] = ["response_time_s", "presentation_s"];
 
 /// The software version written into every row and sidecar.
@@ -151,9 +152,11 @@ pub struct TrialRecord {
     pub identified: String,
     /// The answer as option number, 1-based.
     pub response_key: usize,
-    /// Time from the end of the presentation to the answer \[s\].
-    pub response_time_s: f64,
-    /// Measured duration of the presentation \[s\] (real seconds; scaled by the clock's time scale).
+    /// Time from the end of the presentation to the answer \[s\], measured when a person answered; `None` (an empty
+    /// cell, as PsychoPy leaves a missing `rt`) for a responses file or the simulated participant.
+    pub response_time_s: Option<f64>,
+    /// Duration of the presentation in experiment seconds \[s\]: the clock's seconds divided by the time scale; at
+    /// time scale 0 (a simulation without waiting) the presentation the stimulus covered.
     pub presentation_s: f64,
     /// The session's finger baseline: the start temperature of its first trial \[°C\].
     pub finger_baseline_c: f64,
@@ -437,7 +440,10 @@ impl SessionFile {
             trial: planned.clone(),
             identified,
             response_key,
-            response_time_s: number("response_time_s")?,
+            response_time_s: match field("response_time_s") {
+                "" => None,
+                _ => Some(number("response_time_s")?),
+            },
             presentation_s: number("presentation_s")?,
             finger_baseline_c: number("finger_baseline_c")?,
             finger_start_c: number("finger_start_c")?,
@@ -481,7 +487,7 @@ impl SessionFile {
             r.trial.presented.clone(),
             r.identified.clone(),
             r.response_key.to_string(),
-            format!("{:.3}", r.response_time_s),
+            r.response_time_s.map(|t| format!("{t:.3}")).unwrap_or_default(),
             format!("{:.3}", r.presentation_s),
             format!("{:.4}", r.finger_baseline_c),
             format!("{:.4}", r.finger_start_c),

@@ -807,8 +807,8 @@ fn serve_checks_its_options_before_opening_ports_and_says_who_holds_a_port() {
 }
 
 /// Every file of `dir`, by name, with its bytes.
-fn files_of(dir: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut files: Vec<(String, Vec<u8>)> = std::fs::read_dir(dir)
+fn files_of(dir: &Path) -> Vec<(String, String)> {
+    let mut files: Vec<(String, String)> = std::fs::read_dir(dir)
         .expect("read dir")
         .map(|e| {
             let path = e.expect("entry").path();
@@ -816,7 +816,7 @@ fn files_of(dir: &Path) -> Vec<(String, Vec<u8>)> {
                 .file_name()
                 .map(|n| n.to_string_lossy().to_string())
                 .unwrap_or_default();
-            (name, std::fs::read(&path).expect("read file"))
+            (name, std::fs::read_to_string(&path).expect("read file"))
         })
         .collect();
     files.sort();

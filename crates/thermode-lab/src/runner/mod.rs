@@ -162,6 +162,15 @@ impl Runner<'_> {
         }
     }
 
+    /// Experiment seconds since the clock read `start_s`: the clock's seconds divided by the time scale (0 at time
+    /// scale 0, where no experiment time passes but the waits).
+    fn experiment_s_since(&self, start_s: f64) -> f64 {
+        match self.time_scale > 0.0 {
+            true => (self.clock.now_s() - start_s) / self.time_scale,
+            false => 0.0,
+        }
+    }
+
     /// Runs (or resumes) the session to its end.
     pub fn run(mut self) -> Result<SessionSummary, RunError> {
         let plan = participant_plan(self.experiment, self.participant)?;
@@ -268,11 +277,14 @@ impl Runner<'_> {
             trial: planned.trial,
         })?;
         measurement.validate()?;
-        let elapsed_s = self.clock.now_s() - start_s;
+        let elapsed_s = self.experiment_s_since(start_s);
         if elapsed_s < design.presentation_s {
             self.wait_s(design.presentation_s - elapsed_s);
         }
-        let presentation_s = self.clock.now_s() - start_s;
+        let presentation_s = match self.time_scale > 0.0 {
+            true => self.experiment_s_since(start_s),
+            false => design.presentation_s,
+        };
         let options = &design.response_options;
         let query = ResponseQuery {
             participant_index: plan.index,
@@ -282,7 +294,7 @@ impl Runner<'_> {
         };
         let asked_s = self.clock.now_s();
         let choice = self.responder.respond(&query, &mut *self.console)?;
-        let response_time_s = self.clock.now_s() - asked_s;
+        let response_time_s = self.responder.is_a_person().then(|| self.clock.now_s() - asked_s);
         let baseline_c = baseline_c.unwrap_or(measurement.finger_start_c);
         let reason = exclusion_reason(measurement.finger_start_c, baseline_c, design.exclusion_max_drift_c);
         Ok(TrialRecord {

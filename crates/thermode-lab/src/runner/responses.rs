@@ -31,6 +31,12 @@ pub struct ResponseQuery<'a> {
 pub trait Responder {
     /// The chosen option, 0-based in `query.options`.
     fn respond(&mut self, query: &ResponseQuery, console: &mut dyn Console) -> Result<usize, RunError>;
+
+    /// Whether the answer comes from a person at the terminal, so that the time it took is a response time. A
+    /// responses file or the simulated participant answers at once: their rows leave `response_time_s` empty.
+    fn is_a_person(&self) -> bool {
+        false
+    }
 }
 
 /// Reads an answer (`1..n` or a name) against `options`; the error says what is expected.
@@ -59,6 +65,10 @@ pub fn parse_answer(text: &str, options: &[String]) -> Result<usize, String> {
 pub struct InteractiveResponder;
 
 impl Responder for InteractiveResponder {
+    fn is_a_person(&self) -> bool {
+        true
+    }
+
     fn respond(&mut self, query: &ResponseQuery, console: &mut dyn Console) -> Result<usize, RunError> {
         let menu: Vec<String> = query
             .options
