@@ -491,7 +491,12 @@ fn events_sidecar(columns: &[&String]) -> Value {
 fn column_description(name: &str) -> Value {
     let known = match name {
         "participant" => "Participant identifier in thermode's files",
-        "experiment" => "Experiment name",
+        "experiment" | "expName" => "Experiment name",
+        "trials.thisN" => "Trial index from 0 (PsychoPy's loop counter)",
+        "curve_file" => "The trial's curve on the display, relative to the data folder",
+        "model_finger_baseline_c" => "Simulated finger temperature before the session's first trial",
+        "model_finger_start_c" => "Simulated finger temperature before the touch",
+        "model_finger_end_c" => "Simulated finger temperature at the end of the presentation",
         "session_date" => "Date the session started",
         "seed" => "The design's seed",
         "software_version" => "thermode version that recorded the row",
@@ -502,17 +507,17 @@ fn column_description(name: &str) -> Value {
         "position" => "Position within the block",
         "presented" => "The material presented",
         "identified" => "The material the participant named",
-        "response_key" => "The answer as option number (1-based)",
-        "response_time_s" => "Time from the end of the presentation to the answer",
+        "response_key" | "key_resp.keys" => "The answer as option number (1-based)",
+        "response_time_s" | "key_resp.rt" => "Time from the end of the presentation to a person's answer",
         "presentation_s" => "Measured duration of the presentation",
-        "finger_baseline_c" => "The session's finger baseline temperature",
-        "finger_start_c" => "Finger temperature before the touch",
-        "finger_end_c" => "Finger temperature at the end of the presentation",
+        "finger_baseline_c" => "The session's finger baseline temperature, measured on the display",
+        "finger_start_c" => "Finger temperature measured on the display at rest before the trial",
+        "finger_end_c" => "Finger temperature measured on the display at rest after the trial",
         "excluded" => "Whether the exclusion rule discarded the trial",
         "exclusion_reason" => "Why the trial was excluded",
         _ => "Column of thermode's session CSV (see thermode's documentation)",
     };
-    let units = if name.ends_with("_s") {
+    let units = if name.ends_with("_s") || name == "key_resp.rt" {
         Some("s")
     } else if name.ends_with("_c") {
         Some("degC")

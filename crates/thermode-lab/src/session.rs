@@ -31,8 +31,41 @@ use thiserror::Error;
 use crate::design::{Experiment, ExperimentFile};
 use crate::plan::{ParticipantPlan, PlannedTrial};
 
-/// Columns of a session CSV, in order.
-pub const SESSION_COLUMNS: [&str; 20] = [
+/// Columns of a session CSV (format 2), in order. Where a column means what one of PsychoPy's data files means, it
+/// has PsychoPy's name (`participant`, `expName`, `trials.thisN`, `key_resp.keys`, `key_resp.rt`); `docs/lab.md`
+/// lists them and says why the others differ. Finger temperatures measured on a display and those of a simulation
+/// are never in the same column: `finger_*` hold measurements, `model_finger_*` a simulation's (the other set is
+/// empty).
+pub const SESSION_COLUMNS: [&str; 25] = [
+    "participant",
+    "expName",
+    "session_date",
+    "seed",
+    "software_version",
+    "trials.thisN",
+    "trial",
+    "block",
+    "repetition",
+    "condition",
+    "position",
+    "presented",
+    "identified",
+    "key_resp.keys",
+    "key_resp.rt",
+    "presentation_s",
+    "finger_baseline_c",
+    "finger_start_c",
+    "finger_end_c",
+    "model_finger_baseline_c",
+    "model_finger_start_c",
+    "model_finger_end_c",
+    "excluded",
+    "exclusion_reason",
+    "curve_file",
+];
+
+/// The columns of format 1 (thermode 0.1 before PsychoPy's names), still read and continued on a resume.
+pub const SESSION_COLUMNS_V1: [&str; 20] = [
     "participant",
     "experiment",
     "session_date",
@@ -55,15 +88,25 @@ pub const SESSION_COLUMNS: [&str; 20] = [
     "exclusion_reason",
 ];
 
+/// Format-1 names of the columns that format 2 renamed to PsychoPy's: (format 2, format 1).
+const RENAMED: [(&str, &str); 3] = [
+    ("expName", "experiment"),
+    ("key_resp.keys", "response_key"),
+    ("key_resp.rt", "response_time_s"),
+];
+
 /// The columns that hold measured durations (they differ between two runs of the same plan on a person or a
 /// display in real time; a simulation at time scale 0 writes them identically).
-pub const TIMING_COLUMNS: [&str; 2] = ["response_time_s", "presentation_s"];
+pub const TIMING_COLUMNS: [&str; 2] = ["key_resp.rt", "presentation_s"];
 
 /// The software version written into every row and sidecar.
 pub const SOFTWARE_VERSION: &str = env!("CARGO_PKG_VERSION");
 
 /// The `format` field of a sidecar.
-pub const SIDECAR_FORMAT: &str = "thermode-lab session 1";
+pub const SIDECAR_FORMAT: &str = "thermode-lab session 2";
+
+/// The `format` of a format-1 sidecar (its CSV has [`SESSION_COLUMNS_V1`]).
+pub const SIDECAR_FORMAT_V1: &str = "thermode-lab session 1";
 
 /// Why a session file could not be created, resumed or written.
 #[derive(Debug, Error)]
@@ -158,6 +201,9 @@ pub struct TrialRecord {
     /// Duration of the presentation in experiment seconds \[s\]: the clock's seconds divided by the time scale; at
     /// time scale 0 (a simulation without waiting) the presentation the stimulus covered.
     pub presentation_s: f64,
+    /// Whether the finger temperatures below were measured on a display (`finger_*` columns) or simulated
+    /// (`model_finger_*` columns).
+    pub finger_measured: bool,
     /// The session's finger baseline: the start temperature of its first trial \[°C\].
     pub finger_baseline_c: f64,
     /// Finger temperature just before the touch \[°C\].
@@ -170,6 +216,8 @@ pub struct TrialRecord {
     pub exclusion_reason: String,
     /// Software version that recorded the row.
     pub software_version: String,
+    /// The trial's curve file beside the session CSV (empty when the stimulus records none).
+    pub curve_file: String,
 }
 
 /// A resume of a session, as noted in its sidecar.
@@ -327,7 +375,23 @@ impl SessionFile {
         resumed: bool,
     ) -> Result<SessionFile, SessionError> {
         let csv_path = sidecar_path.with_file_name(&sidecar.csv_file);
-        let header = format!("{}\n", SESSION_COLUMNS.join(","));
+        let known = match sidecar.format.as_str() {
+            SIDECAR_FORMAT => &SESSION_COLUMNS[..],
+            SIDECAR_FORMAT_V1 => &SESSION_COLUMNS_V1[..],
+            other => {
+                return Err(SessionError::Mismatch {
+                    file: sidecar_path,
+                    message: format!("session format `{other}` is not one this version of thermode reads"),
+                })
+            }
+        };
+        if sidecar.columns != known {
+            return Err(SessionError::Mismatch {
+                file: sidecar_path,
+                message: format!("its columns are not those of `{}`", sidecar.format),
+            });
+        }
+        let header = format!("{}\n", sidecar.columns.join(","));
         if !csv_path.exists() {
             write_atomically(&csv_path, header.as_bytes())?;
         }
@@ -389,14 +453,11 @@ impl SessionFile {
 
     /// Parses one row and checks it against the session and the planned trial.
     fn parse_row(&self, record: &csv::StringRecord, planned: &PlannedTrial) -> Result<TrialRecord, String> {
-        if record.len() != SESSION_COLUMNS.len() {
-            return Err(format!(
-                "{} fields, the header has {}",
-                record.len(),
-                SESSION_COLUMNS.len()
-            ));
+        let columns = &self.sidecar.columns;
+        if record.len() != columns.len() {
+            return Err(format!("{} fields, the header has {}", record.len(), columns.len()));
         }
-        let field = |name: &str| record.get(column(name)).unwrap_or_default();
+        let field = |name: &str| record.get(column(columns, name)).unwrap_or_default();
         let expect = |name: &str, want: &str| {
             let got = field(name);
             if got == want {
@@ -409,7 +470,7 @@ impl SessionFile {
         };
         let s = &self.sidecar;
         expect("participant", &s.participant)?;
-        expect("experiment", &s.experiment)?;
+        expect("expName", &s.experiment)?;
         expect("session_date", &s.session_date)?;
         expect("seed", &s.seed.to_string())?;
         expect("trial", &planned.trial.to_string())?;
@@ -423,12 +484,17 @@ impl SessionFile {
         let Some(response_key) = key else {
             return Err(format!("`identified` = `{identified}` is not a response option"));
         };
-        expect("response_key", &response_key.to_string())?;
+        expect("key_resp.keys", &response_key.to_string())?;
         let excluded = match field("excluded") {
             "true" => true,
             "false" => false,
             other => return Err(format!("`excluded` = `{other}`: expected true or false")),
         };
+        // Format 1 kept every finger temperature in `finger_*`, and they were all simulated (no display could run
+        // the lab then); format 2 keeps a simulation's in `model_finger_*`.
+        let v1 = self.sidecar.format == SIDECAR_FORMAT_V1;
+        let finger_measured = !v1 && !field("finger_start_c").is_empty();
+        let prefix = if finger_measured || v1 { "" } else { "model_" };
         let number = |name: &str| -> Result<f64, String> {
             let text = field(name);
             text.parse::<f64>()
@@ -440,17 +506,19 @@ impl SessionFile {
             trial: planned.clone(),
             identified,
             response_key,
-            response_time_s: match field("response_time_s") {
+            response_time_s: match field("key_resp.rt") {
                 "" => None,
-                _ => Some(number("response_time_s")?),
+                _ => Some(number("key_resp.rt")?),
             },
             presentation_s: number("presentation_s")?,
-            finger_baseline_c: number("finger_baseline_c")?,
-            finger_start_c: number("finger_start_c")?,
-            finger_end_c: number("finger_end_c")?,
+            finger_measured,
+            finger_baseline_c: number(&format!("{prefix}finger_baseline_c"))?,
+            finger_start_c: number(&format!("{prefix}finger_start_c"))?,
+            finger_end_c: number(&format!("{prefix}finger_end_c"))?,
             excluded,
             exclusion_reason: field("exclusion_reason").to_string(),
             software_version: field("software_version").to_string(),
+            curve_file: field("curve_file").to_string(),
         })
     }
 
@@ -473,34 +541,62 @@ impl SessionFile {
 
     fn row_bytes(&self, r: &TrialRecord) -> Vec<u8> {
         let s = &self.sidecar;
-        let fields = [
-            s.participant.clone(),
-            s.experiment.clone(),
-            s.session_date.clone(),
-            s.seed.to_string(),
-            r.software_version.clone(),
-            r.trial.trial.to_string(),
-            r.trial.block.to_string(),
-            r.trial.repetition.to_string(),
-            r.trial.condition.name().to_string(),
-            r.trial.position.to_string(),
-            r.trial.presented.clone(),
-            r.identified.clone(),
-            r.response_key.to_string(),
-            r.response_time_s.map(|t| format!("{t:.3}")).unwrap_or_default(),
-            format!("{:.3}", r.presentation_s),
-            format!("{:.4}", r.finger_baseline_c),
-            format!("{:.4}", r.finger_start_c),
-            format!("{:.4}", r.finger_end_c),
-            r.excluded.to_string(),
-            r.exclusion_reason.clone(),
-        ];
+        let fingers = [r.finger_baseline_c, r.finger_start_c, r.finger_end_c].map(|c| format!("{c:.4}"));
+        let v1 = s.format == SIDECAR_FORMAT_V1;
+        let (measured, model) = match (r.finger_measured || v1, fingers.clone()) {
+            (true, f) => (f, Default::default()),
+            (false, f) => (Default::default(), f),
+        };
+        let value = |name: &str| -> String {
+            match name {
+                "participant" => s.participant.clone(),
+                "expName" => s.experiment.clone(),
+                "session_date" => s.session_date.clone(),
+                "seed" => s.seed.to_string(),
+                "software_version" => r.software_version.clone(),
+                "trials.thisN" => (r.trial.trial - 1).to_string(),
+                "trial" => r.trial.trial.to_string(),
+                "block" => r.trial.block.to_string(),
+                "repetition" => r.trial.repetition.to_string(),
+                "condition" => r.trial.condition.name().to_string(),
+                "position" => r.trial.position.to_string(),
+                "presented" => r.trial.presented.clone(),
+                "identified" => r.identified.clone(),
+                "key_resp.keys" => r.response_key.to_string(),
+                "key_resp.rt" => r.response_time_s.map(|t| format!("{t:.3}")).unwrap_or_default(),
+                "presentation_s" => format!("{:.3}", r.presentation_s),
+                "finger_baseline_c" => measured[0].clone(),
+                "finger_start_c" => measured[1].clone(),
+                "finger_end_c" => measured[2].clone(),
+                "model_finger_baseline_c" => model[0].clone(),
+                "model_finger_start_c" => model[1].clone(),
+                "model_finger_end_c" => model[2].clone(),
+                "excluded" => r.excluded.to_string(),
+                "exclusion_reason" => r.exclusion_reason.clone(),
+                "curve_file" => r.curve_file.clone(),
+                _ => String::new(),
+            }
+        };
+        let fields: Vec<String> = s.columns.iter().map(|c| value(canonical(c))).collect();
         let mut writer = csv::WriterBuilder::new()
             .terminator(csv::Terminator::Any(b'\n'))
             .from_writer(Vec::new());
         // Writing to memory cannot fail; the fields hold no line ends.
         let _ = writer.write_record(&fields);
         writer.into_inner().unwrap_or_default()
+    }
+
+    /// Writes trial `trial`'s curve in the session's curve folder beside its CSV, atomically
+    /// (`<stem>_curves/trial-<NNN>.csv`; a trial repeated after a crash writes it anew), and returns its path
+    /// relative to the data folder for the row's `curve_file`. Call it before [`SessionFile::append`], so that a
+    /// row never names a file that is not there. `lab export --bids` exports the folder's curves.
+    pub fn write_curve(&self, trial: usize, csv_text: &str) -> Result<String, SessionError> {
+        let folder = format!("{}_curves", self.sidecar.csv_file.trim_end_matches(".csv"));
+        let dir = self.csv_path.with_file_name(&folder);
+        std::fs::create_dir_all(&dir).map_err(io(&dir))?;
+        let name = format!("trial-{trial:03}.csv");
+        write_atomically(&dir.join(&name), csv_text.as_bytes())?;
+        Ok(format!("{folder}/{name}"))
     }
 
     /// The session CSV.
@@ -549,8 +645,14 @@ impl SessionFile {
     }
 }
 
-fn column(name: &str) -> usize {
-    SESSION_COLUMNS.iter().position(|c| *c == name).unwrap_or(usize::MAX)
+/// The format-2 name of a column (a format-1 name that format 2 renamed becomes PsychoPy's).
+fn canonical(name: &str) -> &str {
+    RENAMED.iter().find(|(_, v1)| *v1 == name).map_or(name, |(v2, _)| v2)
+}
+
+/// The index of the column whose format-2 name is `name` in `columns` (format 1 or 2).
+fn column(columns: &[String], name: &str) -> usize {
+    columns.iter().position(|c| canonical(c) == name).unwrap_or(usize::MAX)
 }
 
 /// Refuses a session whose sidecar records a different design.
@@ -559,9 +661,9 @@ fn check_same_design(sidecar_path: &Path, sidecar: &Sidecar, design: &Experiment
         file: sidecar_path.to_path_buf(),
         message,
     };
-    if sidecar.format != SIDECAR_FORMAT {
+    if sidecar.format != SIDECAR_FORMAT && sidecar.format != SIDECAR_FORMAT_V1 {
         return Err(mismatch(format!(
-            "sidecar format `{}`, expected `{SIDECAR_FORMAT}`",
+            "sidecar format `{}`, expected `{SIDECAR_FORMAT}` or `{SIDECAR_FORMAT_V1}`",
             sidecar.format
         )));
     }

@@ -192,6 +192,12 @@ pub struct Telemetry {
     /// The safety envelope's estimate of the true plate (its own model of the display, whatever the controller);
     /// NaN before the first reading.
     pub plate_estimate_c: f64,
+    /// The real finger's receptor temperature as the plate's heat balance measures it \[°C\]: the controller's finger
+    /// model plus the heat the real finger gives the plate beyond the model's (the observer's unknown heat d) over
+    /// the receptor-to-plate conductance G, `T_model + d/G` (the same measure the touch calibration uses). Per tick
+    /// it carries the observer's noise: average it over a rest (`thermode lab run` does). NaN for a controller
+    /// without an observer (pid), while held off and on a refused time step.
+    pub finger_c: f64,
     /// The latched fault, if any.
     pub fault: Option<FaultCode>,
 }
@@ -682,6 +688,11 @@ impl ChannelPipeline {
             requested_current_a: outcome.requested_current_a,
             current_a: drive.current_a(),
             plate_estimate_c: self.drive.plate_estimate_c(),
+            finger_c: self
+                .drive
+                .controller
+                .unknown_heat_w()
+                .map_or(f64::NAN, |heat_w| finger.receptor_c + heat_w / finger.conductance_w_k),
             fault: drive.fault(),
         };
         (drive, telemetry)
@@ -712,6 +723,7 @@ impl ChannelPipeline {
             requested_current_a: 0.0,
             current_a: 0.0,
             plate_estimate_c: plate_c,
+            finger_c: f64::NAN,
             fault: drive.fault(),
         };
         (drive, telemetry)
@@ -736,6 +748,7 @@ impl ChannelPipeline {
             requested_current_a: f64::NAN,
             current_a: drive.current_a(),
             plate_estimate_c: self.drive.plate_estimate_c(),
+            finger_c: f64::NAN,
             fault: drive.fault(),
         }
     }

@@ -192,6 +192,7 @@ impl ChannelEngine for TrackingEngine {
             requested_current_a: request_a,
             current_a: command.current_a(),
             plate_estimate_c: f64::NAN,
+            finger_c: f64::NAN,
             fault: command.fault(),
         };
         (command, telemetry)

@@ -26,6 +26,7 @@ pub const EMPTY_TELEMETRY: Telemetry = Telemetry {
     requested_current_a: f64::NAN,
     current_a: 0.0,
     plate_estimate_c: f64::NAN,
+    finger_c: f64::NAN,
     fault: None,
 };
 

@@ -831,6 +831,7 @@ fn lab_run_batches_participants_with_output_independent_of_the_thread_count() {
         [
             "lab",
             "run",
+            "--simulate",
             "--experiment",
             experiment,
             "--observer",
@@ -878,6 +879,7 @@ fn lab_run_batches_participants_with_output_independent_of_the_thread_count() {
     let keyboard = [
         "lab",
         "run",
+        "--simulate",
         "--experiment",
         experiment,
         "--participant",
@@ -890,4 +892,128 @@ fn lab_run_batches_participants_with_output_independent_of_the_thread_count() {
     zero.extend(["--all-participants", "--jobs", "0"].map(String::from));
     let zero: Vec<&str> = zero.iter().map(String::as_str).collect();
     expect_error(&zero, "--jobs 0");
+}
+
+/// `lab run` on a display (`--device sim`: the simulated display run as `serve` runs it, in real time, through the
+/// daemon's WebSocket API): the finger is measured on the plate at rest, the measurements go in the `finger_*`
+/// columns (none in `model_finger_*`), each trial's curve is kept beside the session CSV and `lab analyze --curves`
+/// reads it; the same command after the end finds the session complete. The plant's finger is the fv fingertip,
+/// whose receptor rests at 32.13 °C in 23 °C air (README: fv surface at rest); the display renders air for it.
+#[test]
+fn lab_run_on_a_display_measures_the_finger_on_it_and_keeps_each_trials_curve() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let experiment = tmp.path().join("mini.toml");
+    std::fs::write(
+        &experiment,
+        "name = \"mini\"\nmaterials = [\"aluminium\", \"wood\"]\nconditions = [\"simulated\", \"real\"]\n\
+         participants = 1\nrepetitions = 1\npresentation_s = 2.0\nresponse_options = [\"aluminium\", \"wood\"]\n\
+         exclusion_max_drift_c = 1.0\nseed = 7\n",
+    )
+    .expect("write experiment");
+    let data = tmp.path().join("data");
+    let (experiment, data_dir, state) = (
+        experiment.display().to_string(),
+        data.display().to_string(),
+        tmp.path().join("state").display().to_string(),
+    );
+    let args = [
+        "lab",
+        "run",
+        "--experiment",
+        &experiment,
+        "--participant",
+        "P01",
+        "--device",
+        "sim",
+        "--state-dir",
+        &state,
+        "--simulated-participant",
+        "--data-dir",
+        &data_dir,
+    ];
+    let out = expect_success(&args);
+    assert!(out.contains("session complete: 4 trials"), "{out}");
+    let session = std::fs::read_dir(&data)
+        .expect("data folder")
+        .map(|e| e.expect("entry").path())
+        .find(|p| p.extension().is_some_and(|e| e == "csv"))
+        .expect("a session CSV");
+    let csv = std::fs::read_to_string(&session).expect("session CSV");
+    let mut reader = csv::Reader::from_reader(csv.as_bytes());
+    let header = reader.headers().expect("header").clone();
+    let column = |name: &str| {
+        header
+            .iter()
+            .position(|h| h == name)
+            .unwrap_or_else(|| panic!("no {name}"))
+    };
+    let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.expect("row")).collect();
+    assert_eq!(rows.len(), 4, "{csv}");
+    let baseline_c: f64 = rows[0][column("finger_start_c")].parse().expect("a measured start");
+    assert!(
+        (baseline_c - 32.13).abs() < 0.3,
+        "finger measured at rest before the first trial {baseline_c} °C vs the plant's 32.13 °C"
+    );
+    for row in &rows {
+        let number = |name: &str| -> f64 { row[column(name)].parse().unwrap_or_else(|_| panic!("{name}: {row:?}")) };
+        let (start_c, end_c) = (number("finger_start_c"), number("finger_end_c"));
+        assert!(
+            row[column("model_finger_start_c")].is_empty(),
+            "nothing simulated in a measured session"
+        );
+        if &row[column("condition")] == "simulated" {
+            // Aluminium and wood at 23 °C both draw heat: the finger comes back to the plate cooler.
+            assert!(
+                end_c < start_c - 0.2,
+                "a cold touch cooled the finger: {start_c} -> {end_c} °C"
+            );
+        }
+        let presentation_s: f64 = row[column("presentation_s")].parse().expect("presentation");
+        assert!(
+            (presentation_s - 2.0).abs() < 0.02,
+            "the contact lasted {presentation_s} s of 2"
+        );
+        let curve = std::fs::read_to_string(data.join(&row[column("curve_file")])).expect("the trial's curve");
+        let lines = curve.lines().count();
+        assert!(
+            (200..=204).contains(&lines),
+            "{lines} lines: a sample per 10 ms tick over 2 s"
+        );
+    }
+    let simulated = rows
+        .iter()
+        .find(|r| &r[column("condition")] == "simulated")
+        .expect("a simulated trial");
+    let curves = data.join(&simulated[column("curve_file")]).display().to_string();
+    let session = session.display().to_string();
+    let analysis = expect_success(&["lab", "analyze", &session, "--curves", &curves, "--format", "json"]);
+    assert!(
+        analysis.contains("\"finger_c\""),
+        "the curve's temperature is the measured finger: {analysis}"
+    );
+    let again = expect_success(&args);
+    assert!(again.contains("session already complete"), "{again}");
+}
+
+#[test]
+fn lab_run_needs_a_display_or_an_explicit_simulation() {
+    let experiment = concat!(env!("CARGO_MANIFEST_DIR"), "/../thermode-lab/experiments/paper.toml");
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let dir = tmp.path().display().to_string();
+    let base = [
+        "lab",
+        "run",
+        "--experiment",
+        experiment,
+        "--participant",
+        "P01",
+        "--data-dir",
+        &dir,
+    ];
+    expect_error(&base, "--simulate (the offline simulation)");
+    expect_error(
+        &[&base[..], &["--display", "ws://127.0.0.1:1"]].concat(),
+        "cannot reach the display at ws://127.0.0.1:1",
+    );
+    expect_error(&[&base[..], &["--display", "http://x"]].concat(), "ws://HOST:PORT");
 }

@@ -3,11 +3,14 @@
 //!
 //! Curve CSV columns (header names trimmed, case-insensitive):
 //! - `time_s` — time since contact \[s\], strictly increasing within a curve;
-//! - a temperature \[°C\], the first present of [`TEMPERATURE_COLUMNS`]: `skin_c`, `skin_surface_c`, `truth_skin_c`,
-//!   `target_skin_c`;
+//! - a temperature \[°C\], the first present of [`TEMPERATURE_COLUMNS`]: `finger_c` (a `lab run` trial curve on a
+//!   display: the finger measured on the plate), `skin_c`, `skin_surface_c`, `truth_skin_c`, `target_skin_c`;
 //! - `material` — a library material name; `condition` — `real` or `simulated`;
 //! - optional `repetition` — rows with the same (file, condition, material, repetition) form one curve; without the
 //!   column, one file holds one curve per (condition, material).
+//!
+//! An empty temperature cell is a sample that was not measured and is skipped (a `lab run` trial curve of a real
+//! trial has no `finger_c`: the finger touched the sample, not the plate).
 //!
 //! The CSVs thermode writes are read as they are, without a `condition` column:
 //! - a `render` CSV (`truth_skin_c` and `skin_c`, no `channel`): per (material, controller, renderer), the real
@@ -37,7 +40,7 @@ use crate::design::Condition;
 use crate::error::LabError;
 
 /// Accepted temperature column names \[°C\], in order of preference.
-pub const TEMPERATURE_COLUMNS: [&str; 4] = ["skin_c", "skin_surface_c", "truth_skin_c", "target_skin_c"];
+pub const TEMPERATURE_COLUMNS: [&str; 5] = ["finger_c", "skin_c", "skin_surface_c", "truth_skin_c", "target_skin_c"];
 /// Length of the window for the initial slope \[s\]: 2.
 pub const INITIAL_SLOPE_WINDOW_S: f64 = 2.0;
 
@@ -181,6 +184,10 @@ fn read_curve_file(
     for (line, fields) in &table.rows {
         let line = *line;
         let time_s = finite(table, line, "time_s", &fields[cols.time])?;
+        if fields[cols.temperature].trim().is_empty() {
+            // Not measured (a `lab run` real trial: the finger is on the sample, not on the plate).
+            continue;
+        }
         let temperature_c = finite(table, line, &temperature_name, &fields[cols.temperature])?;
         let condition = Condition::parse(&fields[cols.condition]).ok_or_else(|| LabError::BadCondition {
             file: table.file.clone(),

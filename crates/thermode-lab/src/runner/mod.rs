@@ -15,8 +15,10 @@
 //! nothing needs to be caught, since every completed trial is already on disk.
 
 pub mod console;
+pub mod live;
 pub mod responses;
 pub mod stimulus;
+pub mod ws_link;
 
 use std::path::{Path, PathBuf};
 
@@ -198,7 +200,26 @@ impl Runner<'_> {
                     close: Vec::new(),
                 }
             })?;
-            let record = self.run_trial(&plan, planned, material, session.baseline_c())?;
+            let (mut record, trace) = self.run_trial(&plan, planned, material, session.baseline_c())?;
+            if let Some(first) = session
+                .records()
+                .first()
+                .filter(|f| f.finger_measured != record.finger_measured)
+            {
+                let kind = |measured: bool| if measured { "measured on a display" } else { "simulated" };
+                return Err(SessionError::Mismatch {
+                    file: session.csv_path().to_path_buf(),
+                    message: format!(
+                        "its finger temperatures are {}; this run's are {}: continue it as it was started",
+                        kind(first.finger_measured),
+                        kind(record.finger_measured)
+                    ),
+                }
+                .into());
+            }
+            if let Some(trace) = trace {
+                record.curve_file = session.write_curve(planned.trial, &trace.to_csv())?;
+            }
             session.append(&record)?;
             self.report(&record)?;
         }
@@ -256,7 +277,7 @@ impl Runner<'_> {
         planned: &PlannedTrial,
         material: &Material,
         baseline_c: Option<f64>,
-    ) -> Result<TrialRecord, RunError> {
+    ) -> Result<(TrialRecord, Option<live::TrialTrace>), RunError> {
         let experiment: &ExperimentFile = self.experiment;
         let design = &experiment.experiment;
         self.say(&format!(
@@ -277,13 +298,20 @@ impl Runner<'_> {
             trial: planned.trial,
         })?;
         measurement.validate()?;
+        for note in self.stimulus.take_notes() {
+            self.say(&format!("  note: {note}"))?;
+        }
         let elapsed_s = self.experiment_s_since(start_s);
         if elapsed_s < design.presentation_s {
             self.wait_s(design.presentation_s - elapsed_s);
         }
-        let presentation_s = match self.time_scale > 0.0 {
-            true => self.experiment_s_since(start_s),
-            false => design.presentation_s,
+        // A display times the presentation itself (its trace, from the touch); the rests around it are not part
+        // of it.
+        let traced_s = measurement.trace.as_ref().and_then(|t| t.time_s.last().copied());
+        let presentation_s = match (traced_s, self.time_scale > 0.0) {
+            (Some(traced_s), _) => traced_s,
+            (None, true) => self.experiment_s_since(start_s),
+            (None, false) => design.presentation_s,
         };
         let options = &design.response_options;
         let query = ResponseQuery {
@@ -297,19 +325,22 @@ impl Runner<'_> {
         let response_time_s = self.responder.is_a_person().then(|| self.clock.now_s() - asked_s);
         let baseline_c = baseline_c.unwrap_or(measurement.finger_start_c);
         let reason = exclusion_reason(measurement.finger_start_c, baseline_c, design.exclusion_max_drift_c);
-        Ok(TrialRecord {
+        let record = TrialRecord {
             trial: planned.clone(),
             identified: options[choice].clone(),
             response_key: choice + 1,
             response_time_s,
             presentation_s,
+            finger_measured: measurement.measured,
             finger_baseline_c: baseline_c,
             finger_start_c: measurement.finger_start_c,
             finger_end_c: measurement.finger_end_c,
             excluded: reason.is_some(),
             exclusion_reason: reason.unwrap_or_default(),
             software_version: SOFTWARE_VERSION.to_string(),
-        })
+            curve_file: String::new(),
+        };
+        Ok((record, measurement.trace))
     }
 
     /// Real trial: the experimenter places the sample (and confirms, interactively). Simulated: say so.

@@ -110,6 +110,11 @@ pub struct TrialMeasurement {
     pub finger_end_c: f64,
     /// The skin temperature curve of the presentation, if the stimulus records one.
     pub curve: Option<SkinCurve>,
+    /// Whether the finger temperatures were measured on a display (true) or come from a model (false: a
+    /// simulation); the session keeps them in different columns.
+    pub measured: bool,
+    /// The trial's curve on a real display (kept beside the session CSV), if the stimulus records one.
+    pub trace: Option<crate::runner::live::TrialTrace>,
 }
 
 impl TrialMeasurement {
@@ -145,6 +150,11 @@ pub struct StimulusRequest<'a> {
 pub trait Stimulus {
     /// Presents `request.material` in `request.condition` and returns the measurement.
     fn present(&mut self, request: &StimulusRequest) -> Result<TrialMeasurement, StimulusError>;
+
+    /// Notes for the operator gathered since the last call (an unsettled measurement, …); none by default.
+    fn take_notes(&mut self) -> Vec<String> {
+        Vec::new()
+    }
 }
 
 /// Real contact of the finger with a material under the finite-volume model (`thermode_model::fv`).
@@ -297,6 +307,8 @@ impl Stimulus for ModelStimulus {
             finger_start_c: curve.skin_c[0],
             finger_end_c: curve.skin_c[curve.skin_c.len() - 1],
             curve: Some(curve),
+            measured: false,
+            trace: None,
         })
     }
 }
@@ -553,6 +565,8 @@ impl Stimulus for DisplayStimulus {
             finger_start_c: curve.skin_c[0],
             finger_end_c: curve.skin_c[curve.skin_c.len() - 1],
             curve: Some(curve),
+            measured: false,
+            trace: None,
         })
     }
 }

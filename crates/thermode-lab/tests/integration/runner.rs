@@ -17,7 +17,7 @@ use thermode_lab::runner::{
     FvContact, InteractiveResponder, ModelStimulus, QuietConsole, RunError, Runner, ScriptedResponses, SessionSummary,
     Stimulus, StimulusError, StimulusRequest, TerminalConsole, TrialMeasurement,
 };
-use thermode_lab::session::{SessionError, SESSION_COLUMNS, SOFTWARE_VERSION, TIMING_COLUMNS};
+use thermode_lab::session::{SessionError, SESSION_COLUMNS, SESSION_COLUMNS_V1, SOFTWARE_VERSION, TIMING_COLUMNS};
 use thermode_model::materials::find;
 use thermode_platform::{parse_iso_date, ManualClock};
 
@@ -66,6 +66,8 @@ impl Stimulus for TableStimulus {
             finger_start_c: start,
             finger_end_c: start - 3.0,
             curve: None,
+            measured: false,
+            trace: None,
         })
     }
 }
@@ -153,7 +155,17 @@ fn a_scripted_session_writes_the_planned_trials_with_session_fields_on_every_row
     assert_eq!(rows.len(), 20);
     for (row, t) in rows.iter().zip(planned) {
         assert_eq!(field(row, "participant"), "P02");
-        assert_eq!(field(row, "experiment"), "paper");
+        assert_eq!(field(row, "expName"), "paper");
+        assert_eq!(
+            field(row, "trials.thisN"),
+            (t.trial - 1).to_string(),
+            "PsychoPy's 0-based counter"
+        );
+        assert_eq!(
+            field(row, "key_resp.rt"),
+            "",
+            "a responses file is not a person: no response time"
+        );
         assert_eq!(field(row, "session_date"), DATE);
         assert_eq!(field(row, "seed"), "2008");
         assert_eq!(field(row, "software_version"), SOFTWARE_VERSION);
@@ -167,8 +179,13 @@ fn a_scripted_session_writes_the_planned_trials_with_session_fields_on_every_row
             "the fake clock's presentation time"
         );
         assert_eq!(field(row, "excluded"), "false");
-        let start: f64 = field(row, "finger_start_c").parse().expect("number");
-        let end: f64 = field(row, "finger_end_c").parse().expect("number");
+        assert_eq!(
+            field(row, "finger_start_c"),
+            "",
+            "a model's finger is not a measurement"
+        );
+        let start: f64 = field(row, "model_finger_start_c").parse().expect("number");
+        let end: f64 = field(row, "model_finger_end_c").parse().expect("number");
         assert!(start > 31.0 && start < 34.0, "resting finger {start} °C");
         assert!(
             end < start && end > 23.0,
@@ -309,7 +326,7 @@ fn the_exclusion_rule_marks_trials_beyond_one_degree_from_the_session_start() {
     let rows = rows(&summary.csv_path);
     let excluded: Vec<&str> = rows.iter().map(|r| field(r, "excluded")).collect();
     assert_eq!(excluded, ["false", "true", "false", "true", "false", "false"]);
-    assert!(rows.iter().all(|r| field(r, "finger_baseline_c") == "32.0000"));
+    assert!(rows.iter().all(|r| field(r, "model_finger_baseline_c") == "32.0000"));
     let reason = field(&rows[1], "exclusion_reason");
     assert!(reason.contains("1.20 °C") && reason.contains("limit 1 °C"), "{reason}");
     assert_eq!(field(&rows[0], "exclusion_reason"), "");
@@ -640,4 +657,70 @@ fn sessions_whose_names_collide_are_told_apart_and_never_overwritten() {
     // The first session is still found as its own (complete) session.
     let again = run_scripted(&first, "a", &data, &mut steady(), "1\n1\n1\n1\n", DATE).expect("complete");
     assert_eq!((again.recorded_before, again.recorded_now), (4, 0));
+}
+
+/// A session started by thermode before PsychoPy's column names (format 1) resumes in its own columns: the rows
+/// already there are read, the new ones are written under the same header, and nothing moves to the new names.
+#[test]
+fn a_format_1_session_resumes_in_its_own_columns() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let exp = small(dir.path(), 5);
+    let answers = "1\n2\n3\n1\n2\n3\n";
+    let mut failing = TableStimulus {
+        starts_c: vec![32.0],
+        fail_at: Some(3),
+    };
+    run_scripted(&exp, "P01", dir.path(), &mut failing, answers, DATE).expect_err("fails at trial 3");
+    let (csv, json) = (
+        dir.path().join("P01_small_2024-05-01.csv"),
+        dir.path().join("P01_small_2024-05-01.json"),
+    );
+    // Rewrite the two rows and the sidecar as format 1 wrote them.
+    let mut reader = csv::Reader::from_path(&csv).expect("session");
+    let header: Vec<String> = reader.headers().expect("header").iter().map(str::to_string).collect();
+    let v1_of = |name: &str| match name {
+        "experiment" => "expName".to_string(),
+        "response_key" => "key_resp.keys".to_string(),
+        "response_time_s" => "key_resp.rt".to_string(),
+        "finger_baseline_c" | "finger_start_c" | "finger_end_c" => format!("model_{name}"),
+        other => other.to_string(),
+    };
+    let mut text = format!("{}\n", SESSION_COLUMNS_V1.join(","));
+    for row in reader.records() {
+        let row = row.expect("row");
+        let cells: Vec<String> = SESSION_COLUMNS_V1
+            .iter()
+            .map(|c| {
+                let i = header.iter().position(|h| *h == v1_of(c)).expect("mapped column");
+                match (c, &row[i]) {
+                    (&"response_time_s", "") => "0.000".to_string(),
+                    (_, value) => value.to_string(),
+                }
+            })
+            .collect();
+        text.push_str(&format!("{}\n", cells.join(",")));
+    }
+    std::fs::write(&csv, &text).expect("format-1 CSV");
+    let mut sidecar: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("sidecar")).expect("json");
+    sidecar["format"] = "thermode-lab session 1".into();
+    sidecar["columns"] = serde_json::json!(SESSION_COLUMNS_V1);
+    std::fs::write(&json, sidecar.to_string()).expect("format-1 sidecar");
+    let summary = run_scripted(&exp, "P01", dir.path(), &mut steady(), answers, DATE).expect("resumes");
+    assert_eq!((summary.recorded_before, summary.recorded_now), (2, 4));
+    let after = std::fs::read_to_string(&csv).expect("read");
+    assert!(
+        after.starts_with(&text),
+        "the format-1 rows are kept as they were:\n{after}"
+    );
+    let mut reader = csv::Reader::from_path(&csv).expect("session");
+    assert_eq!(
+        reader.headers().expect("header").iter().collect::<Vec<_>>(),
+        SESSION_COLUMNS_V1
+    );
+    let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.expect("row")).collect();
+    assert_eq!(rows.len(), 6);
+    assert!(rows
+        .iter()
+        .all(|r| r.len() == SESSION_COLUMNS_V1.len() && &r[1] == "small" && &r[16] == "32.0000"));
 }

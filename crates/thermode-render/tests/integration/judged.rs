@@ -269,7 +269,8 @@ fn overshoot_counts_the_contact_only_not_the_warming_after_a_release() {
 /// the gap the uncalibrated model leaves (the learned heat fluctuates by about ±3 mW, ±0.05 °C, from tick to tick;
 /// its average over the last second trails the real finger, which still settles on the display), and
 /// leaves the model exactly as it is for the default finger (its learned heat is noise, which the gate refuses).
-/// pid learns no heat: never calibrated. The real finger's own resting temperature in air differs from the model's
+/// pid learns no heat: never calibrated. The telemetry's `finger_c` (the same measure per tick), averaged over
+/// the last second of rest, is the real finger's receptor within 0.1 °C (NaN for pid). The real finger's own resting temperature in air differs from the model's
 /// by more (−1.15 °C at ×0.8): while the display renders air for the model finger, its plate holds the real finger
 /// near the model's resting surface (800 W/(m²·K) to the plate against 10 to air), and the display can only
 /// render a touch from where the finger really is.
@@ -280,9 +281,22 @@ fn the_touch_calibrates_the_finger_model_to_the_real_finger_and_only_to_a_differ
             let mut s = spec(ShippedDisplay::Default, controller, "wood");
             s.finger_skin = finger(factor);
             let mut lp = Loop::new(&s);
-            lp.run((s.pre_contact_s * s.rate_hz).round() as usize);
+            let rest = lp.run((s.pre_contact_s * s.rate_hz).round() as usize);
             let model_c = lp.pipeline.display_finger().receptor_c();
             let real_c = lp.plant.channel(0).unwrap_or_else(|e| panic!("{e}")).state().receptor_c;
+            let last_second = &rest[rest.len() - s.rate_hz as usize..];
+            let measured_c = last_second.iter().map(|t| t.telemetry.finger_c).sum::<f64>() / s.rate_hz;
+            if lp.pipeline.controller().name() == "pid" {
+                assert!(
+                    measured_c.is_nan(),
+                    "pid has no observer to measure the finger: {measured_c}"
+                );
+            } else {
+                assert!(
+                    (measured_c - real_c).abs() < 0.1,
+                    "×{factor}: finger_c over the last second of rest {measured_c} vs the real receptor {real_c} °C"
+                );
+            }
             let touch = Stimulus::Touch {
                 material: s.material.clone(),
                 object_c: s.object_temperature_c(),

@@ -517,6 +517,7 @@ pub fn channel_telemetry(status: &ChannelStatus) -> Value {
         "display_setpoint_c": finite(t.display_setpoint_c),
         "sensor_c": finite(t.sensor_c),
         "plate_estimate_c": finite(t.plate_estimate_c),
+        "finger_c": finite(t.finger_c),
         "current_a": finite(t.current_a),
         "hot_side_c": finite(t.hot_side_c),
         "fault": fault_code(status),

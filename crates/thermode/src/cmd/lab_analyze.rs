@@ -41,8 +41,9 @@ pub struct LabAnalyzeArgs {
     #[arg(long, value_enum, default_value = "md")]
     format: ReportFormat,
     /// Curve CSV file for Figure 3: a `render` CSV (truth_skin_c real, skin_c simulated), a `serve --record` file
-    /// (each touch: target_skin_c real, skin_c simulated), or a table with time_s, skin_c | skin_surface_c |
-    /// truth_skin_c | target_skin_c, material, condition and an optional repetition; repeat for several files.
+    /// (each touch: target_skin_c real, skin_c simulated), a `lab run` trial curve on a display (finger_c), or a
+    /// table with time_s, finger_c | skin_c | skin_surface_c | truth_skin_c | target_skin_c, material, condition
+    /// and an optional repetition; repeat for several files.
     #[arg(long)]
     curves: Vec<PathBuf>,
 }

@@ -22,13 +22,15 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use serde_json::json;
 use thermode_device::DeviceConfig;
 use thermode_lab::design::{Experiment, ExperimentFile};
 use thermode_lab::participant::{CurveFeatures, SimulatedParticipant, PAPER_REAL_IDENTIFICATION_RATE};
+use thermode_lab::runner::live::{LiveSettings, LiveStimulus};
 use thermode_lab::runner::stimulus::{DisplaySetup, DisplayStimulus};
+use thermode_lab::runner::ws_link::WsLink;
 use thermode_lab::runner::{
     participant_plan, FvContact, InteractiveResponder, ModelStimulus, Responder, Runner, ScriptedResponses, Stimulus,
     TerminalConsole,
@@ -38,6 +40,7 @@ use thermode_pipeline::controllers::GainsSource;
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::MonotonicClock;
 
+use super::serve::{self, ControllerArg, DisplayArgs};
 use crate::resolve;
 
 /// What presents the materials.
@@ -102,9 +105,32 @@ pub struct LabRunArgs {
     /// The display's controller (with `--stimulus display`; default model).
     #[arg(long, value_enum)]
     controller: Option<LabControllerArg>,
-    /// The display's device file (TOML; with `--stimulus display`); default: the built-in default display.
+    /// The display's device file (TOML; with `--device` or `--stimulus display`); default: the built-in default
+    /// display.
     #[arg(long, value_name = "FILE")]
     device_file: Option<PathBuf>,
+    /// Present on a running display: the `ws://HOST:PORT` of a `thermode serve` (with `--token` if it has one).
+    /// The finger is measured on it (docs/lab.md).
+    #[arg(long, value_name = "ws://HOST:PORT", conflicts_with_all = ["device", "simulate"])]
+    display: Option<String>,
+    /// The token of the daemon of `--display`.
+    #[arg(long, value_name = "T", requires = "display")]
+    token: Option<String>,
+    /// Present on a display connected to this machine: the values `thermode serve --device` takes (`sim` is the
+    /// simulated display in real time, `serial:PATH`, `mecom:PATH`, …); thermode runs it as `serve` would, on
+    /// loopback only, for this session.
+    #[arg(long, value_name = "DEVICE", conflicts_with = "simulate")]
+    device: Option<String>,
+    /// The display channel (finger) the trials are presented on, with `--display` or `--device`.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    channel: usize,
+    /// Directory of the dose ledger of `--device` (as `serve --state-dir`).
+    #[arg(long = "state-dir", value_name = "DIR", requires = "device")]
+    state_dir: Option<PathBuf>,
+    /// Simulate instead: no display; the materials are rendered offline (`--stimulus`) and every finger
+    /// temperature is the simulation's (kept in the `model_finger_*` columns).
+    #[arg(long)]
+    simulate: bool,
 }
 
 /// Runs `thermode lab run`.
@@ -124,11 +150,37 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
     for participant in &participants {
         participant_plan(&experiment, participant)?;
     }
+    let live = args.display.is_some() || args.device.is_some();
+    if !live && !args.simulate {
+        bail!(
+            "choose where the materials are presented: --display ws://HOST:PORT (a running `thermode serve`), \
+             --device DEVICE (a display on this machine) or --simulate (the offline simulation)"
+        );
+    }
     let mut stdout = std::io::stdout();
+    if live {
+        let [participant] = participants.as_slice() else {
+            bail!("a display presents to one participant at a time: give one --participant");
+        };
+        if args.time_scale != 1.0 {
+            bail!("--time-scale {}: a display presents in real time (1)", args.time_scale);
+        }
+        return run_live(args, &experiment, participant, &mut stdout);
+    }
     match participants.as_slice() {
         [one] => {
             let prepared = prepare(args, &experiment.experiment, &mut stdout)?;
-            session(args, &experiment, one, &prepared, std::io::stdin().lock(), &mut stdout)
+            let mut boxed = prepared.stimulus.fresh();
+            let stimulus: (&mut dyn Stimulus, _) = (&mut *boxed, &prepared.description);
+            session(
+                args,
+                &experiment,
+                one,
+                stimulus,
+                &prepared.who,
+                std::io::stdin().lock(),
+                &mut stdout,
+            )
         }
         _ => run_batch(args, &experiment, &participants),
     }
@@ -137,10 +189,15 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
 /// What every participant's session starts from: the prepared stimulus, the responder and their descriptions.
 struct Prepared {
     stimulus: PreparedStimulus,
+    who: Answers,
+    description: serde_json::Value,
+}
+
+/// Who answers, and its description for the sidecar.
+struct Answers {
     /// The calibrated simulated participant (`None`: keyboard or responses file).
     simulated: Option<SimulatedParticipant>,
     answers: String,
-    description: serde_json::Value,
 }
 
 /// A stimulus ready to present, copied for each session.
@@ -150,6 +207,7 @@ enum PreparedStimulus {
 }
 
 impl PreparedStimulus {
+    /// A copy for one session.
     fn fresh(&self) -> Box<dyn Stimulus> {
         match self {
             PreparedStimulus::Model(s) => Box::new(s.as_ref().clone()),
@@ -158,10 +216,26 @@ impl PreparedStimulus {
     }
 }
 
-/// Prepares the stimulus and calibrates the simulated participant (once for a batch), messages to `out`.
+/// The simulated display's stimulus of `--simulate`, prepared once (batches copy it).
 fn prepare(args: &LabRunArgs, design: &Experiment, out: &mut dyn Write) -> Result<Prepared> {
     let (stimulus, references, description) = stimulus(args, design, out)?;
-    let (simulated, answers) = if args.simulated_participant {
+    let (simulated, answers) = answers(args, design, references, out)?;
+    Ok(Prepared {
+        stimulus,
+        who: Answers { simulated, answers },
+        description,
+    })
+}
+
+/// Who answers: the simulated participant calibrated on `references` (with `--simulated-participant`), a
+/// responses file or the keyboard; and its description for the sidecar.
+fn answers(
+    args: &LabRunArgs,
+    design: &Experiment,
+    references: Vec<CurveFeatures>,
+    out: &mut dyn Write,
+) -> Result<(Option<SimulatedParticipant>, String)> {
+    Ok(if args.simulated_participant {
         let mut simulated = SimulatedParticipant::new(design.response_options.clone(), references, design.seed);
         let calibration = simulated.calibrate(PAPER_REAL_IDENTIFICATION_RATE, CALIBRATION_SAMPLES, CALIBRATION_SEED)?;
         writeln!(
@@ -176,13 +250,75 @@ fn prepare(args: &LabRunArgs, design: &Experiment, out: &mut dyn Write) -> Resul
         (None, format!("responses file {}", path.display()))
     } else {
         (None, "keyboard".to_string())
-    };
-    Ok(Prepared {
-        stimulus,
-        simulated,
-        answers,
-        description,
     })
+}
+
+/// Runs one participant on a real display: a running daemon (`--display`) or one started for the session
+/// (`--device`), the finger measured on it.
+fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, out: &mut dyn Write) -> Result<()> {
+    let design = &experiment.experiment;
+    let (daemon, url, token) = match (&args.display, &args.device) {
+        (Some(url), _) => (None, url.clone(), args.token.clone()),
+        (None, Some(device)) => {
+            let display = DisplayArgs {
+                device: device.clone(),
+                device_file: args.device_file.clone(),
+                channels: None,
+                controller: match args.controller {
+                    Some(LabControllerArg::Pid) => ControllerArg::Pid,
+                    _ => ControllerArg::Model,
+                },
+                seed: 1,
+            };
+            let (daemon, token) = serve::start_private(&display, args.state_dir.clone())?;
+            let url = format!("ws://{}", daemon.http_addr());
+            (Some(daemon), url, Some(token))
+        }
+        (None, None) => bail!("--display or --device"),
+    };
+    let result = (|| {
+        let link = WsLink::connect(&url, token.as_deref(), args.channel)?;
+        let mut stimulus = LiveStimulus::new(link, LiveSettings::default())?;
+        if args.simulated_participant {
+            stimulus = stimulus.with_modelled_real_contact(FvContact::default());
+        }
+        writeln!(
+            out,
+            "presenting on {} channel {}",
+            args.device.as_deref().unwrap_or(&url),
+            args.channel
+        )?;
+        // The simulated participant compares what it feels with real contact under the fv model.
+        let contact = FvContact::default();
+        let mut references = Vec::new();
+        for name in &design.response_options {
+            references.push(CurveFeatures::of(&contact.curve(
+                &find(name)?,
+                None,
+                design.presentation_s,
+            )?)?);
+        }
+        let (simulated, answers) = answers(args, design, references, out)?;
+        let who = Answers { simulated, answers };
+        let description = stimulus.describe();
+        let input = std::io::stdin().lock();
+        session(
+            args,
+            experiment,
+            participant,
+            (&mut stimulus, &description),
+            &who,
+            input,
+            out,
+        )
+    })();
+    if let Some(daemon) = daemon {
+        let report = daemon.stop()?;
+        if let Some(Err(e)) = report.all_off {
+            return Err(e).context("switching every drive off at the end of the session");
+        }
+    }
+    result
 }
 
 /// What a session of a batch printed, and how it ended.
@@ -210,7 +346,10 @@ fn run_batch(args: &LabRunArgs, experiment: &ExperimentFile, participants: &[Str
                     break;
                 };
                 let mut out = Vec::new();
-                let result = session(args, experiment, participant, &prepared, std::io::empty(), &mut out);
+                let mut boxed = prepared.stimulus.fresh();
+                let stimulus: (&mut dyn Stimulus, _) = (&mut *boxed, &prepared.description);
+                let input = std::io::empty();
+                let result = session(args, experiment, participant, stimulus, &prepared.who, input, &mut out);
                 if let Ok(mut slot) = results[index].lock() {
                     *slot = Some((out, result));
                 }
@@ -249,14 +388,14 @@ fn session(
     args: &LabRunArgs,
     experiment: &ExperimentFile,
     participant: &str,
-    prepared: &Prepared,
+    (stimulus, description): (&mut dyn Stimulus, &serde_json::Value),
+    who: &Answers,
     input: impl BufRead,
     out: &mut dyn Write,
 ) -> Result<()> {
     let clock = MonotonicClock::new();
     let design = &experiment.experiment;
-    let mut stimulus = prepared.stimulus.fresh();
-    let mut responder: Box<dyn Responder> = match (&prepared.simulated, &args.responses) {
+    let mut responder: Box<dyn Responder> = match (&who.simulated, &args.responses) {
         (Some(simulated), _) => Box::new(simulated.clone()),
         (None, Some(path)) => Box::new(ScriptedResponses::load(
             path,
@@ -266,8 +405,8 @@ fn session(
         (None, None) => Box::new(InteractiveResponder),
     };
     let device = json!({
-        "stimulus": prepared.description,
-        "answers": prepared.answers,
+        "stimulus": description,
+        "answers": who.answers,
         "time_scale": args.time_scale,
     });
     let interactive = !args.simulated_participant && args.responses.is_none();
@@ -277,7 +416,7 @@ fn session(
         participant,
         data_dir: &args.data_dir,
         device,
-        stimulus: stimulus.as_mut(),
+        stimulus,
         responder: responder.as_mut(),
         clock: &clock,
         time_scale: args.time_scale,

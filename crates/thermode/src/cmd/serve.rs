@@ -225,6 +225,43 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Displ
 
 /// Starts the daemon of `args` and prints where it listens.
 pub fn start(args: &ServeArgs) -> Result<Daemon> {
+    let (daemon, description) = start_quiet(args)?;
+    print_banner(&daemon, &description, args);
+    Ok(daemon)
+}
+
+/// Starts `display` as `serve` would, for `thermode lab run --device`: on loopback at a free port, without OSC,
+/// with a random token of its own (so no other local program can drive it), the dose ledger in `state_dir` (the
+/// default when `None`). Prints no banner. Returns the daemon and its token.
+pub fn start_private(display: &DisplayArgs, state_dir: Option<PathBuf>) -> Result<(Daemon, String)> {
+    use std::hash::BuildHasher;
+    let random = std::collections::hash_map::RandomState::new();
+    let token = format!("{:016x}{:016x}", random.hash_one(1u8), random.hash_one(2u8));
+    let args = ServeArgs {
+        display: display.clone(),
+        rate: 100.0,
+        bind: IpAddr::from([127, 0, 0, 1]),
+        port: 0,
+        osc_port: 0,
+        no_osc: true,
+        osc_without_token: false,
+        token: Some(token.clone()),
+        allow_origin: Vec::new(),
+        record: None,
+        on_record_error: OnRecordError::Stop,
+        record_max_bytes: None,
+        release_after: 2.0,
+        duration: None,
+        state_dir,
+        no_realtime: false,
+        lsl: false,
+        lsl_name: "thermode".to_string(),
+    };
+    Ok((start_quiet(&args)?.0, token))
+}
+
+/// Starts the daemon of `args`; returns it and the display's description.
+fn start_quiet(args: &ServeArgs) -> Result<(Daemon, String)> {
     // Every option is checked before a port is opened or a device touched.
     check_duration(args.duration)?;
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
@@ -264,8 +301,7 @@ pub fn start(args: &ServeArgs) -> Result<Daemon> {
         }),
     };
     let daemon = Daemon::start(config, display.device, display.engines, clock)?;
-    print_banner(&daemon, &display.description, args);
-    Ok(daemon)
+    Ok((daemon, display.description))
 }
 
 fn print_banner(daemon: &Daemon, description: &str, args: &ServeArgs) {

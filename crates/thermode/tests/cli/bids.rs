@@ -37,6 +37,7 @@ fn lab_folder(root: &Path) -> (PathBuf, PathBuf) {
         thermode(&[
             "lab",
             "run",
+            "--simulate",
             "--experiment",
             &paper(),
             "--participant",
