@@ -8,7 +8,7 @@
 //! their `excluded` field is checked. Header names are matched trimmed and case-insensitively; every other column
 //! is kept with the trial (and echoed in `trials.csv`) but ignored by the statistics.
 //!
-//! The response options are the set of materials presented anywhere in the (included) data; an identified material
+//! The response options are the set of materials presented anywhere in the data (excluded trials too: their materials were offered all the same); an identified material
 //! outside that set is an error. The options are ordered by conductivity, highest first (the paper's Table 1 order:
 //! aluminium, steel, stone, wood, rubber), ties by name.
 
@@ -310,6 +310,9 @@ fn read_trials(
             let is_excluded = parse_excluded(value)
                 .ok_or_else(|| table.bad_value(line, "excluded", value, "expected true/false/1/0/yes/no or empty"))?;
             if is_excluded {
+                // Its material was still presented: it stays a response option.
+                let shown = resolver.resolve_at(table, line, "presented", &fields[cols.presented])?;
+                presented.entry(shown.name.clone()).or_insert(shown);
                 excluded += 1;
                 continue;
             }
