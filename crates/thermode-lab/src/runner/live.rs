@@ -284,7 +284,9 @@ impl<L: DisplayLink> LiveStimulus<L> {
         loop {
             let sample = self.sample()?;
             let t_s = sample.loop_time_s - start_s;
-            if t_s < 0.0 {
+            // Before the touch, or the same tick again (a subscriber gets the newest snapshot at its rate: a late
+            // loop publishes one tick twice).
+            if t_s < 0.0 || trace.time_s.last().is_some_and(|&last| t_s <= last) {
                 continue;
             }
             trace.time_s.push(t_s);
@@ -332,11 +334,21 @@ impl<L: DisplayLink> Stimulus for LiveStimulus<L> {
         self.note_unsettled("after", trial, &after);
         let curve = match request.condition {
             // What the simulated participant feels: the measured finger, its time from the first sample.
-            Condition::Simulated => Some(SkinCurve {
-                time_s: trace.time_s.iter().map(|t| t - trace.time_s[0]).collect(),
-                skin_c: trace.samples.iter().map(|s| s.finger_c).collect(),
-            })
-            .filter(|c| c.validate().is_ok()),
+            Condition::Simulated => {
+                let measured = trace
+                    .time_s
+                    .iter()
+                    .zip(&trace.samples)
+                    .filter(|(_, s)| s.finger_c.is_finite());
+                let (time_s, skin_c): (Vec<f64>, Vec<f64>) = measured.map(|(t, s)| (*t, s.finger_c)).unzip();
+                let first_s = time_s.first().copied().unwrap_or(0.0);
+                let curve = SkinCurve {
+                    time_s: time_s.iter().map(|t| t - first_s).collect(),
+                    skin_c,
+                };
+                curve.validate()?;
+                Some(curve)
+            }
             Condition::Real => match &self.real_contact {
                 Some(contact) => Some(contact.curve(request.material, Some(before.finger_c), request.duration_s)?),
                 None => None,
