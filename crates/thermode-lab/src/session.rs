@@ -25,7 +25,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use thermode_platform::{parse_iso_date, write_bytes_atomically};
+use thermode_platform::{parse_iso_date, utc_iso8601_ms, write_bytes_atomically};
 use thiserror::Error;
 
 use crate::design::{Experiment, ExperimentFile};
@@ -233,6 +233,9 @@ pub struct ResumeNote {
     pub software_version: String,
     /// Device configuration at the resume.
     pub device: serde_json::Value,
+    /// When the resume started (UTC, ISO 8601 with milliseconds).
+    #[serde(default)]
+    pub started_utc: String,
 }
 
 /// The sidecar JSON of a session.
@@ -248,6 +251,9 @@ pub struct Sidecar {
     pub experiment: String,
     /// Date the session started (`YYYY-MM-DD`).
     pub session_date: String,
+    /// When the session started (UTC, ISO 8601 with milliseconds; empty in format 1).
+    #[serde(default)]
+    pub started_utc: String,
     /// The design's seed.
     pub seed: u64,
     /// Software name.
@@ -284,6 +290,8 @@ pub struct SessionSpec<'a> {
     pub data_dir: &'a Path,
     /// Today's date (`YYYY-MM-DD`), used for a new session and noted on a resume.
     pub today: &'a str,
+    /// The wall-clock time now (s since 1970, UTC), noted as the start of a new session or a resume.
+    pub now_unix_s: f64,
     /// Device configuration for the sidecar.
     pub device: &'a serde_json::Value,
 }
@@ -328,6 +336,7 @@ impl SessionFile {
             participant_index: spec.plan.index,
             experiment: design.name.clone(),
             session_date: spec.today.to_string(),
+            started_utc: utc_iso8601_ms(spec.now_unix_s),
             seed: design.seed,
             software: "thermode-lab".to_string(),
             software_version: SOFTWARE_VERSION.to_string(),
@@ -360,6 +369,7 @@ impl SessionFile {
                 removed_torn_row: session.removed_torn_row,
                 software_version: SOFTWARE_VERSION.to_string(),
                 device: spec.device.clone(),
+                started_utc: utc_iso8601_ms(spec.now_unix_s),
             });
             write_sidecar(&session.sidecar_path, &sidecar)?;
             session.sidecar = sidecar;

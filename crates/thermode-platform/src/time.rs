@@ -233,6 +233,15 @@ pub fn utc_iso8601(unix_s: i64) -> String {
     format!("{year:04}-{month:02}-{day:02}T{hour:02}:{minute:02}:{second:02}Z")
 }
 
+/// `unix_s` (s since 1970, UTC) as `YYYY-MM-DDTHH:MM:SS.mmmZ` (ISO 8601 with milliseconds, truncated; for clock
+/// alignment of recordings and lab sessions).
+pub fn utc_iso8601_ms(unix_s: f64) -> String {
+    let whole_s = unix_s.floor();
+    let millis = (((unix_s - whole_s) * 1000.0).floor() as u32).min(999);
+    let iso = utc_iso8601(whole_s as i64);
+    format!("{}.{millis:03}Z", iso.trim_end_matches('Z'))
+}
+
 /// Why a [`Ticker`] was refused.
 #[derive(Debug, Clone, Copy, PartialEq, Error)]
 pub enum TickerError {
@@ -343,6 +352,15 @@ impl Ticker {
 mod tests {
     use super::*;
     use std::sync::Arc;
+
+    #[test]
+    fn iso_timestamps_with_milliseconds_truncate_and_roll_over_correctly() {
+        // 2023-11-14T22:13:20Z is 1 700 000 000 s (GNU `date -u -d @1700000000`).
+        assert_eq!(utc_iso8601_ms(1_700_000_000.0), "2023-11-14T22:13:20.000Z");
+        assert_eq!(utc_iso8601_ms(1_700_000_000.9996), "2023-11-14T22:13:20.999Z");
+        assert_eq!(utc_iso8601_ms(1_700_000_059.25), "2023-11-14T22:14:19.250Z");
+        assert_eq!(utc_iso8601_ms(-0.5), "1969-12-31T23:59:59.500Z");
+    }
 
     #[test]
     fn manual_clock_moves_only_forward() {

@@ -604,13 +604,10 @@ fn start_lsl(
 fn write_clock_sidecar(csv: &Path, clock: &dyn Clock) -> Result<(), RuntimeError> {
     let (now_s, unix_s) = (clock.now_s(), clock.unix_time_s());
     let zero_unix_s = unix_s - now_s;
-    let whole_s = zero_unix_s.floor();
-    let iso = thermode_platform::utc_iso8601(whole_s as i64);
-    let millis = (((zero_unix_s - whole_s) * 1000.0).floor() as u32).min(999);
     let text = serde_json::json!({
         "recording": csv.file_name().map(|n| n.to_string_lossy().into_owned()),
         "time_s": "loop time: monotonic seconds of the daemon's clock (CLOCK_MONOTONIC), about 0 at the start",
-        "loop_time_zero_utc": format!("{}.{millis:03}Z", iso.trim_end_matches('Z')),
+        "loop_time_zero_utc": thermode_platform::utc_iso8601_ms(zero_unix_s),
         "loop_time_zero_unix_s": zero_unix_s,
         "measured_at_loop_time_s": now_s,
         "alignment": "unix_time_s = loop_time_zero_unix_s + time_s; with --lsl see the .lsl.json beside it",

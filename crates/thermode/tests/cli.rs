@@ -806,7 +806,8 @@ fn serve_checks_its_options_before_opening_ports_and_says_who_holds_a_port() {
     );
 }
 
-/// Every file of `dir`, by name, with its bytes.
+/// Every file of `dir`, by name, with its text, less the sidecars' wall-clock start (`started_utc`: the one thing
+/// that differs between two runs of the same simulation).
 fn files_of(dir: &Path) -> Vec<(String, String)> {
     let mut files: Vec<(String, String)> = std::fs::read_dir(dir)
         .expect("read dir")
@@ -816,7 +817,9 @@ fn files_of(dir: &Path) -> Vec<(String, String)> {
                 .file_name()
                 .map(|n| n.to_string_lossy().to_string())
                 .unwrap_or_default();
-            (name, std::fs::read_to_string(&path).expect("read file"))
+            let text = std::fs::read_to_string(&path).expect("read file");
+            let kept: Vec<&str> = text.lines().filter(|l| !l.contains("\"started_utc\"")).collect();
+            (name, kept.join("\n"))
         })
         .collect();
     files.sort();
@@ -990,6 +993,19 @@ fn lab_run_on_a_display_measures_the_finger_on_it_and_keeps_each_trials_curve() 
     assert!(
         analysis.contains("\"finger_c\""),
         "the curve's temperature is the measured finger: {analysis}"
+    );
+    let sidecar: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(Path::new(&session).with_extension("json")).expect("sidecar"))
+            .expect("JSON sidecar");
+    let started = sidecar["started_utc"].as_str().unwrap_or_default();
+    assert!(
+        started.len() == 24 && started.ends_with('Z'),
+        "UTC ISO 8601 start with ms: {started}"
+    );
+    let display = &sidecar["device"]["stimulus"]["display"];
+    assert!(
+        display["loop_time_zero_unix_s"].as_f64().is_some_and(f64::is_finite),
+        "{display}"
     );
     let again = expect_success(&args);
     assert!(again.contains("session already complete"), "{again}");

@@ -182,6 +182,7 @@ impl Runner<'_> {
             plan: &plan,
             data_dir: self.data_dir,
             today: &today,
+            now_unix_s: self.clock.unix_time_s(),
             device: &self.device,
         })?;
         let recorded_before = session.records().len();

@@ -30,6 +30,17 @@ pub struct WsLink {
     next_id: u64,
     pending: VecDeque<DisplaySample>,
     status: Value,
+    /// The wall-clock time of the daemon's loop time zero \[s since 1970, UTC\], from the status at connect.
+    loop_time_zero_unix_s: f64,
+    /// Half the status request's round trip: the uncertainty of that zero \[s\].
+    loop_time_zero_uncertainty_s: f64,
+}
+
+/// The system's wall clock \[s since 1970, UTC\].
+fn unix_now_s() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
 }
 
 fn device(message: impl Into<String>) -> StimulusError {
@@ -80,8 +91,16 @@ impl WsLink {
             next_id: 0,
             pending: VecDeque::new(),
             status: Value::Null,
+            loop_time_zero_unix_s: f64::NAN,
+            loop_time_zero_uncertainty_s: f64::NAN,
         };
+        let sent_unix_s = unix_now_s();
         link.status = link.request(json!({"type": "status"}))?;
+        let received_unix_s = unix_now_s();
+        if let Some(loop_s) = link.status["time_s"].as_f64() {
+            link.loop_time_zero_unix_s = 0.5 * (sent_unix_s + received_unix_s) - loop_s;
+            link.loop_time_zero_uncertainty_s = 0.5 * (received_unix_s - sent_unix_s);
+        }
         let count = link.status["channel_count"].as_u64().unwrap_or(0) as usize;
         if channel >= count {
             return Err(device(format!(
@@ -220,6 +239,10 @@ impl DisplayLink for WsLink {
             "device": self.status["device"],
             "loop_rate_hz": self.status["loop"]["rate_hz"],
             "limits": self.status["limits"],
+            "loop_time_zero_utc": thermode_platform::utc_iso8601_ms(self.loop_time_zero_unix_s),
+            "loop_time_zero_unix_s": self.loop_time_zero_unix_s,
+            "loop_time_zero_uncertainty_s": self.loop_time_zero_uncertainty_s,
+            "alignment": "unix_time_s = loop_time_zero_unix_s + loop_time_s (the trial curves' column)",
         })
     }
 }
