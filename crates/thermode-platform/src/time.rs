@@ -357,7 +357,7 @@ mod tests {
     fn iso_timestamps_with_milliseconds_truncate_and_roll_over_correctly() {
         // 2023-11-14T22:13:20Z is 1 700 000 000 s (GNU `date -u -d @1700000000`).
         assert_eq!(utc_iso8601_ms(1_700_000_000.0), "2023-11-14T22:13:20.000Z");
-        assert_eq!(utc_iso8601_ms(1_700_000_000.9996), "2023-11-14T22:13:20.999Z");
+        assert_eq!(utc_iso8601_ms(1_700_000_000.999_6), "2023-11-14T22:13:20.999Z");
         assert_eq!(utc_iso8601_ms(1_700_000_059.25), "2023-11-14T22:14:19.250Z");
         assert_eq!(utc_iso8601_ms(-0.5), "1969-12-31T23:59:59.500Z");
     }
