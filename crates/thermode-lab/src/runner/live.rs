@@ -53,8 +53,9 @@ pub trait DisplayLink {
     fn touch(&mut self, material: &Material) -> Result<f64, StimulusError>;
     /// Releases the channel (the display renders air); returns the loop time \[s\].
     fn release(&mut self) -> Result<f64, StimulusError>;
-    /// Sends an event marker (the daemon's marker stream).
-    fn marker(&mut self, text: &str) -> Result<(), StimulusError>;
+    /// Sends an event marker (the daemon's marker stream); returns the LSL clock minus the loop clock at the
+    /// marker \[s\] when the daemon publishes LSL (`serve --lsl`), else `None`.
+    fn marker(&mut self, text: &str) -> Result<Option<f64>, StimulusError>;
     /// The channel's next telemetry sample (blocks until it comes; an error when the link is silent).
     fn next_sample(&mut self) -> Result<DisplaySample, StimulusError>;
     /// What the display is, for the session sidecar.
@@ -87,12 +88,13 @@ impl Default for LiveSettings {
 }
 
 /// The columns of a trial's curve file, in order.
-pub const TRACE_COLUMNS: [&str; 12] = [
+pub const TRACE_COLUMNS: [&str; 13] = [
     "trial",
     "condition",
     "material",
     "time_s",
     "loop_time_s",
+    "lsl_time_s",
     "target_skin_c",
     "skin_c",
     "finger_c",
@@ -119,6 +121,9 @@ pub struct TrialTrace {
     pub samples: Vec<DisplaySample>,
     /// Whether the finger touched the rendered material (a simulated trial) or the display rendered air.
     pub contact: bool,
+    /// The LSL clock minus the loop clock at the trial's start marker \[s\] (`None` without LSL): the curve's
+    /// `lsl_time_s` is `loop_time_s` plus it.
+    pub lsl_minus_loop_s: Option<f64>,
 }
 
 impl TrialTrace {
@@ -133,6 +138,8 @@ impl TrialTrace {
             let values = [
                 (t * 1e6).round() / 1e6,
                 s.loop_time_s,
+                self.lsl_minus_loop_s
+                    .map_or(f64::NAN, |offset_s| s.loop_time_s + offset_s),
                 s.target_skin_c,
                 s.skin_c,
                 finger(s.finger_c),
@@ -279,6 +286,7 @@ impl<L: DisplayLink> LiveStimulus<L> {
             time_s: Vec::new(),
             samples: Vec::new(),
             contact,
+            lsl_minus_loop_s: None,
         };
         let duration_s = request.duration_s;
         loop {
@@ -314,8 +322,8 @@ impl<L: DisplayLink> Stimulus for LiveStimulus<L> {
         self.note_unsettled("before", trial, &before);
         let name = &request.material.name;
         let condition = request.condition.name();
-        self.link.marker(&format!("trial {trial} start {condition} {name}"))?;
-        let trace = match request.condition {
+        let lsl_minus_loop_s = self.link.marker(&format!("trial {trial} start {condition} {name}"))?;
+        let mut trace = match request.condition {
             Condition::Simulated => {
                 let touch_s = self.link.touch(request.material)?;
                 let trace = self.trace(request, touch_s);
@@ -329,6 +337,7 @@ impl<L: DisplayLink> Stimulus for LiveStimulus<L> {
                 self.trace(request, start_s)?
             }
         };
+        trace.lsl_minus_loop_s = lsl_minus_loop_s;
         self.link.marker(&format!("trial {trial} end"))?;
         let after = self.measure_at_rest()?;
         self.note_unsettled("after", trial, &after);
@@ -392,9 +401,9 @@ mod tests {
             self.contact = false;
             Ok(self.time_s)
         }
-        fn marker(&mut self, text: &str) -> Result<(), StimulusError> {
+        fn marker(&mut self, text: &str) -> Result<Option<f64>, StimulusError> {
             self.markers.push(text.to_string());
-            Ok(())
+            Ok(Some(1000.0))
         }
         fn next_sample(&mut self) -> Result<DisplaySample, StimulusError> {
             self.time_s += 0.01;
@@ -485,13 +494,13 @@ mod tests {
         assert_eq!(live.link.markers, ["trial 3 start simulated aluminium", "trial 3 end"]);
         let csv = trace.to_csv();
         assert!(
-            csv.starts_with("trial,condition,material,time_s,loop_time_s,target_skin_c,"),
+            csv.starts_with("trial,condition,material,time_s,loop_time_s,lsl_time_s,target_skin_c,"),
             "{csv}"
         );
         assert!(
             csv.lines()
                 .nth(1)
-                .is_some_and(|l| l.starts_with("3,simulated,aluminium,0.01,")),
+                .is_some_and(|l| l.starts_with("3,simulated,aluminium,0.01,3.0299999999999794,1003.03,")),
             "{csv}"
         );
         assert_eq!(csv.lines().count(), trace.time_s.len() + 1);
@@ -530,7 +539,7 @@ mod tests {
             fn release(&mut self) -> Result<f64, StimulusError> {
                 self.0.release()
             }
-            fn marker(&mut self, text: &str) -> Result<(), StimulusError> {
+            fn marker(&mut self, text: &str) -> Result<Option<f64>, StimulusError> {
                 self.0.marker(text)
             }
             fn next_sample(&mut self) -> Result<DisplaySample, StimulusError> {

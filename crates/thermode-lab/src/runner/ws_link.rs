@@ -212,9 +212,12 @@ impl DisplayLink for WsLink {
         Self::time_of(&reply)
     }
 
-    fn marker(&mut self, text: &str) -> Result<(), StimulusError> {
-        self.request(json!({"type": "marker", "text": text, "channel": self.channel}))
-            .map(|_| ())
+    fn marker(&mut self, text: &str) -> Result<Option<f64>, StimulusError> {
+        let reply = self.request(json!({"type": "marker", "text": text, "channel": self.channel}))?;
+        Ok(reply["lsl_time_s"]
+            .as_f64()
+            .zip(reply["time_s"].as_f64())
+            .map(|(lsl_s, loop_s)| lsl_s - loop_s))
     }
 
     fn next_sample(&mut self) -> Result<DisplaySample, StimulusError> {
