@@ -278,6 +278,13 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
     };
     let result = (|| {
         let link = WsLink::connect(&url, token.as_deref(), args.channel)?;
+        let device = link.status()["device"].as_str().unwrap_or_default().to_string();
+        if device.starts_with("tcs2:") || device.contains("mode=temperature") {
+            bail!(
+                "{device} regulates its plate itself, so the plate's heat balance cannot measure the finger on it \
+                 (docs/lab.md): run the lab on a current-commanded display"
+            );
+        }
         let mut stimulus = LiveStimulus::new(link, LiveSettings::default())?;
         if args.simulated_participant {
             stimulus = stimulus.with_modelled_real_contact(FvContact::default());
