@@ -45,6 +45,8 @@ pub struct DisplaySample {
     pub current_a: f64,
     /// The latched fault code (0: none).
     pub fault: u16,
+    /// Whether the channel renders a touch (the daemon's `contact`).
+    pub contact: bool,
 }
 
 /// A running display, one channel of it: what [`LiveStimulus`] needs.
@@ -237,14 +239,25 @@ impl<L: DisplayLink> LiveStimulus<L> {
 
     /// Releases the channel and measures the resting finger.
     pub fn measure_at_rest(&mut self) -> Result<RestMeasurement, StimulusError> {
-        self.link.release()?;
-        let first = self.sample()?;
+        let released_s = self.link.release()?;
+        // Telemetry from before the release (it may have arrived while the reply was awaited) is not the rest.
+        let mut first = self.sample()?;
+        while first.loop_time_s < released_s {
+            first = self.sample()?;
+        }
         let start_s = first.loop_time_s;
         let (mut previous, mut window): (Option<f64>, Vec<f64>) = (None, Vec::new());
         let (mut window_start_s, mut last_finite_s) = (start_s, start_s);
         loop {
             let sample = self.sample()?;
             let now_s = sample.loop_time_s;
+            if sample.contact {
+                return Err(StimulusError::Device(
+                    "the channel was touched while the finger rested on it (another client?): the finger cannot be \
+                     measured; the trial is not recorded"
+                        .into(),
+                ));
+            }
             if !sample.finger_c.is_finite() {
                 if now_s - last_finite_s > 2.0 * self.settings.window_s {
                     return Err(StimulusError::Device(
@@ -296,6 +309,14 @@ impl<L: DisplayLink> LiveStimulus<L> {
             // loop publishes one tick twice).
             if t_s < 0.0 || trace.time_s.last().is_some_and(|&last| t_s <= last) {
                 continue;
+            }
+            if sample.contact != contact {
+                return Err(StimulusError::Device(format!(
+                    "trial {}: the channel {} at {t_s:.2} s of the presentation (a stop all, another client or the \
+                     dose limit); the trial is not recorded; run the same command to repeat it",
+                    request.trial,
+                    if contact { "left the touch" } else { "was touched" }
+                )));
             }
             trace.time_s.push(t_s);
             trace.samples.push(sample);
@@ -390,6 +411,7 @@ mod tests {
         contact: bool,
         markers: Vec<String>,
         fault_at_s: Option<f64>,
+        interrupt_at_s: Option<f64>,
     }
 
     impl DisplayLink for FakeDisplay {
@@ -419,6 +441,7 @@ mod tests {
                 display_setpoint_c: self.finger_c,
                 current_a: 0.0,
                 fault: if fault { 104 } else { 0 },
+                contact: self.contact && self.time_s < self.interrupt_at_s.unwrap_or(f64::INFINITY),
             })
         }
         fn describe(&self) -> serde_json::Value {
@@ -434,6 +457,7 @@ mod tests {
             contact: false,
             markers: Vec::new(),
             fault_at_s: None,
+            interrupt_at_s: None,
         }
     }
 
@@ -527,6 +551,15 @@ mod tests {
             .present(&request(&wood, Condition::Simulated))
             .expect_err("faulted");
         assert!(error.to_string().contains("code 104"), "{error}");
+        let stopped = FakeDisplay {
+            interrupt_at_s: Some(6.0),
+            ..fake(32.0)
+        };
+        let mut live = LiveStimulus::new(stopped, LiveSettings::default()).expect("settings");
+        let error = live
+            .present(&request(&wood, Condition::Simulated))
+            .expect_err("interrupted");
+        assert!(error.to_string().contains("left the touch"), "{error}");
     }
 
     #[test]

@@ -190,6 +190,7 @@ impl WsLink {
             display_setpoint_c: number("display_setpoint_c"),
             current_a: number("current_a"),
             fault: channel["fault"].as_u64().unwrap_or(0).min(u16::MAX as u64) as u16,
+            contact: channel["contact"].as_bool().unwrap_or(false),
         })
     }
 
