@@ -553,9 +553,11 @@ impl SessionFile {
         let s = &self.sidecar;
         let fingers = [r.finger_baseline_c, r.finger_start_c, r.finger_end_c].map(|c| format!("{c:.4}"));
         let v1 = s.format == SIDECAR_FORMAT_V1;
-        let (measured, model) = match (r.finger_measured || v1, fingers.clone()) {
-            (true, f) => (f, Default::default()),
-            (false, f) => (Default::default(), f),
+        // Format 1 has only `finger_*`; format 2 puts a simulation's in `model_finger_*`.
+        let (measured, model): ([String; 3], [String; 3]) = if r.finger_measured || v1 {
+            (fingers, Default::default())
+        } else {
+            (Default::default(), fingers)
         };
         let value = |name: &str| -> String {
             match name {

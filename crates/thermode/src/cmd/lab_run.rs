@@ -268,7 +268,7 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
                     Some(LabControllerArg::Pid) => ControllerArg::Pid,
                     _ => ControllerArg::Model,
                 },
-                seed: 1,
+                seed: 1, // the simulated display's sensor noise, as `serve`'s default
             };
             let (daemon, token) = serve::start_private(&display, args.state_dir.clone())?;
             let url = format!("ws://{}", daemon.http_addr());
@@ -296,15 +296,17 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
             args.channel
         )?;
         // The simulated participant compares what it feels with real contact under the fv model.
-        let contact = FvContact::default();
-        let mut references = Vec::new();
-        for name in &design.response_options {
-            references.push(CurveFeatures::of(&contact.curve(
-                &find(name)?,
-                None,
-                design.presentation_s,
-            )?)?);
-        }
+        let references = match args.simulated_participant {
+            true => {
+                let options: Vec<Material> = design
+                    .response_options
+                    .iter()
+                    .map(|n| find(n))
+                    .collect::<Result<_, _>>()?;
+                contact_references(&FvContact::default(), &options, design.presentation_s)?
+            }
+            false => Vec::new(),
+        };
         let (simulated, answers) = answers(args, design, references, out)?;
         let who = Answers { simulated, answers };
         let description = stimulus.describe();
@@ -453,14 +455,7 @@ fn stimulus(
             }
             let contact = FvContact::default();
             let stimulus = ModelStimulus::new(contact.clone(), args.finger_drift_sd_c, design.seed)?;
-            let mut references = Vec::with_capacity(options.len());
-            for material in &options {
-                references.push(CurveFeatures::of(&contact.curve(
-                    material,
-                    None,
-                    design.presentation_s,
-                )?)?);
-            }
+            let references = contact_references(&contact, &options, design.presentation_s)?;
             let description = stimulus.describe();
             Ok((PreparedStimulus::Model(Box::new(stimulus)), references, description))
         }
@@ -491,6 +486,14 @@ fn stimulus(
             Ok((PreparedStimulus::Display(Box::new(stimulus)), references, description))
         }
     }
+}
+
+/// The simulated participant's references: real contact with each option under `contact` for `duration_s`.
+fn contact_references(contact: &FvContact, options: &[Material], duration_s: f64) -> Result<Vec<CurveFeatures>> {
+    options
+        .iter()
+        .map(|material| Ok(CurveFeatures::of(&contact.curve(material, None, duration_s)?)?))
+        .collect()
 }
 
 /// The display's controller: `model` (default), or `pid` with the tuned gains of the shipped display that matches
