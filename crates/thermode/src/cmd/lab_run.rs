@@ -19,8 +19,9 @@
 
 use std::io::{BufRead, Write};
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
@@ -39,9 +40,11 @@ use thermode_model::materials::{find, Material};
 use thermode_pipeline::controllers::GainsSource;
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::MonotonicClock;
+use thermode_runtime::Daemon;
 
 use super::serve::{self, ControllerArg, DisplayArgs};
 use crate::resolve;
+use crate::signals::{StopSignals, SECOND_SIGNAL_EXIT_CODE};
 
 /// What presents the materials.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -257,6 +260,9 @@ fn answers(
 /// (`--device`), the finger measured on it.
 fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, out: &mut dyn Write) -> Result<()> {
     let design = &experiment.experiment;
+    // With --device this process runs the display: a stop signal must stop it cleanly (every drive to 0 A, the
+    // dose ledger written) before the process ends. Installed before the daemon starts its threads.
+    let signals = args.device.is_some().then(StopSignals::install).transpose()?;
     let (daemon, url, token) = match (&args.display, &args.device) {
         (Some(url), _) => (None, url.clone(), args.token.clone()),
         (None, Some(device)) => {
@@ -276,6 +282,12 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
         }
         (None, None) => bail!("--display or --device"),
     };
+    let daemon = Arc::new(Mutex::new(daemon));
+    let (done, interrupted) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
+    if let Some(signals) = signals {
+        let (daemon, done, interrupted) = (daemon.clone(), done.clone(), interrupted.clone());
+        std::thread::spawn(move || stop_on_signal(&signals, &daemon, &done, &interrupted));
+    }
     let result = (|| {
         let link = WsLink::connect(&url, token.as_deref(), args.channel)?;
         let device = link.status()["device"].as_str().unwrap_or_default().to_string();
@@ -321,13 +333,45 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
             out,
         )
     })();
-    if let Some(daemon) = daemon {
-        let report = daemon.stop()?;
-        if let Some(Err(e)) = report.all_off {
+    if interrupted.load(Ordering::SeqCst) {
+        // The session ended because the signal thread is stopping the display; it ends the process when done.
+        loop {
+            std::thread::park();
+        }
+    }
+    done.store(true, Ordering::SeqCst);
+    stop_display(&daemon)?;
+    result
+}
+
+/// Stops the display this process runs, if it still runs: every drive to 0 A, the dose ledger written.
+fn stop_display(daemon: &Mutex<Option<Daemon>>) -> Result<()> {
+    let taken = daemon.lock().ok().and_then(|mut d| d.take());
+    if let Some(daemon) = taken {
+        if let Some(Err(e)) = daemon.stop()?.all_off {
             return Err(e).context("switching every drive off at the end of the session");
         }
     }
-    result
+    Ok(())
+}
+
+/// Waits for SIGINT or SIGTERM until the session is `done`; on one, stops the display and ends the process (exit
+/// 130): the completed trials are already on disk.
+fn stop_on_signal(signals: &StopSignals, daemon: &Mutex<Option<Daemon>>, done: &AtomicBool, interrupted: &AtomicBool) {
+    while !done.load(Ordering::SeqCst) {
+        if let Some(signal) = signals.wait(Duration::from_millis(100)) {
+            interrupted.store(true, Ordering::SeqCst);
+            let stopped = match stop_display(daemon) {
+                Ok(()) => "the display is stopped (every drive at 0 A)".to_string(),
+                Err(e) => format!("stopping the display failed: {e:#}"),
+            };
+            eprintln!(
+                "thermode: {}: {stopped}; the completed trials are saved; run the same command to resume",
+                signal.as_str()
+            );
+            std::process::exit(SECOND_SIGNAL_EXIT_CODE);
+        }
+    }
 }
 
 /// What a session of a batch printed, and how it ended.
