@@ -40,6 +40,7 @@
 pub mod controller;
 pub mod error;
 pub mod filter;
+pub mod identify;
 pub mod model_controller;
 pub mod observer;
 pub mod pid;

@@ -15,6 +15,7 @@ use crate::channel::SimulatedChannel;
 use crate::config::DeviceConfig;
 use crate::error::DeviceError;
 use crate::finger::PlateFinger;
+use crate::sensor::standard_normal;
 
 /// Most channels of one display: the paper found at most about ten independently resolvable sites per hand.
 pub const MAX_CHANNELS: usize = 10;
@@ -33,6 +34,9 @@ pub struct Reading {
     pub sample_seq: u64,
     /// The current the drive delivers \[A\] (its own measurement).
     pub current_a: f64,
+    /// The voltage across the Peltier module \[V\] (its own measurement; NaN when the device does not report it).
+    /// `thermode identify` needs it: it fixes the absolute scale of the module's parameters.
+    pub voltage_v: f64,
 }
 
 impl Reading {
@@ -92,7 +96,15 @@ pub struct SimulatedDisplay<F> {
     channels: Vec<SimulatedChannel<F>>,
     commanded_a: Vec<f64>,
     time_s: f64,
+    /// The noise of each channel's voltage reading (ChaCha8 from the display's seed, stream
+    /// [`VOLTAGE_NOISE_STREAM`] + channel, apart from the sensors').
+    voltage_rngs: Vec<ChaCha8Rng>,
 }
+
+/// Standard deviation of the simulated Peltier voltage reading \[V\]: 1 mV (a TEC controller's measurement).
+pub const VOLTAGE_NOISE_V: f64 = 1e-3;
+/// First ChaCha8 stream of the voltage noise (channel k uses this + k).
+pub const VOLTAGE_NOISE_STREAM: u64 = 1 << 32;
 
 impl<F: PlateFinger> SimulatedDisplay<F> {
     /// A display with one channel per finger (1 to [`MAX_CHANNELS`]), all described by `config`.
@@ -110,10 +122,18 @@ impl<F: PlateFinger> SimulatedDisplay<F> {
             channels.push(SimulatedChannel::new(config, finger, rng)?);
         }
         let commanded_a = vec![0.0; channels.len()];
+        let voltage_rngs = (0..channels.len())
+            .map(|index| {
+                let mut rng = ChaCha8Rng::seed_from_u64(seed);
+                rng.set_stream(VOLTAGE_NOISE_STREAM + index as u64);
+                rng
+            })
+            .collect();
         Ok(SimulatedDisplay {
             channels,
             commanded_a,
             time_s: 0.0,
+            voltage_rngs,
         })
     }
 
@@ -182,6 +202,8 @@ impl<F: PlateFinger> Device for SimulatedDisplay<F> {
     }
 
     fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
+        self.channel(channel)?;
+        let voltage_noise_v = VOLTAGE_NOISE_V * standard_normal(&mut self.voltage_rngs[channel]);
         let ch = self.channel(channel)?;
         let state = ch.state();
         Ok(Reading {
@@ -190,6 +212,10 @@ impl<F: PlateFinger> Device for SimulatedDisplay<F> {
             time_s: state.sensor.time_s,
             sample_seq: state.sensor.seq,
             current_a: state.applied_current_a,
+            voltage_v: ch
+                .module()
+                .voltage_v(state.applied_current_a, state.plate_c, state.hot_side_c)
+                + voltage_noise_v,
         })
     }
 

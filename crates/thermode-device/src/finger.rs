@@ -88,3 +88,30 @@ impl PlateFinger for ModalFv {
         Ok(ModalFv::new(<FvModel as PlateFinger>::fingertip()?))
     }
 }
+
+/// No finger: the bare plate, as `thermode identify` measures a display (only the Peltier, the plate, the hot side
+/// and the water exchange heat). It couples with zero conductance and has no receptor (NaN).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct NoFinger;
+
+impl PlateCoupled for NoFinger {
+    fn receptor_affine(&self, _dt_s: f64, _conductance_w_m2k: f64) -> (f64, f64) {
+        (0.0, 0.0)
+    }
+
+    fn step_on_plate(&mut self, _dt_s: f64, _conductance_w_m2k: f64, _plate_c: f64) {}
+
+    fn receptor_c(&self) -> f64 {
+        f64::NAN
+    }
+}
+
+impl PlateFinger for NoFinger {
+    fn receptor_conductance_w_m2k(&self, _surface_contact_w_m2k: f64) -> f64 {
+        0.0
+    }
+
+    fn fingertip() -> Result<Self, ParamError> {
+        Ok(NoFinger)
+    }
+}

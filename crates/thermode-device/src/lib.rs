@@ -50,7 +50,7 @@ pub use channel::{ChannelState, Fault, HeatFlows, Polarity, SimulatedChannel, MA
 pub use config::DeviceConfig;
 pub use device::{Device, Reading, RecordedCommand, RecordingDevice, SimulatedDisplay, MAX_CHANNELS};
 pub use error::{DeviceCut, DeviceError};
-pub use finger::{default_finger, DefaultFinger, PlateFinger};
+pub use finger::{default_finger, DefaultFinger, NoFinger, PlateFinger};
 pub use link::LinkHealth;
 pub use sensor::{Pt100, SensorCondition, SensorSample, SENSOR_OPEN_READING_C, SENSOR_SHORT_READING_C};
 

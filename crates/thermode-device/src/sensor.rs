@@ -130,7 +130,7 @@ impl Pt100 {
 
     /// Takes sample number `next_sample` at `instant_s`.
     fn sample_now(&mut self, instant_s: f64) {
-        let noise = self.config.noise_c * self.standard_normal();
+        let noise = self.config.noise_c * standard_normal(&mut self.rng);
         let seq = self.next_sample;
         self.next_sample += 1;
         let value_c = match self.condition {
@@ -144,13 +144,6 @@ impl Pt100 {
             time_s: instant_s,
             seq,
         };
-    }
-
-    /// A standard normal deviate by the Box–Muller transform (one per call; the sine partner is discarded).
-    fn standard_normal(&mut self) -> f64 {
-        let u1 = 1.0 - self.rng.gen::<f64>(); // (0, 1]: the logarithm stays finite
-        let u2 = self.rng.gen::<f64>();
-        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
     }
 
     /// The latest sample (held between sample instants).
@@ -191,4 +184,11 @@ pub fn quantise(value: f64, step: f64) -> f64 {
     } else {
         value
     }
+}
+
+/// A standard normal deviate from `rng` by the Box–Muller transform (one per call; the sine partner is discarded).
+pub(crate) fn standard_normal(rng: &mut ChaCha8Rng) -> f64 {
+    let u1 = 1.0 - rng.gen::<f64>(); // (0, 1]: the logarithm stays finite
+    let u2 = rng.gen::<f64>();
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }

@@ -835,6 +835,7 @@ impl SerialDevice {
             time_s: track.time_s,
             sample_seq,
             current_a: track.current_a,
+            voltage_v: f64::NAN,
         })
     }
 }

@@ -74,6 +74,35 @@ impl Default for PeltierDatasheet {
 }
 
 impl PeltierDatasheet {
+    /// The datasheet values (quoted at `hot_side_k` \[K\]) of a module with `module`'s S, R and K — the inverse of
+    /// [`PeltierModule::from_datasheet`]: V_max = S T_h; ΔT_max the smaller root of S² (T_h − ΔT)² = 2 R K ΔT;
+    /// I_max = S (T_h − ΔT_max)/R; Q_max the predicted value ([`PeltierDatasheet::predicted_qmax_w`]). `None` when
+    /// the values give no ΔT_max between 0 and T_h.
+    pub fn from_module(module: &PeltierModule, hot_side_k: f64) -> Option<PeltierDatasheet> {
+        let (s, r, k, th) = (
+            module.seebeck_v_k,
+            module.resistance_ohm,
+            module.conductance_w_k,
+            hot_side_k,
+        );
+        // S² x² − (2 S² T_h + 2 R K) x + S² T_h² = 0.
+        let (a, b, c) = (s * s, -(2.0 * s * s * th + 2.0 * r * k), s * s * th * th);
+        let disc = b * b - 4.0 * a * c;
+        let dtmax_k = (-b - disc.max(0.0).sqrt()) / (2.0 * a);
+        if !(dtmax_k.is_finite() && dtmax_k > 0.0 && dtmax_k < th) {
+            return None;
+        }
+        let mut sheet = PeltierDatasheet {
+            imax_a: s * (th - dtmax_k) / r,
+            vmax_v: s * th,
+            qmax_w: 0.0,
+            dtmax_k,
+            hot_side_k: th,
+        };
+        sheet.qmax_w = sheet.predicted_qmax_w();
+        Some(sheet)
+    }
+
     /// The Q_max \[W\] that the standard approximations predict: V_max I_max (T_h + ΔT_max) / (2 T_h).
     pub fn predicted_qmax_w(&self) -> f64 {
         self.vmax_v * self.imax_a * (self.hot_side_k + self.dtmax_k) / (2.0 * self.hot_side_k)

@@ -8,6 +8,7 @@
 //!   of the pipeline's stages.
 //! - [`truth`]: the ground truth of a render, converged in grid and time.
 //! - [`figure`]: the paper's Figure 3 for the simulated system.
+//! - [`identify`]: `thermode identify` on the simulated display (excitation, record, fit, device file).
 //! - [`error`]: [`RenderError`], refused runs and settings.
 //!
 //! Temperatures in °C, currents in A (positive heats the display), times in s. Deterministic: the only randomness
@@ -15,6 +16,7 @@
 
 pub mod error;
 pub mod figure;
+pub mod identify;
 pub mod nelder_mead;
 pub mod run;
 pub mod summary;

@@ -363,6 +363,7 @@ const NO_READING: Reading = Reading {
     time_s: 0.0,
     sample_seq: 0,
     current_a: 0.0,
+    voltage_v: f64::NAN,
 };
 
 impl ControlLoop {

@@ -36,6 +36,8 @@ enum Command {
     Render(cmd::render::RenderArgs),
     /// Tune the paper's PID (gains and sensor filter) for a display; writes a gains file.
     Tune(cmd::tune::TuneArgs),
+    /// Identify a display (no finger on it): fit its device file's thermal parameters to an excitation.
+    Identify(cmd::identify::IdentifyArgs),
     /// Experiments: plan, run and analyse material-identification studies.
     #[command(subcommand)]
     Lab(LabCommand),
@@ -83,6 +85,7 @@ fn main() -> ExitCode {
         Command::Lab(LabCommand::Run(args)) => cmd::lab_run::run(args),
         Command::Render(args) => cmd::render::run(args),
         Command::Tune(args) => cmd::tune::run(args),
+        Command::Identify(args) => cmd::identify::run(args),
         Command::Dose(DoseCommand::Show(args)) => cmd::dose::show(args),
         Command::Dose(DoseCommand::Reset(args)) => cmd::dose::reset(args),
     };

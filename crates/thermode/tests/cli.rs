@@ -1033,3 +1033,17 @@ fn lab_run_needs_a_display_or_an_explicit_simulation() {
     );
     expect_error(&[&base[..], &["--display", "http://x"]].concat(), "ws://HOST:PORT");
 }
+
+/// `thermode identify` writes a device file that `render` reads, and refuses a display that reports no voltage.
+#[test]
+fn identify_writes_a_device_file_render_reads_and_refuses_a_display_without_voltage() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let out = tmp.path().join("identified.toml");
+    let out_arg = out.display().to_string();
+    expect_success(&["identify", "--out", &out_arg]);
+    let text = std::fs::read_to_string(&out).expect("identified file");
+    assert!(text.starts_with("# Identified by `thermode identify`"), "{text}");
+    let summary = expect_success(&["render", "--material", "wood", "--device-file", &out_arg, "--summary"]);
+    assert!(summary.contains("wood"), "{summary}");
+    expect_error(&["identify", "--device", "serial:/dev/null"], "Peltier voltage");
+}

@@ -1008,6 +1008,7 @@ impl Device for MecomDevice {
             time_s: track.time_s,
             sample_seq: track.sample_seq,
             current_a: track.current_a,
+            voltage_v: f64::NAN,
         })
     }
 

@@ -556,6 +556,7 @@ impl Device for Tcs2Device {
             time_s: state.time_s,
             sample_seq: state.sample_seq,
             current_a: 0.0,
+            voltage_v: f64::NAN,
         })
     }
 

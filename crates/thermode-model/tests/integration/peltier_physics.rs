@@ -259,3 +259,32 @@ fn bad_datasheets_are_refused_with_the_key() {
     assert!(PeltierModule::new(0.0064, 0.5, f64::NAN).is_err());
     assert!(PeltierModule::new(0.0064, 0.5, 0.028).is_ok());
 }
+
+/// The datasheet of a module (`PeltierDatasheet::from_module`) is the one it was made from: I_max, V_max and
+/// ΔT_max come back to 1e-9 relative for datasheets 30 % off the default each way, and Q_max is the predicted one.
+#[test]
+fn a_modules_datasheet_is_the_one_it_was_made_from() {
+    for (fi, fv, fd) in [(1.0, 1.0, 1.0), (1.3, 0.7, 1.3), (0.7, 1.3, 0.7), (1.3, 1.3, 0.8)] {
+        let base = PeltierDatasheet::default();
+        let mut ds = PeltierDatasheet {
+            imax_a: base.imax_a * fi,
+            vmax_v: base.vmax_v * fv,
+            dtmax_k: base.dtmax_k * fd,
+            ..base
+        };
+        ds.qmax_w = ds.predicted_qmax_w();
+        let module = PeltierModule::from_datasheet(&ds).unwrap_or_else(|e| panic!("{e}"));
+        let back = PeltierDatasheet::from_module(&module, ds.hot_side_k).expect("a datasheet");
+        for (name, got, want) in [
+            ("imax", back.imax_a, ds.imax_a),
+            ("vmax", back.vmax_v, ds.vmax_v),
+            ("dtmax", back.dtmax_k, ds.dtmax_k),
+            ("qmax", back.qmax_w, ds.qmax_w),
+        ] {
+            assert!(
+                (got / want - 1.0).abs() < 1e-9,
+                "{name}: {got} vs {want} (factors {fi} {fv} {fd})"
+            );
+        }
+    }
+}

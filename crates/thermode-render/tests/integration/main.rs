@@ -5,6 +5,7 @@ mod common;
 
 mod dose;
 mod faults;
+mod identify;
 mod judged;
 mod kron_depth;
 mod pipeline;

@@ -5,6 +5,7 @@ pub mod demo;
 pub mod dose;
 pub mod emulate;
 pub mod emulate_hw;
+pub mod identify;
 pub mod lab_analyze;
 pub mod lab_export;
 pub mod lab_plan;

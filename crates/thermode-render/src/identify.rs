@@ -1,0 +1,128 @@
+//! `thermode identify` on the simulated display: an excitation inside the safety envelope with no finger on the
+//! plate, recorded, and the device file's thermal parameters fitted to it ([`thermode_control::identify`]).
+//!
+//! **Excitation** ([`excitation`]): the pipeline in direct mode (every current through the controller and the
+//! safety envelope) is taken from rest to 32 °C, through steps between 20 and 40 °C (below 43 °C, so no thermal dose
+//! accrues) and a pseudo-random binary sequence of ±5 °C around 30 °C (one-second bits from a 16-bit LFSR), 160 s in
+//! all. The plate is bare ([`NoFinger`]).
+//!
+//! **Result**: the fitted S, R, K become a datasheet quoted at the believed file's hot-side temperature
+//! ([`PeltierDatasheet::from_module`]); the capacities, the water conductance and temperature and the sensor's time
+//! constant replace the believed file's; everything else (sensor noise and rate, contact, render limits) is kept,
+//! and the drive limit too unless it exceeds the identified I_max (a device file bounds it by I_max).
+
+use thermode_control::identify::{identify, IdSample, Identification, IdentifyError};
+use thermode_device::{Device, DeviceConfig, NoFinger, SimulatedDisplay};
+use thermode_model::peltier::PeltierDatasheet;
+use thermode_pipeline::{controllers::plant_model, ChannelPipeline, ControllerKind, PipelineConfig, Stimulus};
+
+use crate::error::RenderError;
+
+/// Tick rate of the excitation \[Hz\]: 100 (the PT-100's rate).
+pub const RATE_HZ: f64 = 100.0;
+/// Plant substeps per tick: 10.
+const SUBSTEPS: usize = 10;
+/// Length of the excitation \[s\]: 160.
+pub const DURATION_S: f64 = 160.0;
+/// Rate of the direct set-point steps \[°C/s\]: 10.
+const STEP_RATE_C_PER_S: f64 = 10.0;
+
+/// The direct set-points of the excitation: `(from time [s], temperature [°C])`, in order.
+pub fn excitation() -> Vec<(f64, f64)> {
+    let mut steps = vec![
+        (0.0, 32.0),
+        (15.0, 20.0),
+        (30.0, 40.0),
+        (45.0, 28.0),
+        (60.0, 38.0),
+        (75.0, 24.0),
+        (90.0, 34.0),
+    ];
+    let mut lfsr: u16 = 0xACE1;
+    for bit in 0..60 {
+        // x¹⁶ + x¹⁴ + x¹³ + x¹¹ + 1, maximal length.
+        let feedback = (lfsr ^ (lfsr >> 2) ^ (lfsr >> 3) ^ (lfsr >> 5)) & 1;
+        lfsr = (lfsr >> 1) | (feedback << 15);
+        let level = if lfsr & 1 == 1 { 35.0 } else { 25.0 };
+        steps.push((100.0 + bit as f64, level));
+    }
+    steps
+}
+
+/// Runs the excitation on a simulated display built from `plant` (the hidden hardware) with the pipeline of
+/// `believed` (the device file the controller knows), sensor noise seeded by `seed`; returns the record.
+pub fn record(believed: &DeviceConfig, plant: &DeviceConfig, seed: u64) -> Result<Vec<IdSample>, RenderError> {
+    let invalid = |e: &dyn std::fmt::Display| RenderError::Invalid(format!("identification: {e}"));
+    let mut display = SimulatedDisplay::<NoFinger>::fingertips(plant, 1, seed).map_err(|e| invalid(&e))?;
+    let mut pipeline = ChannelPipeline::new(&PipelineConfig::new(*believed, ControllerKind::Model))?;
+    let schedule = excitation();
+    let dt_s = 1.0 / RATE_HZ;
+    let ticks = (DURATION_S * RATE_HZ).round() as usize;
+    let mut next_step = 0;
+    let mut samples = Vec::with_capacity(ticks + 1);
+    let first = display.read(0).map_err(|e| invalid(&e))?;
+    samples.push(IdSample {
+        current_a: 0.0,
+        sensor_c: first.sensor_c,
+        hot_side_c: first.hot_side_c,
+        voltage_v: first.voltage_v,
+    });
+    for tick in 0..ticks {
+        let now_s = tick as f64 * dt_s;
+        while next_step < schedule.len() && schedule[next_step].0 <= now_s {
+            pipeline.set_stimulus(Stimulus::Direct {
+                temp_c: schedule[next_step].1,
+                rate_c_s: STEP_RATE_C_PER_S,
+            })?;
+            next_step += 1;
+        }
+        let reading = display.read(0).map_err(|e| invalid(&e))?;
+        let (drive, _) = pipeline.tick(now_s, dt_s, &reading);
+        if let Some(fault) = drive.fault() {
+            return Err(invalid(&format!("the display faulted at {now_s:.2} s: {fault}")));
+        }
+        display.apply(0, &drive).map_err(|e| invalid(&e))?;
+        for _ in 0..SUBSTEPS {
+            display.advance(dt_s / SUBSTEPS as f64);
+        }
+        let after = display.read(0).map_err(|e| invalid(&e))?;
+        samples.push(IdSample {
+            current_a: after.current_a,
+            sensor_c: after.sensor_c,
+            hot_side_c: after.hot_side_c,
+            voltage_v: after.voltage_v,
+        });
+    }
+    Ok(samples)
+}
+
+/// The device file of an identification: `believed` with the fitted values (see the module documentation).
+pub fn identified_device(believed: &DeviceConfig, fit: &Identification) -> Result<DeviceConfig, IdentifyError> {
+    let p = &fit.plant;
+    let peltier = PeltierDatasheet::from_module(&p.module, believed.peltier.hot_side_k).ok_or_else(|| {
+        IdentifyError::Record("the fitted module gives no datasheet (no ΔT_max between 0 and T_h)".into())
+    })?;
+    let mut device = *believed;
+    device.peltier = peltier;
+    device.plate.heat_capacity_j_k = p.plate_heat_capacity_j_k;
+    device.hot_side.heat_capacity_j_k = p.hot_heat_capacity_j_k;
+    device.hot_side.water_conductance_w_k = p.water_conductance_w_k;
+    device.ambient.water_c = p.water_c;
+    device.sensor.time_constant_s = p.sensor_time_constant_s;
+    // The drive's limit is the drive's, not fitted; a device file bounds it by the module's I_max.
+    device.drive.current_limit_a = device.drive.current_limit_a.min(device.peltier.imax_a);
+    Ok(device)
+}
+
+/// Records the excitation on the simulated display of `plant` and fits `believed` to it.
+pub fn identify_simulated(
+    believed: &DeviceConfig,
+    plant: &DeviceConfig,
+    seed: u64,
+) -> Result<(Identification, DeviceConfig), RenderError> {
+    let samples = record(believed, plant, seed)?;
+    let initial = plant_model(believed)?;
+    let fit = identify(&samples, &initial, 1.0 / RATE_HZ).map_err(|e| RenderError::Invalid(e.to_string()))?;
+    let device = identified_device(believed, &fit).map_err(|e| RenderError::Invalid(e.to_string()))?;
+    Ok((fit, device))
+}
