@@ -411,7 +411,12 @@ impl<F: PlateFinger> MecomEmulator<F> {
             param::SINK_TEMPERATURE => f(channel.hot_side_reading_c()),
             param::TARGET_OBJECT_TEMPERATURE => f(inst.active_target_c()),
             param::ACTUAL_OUTPUT_CURRENT => f(inst.applied_a * inst.sign()),
-            param::ACTUAL_OUTPUT_VOLTAGE => f(inst.applied_a.abs() * inst.resistance_ohm),
+            param::ACTUAL_OUTPUT_VOLTAGE => {
+                f(channel
+                    .module()
+                    .voltage_v(inst.applied_a, state.plate_c, state.hot_side_c)
+                    * inst.sign())
+            }
             param::INPUT_SELECTION => i(inst.input_selection),
             param::OUTPUT_STAGE_ENABLE => i(inst.output_enable),
             2020 => Ok(inst.static_current_a.to_bits()),

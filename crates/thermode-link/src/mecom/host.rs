@@ -18,7 +18,8 @@
 //!   carries the envelope's shaped set-point of the gated command ([`DriveCommand::setpoint_c`]); a command without
 //!   one (off, a hold, a fault) disables the output.
 //! - **Cycle**: a worker thread owns the port and, at most every [`MecomConfig::cycle_interval_s`], per channel
-//!   writes the drive and reads object temperature (1000), sink temperature (1001), actual current (1020), device
+//!   writes the drive and reads object temperature (1000), sink temperature (1001), actual current (1020), actual
+//!   voltage (1021, which `thermode identify` needs), device
 //!   status (104) and error number (105). Every request waits for its answer (the sequence number matches), and is
 //!   sent once more with the same sequence number after [`MecomConfig::answer_timeout_s`]. [`Device::read`] only
 //!   copies the newest values.
@@ -221,6 +222,8 @@ struct Track {
     object_c: f64,
     sink_c: f64,
     current_a: f64,
+    /// Actual output voltage \[V\] (1021), in thermode's sign convention.
+    voltage_v: f64,
     device_status: i32,
     error_number: i32,
     /// Host clock time of the last good answer from this channel \[s\].
@@ -882,17 +885,18 @@ impl Worker {
     /// Reads channel `index`'s object and sink temperature, current, status and error number.
     fn sample(&mut self, index: usize) -> Result<(), Failure> {
         let ChannelSetup { channel, sign } = self.channels[index];
-        let values = (|| -> Result<(f64, f64, f64, f64, i32, i32), Failure> {
+        let values = (|| -> Result<(f64, f64, f64, f64, f64, i32, i32), Failure> {
             let object_c = self.link.read_f32(channel, param::OBJECT_TEMPERATURE)?;
             let time_s = self.clock.now_s();
             let sink_c = self.link.read_f32(channel, param::SINK_TEMPERATURE)?;
             let current_a = self.link.read_f32(channel, param::ACTUAL_OUTPUT_CURRENT)? * sign;
+            let voltage_v = self.link.read_f32(channel, param::ACTUAL_OUTPUT_VOLTAGE)? * sign;
             let device_status = self.link.read_i32(channel, param::DEVICE_STATUS)?;
             let number = self.link.read_i32(channel, param::ERROR_NUMBER)?;
-            Ok((time_s, object_c, sink_c, current_a, device_status, number))
+            Ok((time_s, object_c, sink_c, current_a, voltage_v, device_status, number))
         })();
         match values {
-            Ok((time_s, object_c, sink_c, current_a, device_status, number)) => {
+            Ok((time_s, object_c, sink_c, current_a, voltage_v, device_status, number)) => {
                 if device_status == status::ERROR {
                     // The device disabled its output by itself; it stays off until thermode enables it again.
                     self.enabled[index] = false;
@@ -903,6 +907,7 @@ impl Worker {
                     track.object_c = object_c;
                     track.sink_c = sink_c;
                     track.current_a = current_a;
+                    track.voltage_v = voltage_v;
                     track.device_status = device_status;
                     track.error_number = number;
                     track.last_answer_s = Some(self.clock.now_s());
@@ -1008,7 +1013,7 @@ impl Device for MecomDevice {
             time_s: track.time_s,
             sample_seq: track.sample_seq,
             current_a: track.current_a,
-            voltage_v: f64::NAN,
+            voltage_v: track.voltage_v,
         })
     }
 
