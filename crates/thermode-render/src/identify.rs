@@ -12,9 +12,10 @@
 //! and the drive limit too unless it exceeds the identified I_max (a device file bounds it by I_max).
 
 use thermode_control::identify::{identify, IdSample, Identification, IdentifyError};
-use thermode_device::{Device, DeviceConfig, NoFinger, SimulatedDisplay};
+use thermode_device::{Device, DeviceConfig, NoFinger, Reading, SimulatedDisplay};
 use thermode_model::peltier::PeltierDatasheet;
 use thermode_pipeline::{controllers::plant_model, ChannelPipeline, ControllerKind, PipelineConfig, Stimulus};
+use thermode_safety::DriveCommand;
 
 use crate::error::RenderError;
 
@@ -49,49 +50,85 @@ pub fn excitation() -> Vec<(f64, f64)> {
     steps
 }
 
-/// Runs the excitation on a simulated display built from `plant` (the hidden hardware) with the pipeline of
-/// `believed` (the device file the controller knows), sensor noise seeded by `seed`; returns the record.
-pub fn record(believed: &DeviceConfig, plant: &DeviceConfig, seed: u64) -> Result<Vec<IdSample>, RenderError> {
+/// The excitation tick by tick on the pipeline of `believed` (the device file the controller knows): for a
+/// simulated display ([`record`]) or a real one in real time (`thermode identify --device`).
+pub struct Excitation {
+    pipeline: ChannelPipeline,
+    schedule: Vec<(f64, f64)>,
+    next_step: usize,
+    /// The clock time of the first tick \[s\]: the schedule's zero.
+    start_s: Option<f64>,
+}
+
+impl Excitation {
+    /// The excitation of [`excitation`] on a fresh pipeline with the model controller.
+    pub fn new(believed: &DeviceConfig) -> Result<Excitation, RenderError> {
+        Ok(Excitation {
+            pipeline: ChannelPipeline::new(&PipelineConfig::new(*believed, ControllerKind::Model))?,
+            schedule: excitation(),
+            next_step: 0,
+            start_s: None,
+        })
+    }
+
+    /// The gated drive for the tick at `now_s` \[s\] (the clock of the readings' `time_s`; the first tick is the
+    /// schedule's zero) of `dt_s` \[s\] with `reading`; a fault is an error (the drive is then off).
+    pub fn tick(&mut self, now_s: f64, dt_s: f64, reading: &Reading) -> Result<DriveCommand, RenderError> {
+        let since_s = now_s - *self.start_s.get_or_insert(now_s);
+        while let Some(&(_, temp_c)) = self.schedule.get(self.next_step).filter(|s| s.0 <= since_s) {
+            self.pipeline.set_stimulus(Stimulus::Direct {
+                temp_c,
+                rate_c_s: STEP_RATE_C_PER_S,
+            })?;
+            self.next_step += 1;
+        }
+        let (drive, _) = self.pipeline.tick(now_s, dt_s, reading);
+        match drive.fault() {
+            Some(fault) => Err(RenderError::Invalid(format!(
+                "identification: the display faulted at {now_s:.2} s: {fault}"
+            ))),
+            None => Ok(drive),
+        }
+    }
+}
+
+/// The record sample of a reading.
+pub fn sample_of(reading: &Reading) -> IdSample {
+    IdSample {
+        current_a: reading.current_a,
+        sensor_c: reading.sensor_c,
+        hot_side_c: reading.hot_side_c,
+        voltage_v: reading.voltage_v,
+    }
+}
+
+/// Runs the excitation for `duration_s` \[s\] on a simulated display built from `plant` (the hidden hardware)
+/// with the pipeline of `believed`, sensor noise seeded by `seed`; returns the record.
+pub fn record(
+    believed: &DeviceConfig,
+    plant: &DeviceConfig,
+    seed: u64,
+    duration_s: f64,
+) -> Result<Vec<IdSample>, RenderError> {
     let invalid = |e: &dyn std::fmt::Display| RenderError::Invalid(format!("identification: {e}"));
     let mut display = SimulatedDisplay::<NoFinger>::fingertips(plant, 1, seed).map_err(|e| invalid(&e))?;
-    let mut pipeline = ChannelPipeline::new(&PipelineConfig::new(*believed, ControllerKind::Model))?;
-    let schedule = excitation();
+    let mut excitation = Excitation::new(believed)?;
     let dt_s = 1.0 / RATE_HZ;
-    let ticks = (DURATION_S * RATE_HZ).round() as usize;
-    let mut next_step = 0;
+    let ticks = (duration_s * RATE_HZ).round() as usize;
     let mut samples = Vec::with_capacity(ticks + 1);
     let first = display.read(0).map_err(|e| invalid(&e))?;
     samples.push(IdSample {
         current_a: 0.0,
-        sensor_c: first.sensor_c,
-        hot_side_c: first.hot_side_c,
-        voltage_v: first.voltage_v,
+        ..sample_of(&first)
     });
     for tick in 0..ticks {
-        let now_s = tick as f64 * dt_s;
-        while next_step < schedule.len() && schedule[next_step].0 <= now_s {
-            pipeline.set_stimulus(Stimulus::Direct {
-                temp_c: schedule[next_step].1,
-                rate_c_s: STEP_RATE_C_PER_S,
-            })?;
-            next_step += 1;
-        }
         let reading = display.read(0).map_err(|e| invalid(&e))?;
-        let (drive, _) = pipeline.tick(now_s, dt_s, &reading);
-        if let Some(fault) = drive.fault() {
-            return Err(invalid(&format!("the display faulted at {now_s:.2} s: {fault}")));
-        }
+        let drive = excitation.tick(tick as f64 * dt_s, dt_s, &reading)?;
         display.apply(0, &drive).map_err(|e| invalid(&e))?;
         for _ in 0..SUBSTEPS {
             display.advance(dt_s / SUBSTEPS as f64);
         }
-        let after = display.read(0).map_err(|e| invalid(&e))?;
-        samples.push(IdSample {
-            current_a: after.current_a,
-            sensor_c: after.sensor_c,
-            hot_side_c: after.hot_side_c,
-            voltage_v: after.voltage_v,
-        });
+        samples.push(sample_of(&display.read(0).map_err(|e| invalid(&e))?));
     }
     Ok(samples)
 }
@@ -114,15 +151,19 @@ pub fn identified_device(believed: &DeviceConfig, fit: &Identification) -> Resul
     Ok(device)
 }
 
-/// Records the excitation on the simulated display of `plant` and fits `believed` to it.
+/// Fits `believed` to `samples` (one every 1/[`RATE_HZ`] s) and makes the identified device file.
+pub fn fit(believed: &DeviceConfig, samples: &[IdSample]) -> Result<(Identification, DeviceConfig), RenderError> {
+    let initial = plant_model(believed)?;
+    let fit = identify(samples, &initial, 1.0 / RATE_HZ).map_err(|e| RenderError::Invalid(e.to_string()))?;
+    let device = identified_device(believed, &fit).map_err(|e| RenderError::Invalid(e.to_string()))?;
+    Ok((fit, device))
+}
+
+/// Records the whole excitation on the simulated display of `plant` and fits `believed` to it.
 pub fn identify_simulated(
     believed: &DeviceConfig,
     plant: &DeviceConfig,
     seed: u64,
 ) -> Result<(Identification, DeviceConfig), RenderError> {
-    let samples = record(believed, plant, seed)?;
-    let initial = plant_model(believed)?;
-    let fit = identify(&samples, &initial, 1.0 / RATE_HZ).map_err(|e| RenderError::Invalid(e.to_string()))?;
-    let device = identified_device(believed, &fit).map_err(|e| RenderError::Invalid(e.to_string()))?;
-    Ok((fit, device))
+    fit(believed, &record(believed, plant, seed, DURATION_S)?)
 }

@@ -882,36 +882,36 @@ impl Worker {
         result
     }
 
-    /// Reads channel `index`'s object and sink temperature, current, status and error number.
+    /// Reads channel `index`'s object and sink temperature, current, voltage, status and error number.
     fn sample(&mut self, index: usize) -> Result<(), Failure> {
         let ChannelSetup { channel, sign } = self.channels[index];
-        let values = (|| -> Result<(f64, f64, f64, f64, f64, i32, i32), Failure> {
+        let read = (|| -> Result<Track, Failure> {
             let object_c = self.link.read_f32(channel, param::OBJECT_TEMPERATURE)?;
-            let time_s = self.clock.now_s();
-            let sink_c = self.link.read_f32(channel, param::SINK_TEMPERATURE)?;
-            let current_a = self.link.read_f32(channel, param::ACTUAL_OUTPUT_CURRENT)? * sign;
-            let voltage_v = self.link.read_f32(channel, param::ACTUAL_OUTPUT_VOLTAGE)? * sign;
-            let device_status = self.link.read_i32(channel, param::DEVICE_STATUS)?;
-            let number = self.link.read_i32(channel, param::ERROR_NUMBER)?;
-            Ok((time_s, object_c, sink_c, current_a, voltage_v, device_status, number))
+            Ok(Track {
+                time_s: self.clock.now_s(),
+                object_c,
+                sink_c: self.link.read_f32(channel, param::SINK_TEMPERATURE)?,
+                current_a: self.link.read_f32(channel, param::ACTUAL_OUTPUT_CURRENT)? * sign,
+                voltage_v: self.link.read_f32(channel, param::ACTUAL_OUTPUT_VOLTAGE)? * sign,
+                device_status: self.link.read_i32(channel, param::DEVICE_STATUS)?,
+                error_number: self.link.read_i32(channel, param::ERROR_NUMBER)?,
+                ..Track::default()
+            })
         })();
-        match values {
-            Ok((time_s, object_c, sink_c, current_a, voltage_v, device_status, number)) => {
-                if device_status == status::ERROR {
+        match read {
+            Ok(new) => {
+                if new.device_status == status::ERROR {
                     // The device disabled its output by itself; it stays off until thermode enables it again.
                     self.enabled[index] = false;
                 }
                 if let Some(track) = self.shared.lock().ok().as_mut().and_then(|s| s.tracks.get_mut(index)) {
-                    track.sample_seq += 1;
-                    track.time_s = track.time_s.max(time_s);
-                    track.object_c = object_c;
-                    track.sink_c = sink_c;
-                    track.current_a = current_a;
-                    track.voltage_v = voltage_v;
-                    track.device_status = device_status;
-                    track.error_number = number;
-                    track.last_answer_s = Some(self.clock.now_s());
-                    track.last_failure = None;
+                    *track = Track {
+                        sample_seq: track.sample_seq + 1,
+                        time_s: track.time_s.max(new.time_s),
+                        last_answer_s: Some(self.clock.now_s()),
+                        last_failure: None,
+                        ..new
+                    };
                 }
                 Ok(())
             }

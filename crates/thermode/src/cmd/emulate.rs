@@ -64,6 +64,9 @@ pub struct EmulateArgs {
     /// TCS II only: stream temperature lines at this rate [Hz] even when muted (a test of the host).
     #[arg(long = "stream-hz", value_name = "HZ")]
     pub stream_hz: Option<f64>,
+    /// MeCom and TCS II: no finger on the simulated plates (the bare display `thermode identify` measures).
+    #[arg(long = "no-finger")]
+    pub no_finger: bool,
     /// Also publish the pseudo-terminal as the symbolic link PATH (replaced if it exists; removed at a clean end),
     /// so a host opening PATH finds a restarted emulator there.
     #[arg(long, value_name = "PATH")]

@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use anyhow::{bail, Result};
 use clap::ValueEnum;
-use thermode_device::{DefaultFinger, SimulatedDisplay};
+use thermode_device::{DefaultFinger, Device, NoFinger, PlateFinger, SimulatedDisplay};
 use thermode_link::emulator::RunEnd;
 use thermode_link::firmware::{Firmware, PtyFirmware, TcpFirmware};
 use thermode_link::mecom::emulator::{MecomEmulator, MecomEmulatorConfig};
@@ -35,9 +35,23 @@ pub enum Protocol {
 pub fn run(args: &EmulateArgs) -> Result<()> {
     let (channels, device_file, seed) = args.plant();
     let device = resolve::device_config(device_file)?;
-    let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device, channels, seed)?;
-    let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
-    let (firmware, what, spelling): (Box<dyn Firmware>, String, &str) = match args.protocol {
+    let (firmware, what, spelling) = match args.no_finger {
+        true => firmware(args, SimulatedDisplay::<NoFinger>::fingertips(&device, channels, seed)?)?,
+        false => firmware(
+            args,
+            SimulatedDisplay::<DefaultFinger>::fingertips(&device, channels, seed)?,
+        )?,
+    };
+    serve_firmware(args, firmware, &what, spelling)
+}
+
+/// The emulator of `args.protocol` over `display`, what it is, and the `--device` spelling that connects to it.
+fn firmware<F: PlateFinger + Send + 'static>(
+    args: &EmulateArgs,
+    display: SimulatedDisplay<F>,
+) -> Result<(Box<dyn Firmware>, String, &'static str)> {
+    let channels = display.channel_count();
+    Ok(match args.protocol {
         Protocol::Mecom => {
             let config = MecomEmulatorConfig {
                 address: args.address,
@@ -67,7 +81,12 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
             )
         }
         Protocol::Own => bail!("the own protocol is emulated by `thermode emulate` itself"),
-    };
+    })
+}
+
+/// Serves `firmware` on TCP or a pseudo-terminal until it ends.
+fn serve_firmware(args: &EmulateArgs, firmware: Box<dyn Firmware>, what: &str, spelling: &str) -> Result<()> {
+    let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
     let mut stdout = std::io::stdout().lock();
     let end = if let Some(bind) = &args.tcp {
         let tcp = TcpFirmware::spawn(firmware, bind, clock)?;

@@ -3,15 +3,21 @@
 //! parameters fitted with their confidence (`thermode_render::identify`, `thermode_control::identify`).
 //!
 //! The Peltier voltage fixes the absolute scale of the parameters (from temperatures alone only their ratios are
-//! known), so only a display that reports it can be identified: today the simulated display (`--device sim`, whose
-//! hidden hardware `--plant-device` sets). The serial protocols do not carry the voltage yet.
+//! known), so only a display that reports it can be identified: the simulated display (`--device sim`, whose
+//! hidden hardware `--plant-device` sets; run in simulated time) and Meerstetter TEC controllers in current mode
+//! (`--device mecom:…`, in real time; thermode's own protocol and the TCS II carry no voltage).
 
 use std::path::PathBuf;
+use std::sync::Arc;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
-use thermode_control::identify::PARAMETERS;
-use thermode_render::identify::{identify_simulated, DURATION_S};
+use thermode_control::identify::{IdSample, PARAMETERS};
+use thermode_device::DeviceConfig;
+use thermode_platform::{Clock, MonotonicClock};
+use thermode_render::identify::{fit, record, sample_of, Excitation, DURATION_S, RATE_HZ};
+
+use super::serve::{build_display, ControllerArg, DisplayArgs};
 
 use crate::output::{print_stdout, write_atomically};
 use crate::resolve;
@@ -19,8 +25,9 @@ use crate::resolve;
 /// Arguments of `thermode identify`.
 #[derive(Args, Debug)]
 pub struct IdentifyArgs {
-    /// The display: `sim` (the simulated display; the serial protocols do not report the Peltier voltage yet).
-    #[arg(long, value_name = "sim", default_value = "sim")]
+    /// The display: `sim` (the simulated display, in simulated time) or `mecom:PATH` / `mecom-tcp:HOST:PORT` (a
+    /// Meerstetter TEC controller in current mode, in real time); the others report no Peltier voltage.
+    #[arg(long, value_name = "sim|mecom:PATH|mecom-tcp:HOST:PORT", default_value = "sim")]
     device: String,
     /// The device file the controller starts from (TOML); default: the built-in default display.
     #[arg(long = "device-file", value_name = "FILE")]
@@ -32,6 +39,9 @@ pub struct IdentifyArgs {
     /// Seed of the simulated sensor noise.
     #[arg(long, value_name = "N", default_value_t = 1)]
     seed: u64,
+    /// Length of the excitation [s], 30 to 160 (the whole sequence; shorter runs stop it early).
+    #[arg(long, value_name = "S", default_value_t = DURATION_S)]
+    duration: f64,
     /// Write the identified device file here; default: print it.
     #[arg(long, value_name = "FILE.toml")]
     out: Option<PathBuf>,
@@ -39,23 +49,41 @@ pub struct IdentifyArgs {
 
 /// Runs `thermode identify`.
 pub fn run(args: &IdentifyArgs) -> Result<()> {
-    if args.device != "sim" {
+    let sim = args.device == "sim";
+    if !(sim || args.device.starts_with("mecom:") || args.device.starts_with("mecom-tcp:")) {
         bail!(
-            "--device {}: identify needs the Peltier voltage, which thermode's serial protocols do not carry yet; \
-             it runs on the simulated display (`--device sim --plant-device FILE`)",
+            "--device {}: identify needs the Peltier voltage, which thermode's own protocol and the TCS II do not \
+             report; it runs on `sim` and on Meerstetter TEC controllers (`mecom:PATH`, `mecom-tcp:HOST:PORT`)",
             args.device
         );
     }
+    if args.plant_device.is_some() && !sim {
+        bail!("--plant-device sets the simulated display's hardware; it needs --device sim");
+    }
+    if !(args.duration.is_finite() && (30.0..=DURATION_S).contains(&args.duration)) {
+        bail!("--duration {}: must be between 30 and {DURATION_S} s", args.duration);
+    }
     let believed = resolve::device_config(args.device_file.as_deref())?;
-    let plant = match &args.plant_device {
-        Some(path) => resolve::device_config(Some(path))?,
-        None => believed,
+    eprintln!(
+        "identify: {} s of excitation on {}, no finger on the plate…",
+        args.duration, args.device
+    );
+    let samples = if sim {
+        let plant = match &args.plant_device {
+            Some(path) => resolve::device_config(Some(path))?,
+            None => believed,
+        };
+        record(&believed, &plant, args.seed, args.duration)?
+    } else {
+        record_in_real_time(args, &believed)?
     };
-    eprintln!("identify: {DURATION_S} s of excitation on the simulated display, no finger on the plate…");
-    let (fit, device) = identify_simulated(&believed, &plant, args.seed)?;
+    let (fit, device) = fit(&believed, &samples)?;
     let origin = resolve::device_origin(args.device_file.as_deref());
     let mut lines = vec![
-        format!("Identified by `thermode identify` from {origin} ({DURATION_S} s of excitation, no finger)."),
+        format!(
+            "Identified by `thermode identify` on {} from {origin} ({} s of excitation, no finger).",
+            args.device, args.duration
+        ),
         format!(
             "RMS residuals: sensor {:.4} °C, hot side {:.4} °C, voltage {:.5} V; {} iterations.",
             fit.rms_residuals[0], fit.rms_residuals[1], fit.rms_residuals[2], fit.iterations
@@ -75,4 +103,44 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
         Some(path) => write_atomically(path, |sink| Ok(sink.write_all(text.as_bytes())?)),
         None => print_stdout(&text),
     }
+}
+
+/// Runs the excitation on the hardware of `args` in real time (channel 0) and returns the record; every drive is
+/// switched off at the end, also after an error.
+fn record_in_real_time(args: &IdentifyArgs, believed: &DeviceConfig) -> Result<Vec<IdSample>> {
+    let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
+    let display = DisplayArgs {
+        device: args.device.clone(),
+        device_file: args.device_file.clone(),
+        channels: None,
+        controller: ControllerArg::Model,
+        seed: args.seed,
+    };
+    let mut device = build_display(&display, &clock)?.device;
+    let mut excitation = Excitation::new(believed)?;
+    let dt_s = 1.0 / RATE_HZ;
+    let ticks = (args.duration * RATE_HZ).round() as usize;
+    let mut samples = Vec::with_capacity(ticks + 1);
+    let start_s = clock.now_s();
+    let run = (|| -> Result<()> {
+        for tick in 0..=ticks {
+            let deadline_s = start_s + tick as f64 * dt_s;
+            while clock.now_s() < deadline_s {
+                clock.sleep_until(deadline_s);
+            }
+            let now_s = clock.now_s();
+            device.poll(now_s);
+            let reading = device.read(0)?;
+            samples.push(sample_of(&reading));
+            if tick < ticks {
+                let drive = excitation.tick(now_s, dt_s, &reading)?;
+                device.apply(0, &drive)?;
+            }
+        }
+        Ok(())
+    })();
+    let off = device.all_off().context("switching the drive off after the excitation");
+    run?;
+    off?;
+    Ok(samples)
 }
