@@ -15,7 +15,7 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use clap::Args;
 use thermode_device::{DefaultFinger, SimulatedDisplay};
 use thermode_link::emulator::{Emulator, EmulatorConfig, LinkFaults, PtyEmulator, RunEnd};
@@ -94,6 +94,9 @@ impl EmulateArgs {
 pub fn run(args: &EmulateArgs) -> Result<()> {
     if args.protocol != super::emulate_hw::Protocol::Own {
         return super::emulate_hw::run(args);
+    }
+    if args.no_finger {
+        bail!("--no-finger is for --protocol mecom and tcs2 (thermode's own protocol reports no Peltier voltage, so identify does not run on it)");
     }
     let device = resolve::device_config(args.device_file.as_deref())?;
     let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device, args.channels, args.seed)?;
