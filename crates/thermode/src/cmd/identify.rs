@@ -22,6 +22,10 @@ use super::serve::{build_display, ControllerArg, DisplayArgs};
 use crate::output::{print_stdout, write_atomically};
 use crate::resolve;
 
+/// A fit whose sensor residual exceeds this many times the sensor's noise is refused: 10 (the fits of a bare
+/// display measured 1.0–2.5; with a finger resting on the plate, 57).
+const MAX_RESIDUAL_NOISES: f64 = 10.0;
+
 /// Arguments of `thermode identify`.
 #[derive(Args, Debug)]
 pub struct IdentifyArgs {
@@ -97,6 +101,18 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
         });
     }
     eprintln!("{}", lines.join("\n"));
+    let sensor_sd_c = believed
+        .sensor
+        .noise_c
+        .hypot(believed.sensor.resolution_c / 12f64.sqrt());
+    if fit.rms_residuals[0] > MAX_RESIDUAL_NOISES * sensor_sd_c {
+        bail!(
+            "the model does not explain the record (sensor residual {:.3} °C against {sensor_sd_c:.3} °C of noise): \
+             was a finger or an object on the plate, or does the display differ from the model's structure? \
+             Nothing written",
+            fit.rms_residuals[0]
+        );
+    }
     let header: String = lines.iter().map(|l| format!("# {l}\n")).collect();
     let text = format!("{header}{}", device.to_toml_string());
     match &args.out {

@@ -192,3 +192,24 @@ fn identify_finds_the_hidden_parameters_of_a_mecom_emulator() {
         );
     }
 }
+
+/// A finger (the emulator's default) left on the plate: the fit cannot explain the record, and identify says so
+/// and writes nothing.
+#[test]
+fn identify_refuses_a_record_its_model_cannot_explain() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let out = tmp.path().join("identified.toml");
+    let (_emulator, address) = emulate(&["--protocol", "mecom", "--channels", "1", "--tcp", "127.0.0.1:0"]);
+    let device = format!("mecom-tcp:{address}");
+    let run = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args(["identify", "--device", &device, "--duration", "30", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap_or_else(|e| panic!("run identify: {e}"));
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("does not explain the record") && !out.exists(),
+        "{stderr}"
+    );
+}
