@@ -3,12 +3,16 @@
 //! session where it stopped. Answers come from the keyboard, from `--responses FILE` or from the
 //! simulated participant (`--simulated-participant`).
 //!
-//! The stimulus (no display hardware yet) is, by default, `display`: every material rendered offline on the
-//! simulated display (`thermode_render`) with the controller (`--controller model|pid`) and device file
-//! (`--device FILE`) given — a real trial is the simulated finger touching the real material, a simulated trial the
-//! same finger on the display. `--stimulus model` is the older stand-in: both conditions are real contact under the
-//! fv model. The finger temperatures are the simulation's. `--time-scale` scales the waits (0 skips them, for
-//! demos).
+//! Where the materials are presented (one is required; docs/lab.md):
+//! - `--display ws://HOST:PORT [--token T]`: a running `thermode serve`; `--device DEVICE`: a display of this
+//!   machine, run for the session as `serve` runs it (loopback, its own token; Ctrl-C stops it with every drive at
+//!   0 A). Each trial is presented on `--channel N` and the finger is measured on the plate at rest before and after
+//!   it ([`LiveStimulus`]); each trial's curve is kept beside the session CSV. One participant, in real time.
+//! - `--simulate`: no display. `--stimulus display` (default) renders every material offline on the simulated
+//!   display (`thermode_render`) with `--controller model|pid` and `--device-file FILE` — a real trial is the
+//!   simulated finger touching the real material, a simulated trial the same finger on the display; `--stimulus
+//!   model` has both conditions as real contact under the fv model. The finger temperatures are the simulation's
+//!   (`model_finger_*` columns). `--time-scale` scales the waits (0 skips them, for demos).
 //!
 //! The simulated participant's references are real contact under the same stimulus (its `real` curves), so that its
 //! calibration to the paper's 66 % holds for the real trials it will see.
