@@ -50,11 +50,15 @@
 //!    it the lockout would find the plate at up to 48 °C, and the way down (0.25–0.35 s at 16–20 °C/s) alone costs
 //!    about 0.05 CEM43-min, the whole 5 % of the default budget. Likewise for the time budget:
 //!    `T_a = 43 − dose_lockout_margin_c + c·(max_time_at_or_above_43_s − time at ≥ 43 °C)`.
-//!    A sampled loop holds its plate for a whole interval, so the ceiling given for the coming interval is where
-//!    the continuous one will be at its end, `T_a − c·Δt` (`Δt` the last interval between samples): the CEM43 rate
-//!    grows with temperature, so an interval held there spends no more than the continuous descent over it. Without
-//!    this, a coarse loop (0.1–1 s) jumping to the ceiling overspent a small budget by up to 10 %; with it, any loop
-//!    period from 10 ms to 1 s stays within the allowance (property test).
+//!    A sampled loop holds its plate for a whole interval, and an interval is counted at the hotter of its two
+//!    samples, so a plate set now is counted over the coming interval and, when it is the hotter, over the next one
+//!    too: the ceiling given now is where the continuous one will be two intervals ahead, `T_a − 2c·Δt` (`Δt` the
+//!    longer of the last interval and the longest the caller allows, the envelope's stale-sensor timeout, 0.2 s by
+//!    default: 2 °C). The CEM43 rate grows with temperature, so a plate held there spends no more than the
+//!    continuous descent. With one interval (`T_a − c·Δt`, the last interval only) a coarse loop still overspent a
+//!    0.05 CEM43-min budget — by up to 20 % on the interval before the lockout and several times over on the very
+//!    first interval, which no last interval covered; with two, and the longest interval from the start, any loop
+//!    period from 10 ms to 1 s stays within the allowance (property test, 9000 cases).
 //!
 //! With the defaults (B = 1 CEM43-min, c = 5 °C/s, τ = 600 s, a = 0.025): `T_b = 43 + ln(0.0025)/ln 4 = 38.68 °C`;
 //! the anticipating ceiling leaves 48 °C at D = 1 − 0.151 = 0.849 and reaches 38.68 °C at D = 1; an hour at the
@@ -191,9 +195,12 @@ pub struct DoseTracker {
     max_slope_c_per_s: f64,
     /// Previous sample: time (s) and reconstructed temperature (°C).
     prev: Option<(f64, f64)>,
-    /// Length of the last interval between samples, s (0 before the second sample): the ceiling looks this far
-    /// ahead (see [`DoseCap::anticipating_c`]).
+    /// Length of the last interval between samples, s (0 before the second sample).
     last_interval_s: f64,
+    /// The longest interval between samples the caller allows, s (0: not known): the envelope's stale-sensor
+    /// timeout, beyond which the drive is cut. The ceiling looks ahead at least this far, also before the first
+    /// interval (see [`DoseCap::anticipating_c`]).
+    longest_interval_s: f64,
     /// Reference sample of the slope (time, reading), at least the window older than the newest sample.
     slope_older: Option<(f64, f64)>,
     /// The candidate that becomes the reference once the window has passed.
@@ -271,6 +278,19 @@ impl DoseTracker {
         self.last_interval_s
     }
 
+    /// This tracker with the longest interval between samples its caller allows, s (finite, ≥ 0; see
+    /// [`DoseTracker::lookahead_s`]).
+    pub fn with_longest_interval_s(mut self, longest_interval_s: f64) -> Self {
+        self.longest_interval_s = longest_interval_s;
+        self
+    }
+
+    /// How long the coming interval between samples may last, s: the longer of the last interval and the longest
+    /// the caller allows.
+    pub fn lookahead_s(&self) -> f64 {
+        self.last_interval_s.max(self.longest_interval_s)
+    }
+
     /// The plate temperature the last sample was counted at (reconstructed), °C; `None` before the first sample.
     pub fn last_plate_c(&self) -> Option<f64> {
         self.prev.map(|(_, c)| c)
@@ -337,28 +357,37 @@ impl DoseCap {
     }
 
     /// Ceiling 2, °C: the lower of the CEM43 and the time anticipation (+∞ far from either budget), taken where the
-    /// continuous anticipating ceiling will be at the end of the coming interval between samples (assumed as long as
-    /// the last, [`DoseTracker::last_interval_s`]): a plate held there for the interval spends at most what a plate
-    /// riding the continuous ceiling down over the same interval would (the CEM43 rate grows with temperature), so
-    /// sampling cannot carry the dose past the continuous path, however coarse the loop.
+    /// continuous anticipating ceiling will be two intervals between samples ahead (each [`DoseTracker::lookahead_s`]
+    /// long). Two, because an interval is counted at the hotter of its two samples: a plate set now is counted over
+    /// the coming interval and, as the start of the next one, once more when it is the hotter. A plate held there
+    /// then spends at most what a plate riding the continuous ceiling down would (the CEM43 rate grows with
+    /// temperature), so sampling cannot carry the dose past the continuous path, however coarse the loop — also on
+    /// the first interval, when the caller gave its longest interval.
     pub fn anticipating_c(&self, dose: &DoseTracker) -> f64 {
+        self.continuous_anticipation_c(dose) - 2.0 * DOSE_COOLDOWN_RATE_C_PER_S * dose.lookahead_s()
+    }
+
+    /// The continuous anticipating ceiling `T_a`, °C (no look ahead).
+    fn continuous_anticipation_c(&self, dose: &DoseTracker) -> f64 {
         let landing_c = self.after_lockout_c(self.cem43_budget_min);
         let left_min = self.cem43_budget_min - dose.cem43_min();
         let cem43_c = cem43_cooling_start_c(landing_c, left_min, DOSE_COOLDOWN_RATE_C_PER_S);
         let left_s = (self.max_time_at_or_above_43_s - dose.time_at_or_above_43_s()).max(0.0);
         let time_c = self.lockout_max_c + DOSE_COOLDOWN_RATE_C_PER_S * left_s;
-        cem43_c.min(time_c) - DOSE_COOLDOWN_RATE_C_PER_S * dose.last_interval_s()
+        cem43_c.min(time_c)
     }
 
-    /// The dose ceiling, °C: the anticipating ceiling, and after the lockout also ceiling 1. Never increases as the
-    /// dose grows. May lie outside the display range (+∞ far from the budget, −∞ once everything is spent): the
-    /// envelope clamps it into `[min_display_c, max_display_c]`.
+    /// The dose ceiling, °C: before the lockout the anticipating ceiling; after it ceiling 1 and the continuous
+    /// anticipation (at or below the landing temperature; the look ahead is for reaching the lockout at the landing
+    /// temperature, and ceiling 1 falls with a 600 s time constant, which sampling cannot outrun). May lie outside
+    /// the display range (+∞ far from the budget, −∞ once everything is spent): the envelope clamps it into
+    /// `[min_display_c, max_display_c]`.
     pub fn ceiling_c(&self, dose: &DoseTracker) -> f64 {
-        let anticipating_c = self.anticipating_c(dose);
         if self.lockout_reached(dose) {
-            anticipating_c.min(self.after_lockout_c(dose.cem43_min()))
+            self.continuous_anticipation_c(dose)
+                .min(self.after_lockout_c(dose.cem43_min()))
         } else {
-            anticipating_c
+            self.anticipating_c(dose)
         }
     }
 }
@@ -627,7 +656,7 @@ mod tests {
             dt_s in proptest::sample::select(vec![0.01, 0.1, 0.5, 1.0]),
         ) {
             let cap = DoseCap { cem43_budget_min: budget, max_time_at_or_above_43_s: time_budget_s, lockout_max_c: 42.5 };
-            let mut d = DoseTracker::new();
+            let mut d = DoseTracker::new().with_longest_interval_s(dt_s);
             let mut t0_s = 0.0;
             for (duration_s, request_c) in segments {
                 obey(&cap, &mut d, t0_s, duration_s, dt_s, |_| request_c);

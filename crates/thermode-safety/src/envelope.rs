@@ -234,7 +234,8 @@ impl SafetyEnvelope {
                 config.sensor_time_constant_s,
                 config.rate_window_s,
                 config.max_measured_rate_c_per_s,
-            ),
+            )
+            .with_longest_interval_s(config.stale_timeout_s),
             lockout_at_s: None,
             at_48_since_s: None,
             at_limit: None,

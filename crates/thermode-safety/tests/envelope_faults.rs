@@ -347,8 +347,9 @@ fn dose_time_limit_lowers_the_maximum_and_a_hot_display_after_the_grace_is_a_fau
             t_lock = Some(now);
         }
         if d.fault().is_none() {
-            // The anticipating ceiling 42.5 + 5 °C/s · (2 s − time at ≥ 43 °C) falls to 44 °C after 1.7 s: from
-            // then on heating at 44 °C is refused; before, it passes.
+            // The anticipating ceiling 42.5 + 5 °C/s · (2 s − time at ≥ 43 °C), looked two intervals ahead
+            // (− 2 · 5 °C/s · 0.2 s, the stale-sensor timeout), falls to 44 °C after 1.3 s: from then on heating at
+            // 44 °C is refused; before, it passes.
             let blocked = r.env.effective_max_c() <= 44.0;
             if blocked && t_block.is_none() {
                 t_block = Some(now);
@@ -360,8 +361,8 @@ fn dose_time_limit_lowers_the_maximum_and_a_hot_display_after_the_grace_is_a_fau
     });
     let (t_lock, t_block) = (t_lock.expect("lockout engaged"), t_block.expect("heating blocked"));
     assert!(
-        (t_block - t0 - 1.7).abs() <= DT_S + 1e-9,
-        "heating refused {} s after reaching 44 °C, hand 1.7 s",
+        (t_block - t0 - 1.3).abs() <= DT_S + 1e-9,
+        "heating refused {} s after reaching 44 °C, hand 1.3 s",
         t_block - t0
     );
     assert!(
@@ -369,9 +370,9 @@ fn dose_time_limit_lowers_the_maximum_and_a_hot_display_after_the_grace_is_a_fau
         "lockout {} s after reaching 44 °C",
         t_lock - t0
     );
-    // Locked with little CEM43 spent (7 s at 44 °C = 0.23 of 10 CEM43-min): the maximum is 43 − 0.5 °C, less the
-    // anticipation's look one tick ahead (5 °C/s · 1 tick).
-    let locked_max_c = 42.5 - DOSE_COOLDOWN_RATE_C_PER_S * DT_S;
+    // Locked with little CEM43 spent (7 s at 44 °C = 0.23 of 10 CEM43-min): the maximum is 43 − 0.5 °C (after the
+    // lockout the ceiling does not look ahead).
+    let locked_max_c = 42.5;
     assert!(
         (rig.env.effective_max_c() - locked_max_c).abs() < 1e-9,
         "{} vs {locked_max_c}",
@@ -412,11 +413,15 @@ fn dose_time_limit_lowers_the_maximum_and_a_hot_display_after_the_grace_is_a_fau
 #[test]
 fn cem43_budget_lowers_the_maximum_at_the_analytic_times() {
     // 45 °C accrues 0.5^(−2) = 4 CEM43-min per minute: the 1 CEM43-min budget is used after 15 s. The anticipating
-    // ceiling falls below 45 °C when what is left equals the dose of a fall at 5 °C/s from 45 °C to the landing
-    // temperature T_b = 43 + ln(0.0025)/ln 4 = 38.678 °C: (1/ln 4 + 3/ln 2 − 0.0025/ln 4)/300 = 0.016 826 CEM43-min,
-    // i.e. at 15 s · (1 − 0.016 826) = 14.748 s.
+    // ceiling is the temperature T_a from which a fall at c = 5 °C/s to the landing temperature T_b = 43 +
+    // ln(0.0025)/ln 4 = 38.678 °C spends what is left, looked two intervals ahead: T_a − 2c·Δt, Δt the stale-sensor
+    // timeout (0.2 s, longer than the 1 ms tick), 2 °C. It falls below 45 °C when what is left equals the dose of the
+    // fall from 47 °C: ((1 − 0.0025)/ln 4 + (2⁴ − 1)/ln 2)/300 = 0.074 527 CEM43-min, i.e. at 15 s · (1 − 0.074 527)
+    // = 13.882 s.
     let landing_c = 43.0 + 0.0025f64.ln() / 4f64.ln();
-    let left_min = (1.0 / 4f64.ln() + 3.0 / 2f64.ln() - 0.0025 / 4f64.ln()) / 300.0;
+    let margin_c = 2.0 * DOSE_COOLDOWN_RATE_C_PER_S * EnvelopeConfig::default().stale_timeout_s.max(DT_S);
+    let from_c: f64 = 45.0 + margin_c;
+    let left_min = ((1.0 - 0.0025) / 4f64.ln() + (2f64.powf(from_c - 43.0) - 1.0) / 2f64.ln()) / 300.0;
     let t_below_45_hand = 15.0 * (1.0 - left_min);
     let mut rig = Rig::default();
     let (mut t_lock, mut t_below_45) = (None, None);
@@ -441,10 +446,10 @@ fn cem43_budget_lowers_the_maximum_at_the_analytic_times() {
         (t_lock - 15.0).abs() <= DT_S + 1e-9,
         "CEM43 budget used at {t_lock} s, analytic 15 s"
     );
-    // At the lockout the ceiling is the landing temperature less the look one tick ahead (5 °C/s · 1 tick; one
-    // tick of dose past the budget moves it by 2 mK more).
+    // At the lockout the ceiling is the landing temperature (after the lockout it does not look ahead; one tick of
+    // dose past the budget moves it by 2 mK).
     let max_c = rig.env.effective_max_c();
-    let hand_c = landing_c - DOSE_COOLDOWN_RATE_C_PER_S * DT_S;
+    let hand_c = landing_c;
     assert!(
         (max_c - hand_c).abs() < 0.003,
         "ceiling {max_c} at the lockout, hand {hand_c}"
