@@ -53,8 +53,8 @@
 //!    A sampled loop holds its plate for a whole interval, and an interval is counted at the hotter of its two
 //!    samples, so a plate set now is counted over the coming interval and, when it is the hotter, over the next one
 //!    too: the ceiling given now is where the continuous one will be two intervals ahead, `T_a − 2c·Δt` (`Δt` the
-//!    longer of the last interval and the longest the caller allows, the envelope's stale-sensor timeout, 0.2 s by
-//!    default: 2 °C). The CEM43 rate grows with temperature, so a plate held there spends no more than the
+//!    longest interval the caller allows, the envelope's stale-sensor timeout, 0.2 s by default: 2 °C; the last
+//!    interval when the caller gave none). The CEM43 rate grows with temperature, so a plate held there spends no more than the
 //!    continuous descent. With one interval (`T_a − c·Δt`, the last interval only) a coarse loop still overspent a
 //!    0.05 CEM43-min budget — by up to 20 % on the interval before the lockout and several times over on the very
 //!    first interval, which no last interval covered; with two, and the longest interval from the start, any loop
@@ -285,10 +285,15 @@ impl DoseTracker {
         self
     }
 
-    /// How long the coming interval between samples may last, s: the longer of the last interval and the longest
-    /// the caller allows.
+    /// How long the coming interval between samples may last, s: the longest the caller allows when it said (a
+    /// longer gap faults the sensor and cuts the drive, so a gap already past — a link outage — says nothing about
+    /// the coming interval), else the last interval.
     pub fn lookahead_s(&self) -> f64 {
-        self.last_interval_s.max(self.longest_interval_s)
+        if self.longest_interval_s > 0.0 {
+            self.longest_interval_s
+        } else {
+            self.last_interval_s
+        }
     }
 
     /// The plate temperature the last sample was counted at (reconstructed), °C; `None` before the first sample.
@@ -576,6 +581,24 @@ mod tests {
             lockout_max_c: 42.5,
         };
         close(big.ceiling_c(&tracker(0.1, 2.0)), 42.5, 1e-12, "capped at 42.5");
+    }
+
+    /// A link outage (a 5 s gap between samples, which faulted the sensor) says nothing about the coming interval:
+    /// with the caller's longest interval given, the ceiling looks that far ahead, not as far as the gap.
+    #[test]
+    fn a_gap_between_samples_does_not_lower_the_ceiling_afterwards() {
+        let cap = default_cap();
+        let mut d = DoseTracker::new().with_longest_interval_s(0.2);
+        for (t, temp_c) in [(0.0, 44.0), (0.01, 44.0), (5.01, 33.0)] {
+            d.add_sample(t, temp_c);
+        }
+        let continuous_c = cap.continuous_anticipation_c(&d);
+        assert_eq!(d.last_interval_s(), 5.0);
+        assert!(
+            (cap.anticipating_c(&d) - (continuous_c - 2.0)).abs() < 1e-9,
+            "ceiling {} °C after a 5 s gap: want the continuous {continuous_c} °C less 2 · 5 °C/s · 0.2 s",
+            cap.anticipating_c(&d)
+        );
     }
 
     #[test]
