@@ -53,8 +53,8 @@
 //!    A sampled loop holds its plate for a whole interval, and an interval is counted at the hotter of its two
 //!    samples, so a plate set now is counted over the coming interval and, when it is the hotter, over the next one
 //!    too: the ceiling given now is where the continuous one will be two intervals ahead, `T_a − 2c·Δt` (`Δt` the
-//!    longest interval the caller allows, the envelope's stale-sensor timeout, 0.2 s by default: 2 °C; the last
-//!    interval when the caller gave none). The CEM43 rate grows with temperature, so a plate held there spends no more than the
+//!    last interval, at most the longest the caller allows — the envelope's stale-sensor timeout, 0.2 s by default
+//!    — and that longest interval before the second sample; 0.1 °C at 100 Hz). The CEM43 rate grows with temperature, so a plate held there spends no more than the
 //!    continuous descent. With one interval (`T_a − c·Δt`, the last interval only) a coarse loop still overspent a
 //!    0.05 CEM43-min budget — by up to 20 % on the interval before the lockout and several times over on the very
 //!    first interval, which no last interval covered; with two, and the longest interval from the start, any loop
@@ -285,14 +285,14 @@ impl DoseTracker {
         self
     }
 
-    /// How long the coming interval between samples may last, s: the longest the caller allows when it said (a
-    /// longer gap faults the sensor and cuts the drive, so a gap already past — a link outage — says nothing about
-    /// the coming interval), else the last interval.
+    /// How long the coming interval between samples is taken to last, s: the last interval, at most the longest the
+    /// caller allows (a longer gap faults the sensor and cuts the drive, so a gap already past — a link outage —
+    /// says nothing about the coming interval); before the second sample, that longest interval.
     pub fn lookahead_s(&self) -> f64 {
-        if self.longest_interval_s > 0.0 {
-            self.longest_interval_s
-        } else {
-            self.last_interval_s
+        match (self.last_interval_s > 0.0, self.longest_interval_s > 0.0) {
+            (true, true) => self.last_interval_s.min(self.longest_interval_s),
+            (true, false) => self.last_interval_s,
+            (false, _) => self.longest_interval_s,
         }
     }
 
@@ -369,16 +369,25 @@ impl DoseCap {
     /// temperature), so sampling cannot carry the dose past the continuous path, however coarse the loop — also on
     /// the first interval, when the caller gave its longest interval.
     pub fn anticipating_c(&self, dose: &DoseTracker) -> f64 {
-        self.continuous_anticipation_c(dose) - 2.0 * DOSE_COOLDOWN_RATE_C_PER_S * dose.lookahead_s()
+        let look_c = 2.0 * DOSE_COOLDOWN_RATE_C_PER_S * dose.lookahead_s();
+        let (cem43_c, time_c) = self.continuous_anticipations_c(dose);
+        // A plate at or below the lockout maximum (under 43 °C) adds no time at or above 43 °C: the time
+        // anticipation needs no look ahead below it.
+        (cem43_c - look_c).min((time_c - look_c).max(self.lockout_max_c))
     }
 
-    /// The continuous anticipating ceiling `T_a`, °C (no look ahead).
-    fn continuous_anticipation_c(&self, dose: &DoseTracker) -> f64 {
+    /// The continuous anticipating ceilings `T_a` of the CEM43 and of the time budget, °C (no look ahead).
+    fn continuous_anticipations_c(&self, dose: &DoseTracker) -> (f64, f64) {
         let landing_c = self.after_lockout_c(self.cem43_budget_min);
         let left_min = self.cem43_budget_min - dose.cem43_min();
         let cem43_c = cem43_cooling_start_c(landing_c, left_min, DOSE_COOLDOWN_RATE_C_PER_S);
         let left_s = (self.max_time_at_or_above_43_s - dose.time_at_or_above_43_s()).max(0.0);
-        let time_c = self.lockout_max_c + DOSE_COOLDOWN_RATE_C_PER_S * left_s;
+        (cem43_c, self.lockout_max_c + DOSE_COOLDOWN_RATE_C_PER_S * left_s)
+    }
+
+    /// The continuous anticipating ceiling, °C: the lower of the two.
+    fn continuous_anticipation_c(&self, dose: &DoseTracker) -> f64 {
+        let (cem43_c, time_c) = self.continuous_anticipations_c(dose);
         cem43_c.min(time_c)
     }
 

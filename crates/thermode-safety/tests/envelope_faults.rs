@@ -347,9 +347,8 @@ fn dose_time_limit_lowers_the_maximum_and_a_hot_display_after_the_grace_is_a_fau
             t_lock = Some(now);
         }
         if d.fault().is_none() {
-            // The anticipating ceiling 42.5 + 5 °C/s · (2 s − time at ≥ 43 °C), looked two intervals ahead
-            // (− 2 · 5 °C/s · 0.2 s, the stale-sensor timeout), falls to 44 °C after 1.3 s: from then on heating at
-            // 44 °C is refused; before, it passes.
+            // The anticipating ceiling 42.5 + 5 °C/s · (2 s − time at ≥ 43 °C), looked two 1 ms ticks ahead
+            // (− 0.01 °C), falls to 44 °C after 1.698 s: from then on heating at 44 °C is refused; before, it passes.
             let blocked = r.env.effective_max_c() <= 44.0;
             if blocked && t_block.is_none() {
                 t_block = Some(now);
@@ -361,8 +360,8 @@ fn dose_time_limit_lowers_the_maximum_and_a_hot_display_after_the_grace_is_a_fau
     });
     let (t_lock, t_block) = (t_lock.expect("lockout engaged"), t_block.expect("heating blocked"));
     assert!(
-        (t_block - t0 - 1.3).abs() <= DT_S + 1e-9,
-        "heating refused {} s after reaching 44 °C, hand 1.3 s",
+        (t_block - t0 - (1.7 - 2.0 * DT_S)).abs() <= DT_S + 1e-9,
+        "heating refused {} s after reaching 44 °C, hand 1.698 s",
         t_block - t0
     );
     assert!(
@@ -414,12 +413,11 @@ fn dose_time_limit_lowers_the_maximum_and_a_hot_display_after_the_grace_is_a_fau
 fn cem43_budget_lowers_the_maximum_at_the_analytic_times() {
     // 45 °C accrues 0.5^(−2) = 4 CEM43-min per minute: the 1 CEM43-min budget is used after 15 s. The anticipating
     // ceiling is the temperature T_a from which a fall at c = 5 °C/s to the landing temperature T_b = 43 +
-    // ln(0.0025)/ln 4 = 38.678 °C spends what is left, looked two intervals ahead: T_a − 2c·Δt, Δt the stale-sensor
-    // timeout (0.2 s, longer than the 1 ms tick), 2 °C. It falls below 45 °C when what is left equals the dose of the
-    // fall from 47 °C: ((1 − 0.0025)/ln 4 + (2⁴ − 1)/ln 2)/300 = 0.074 527 CEM43-min, i.e. at 15 s · (1 − 0.074 527)
-    // = 13.882 s.
+    // ln(0.0025)/ln 4 = 38.678 °C spends what is left, looked two 1 ms ticks ahead: T_a − 2c·Δt = T_a − 0.01 °C. It
+    // falls below 45 °C when what is left equals the dose of the fall from 45.01 °C:
+    // ((1 − 0.0025)/ln 4 + (2^2.01 − 1)/ln 2)/300 = 0.016 93 CEM43-min, i.e. at 15 s · (1 − 0.016 93) = 14.746 s.
     let landing_c = 43.0 + 0.0025f64.ln() / 4f64.ln();
-    let margin_c = 2.0 * DOSE_COOLDOWN_RATE_C_PER_S * EnvelopeConfig::default().stale_timeout_s.max(DT_S);
+    let margin_c = 2.0 * DOSE_COOLDOWN_RATE_C_PER_S * DT_S;
     let from_c: f64 = 45.0 + margin_c;
     let left_min = ((1.0 - 0.0025) / 4f64.ln() + (2f64.powf(from_c - 43.0) - 1.0) / 2f64.ln()) / 300.0;
     let t_below_45_hand = 15.0 * (1.0 - left_min);
