@@ -412,6 +412,8 @@ mod tests {
         markers: Vec<String>,
         fault_at_s: Option<f64>,
         interrupt_at_s: Option<f64>,
+        /// Publishes no `finger_c` (a pid display).
+        blind: bool,
     }
 
     impl DisplayLink for FakeDisplay {
@@ -436,7 +438,7 @@ mod tests {
                 loop_time_s: self.time_s,
                 target_skin_c: f64::NAN,
                 skin_c: self.finger_c,
-                finger_c: self.finger_c,
+                finger_c: if self.blind { f64::NAN } else { self.finger_c },
                 sensor_c: self.finger_c,
                 display_setpoint_c: self.finger_c,
                 current_a: 0.0,
@@ -458,6 +460,7 @@ mod tests {
             markers: Vec::new(),
             fault_at_s: None,
             interrupt_at_s: None,
+            blind: false,
         }
     }
 
@@ -564,29 +567,11 @@ mod tests {
 
     #[test]
     fn a_display_without_a_finger_measurement_is_refused() {
-        struct Blind(FakeDisplay);
-        impl DisplayLink for Blind {
-            fn touch(&mut self, m: &Material) -> Result<f64, StimulusError> {
-                self.0.touch(m)
-            }
-            fn release(&mut self) -> Result<f64, StimulusError> {
-                self.0.release()
-            }
-            fn marker(&mut self, text: &str) -> Result<Option<f64>, StimulusError> {
-                self.0.marker(text)
-            }
-            fn next_sample(&mut self) -> Result<DisplaySample, StimulusError> {
-                let s = self.0.next_sample()?;
-                Ok(DisplaySample {
-                    finger_c: f64::NAN,
-                    ..s
-                })
-            }
-            fn describe(&self) -> serde_json::Value {
-                json!("blind")
-            }
-        }
-        let mut live = LiveStimulus::new(Blind(fake(32.0)), LiveSettings::default()).expect("settings");
+        let blind = FakeDisplay {
+            blind: true,
+            ..fake(32.0)
+        };
+        let mut live = LiveStimulus::new(blind, LiveSettings::default()).expect("settings");
         let error = live.measure_at_rest().expect_err("refused");
         assert!(error.to_string().contains("model controller"), "{error}");
     }

@@ -79,6 +79,19 @@ fn steady() -> TableStimulus {
     }
 }
 
+/// Answers for the six trials of [`small`].
+const SIX_ANSWERS: &str = "1\n2\n3\n1\n2\n3\n";
+
+/// P01's session of `exp` in `dir`, stopped by a display that fails at trial `fail_at`; its CSV.
+fn interrupted_at(exp: &ExperimentFile, dir: &Path, fail_at: usize) -> PathBuf {
+    let mut failing = TableStimulus {
+        starts_c: vec![32.0],
+        fail_at: Some(fail_at),
+    };
+    run_scripted(exp, "P01", dir, &mut failing, SIX_ANSWERS, DATE).expect_err("the display fails");
+    dir.join("P01_small_2024-05-01.csv")
+}
+
 fn run_scripted(
     experiment: &ExperimentFile,
     participant: &str,
@@ -243,13 +256,8 @@ fn resuming_after_a_failure_continues_at_the_first_missing_trial() {
 fn a_torn_last_row_is_cut_off_and_the_trial_redone() {
     let dir = tempfile::tempdir().expect("temp dir");
     let exp = small(dir.path(), 5);
-    let answers = "1\n2\n3\n1\n2\n3\n";
-    let mut failing = TableStimulus {
-        starts_c: vec![32.0],
-        fail_at: Some(3),
-    };
-    run_scripted(&exp, "P01", dir.path(), &mut failing, answers, DATE).expect_err("fails at trial 3");
-    let csv = dir.path().join("P01_small_2024-05-01.csv");
+    let answers = SIX_ANSWERS;
+    let csv = interrupted_at(&exp, dir.path(), 3);
     let before = std::fs::read_to_string(&csv).expect("read");
     let second_row = before.lines().nth(2).expect("row 2").to_string();
     // Simulate a kill in the middle of writing trial 3's row: a prefix of a row without its line end.
@@ -267,13 +275,8 @@ fn a_torn_last_row_is_cut_off_and_the_trial_redone() {
 fn a_complete_row_that_contradicts_the_plan_is_reported_not_dropped() {
     let dir = tempfile::tempdir().expect("temp dir");
     let exp = small(dir.path(), 5);
-    let answers = "1\n2\n3\n1\n2\n3\n";
-    let mut failing = TableStimulus {
-        starts_c: vec![32.0],
-        fail_at: Some(3),
-    };
-    run_scripted(&exp, "P01", dir.path(), &mut failing, answers, DATE).expect_err("fails at trial 3");
-    let csv = dir.path().join("P01_small_2024-05-01.csv");
+    let answers = SIX_ANSWERS;
+    let csv = interrupted_at(&exp, dir.path(), 3);
     let text = std::fs::read_to_string(&csv).expect("read");
     let planned = &make_plan(&exp.experiment).participants[0].trials[1];
     let other = ["aluminium", "steel", "wood"]
@@ -295,13 +298,8 @@ fn a_complete_row_that_contradicts_the_plan_is_reported_not_dropped() {
 fn a_session_of_a_different_plan_is_refused() {
     let dir = tempfile::tempdir().expect("temp dir");
     let exp = small(dir.path(), 5);
-    let answers = "1\n2\n3\n1\n2\n3\n";
-    let mut failing = TableStimulus {
-        starts_c: vec![32.0],
-        fail_at: Some(2),
-    };
-    run_scripted(&exp, "P01", dir.path(), &mut failing, answers, DATE).expect_err("fails at trial 2");
-    let csv = dir.path().join("P01_small_2024-05-01.csv");
+    let answers = SIX_ANSWERS;
+    let csv = interrupted_at(&exp, dir.path(), 2);
     let before = std::fs::read(&csv).expect("read");
     let reseeded = small(dir.path(), 6);
     let err = run_scripted(&reseeded, "P01", dir.path(), &mut steady(), answers, DATE).expect_err("mismatch");
@@ -665,16 +663,9 @@ fn sessions_whose_names_collide_are_told_apart_and_never_overwritten() {
 fn a_format_1_session_resumes_in_its_own_columns() {
     let dir = tempfile::tempdir().expect("temp dir");
     let exp = small(dir.path(), 5);
-    let answers = "1\n2\n3\n1\n2\n3\n";
-    let mut failing = TableStimulus {
-        starts_c: vec![32.0],
-        fail_at: Some(3),
-    };
-    run_scripted(&exp, "P01", dir.path(), &mut failing, answers, DATE).expect_err("fails at trial 3");
-    let (csv, json) = (
-        dir.path().join("P01_small_2024-05-01.csv"),
-        dir.path().join("P01_small_2024-05-01.json"),
-    );
+    let answers = SIX_ANSWERS;
+    let csv = interrupted_at(&exp, dir.path(), 3);
+    let json = csv.with_extension("json");
     // Rewrite the two rows and the sidecar as format 1 wrote them.
     let mut reader = csv::Reader::from_path(&csv).expect("session");
     let header: Vec<String> = reader.headers().expect("header").iter().map(str::to_string).collect();

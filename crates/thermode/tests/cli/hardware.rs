@@ -128,6 +128,17 @@ fn bench_floor_measures_an_empty_loop_and_refuses_impossible_rates() {
     assert_eq!(out.status.code(), Some(2), "{}", String::from_utf8_lossy(&out.stderr));
 }
 
+/// `thermode identify --device DEVICE --duration 30 --out OUT`: its exit status and standard error.
+fn identify_on(device: &str, out: &std::path::Path) -> (std::process::Output, String) {
+    let run = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args(["identify", "--device", device, "--duration", "30", "--out"])
+        .arg(out)
+        .output()
+        .unwrap_or_else(|e| panic!("run identify: {e}"));
+    let stderr = String::from_utf8_lossy(&run.stderr).to_string();
+    (run, stderr)
+}
+
 /// `thermode identify` on a bare MeCom emulator over TCP (real time, 30 s of the excitation): the emulated hardware's
 /// thermal parameters, each 20–30 % off the default device file that identify starts from, come back within 10 %.
 /// (The drive limit stays the file's 2.8 A: the host sets it at connect, and the hardware refuses more than its own.)
@@ -159,13 +170,7 @@ fn identify_finds_the_hidden_parameters_of_a_mecom_emulator() {
         "--device-file",
         &plant_arg,
     ]);
-    let device = format!("mecom-tcp:{address}");
-    let run = Command::new(env!("CARGO_BIN_EXE_thermode"))
-        .args(["identify", "--device", &device, "--duration", "30", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap_or_else(|e| panic!("run identify: {e}"));
-    let stderr = String::from_utf8_lossy(&run.stderr);
+    let (run, stderr) = identify_on(&format!("mecom-tcp:{address}"), &out);
     assert!(run.status.success(), "identify failed: {stderr}");
     let text = std::fs::read_to_string(&out).expect("identified file");
     let found = DeviceConfig::from_toml_str(&text, "identified").unwrap_or_else(|e| panic!("{e}\n{text}"));
@@ -200,13 +205,7 @@ fn identify_refuses_a_record_its_model_cannot_explain() {
     let tmp = tempfile::tempdir().expect("temp dir");
     let out = tmp.path().join("identified.toml");
     let (_emulator, address) = emulate(&["--protocol", "mecom", "--channels", "1", "--tcp", "127.0.0.1:0"]);
-    let device = format!("mecom-tcp:{address}");
-    let run = Command::new(env!("CARGO_BIN_EXE_thermode"))
-        .args(["identify", "--device", &device, "--duration", "30", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap_or_else(|e| panic!("run identify: {e}"));
-    let stderr = String::from_utf8_lossy(&run.stderr);
+    let (run, stderr) = identify_on(&format!("mecom-tcp:{address}"), &out);
     assert_eq!(run.status.code(), Some(2), "{stderr}");
     assert!(
         stderr.contains("does not explain the record") && !out.exists(),
