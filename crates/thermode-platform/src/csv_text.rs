@@ -1,9 +1,131 @@
 //! Fast CSV text: numbers and fields appended to a byte buffer without allocating, for the large CSVs of `simulate`
 //! and `render` (a 90 s run at 1 ms is 90 000 rows). [`push_f64`] writes exactly what Rust's `{}` writes for an `f64`
-//! (the shortest digits that read back as the same number, never an exponent), from the `ryu` digits; [`push_field`]
-//! quotes a text field as the `csv` crate does (only when needed).
+//! (the shortest digits that read back as the same number, never an exponent), from the `ryu` digits;
+//! [`push_f64_decimals`] writes what `{:.N}` writes (correctly rounded to N decimals), for a CSV whose reader does
+//! not need every bit; [`push_number`] picks one of the two by a [`Precision`]; [`push_field`] quotes a text field
+//! as the `csv` crate does (only when needed).
 
 use std::fmt::Write as _;
+
+/// How the numbers of a CSV are written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Precision {
+    /// The shortest digits that read back as the same `f64` (Rust's `{}`): nothing is lost (default).
+    #[default]
+    Exact,
+    /// This many decimal places, correctly rounded (Rust's `{:.N}`), at most [`MAX_DECIMALS`].
+    Decimals(u8),
+}
+
+/// The most decimal places [`Precision::Decimals`] takes (12: a picokelvin, far below any model's accuracy).
+pub const MAX_DECIMALS: u8 = 12;
+
+/// Appends `x` written as `precision` says.
+pub fn push_number(out: &mut Vec<u8>, x: f64, precision: Precision) {
+    match precision {
+        Precision::Exact => push_f64(out, x),
+        Precision::Decimals(decimals) => push_f64_decimals(out, x, decimals),
+    }
+}
+
+/// Appends `x` as `format!("{x:.decimals$}")` would write it. `x·10^decimals` is rounded to an integer whose digits
+/// are written with the point put in; a value whose product lies within its own rounding error of a tie between
+/// two integers, or too large for exact integers, and every `decimals` above [`MAX_DECIMALS`], go to the formatter.
+pub fn push_f64_decimals(out: &mut Vec<u8>, x: f64, decimals: u8) {
+    const POWERS_OF_TEN: [f64; MAX_DECIMALS as usize + 1] =
+        [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12];
+    let Some(&scale) = POWERS_OF_TEN.get(usize::from(decimals)) else {
+        return push_display_decimals(out, x, decimals);
+    };
+    // Exact powers of ten, so the product carries one rounding: at most half an ulp of `scaled`. Below 4e15 the
+    // whole part and the fraction are exact (no libm call: `round` and `trunc` are calls without SSE4.1).
+    let scaled = x.abs() * scale;
+    if !x.is_finite() || scaled >= 4.0e15 {
+        return push_display_decimals(out, x, decimals);
+    }
+    let whole = scaled as u64;
+    let fraction = scaled - whole as f64;
+    if (fraction - 0.5).abs() <= scaled * f64::EPSILON {
+        return push_display_decimals(out, x, decimals);
+    }
+    push_scaled_integer(
+        out,
+        x.is_sign_negative(),
+        whole + u64::from(fraction > 0.5),
+        usize::from(decimals),
+    );
+}
+
+/// The two-digit strings "00" to "99", one after the other.
+const DIGIT_PAIRS: [u8; 200] = {
+    let mut pairs = [0u8; 200];
+    let mut i = 0;
+    while i < 100 {
+        pairs[2 * i] = b'0' + (i / 10) as u8;
+        pairs[2 * i + 1] = b'0' + (i % 10) as u8;
+        i += 1;
+    }
+    pairs
+};
+
+/// Appends `value / 10^decimals` (`value` below 1e16, `decimals` at most [`MAX_DECIMALS`]), with a minus sign
+/// when `negative`: at least one digit before the point, exactly `decimals` after it (no point when `decimals` is
+/// 0). The text is built right-aligned in a fixed array and appended with one copy of constant length, then cut:
+/// small copies of varying length cost a library call each.
+fn push_scaled_integer(out: &mut Vec<u8>, negative: bool, mut value: u64, decimals: usize) {
+    const LEN: usize = 32;
+    let mut text = [b'0'; LEN];
+    let mut start = LEN;
+    let mut fraction_digits = decimals;
+    while fraction_digits >= 2 {
+        put_pair(&mut text, &mut start, value % 100);
+        value /= 100;
+        fraction_digits -= 2;
+    }
+    if fraction_digits == 1 {
+        start -= 1;
+        text[start] = b'0' + (value % 10) as u8;
+        value /= 10;
+    }
+    if decimals > 0 {
+        start -= 1;
+        text[start] = b'.';
+    }
+    loop {
+        if value < 10 {
+            start -= 1;
+            text[start] = b'0' + value as u8;
+            break;
+        }
+        put_pair(&mut text, &mut start, value % 100);
+        value /= 100;
+        if value == 0 {
+            break;
+        }
+    }
+    if negative {
+        start -= 1;
+        text[start] = b'-';
+    }
+    // Left-align, so the copy below has a constant length.
+    text.copy_within(start.., 0);
+    let length = out.len() + LEN - start;
+    out.extend_from_slice(&text);
+    out.truncate(length);
+}
+
+/// Writes the two digits of `pair` (below 100) before `start` and moves `start` back by two.
+fn put_pair(text: &mut [u8], start: &mut usize, pair: u64) {
+    let pair = pair as usize;
+    *start -= 2;
+    text[*start..*start + 2].copy_from_slice(&DIGIT_PAIRS[2 * pair..2 * pair + 2]);
+}
+
+fn push_display_decimals(out: &mut Vec<u8>, x: f64, decimals: u8) {
+    let mut text = String::new();
+    let _ = write!(text, "{x:.*}", usize::from(decimals));
+    out.extend_from_slice(text.as_bytes());
+}
 
 /// Appends `x` as `format!("{x}")` would write it.
 pub fn push_f64(out: &mut Vec<u8>, x: f64) {
@@ -146,6 +268,57 @@ mod tests {
             let x = f64::from_bits(bits);
             proptest::prop_assert_eq!(f64_text(x), format!("{}", x));
             proptest::prop_assert_eq!(f64_text(y), format!("{}", y));
+        }
+
+        /// Any bit pattern, numbers of the sizes thermode writes, and exact ties (halves at the last decimal):
+        /// the same text as `{:.N}`.
+        #[test]
+        fn any_f64_is_written_with_decimals_as_the_formatter_writes_it(bits in proptest::num::u64::ANY,
+            y in -1.0e5..1.0e5f64, tie in -1_000_000i64..1_000_000, decimals in 0u8..=14) {
+            let x = f64::from_bits(bits);
+            let half = (tie as f64 + 0.5) / 10f64.powi(i32::from(decimals.min(6)));
+            for value in [x, y, half] {
+                proptest::prop_assert_eq!(decimals_text(value, decimals), format!("{:.*}", usize::from(decimals), value));
+            }
+        }
+    }
+
+    fn decimals_text(x: f64, decimals: u8) -> String {
+        let mut out = Vec::new();
+        push_f64_decimals(&mut out, x, decimals);
+        String::from_utf8(out).unwrap_or_default()
+    }
+
+    #[test]
+    fn edge_values_are_written_with_decimals_as_the_formatter_writes_them() {
+        for x in [
+            0.0,
+            -0.0,
+            -0.001,
+            0.125,
+            0.375,
+            2.5,
+            -2.5,
+            0.5,
+            1.005,
+            32.0025,
+            9.999_999_5,
+            1e15,
+            4.0e15,
+            1e300,
+            5e-324,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            32.002564788860134,
+        ] {
+            for decimals in [0, 1, 2, 3, 6, 9, 12, 13, 17] {
+                assert_eq!(
+                    decimals_text(x, decimals),
+                    format!("{x:.*}", usize::from(decimals)),
+                    "{x:e} .{decimals}"
+                );
+            }
         }
     }
 

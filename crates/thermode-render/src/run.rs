@@ -48,6 +48,7 @@ use thermode_device::{Device, DeviceConfig, PlateFinger, SimulatedChannel, Simul
 use thermode_model::fv::{FvConfig, FvModel};
 use thermode_model::{BadValue, Material, Skin};
 use thermode_platform::csv_text;
+pub use thermode_platform::csv_text::Precision;
 use thermode_safety::FaultCode;
 
 use thermode_model::limits::{self, CONTACT_CONDUCTANCE, DURATION, OBJECT_TEMPERATURE, TICK_RATE};
@@ -546,14 +547,14 @@ pub const CSV_HEADER: [&str; 18] = [
     "fault_description",
 ];
 
-/// Writes the runs as one CSV (header first, then every run's rows in order). Numbers in Rust's shortest
-/// round-trip form; `fault` is the numeric fault code (empty without fault); `contact` is 0 or 1.
+/// Writes the runs as one CSV (header first, then every run's rows in order). `time_s` in Rust's shortest
+/// round-trip form, the other numbers as `precision` says; `fault` is the numeric fault code (empty without fault); `contact` is 0 or 1.
 /// The columns are the [`Trajectory`] fields of the same names. `target_skin_c` is the renderer's receptor, and
 /// `skin_c` (the simulated finger on the display) and `truth_skin_c` (that finger touching the real material) are
 /// read at the same depth: the skin surface with `renderer` = `fv`, the centre of the finger's epidermis (Kron's
 /// T1, depth Δx₁/2) with `renderer` = `kron` ([`RenderSpec::receptor_depth_m`]). `model_skin_c` is the
 /// pipeline's own display-finger model at its receptor (the same node as the target).
-pub fn write_csv(runs: &[RenderRun], sink: &mut dyn Write) -> Result<(), csv::Error> {
+pub fn write_csv(runs: &[RenderRun], precision: Precision, sink: &mut dyn Write) -> Result<(), csv::Error> {
     /// The CSV goes to `sink` in chunks of this many bytes (64 KiB).
     const CHUNK_BYTES: usize = 64 * 1024;
     let mut out = Vec::with_capacity(CHUNK_BYTES + 4096);
@@ -562,8 +563,9 @@ pub fn write_csv(runs: &[RenderRun], sink: &mut dyn Write) -> Result<(), csv::Er
     for run in runs {
         let t = &run.trajectory;
         for row in 0..t.len() {
+            csv_text::push_f64(&mut out, t.time_s[row]);
+            out.push(b',');
             for column in [
-                &t.time_s,
                 &t.truth_skin_c,
                 &t.target_skin_c,
                 &t.skin_c,
@@ -576,7 +578,7 @@ pub fn write_csv(runs: &[RenderRun], sink: &mut dyn Write) -> Result<(), csv::Er
                 &t.current_a,
                 &t.hot_side_c,
             ] {
-                csv_text::push_f64(&mut out, column[row]);
+                csv_text::push_number(&mut out, column[row], precision);
                 out.push(b',');
             }
             out.push(if t.contact[row] { b'1' } else { b'0' });

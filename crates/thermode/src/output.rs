@@ -11,6 +11,7 @@ use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
+use thermode_platform::csv_text::Precision;
 use thermode_platform::WriteError;
 
 /// Whether `path` names standard output (`-`).
@@ -73,4 +74,9 @@ pub fn print_stdout(text: &str) -> Result<()> {
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
         Err(e) => Err(e).context("cannot write to standard output"),
     }
+}
+
+/// The CSV precision of a `--precision` option: exact without one.
+pub fn csv_precision(decimals: Option<u8>) -> Precision {
+    decimals.map_or(Precision::Exact, Precision::Decimals)
 }

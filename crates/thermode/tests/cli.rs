@@ -155,6 +155,50 @@ fn simulate_kron_writes_csv_whose_display_finger_follows_the_target() {
 }
 
 #[test]
+fn simulate_precision_rounds_every_quantity_and_keeps_time_exact() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let exact_path = dir.path().join("exact.csv");
+    let rounded_path = dir.path().join("rounded.csv");
+    let base = [
+        "simulate",
+        "--material",
+        "steel",
+        "--duration",
+        "2",
+        "--dt",
+        "0.001",
+        "--out",
+    ];
+    let run = |path: &Path, extra: &[&str]| {
+        let mut args = base.to_vec();
+        args.push(path.to_str().expect("path"));
+        args.extend_from_slice(extra);
+        expect_success(&args);
+    };
+    run(&exact_path, &[]);
+    run(&rounded_path, &["--precision", "3"]);
+    let (header, exact) = read_csv(&exact_path);
+    let (rounded_header, rounded) = read_csv(&rounded_path);
+    assert_eq!((&header, exact.len()), (&rounded_header, rounded.len()));
+    for (row, (e, r)) in exact.iter().zip(&rounded).enumerate() {
+        assert_eq!(e[0], r[0], "row {row}: time_s is written exact");
+        for (name, (e, r)) in header.iter().zip(e.iter().zip(r)).skip(1) {
+            let Ok(exact_value) = e.parse::<f64>() else {
+                assert_eq!(e, r, "row {row} {name}");
+                continue;
+            };
+            let decimals = r.split_once('.').map_or(0, |(_, fraction)| fraction.len());
+            let value: f64 = r.parse().expect("number");
+            assert!(
+                decimals == 3 && (value - exact_value).abs() <= 5.0005e-4,
+                "row {row} {name}: {r} written for {e}"
+            );
+        }
+    }
+    expect_error(&["simulate", "--material", "steel", "--precision", "13"], "--precision");
+}
+
+#[test]
 fn simulate_semi_infinite_matches_the_interface_temperature() {
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("s.csv");

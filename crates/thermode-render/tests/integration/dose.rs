@@ -15,7 +15,7 @@
 use thermode_device::DeviceConfig;
 use thermode_model::materials;
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
-use thermode_render::run::{render, write_csv};
+use thermode_render::run::{render, write_csv, Precision};
 use thermode_render::RenderSpec;
 
 /// The spec of `thermode render --material copper --object-temp 70 --duration 3600 --controller <controller>`.
@@ -68,7 +68,7 @@ fn hour_on_hot_copper(controller: ControllerKind) -> (f64, f64, f64, f64) {
     let budget_min = spec.pipeline.envelope.cem43_budget_min;
     let run = render(&spec).unwrap_or_else(|e| panic!("{e}"));
     let mut csv_text = Vec::new();
-    write_csv(std::slice::from_ref(&run), &mut csv_text).unwrap_or_else(|e| panic!("{e}"));
+    write_csv(std::slice::from_ref(&run), Precision::Exact, &mut csv_text).unwrap_or_else(|e| panic!("{e}"));
     let (cem43_min, hottest_c, last_setpoint_c) = cem43_of_csv(&csv_text);
     println!(
         "{}: CEM43 of display_c over {} s = {cem43_min:.4} CEM43-min (budget {budget_min}, cap {:.4}); hottest \

@@ -12,7 +12,7 @@ use thermode_model::fv::{simulate_contact, ContactSpec, FvConfig, InitialState};
 use thermode_model::simulate::{simulate, ModelKind, SimulationSpec};
 use thermode_model::Skin;
 use thermode_pipeline::{ControllerKind, RendererKind, ShippedDisplay, LIGHT_TOUCH_RESISTANCE_M2K_W};
-use thermode_render::run::{render_all, write_csv};
+use thermode_render::run::{render_all, write_csv, Precision};
 use thermode_render::{render, tune};
 
 const PAPER: [&str; 5] = ["aluminium", "steel", "stone", "wood", "rubber"];
@@ -296,7 +296,7 @@ fn the_same_seed_gives_a_bit_identical_csv() {
         s.seed = seed;
         let run = render(&s).unwrap_or_else(|e| panic!("{e}"));
         let mut bytes = Vec::new();
-        write_csv(&[run], &mut bytes).unwrap_or_else(|e| panic!("{e}"));
+        write_csv(&[run], Precision::Exact, &mut bytes).unwrap_or_else(|e| panic!("{e}"));
         bytes
     };
     let first = csv(7);

@@ -17,7 +17,7 @@ use thermode_render::run::{render_all, write_csv, DEFAULT_DURATION_S, DEFAULT_PR
 use thermode_render::summary::{summary_table, Summary};
 use thermode_render::RenderSpec;
 
-use crate::output::{check_outputs, is_stdout, print_stdout, write_atomically};
+use crate::output::{check_outputs, csv_precision, is_stdout, print_stdout, write_atomically};
 use crate::resolve;
 
 /// The controller(s) to run.
@@ -119,6 +119,11 @@ pub struct RenderArgs {
     /// Draw the paper's Figure 3 for the simulated system (.svg or .png).
     #[arg(long, value_name = "FILE")]
     plot: Option<PathBuf>,
+    /// Decimal places of the CSV's numbers (0-12, correctly rounded as `{:.N}` rounds them; `time_s` stays exact);
+    /// default: every number exact, the shortest digits that read back as the same value (larger, and about four
+    /// times slower to write).
+    #[arg(long, value_name = "DECIMALS", value_parser = clap::value_parser!(u8).range(0..=i64::from(thermode_platform::csv_text::MAX_DECIMALS)))]
+    precision: Option<u8>,
     /// Print the summary metrics (also printed when neither --out nor --plot is given).
     #[arg(long)]
     summary: bool,
@@ -143,7 +148,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
     }
     if let Some(path) = &args.out {
-        write_atomically(path, |sink| write_csv(&runs, sink).map_err(anyhow::Error::from))?;
+        write_atomically(path, |sink| {
+            write_csv(&runs, csv_precision(args.precision), sink).map_err(anyhow::Error::from)
+        })?;
     }
     if let Some(path) = &args.plot {
         write_figure(&figure3(&runs), path).with_context(|| format!("cannot write {}", path.display()))?;
