@@ -71,6 +71,10 @@ pub struct RenderConfig {
     /// Set-point rate limit of the safety envelope when this display renders contacts \[°C/s\], in
     /// [`limits::SETPOINT_RATE`] (at most the compiled-in 300). Default 20.
     pub max_setpoint_rate_c_per_s: f64,
+    /// Relative uncertainty of the Peltier module's S, R and K as this file gives them \[-\], 0 to 1. Default 0.3
+    /// (datasheet values); `thermode identify` writes its fit's. The heat at rest that errors this large could
+    /// explain is not taken for the finger's when the finger models are calibrated at a touch.
+    pub peltier_uncertainty: f64,
 }
 
 /// Everything that describes one simulated display channel (all channels of a display are identical).
@@ -138,6 +142,7 @@ impl Default for RenderConfig {
     fn default() -> Self {
         RenderConfig {
             max_setpoint_rate_c_per_s: 20.0,
+            peltier_uncertainty: 0.3,
         }
     }
 }
@@ -171,7 +176,7 @@ const MODULE_SOURCE: &str = "model.md §5: a typical single-stage Bi₂Te₃ min
 
 impl DeviceConfig {
     /// Every key of the device file, in file order, each with the field of `self` it reads and writes.
-    fn fields(&mut self) -> [Field<'_>; 17] {
+    fn fields(&mut self) -> [Field<'_>; 18] {
         [
             Field {
                 section: "peltier",
@@ -332,7 +337,30 @@ impl DeviceConfig {
                          leaves the actuator in charge of the initial drop (docs/design-choices.md, rendering rate \
                          limit); commercial stimulators ramp at 70-300 °C/s within the same temperature bounds.",
             },
+            Field {
+                section: "render",
+                key: "peltier_uncertainty",
+                rule: Rule::Within { min: 0.0, max: 1.0 },
+                value: &mut self.render.peltier_uncertainty,
+                doc: "Relative uncertainty of the Peltier module's S, R and K as this file gives them [-], 0 to 1. \
+                      At a touch the finger models are calibrated to the heat the resting finger gives the plate \
+                      beyond the model's (docs/design-choices.md, touch calibration); the part of that heat which \
+                      errors this large in the module could explain is not taken for the finger's. `thermode \
+                      identify` writes its fit's uncertainty.",
+                source: "Datasheet values describe a module type, not the one on the display: ±30 % in the derived \
+                         conductance K moves the heat a resting plate exchanges with the hot side by about 75 mW, a \
+                         1.2 °C error of the finger's temperature (docs/design-choices.md).",
+            },
         ]
+    }
+
+    /// This file as a controller may believe it when it drives a simulated display built from this very file: the
+    /// module is then exactly what the file says (`render.peltier_uncertainty` 0). Real hardware, or a simulated
+    /// display built from another file, keeps the file's own uncertainty.
+    pub fn exact_for_its_simulation(&self) -> DeviceConfig {
+        let mut exact = *self;
+        exact.render.peltier_uncertainty = 0.0;
+        exact
     }
 
     /// Reads a device file. Every key is optional (missing keys keep their defaults); unknown sections or keys,

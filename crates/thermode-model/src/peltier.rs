@@ -212,6 +212,16 @@ impl PeltierModule {
             + self.conductance_w_k * (hot_c - display_c)
     }
 
+    /// The sum of the magnitudes of the three terms of [`PeltierModule::heat_into_display_w`] \[W\]:
+    /// |S I T_d| + ½ I² R + |K (T_h − T_d)|. A relative error u of every parameter moves the heat into the display by
+    /// at most u times this.
+    pub fn display_heat_terms_w(&self, current_a: f64, display_c: f64, hot_c: f64) -> f64 {
+        let i = current_a;
+        (self.seebeck_v_k * i * kelvin(display_c)).abs()
+            + 0.5 * i * i * self.resistance_ohm
+            + (self.conductance_w_k * (hot_c - display_c)).abs()
+    }
+
     /// Heat flowing into the hot side \[W\]: −S I T_h + ½ I² R − K (T_h − T_d).
     pub fn heat_into_hot_side_w(&self, current_a: f64, display_c: f64, hot_c: f64) -> f64 {
         let i = current_a;

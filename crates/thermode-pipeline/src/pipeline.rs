@@ -39,6 +39,7 @@ use thermode_device::{DeviceConfig, Reading};
 use thermode_model::fv::{FvConfig, FvModel, ModalStepping};
 use thermode_model::kron::calibrate_to_surface;
 use thermode_model::limits::CONTACT_RESISTANCE;
+use thermode_model::peltier::PeltierModule;
 use thermode_model::{Material, Rule, Skin};
 use thermode_safety::{
     DoseLedger, DriveCommand, EnvelopeConfig, FaultCode, MeasuredOnly, SafetyEnvelope, SetpointDecision,
@@ -262,6 +263,9 @@ pub struct ChannelPipeline {
     calibration: Option<FingerModels>,
     /// The controller's unknown heat averaged over the rest before the first touch.
     rest_heat: RestHeat,
+    /// The module the device file describes and the relative uncertainty of its parameters
+    /// ([`thermode_device::RenderConfig::peltier_uncertainty`]), for the calibration.
+    peltier: (PeltierModule, f64),
     /// How much warmer the calibrated display finger model is than the one the controller's unknown heat was
     /// learned against \[°C\]; subtracted from the receptor temperature given to the controller (0 uncalibrated).
     receptor_offset_c: f64,
@@ -279,20 +283,24 @@ pub const REST_SETTLE_S: f64 = 1.0;
 pub const REST_AVERAGE_S: f64 = 1.0;
 
 /// The controller's unknown heat averaged over the rest before the first touch: exponentially weighted mean and
-/// variance with time constant [`REST_AVERAGE_S`], from [`REST_SETTLE_S`] of rest on.
+/// variance with time constant [`REST_AVERAGE_S`], from [`REST_SETTLE_S`] of rest on, and the average of the part
+/// of it that the device file's uncertain Peltier parameters could explain.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 struct RestHeat {
     /// Rest so far \[s\].
     rested_s: f64,
     /// Weighted mean \[W\] and variance \[W²\] (`None` before the first averaged sample).
     moments: Option<(f64, f64)>,
+    /// Weighted mean of the heat the module's uncertainty could explain \[W\].
+    explained_w: f64,
 }
 
 impl RestHeat {
-    /// Adds one tick of `dt_s` \[s\] with the controller's unknown heat `heat_w` \[W\] (none or non-finite: nothing).
-    fn add(&mut self, dt_s: f64, heat_w: Option<f64>) {
+    /// Adds one tick of `dt_s` \[s\] with the controller's unknown heat `heat_w` \[W\] (none or non-finite: nothing)
+    /// and the heat `explained_w` \[W\] that errors of the module's parameters could produce at this tick.
+    fn add(&mut self, dt_s: f64, heat_w: Option<f64>, explained_w: f64) {
         self.rested_s += dt_s;
-        let Some(d) = heat_w.filter(|d| d.is_finite()) else {
+        let Some(d) = heat_w.filter(|d| d.is_finite() && explained_w.is_finite()) else {
             return;
         };
         if self.rested_s < REST_SETTLE_S {
@@ -300,19 +308,26 @@ impl RestHeat {
         }
         let alpha = 1.0 - (-dt_s / REST_AVERAGE_S).exp();
         self.moments = Some(match self.moments {
-            None => (d, 0.0),
+            None => {
+                self.explained_w = explained_w;
+                (d, 0.0)
+            }
             Some((mean, var)) => {
+                self.explained_w += alpha * (explained_w - self.explained_w);
                 let delta = d - mean;
                 (mean + alpha * delta, (1.0 - alpha) * (var + alpha * delta * delta))
             }
         });
     }
 
-    /// The mean \[W\] if it differs from zero by more than twice the fluctuation of the samples (standard
-    /// deviation) and at least one average time was averaged; else `None`.
+    /// The part of the mean \[W\] beyond what the module's uncertainty explains, if the mean differs from zero by
+    /// more than twice the fluctuation of the samples (standard deviation) and by more than that explained heat,
+    /// and at least one average time was averaged; else `None`.
     fn significant_w(&self) -> Option<f64> {
         let (mean, var) = self.moments?;
-        (self.rested_s >= REST_SETTLE_S + REST_AVERAGE_S && mean.abs() > 2.0 * var.sqrt()).then_some(mean)
+        let beyond_w = mean.abs() - self.explained_w;
+        (self.rested_s >= REST_SETTLE_S + REST_AVERAGE_S && mean.abs() > 2.0 * var.sqrt() && beyond_w > 0.0)
+            .then_some(beyond_w.copysign(mean))
     }
 }
 
@@ -582,6 +597,7 @@ impl ChannelPipeline {
                 fast_path: config.fv_fast_path,
             }),
             rest_heat: RestHeat::default(),
+            peltier: (config.device.module()?, config.device.render.peltier_uncertainty),
             receptor_offset_c: 0.0,
             held: false,
         })
@@ -671,7 +687,13 @@ impl ChannelPipeline {
         let outcome = self.drive.drive(now_s, dt_s, reading, requested_c, finger);
         self.last_setpoint_c = Some(outcome.decision.setpoint_c);
         if self.calibration.is_some() && self.setpoint.mode == Mode::Render && !self.setpoint.renderer.in_contact() {
-            self.rest_heat.add(dt_s, self.drive.controller.unknown_heat_w());
+            let (module, uncertainty) = self.peltier;
+            let plate_c = Some(self.drive.plate_estimate_c())
+                .filter(|c| c.is_finite())
+                .unwrap_or(reading.sensor_c);
+            let explained_w = uncertainty * module.display_heat_terms_w(reading.current_a, plate_c, reading.hot_side_c);
+            self.rest_heat
+                .add(dt_s, self.drive.controller.unknown_heat_w(), explained_w);
         }
         let plate_c = self.drive.plate_for_finger_c(&outcome.decision);
         self.setpoint.follow(dt_s, plate_c);

@@ -218,6 +218,16 @@ impl RenderSpec {
         self.pipeline.renderer.receptor_depth_m(&self.finger_skin)
     }
 
+    /// The pipeline as the controller believes it: [`RenderSpec::pipeline`], whose device file is exact
+    /// ([`DeviceConfig::exact_for_its_simulation`]) when the plant is built from it (no [`RenderSpec::hardware`]).
+    pub fn believed_pipeline(&self) -> PipelineConfig {
+        let mut config = self.pipeline.clone();
+        if self.hardware.is_none() {
+            config.device = config.device.exact_for_its_simulation();
+        }
+        config
+    }
+
     /// The device as the plant sees it: the hardware (default: the pipeline's device file) with the simulated
     /// finger's contact conductance.
     pub fn plant_device(&self) -> DeviceConfig {
@@ -408,7 +418,7 @@ pub fn truth_renderer(spec: &RenderSpec) -> Result<Renderer, RenderError> {
 /// Runs `spec` with the controller its pipeline names.
 pub fn render(spec: &RenderSpec) -> Result<RenderRun, RenderError> {
     spec.validate()?;
-    let pipeline = ChannelPipeline::new(&spec.pipeline)?;
+    let pipeline = ChannelPipeline::new(&spec.believed_pipeline())?;
     render_with(spec, pipeline)
 }
 

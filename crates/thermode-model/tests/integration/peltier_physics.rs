@@ -45,6 +45,40 @@ fn energy_is_conserved_at_every_operating_point() {
     println!("worst relative energy imbalance {worst:e}");
 }
 
+/// `display_heat_terms_w` bounds what a relative error u of S, R and K can do to the heat into the display: scaling
+/// all three by 1 ± u moves `heat_into_display_w` by at most u times the terms' sum (equality when every term has
+/// the sign of the change), and at zero current the sum is the conduction |K ΔT|.
+#[test]
+fn the_heat_terms_bound_the_effect_of_parameter_errors() {
+    let m = mini();
+    for current in [-2.8, -0.7, 0.0, 0.4, 2.8] {
+        for (display_c, hot_c) in [(32.0, 23.0), (15.0, 45.0), (25.0, 25.0)] {
+            let terms_w = m.display_heat_terms_w(current, display_c, hot_c);
+            let q_w = m.heat_into_display_w(current, display_c, hot_c);
+            for u in [-0.3, 0.3] {
+                let scaled = PeltierModule::new(
+                    m.seebeck_v_k * (1.0 + u),
+                    m.resistance_ohm * (1.0 + u),
+                    m.conductance_w_k * (1.0 + u),
+                )
+                .unwrap_or_else(|e| panic!("{e}"));
+                let moved_w = (scaled.heat_into_display_w(current, display_c, hot_c) - q_w).abs();
+                assert!(
+                    moved_w <= 0.3 * terms_w * (1.0 + 1e-12),
+                    "I={current} Td={display_c} Th={hot_c} u={u}: moved {moved_w} W, bound {} W",
+                    0.3 * terms_w
+                );
+            }
+        }
+    }
+    assert_close(
+        m.display_heat_terms_w(0.0, 32.0, 23.0),
+        m.conductance_w_k * 9.0,
+        1e-12,
+        "conduction at rest",
+    );
+}
+
 #[test]
 fn mini_module_parameters_match_the_expected_values() {
     let m = mini();

@@ -69,7 +69,7 @@ pub struct Loop {
 
 impl Loop {
     pub fn new(spec: &RenderSpec) -> Self {
-        let pipeline = ChannelPipeline::new(&spec.pipeline).unwrap_or_else(|e| panic!("{e}"));
+        let pipeline = ChannelPipeline::new(&spec.believed_pipeline()).unwrap_or_else(|e| panic!("{e}"));
         let plant = resting_plant(spec).unwrap_or_else(|e| panic!("{e}"));
         let start_s = plant.time_s();
         let substeps = ((spec.tick_s() / spec.plant_substep_s) - 1e-9).ceil().max(1.0) as usize;

@@ -316,3 +316,53 @@ fn the_touch_calibrates_the_finger_model_to_the_real_finger_and_only_to_a_differ
         }
     }
 }
+
+/// The calibration's gate on the device file's uncertainty (`render.peltier_uncertainty`): on a display whose
+/// module conducts 30 % less than its datasheet file says (ΔT_max × 0.7 in the plant), the resting plate exchanges
+/// less heat with the hot side than the model expects, and the controller learns that as heat from the finger.
+/// Believing the file exact, the touch would move the finger model by that heat over G — a finger that is not
+/// there; the datasheet file's 30 % explains it, so a finger that matches the model is left as it is, and the model
+/// controller then renders the paper's materials with an RMS no worse than pid's on that plant.
+#[test]
+fn a_datasheet_file_does_not_take_its_own_peltier_error_for_the_finger() {
+    let believed = thermode_device::DeviceConfig::default();
+    let mut plant = believed;
+    plant.peltier.dtmax_k *= 0.7;
+    plant.peltier.qmax_w = plant.peltier.predicted_qmax_w();
+    let shift_c = |uncertainty: f64| {
+        let mut s = spec(ShippedDisplay::Default, ControllerKind::Model, "wood");
+        s.pipeline.device.render.peltier_uncertainty = uncertainty;
+        s.hardware = Some(plant);
+        let mut lp = Loop::new(&s);
+        lp.run((s.pre_contact_s * s.rate_hz).round() as usize);
+        let touch = Stimulus::Touch {
+            material: s.material.clone(),
+            object_c: s.object_temperature_c(),
+        };
+        lp.pipeline.set_stimulus(touch).unwrap_or_else(|e| panic!("{e}"));
+        lp.pipeline.calibration_shift_c()
+    };
+    let (believed_exact_c, datasheet_c) = (shift_c(0.0), shift_c(believed.render.peltier_uncertainty));
+    eprintln!("calibration shift of a model finger: file taken as exact {believed_exact_c:.3} °C, as a datasheet {datasheet_c:.3} °C");
+    assert!(
+        believed_exact_c.abs() > 0.5,
+        "the module's error read as a finger: {believed_exact_c} °C"
+    );
+    assert_eq!(datasheet_c, 0.0, "a datasheet file's own error taken for the finger");
+    let specs: Vec<_> = [pid(ShippedDisplay::Default), ControllerKind::Model]
+        .into_iter()
+        .flat_map(|c| PAPER.map(|m| spec(ShippedDisplay::Default, c, m)))
+        .map(|mut s| {
+            s.hardware = Some(plant);
+            s
+        })
+        .collect();
+    let runs = render_all(&specs).unwrap_or_else(|e| panic!("{e}"));
+    let rms = |s: &Summary| value(s.rms_skin_0_90_c, "rms", s);
+    let (p, m) = (mean(&of(&runs, "pid"), rms), mean(&of(&runs, "model"), rms));
+    eprintln!("ΔT_max × 0.7 plant: mean RMS pid {p:.4}, model {m:.4} °C");
+    assert!(
+        m <= p,
+        "model {m} vs pid {p} °C on a plant whose K is 30 % below its file"
+    );
+}

@@ -167,9 +167,11 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Displ
         ControllerArg::Model => ControllerKind::Model,
         ControllerArg::Pid => ControllerKind::Pid(gains_for_device(&device_config)?.0),
     };
-    let pipeline = PipelineConfig::new(device_config, controller);
+    let mut pipeline = PipelineConfig::new(device_config, controller);
     pipeline.validate()?;
     let (device, label): (Box<dyn Device + Send>, String) = if args.device == "sim" {
+        // The simulated display is built from this very file, so the file is exact for it.
+        pipeline.device = device_config.exact_for_its_simulation();
         let count = args.channels.unwrap_or(5);
         if count == 0 || count > MAX_CHANNELS {
             bail!("--channels must be 1 to {MAX_CHANNELS}, not {count}");
