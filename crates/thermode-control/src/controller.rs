@@ -53,6 +53,11 @@ pub trait Controller {
     /// Forgets all internal state (filters, integrators, observers), as after a restart.
     fn reset(&mut self);
 
+    /// The drive's own measurement with this tick's reading, given before [`Controller::update`]: the current it
+    /// delivers \[A\] and the module's terminal voltage \[V\] (NaN when the device does not report them). The
+    /// default ignores them; the model-based controller fits its module to them.
+    fn observe_drive(&mut self, _current_a: f64, _voltage_v: f64) {}
+
     /// The controller's best estimate of the true display (plate) temperature after its last update, °C, if it
     /// has one (an observer). The pipeline advances the display inverse's finger model with this value — what the
     /// finger really receives — instead of the set-point; `None` (the paper's way) advances it with the set-point.

@@ -15,6 +15,8 @@
 //!   plate ([`observer`]: [`PlateObserver`] on a [`PlantModel`] filled from the device file) and the plate's heat
 //!   balance inverted through the Peltier equations, driving the most useful current when a set-point is
 //!   infeasible, with nothing to wind up.
+//! - [`module_fit`]: [`ModuleFit`], the live fit of the Peltier module to its terminal voltage that the model-based
+//!   controller uses when the device reports one.
 //! - [`error`]: [`ControlError`], refused parameters and inputs.
 //!
 //! One tick of a channel:
@@ -42,6 +44,7 @@ pub mod error;
 pub mod filter;
 pub mod identify;
 pub mod model_controller;
+pub mod module_fit;
 pub mod observer;
 pub mod pid;
 
@@ -49,5 +52,6 @@ pub use controller::{ControlInput, Controller, PidController};
 pub use error::ControlError;
 pub use filter::LowPass;
 pub use model_controller::{ModelController, ModelDesign, ModelTerms};
+pub use module_fit::ModuleFit;
 pub use observer::{Finger, ObserverDesign, ObserverTick, PlantModel, PlateEstimate, PlateObserver};
 pub use pid::{AntiWindup, Pid, PidGains, PidTerms};

@@ -36,6 +36,10 @@
 //!   acts on the observer's estimate, which is model-based and nearly noise-free, so the loop can be as fast as the
 //!   sensor delivers information.
 //!
+//! When the device reports the module's voltage ([`Controller::observe_drive`]), the observer's Peltier module is
+//! fitted to it live ([`ModuleFit`]: S and R from the voltage, K from the file's figure of merit), so a module that
+//! is not its datasheet does not leave a current-dependent error in the observer's unknown heat.
+//!
 //! No control error is integrated anywhere, so there is nothing to wind up: the only integrating state is the
 //! observer's unknown heat, an estimate of a physical heat flow driven by the current really applied, which stays
 //! right while the drive is saturated.
@@ -71,6 +75,7 @@
 
 use crate::controller::{ControlInput, Controller};
 use crate::error::ControlError;
+use crate::module_fit::ModuleFit;
 use crate::observer::{Finger, ObserverDesign, ObserverTick, PlantModel, PlateEstimate, PlateObserver};
 use thermode_model::Rule;
 
@@ -80,6 +85,9 @@ use thermode_model::Rule;
 pub struct ModelDesign {
     /// The observer's noise model. Default [`ObserverDesign::default`].
     pub observer: ObserverDesign,
+    /// Relative standard deviation of the device file's S and R with which the live fit to the module's voltage
+    /// starts ([`ModuleFit`]), > 0; `None`: no fit (the file's module throughout). Default `Some(0.3)`.
+    pub module_fit_relative_sd: Option<f64>,
     /// Closed-loop time constant of the plate, in sensor sample periods (> 0). Default 2 (20 ms for the default
     /// 100 Hz PT-100).
     pub closed_loop_sample_periods: f64,
@@ -89,6 +97,7 @@ impl Default for ModelDesign {
     fn default() -> Self {
         Self {
             observer: ObserverDesign::default(),
+            module_fit_relative_sd: Some(0.3),
             closed_loop_sample_periods: 2.0,
         }
     }
@@ -117,6 +126,11 @@ pub struct ModelController {
     observer: PlateObserver,
     closed_loop_sample_periods: f64,
     terms: Option<ModelTerms>,
+    /// The live fit of the module to its voltage (`None`: off), as it started, and as it is; the drive's measured
+    /// current \[A\] and voltage \[V\] given for this tick (`None` when not given or not finite).
+    module_fit_start: Option<ModuleFit>,
+    module_fit: Option<ModuleFit>,
+    measured_drive: Option<(f64, f64)>,
 }
 
 impl ModelController {
@@ -129,10 +143,16 @@ impl ModelController {
     pub fn with_design(plant: PlantModel, design: ModelDesign) -> Result<Self, ControlError> {
         let periods = design.closed_loop_sample_periods;
         Rule::Positive.check("closed_loop_sample_periods [-]", periods)?;
+        if let Some(sd) = design.module_fit_relative_sd {
+            Rule::Positive.check("module_fit_relative_sd [-]", sd)?;
+        }
         Ok(Self {
             observer: PlateObserver::with_design(plant, design.observer)?,
             closed_loop_sample_periods: periods,
             terms: None,
+            module_fit_start: design.module_fit_relative_sd.map(|sd| ModuleFit::new(plant.module, sd)),
+            module_fit: design.module_fit_relative_sd.map(|sd| ModuleFit::new(plant.module, sd)),
+            measured_drive: None,
         })
     }
 
@@ -240,17 +260,33 @@ impl Controller for ModelController {
             sensor_c: input.sensor_c,
             hot_side_c: input.hot_side_c,
         })?;
+        let mut module_fit = self.module_fit;
+        if let (Some(fit), Some((current_a, voltage_v))) = (&mut module_fit, self.measured_drive) {
+            if let Some(module) = fit.update(voltage_v, current_a, estimate.plate_c, input.hot_side_c, input.dt_s) {
+                observer.set_module(module);
+            }
+        }
         let terms = self.control(&observer, &estimate, input, finger);
         Rule::Finite.check("requested current", terms.current_a)?;
         Rule::Finite.check("predicted plate temperature", terms.predicted_plate_c)?;
         self.observer = observer;
+        self.module_fit = module_fit;
         self.terms = Some(terms);
         Ok(terms.current_a)
     }
 
     fn reset(&mut self) {
         self.observer.reset();
+        if let Some(start) = self.module_fit_start {
+            self.observer.set_module(start.file_module());
+        }
+        self.module_fit = self.module_fit_start;
+        self.measured_drive = None;
         self.terms = None;
+    }
+
+    fn observe_drive(&mut self, current_a: f64, voltage_v: f64) {
+        self.measured_drive = (current_a.is_finite() && voltage_v.is_finite()).then_some((current_a, voltage_v));
     }
 
     /// The plate temperature expected at the end of the coming tick with the requested current, °C (what the finger

@@ -316,6 +316,11 @@ impl PlateObserver {
         &self.plant
     }
 
+    /// Replaces the plant model's Peltier module (a live estimate of it); the state and its covariance are kept.
+    pub fn set_module(&mut self, module: PeltierModule) {
+        self.plant.module = module;
+    }
+
     /// The noise model.
     pub fn design(&self) -> &ObserverDesign {
         &self.design

@@ -1,0 +1,190 @@
+//! A live fit of the Peltier module from its terminal voltage ([`ModuleFit`]), for the model-based controller on
+//! a display whose module is not its datasheet.
+//!
+//! The voltage across the module is `V = I R + S (T_p − T_h)` (`PeltierModule::voltage_v`): linear in the Seebeck
+//! coefficient S and the resistance R, with regressors the plate-to-hot-side difference and the current, both known
+//! every tick. A Kalman filter on θ = [S, R] (a slow random walk, so a module that warms up is followed) starts at
+//! the device file's values with the file's relative uncertainty and updates on every reading that carries a
+//! voltage. The resting plate (about 9 K above the hot side, a small current) and every change of current separate
+//! the two. The conductance K is not in the voltage; it follows from the module's figure of merit
+//! `Z = S² / (R K)`, a property of the thermoelectric material that the file's datasheet fixes, so
+//! `K = S² / (R Z)`: a module whose every parameter is scaled (a different V_max) or whose R and K trade (a
+//! different I_max) is then right in all three.
+//!
+//! Each estimate is kept within a factor of two of the file's value, and a reading that is not finite changes
+//! nothing. No allocation; deterministic.
+
+use thermode_model::peltier::PeltierModule;
+
+/// Standard deviation of a voltage reading the fit assumes \[V\]: 2 mV (twice the simulated display's noise; a
+/// Meerstetter controller reports the output voltage to the millivolt).
+pub const VOLTAGE_SD_V: f64 = 2e-3;
+
+/// Relative random walk of S and R per √s \[1/√s\]: 1e-3 (a module's parameters change with its temperature, a few
+/// tenths of a percent per kelvin, over seconds).
+pub const DRIFT_PER_SQRT_S: f64 = 1e-3;
+
+/// Largest factor between an estimate and the device file's value: 2.
+pub const MAX_FACTOR: f64 = 2.0;
+
+/// The live fit of S and R; see the module documentation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModuleFit {
+    /// The device file's module.
+    file: PeltierModule,
+    /// Current estimate [S in V/K, R in Ω].
+    theta: [f64; 2],
+    /// Its covariance.
+    p: [[f64; 2]; 2],
+    /// The module's figure of merit from the file, S²/(R K) \[1/K\].
+    figure_of_merit_per_k: f64,
+}
+
+impl ModuleFit {
+    /// A fit starting at `file` with relative standard deviation `relative_sd` (> 0) of S and R.
+    pub fn new(file: PeltierModule, relative_sd: f64) -> Self {
+        let theta = [file.seebeck_v_k, file.resistance_ohm];
+        let var = |x: f64| (relative_sd * x).powi(2);
+        Self {
+            file,
+            theta,
+            p: [[var(theta[0]), 0.0], [0.0, var(theta[1])]],
+            figure_of_merit_per_k: file.seebeck_v_k.powi(2) / (file.resistance_ohm * file.conductance_w_k),
+        }
+    }
+
+    /// Updates with one reading: the module's terminal `voltage_v` \[V\] while `current_a` \[A\] flows with the plate
+    /// at `plate_c` and the hot side at `hot_c` \[°C\], `dt_s` \[s\] after the previous one. Returns the module as now
+    /// estimated, or `None` (and nothing changes) when the reading is not usable.
+    pub fn update(
+        &mut self,
+        voltage_v: f64,
+        current_a: f64,
+        plate_c: f64,
+        hot_c: f64,
+        dt_s: f64,
+    ) -> Option<PeltierModule> {
+        let phi = [plate_c - hot_c, current_a];
+        if !([voltage_v, phi[0], phi[1], dt_s].iter().all(|x| x.is_finite()) && dt_s > 0.0) {
+            return None;
+        }
+        for (k, theta) in self.theta.iter().enumerate() {
+            self.p[k][k] += (DRIFT_PER_SQRT_S * theta).powi(2) * dt_s;
+        }
+        let p_phi = [
+            self.p[0][0] * phi[0] + self.p[0][1] * phi[1],
+            self.p[1][0] * phi[0] + self.p[1][1] * phi[1],
+        ];
+        let innovation_var = phi[0] * p_phi[0] + phi[1] * p_phi[1] + VOLTAGE_SD_V * VOLTAGE_SD_V;
+        let innovation = voltage_v - (phi[0] * self.theta[0] + phi[1] * self.theta[1]);
+        let file = [self.file.seebeck_v_k, self.file.resistance_ohm];
+        for k in 0..2 {
+            let gain = p_phi[k] / innovation_var;
+            self.theta[k] = (self.theta[k] + gain * innovation).clamp(file[k] / MAX_FACTOR, file[k] * MAX_FACTOR);
+            for (p, p_phi_j) in self.p[k].iter_mut().zip(p_phi) {
+                *p -= gain * p_phi_j;
+            }
+        }
+        Some(self.module())
+    }
+
+    /// The device file's module, where the fit started.
+    pub fn file_module(&self) -> PeltierModule {
+        self.file
+    }
+
+    /// The module as now estimated: S and R fitted, K from the file's figure of merit.
+    pub fn module(&self) -> PeltierModule {
+        let [s, r] = self.theta;
+        PeltierModule {
+            seebeck_v_k: s,
+            resistance_ohm: r,
+            conductance_w_k: s * s / (r * self.figure_of_merit_per_k),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use thermode_model::peltier::PeltierDatasheet;
+
+    fn module_of(datasheet: &PeltierDatasheet) -> PeltierModule {
+        PeltierModule::from_datasheet(datasheet).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    /// Feeds `fit` 20 s at 100 Hz of noise-free voltages of `truth`: a resting plate 9 K above the hot side at a
+    /// small current, then a cooling drop at -2.8 A and a recovery, as a touch gives them.
+    fn feed(fit: &mut ModuleFit, truth: &PeltierModule) -> PeltierModule {
+        let mut module = fit.module();
+        for k in 0..2000 {
+            let t = f64::from(k) * 0.01;
+            let (current_a, plate_c): (f64, f64) = match t {
+                t if t < 10.0 => (0.12, 32.0),
+                t if t < 11.0 => (-2.8, 32.0 - 10.0 * (t - 10.0)),
+                t => (0.4, 22.0 + (t - 11.0)),
+            };
+            let hot_c = 23.0 + 0.3 * current_a.abs();
+            let voltage_v = truth.voltage_v(current_a, plate_c, hot_c);
+            module = fit.update(voltage_v, current_a, plate_c, hot_c, 0.01).unwrap_or(module);
+        }
+        module
+    }
+
+    fn assert_within(got: f64, want: f64, relative: f64, what: &str) {
+        assert!(
+            (got / want - 1.0).abs() <= relative,
+            "{what}: fitted {got} vs true {want}"
+        );
+    }
+
+    /// Datasheets 30 % off in V_max (S, R and K scaled together) and I_max (R and K trading): S and R from the
+    /// voltage, and K from the file's figure of merit, each within 0.5 % of the true module.
+    #[test]
+    fn the_fit_finds_a_module_scaled_from_its_file() {
+        let file = PeltierDatasheet::default();
+        for (vmax, imax) in [(1.3, 1.0), (0.7, 1.0), (1.0, 1.3), (1.0, 0.7)] {
+            let mut hidden = PeltierDatasheet {
+                vmax_v: file.vmax_v * vmax,
+                imax_a: file.imax_a * imax,
+                ..file
+            };
+            hidden.qmax_w = hidden.predicted_qmax_w();
+            let truth = module_of(&hidden);
+            let mut fit = ModuleFit::new(module_of(&file), 0.3);
+            let fitted = feed(&mut fit, &truth);
+            let what = format!("V_max × {vmax}, I_max × {imax}");
+            assert_within(fitted.seebeck_v_k, truth.seebeck_v_k, 0.005, &format!("{what}: S"));
+            assert_within(
+                fitted.resistance_ohm,
+                truth.resistance_ohm,
+                0.005,
+                &format!("{what}: R"),
+            );
+            assert_within(
+                fitted.conductance_w_k,
+                truth.conductance_w_k,
+                0.005,
+                &format!("{what}: K"),
+            );
+        }
+    }
+
+    #[test]
+    fn an_unusable_reading_changes_nothing_and_estimates_stay_within_a_factor_of_two() {
+        let file = module_of(&PeltierDatasheet::default());
+        let mut fit = ModuleFit::new(file, 0.3);
+        let before = fit;
+        for (voltage_v, current_a, dt_s) in [(f64::NAN, 1.0, 0.01), (0.5, f64::INFINITY, 0.01), (0.5, 1.0, 0.0)] {
+            assert_eq!(fit.update(voltage_v, current_a, 32.0, 23.0, dt_s), None);
+            assert_eq!(fit, before);
+        }
+        // A voltage ten times what the module could give: the estimates stop at twice the file's.
+        for _ in 0..1000 {
+            fit.update(10.0 * file.voltage_v(2.0, 32.0, 23.0), 2.0, 32.0, 23.0, 0.01);
+        }
+        let module = fit.module();
+        assert!(module.seebeck_v_k <= 2.0 * file.seebeck_v_k && module.resistance_ohm <= 2.0 * file.resistance_ohm);
+        assert_eq!(fit.file_module(), file);
+    }
+}
