@@ -1,16 +1,21 @@
-//! SIGINT and SIGTERM as a clean stop for the commands that run the daemon (`serve`, `demo`).
+//! SIGINT and SIGTERM as a clean stop for the commands that run a display (`serve`, `demo`, `lab run --device`).
 //!
-//! [`StopSignals::install`] blocks both signals in the calling thread — and so in every thread started after it,
-//! which inherit the mask: call it before starting any — and starts one thread that takes them with `sigwait`. The
-//! first signal is handed to whoever waits on [`StopSignals::wait`] (the command then stops the daemon: every drive to
-//! 0 A at once, the recording flushed and synced, a one-line summary, exit 0). A second signal while that stop is
-//! still running ends the process at once with exit code 130 (the devices' own watchdogs then switch the drives off).
+//! [`StopSignals::install`] installs handlers for both signals (`signal-hook`: the handler writes to a self-pipe) and
+//! starts one thread that reads them. A handler, not a blocked mask and `sigwait`, because any thread may take a
+//! process-directed signal: the serial reader waits in `ppoll` with an empty signal mask (serialport), so a signal
+//! blocked everywhere else reached it and killed the process with the drives still on (found by the test
+//! `sigterm_stops_serve_cleanly`). The first signal is handed to whoever waits on [`StopSignals::wait`] (the command
+//! then stops the daemon: every drive to 0 A at once, the recording flushed and synced, a one-line summary, exit 0).
+//! A second signal while that stop is still running ends the process at once with exit code 130 (the devices' own
+//! watchdogs then switch the drives off).
 
 use std::sync::mpsc::{channel, Receiver, RecvTimeoutError};
 use std::time::Duration;
 
 use anyhow::{Context, Result};
-use nix::sys::signal::{SigSet, Signal};
+use nix::sys::signal::Signal;
+use signal_hook::consts::{SIGINT, SIGTERM};
+use signal_hook::iterator::Signals;
 
 /// Exit code when a second signal cuts the clean stop short: 130 (128 + SIGINT, the shell's convention).
 pub const SECOND_SIGNAL_EXIT_CODE: i32 = 130;
@@ -22,20 +27,16 @@ pub struct StopSignals {
 }
 
 impl StopSignals {
-    /// Blocks SIGINT and SIGTERM in this thread and its future threads, and starts the thread that takes them.
+    /// Installs the handlers of SIGINT and SIGTERM and starts the thread that takes them.
     pub fn install() -> Result<StopSignals> {
-        let mut set = SigSet::empty();
-        set.add(Signal::SIGINT);
-        set.add(Signal::SIGTERM);
-        set.thread_block().context("cannot block SIGINT and SIGTERM")?;
+        let mut signals = Signals::new([SIGINT, SIGTERM]).context("cannot install the SIGINT and SIGTERM handlers")?;
         let (send, received) = channel();
         std::thread::Builder::new()
             .name("thermode-signals".into())
             .spawn(move || {
-                let mut seen = 0u32;
-                while let Ok(signal) = set.wait() {
-                    seen += 1;
-                    if seen > 1 {
+                for (seen, number) in signals.forever().enumerate() {
+                    let signal = Signal::try_from(number).unwrap_or(Signal::SIGTERM);
+                    if seen > 0 {
                         eprintln!("thermode: {} again: exiting at once", signal.as_str());
                         std::process::exit(SECOND_SIGNAL_EXIT_CODE);
                     }
@@ -53,7 +54,7 @@ impl StopSignals {
             Ok(signal) => Some(signal),
             Err(RecvTimeoutError::Timeout) => None,
             Err(RecvTimeoutError::Disconnected) => {
-                // The signal thread ended (sigwait failed): no signal will come; wait out the time all the same.
+                // The signal thread ended: no signal will come; wait out the time all the same.
                 std::thread::sleep(timeout);
                 None
             }

@@ -265,7 +265,7 @@ fn answers(
 fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, out: &mut dyn Write) -> Result<()> {
     let design = &experiment.experiment;
     // With --device this process runs the display: a stop signal must stop it cleanly (every drive to 0 A, the
-    // dose ledger written) before the process ends. Installed before the daemon starts its threads.
+    // dose ledger written) before the process ends. Installed before the daemon starts.
     let signals = args.device.is_some().then(StopSignals::install).transpose()?;
     let (daemon, url, token) = match (&args.display, &args.device) {
         (Some(url), _) => (None, url.clone(), args.token.clone()),

@@ -405,6 +405,24 @@ fn session_csv(dir: &Path) -> PathBuf {
 }
 
 /// Signals `serve` while it drives two channels (one heating, one cooling); checks the trace and the recording.
+/// `sig` has a handler in `child` (its bit in /proc's SigCgt), so whichever thread takes it, the process stops
+/// cleanly: a blocked mask and `sigwait` were not enough, because the serial reader waits in `ppoll` with every
+/// signal unblocked, and a SIGTERM delivered there killed `serve` with the drives still on.
+fn assert_signal_is_caught(child: &std::process::Child, sig: Signal) {
+    let status = std::fs::read_to_string(format!("/proc/{}/status", child.id())).unwrap_or_default();
+    let Some(caught) = status
+        .lines()
+        .find_map(|line| line.strip_prefix("SigCgt:"))
+        .and_then(|hex| u64::from_str_radix(hex.trim(), 16).ok())
+    else {
+        return; // no /proc (not Linux): nothing to read
+    };
+    assert!(
+        caught & (1 << (sig as i32 - 1)) != 0,
+        "{sig} has no handler in serve (SigCgt {caught:x})"
+    );
+}
+
 fn stop_with(sig: Signal) {
     let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
     let (trace, record) = (dir.path().join("trace.csv"), dir.path().join("sessions"));
@@ -432,6 +450,7 @@ fn stop_with(sig: Signal) {
         newest_s = r.time_s;
     }
     let signal_at_or_after_s = newest_s;
+    assert_signal_is_caught(&host.process.0, sig);
     signal(&host.process.0, sig);
     let waited = Instant::now();
     let code = loop {
