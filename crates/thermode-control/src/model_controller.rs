@@ -146,12 +146,13 @@ impl ModelController {
         if let Some(sd) = design.module_fit_relative_sd {
             Rule::Positive.check("module_fit_relative_sd [-]", sd)?;
         }
+        let module_fit = design.module_fit_relative_sd.map(|sd| ModuleFit::new(plant.module, sd));
         Ok(Self {
             observer: PlateObserver::with_design(plant, design.observer)?,
             closed_loop_sample_periods: periods,
             terms: None,
-            module_fit_start: design.module_fit_relative_sd.map(|sd| ModuleFit::new(plant.module, sd)),
-            module_fit: design.module_fit_relative_sd.map(|sd| ModuleFit::new(plant.module, sd)),
+            module_fit_start: module_fit,
+            module_fit,
             measured_drive: None,
         })
     }
