@@ -634,6 +634,28 @@ mod tests {
         assert_eq!(utc_iso8601(1_700_000_000), "2023-11-14T22:13:20Z");
     }
 
+    /// A dose read back is the dose written, to the bit (1.0023176924538377 came back an ulp lower, below the loop's
+    /// dose, before JSON numbers were parsed with `float_roundtrip`).
+    #[test]
+    fn a_written_ledger_reads_back_to_the_bit() {
+        let mut l = Ledger::default();
+        let values: Vec<f64> = std::iter::once(1.002_317_692_453_837_7)
+            .chain((0..2000u64).map(|i| f64::from_bits(0x3ff0_0000_0000_0000 + i * 1_037_353)))
+            .collect();
+        for (channel, &value) in values.iter().enumerate() {
+            l.merge(channel, &dose(value, value * 60.0, false), "t");
+        }
+        let back = Ledger::from_json(&l.to_json(), Path::new("ledger.json")).unwrap_or_else(|e| panic!("{e}"));
+        for (channel, &value) in values.iter().enumerate() {
+            let d = back.dose(channel);
+            assert_eq!(
+                (d.cem43_min.to_bits(), d.time_at_or_above_43_s.to_bits()),
+                (value.to_bits(), (value * 60.0).to_bits()),
+                "channel {channel}: {value} read back as {d:?}"
+            );
+        }
+    }
+
     #[test]
     fn a_merge_never_lowers_and_grades_the_change() {
         let mut l = Ledger::default();
