@@ -70,8 +70,7 @@ const DIGIT_PAIRS: [u8; 200] = {
 
 /// Appends `value / 10^decimals` (`value` below 1e16, `decimals` at most [`MAX_DECIMALS`]), with a minus sign
 /// when `negative`: at least one digit before the point, exactly `decimals` after it (no point when `decimals` is
-/// 0). The text is built right-aligned in a fixed array and appended with one copy of constant length, then cut:
-/// small copies of varying length cost a library call each.
+/// 0), built right-aligned in a fixed array, two digits at a time.
 fn push_scaled_integer(out: &mut Vec<u8>, negative: bool, mut value: u64, decimals: usize) {
     const LEN: usize = 32;
     let mut text = [b'0'; LEN];
@@ -107,11 +106,7 @@ fn push_scaled_integer(out: &mut Vec<u8>, negative: bool, mut value: u64, decima
         start -= 1;
         text[start] = b'-';
     }
-    // Left-align, so the copy below has a constant length.
-    text.copy_within(start.., 0);
-    let length = out.len() + LEN - start;
-    out.extend_from_slice(&text);
-    out.truncate(length);
+    out.extend_from_slice(&text[start..]);
 }
 
 /// Writes the two digits of `pair` (below 100) before `start` and moves `start` back by two.
