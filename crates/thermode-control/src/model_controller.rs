@@ -86,7 +86,8 @@ pub struct ModelDesign {
     /// The observer's noise model. Default [`ObserverDesign::default`].
     pub observer: ObserverDesign,
     /// Relative standard deviation of the device file's S and R with which the live fit to the module's voltage
-    /// starts ([`ModuleFit`]), > 0; `None`: no fit (the file's module throughout). Default `Some(0.3)`.
+    /// starts ([`ModuleFit`]), > 0; `None`: no fit (the file's module throughout). Default `Some(0.3)` (datasheet
+    /// values); the pipeline gives the device file's `render.peltier_uncertainty`, and `None` when that is 0.
     pub module_fit_relative_sd: Option<f64>,
     /// Closed-loop time constant of the plate, in sensor sample periods (> 0). Default 2 (20 ms for the default
     /// 100 Hz PT-100).

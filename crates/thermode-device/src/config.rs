@@ -73,7 +73,8 @@ pub struct RenderConfig {
     pub max_setpoint_rate_c_per_s: f64,
     /// Relative uncertainty of the Peltier module's S, R and K as this file gives them \[-\], 0 to 1. Default 0.3
     /// (datasheet values); `thermode identify` writes its fit's. The heat at rest that errors this large could
-    /// explain is not taken for the finger's when the finger models are calibrated at a touch.
+    /// explain is not taken for the finger's when the finger models are calibrated at a touch, and the model
+    /// controller's live fit of the module to its voltage starts with this uncertainty (none when 0).
     pub peltier_uncertainty: f64,
 }
 
@@ -345,8 +346,9 @@ impl DeviceConfig {
                 doc: "Relative uncertainty of the Peltier module's S, R and K as this file gives them [-], 0 to 1. \
                       At a touch the finger models are calibrated to the heat the resting finger gives the plate \
                       beyond the model's (docs/design-choices.md, touch calibration); the part of that heat which \
-                      errors this large in the module could explain is not taken for the finger's. `thermode \
-                      identify` writes its fit's uncertainty.",
+                      errors this large in the module could explain is not taken for the finger's. Where the \
+                      display reports the module's voltage, the model controller fits S and R to it live, starting \
+                      with this uncertainty (no fit when 0). `thermode identify` writes its fit's uncertainty.",
                 source: "Datasheet values describe a module type, not the one on the display: ±30 % in the derived \
                          conductance K moves the heat a resting plate exchanges with the hot side by about 75 mW, a \
                          1.2 °C error of the finger's temperature (docs/design-choices.md).",
