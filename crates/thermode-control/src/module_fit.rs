@@ -11,8 +11,8 @@
 //! `K = S² / (R Z)`: a module whose every parameter is scaled (a different V_max) or whose R and K trade (a
 //! different I_max) is then right in all three.
 //!
-//! Each estimate is kept within a factor of two of the file's value, and a reading that is not finite changes
-//! nothing. No allocation; deterministic.
+//! Each estimate is kept within a factor of two of the file's value; a reading that is not finite, or further than
+//! [`GATE_SD`] standard deviations from what the fit expects, changes nothing. No allocation; deterministic.
 
 use thermode_model::peltier::PeltierModule;
 
@@ -26,6 +26,10 @@ pub const DRIFT_PER_SQRT_S: f64 = 1e-3;
 
 /// Largest factor between an estimate and the device file's value: 2.
 pub const MAX_FACTOR: f64 = 2.0;
+
+/// A reading further than this many of its expected standard deviations from the prediction is not used: 5 (a
+/// spike, a voltage in another sign convention or unit, a module the model cannot describe).
+pub const GATE_SD: f64 = 5.0;
 
 /// The live fit of S and R; see the module documentation.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -55,7 +59,7 @@ impl ModuleFit {
 
     /// Updates with one reading: the module's terminal `voltage_v` \[V\] while `current_a` \[A\] flows with the plate
     /// at `plate_c` and the hot side at `hot_c` \[°C\], `dt_s` \[s\] after the previous one. Returns the module as now
-    /// estimated, or `None` (and nothing changes) when the reading is not usable.
+    /// estimated, or `None` (and nothing changes) when the reading is not usable (not finite, or beyond the gate).
     pub fn update(
         &mut self,
         voltage_v: f64,
@@ -68,15 +72,17 @@ impl ModuleFit {
         if !([voltage_v, phi[0], phi[1], dt_s].iter().all(|x| x.is_finite()) && dt_s > 0.0) {
             return None;
         }
+        let mut p = self.p;
         for (k, theta) in self.theta.iter().enumerate() {
-            self.p[k][k] += (DRIFT_PER_SQRT_S * theta).powi(2) * dt_s;
+            p[k][k] += (DRIFT_PER_SQRT_S * theta).powi(2) * dt_s;
         }
-        let p_phi = [
-            self.p[0][0] * phi[0] + self.p[0][1] * phi[1],
-            self.p[1][0] * phi[0] + self.p[1][1] * phi[1],
-        ];
+        let p_phi = [p[0][0] * phi[0] + p[0][1] * phi[1], p[1][0] * phi[0] + p[1][1] * phi[1]];
         let innovation_var = phi[0] * p_phi[0] + phi[1] * p_phi[1] + VOLTAGE_SD_V * VOLTAGE_SD_V;
         let innovation = voltage_v - (phi[0] * self.theta[0] + phi[1] * self.theta[1]);
+        if innovation * innovation > GATE_SD * GATE_SD * innovation_var {
+            return None;
+        }
+        self.p = p;
         let file = [self.file.seebeck_v_k, self.file.resistance_ohm];
         for k in 0..2 {
             let gain = p_phi[k] / innovation_var;
@@ -171,7 +177,7 @@ mod tests {
     }
 
     #[test]
-    fn an_unusable_reading_changes_nothing_and_estimates_stay_within_a_factor_of_two() {
+    fn an_unusable_or_implausible_reading_changes_nothing_and_estimates_stay_within_a_factor_of_two() {
         let file = module_of(&PeltierDatasheet::default());
         let mut fit = ModuleFit::new(file, 0.3);
         let before = fit;
@@ -179,12 +185,25 @@ mod tests {
             assert_eq!(fit.update(voltage_v, current_a, 32.0, 23.0, dt_s), None);
             assert_eq!(fit, before);
         }
-        // A voltage ten times what the module could give: the estimates stop at twice the file's.
+        // A voltage in the opposite sign convention is refused outright; nothing moves.
         for _ in 0..1000 {
-            fit.update(10.0 * file.voltage_v(2.0, 32.0, 23.0), 2.0, 32.0, 23.0, 0.01);
+            assert_eq!(
+                fit.update(-file.voltage_v(2.0, 32.0, 23.0), 2.0, 32.0, 23.0, 0.01),
+                None
+            );
+        }
+        assert_eq!(fit, before);
+        // A module twice as resistive as the file's hardest case: the estimates stop at twice the file's values.
+        let mut strong = file;
+        strong.resistance_ohm *= 2.5;
+        let mut fit = ModuleFit::new(file, 1.0);
+        for k in 0..3000 {
+            let current_a = 0.5 + f64::from(k % 7) * 0.3;
+            fit.update(strong.voltage_v(current_a, 32.0, 23.0), current_a, 32.0, 23.0, 0.01);
         }
         let module = fit.module();
-        assert!(module.seebeck_v_k <= 2.0 * file.seebeck_v_k && module.resistance_ohm <= 2.0 * file.resistance_ohm);
+        assert!(module.resistance_ohm <= 2.0 * file.resistance_ohm, "{module:?}");
+        assert!(module.resistance_ohm >= 1.9 * file.resistance_ohm, "{module:?}");
         assert_eq!(fit.file_module(), file);
     }
 }
