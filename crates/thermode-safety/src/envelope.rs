@@ -209,6 +209,9 @@ pub struct SafetyEnvelope {
     /// Reference sample (time, °C) of the measured-rate check.
     rate_ref: Option<(f64, f64)>,
     dose: DoseTracker,
+    /// The lowest dose ceiling of any sample so far, °C (+∞ before the first): the dose only grows, so the ceiling
+    /// it allows never rises again — not even where the formula steps up by its look ahead as the lockout engages.
+    lowest_dose_ceiling_c: f64,
     lockout_at_s: Option<f64>,
     at_48_since_s: Option<f64>,
     at_limit: Option<AtLimit>,
@@ -236,6 +239,7 @@ impl SafetyEnvelope {
                 config.max_measured_rate_c_per_s,
             )
             .with_longest_interval_s(config.stale_timeout_s),
+            lowest_dose_ceiling_c: f64::INFINITY,
             lockout_at_s: None,
             at_48_since_s: None,
             at_limit: None,
@@ -312,9 +316,15 @@ impl SafetyEnvelope {
     }
 
     /// The highest display set-point now, °C: `max_display_c`, lowered by the dose cap near and after the end of the
-    /// budget ([`crate::dose`], "The cap"), never below `min_display_c`.
+    /// budget ([`crate::dose`], "The cap") and never raised again by it (the lowest dose ceiling of any sample so
+    /// far: the dose only grows), never below `min_display_c`.
     pub fn effective_max_c(&self) -> f64 {
-        let ceiling_c = self.dose_cap().ceiling_c(&self.dose);
+        let formula_c = self.dose_cap().ceiling_c(&self.dose);
+        let ceiling_c = if formula_c.is_nan() {
+            formula_c
+        } else {
+            formula_c.min(self.lowest_dose_ceiling_c)
+        };
         let (min_c, max_c) = (self.config.min_display_c, self.config.max_display_c);
         // Written so that a NaN ceiling (none is expected) gives the minimum.
         if ceiling_c >= max_c {
@@ -472,6 +482,15 @@ impl SafetyEnvelope {
         }
         self.check_sustained_48(m);
         self.check_dose_lockout(m);
+        self.lower_dose_ceiling();
+    }
+
+    /// Keeps the lowest dose ceiling so far ([`SafetyEnvelope::effective_max_c`]).
+    fn lower_dose_ceiling(&mut self) {
+        let ceiling_c = self.dose_cap().ceiling_c(&self.dose);
+        if ceiling_c < self.lowest_dose_ceiling_c {
+            self.lowest_dose_ceiling_c = ceiling_c;
+        }
     }
 
     /// Open, short or implausible display sensor reading.
