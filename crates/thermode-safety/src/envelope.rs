@@ -209,8 +209,9 @@ pub struct SafetyEnvelope {
     /// Reference sample (time, °C) of the measured-rate check.
     rate_ref: Option<(f64, f64)>,
     dose: DoseTracker,
-    /// The lowest dose ceiling of any sample so far, °C (+∞ before the first): the dose only grows, so the ceiling
-    /// it allows never rises again — not even where the formula steps up by its look ahead as the lockout engages.
+    /// The dose ceiling of the last sample, and after the lockout the lowest since the last sample before it, °C
+    /// (+∞ before the first sample): the ceiling's formula steps up by its look ahead as the lockout engages, and
+    /// the maximum must not.
     lowest_dose_ceiling_c: f64,
     lockout_at_s: Option<f64>,
     at_48_since_s: Option<f64>,
@@ -316,8 +317,7 @@ impl SafetyEnvelope {
     }
 
     /// The highest display set-point now, °C: `max_display_c`, lowered by the dose cap near and after the end of the
-    /// budget ([`crate::dose`], "The cap") and never raised again by it (the lowest dose ceiling of any sample so
-    /// far: the dose only grows), never below `min_display_c`.
+    /// budget ([`crate::dose`], "The cap"; from the lockout on never raised again), never below `min_display_c`.
     pub fn effective_max_c(&self) -> f64 {
         let formula_c = self.dose_cap().ceiling_c(&self.dose);
         let ceiling_c = if formula_c.is_nan() {
@@ -485,10 +485,12 @@ impl SafetyEnvelope {
         self.lower_dose_ceiling();
     }
 
-    /// Keeps the lowest dose ceiling so far ([`SafetyEnvelope::effective_max_c`]).
+    /// Keeps the dose ceiling of this sample, and after the lockout the lowest one since the last sample before it
+    /// ([`SafetyEnvelope::effective_max_c`]). Before the lockout the ceiling may rise (its look ahead shrinks once
+    /// the interval between samples is known); from the lockout on it only falls.
     fn lower_dose_ceiling(&mut self) {
         let ceiling_c = self.dose_cap().ceiling_c(&self.dose);
-        if ceiling_c < self.lowest_dose_ceiling_c {
+        if !self.dose_lockout_active() || ceiling_c < self.lowest_dose_ceiling_c {
             self.lowest_dose_ceiling_c = ceiling_c;
         }
     }

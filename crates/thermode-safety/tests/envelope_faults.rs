@@ -861,13 +861,14 @@ fn the_gated_command_carries_the_shaped_setpoint_only_when_it_passed() {
     assert_eq!((faulted.current_a(), faulted.setpoint_c()), (0.0, None), "{faulted:?}");
 }
 
-/// The dose only grows, so the maximum it allows never rises: a plate held at 45 °C until the default budget is
-/// nearly used (about 15 s), then at 38.6 °C, just under the landing temperature, where the last thousandth of the
-/// budget takes minutes, sampled at 1 kHz through the lockout and on. Where the lockout engages the ceiling's formula
-/// drops its look ahead, a step up of two ticks' cool-down (0.01 °C) that let a PID heat at 38.6 °C above the
-/// maximum of the tick before (found by the render property test).
+/// From the lockout on the maximum never rises (the dose only grows): a plate held at 45 °C until the default
+/// budget is nearly used (about 15 s), then at 38.6 °C, just under the landing temperature, where the last
+/// thousandth of the budget takes seconds, sampled at 1 kHz through the lockout and on. Where the lockout engages
+/// the ceiling's formula drops its look ahead, a step up of two ticks' cool-down (0.01 °C) that let a PID heat at
+/// 38.6 °C above the maximum of the tick before (found by the render property test). Before the lockout the
+/// maximum may rise a little as the interval between samples becomes known.
 #[test]
-fn the_dose_maximum_never_rises() {
+fn the_dose_maximum_never_rises_from_the_lockout_on() {
     let mut rig = Rig::default();
     let mut previous_c = f64::INFINITY;
     let mut locked_at_s = None;
@@ -880,15 +881,15 @@ fn the_dose_maximum_never_rises() {
         rig.sample(if rig.env.cem43_min() < 0.999 { 45.0 } else { 38.6 }, 25.0);
         rig.tick += 1;
         let max_c = rig.env.effective_max_c();
-        assert!(
-            max_c <= previous_c,
-            "at {} s the maximum rose from {previous_c} to {max_c} °C",
-            rig.now_s()
-        );
-        previous_c = max_c;
         if rig.env.dose_lockout_active() {
             locked_at_s.get_or_insert(rig.now_s());
+            assert!(
+                max_c <= previous_c,
+                "at {} s the maximum rose from {previous_c} to {max_c} °C",
+                rig.now_s()
+            );
         }
+        previous_c = max_c;
     }
     assert!(previous_c < 43.0, "maximum {previous_c} °C after the lockout");
 }
