@@ -38,6 +38,11 @@ pub struct ControlInput {
     /// times the contact area), so the heat the finger gives the plate is
     /// `finger_conductance_w_k · (finger_receptor_c − T_plate)`. 0 when unknown.
     pub finger_conductance_w_k: f64,
+    /// The drive's own measurement with this tick's reading: the current it delivers, A, and the module's terminal
+    /// voltage, V; NaN when the device does not report them. The model controller fits its module to them.
+    pub measured_current_a: f64,
+    /// See `measured_current_a`.
+    pub voltage_v: f64,
 }
 
 /// A display temperature controller: one requested current per tick.
@@ -52,11 +57,6 @@ pub trait Controller {
 
     /// Forgets all internal state (filters, integrators, observers), as after a restart.
     fn reset(&mut self);
-
-    /// The drive's own measurement with this tick's reading, given before [`Controller::update`]: the current it
-    /// delivers \[A\] and the module's terminal voltage \[V\] (NaN when the device does not report them). The
-    /// default ignores them; the model-based controller fits its module to them.
-    fn observe_drive(&mut self, _current_a: f64, _voltage_v: f64) {}
 
     /// The controller's best estimate of the true display (plate) temperature after its last update, °C, if it
     /// has one (an observer). The pipeline advances the display inverse's finger model with this value — what the

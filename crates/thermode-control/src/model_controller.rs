@@ -36,7 +36,7 @@
 //!   acts on the observer's estimate, which is model-based and nearly noise-free, so the loop can be as fast as the
 //!   sensor delivers information.
 //!
-//! When the device reports the module's voltage ([`Controller::observe_drive`]), the observer's Peltier module is
+//! When the device reports the module's voltage ([`ControlInput::voltage_v`]), the observer's Peltier module is
 //! fitted to it live ([`ModuleFit`]: S and R from the voltage, K from the file's figure of merit), so a module that
 //! is not its datasheet does not leave a current-dependent error in the observer's unknown heat.
 //!
@@ -67,7 +67,7 @@
 //! // A plate resting at 32 °C asked to be at 20 °C: far out of reach in one tick, so full cooling.
 //! let input = ControlInput { time_s: 0.0, dt_s: 0.01, setpoint_c: 20.0, setpoint_rate_c_per_s: 0.0,
 //!     sensor_c: 32.0, hot_side_c: 23.0, applied_current_a: 0.0, finger_receptor_c: Some(32.1),
-//!     finger_conductance_w_k: 0.064 };
+//!     finger_conductance_w_k: 0.064, measured_current_a: f64::NAN, voltage_v: f64::NAN };
 //! assert_eq!(controller.update(&input)?, -2.8);
 //! assert!(controller.plate_estimate_c().is_some_and(|p| p < 32.0));
 //! # Ok::<(), Box<dyn std::error::Error>>(())
@@ -127,11 +127,9 @@ pub struct ModelController {
     observer: PlateObserver,
     closed_loop_sample_periods: f64,
     terms: Option<ModelTerms>,
-    /// The live fit of the module to its voltage (`None`: off), as it started, and as it is; the drive's measured
-    /// current \[A\] and voltage \[V\] given for this tick (`None` when not given or not finite).
+    /// The live fit of the module to its voltage (`None`: off), as it started, and as it is.
     module_fit_start: Option<ModuleFit>,
     module_fit: Option<ModuleFit>,
-    measured_drive: Option<(f64, f64)>,
 }
 
 impl ModelController {
@@ -154,7 +152,6 @@ impl ModelController {
             terms: None,
             module_fit_start: module_fit,
             module_fit,
-            measured_drive: None,
         })
     }
 
@@ -263,7 +260,8 @@ impl Controller for ModelController {
             hot_side_c: input.hot_side_c,
         })?;
         let mut module_fit = self.module_fit;
-        if let (Some(fit), Some((current_a, voltage_v))) = (&mut module_fit, self.measured_drive) {
+        if let Some(fit) = &mut module_fit {
+            let (current_a, voltage_v) = (input.measured_current_a, input.voltage_v);
             if let Some(module) = fit.update(voltage_v, current_a, estimate.plate_c, input.hot_side_c, input.dt_s) {
                 observer.set_module(module);
             }
@@ -283,12 +281,7 @@ impl Controller for ModelController {
             self.observer.set_module(start.file_module());
         }
         self.module_fit = self.module_fit_start;
-        self.measured_drive = None;
         self.terms = None;
-    }
-
-    fn observe_drive(&mut self, current_a: f64, voltage_v: f64) {
-        self.measured_drive = (current_a.is_finite() && voltage_v.is_finite()).then_some((current_a, voltage_v));
     }
 
     /// The plate temperature expected at the end of the coming tick with the requested current, °C (what the finger

@@ -491,8 +491,9 @@ impl DriveStage {
             applied_current_a: self.applied_current_a,
             finger_receptor_c: Some(finger.receptor_c),
             finger_conductance_w_k: finger.conductance_w_k,
+            measured_current_a: reading.current_a,
+            voltage_v: reading.voltage_v,
         };
-        self.controller.observe_drive(reading.current_a, reading.voltage_v);
         let requested_current_a = self.controller.update(&input).unwrap_or(f64::NAN);
         let forecast = self.guard.forecast(dt_s, finger);
         let drive = self.envelope.gate_drive(now_s, requested_current_a, &forecast);

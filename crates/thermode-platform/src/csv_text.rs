@@ -5,7 +5,7 @@
 //! not need every bit; [`push_number`] picks one of the two by a [`Precision`]; [`push_field`] quotes a text field
 //! as the `csv` crate does (only when needed).
 
-use std::fmt::Write as _;
+use std::io::Write as _;
 
 /// How the numbers of a CSV are written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -35,18 +35,18 @@ pub fn push_f64_decimals(out: &mut Vec<u8>, x: f64, decimals: u8) {
     const POWERS_OF_TEN: [f64; MAX_DECIMALS as usize + 1] =
         [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12];
     let Some(&scale) = POWERS_OF_TEN.get(usize::from(decimals)) else {
-        return push_display_decimals(out, x, decimals);
+        return push_formatted(out, format_args!("{x:.*}", usize::from(decimals)));
     };
     // Exact powers of ten, so the product carries one rounding: at most half an ulp of `scaled`. Below 4e15 the
     // whole part and the fraction are exact (no libm call: `round` and `trunc` are calls without SSE4.1).
     let scaled = x.abs() * scale;
     if !x.is_finite() || scaled >= 4.0e15 {
-        return push_display_decimals(out, x, decimals);
+        return push_formatted(out, format_args!("{x:.*}", usize::from(decimals)));
     }
     let whole = scaled as u64;
     let fraction = scaled - whole as f64;
     if (fraction - 0.5).abs() <= scaled * f64::EPSILON {
-        return push_display_decimals(out, x, decimals);
+        return push_formatted(out, format_args!("{x:.*}", usize::from(decimals)));
     }
     push_scaled_integer(
         out,
@@ -116,16 +116,10 @@ fn put_pair(text: &mut [u8], start: &mut usize, pair: u64) {
     text[*start..*start + 2].copy_from_slice(&DIGIT_PAIRS[2 * pair..2 * pair + 2]);
 }
 
-fn push_display_decimals(out: &mut Vec<u8>, x: f64, decimals: u8) {
-    let mut text = String::new();
-    let _ = write!(text, "{x:.*}", usize::from(decimals));
-    out.extend_from_slice(text.as_bytes());
-}
-
 /// Appends `x` as `format!("{x}")` would write it.
 pub fn push_f64(out: &mut Vec<u8>, x: f64) {
     if !x.is_finite() || may_tie(x) {
-        push_display(out, x);
+        push_formatted(out, format_args!("{x}"));
         return;
     }
     let mut buffer = ryu::Buffer::new();
@@ -196,10 +190,10 @@ fn push_expanded(out: &mut Vec<u8>, mantissa: &[u8], exponent: &[u8]) {
     }
 }
 
-fn push_display(out: &mut Vec<u8>, x: f64) {
-    let mut text = String::new();
-    let _ = write!(text, "{x}");
-    out.extend_from_slice(text.as_bytes());
+/// Appends what the formatter writes for `args` (the few values the fast paths leave to it).
+fn push_formatted(out: &mut Vec<u8>, args: std::fmt::Arguments<'_>) {
+    // Writing into a vector cannot fail.
+    let _ = out.write_fmt(args);
 }
 
 /// Appends a text field, quoted (with doubled quotes) only when it holds a comma, a quote or a line break, as the
@@ -223,10 +217,18 @@ pub fn push_field(out: &mut Vec<u8>, text: &str) {
 mod tests {
     use super::*;
 
-    fn f64_text(x: f64) -> String {
+    fn written(push: impl FnOnce(&mut Vec<u8>)) -> String {
         let mut out = Vec::new();
-        push_f64(&mut out, x);
+        push(&mut out);
         String::from_utf8(out).unwrap_or_default()
+    }
+
+    fn f64_text(x: f64) -> String {
+        written(|out| push_f64(out, x))
+    }
+
+    fn decimals_text(x: f64, decimals: u8) -> String {
+        written(|out| push_f64_decimals(out, x, decimals))
     }
 
     #[test]
@@ -276,12 +278,6 @@ mod tests {
                 proptest::prop_assert_eq!(decimals_text(value, decimals), format!("{:.*}", usize::from(decimals), value));
             }
         }
-    }
-
-    fn decimals_text(x: f64, decimals: u8) -> String {
-        let mut out = Vec::new();
-        push_f64_decimals(&mut out, x, decimals);
-        String::from_utf8(out).unwrap_or_default()
     }
 
     #[test]

@@ -292,6 +292,8 @@ fn closed_loop(
             applied_current_a: applied_a,
             finger_receptor_c: Some(finger.temp_c),
             finger_conductance_w_k: finger.plate_w_k,
+            measured_current_a: f64::NAN,
+            voltage_v: f64::NAN,
         };
         previous_c = setpoint_c;
         let current_a = controller.update(&input).unwrap_or_else(|e| panic!("tick {k}: {e}"));
@@ -767,6 +769,8 @@ fn good_input() -> ControlInput {
         applied_current_a: -1.0,
         finger_receptor_c: Some(31.5),
         finger_conductance_w_k: 0.064,
+        measured_current_a: f64::NAN,
+        voltage_v: f64::NAN,
     }
 }
 

@@ -68,6 +68,8 @@ fn input(setpoint_c: f64, sensor_c: f64) -> ControlInput {
         applied_current_a: 0.0,
         finger_receptor_c: None,
         finger_conductance_w_k: 0.0,
+        measured_current_a: f64::NAN,
+        voltage_v: f64::NAN,
     }
 }
 

@@ -35,13 +35,20 @@ const PAPER: [&str; 5] = ["aluminium", "steel", "stone", "wood", "rubber"];
 
 /// pid then model, the five materials each, on `display` with `finger` (None = the controller's own model).
 fn runs(display: ShippedDisplay, finger: Option<&Skin>) -> Vec<RenderRun> {
+    runs_edited(display, |s| {
+        if let Some(skin) = finger {
+            s.finger_skin = skin.clone();
+        }
+    })
+}
+
+/// pid then model, the five materials each, on `display`, each spec changed by `edit`.
+fn runs_edited(display: ShippedDisplay, edit: impl Fn(&mut RenderSpec)) -> Vec<RenderRun> {
     let specs: Vec<_> = [pid(display), ControllerKind::Model]
         .into_iter()
         .flat_map(|c| PAPER.map(|m| spec(display, c, m)))
         .map(|mut s| {
-            if let Some(skin) = finger {
-                s.finger_skin = skin.clone();
-            }
+            edit(&mut s);
             s
         })
         .collect();
@@ -360,15 +367,7 @@ fn a_datasheet_file_does_not_take_its_own_peltier_error_for_the_finger() {
 /// Mean RMS skin error (0-90 s) of pid and of the model controller, and the model's largest overshoot, over the
 /// paper's materials on the default display's file with `hardware` as the plant.
 fn on_hardware(hardware: thermode_device::DeviceConfig) -> (f64, f64, f64) {
-    let specs: Vec<_> = [pid(ShippedDisplay::Default), ControllerKind::Model]
-        .into_iter()
-        .flat_map(|c| PAPER.map(|m| spec(ShippedDisplay::Default, c, m)))
-        .map(|mut s| {
-            s.hardware = Some(hardware);
-            s
-        })
-        .collect();
-    let runs = render_all(&specs).unwrap_or_else(|e| panic!("{e}"));
+    let runs = runs_edited(ShippedDisplay::Default, |s| s.hardware = Some(hardware));
     let rms = |s: &Summary| value(s.rms_skin_0_90_c, "rms", s);
     let overshoot_c = of(&runs, "model").iter().map(|s| s.overshoot_c).fold(0.0, f64::max);
     (
