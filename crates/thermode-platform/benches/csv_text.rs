@@ -1,10 +1,10 @@
 //! Criterion benchmark of the CSV number writers (issue 13, the CSV's share of a run): the eight numbers of a row of
-//! `simulate --dt 0.001` written exact (`push_f64`, the shortest round-trip digits) and at six decimals
-//! (`push_f64_decimals`), per number.
+//! `simulate --dt 0.001` written exact (`CsvText::push_f64`, the shortest round-trip digits) and at six decimals
+//! (`CsvText::push_f64_decimals`), per number.
 #![allow(missing_docs)] // criterion_main! generates an undocumented `main`
 
 use criterion::{black_box, criterion_group, criterion_main, Criterion, Throughput};
-use thermode_platform::csv_text::{push_f64, push_f64_decimals};
+use thermode_platform::csv_text::CsvText;
 
 /// Rows of one benchmark iteration (10 s at 1 ms).
 const ROWS: usize = 10_000;
@@ -35,14 +35,14 @@ fn writers(c: &mut Criterion) {
     let rows = rows();
     let mut group = c.benchmark_group("csv_numbers");
     group.throughput(Throughput::Elements((ROWS * 8) as u64));
-    let mut out = Vec::with_capacity(ROWS * 8 * 20);
+    let mut out = CsvText::new();
     group.bench_function("exact", |b| {
         b.iter(|| {
             out.clear();
             for row in &rows {
                 for &x in row {
-                    push_f64(&mut out, black_box(x));
-                    out.push(b',');
+                    out.push_f64(black_box(x));
+                    out.push_byte(b',');
                 }
             }
             black_box(out.len())
@@ -53,8 +53,8 @@ fn writers(c: &mut Criterion) {
             out.clear();
             for row in &rows {
                 for &x in row {
-                    push_f64_decimals(&mut out, black_box(x), 6);
-                    out.push(b',');
+                    out.push_f64_decimals(black_box(x), 6);
+                    out.push_byte(b',');
                 }
             }
             black_box(out.len())

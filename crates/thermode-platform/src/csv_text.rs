@@ -1,11 +1,13 @@
-//! Fast CSV text: numbers and fields appended to a byte buffer without allocating, for the large CSVs of `simulate`
-//! and `render` (a 90 s run at 1 ms is 90 000 rows). [`push_f64`] writes exactly what Rust's `{}` writes for an `f64`
-//! (the shortest digits that read back as the same number, never an exponent), from the `ryu` digits;
-//! [`push_f64_decimals`] writes what `{:.N}` writes (correctly rounded to N decimals), for a CSV whose reader does
-//! not need every bit; [`push_number`] picks one of the two by a [`Precision`]; [`push_field`] quotes a text field
-//! as the `csv` crate does (only when needed).
-
-use std::io::Write as _;
+//! Fast CSV text: numbers and fields appended to a [`CsvText`] buffer, for the large CSVs of `simulate` and `render`
+//! (a 90 s run at 1 ms is 90 000 rows). [`CsvText::push_f64`] writes exactly what Rust's `{}` writes for an `f64`
+//! (the shortest digits that read back as the same number, never an exponent): short decimals directly, the rest
+//! from the `ryu` digits; [`CsvText::push_f64_decimals`] writes what `{:.N}` writes (correctly rounded to N
+//! decimals), for a CSV whose reader does not need every bit; [`CsvText::push_number`] picks one of the two by a
+//! [`Precision`]; [`CsvText::push_field`] quotes a text field as the `csv` crate does (only when needed).
+//!
+//! The buffer keeps its length outside its allocation and grows only by a call that takes the allocation by value,
+//! so in a writing loop the length stays in a register: appending to a `Vec` (whose growth takes the vector by
+//! reference) kept it in memory and tripled the cost of a number.
 
 /// How the numbers of a CSV are written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -20,40 +22,237 @@ pub enum Precision {
 /// The most decimal places [`Precision::Decimals`] takes (12: a picokelvin, far below any model's accuracy).
 pub const MAX_DECIMALS: u8 = 12;
 
-/// Appends `x` written as `precision` says.
-pub fn push_number(out: &mut Vec<u8>, x: f64, precision: Precision) {
-    match precision {
-        Precision::Exact => push_f64(out, x),
-        Precision::Decimals(decimals) => push_f64_decimals(out, x, decimals),
+/// The longest text a fixed-point number takes here, with room to spare: a sign, 16 whole digits, the point, and up
+/// to [`MAX_DECIMALS`] decimals (the whole part and the decimals together have at most 16 digits, plus a leading 0).
+const FIXED_POINT_LEN: usize = 32;
+
+/// Bytes a new [`CsvText`] holds before it first grows (64 KiB, the size its users write out at).
+const INITIAL_BYTES: usize = 64 * 1024 + 4096;
+
+/// CSV text being built: [`CsvText::as_bytes`] is what has been appended.
+#[derive(Debug, Clone)]
+pub struct CsvText {
+    /// The allocation, all of it initialised; the text is its first `len` bytes, the rest is scratch.
+    bytes: Vec<u8>,
+    /// Bytes of text.
+    len: usize,
+}
+
+impl Default for CsvText {
+    fn default() -> Self {
+        Self::new()
     }
 }
 
-/// Appends `x` as `format!("{x:.decimals$}")` would write it. `x·10^decimals` is rounded to an integer whose digits
-/// are written with the point put in; a value whose product lies within its own rounding error of a tie between
-/// two integers, or too large for exact integers, and every `decimals` above [`MAX_DECIMALS`], go to the formatter.
-pub fn push_f64_decimals(out: &mut Vec<u8>, x: f64, decimals: u8) {
-    const POWERS_OF_TEN: [f64; MAX_DECIMALS as usize + 1] =
-        [1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12];
-    let Some(&scale) = POWERS_OF_TEN.get(usize::from(decimals)) else {
-        return push_formatted(out, format_args!("{x:.*}", usize::from(decimals)));
-    };
-    // Exact powers of ten, so the product carries one rounding: at most half an ulp of `scaled`. Below 4e15 the
-    // whole part and the fraction are exact (no libm call: `round` and `trunc` are calls without SSE4.1).
-    let scaled = x.abs() * scale;
-    if !x.is_finite() || scaled >= 4.0e15 {
-        return push_formatted(out, format_args!("{x:.*}", usize::from(decimals)));
+impl CsvText {
+    /// An empty text with room for 68 KiB before it grows.
+    pub fn new() -> Self {
+        Self {
+            bytes: vec![0; INITIAL_BYTES],
+            len: 0,
+        }
     }
-    let whole = scaled as u64;
-    let fraction = scaled - whole as f64;
-    if (fraction - 0.5).abs() <= scaled * f64::EPSILON {
-        return push_formatted(out, format_args!("{x:.*}", usize::from(decimals)));
+
+    /// The text appended so far.
+    pub fn as_bytes(&self) -> &[u8] {
+        &self.bytes[..self.len]
     }
-    push_scaled_integer(
-        out,
-        x.is_sign_negative(),
-        whole + u64::from(fraction > 0.5),
-        usize::from(decimals),
-    );
+
+    /// Bytes of text appended so far.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether nothing has been appended.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Forgets the text, keeping the allocation.
+    pub fn clear(&mut self) {
+        self.len = 0;
+    }
+
+    /// The `needed` bytes after the text, to write into (their content is undefined scratch).
+    #[inline(always)]
+    fn room(&mut self, needed: usize) -> &mut [u8] {
+        if self.bytes.len() - self.len < needed {
+            self.bytes = grown(std::mem::take(&mut self.bytes), self.len + needed);
+        }
+        &mut self.bytes[self.len..self.len + needed]
+    }
+
+    /// Appends one byte (a separator or a line end).
+    #[inline(always)]
+    pub fn push_byte(&mut self, byte: u8) {
+        self.room(1)[0] = byte;
+        self.len += 1;
+    }
+
+    /// Appends bytes as they are.
+    #[inline(always)]
+    pub fn push_bytes(&mut self, text: &[u8]) {
+        self.room(text.len()).copy_from_slice(text);
+        self.len += text.len();
+    }
+
+    /// Appends a text field, quoted (with doubled quotes) only when it holds a comma, a quote or a line break, as
+    /// the `csv` crate writes it.
+    pub fn push_field(&mut self, text: &str) {
+        if text.bytes().any(|b| matches!(b, b',' | b'"' | b'\n' | b'\r')) {
+            self.push_bytes(format!("\"{}\"", text.replace('"', "\"\"")).as_bytes());
+        } else {
+            self.push_bytes(text.as_bytes());
+        }
+    }
+
+    /// Appends `x` written as `precision` says.
+    #[inline(always)]
+    pub fn push_number(&mut self, x: f64, precision: Precision) {
+        match precision {
+            Precision::Exact => self.push_f64(x),
+            Precision::Decimals(decimals) => self.push_f64_decimals(x, decimals),
+        }
+    }
+
+    /// Appends `x` as `format!("{x:.decimals$}")` would write it. `x·10^decimals` is rounded to an integer whose
+    /// digits are written with the point put in; a value whose product lies within its own rounding error of a tie
+    /// between two integers, or too large for exact integers, and every `decimals` above [`MAX_DECIMALS`], go to
+    /// the formatter.
+    #[inline(always)]
+    pub fn push_f64_decimals(&mut self, x: f64, decimals: u8) {
+        let written = match decimals {
+            0 => self.push_rounded::<0>(x),
+            1 => self.push_rounded::<1>(x),
+            2 => self.push_rounded::<2>(x),
+            3 => self.push_rounded::<3>(x),
+            4 => self.push_rounded::<4>(x),
+            5 => self.push_rounded::<5>(x),
+            6 => self.push_rounded::<6>(x),
+            7 => self.push_rounded::<7>(x),
+            8 => self.push_rounded::<8>(x),
+            9 => self.push_rounded::<9>(x),
+            10 => self.push_rounded::<10>(x),
+            11 => self.push_rounded::<11>(x),
+            12 => self.push_rounded::<12>(x),
+            _ => false,
+        };
+        if !written {
+            self.push_bytes(formatted_with_decimals(x, decimals).as_bytes());
+        }
+    }
+
+    /// Appends `x` rounded to `DECIMALS` places and returns true, or returns false (nothing written) for what it
+    /// leaves to the formatter: non-finite values, values of 4e15 or more once scaled, and products within their own
+    /// rounding error of a tie. The scale is an exact power of ten, so the product carries one rounding: at most half
+    /// an ulp of `scaled`. Below 4e15 the whole part and the fraction are exact (no libm call: `round` and `trunc`
+    /// are calls without SSE4.1).
+    #[inline(always)]
+    fn push_rounded<const DECIMALS: usize>(&mut self, x: f64) -> bool {
+        let scaled = x.abs() * power_of_ten::<DECIMALS>() as f64;
+        if !x.is_finite() || scaled >= 4.0e15 {
+            return false;
+        }
+        // Signed conversions: single instructions both ways, where unsigned ones take several without AVX-512.
+        let whole = scaled as i64;
+        let fraction = scaled - whole as f64;
+        if (fraction - 0.5).abs() <= scaled * f64::EPSILON {
+            return false;
+        }
+        let value = whole.unsigned_abs() + u64::from(fraction > 0.5);
+        self.push_fixed_point::<DECIMALS>(x.is_sign_negative(), value);
+        true
+    }
+
+    /// Appends `value / 10^DECIMALS` (`value` below 1e16), with a minus sign when `negative`: at least one digit
+    /// before the point, exactly `DECIMALS` after it (no point when `DECIMALS` is 0), written into a fixed run of
+    /// scratch two digits at a time with divisions by constants. Returns the text written.
+    #[inline(always)]
+    fn push_fixed_point<const DECIMALS: usize>(&mut self, negative: bool, value: u64) -> &[u8] {
+        let whole = value / power_of_ten::<DECIMALS>();
+        let whole_digits = decimal_digits(whole);
+        let sign = usize::from(negative);
+        let len = sign + whole_digits + usize::from(DECIMALS > 0) + DECIMALS;
+        let text = self.room(FIXED_POINT_LEN);
+        put_digits(text, len, value % power_of_ten::<DECIMALS>(), DECIMALS);
+        put_digits(text, sign + whole_digits, whole, whole_digits);
+        if DECIMALS > 0 {
+            text[sign + whole_digits] = b'.';
+        }
+        if negative {
+            text[0] = b'-';
+        }
+        let start = self.len;
+        self.len += len;
+        &self.bytes[start..self.len]
+    }
+
+    /// Appends `x` as `format!("{x}")` would write it.
+    #[inline(always)]
+    pub fn push_f64(&mut self, x: f64) {
+        if self.push_short_decimal(x) {
+            return;
+        }
+        if !x.is_finite() || may_tie(x) {
+            self.push_bytes(format!("{x}").as_bytes());
+            return;
+        }
+        let mut buffer = ryu::Buffer::new();
+        let text = buffer.format_finite(x).as_bytes();
+        let (negative, text) = match text.split_first() {
+            Some((b'-', rest)) => (true, rest),
+            _ => (false, text),
+        };
+        if negative {
+            self.push_byte(b'-');
+        }
+        match text.iter().position(|&b| b == b'e') {
+            Some(e) => self.push_bytes(&expanded(&text[..e], &text[e + 1..])),
+            None => self.push_bytes(text.strip_suffix(b".0").unwrap_or(text)),
+        }
+    }
+
+    /// Appends `x` and returns true when it is a decimal of at most six places and 15 significant digits (a time
+    /// column of whole milliseconds, a set-point of 32.5): such a decimal that reads back as `x` is its shortest
+    /// form, because two different decimals of at most 15 significant digits never read back as the same `f64`.
+    /// `x·10^6` is rounded to the candidate integer, and the candidate kept only when dividing it by 10^6 (one
+    /// correctly rounded division, as reading the text does) gives `x` back; its trailing zeros and a bare point
+    /// are cut. Otherwise nothing is written.
+    #[inline(always)]
+    fn push_short_decimal(&mut self, x: f64) -> bool {
+        const SCALE: f64 = 1e6;
+        let scaled = x.abs() * SCALE;
+        if !x.is_finite() || scaled >= 1e15 {
+            return false;
+        }
+        let candidate = (scaled + 0.5) as i64;
+        if candidate as f64 / SCALE != x.abs() {
+            return false;
+        }
+        let text = self.push_fixed_point::<6>(x.is_sign_negative(), candidate.unsigned_abs());
+        let cut = match text.iter().rposition(|&b| b != b'0') {
+            Some(last) if text[last] == b'.' => text.len() - last,
+            Some(last) => text.len() - last - 1,
+            None => 0,
+        };
+        self.len -= cut;
+        true
+    }
+}
+
+/// `bytes` grown to at least `needed` bytes (at least doubled); taken and given back by value, so that the caller's
+/// buffer never has its address taken in a writing loop.
+#[cold]
+#[inline(never)]
+fn grown(mut bytes: Vec<u8>, needed: usize) -> Vec<u8> {
+    let len = needed.max(2 * bytes.len());
+    bytes.resize(len, 0);
+    bytes
+}
+
+/// `10^N` for `N` up to [`MAX_DECIMALS`].
+const fn power_of_ten<const N: usize>() -> u64 {
+    10u64.pow(N as u32)
 }
 
 /// The two-digit strings "00" to "99", one after the other.
@@ -68,73 +267,52 @@ const DIGIT_PAIRS: [u8; 200] = {
     pairs
 };
 
-/// Appends `value / 10^decimals` (`value` below 1e16, `decimals` at most [`MAX_DECIMALS`]), with a minus sign
-/// when `negative`: at least one digit before the point, exactly `decimals` after it (no point when `decimals` is
-/// 0), built right-aligned in a fixed array, two digits at a time.
-fn push_scaled_integer(out: &mut Vec<u8>, negative: bool, mut value: u64, decimals: usize) {
-    const LEN: usize = 32;
-    let mut text = [b'0'; LEN];
-    let mut start = LEN;
-    let mut fraction_digits = decimals;
-    while fraction_digits >= 2 {
-        put_pair(&mut text, &mut start, value % 100);
+/// Writes the last `count` decimal digits of `value` (with leading zeros) so that they end before `end`: four
+/// digits split off at a time (two independent pairs, in 32 bits), then a pair, then a single digit.
+#[inline(always)]
+fn put_digits(text: &mut [u8], mut end: usize, mut value: u64, mut count: usize) {
+    while count >= 4 {
+        let group = (value % 10_000) as u32;
+        value /= 10_000;
+        put_pair(text, end - 2, group % 100);
+        put_pair(text, end - 4, group / 100);
+        end -= 4;
+        count -= 4;
+    }
+    if count >= 2 {
+        put_pair(text, end - 2, (value % 100) as u32);
         value /= 100;
-        fraction_digits -= 2;
+        end -= 2;
+        count -= 2;
     }
-    if fraction_digits == 1 {
-        start -= 1;
-        text[start] = b'0' + (value % 10) as u8;
-        value /= 10;
+    if count == 1 {
+        text[end - 1] = b'0' + (value % 10) as u8;
     }
-    if decimals > 0 {
-        start -= 1;
-        text[start] = b'.';
-    }
-    loop {
-        if value < 10 {
-            start -= 1;
-            text[start] = b'0' + value as u8;
-            break;
-        }
-        put_pair(&mut text, &mut start, value % 100);
-        value /= 100;
-        if value == 0 {
-            break;
-        }
-    }
-    if negative {
-        start -= 1;
-        text[start] = b'-';
-    }
-    out.extend_from_slice(&text[start..]);
 }
 
-/// Writes the two digits of `pair` (below 100) before `start` and moves `start` back by two.
-fn put_pair(text: &mut [u8], start: &mut usize, pair: u64) {
-    let pair = pair as usize;
-    *start -= 2;
-    text[*start..*start + 2].copy_from_slice(&DIGIT_PAIRS[2 * pair..2 * pair + 2]);
-}
-
-/// Appends `x` as `format!("{x}")` would write it.
-pub fn push_f64(out: &mut Vec<u8>, x: f64) {
-    if !x.is_finite() || may_tie(x) {
-        push_formatted(out, format_args!("{x}"));
-        return;
-    }
-    let mut buffer = ryu::Buffer::new();
-    let text = buffer.format_finite(x).as_bytes();
-    let (negative, text) = match text.split_first() {
-        Some((b'-', rest)) => (true, rest),
-        _ => (false, text),
+/// How many decimal digits `value` has (1 for 0): its bit length times log10(2) (1233/4096) is the number of digits
+/// or one fewer, and one comparison with a power of ten decides (the standard library's `ilog10` is a call).
+#[inline(always)]
+fn decimal_digits(value: u64) -> usize {
+    const POWERS: [u64; 20] = {
+        let mut powers = [1u64; 20];
+        let mut i = 1;
+        while i < 20 {
+            powers[i] = powers[i - 1] * 10;
+            i += 1;
+        }
+        powers
     };
-    if negative {
-        out.push(b'-');
-    }
-    match text.iter().position(|&b| b == b'e') {
-        Some(e) => push_expanded(out, &text[..e], &text[e + 1..]),
-        None => out.extend_from_slice(text.strip_suffix(b".0").unwrap_or(text)),
-    }
+    let value = value | 1;
+    let estimate = ((64 - value.leading_zeros() as usize) * 1233) >> 12;
+    estimate + usize::from(value >= POWERS[estimate])
+}
+
+/// Writes the two digits of `pair` (below 100) at `at`.
+#[inline(always)]
+fn put_pair(text: &mut [u8], at: usize, pair: u32) {
+    let pair = pair as usize;
+    text[at..at + 2].copy_from_slice(&DIGIT_PAIRS[2 * pair..2 * pair + 2]);
 }
 
 /// Whether two shortest digit strings could lie equally near `x`, where ryu (ties to even) and Rust's formatter may
@@ -162,8 +340,10 @@ fn may_tie(x: f64) -> bool {
     }
 }
 
-/// Appends a number given by ryu as `mantissa` (`d` or `d.ddd`) and decimal `exponent` as plain decimals.
-fn push_expanded(out: &mut Vec<u8>, mantissa: &[u8], exponent: &[u8]) {
+/// A number given by ryu as `mantissa` (`d` or `d.ddd`) and decimal `exponent`, written as plain decimals.
+#[cold]
+fn expanded(mantissa: &[u8], exponent: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
     let exponent: i64 = std::str::from_utf8(exponent)
         .ok()
         .and_then(|e| e.parse().ok())
@@ -188,47 +368,31 @@ fn push_expanded(out: &mut Vec<u8>, mantissa: &[u8], exponent: &[u8]) {
         out.push(b'.');
         out.extend_from_slice(fraction);
     }
+    out
 }
 
-/// Appends what the formatter writes for `args` (the few values the fast paths leave to it).
-fn push_formatted(out: &mut Vec<u8>, args: std::fmt::Arguments<'_>) {
-    // Writing into a vector cannot fail.
-    let _ = out.write_fmt(args);
-}
-
-/// Appends a text field, quoted (with doubled quotes) only when it holds a comma, a quote or a line break, as the
-/// `csv` crate writes it.
-pub fn push_field(out: &mut Vec<u8>, text: &str) {
-    if text.bytes().any(|b| matches!(b, b',' | b'"' | b'\n' | b'\r')) {
-        out.push(b'"');
-        for b in text.bytes() {
-            if b == b'"' {
-                out.push(b'"');
-            }
-            out.push(b);
-        }
-        out.push(b'"');
-    } else {
-        out.extend_from_slice(text.as_bytes());
-    }
+/// What `{x:.decimals$}` writes (the few values the fast path leaves to the formatter).
+#[cold]
+fn formatted_with_decimals(x: f64, decimals: u8) -> String {
+    format!("{x:.*}", usize::from(decimals))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn written(push: impl FnOnce(&mut Vec<u8>)) -> String {
-        let mut out = Vec::new();
+    fn written(push: impl FnOnce(&mut CsvText)) -> String {
+        let mut out = CsvText::new();
         push(&mut out);
-        String::from_utf8(out).unwrap_or_default()
+        String::from_utf8(out.as_bytes().to_vec()).unwrap_or_default()
     }
 
     fn f64_text(x: f64) -> String {
-        written(|out| push_f64(out, x))
+        written(|out| out.push_f64(x))
     }
 
     fn decimals_text(x: f64, decimals: u8) -> String {
-        written(|out| push_f64_decimals(out, x, decimals))
+        written(|out| out.push_f64_decimals(x, decimals))
     }
 
     #[test]
@@ -259,12 +423,19 @@ mod tests {
         #![proptest_config(proptest::prelude::ProptestConfig { cases: 20_000, failure_persistence: None,
             ..proptest::prelude::ProptestConfig::default() })]
 
-        /// Any bit pattern, and numbers of the sizes thermode writes: the same text as `{}`.
+        /// Any bit pattern, numbers of the sizes thermode writes, short decimals (divided and multiplied out, as
+        /// a time column is made) and their neighbours one ulp away: the same text as `{}`.
         #[test]
-        fn any_f64_is_written_as_display_writes_it(bits in proptest::num::u64::ANY, y in -1.0e5..1.0e5f64) {
+        fn any_f64_is_written_as_display_writes_it(bits in proptest::num::u64::ANY, y in -1.0e5..1.0e5f64,
+            raw in proptest::num::i64::ANY, digits in 1u32..=17, places in 0i32..=8) {
             let x = f64::from_bits(bits);
-            proptest::prop_assert_eq!(f64_text(x), format!("{}", x));
-            proptest::prop_assert_eq!(f64_text(y), format!("{}", y));
+            let short = raw % 10i64.pow(digits);
+            let divided = short as f64 / 10f64.powi(places);
+            let multiplied = short as f64 * 10f64.powi(-places);
+            let neighbour = f64::from_bits(divided.to_bits() + 1);
+            for value in [x, y, divided, multiplied, neighbour] {
+                proptest::prop_assert_eq!(f64_text(value), format!("{}", value));
+            }
         }
 
         /// Any bit pattern, numbers of the sizes thermode writes, and exact ties (halves at the last decimal):
@@ -314,11 +485,40 @@ mod tests {
     }
 
     #[test]
+    fn digit_counts_match_the_written_integers() {
+        for power in 0..20 {
+            let ten = 10u64.pow(power);
+            for value in [ten - 1, ten, ten + 1, ten.saturating_mul(5)] {
+                assert_eq!(decimal_digits(value), value.to_string().len(), "{value}");
+            }
+        }
+        assert_eq!(decimal_digits(u64::MAX), 20);
+    }
+
+    #[test]
     fn fields_are_quoted_only_when_needed() {
-        let mut out = Vec::new();
-        push_field(&mut out, "aluminium");
-        out.push(b'|');
-        push_field(&mut out, "a,b\"c");
-        assert_eq!(String::from_utf8(out).unwrap_or_default(), "aluminium|\"a,b\"\"c\"");
+        let text = written(|out| {
+            out.push_field("aluminium");
+            out.push_byte(b'|');
+            out.push_field("a,b\"c");
+        });
+        assert_eq!(text, "aluminium|\"a,b\"\"c\"");
+    }
+
+    #[test]
+    fn the_text_grows_past_its_first_allocation_and_keeps_every_byte() {
+        let mut expected = String::new();
+        let text = written(|out| {
+            for k in 0..20_000 {
+                let x = f64::from(k) * 1.37e-3 - 7.0;
+                out.push_f64(x);
+                out.push_byte(b',');
+                out.push_f64_decimals(x, 12);
+                out.push_bytes(b";\n");
+                expected.push_str(&format!("{x},{x:.12};\n"));
+            }
+        });
+        assert!(expected.len() > INITIAL_BYTES, "{} bytes", expected.len());
+        assert_eq!(text, expected);
     }
 }

@@ -47,7 +47,7 @@ use std::io::Write;
 use thermode_device::{Device, DeviceConfig, PlateFinger, SimulatedChannel, SimulatedDisplay};
 use thermode_model::fv::{FvConfig, FvModel};
 use thermode_model::{BadValue, Material, Skin};
-use thermode_platform::csv_text;
+use thermode_platform::csv_text::CsvText;
 pub use thermode_platform::csv_text::Precision;
 use thermode_safety::FaultCode;
 
@@ -567,14 +567,24 @@ pub const CSV_HEADER: [&str; 18] = [
 pub fn write_csv(runs: &[RenderRun], precision: Precision, sink: &mut dyn Write) -> Result<(), csv::Error> {
     /// The CSV goes to `sink` in chunks of this many bytes (64 KiB).
     const CHUNK_BYTES: usize = 64 * 1024;
-    let mut out = Vec::with_capacity(CHUNK_BYTES + 4096);
-    out.extend_from_slice(CSV_HEADER.join(",").as_bytes());
-    out.push(b'\n');
+    let mut out = CsvText::new();
+    out.push_bytes(CSV_HEADER.join(",").as_bytes());
+    out.push_byte(b'\n');
     for run in runs {
         let t = &run.trajectory;
+        let mut run_fields = CsvText::new();
+        for text in [
+            run.spec.material.name.as_str(),
+            run.summary.controller.as_str(),
+            run.spec.pipeline.renderer.name(),
+        ] {
+            run_fields.push_byte(b',');
+            run_fields.push_field(text);
+        }
+        run_fields.push_byte(b',');
         for row in 0..t.len() {
-            csv_text::push_f64(&mut out, t.time_s[row]);
-            out.push(b',');
+            out.push_f64(t.time_s[row]);
+            out.push_byte(b',');
             for column in [
                 &t.truth_skin_c,
                 &t.target_skin_c,
@@ -588,34 +598,26 @@ pub fn write_csv(runs: &[RenderRun], precision: Precision, sink: &mut dyn Write)
                 &t.current_a,
                 &t.hot_side_c,
             ] {
-                csv_text::push_number(&mut out, column[row], precision);
-                out.push(b',');
+                out.push_number(column[row], precision);
+                out.push_byte(b',');
             }
-            out.push(if t.contact[row] { b'1' } else { b'0' });
-            out.push(b',');
+            out.push_byte(if t.contact[row] { b'1' } else { b'0' });
+            out.push_byte(b',');
             if let Some(fault) = t.fault[row] {
-                out.extend_from_slice(fault.code().to_string().as_bytes());
+                out.push_bytes(fault.code().to_string().as_bytes());
             }
-            for text in [
-                run.spec.material.name.as_str(),
-                run.summary.controller.as_str(),
-                run.spec.pipeline.renderer.name(),
-            ] {
-                out.push(b',');
-                csv_text::push_field(&mut out, text);
-            }
-            out.push(b',');
+            out.push_bytes(run_fields.as_bytes());
             if let Some(fault) = t.fault[row] {
-                csv_text::push_field(&mut out, fault.description());
+                out.push_field(fault.description());
             }
-            out.push(b'\n');
+            out.push_byte(b'\n');
             if out.len() >= CHUNK_BYTES {
-                sink.write_all(&out)?;
+                sink.write_all(out.as_bytes())?;
                 out.clear();
             }
         }
     }
-    sink.write_all(&out)?;
+    sink.write_all(out.as_bytes())?;
     sink.flush()?;
     Ok(())
 }

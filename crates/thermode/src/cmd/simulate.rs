@@ -9,7 +9,7 @@ use clap::{Args, ValueEnum};
 use thermode_model::limits;
 use thermode_model::materials::Material;
 use thermode_model::simulate::{simulate, Initial, ModelKind, SimulationSpec, Trace};
-use thermode_platform::csv_text::{self, Precision};
+use thermode_platform::csv_text::{self, CsvText, Precision};
 use thermode_plot::{write_figure, Figure, Panel, Series, SeriesStyle};
 use thermode_render::figure::EARLY_WINDOW_S;
 
@@ -160,26 +160,28 @@ fn write_csv(path: &Path, traces: &[(Material, Trace)], precision: Precision) ->
     header.extend(first.columns.iter().map(|(name, _)| name.as_str()));
     header.push("material");
     write_atomically(path, |sink| {
-        let mut row = Vec::with_capacity(CSV_CHUNK_BYTES + 4096);
-        row.extend_from_slice(header.join(",").as_bytes());
-        row.push(b'\n');
+        let mut text = CsvText::new();
+        text.push_bytes(header.join(",").as_bytes());
+        text.push_byte(b'\n');
         for (material, trace) in traces {
+            let mut row_end = CsvText::new();
+            row_end.push_byte(b',');
+            row_end.push_field(&material.name);
+            row_end.push_byte(b'\n');
             for (index, time_s) in trace.time_s.iter().enumerate() {
-                csv_text::push_f64(&mut row, *time_s);
+                text.push_f64(*time_s);
                 for (_, values) in &trace.columns {
-                    row.push(b',');
-                    csv_text::push_number(&mut row, values[index], precision);
+                    text.push_byte(b',');
+                    text.push_number(values[index], precision);
                 }
-                row.push(b',');
-                csv_text::push_field(&mut row, &material.name);
-                row.push(b'\n');
-                if row.len() >= CSV_CHUNK_BYTES {
-                    sink.write_all(&row)?;
-                    row.clear();
+                text.push_bytes(row_end.as_bytes());
+                if text.len() >= CSV_CHUNK_BYTES {
+                    sink.write_all(text.as_bytes())?;
+                    text.clear();
                 }
             }
         }
-        sink.write_all(&row)?;
+        sink.write_all(text.as_bytes())?;
         Ok(())
     })
 }
