@@ -5,9 +5,8 @@
 //! decimals), for a CSV whose reader does not need every bit; [`CsvText::push_number`] picks one of the two by a
 //! [`Precision`]; [`CsvText::push_field`] quotes a text field as the `csv` crate does (only when needed).
 //!
-//! The buffer keeps its length outside its allocation and grows only by a call that takes the allocation by value,
-//! so in a writing loop the length stays in a register: appending to a `Vec` (whose growth takes the vector by
-//! reference) kept it in memory and tripled the cost of a number.
+//! A number is written into a fixed run of scratch bytes past the text and the length then advanced (no copy of
+//! varying length per number); the buffer grows only by a cold call that takes its allocation by value.
 
 /// How the numbers of a CSV are written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
