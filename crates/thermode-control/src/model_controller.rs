@@ -26,8 +26,9 @@
 //!   then waits for the set-point instead of running on to meet it and having to turn back, which would carry the
 //!   finger past its target. The bound acts only when the plate is ahead of a moving set-point by more than
 //!   `λ/(1 − λ)` ticks of its motion (1.5 at the default tick), so it never touches a plate following a ramp.
-//! - Heat the plate needs for that (backward Euler, as the plant integrates):
-//!   `q* = C_p (T_p* − T̂_p)/h − G_f (T_r − T_p*) − d̂`.
+//! - Heat the plate needs for that (backward Euler, as the plant integrates), with the plate's capacity as the
+//!   observer has learnt it (the file's C_p over its response scale 1 + θ̂, [`PlateEstimate::plate_response_scale`]):
+//!   `q* = C_p/(1 + θ̂) (T_p* − T̂_p)/h − G_f (T_r − T_p*) − d̂`.
 //! - Current: the root of `q_d(I, T_p*, T̂_h) = q*` on the efficient branch
 //!   ([`thermode_model::peltier::PeltierModule::current_for_heat_into_display`]), limited to
 //!   `[most useful cooling current, +drive limit]`; if more cooling is asked than the module can pump at any
@@ -223,7 +224,7 @@ impl ModelController {
         let h = input.dt_s;
         let lambda = (-h / self.closed_loop_time_constant_s(h)).exp();
         let reference_c = Self::reference_c(est.plate_c, input, lambda);
-        let heat_needed_w = plant.plate_heat_capacity_j_k * (reference_c - est.plate_c) / h
+        let heat_needed_w = plant.plate_heat_capacity_j_k / est.plate_response_scale * (reference_c - est.plate_c) / h
             - finger.conductance_w_k * (finger.receptor_c - reference_c)
             - est.disturbance_w;
         let lowest_a = plant.most_useful_cooling_a(est.plate_c);

@@ -8,6 +8,7 @@
 //! - `C_h dT_h/dt = q_h(I, T_p, T_h) − G_w (T_h − T_w)`
 //! - `τ dT_s/dt = T_p − T_s` (τ includes the mean age of the held sample, see below)
 //! - `dd/dt = w` (a random walk: the finger's heat the finger model gets wrong, and any other mismatch)
+//! - θ constant: the plate's response to heat relative to the file's capacity, `C_file/C_p − 1` (see below)
 //!
 //! q_d and q_h are the Peltier flows of [`PeltierModule`]; the plate has no other losses (as in the simulated
 //! device: its free edges lose under 0.3 mW/K to air). d makes the observer offset-free: whatever heat the model
@@ -20,8 +21,18 @@
 //! plant (identical to it when a tick is one plant substep; the first-order difference over a 10 ms tick is far
 //! below the sensor noise, the plate's slowest time constant being seconds). The PT-100 is advanced with the exact
 //! first-order-lag response to a plate temperature that changes linearly over the step.
-//! The result is a linear map `x₁ = F x₀ + c` of the state `x = [T_p, T_h, T_s, d]`, on which the Kalman filter
-//! propagates its covariance `P₁ = F P₀ Fᵀ + Q`.
+//! The plate's change over the step is then scaled by 1 + θ: `T_p1 = T̃_p1 + θ (T̃_p1 − T_p0)` with `T̃_p1` the
+//! file's step (exactly the file's at θ = 0). The result is a map `x₁ = F x₀ + c` of the state
+//! `x = [T_p, T_h, T_s, d, θ]`, linear but for the product θ·(T̃_p1 − T_p0), which F linearises (an extended
+//! Kalman filter); the filter propagates its covariance `P₁ = F P₀ Fᵀ + Q`.
+//!
+//! # The plate's response θ
+//! The file's plate capacity is an estimate; a plate 30 % lighter falls 43 % faster at full current, and the
+//! finger, whose model follows the estimate, overshoots at the end of a drop. θ starts at 0 with the standard
+//! deviation [`ObserverDesign::plate_response_uncertainty`] (the device file's `render.plate_uncertainty`), has no
+//! process noise (a property of the plant), is learnt while heat flows (its Jacobian column is the plate's change
+//! over the step) and is kept within −0.5 and 1. With an uncertainty of 0 it stays 0 and the filter is the
+//! four-state filter on the file's capacity.
 //!
 //! # Measurements
 //! The PT-100 reading `y_s = T_s + v_s` with variance `σ² + Δ²/12` (noise plus uniform quantisation error) and the
@@ -47,8 +58,8 @@ use thermode_model::peltier::PeltierModule;
 use crate::error::ControlError;
 use thermode_model::{BadValue, Rule};
 
-/// Number of observer states: plate, hot side, sensor element, unknown heat.
-pub const OBSERVER_STATES: usize = 4;
+/// Number of observer states: plate, hot side, sensor element, unknown heat, plate response scale.
+pub const OBSERVER_STATES: usize = 5;
 
 /// The observer's noise model as dimensionless fractions of the module's reference heat flow
 /// ([`PlantModel::reference_heat_w`]); the same for every display (no tuning per display). Defaults in the field
@@ -65,6 +76,9 @@ pub struct ObserverDesign {
     /// RMS of the white heat noise on the plate and hot-side nodes over one sensor sample period, as a fraction of
     /// the reference heat. Default 0.002 (7 mW for the default module).
     pub plant_heat_noise_fraction: f64,
+    /// Relative standard deviation of the plate's response to heat (its heat capacity as the file states it) at
+    /// start; the observer then estimates the response's scale. Default 0 (the file's capacity, not estimated).
+    pub plate_response_uncertainty: f64,
 }
 
 impl Default for ObserverDesign {
@@ -73,6 +87,7 @@ impl Default for ObserverDesign {
             disturbance_drift_per_sqrt_s: 0.003,
             disturbance_initial_fraction: 0.1,
             plant_heat_noise_fraction: 0.002,
+            plate_response_uncertainty: 0.0,
         }
     }
 }
@@ -83,6 +98,7 @@ impl ObserverDesign {
         Rule::NonNegative.check("disturbance_drift_per_sqrt_s", self.disturbance_drift_per_sqrt_s)?;
         Rule::NonNegative.check("disturbance_initial_fraction", self.disturbance_initial_fraction)?;
         Rule::NonNegative.check("plant_heat_noise_fraction", self.plant_heat_noise_fraction)?;
+        Rule::NonNegative.check("plate_response_uncertainty", self.plate_response_uncertainty)?;
         Ok(())
     }
 }
@@ -99,6 +115,11 @@ const TP: usize = 0;
 const TH: usize = 1;
 const TS: usize = 2;
 const DIST: usize = 3;
+const SCALE: usize = 4;
+
+/// The plate response scale's estimate is kept within these bounds (a plate responding half or twice as fast as
+/// its file says).
+const SCALE_BOUNDS: (f64, f64) = (-0.5, 1.0);
 
 type Matrix = [[f64; OBSERVER_STATES]; OBSERVER_STATES];
 type Vector = [f64; OBSERVER_STATES];
@@ -252,6 +273,9 @@ pub struct PlateEstimate {
     pub disturbance_w: f64,
     /// Standard deviation of the plate estimate, °C.
     pub plate_sd_c: f64,
+    /// The plate's response to heat relative to its file (1 + θ: 1.3 is a plate 30 % faster, a heat capacity 1/1.3
+    /// of the file's).
+    pub plate_response_scale: f64,
 }
 
 /// One tick's data for the observer.
@@ -341,6 +365,7 @@ impl PlateObserver {
             sensor_element_c: self.x[TS],
             disturbance_w: self.x[DIST],
             plate_sd_c: self.p[TP][TP].max(0.0).sqrt(),
+            plate_response_scale: 1.0 + self.x[SCALE],
         })
     }
 
@@ -370,18 +395,19 @@ impl PlateObserver {
             let step = self
                 .plant
                 .plate_hot_step(dt_s, current_a, [self.x[TP], self.x[TH]], finger, self.x[DIST]);
-            step.end[0]
+            step.end[0] + self.x[SCALE] * (step.end[0] - self.x[TP])
         })
     }
 
     fn start(&mut self, sensor_c: f64, hot_side_c: f64) {
         let q_ref = self.plant.reference_heat_w();
-        self.x = [sensor_c, hot_side_c, sensor_c, 0.0];
+        self.x = [sensor_c, hot_side_c, sensor_c, 0.0, 0.0];
         self.p = [[0.0; OBSERVER_STATES]; OBSERVER_STATES];
         self.p[TP][TP] = INITIAL_PLATE_SD_C.powi(2);
         self.p[TH][TH] = self.plant.hot_side_variance_c2();
         self.p[TS][TS] = self.plant.sensor_variance_c2();
         self.p[DIST][DIST] = (self.design.disturbance_initial_fraction * q_ref).powi(2);
+        self.p[SCALE][SCALE] = self.design.plate_response_uncertainty.powi(2);
         self.started = true;
     }
 
@@ -406,14 +432,24 @@ impl PlateObserver {
             f[row][TH] = step.start_map[node][1];
             f[row][DIST] = step.heat_map[node];
         }
+        // The plate's change scaled by 1 + θ: T_p1 = end + θ (end − T_p0).
+        let scale = self.x[SCALE];
+        let change_c = step.end[0] - self.x[TP];
+        let plate_c = step.end[0] + scale * change_c;
         for col in [TP, TH, DIST] {
+            f[TP][col] *= 1.0 + scale;
+        }
+        f[TP][TP] -= scale;
+        f[TP][SCALE] = change_c;
+        for col in [TP, TH, DIST, SCALE] {
             f[TS][col] = w1 * f[TP][col];
         }
         f[TS][TP] += w0;
         f[TS][TS] = decay;
         f[DIST][DIST] = 1.0;
-        let sensor = decay * self.x[TS] + w1 * step.end[0] + w0 * self.x[TP];
-        (f, [step.end[0], step.end[1], sensor, self.x[DIST]])
+        f[SCALE][SCALE] = 1.0;
+        let sensor = decay * self.x[TS] + w1 * plate_c + w0 * self.x[TP];
+        (f, [plate_c, step.end[1], sensor, self.x[DIST], scale])
     }
 
     fn predict(&mut self, tick: &ObserverTick) {
@@ -430,7 +466,8 @@ impl PlateObserver {
         self.x = x1;
     }
 
-    /// Diagonal process noise over a step of `dt_s`: heat noise on plate and hot side, random walk of d.
+    /// Diagonal process noise over a step of `dt_s`: heat noise on plate and hot side, random walk of d (the
+    /// plate's response scale is a constant).
     fn process_noise(&self, dt_s: f64) -> Vector {
         let q_ref = self.plant.reference_heat_w();
         // White heat of RMS a over one sample period has intensity a²·T_sample [W²·s]; over dt it adds
@@ -441,6 +478,7 @@ impl PlateObserver {
             heat / self.plant.hot_heat_capacity_j_k.powi(2),
             0.0,
             (self.design.disturbance_drift_per_sqrt_s * q_ref).powi(2) * dt_s,
+            0.0,
         ]
     }
 
@@ -455,6 +493,7 @@ impl PlateObserver {
         for (x, k) in self.x.iter_mut().zip(gain) {
             *x += k * innovation;
         }
+        self.x[SCALE] = self.x[SCALE].clamp(SCALE_BOUNDS.0, SCALE_BOUNDS.1);
         let row = self.p[index];
         for (i, k) in gain.iter().enumerate() {
             for (j, pj) in row.iter().enumerate() {

@@ -76,6 +76,11 @@ pub struct RenderConfig {
     /// explain is not taken for the finger's when the finger models are calibrated at a touch, and the model
     /// controller's live fit of the module to its voltage starts with this uncertainty (none when 0).
     pub peltier_uncertainty: f64,
+    /// Relative uncertainty of the plate's heat capacity (`plate.heat_capacity_j_k`) as this file gives it \[-\], 0
+    /// to 1. Default 0.2; `thermode identify` writes its fit's. The model controller's observer estimates how fast
+    /// the plate really responds to heat, starting with this uncertainty (the file's capacity taken as exact when
+    /// 0).
+    pub plate_uncertainty: f64,
 }
 
 /// Everything that describes one simulated display channel (all channels of a display are identical).
@@ -144,6 +149,7 @@ impl Default for RenderConfig {
         RenderConfig {
             max_setpoint_rate_c_per_s: 20.0,
             peltier_uncertainty: 0.3,
+            plate_uncertainty: 0.2,
         }
     }
 }
@@ -177,7 +183,7 @@ const MODULE_SOURCE: &str = "model.md §5: a typical single-stage Bi₂Te₃ min
 
 impl DeviceConfig {
     /// Every key of the device file, in file order, each with the field of `self` it reads and writes.
-    fn fields(&mut self) -> [Field<'_>; 18] {
+    fn fields(&mut self) -> [Field<'_>; 19] {
         [
             Field {
                 section: "peltier",
@@ -353,15 +359,31 @@ impl DeviceConfig {
                          conductance K moves the heat a resting plate exchanges with the hot side by about 75 mW, a \
                          1.2 °C error of the finger's temperature (docs/design-choices.md).",
             },
+            Field {
+                section: "render",
+                key: "plate_uncertainty",
+                rule: Rule::Within { min: 0.0, max: 1.0 },
+                value: &mut self.render.plate_uncertainty,
+                doc: "Relative uncertainty of the plate's heat capacity (plate.heat_capacity_j_k) as this file \
+                      gives it [-], 0 to 1. The model controller's observer estimates how fast the plate really \
+                      responds to heat (the response of a saturated drop decides when it ends), starting with this \
+                      uncertainty; 0 takes the file's capacity as exact. `thermode identify` writes its fit's \
+                      uncertainty.",
+                source: "An estimate from handbook values and part sizes (plate.heat_capacity_j_k) misses the glue and \
+                         grease layers and how much of the legs moves with the plate: about 20 % (docs/design-choices.md, \
+                         the plate's response).",
+            },
         ]
     }
 
     /// This file as a controller may believe it when it drives a simulated display built from this very file: the
-    /// module is then exactly what the file says (`render.peltier_uncertainty` 0). Real hardware, or a simulated
-    /// display built from another file, keeps the file's own uncertainty.
+    /// module and the plate are then exactly what the file says (`render.peltier_uncertainty` and
+    /// `render.plate_uncertainty` 0). Real hardware, or a simulated display built from another file, keeps the
+    /// file's own uncertainties.
     pub fn exact_for_its_simulation(&self) -> DeviceConfig {
         let mut exact = *self;
         exact.render.peltier_uncertainty = 0.0;
+        exact.render.plate_uncertainty = 0.0;
         exact
     }
 

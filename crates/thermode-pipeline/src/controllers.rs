@@ -5,7 +5,7 @@
 //! A gains file is the TOML form of [`PidGains`] (`kp_a_per_c`, `ki_a_per_c_s`, `kd_a_s_per_c`, `filter_cutoff_hz`,
 //! optional `derivative_filter_s`); comments are allowed, unknown keys are refused. `thermode tune` writes them.
 
-use thermode_control::{Controller, ModelController, ModelDesign, PidController, PidGains, PlantModel};
+use thermode_control::{Controller, ModelController, ModelDesign, ObserverDesign, PidController, PidGains, PlantModel};
 use thermode_device::{DeviceConfig, DEFAULT_DEVICE_TOML, LAGGING_SENSOR_DEVICE_TOML, WEAK_COOLING_DEVICE_TOML};
 
 use crate::error::PipelineError;
@@ -167,14 +167,19 @@ pub fn plant_model(device: &DeviceConfig) -> Result<PlantModel, PipelineError> {
 }
 
 /// Builds the controller `kind` for `device` (output limited to the device's drive limit). The model controller
-/// fits its module to the device's voltage starting from the file's `render.peltier_uncertainty`, and not at all
-/// when that is 0 (a file exact for its display).
+/// fits its module to the device's voltage starting from the file's `render.peltier_uncertainty`, and its observer
+/// estimates the plate's response to heat starting from `render.plate_uncertainty`; neither when its uncertainty
+/// is 0 (a file exact for its display).
 pub fn build_controller(kind: &ControllerKind, device: &DeviceConfig) -> Result<Box<dyn Controller>, PipelineError> {
     match kind {
         ControllerKind::Pid(gains) => Ok(Box::new(PidController::new(*gains, device.drive.current_limit_a)?)),
         ControllerKind::Model => {
             let design = ModelDesign {
                 module_fit_relative_sd: Some(device.render.peltier_uncertainty).filter(|&u| u > 0.0),
+                observer: ObserverDesign {
+                    plate_response_uncertainty: device.render.plate_uncertainty,
+                    ..ObserverDesign::default()
+                },
                 ..ModelDesign::default()
             };
             Ok(Box::new(ModelController::with_design(plant_model(device)?, design)?))

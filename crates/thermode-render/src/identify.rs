@@ -9,7 +9,8 @@
 //! **Result**: the fitted S, R, K become a datasheet quoted at the believed file's hot-side temperature
 //! ([`PeltierDatasheet::from_module`]); the capacities, the water conductance and temperature and the sensor's time
 //! constant replace the believed file's; the module's uncertainty (`render.peltier_uncertainty`) becomes the fit's
-//! (three of the largest standard deviation of S, R, K, at least [`MIN_IDENTIFIED_UNCERTAINTY`]); everything else
+//! (three of the largest standard deviation of S, R, K, at least [`MIN_IDENTIFIED_UNCERTAINTY`]), and so does the
+//! plate's (`render.plate_uncertainty`, from the plate capacity's standard deviation); everything else
 //! (sensor noise and rate, contact, the render rate limit) is kept, and the drive limit too unless it exceeds the
 //! identified I_max (a device file bounds it by I_max).
 
@@ -148,7 +149,8 @@ pub fn identified_device(believed: &DeviceConfig, fit: &Identification) -> Resul
     device.hot_side.water_conductance_w_k = p.water_conductance_w_k;
     device.ambient.water_c = p.water_c;
     device.sensor.time_constant_s = p.sensor_time_constant_s;
-    device.render.peltier_uncertainty = identified_peltier_uncertainty(fit);
+    device.render.peltier_uncertainty = identified_uncertainty(&fit.relative_sd[..3]);
+    device.render.plate_uncertainty = identified_uncertainty(&fit.relative_sd[3..4]);
     // The drive's limit is the drive's, not fitted; a device file bounds it by the module's I_max.
     device.drive.current_limit_a = device.drive.current_limit_a.min(device.peltier.imax_a);
     Ok(device)
@@ -159,10 +161,10 @@ pub fn identified_device(believed: &DeviceConfig, fit: &Identification) -> Resul
 /// MeCom emulator in real time the parameters came out within 2–3 %).
 pub const MIN_IDENTIFIED_UNCERTAINTY: f64 = 0.02;
 
-/// The relative uncertainty of an identified module's S, R and K: three of the fit's largest standard deviation
-/// among them, at least [`MIN_IDENTIFIED_UNCERTAINTY`], at most 1.
-fn identified_peltier_uncertainty(fit: &Identification) -> f64 {
-    let largest_sd = fit.relative_sd[..3].iter().copied().fold(0.0, f64::max);
+/// The relative uncertainty of identified parameters (the module's S, R and K; the plate's capacity) from their
+/// relative standard deviations: three of the largest, at least [`MIN_IDENTIFIED_UNCERTAINTY`], at most 1.
+fn identified_uncertainty(relative_sd: &[f64]) -> f64 {
+    let largest_sd = relative_sd.iter().copied().fold(0.0, f64::max);
     if largest_sd.is_finite() {
         (3.0 * largest_sd).clamp(MIN_IDENTIFIED_UNCERTAINTY, 1.0)
     } else {

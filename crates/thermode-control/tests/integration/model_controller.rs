@@ -466,6 +466,69 @@ fn the_observer_learns_the_heat_of_a_finger_that_differs_from_its_model() {
     }
 }
 
+/// A plate whose heat capacity is 30 % off its file (C_p × 0.7 and × 1.3) under a bare plate's square wave of full
+/// cooling and heating (0.5 s each, 10 s): the observer, told the file's capacity may be 20 % off, learns the
+/// plate's response scale C_file/C_true within 2 % (1/0.7 and 1/1.3), and its estimate of the plate during the
+/// last 5 s is within 0.05 °C of the truth, where the file's capacity alone leaves it off by more than 0.3 °C. On a
+/// plate that is its file the scale stays within 3 % of 1.
+#[test]
+fn the_observer_learns_how_fast_a_plate_responds_when_its_capacity_is_off() {
+    let square_a = |k: usize| if (k / 50).is_multiple_of(2) { -2.8 } else { 2.0 };
+    let run = |factor: f64, uncertainty: f64| {
+        let spec = Spec {
+            plate_j_k: 0.28 * factor,
+            ..Spec::default_display()
+        };
+        let believed = Spec::default_display().plant_model();
+        let design = ObserverDesign {
+            plate_response_uncertainty: uncertainty,
+            ..ObserverDesign::default()
+        };
+        let mut observer = PlateObserver::with_design(believed, design).unwrap_or_else(|e| panic!("{e}"));
+        let mut display = Display::new(spec, FingerNode::fingertip(), 32.0, 5);
+        display.finger.plate_w_k = 0.0;
+        let (mut applied, mut worst_c, mut scale) = (0.0, 0.0f64, f64::NAN);
+        for k in 0..1000 {
+            let tick = ObserverTick {
+                dt_s: 0.01,
+                applied_current_a: applied,
+                finger: Finger::NONE,
+                sensor_c: display.reading_c,
+                hot_side_c: display.hot_reading_c(),
+            };
+            let estimate = observer.update(&tick).unwrap_or_else(|e| panic!("{e}"));
+            if k >= 500 {
+                worst_c = worst_c.max((estimate.plate_c - display.plate_c()).abs());
+            }
+            scale = estimate.plate_response_scale;
+            applied = square_a(k);
+            display.advance(0.01, applied);
+        }
+        (scale, worst_c)
+    };
+    for factor in [0.7, 1.3] {
+        let (scale, worst_c) = run(factor, 0.2);
+        let (_, file_worst_c) = run(factor, 0.0);
+        eprintln!(
+            "C_p × {factor}: scale {scale:.4} (true {:.4}); estimate off by at most {worst_c:.3} °C (file's capacity: \
+             {file_worst_c:.3} °C)",
+            1.0 / factor
+        );
+        assert!(
+            (scale * factor - 1.0).abs() < 0.02,
+            "C_p × {factor}: learnt scale {scale} vs {}",
+            1.0 / factor
+        );
+        assert!(worst_c < 0.05, "C_p × {factor}: estimate off by {worst_c} °C vs 0.05");
+        assert!(
+            file_worst_c > 0.3,
+            "C_p × {factor}: the file's capacity alone is off by only {file_worst_c} °C"
+        );
+    }
+    let (scale, _) = run(1.0, 0.2);
+    assert!((scale - 1.0).abs() < 0.03, "exact plate: learnt scale {scale} vs 1");
+}
+
 #[test]
 fn the_estimate_leads_the_lagging_sensor_during_a_ramp() {
     for (spec, bound_c) in [(Spec::default_display(), 0.1), (Spec::lagging(), 0.15)] {

@@ -377,6 +377,24 @@ fn on_hardware(hardware: thermode_device::DeviceConfig) -> (f64, f64, f64) {
     )
 }
 
+/// The observer's estimate of the plate's response (device file `render.plate_uncertainty`): on displays whose
+/// plate has 30 % more or less heat capacity than the default file says, the model controller believing that file
+/// overshoots the target by at most 0.2 °C and its mean RMS stays at or below pid's. With the file's capacity taken
+/// as exact it overshot by 0.29 and 0.50 °C.
+#[test]
+fn the_plate_response_estimate_keeps_the_model_controller_on_target_with_a_plate_off_its_file() {
+    for factor in [1.3, 0.7] {
+        let mut plant = thermode_device::DeviceConfig::default();
+        plant.plate.heat_capacity_j_k *= factor;
+        let (p, m, overshoot_c) = on_hardware(plant);
+        eprintln!("C_p × {factor}: mean RMS pid {p:.4}, model {m:.4} °C; overshoot {overshoot_c:.3} °C");
+        assert!(
+            overshoot_c <= 0.2 && m <= p,
+            "C_p × {factor}: overshoot {overshoot_c} °C, RMS model {m} vs pid {p} °C"
+        );
+    }
+}
+
 /// The live fit of the module to its voltage (`thermode_control::ModuleFit`): on displays whose module is 30 % off
 /// the datasheet file in V_max (S, R and K together) or has 30 % less I_max (R up, K down, and a drive that stops
 /// at the module's I_max), the model controller believing the default file overshoots the target by at most
