@@ -6,7 +6,7 @@
 //! [`Precision`]; [`CsvText::push_field`] quotes a text field as the `csv` crate does (only when needed).
 //!
 //! A number is written into a fixed run of scratch bytes past the text and the length then advanced (no copy of
-//! varying length per number); the buffer grows only by a cold call that takes its allocation by value.
+//! varying length per number); the buffer doubles, rarely, when the run does not fit.
 
 /// How the numbers of a CSV are written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -165,7 +165,7 @@ impl CsvText {
 
     /// Appends `value / 10^DECIMALS` (`value` below 1e16), with a minus sign when `negative`: at least one digit
     /// before the point, exactly `DECIMALS` after it (no point when `DECIMALS` is 0), written into a fixed run of
-    /// scratch two digits at a time with divisions by constants. Returns the text written.
+    /// scratch with divisions by constants ([`put_digits`]). Returns the text written.
     #[inline(always)]
     fn push_fixed_point<const DECIMALS: usize>(&mut self, negative: bool, value: u64) -> &[u8] {
         let whole = value / power_of_ten::<DECIMALS>();
@@ -239,8 +239,7 @@ impl CsvText {
     }
 }
 
-/// `bytes` grown to at least `needed` bytes (at least doubled); taken and given back by value, so that the caller's
-/// buffer never has its address taken in a writing loop.
+/// `bytes` grown to at least `needed` bytes (at least doubled), the new bytes zero.
 #[cold]
 #[inline(never)]
 fn grown(mut bytes: Vec<u8>, needed: usize) -> Vec<u8> {
