@@ -84,6 +84,19 @@ fn identify_recovers_every_hidden_parameter_within_ten_percent() {
                 fit.relative_sd
             );
         }
+        // The plate uncertainty the identified file states covers its capacity's real error, and is far below a
+        // datasheet file's 0.2.
+        let plate_error = identified.plate.heat_capacity_j_k / hidden.plate.heat_capacity_j_k - 1.0;
+        let stated = identified.render.plate_uncertainty;
+        eprintln!(
+            "plate capacity off by {:+.2} %, stated uncertainty {:.2} %",
+            100.0 * plate_error,
+            100.0 * stated
+        );
+        assert!(
+            plate_error.abs() <= stated && stated < 0.1,
+            "plate capacity off by {plate_error}, stated uncertainty {stated}"
+        );
         let (with_identified, with_true) = (mean_rms_c(&identified, &hidden), mean_rms_c(&hidden, &hidden));
         eprintln!("mean RMS with the identified file {with_identified:.5} °C, with the true file {with_true:.5} °C");
         assert!(
