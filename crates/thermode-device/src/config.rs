@@ -81,6 +81,10 @@ pub struct RenderConfig {
     /// the plate really responds to heat, starting with this uncertainty (the file's capacity taken as exact when
     /// 0).
     pub plate_uncertainty: f64,
+    /// Relative uncertainty of the sensor's time constant (`sensor.time_constant_s`) as this file gives it \[-\], 0
+    /// to 1. Default 0.5; `thermode identify` writes its fit's. The safety envelope's plate guard holds its estimate
+    /// of the true plate to where a sensor that much slower puts it (none when 0).
+    pub sensor_lag_uncertainty: f64,
 }
 
 /// Everything that describes one simulated display channel (all channels of a display are identical).
@@ -150,6 +154,7 @@ impl Default for RenderConfig {
             max_setpoint_rate_c_per_s: 20.0,
             peltier_uncertainty: 0.3,
             plate_uncertainty: 0.2,
+            sensor_lag_uncertainty: 0.5,
         }
     }
 }
@@ -183,7 +188,7 @@ const MODULE_SOURCE: &str = "model.md §5: a typical single-stage Bi₂Te₃ min
 
 impl DeviceConfig {
     /// Every key of the device file, in file order, each with the field of `self` it reads and writes.
-    fn fields(&mut self) -> [Field<'_>; 19] {
+    fn fields(&mut self) -> [Field<'_>; 20] {
         [
             Field {
                 section: "peltier",
@@ -373,17 +378,32 @@ impl DeviceConfig {
                          grease layers and how much of the legs moves with the plate: about 20 % (docs/design-choices.md, \
                          the plate's response).",
             },
+            Field {
+                section: "render",
+                key: "sensor_lag_uncertainty",
+                rule: Rule::Within { min: 0.0, max: 1.0 },
+                value: &mut self.render.sensor_lag_uncertainty,
+                doc: "Relative uncertainty of the sensor's time constant (sensor.time_constant_s) as this file gives \
+                      it [-], 0 to 1. The safety envelope's plate guard holds its estimate of the true plate to where \
+                      a sensor this much slower than the file's would put it while the reading moves, so that a \
+                      display off its file cannot heat past the envelope's maximum behind a model that lags it \
+                      (docs/security.md); 0 takes the file's time constant as exact. `thermode identify` writes its \
+                      fit's uncertainty.",
+                source: "model.md §5 gives 0.2–0.6 s for a PT-100 chip glued into the plate: the file's 0.3 s may be \
+                         50 % short.",
+            },
         ]
     }
 
     /// This file as a controller may believe it when it drives a simulated display built from this very file: the
-    /// module and the plate are then exactly what the file says (`render.peltier_uncertainty` and
-    /// `render.plate_uncertainty` 0). Real hardware, or a simulated display built from another file, keeps the
-    /// file's own uncertainties.
+    /// module, the plate and the sensor are then exactly what the file says (`render.peltier_uncertainty`,
+    /// `render.plate_uncertainty` and `render.sensor_lag_uncertainty` 0). Real hardware, or a simulated display
+    /// built from another file, keeps the file's own uncertainties.
     pub fn exact_for_its_simulation(&self) -> DeviceConfig {
         let mut exact = *self;
         exact.render.peltier_uncertainty = 0.0;
         exact.render.plate_uncertainty = 0.0;
+        exact.render.sensor_lag_uncertainty = 0.0;
         exact
     }
 

@@ -6,6 +6,18 @@
 //! Per tick, before the drive is gated: the observer is updated over the interval since the previous tick with the
 //! current the envelope let through then, the display's finger model, and both readings; the forecast then predicts
 //! the plate at the end of the coming tick for any current ([`PlateObserver::predict_plate_c`]).
+//!
+//! **A model that is not its display.** The observer is only as good as the device file: on a display whose sensor
+//! lags 30 % more, or whose module heats 30 % harder, than its file says, the estimate ran up to 2.4 °C behind a
+//! plate heating at full current, and the plate reached 50.1 °C under a 48 °C maximum. So the forecast is also held
+//! to what the PT-100 alone says: a first-order sensor trails the plate by its time constant times its own rate, so
+//! while the reading moves the plate is at least `reading + (1 + u) τ ṙ` along in that direction, with τ the file's
+//! time constant, u its stated uncertainty (device file `render.sensor_lag_uncertainty`: a sensor up to that much
+//! slower than its file) and ṙ the reading's steepest rate against its readings of 40–200 ms ago (beyond the noise's
+//! 2 °C/s). Where that bound lies beyond the model's forecast, the forecast's range is widened to it on that side
+//! only ([`PlateForecast::plate_after_range_c`]: a bound on a rising plate must not let it cool past the minimum).
+//! A file exact for its display (u = 0: a simulated display built from it) has no such bound: its model is the
+//! display (figures in `docs/security.md`).
 
 use thermode_control::{Finger, ObserverTick, PlantModel, PlateObserver};
 use thermode_device::Reading;
@@ -13,18 +25,97 @@ use thermode_safety::{PlateForecast, PlateNow};
 
 use crate::error::PipelineError;
 
+/// Readings the trend keeps (at least [`TREND_SPACING_S`] apart, so 240 ms or more of them).
+const TREND_READINGS: usize = 24;
+/// Smallest spacing of the readings the trend keeps \[s\]: 10 ms (the PT-100's sample period; at a faster tick the
+/// same sample is held).
+const TREND_SPACING_S: f64 = 0.01;
+/// The trend's rates are taken against readings 40 to 200 ms old \[s\]: long enough that the sensor's noise
+/// (0.02 °C, 0.01 °C steps) gives rates under [`TREND_NOISE_RATE_C_PER_S`], short enough to follow a plate at full
+/// current.
+const TREND_WINDOW_S: (f64, f64) = (0.04, 0.2);
+/// A steepest rate of at most this is the sensor's noise, not a moving plate \[°C/s\]: 2 (a difference of 0.08 °C
+/// over 40 ms; taken as the plate's motion, it made the guard hold a plate at the display's minimum with the drive
+/// swinging between ±2.8 A).
+const TREND_NOISE_RATE_C_PER_S: f64 = 2.0;
+
+/// The PT-100's recent trend: its newest reading and its steepest rate over the last 40–200 ms.
+#[derive(Debug, Clone)]
+struct SensorTrend {
+    /// (time \[s\], reading \[°C\]) at least [`TREND_SPACING_S`] apart, oldest overwritten first.
+    readings: [(f64, f64); TREND_READINGS],
+    next: usize,
+    newest_c: f64,
+    /// The steepest rate against the kept readings within [`TREND_WINDOW_S`] \[°C/s\], 0 when it is within the
+    /// noise ([`TREND_NOISE_RATE_C_PER_S`]) or there is none.
+    rate_c_per_s: f64,
+}
+
+impl SensorTrend {
+    fn new() -> Self {
+        SensorTrend {
+            readings: [(f64::NAN, f64::NAN); TREND_READINGS],
+            next: 0,
+            newest_c: f64::NAN,
+            rate_c_per_s: 0.0,
+        }
+    }
+
+    /// Takes the finite reading `sensor_c` at `now_s`.
+    fn record(&mut self, now_s: f64, sensor_c: f64) {
+        let last_s = self.readings[(self.next + TREND_READINGS - 1) % TREND_READINGS].0;
+        // The first reading (no last one: NaN) is kept too.
+        if last_s.is_nan() || now_s - last_s >= TREND_SPACING_S {
+            self.readings[self.next] = (now_s, sensor_c);
+            self.next = (self.next + 1) % TREND_READINGS;
+        }
+        self.newest_c = sensor_c;
+        let rate = self.steepest_rate_c_per_s(now_s);
+        self.rate_c_per_s = if rate.abs() > TREND_NOISE_RATE_C_PER_S {
+            rate
+        } else {
+            0.0
+        };
+    }
+
+    /// The steepest rate against the kept readings 40–200 ms old ([`TREND_WINDOW_S`]) \[°C/s\]: of largest
+    /// magnitude, with its sign (0 without one).
+    fn steepest_rate_c_per_s(&self, now_s: f64) -> f64 {
+        self.readings
+            .iter()
+            .filter(|(t, _)| (TREND_WINDOW_S.0..=TREND_WINDOW_S.1).contains(&(now_s - t)))
+            .map(|(t, c)| (self.newest_c - c) / (now_s - t))
+            .fold(
+                0.0,
+                |steepest: f64, rate| if rate.abs() > steepest.abs() { rate } else { steepest },
+            )
+    }
+
+    /// Where a first-order sensor of time constant `lag_s` \[s\] puts the plate at least, in the direction the
+    /// reading moves \[°C\] (NaN before the first reading).
+    fn plate_bound_c(&self, lag_s: f64) -> f64 {
+        self.newest_c + lag_s * self.rate_c_per_s
+    }
+}
+
 /// The envelope's model of one channel's plate.
 #[derive(Debug, Clone)]
 pub struct PlateGuard {
     observer: PlateObserver,
     /// Time of the previous update \[s\] (`None` before the first).
     last_time_s: Option<f64>,
+    trend: SensorTrend,
+    /// The sensor lag of the bound, `(1 + u) τ` \[s\]; `None` for a file exact for its display (u = 0).
+    bound_lag_s: Option<f64>,
 }
 
 /// The plate guard's forecast over one tick.
 #[derive(Debug, Clone, Copy)]
 pub struct TickForecast<'a> {
     observer: &'a PlateObserver,
+    /// How far the sensor's bound lies beyond the model's estimate in the direction the reading moves \[°C\]
+    /// (positive rising, negative falling, 0 when the estimate is already beyond it or there is no bound).
+    beyond_c: f64,
     /// Length of the tick \[s\].
     dt_s: f64,
     /// The finger model on the plate.
@@ -32,11 +123,17 @@ pub struct TickForecast<'a> {
 }
 
 impl PlateGuard {
-    /// A guard of the display described by `plant` (validated), with no estimate yet.
-    pub fn new(plant: PlantModel) -> Result<Self, PipelineError> {
+    /// A guard of the display described by `plant` (validated), whose sensor may lag by up to `1 +
+    /// sensor_lag_uncertainty` times the plant's time constant (0: exactly it, no sensor bound), with no estimate
+    /// yet.
+    pub fn new(plant: PlantModel, sensor_lag_uncertainty: f64) -> Result<Self, PipelineError> {
+        let bound_lag_s =
+            (sensor_lag_uncertainty > 0.0).then_some((1.0 + sensor_lag_uncertainty) * plant.sensor_time_constant_s);
         Ok(PlateGuard {
             observer: PlateObserver::new(plant)?,
             last_time_s: None,
+            trend: SensorTrend::new(),
+            bound_lag_s,
         })
     }
 
@@ -54,6 +151,7 @@ impl PlateGuard {
         };
         if self.observer.update(&tick).is_ok() {
             self.last_time_s = Some(now_s);
+            self.trend.record(now_s, reading.sensor_c);
         }
     }
 
@@ -62,10 +160,30 @@ impl PlateGuard {
         self.observer.estimate().map_or(f64::NAN, |e| e.plate_c)
     }
 
+    /// How far the sensor's bound lies beyond the model's estimate, in the direction the reading moves \[°C\]
+    /// (see the module documentation; 0 before the first reading).
+    fn beyond_estimate_c(&self) -> f64 {
+        let Some(lag_s) = self.bound_lag_s else {
+            return 0.0;
+        };
+        let gap_c = self.trend.plate_bound_c(lag_s) - self.plate_estimate_c();
+        let rate = self.trend.rate_c_per_s;
+        if !gap_c.is_finite() {
+            0.0
+        } else if rate > 0.0 {
+            gap_c.max(0.0)
+        } else if rate < 0.0 {
+            gap_c.min(0.0)
+        } else {
+            0.0
+        }
+    }
+
     /// The forecast over a tick of `dt_s` \[s\] with `finger` on the plate.
     pub fn forecast(&self, dt_s: f64, finger: Finger) -> TickForecast<'_> {
         TickForecast {
             observer: &self.observer,
+            beyond_c: self.beyond_estimate_c(),
             dt_s,
             finger,
         }
@@ -86,8 +204,50 @@ impl PlateForecast for TickForecast<'_> {
             .unwrap_or(f64::NAN)
     }
 
+    /// The model's forecast, widened to where the sensor's bound puts the plate on the side the reading moves,
+    /// for a current that drives it further that way: the bound stops heating (or cooling) a plate the model may
+    /// lag, but never makes the envelope drive the other way on a worst case alone.
+    fn plate_after_range_c(&self, current_a: f64) -> (f64, f64) {
+        let plate_c = self.plate_after_c(current_a);
+        let (lower_c, upper_c) = (self.beyond_c.min(0.0), self.beyond_c.max(0.0));
+        (
+            plate_c + if current_a < 0.0 { lower_c } else { 0.0 },
+            plate_c + if current_a > 0.0 { upper_c } else { 0.0 },
+        )
+    }
+
     fn strongest_cooling_a(&self) -> f64 {
         let plate_c = self.observer.estimate().map_or(f64::NAN, |e| e.plate_c);
         self.observer.plant().most_useful_cooling_a(plate_c)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A reading of `plate_c(t)` sampled at 100 Hz with ±0.02 °C of alternating noise and 0.01 °C steps, recorded
+    /// every 10 ms for `duration_s`: the trend's rate at the end.
+    fn trend_rate(plate_c: impl Fn(f64) -> f64, duration_s: f64) -> f64 {
+        let mut trend = SensorTrend::new();
+        for k in 0..=(duration_s / 0.01).round() as usize {
+            let t = k as f64 * 0.01;
+            let noise_c = if k % 2 == 0 { 0.02 } else { -0.02 };
+            trend.record(t, ((plate_c(t) + noise_c) / 0.01).round() * 0.01);
+        }
+        trend.rate_c_per_s
+    }
+
+    #[test]
+    fn the_trend_follows_a_ramp_and_ignores_noise() {
+        for rate in [20.0, -15.0, 5.0] {
+            let got = trend_rate(|t| 30.0 + rate * t, 0.5);
+            assert!((got - rate).abs() < 1.5, "ramp of {rate} °C/s: trend {got} °C/s");
+        }
+        let still = trend_rate(|_| 30.0, 0.5);
+        assert_eq!(still, 0.0, "a still plate: trend {still} °C/s");
+        let slow = trend_rate(|t| 30.0 + t, 0.5);
+        assert_eq!(slow, 0.0, "1 °C/s is within the noise: trend {slow} °C/s");
+        assert_eq!(trend_rate(|t| 30.0 + 20.0 * t, 0.02), 0.0, "no reading 40 ms old yet");
     }
 }

@@ -459,7 +459,10 @@ impl DriveStage {
         Ok(DriveStage {
             controller,
             envelope: SafetyEnvelope::new(config.envelope, config.device.drive.current_limit_a)?,
-            guard: PlateGuard::new(plant_model(&config.device)?)?,
+            guard: PlateGuard::new(
+                plant_model(&config.device)?,
+                config.device.render.sensor_lag_uncertainty,
+            )?,
             applied_current_a: 0.0,
         })
     }

@@ -644,11 +644,11 @@ impl SafetyEnvelope {
         let margin_c = plate_margin_c(now.sd_c);
         let (floor_c, ceiling_c) = (self.min_c() + margin_c, self.effective_max_c() - margin_c);
         let strongest_cooling_a = plate.strongest_cooling_a().clamp(-self.current_limit_a, 0.0);
-        let after_c = plate.plate_after_c(current_a);
-        if after_c > ceiling_c && current_a > strongest_cooling_a {
+        let (lowest_c, highest_c) = plate.plate_after_range_c(current_a);
+        if highest_c > ceiling_c && current_a > strongest_cooling_a {
             limits.heating_limited_by_plate = true;
             search_current_a(plate, strongest_cooling_a, current_a, ceiling_c, true)
-        } else if after_c < floor_c && current_a < self.current_limit_a {
+        } else if lowest_c < floor_c && current_a < self.current_limit_a {
             limits.cooling_limited_by_plate = true;
             search_current_a(
                 plate,

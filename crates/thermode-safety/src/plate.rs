@@ -27,6 +27,14 @@ pub trait PlateForecast {
     /// applied over it, °C.
     fn plate_after_c(&self, current_a: f64) -> f64;
 
+    /// The lowest and highest plate the forecast allows at the end of that interval, °C: the envelope keeps the
+    /// lowest above its minimum and the highest below its maximum. Default: [`PlateForecast::plate_after_c`] for
+    /// both (a forecast that knows no error of its own).
+    fn plate_after_range_c(&self, current_a: f64) -> (f64, f64) {
+        let plate_c = self.plate_after_c(current_a);
+        (plate_c, plate_c)
+    }
+
     /// The strongest cooling current worth applying, A (≤ 0): between it and the drive limit
     /// [`PlateForecast::plate_after_c`] increases with the current (more cooling current than this only adds
     /// Joule heat).
@@ -90,10 +98,11 @@ pub(crate) fn search_current_a(
 ) -> f64 {
     for _ in 0..SEARCH_STEPS {
         let mid_a = 0.5 * (low_a + high_a);
+        let (lowest_c, highest_c) = forecast.plate_after_range_c(mid_a);
         let ok = if want_below {
-            forecast.plate_after_c(mid_a) <= bound_c
+            highest_c <= bound_c
         } else {
-            forecast.plate_after_c(mid_a) >= bound_c
+            lowest_c >= bound_c
         };
         // Keep the satisfying end on the side the answer lies: below the bound, `low_a` satisfies.
         if ok == want_below {

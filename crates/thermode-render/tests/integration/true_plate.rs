@@ -3,18 +3,101 @@
 //! accepts (150 °C and −50 °C) in library materials from copper to rubber, at the rendering rate limit and at the
 //! largest rate any envelope may allow, the simulated plate (`display_c`, the truth the envelope never sees) stays
 //! within 0.1 °C of the configured display range at every tick, and no fault latches (the envelope limits the
-//! drive; it does not need to trip).
+//! drive; it does not need to trip). The same on displays 30 % off the default device file that the pipeline
+//! believes (a sensor lagging more, a plate answering faster, a module heating harder, all of them at once), where
+//! the guard's model lags the plate and the sensor's own bound holds it (`render.sensor_lag_uncertainty`).
 
 use crate::common::{pid, spec};
 
+use thermode_device::DeviceConfig;
 use thermode_pipeline::pipeline::render_envelope_with_rate;
 use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
 use thermode_pipeline::{ControllerKind, ShippedDisplay};
 use thermode_render::run::render_all;
+use thermode_render::run::RenderSpec;
 use thermode_safety::ABSOLUTE_MAX_RATE_C_PER_S;
 
 /// How far the true plate may pass a display limit \[°C\] (the issue's judgement).
 const TOLERANCE_C: f64 = 0.1;
+
+/// Runs `specs` and returns one line per run whose true plate left its display range by more than
+/// [`TOLERANCE_C`] or that latched a fault.
+fn runs_leaving_the_range(specs: &[(String, RenderSpec)]) -> Vec<String> {
+    let runs = render_all(&specs.iter().map(|(_, s)| s.clone()).collect::<Vec<_>>()).unwrap_or_else(|e| panic!("{e}"));
+    let mut failures = Vec::new();
+    for ((name, s), run) in specs.iter().zip(&runs) {
+        let (min_c, max_c) = (s.pipeline.envelope.min_display_c, s.pipeline.envelope.max_display_c);
+        let t = &run.trajectory;
+        let hottest_c = t.display_c.iter().copied().fold(f64::MIN, f64::max);
+        let coldest_c = t.display_c.iter().copied().fold(f64::MAX, f64::min);
+        let fault = t.fault.iter().flatten().next();
+        if hottest_c > max_c + TOLERANCE_C || coldest_c < min_c - TOLERANCE_C || fault.is_some() {
+            failures.push(format!(
+                "{name} {} {} at {} °C, {} °C/s: plate {coldest_c:.3}..{hottest_c:.3} °C against [{min_c}, {max_c}] \
+                 ± {TOLERANCE_C}; fault {fault:?}",
+                run.summary.controller,
+                s.material.name,
+                s.object_c.unwrap_or(f64::NAN),
+                s.pipeline.envelope.max_setpoint_rate_c_per_s,
+            ));
+        }
+    }
+    let all = runs.iter().flat_map(|r| r.trajectory.display_c.iter().copied());
+    let (coldest_c, hottest_c) = all.fold((f64::MAX, f64::MIN), |(lo, hi), c| (lo.min(c), hi.max(c)));
+    println!("{} runs: true plate {coldest_c:.3}..{hottest_c:.3} °C", runs.len());
+    failures
+}
+
+/// The default device file with `edit` applied, Q_max and the drive limit kept consistent with the module.
+fn plant_off_file(edit: impl Fn(&mut DeviceConfig)) -> DeviceConfig {
+    let mut plant = DeviceConfig::default();
+    edit(&mut plant);
+    plant.peltier.qmax_w = plant.peltier.predicted_qmax_w();
+    plant.drive.current_limit_a = plant.drive.current_limit_a.min(plant.peltier.imax_a);
+    plant
+}
+
+#[test]
+fn the_true_plate_stays_inside_the_display_range_on_displays_off_their_file() {
+    let plants = [
+        ("sensor τ × 1.3", plant_off_file(|p| p.sensor.time_constant_s *= 1.3)),
+        ("C_plate × 0.7", plant_off_file(|p| p.plate.heat_capacity_j_k *= 0.7)),
+        ("I_max × 0.7", plant_off_file(|p| p.peltier.imax_a *= 0.7)),
+        (
+            "all × 1.3",
+            plant_off_file(|p| {
+                p.peltier.imax_a *= 1.3;
+                p.peltier.vmax_v *= 1.3;
+                p.peltier.dtmax_k *= 1.3;
+                p.plate.heat_capacity_j_k *= 1.3;
+                p.plate.contact_conductance_w_m2k *= 1.3;
+                p.hot_side.heat_capacity_j_k *= 1.3;
+                p.hot_side.water_conductance_w_k *= 1.3;
+                p.sensor.time_constant_s *= 1.3;
+            }),
+        ),
+    ];
+    let mut specs = Vec::new();
+    for (name, plant) in &plants {
+        for controller in [pid(ShippedDisplay::Default), ControllerKind::Model] {
+            for object_c in [OBJECT_TEMPERATURE.max, OBJECT_TEMPERATURE.min] {
+                let mut s = spec(ShippedDisplay::Default, controller, "copper");
+                s.hardware = Some(*plant);
+                s.object_c = Some(object_c);
+                s.duration_s = 12.0;
+                specs.push((name.to_string(), s));
+            }
+        }
+    }
+    let failures = runs_leaving_the_range(&specs);
+    assert!(
+        failures.is_empty(),
+        "{} of {} runs left the range:\n{}",
+        failures.len(),
+        specs.len(),
+        failures.join("\n")
+    );
+}
 
 #[test]
 fn the_true_plate_stays_inside_the_display_range_for_every_controller() {
@@ -42,33 +125,16 @@ fn the_true_plate_stays_inside_the_display_range_for_every_controller() {
             }
         }
     }
-    let runs = render_all(&specs.iter().map(|(_, s)| s.clone()).collect::<Vec<_>>()).unwrap_or_else(|e| panic!("{e}"));
-    let mut failures = Vec::new();
-    for ((display, s), run) in specs.iter().zip(&runs) {
-        let (min_c, max_c) = (s.pipeline.envelope.min_display_c, s.pipeline.envelope.max_display_c);
-        let t = &run.trajectory;
-        let hottest_c = t.display_c.iter().copied().fold(f64::MIN, f64::max);
-        let coldest_c = t.display_c.iter().copied().fold(f64::MAX, f64::min);
-        let fault = t.fault.iter().flatten().next();
-        if hottest_c > max_c + TOLERANCE_C || coldest_c < min_c - TOLERANCE_C || fault.is_some() {
-            failures.push(format!(
-                "{display:?} {} {} at {} °C, {} °C/s: plate {coldest_c:.3}..{hottest_c:.3} °C against [{min_c}, {max_c}] \
-                 ± {TOLERANCE_C}; fault {fault:?}",
-                run.summary.controller,
-                s.material.name,
-                s.object_c.unwrap_or(f64::NAN),
-                s.pipeline.envelope.max_setpoint_rate_c_per_s,
-            ));
-        }
-    }
-    let all = runs.iter().flat_map(|r| r.trajectory.display_c.iter().copied());
-    let (coldest_c, hottest_c) = all.fold((f64::MAX, f64::MIN), |(lo, hi), c| (lo.min(c), hi.max(c)));
-    println!("{} runs: true plate {coldest_c:.3}..{hottest_c:.3} °C", runs.len());
+    let specs: Vec<_> = specs
+        .into_iter()
+        .map(|(display, s)| (format!("{display:?}"), s))
+        .collect();
+    let failures = runs_leaving_the_range(&specs);
     assert!(
         failures.is_empty(),
         "{} of {} runs left the range:\n{}",
         failures.len(),
-        runs.len(),
+        specs.len(),
         failures.join("\n")
     );
 }
