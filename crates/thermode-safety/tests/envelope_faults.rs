@@ -680,6 +680,79 @@ fn the_predicted_plate_limits_heating_and_cooling_even_when_the_reading_lags() {
     assert_eq!(d.fault(), None);
 }
 
+/// A [`LinearPlate`] whose forecast is widened by `upper_c` for heating currents (a sensor bound on a rising plate).
+struct WidenedPlate {
+    plate: LinearPlate,
+    upper_c: f64,
+}
+
+impl PlateForecast for WidenedPlate {
+    fn now(&self) -> Option<PlateNow> {
+        self.plate.now()
+    }
+    fn plate_after_c(&self, current_a: f64) -> f64 {
+        self.plate.plate_after_c(current_a)
+    }
+    fn plate_after_range_c(&self, current_a: f64) -> (f64, f64) {
+        let plate_c = self.plate_after_c(current_a);
+        (plate_c, plate_c + if current_a > 0.0 { self.upper_c } else { 0.0 })
+    }
+    fn strongest_cooling_a(&self) -> f64 {
+        -LIMIT_A
+    }
+}
+
+/// The forecast's range: its upper end limits heating, where the plate itself would pass; a range widened for
+/// heating only stops heating (at most 0 A, not a cooling drive), and leaves cooling as it was.
+#[test]
+fn the_forecast_range_limits_heating_by_its_upper_end_without_driving_the_other_way() {
+    let config = EnvelopeConfig::default();
+    let margin_c = thermode_safety::plate::MIN_PLATE_MARGIN_C;
+    let mut rig = Rig::default();
+    rig.healthy(0.1);
+    let mut gate = |plate: &WidenedPlate, request_a: f64| {
+        rig.sample(33.0, 25.0);
+        let now_s = rig.now_s();
+        let d = rig.env.gate_drive(now_s, request_a, plate);
+        rig.tick += 1;
+        d
+    };
+    // The model says 46 °C; the bound says the plate may be 3 °C further: heating would pass 48 − margin.
+    let widened = WidenedPlate {
+        plate: LinearPlate {
+            plate_c: 46.0,
+            slope_c_per_a: 0.2,
+        },
+        upper_c: 3.0,
+    };
+    let d = gate(&widened, 2.8);
+    assert!(d.limited_by().heating_limited_by_plate, "{d:?}");
+    assert!(
+        (-1e-6..=1e-6).contains(&d.current_a()),
+        "heating stopped at {} A, want 0 A (no cooling drive on the bound alone)",
+        d.current_a()
+    );
+    // A smaller widening leaves the heating the range allows: 46 + 0.2 I + 1.5 ≤ 48 − margin.
+    let slight = WidenedPlate {
+        plate: LinearPlate {
+            plate_c: 46.0,
+            slope_c_per_a: 0.2,
+        },
+        upper_c: 1.5,
+    };
+    let d = gate(&slight, 2.8);
+    let want_a = (config.max_display_c - margin_c - 1.5 - slight.plate.plate_c) / slight.plate.slope_c_per_a;
+    assert!(
+        (d.current_a() - want_a).abs() < 1e-6,
+        "heating limited to {} A, want {want_a} A",
+        d.current_a()
+    );
+    // Cooling is not touched by a bound on heating.
+    let d = gate(&widened, -2.0);
+    assert_eq!(d.current_a(), -2.0);
+    assert_eq!(d.fault(), None);
+}
+
 #[test]
 fn non_finite_set_point_request_measurement_and_time_latch() {
     type Inject = fn(&mut Rig) -> DriveCommand;
