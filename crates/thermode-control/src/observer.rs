@@ -454,11 +454,7 @@ impl PlateObserver {
 
     fn predict(&mut self, tick: &ObserverTick) {
         let (f, x1) = self.transition(tick);
-        let p = &self.p;
-        let fp: Matrix =
-            std::array::from_fn(|i| std::array::from_fn(|j| (0..OBSERVER_STATES).map(|k| f[i][k] * p[k][j]).sum()));
-        self.p =
-            std::array::from_fn(|i| std::array::from_fn(|j| (0..OBSERVER_STATES).map(|k| fp[i][k] * f[j][k]).sum()));
+        self.p = times_transposed(&times(&f, &self.p), &f);
         let q = self.process_noise(tick.dt_s);
         for (i, qi) in q.iter().enumerate() {
             self.p[i][i] += qi;
@@ -509,4 +505,35 @@ impl PlateObserver {
             }
         }
     }
+}
+
+/// `F·P` for the covariance's prediction, skipping the terms where `F` is zero (most of its entries: the unknown heat
+/// and the plate's response map onto themselves), which leaves every sum as it was.
+fn times(f: &Matrix, p: &Matrix) -> Matrix {
+    let mut out = [[0.0; OBSERVER_STATES]; OBSERVER_STATES];
+    for (out_row, f_row) in out.iter_mut().zip(f) {
+        for (&f_ik, p_row) in f_row.iter().zip(p) {
+            if f_ik != 0.0 {
+                for (o, &p_kj) in out_row.iter_mut().zip(p_row) {
+                    *o += f_ik * p_kj;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// `A·Fᵀ`, skipping the terms where `F` is zero (see [`times`]).
+fn times_transposed(a: &Matrix, f: &Matrix) -> Matrix {
+    let mut out = [[0.0; OBSERVER_STATES]; OBSERVER_STATES];
+    for (j, f_row) in f.iter().enumerate() {
+        for (k, &f_jk) in f_row.iter().enumerate() {
+            if f_jk != 0.0 {
+                for (out_row, a_row) in out.iter_mut().zip(a) {
+                    out_row[j] += a_row[k] * f_jk;
+                }
+            }
+        }
+    }
+    out
 }

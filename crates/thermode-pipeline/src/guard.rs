@@ -61,34 +61,40 @@ impl SensorTrend {
         }
     }
 
-    /// Takes the finite reading `sensor_c` at `now_s`.
+    /// Takes the finite reading `sensor_c` at `now_s`. The rate is renewed when the reading is kept (every
+    /// [`TREND_SPACING_S`] or more: a faster tick sees the same held sample in between).
     fn record(&mut self, now_s: f64, sensor_c: f64) {
         let last_s = self.readings[(self.next + TREND_READINGS - 1) % TREND_READINGS].0;
         // The first reading (no last one: NaN) is kept too.
-        if last_s.is_nan() || now_s - last_s >= TREND_SPACING_S {
-            self.readings[self.next] = (now_s, sensor_c);
-            self.next = (self.next + 1) % TREND_READINGS;
+        if !(last_s.is_nan() || now_s - last_s >= TREND_SPACING_S) {
+            return;
         }
         self.newest_c = sensor_c;
-        let rate = self.steepest_rate_c_per_s(now_s);
+        let rate = self.steepest_rate_c_per_s(now_s, sensor_c);
         self.rate_c_per_s = if rate.abs() > TREND_NOISE_RATE_C_PER_S {
             rate
         } else {
             0.0
         };
+        self.readings[self.next] = (now_s, sensor_c);
+        self.next = (self.next + 1) % TREND_READINGS;
     }
 
-    /// The steepest rate against the kept readings 40–200 ms old ([`TREND_WINDOW_S`]) \[°C/s\]: of largest
-    /// magnitude, with its sign (0 without one).
-    fn steepest_rate_c_per_s(&self, now_s: f64) -> f64 {
-        self.readings
-            .iter()
-            .filter(|(t, _)| (TREND_WINDOW_S.0..=TREND_WINDOW_S.1).contains(&(now_s - t)))
-            .map(|(t, c)| (self.newest_c - c) / (now_s - t))
-            .fold(
-                0.0,
-                |steepest: f64, rate| if rate.abs() > steepest.abs() { rate } else { steepest },
-            )
+    /// The steepest rate of `sensor_c` at `now_s` against the kept readings 40–200 ms old ([`TREND_WINDOW_S`])
+    /// \[°C/s\]: of largest magnitude, with its sign (0 without one). Rates are compared cross-multiplied, with one
+    /// division at the end.
+    fn steepest_rate_c_per_s(&self, now_s: f64, sensor_c: f64) -> f64 {
+        let (mut change_c, mut span_s) = (0.0_f64, 1.0_f64);
+        for &(t, c) in &self.readings {
+            let age_s = now_s - t;
+            if (TREND_WINDOW_S.0..=TREND_WINDOW_S.1).contains(&age_s) {
+                let candidate_c = sensor_c - c;
+                if candidate_c.abs() * span_s > change_c.abs() * age_s {
+                    (change_c, span_s) = (candidate_c, age_s);
+                }
+            }
+        }
+        change_c / span_s
     }
 
     /// Where a first-order sensor of time constant `lag_s` \[s\] puts the plate at least, in the direction the
