@@ -62,8 +62,8 @@ use thermode_model::{BadValue, Rule};
 pub const OBSERVER_STATES: usize = 5;
 
 /// The observer's noise model as dimensionless fractions of the module's reference heat flow
-/// ([`PlantModel::reference_heat_w`]); the same for every display (no tuning per display). Defaults in the field
-/// docs.
+/// ([`PlantModel::reference_heat_w`]), the same for every display (no tuning per display), and how uncertain the
+/// device file says the plate's heat capacity is (from the file, not tuned). Defaults in the field docs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ObserverDesign {
     /// Random-walk intensity of the unknown plate heat d, as a fraction of the reference heat per √s. Default 0.003
