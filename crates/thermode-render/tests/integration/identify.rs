@@ -84,19 +84,33 @@ fn identify_recovers_every_hidden_parameter_within_ten_percent() {
                 fit.relative_sd
             );
         }
-        // The plate uncertainty the identified file states covers its capacity's real error, and is far below a
-        // datasheet file's 0.2.
-        let plate_error = identified.plate.heat_capacity_j_k / hidden.plate.heat_capacity_j_k - 1.0;
-        let stated = identified.render.plate_uncertainty;
-        eprintln!(
-            "plate capacity off by {:+.2} %, stated uncertainty {:.2} %",
-            100.0 * plate_error,
-            100.0 * stated
-        );
-        assert!(
-            plate_error.abs() <= stated && stated < 0.1,
-            "plate capacity off by {plate_error}, stated uncertainty {stated}"
-        );
+        // The plate and sensor-lag uncertainties the identified file states cover the real errors of its capacity
+        // and time constant, and are far below a datasheet file's 0.2 and 0.5.
+        for (what, got, want, stated) in [
+            (
+                "plate capacity",
+                identified.plate.heat_capacity_j_k,
+                hidden.plate.heat_capacity_j_k,
+                identified.render.plate_uncertainty,
+            ),
+            (
+                "sensor time constant",
+                identified.sensor.time_constant_s,
+                hidden.sensor.time_constant_s,
+                identified.render.sensor_lag_uncertainty,
+            ),
+        ] {
+            let error = got / want - 1.0;
+            eprintln!(
+                "{what} off by {:+.2} %, stated uncertainty {:.2} %",
+                100.0 * error,
+                100.0 * stated
+            );
+            assert!(
+                error.abs() <= stated && stated < 0.1,
+                "{what} off by {error}, stated uncertainty {stated}"
+            );
+        }
         let (with_identified, with_true) = (mean_rms_c(&identified, &hidden), mean_rms_c(&hidden, &hidden));
         eprintln!("mean RMS with the identified file {with_identified:.5} °C, with the true file {with_true:.5} °C");
         assert!(
