@@ -698,7 +698,7 @@ impl PlateForecast for WidenedPlate {
         (plate_c, plate_c + if current_a > 0.0 { self.upper_c } else { 0.0 })
     }
     fn strongest_cooling_a(&self) -> f64 {
-        -LIMIT_A
+        self.plate.strongest_cooling_a()
     }
 }
 

@@ -21,6 +21,16 @@ pub fn device(display: ShippedDisplay) -> DeviceConfig {
     display.device().unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// The default device file with `edit` applied, Q_max and the drive limit kept consistent with the module (a
+/// simulated display that is not its file, for `RenderSpec::hardware`).
+pub fn plant_off_file(edit: impl Fn(&mut DeviceConfig)) -> DeviceConfig {
+    let mut plant = DeviceConfig::default();
+    edit(&mut plant);
+    plant.peltier.qmax_w = plant.peltier.predicted_qmax_w();
+    plant.drive.current_limit_a = plant.drive.current_limit_a.min(plant.peltier.imax_a);
+    plant
+}
+
 /// The paper's PID with the tuned gains of `display`.
 pub fn pid(display: ShippedDisplay) -> ControllerKind {
     ControllerKind::Pid(display.gains().unwrap_or_else(|e| panic!("{e}")))

@@ -25,7 +25,7 @@ use crate::common;
 
 use std::sync::OnceLock;
 
-use common::{pid, spec, Loop};
+use common::{pid, plant_off_file, spec, Loop};
 use thermode_model::Skin;
 use thermode_pipeline::{ControllerKind, ShippedDisplay, Stimulus};
 use thermode_render::run::{render_all, Trajectory};
@@ -401,13 +401,11 @@ fn the_plate_response_estimate_keeps_the_model_controller_on_target_with_a_plate
 /// 0.2 °C and its mean RMS stays at or below pid's. Without the fit it overshot by 0.45, 0.29 and 0.31 °C.
 #[test]
 fn the_voltage_fit_keeps_the_model_controller_on_target_with_a_module_off_its_datasheet() {
-    let file = thermode_device::DeviceConfig::default();
     for (vmax, imax) in [(1.3, 1.0), (0.7, 1.0), (1.0, 0.7)] {
-        let mut plant = file;
-        plant.peltier.vmax_v *= vmax;
-        plant.peltier.imax_a *= imax;
-        plant.peltier.qmax_w = plant.peltier.predicted_qmax_w();
-        plant.drive.current_limit_a = plant.drive.current_limit_a.min(plant.peltier.imax_a);
+        let plant = plant_off_file(|p| {
+            p.peltier.vmax_v *= vmax;
+            p.peltier.imax_a *= imax;
+        });
         let (p, m, overshoot_c) = on_hardware(plant);
         eprintln!(
             "V_max × {vmax}, I_max × {imax}: mean RMS pid {p:.4}, model {m:.4} °C; overshoot {overshoot_c:.3} °C"

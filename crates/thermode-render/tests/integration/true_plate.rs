@@ -7,9 +7,8 @@
 //! believes (a sensor lagging more, a plate answering faster, a module heating harder, all of them at once), where
 //! the guard's model lags the plate and the sensor's own bound holds it (`render.sensor_lag_uncertainty`).
 
-use crate::common::{pid, spec};
+use crate::common::{pid, plant_off_file, spec};
 
-use thermode_device::DeviceConfig;
 use thermode_pipeline::pipeline::render_envelope_with_rate;
 use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
 use thermode_pipeline::{ControllerKind, ShippedDisplay};
@@ -20,9 +19,9 @@ use thermode_safety::ABSOLUTE_MAX_RATE_C_PER_S;
 /// How far the true plate may pass a display limit \[°C\] (the judgement).
 const TOLERANCE_C: f64 = 0.1;
 
-/// Runs `specs` and returns one line per run whose true plate left its display range by more than
+/// Runs `specs` and fails with one line per run whose true plate left its display range by more than
 /// [`TOLERANCE_C`] or that latched a fault.
-fn runs_leaving_the_range(specs: &[(String, RenderSpec)]) -> Vec<String> {
+fn assert_every_run_stays_inside(specs: &[(String, RenderSpec)]) {
     let runs = render_all(&specs.iter().map(|(_, s)| s.clone()).collect::<Vec<_>>()).unwrap_or_else(|e| panic!("{e}"));
     let mut failures = Vec::new();
     for ((name, s), run) in specs.iter().zip(&runs) {
@@ -45,16 +44,13 @@ fn runs_leaving_the_range(specs: &[(String, RenderSpec)]) -> Vec<String> {
     let all = runs.iter().flat_map(|r| r.trajectory.display_c.iter().copied());
     let (coldest_c, hottest_c) = all.fold((f64::MAX, f64::MIN), |(lo, hi), c| (lo.min(c), hi.max(c)));
     println!("{} runs: true plate {coldest_c:.3}..{hottest_c:.3} °C", runs.len());
-    failures
-}
-
-/// The default device file with `edit` applied, Q_max and the drive limit kept consistent with the module.
-fn plant_off_file(edit: impl Fn(&mut DeviceConfig)) -> DeviceConfig {
-    let mut plant = DeviceConfig::default();
-    edit(&mut plant);
-    plant.peltier.qmax_w = plant.peltier.predicted_qmax_w();
-    plant.drive.current_limit_a = plant.drive.current_limit_a.min(plant.peltier.imax_a);
-    plant
+    assert!(
+        failures.is_empty(),
+        "{} of {} runs left the range:\n{}",
+        failures.len(),
+        specs.len(),
+        failures.join("\n")
+    );
 }
 
 #[test]
@@ -89,14 +85,7 @@ fn the_true_plate_stays_inside_the_display_range_on_displays_off_their_file() {
             }
         }
     }
-    let failures = runs_leaving_the_range(&specs);
-    assert!(
-        failures.is_empty(),
-        "{} of {} runs left the range:\n{}",
-        failures.len(),
-        specs.len(),
-        failures.join("\n")
-    );
+    assert_every_run_stays_inside(&specs);
 }
 
 #[test]
@@ -119,22 +108,11 @@ fn the_true_plate_stays_inside_the_display_range_for_every_controller() {
                             // The rendering envelope at that rate (its measured-rate bound stays above it).
                             s.pipeline.envelope = render_envelope_with_rate(&s.pipeline.device, rate);
                         }
-                        specs.push((display, s));
+                        specs.push((format!("{display:?}"), s));
                     }
                 }
             }
         }
     }
-    let specs: Vec<_> = specs
-        .into_iter()
-        .map(|(display, s)| (format!("{display:?}"), s))
-        .collect();
-    let failures = runs_leaving_the_range(&specs);
-    assert!(
-        failures.is_empty(),
-        "{} of {} runs left the range:\n{}",
-        failures.len(),
-        specs.len(),
-        failures.join("\n")
-    );
+    assert_every_run_stays_inside(&specs);
 }
