@@ -5,8 +5,15 @@
 //! decimals), for a CSV whose reader does not need every bit; [`CsvText::push_number`] picks one of the two by a
 //! [`Precision`]; [`CsvText::push_field`] quotes a text field as the `csv` crate does (only when needed).
 //!
+//! [`write_rows`] formats the rows of a large CSV in blocks on two threads (the caller's and one helper) and writes
+//! them in order: the same bytes as one thread writes, in about half the time on two cores.
+//!
 //! A number is written into a fixed run of scratch bytes past the text and the length then advanced (no copy of
 //! varying length per number); the buffer doubles, rarely, when the run does not fit.
+
+use std::io::{self, Write};
+use std::ops::Range;
+use std::sync::mpsc;
 
 /// How the numbers of a CSV are written.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -93,6 +100,23 @@ impl CsvText {
     pub fn push_bytes(&mut self, text: &[u8]) {
         self.room(text.len()).copy_from_slice(text);
         self.len += text.len();
+    }
+
+    /// Appends a copy of the text between byte offsets `span.0` and `span.1` (written earlier and still held).
+    #[inline(always)]
+    pub fn push_earlier(&mut self, span: (usize, usize)) {
+        let (start, end) = span;
+        let len = end - start;
+        if len <= FIXED_POINT_LEN && start + FIXED_POINT_LEN <= self.len {
+            // A fixed run of bytes (their tail is overwritten by what follows): no call, no varying length.
+            let mut run = [0u8; FIXED_POINT_LEN];
+            run.copy_from_slice(&self.bytes[start..start + FIXED_POINT_LEN]);
+            self.room(FIXED_POINT_LEN).copy_from_slice(&run);
+        } else {
+            self.room(len);
+            self.bytes.copy_within(start..end, self.len);
+        }
+        self.len += len;
     }
 
     /// Appends a text field, quoted (with doubled quotes) only when it holds a comma, a quote or a line break, as
@@ -237,6 +261,72 @@ impl CsvText {
         self.len -= cut;
         true
     }
+}
+
+/// Rows formatted together by [`write_rows`] (2048: about 200 KiB of a simulation's CSV).
+const BLOCK_ROWS: usize = 2048;
+
+/// Writes rows `0..rows` to `sink`: `format` appends the text of a range of rows to a [`CsvText`] (it must not
+/// depend on what other blocks hold). Blocks of [`BLOCK_ROWS`] rows are formatted in pairs, the first on a helper
+/// thread and the second on the caller's, and written in order, so the bytes are the same as one thread writes;
+/// with a single core (or fewer than two blocks) everything is formatted here.
+pub fn write_rows(
+    sink: &mut dyn Write,
+    rows: usize,
+    format: impl Fn(Range<usize>, &mut CsvText) + Sync,
+) -> io::Result<()> {
+    let two_cores = std::thread::available_parallelism().is_ok_and(|cores| cores.get() >= 2);
+    write_blocks(sink, rows, BLOCK_ROWS, two_cores, format)
+}
+
+/// [`write_rows`] with blocks of `block_rows` rows, formatted on two threads when `helper` is set.
+fn write_blocks(
+    sink: &mut dyn Write,
+    rows: usize,
+    block_rows: usize,
+    helper: bool,
+    format: impl Fn(Range<usize>, &mut CsvText) + Sync,
+) -> io::Result<()> {
+    let blocks: Vec<Range<usize>> = (0..rows)
+        .step_by(block_rows.max(1))
+        .map(|start| start..(start + block_rows).min(rows))
+        .collect();
+    let mut own_text = CsvText::new();
+    if !helper || blocks.len() < 2 {
+        for block in blocks {
+            own_text.clear();
+            format(block, &mut own_text);
+            sink.write_all(own_text.as_bytes())?;
+        }
+        return Ok(());
+    }
+    let stopped = || io::Error::other("the CSV formatting thread stopped");
+    std::thread::scope(|scope| {
+        let (job_sender, jobs) = mpsc::channel::<(Range<usize>, CsvText)>();
+        let (done_sender, done) = mpsc::channel::<CsvText>();
+        let format = &format;
+        scope.spawn(move || {
+            for (block, mut text) in jobs {
+                text.clear();
+                format(block, &mut text);
+                if done_sender.send(text).is_err() {
+                    break;
+                }
+            }
+        });
+        let mut helper_text = CsvText::new();
+        for pair in blocks.chunks(2) {
+            job_sender.send((pair[0].clone(), helper_text)).map_err(|_| stopped())?;
+            own_text.clear();
+            if let Some(block) = pair.get(1) {
+                format(block.clone(), &mut own_text);
+            }
+            helper_text = done.recv().map_err(|_| stopped())?;
+            sink.write_all(helper_text.as_bytes())?;
+            sink.write_all(own_text.as_bytes())?;
+        }
+        Ok(())
+    })
 }
 
 /// `bytes` grown to at least `needed` bytes (at least doubled), the new bytes zero.
@@ -518,5 +608,62 @@ mod tests {
         });
         assert!(expected.len() > INITIAL_BYTES, "{} bytes", expected.len());
         assert_eq!(text, expected);
+    }
+
+    /// Rows of a test CSV: a number exact, copied right after it (as `simulate` copies an equal column), with
+    /// twelve decimals, and copied again from more than a fixed run of bytes back.
+    fn format_rows(rows: Range<usize>, text: &mut CsvText) {
+        for row in rows {
+            let x = (row as f64).sqrt() * 1.37 - 7.0;
+            let start = text.len();
+            text.push_f64(x);
+            let span = (start, text.len());
+            text.push_byte(b',');
+            text.push_earlier(span);
+            text.push_byte(b',');
+            text.push_f64_decimals(x, 12);
+            text.push_byte(b',');
+            text.push_earlier(span);
+            text.push_byte(b'\n');
+        }
+    }
+
+    #[test]
+    fn rows_formatted_on_two_threads_are_the_bytes_one_thread_writes() {
+        let expected: String = (0..1001)
+            .map(|row| {
+                let x = (row as f64).sqrt() * 1.37 - 7.0;
+                format!("{x},{x},{x:.12},{x}\n")
+            })
+            .collect();
+        for rows in [0, 1, 999, 1000, 1001] {
+            for (block_rows, helper) in [(100, true), (100, false), (333, true), (5000, true), (1, true)] {
+                let mut sink = Vec::new();
+                write_blocks(&mut sink, rows, block_rows, helper, format_rows).unwrap();
+                let lines: usize = expected.lines().take(rows).map(|line| line.len() + 1).sum();
+                assert_eq!(
+                    String::from_utf8(sink).unwrap(),
+                    expected[..lines],
+                    "{rows} rows in blocks of {block_rows}, helper {helper}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_sink_that_fails_stops_the_rows_with_its_error() {
+        struct Full;
+        impl Write for Full {
+            fn write(&mut self, _: &[u8]) -> io::Result<usize> {
+                Err(io::Error::new(io::ErrorKind::StorageFull, "disk full"))
+            }
+            fn flush(&mut self) -> io::Result<()> {
+                Ok(())
+            }
+        }
+        for helper in [true, false] {
+            let error = write_blocks(&mut Full, 10_000, 100, helper, format_rows).unwrap_err();
+            assert_eq!(error.kind(), io::ErrorKind::StorageFull, "helper {helper}");
+        }
     }
 }

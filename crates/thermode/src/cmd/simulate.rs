@@ -160,34 +160,43 @@ fn write_csv(path: &Path, traces: &[(Material, Trace)], precision: Precision) ->
     header.extend(first.columns.iter().map(|(name, _)| name.as_str()));
     header.push("material");
     write_atomically(path, |sink| {
-        let mut text = CsvText::new();
-        text.push_bytes(header.join(",").as_bytes());
-        text.push_byte(b'\n');
+        sink.write_all(format!("{}\n", header.join(",")).as_bytes())?;
         for (material, trace) in traces {
             let mut row_end = CsvText::new();
             row_end.push_byte(b',');
             row_end.push_field(&material.name);
             row_end.push_byte(b'\n');
-            for (index, time_s) in trace.time_s.iter().enumerate() {
-                text.push_f64(*time_s);
-                for (_, values) in &trace.columns {
-                    text.push_byte(b',');
-                    text.push_number(values[index], precision);
+            let columns: Vec<&[f64]> = trace.columns.iter().map(|(_, values)| values.as_slice()).collect();
+            let copies = earlier_equal_columns(&columns);
+            csv_text::write_rows(sink, trace.time_s.len(), |rows, text| {
+                let mut spans = vec![(0, 0); columns.len()];
+                for row in rows {
+                    text.push_f64(trace.time_s[row]);
+                    for (column, values) in columns.iter().enumerate() {
+                        text.push_byte(b',');
+                        let start = text.len();
+                        match copies[column] {
+                            Some(earlier) => text.push_earlier(spans[earlier]),
+                            None => text.push_number(values[row], precision),
+                        }
+                        spans[column] = (start, text.len());
+                    }
+                    text.push_bytes(row_end.as_bytes());
                 }
-                text.push_bytes(row_end.as_bytes());
-                if text.len() >= CSV_CHUNK_BYTES {
-                    sink.write_all(text.as_bytes())?;
-                    text.clear();
-                }
-            }
+            })?;
         }
-        sink.write_all(text.as_bytes())?;
         Ok(())
     })
 }
 
-/// The CSV goes to its file in chunks of this many bytes (64 KiB).
-const CSV_CHUNK_BYTES: usize = 64 * 1024;
+/// For each column, the first earlier column holding the same numbers bit for bit (kron's skin surface is its
+/// epidermis): its text is copied in each row instead of written again.
+fn earlier_equal_columns(columns: &[&[f64]]) -> Vec<Option<usize>> {
+    let same = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+    (0..columns.len())
+        .map(|column| (0..column).find(|&earlier| same(columns[earlier], columns[column])))
+        .collect()
+}
 
 fn write_plot(path: &Path, traces: &[(Material, Trace)], model: ModelArg) -> Result<()> {
     let mut series = Vec::new();
