@@ -267,7 +267,7 @@ impl CsvText {
 const BLOCK_ROWS: usize = 2048;
 
 /// Writes rows `0..rows` to `sink`: `format` appends the text of a range of rows to a [`CsvText`] (it must not
-/// depend on what other blocks hold). Blocks of [`BLOCK_ROWS`] rows are formatted in pairs, the first on a helper
+/// depend on what other blocks hold). Blocks of 2048 rows are formatted in pairs, the first on a helper
 /// thread and the second on the caller's, and written in order, so the bytes are the same as one thread writes;
 /// with a single core (or fewer than two blocks) everything is formatted here.
 pub fn write_rows(
