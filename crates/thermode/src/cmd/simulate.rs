@@ -192,7 +192,7 @@ fn write_csv(path: &Path, traces: &[(Material, Trace)], precision: Precision) ->
 /// For each column, the first earlier column holding the same numbers bit for bit (kron's skin surface is its
 /// epidermis): its text is copied in each row instead of written again.
 fn earlier_equal_columns(columns: &[&[f64]]) -> Vec<Option<usize>> {
-    let same = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+    let same = |a: &[f64], b: &[f64]| a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
     (0..columns.len())
         .map(|column| (0..column).find(|&earlier| same(columns[earlier], columns[column])))
         .collect()
