@@ -47,8 +47,8 @@ use std::io::Write;
 use thermode_device::{Device, DeviceConfig, PlateFinger, SimulatedChannel, SimulatedDisplay};
 use thermode_model::fv::{FvConfig, FvModel};
 use thermode_model::{BadValue, Material, Skin};
-use thermode_platform::csv_text::CsvText;
 pub use thermode_platform::csv_text::Precision;
+use thermode_platform::csv_text::{self, CsvText};
 use thermode_safety::FaultCode;
 
 use thermode_model::limits::{self, CONTACT_CONDUCTANCE, DURATION, OBJECT_TEMPERATURE, TICK_RATE};
@@ -565,11 +565,7 @@ pub const CSV_HEADER: [&str; 18] = [
 /// T1, depth Δx₁/2) with `renderer` = `kron` ([`RenderSpec::receptor_depth_m`]). `model_skin_c` is the
 /// pipeline's own display-finger model at its receptor (the same node as the target).
 pub fn write_csv(runs: &[RenderRun], precision: Precision, sink: &mut dyn Write) -> Result<(), csv::Error> {
-    /// The CSV goes to `sink` in chunks of this many bytes (64 KiB).
-    const CHUNK_BYTES: usize = 64 * 1024;
-    let mut out = CsvText::new();
-    out.push_bytes(CSV_HEADER.join(",").as_bytes());
-    out.push_byte(b'\n');
+    sink.write_all(format!("{}\n", CSV_HEADER.join(",")).as_bytes())?;
     for run in runs {
         let t = &run.trajectory;
         let mut run_fields = CsvText::new();
@@ -582,42 +578,39 @@ pub fn write_csv(runs: &[RenderRun], precision: Precision, sink: &mut dyn Write)
             run_fields.push_field(text);
         }
         run_fields.push_byte(b',');
-        for row in 0..t.len() {
-            out.push_f64(t.time_s[row]);
-            out.push_byte(b',');
-            for column in [
-                &t.truth_skin_c,
-                &t.target_skin_c,
-                &t.skin_c,
-                &t.model_skin_c,
-                &t.display_setpoint_c,
-                &t.requested_setpoint_c,
-                &t.display_c,
-                &t.sensor_c,
-                &t.plate_estimate_c,
-                &t.current_a,
-                &t.hot_side_c,
-            ] {
-                out.push_number(column[row], precision);
+        csv_text::write_rows(sink, t.len(), |rows, out| {
+            for row in rows {
+                out.push_f64(t.time_s[row]);
                 out.push_byte(b',');
+                for column in [
+                    &t.truth_skin_c,
+                    &t.target_skin_c,
+                    &t.skin_c,
+                    &t.model_skin_c,
+                    &t.display_setpoint_c,
+                    &t.requested_setpoint_c,
+                    &t.display_c,
+                    &t.sensor_c,
+                    &t.plate_estimate_c,
+                    &t.current_a,
+                    &t.hot_side_c,
+                ] {
+                    out.push_number(column[row], precision);
+                    out.push_byte(b',');
+                }
+                out.push_byte(if t.contact[row] { b'1' } else { b'0' });
+                out.push_byte(b',');
+                if let Some(fault) = t.fault[row] {
+                    out.push_bytes(fault.code().to_string().as_bytes());
+                }
+                out.push_bytes(run_fields.as_bytes());
+                if let Some(fault) = t.fault[row] {
+                    out.push_field(fault.description());
+                }
+                out.push_byte(b'\n');
             }
-            out.push_byte(if t.contact[row] { b'1' } else { b'0' });
-            out.push_byte(b',');
-            if let Some(fault) = t.fault[row] {
-                out.push_bytes(fault.code().to_string().as_bytes());
-            }
-            out.push_bytes(run_fields.as_bytes());
-            if let Some(fault) = t.fault[row] {
-                out.push_field(fault.description());
-            }
-            out.push_byte(b'\n');
-            if out.len() >= CHUNK_BYTES {
-                sink.write_all(out.as_bytes())?;
-                out.clear();
-            }
-        }
+        })?;
     }
-    sink.write_all(out.as_bytes())?;
     sink.flush()?;
     Ok(())
 }
