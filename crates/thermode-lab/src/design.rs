@@ -28,6 +28,7 @@ use thermode_model::limits;
 use thermode_model::materials::find;
 use thermode_model::params::{self, Rule, Table};
 use thermode_model::ParamError;
+use thermode_platform::fs::{read_text_at_most, MAX_SETTINGS_BYTES};
 use thiserror::Error;
 
 /// Why an experiment file was refused. Every variant names the file.
@@ -97,7 +98,7 @@ pub struct ExperimentFile {
 impl ExperimentFile {
     /// Reads and validates the experiment file at `path`.
     pub fn load(path: &Path) -> Result<ExperimentFile, DesignError> {
-        let text = std::fs::read_to_string(path).map_err(|error| DesignError::Io {
+        let text = read_text_at_most(path, MAX_SETTINGS_BYTES).map_err(|error| DesignError::Io {
             file: path.to_path_buf(),
             error,
         })?;

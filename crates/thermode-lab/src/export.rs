@@ -32,6 +32,7 @@ use std::path::{Path, PathBuf};
 use flate2::write::GzEncoder;
 use flate2::Compression;
 use serde_json::{json, Map, Value};
+use thermode_platform::fs::{open_at_most, read_text_at_most, MAX_DATA_BYTES, MAX_SETTINGS_BYTES};
 use thiserror::Error;
 
 /// The BIDS version the export follows.
@@ -238,7 +239,7 @@ fn find_sessions(dir: &Path) -> Result<Vec<Session>, ExportError> {
 
 /// The session of a sidecar, or `None` for a JSON file that is not a session sidecar.
 fn read_session(path: &Path) -> Result<Option<Session>, ExportError> {
-    let text = fs::read_to_string(path).map_err(io(path))?;
+    let text = read_text_at_most(path, MAX_SETTINGS_BYTES).map_err(io(path))?;
     let Ok(meta) = serde_json::from_str::<Value>(&text) else {
         return Ok(None);
     };
@@ -379,10 +380,8 @@ fn tsv_field(value: &str) -> String {
 
 /// A CSV as its header and rows.
 fn read_csv(path: &Path) -> Result<(Vec<String>, Vec<Vec<String>>), ExportError> {
-    let mut reader = csv::ReaderBuilder::new()
-        .comment(Some(b'#'))
-        .from_path(path)
-        .map_err(|e| invalid(path, e.to_string()))?;
+    let file = open_at_most(path, MAX_DATA_BYTES).map_err(|e| invalid(path, e.to_string()))?;
+    let mut reader = csv::ReaderBuilder::new().comment(Some(b'#')).from_reader(file);
     let header = reader
         .headers()
         .map_err(|e| invalid(path, e.to_string()))?

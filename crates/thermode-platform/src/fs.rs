@@ -3,9 +3,13 @@
 //! look at it see the right one), synced, renamed over the target, and the folder synced, so that a crash or an
 //! error never leaves half a file and a written file survives a power cut. A target that exists and is not a
 //! regular file (a device such as `/dev/null`, a FIFO) is written in place instead: it is never replaced.
+//!
+//! And the bounded readers: an input file (settings, a plan, a CSV to analyse) is read through [`AtMost`], which
+//! fails with `InvalidData` past a size limit ([`MAX_SETTINGS_BYTES`], [`MAX_DATA_BYTES`]), so a wrong path such as
+//! `/dev/zero` is an error naming the file instead of a process that eats the machine's memory.
 
 use std::fs::{File, OpenOptions};
-use std::io::{self, Write};
+use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};
 
 use thiserror::Error;
@@ -63,6 +67,82 @@ pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
     .map_err(|e| match e {
         WriteError::Fill(e) | WriteError::Io { source: e, .. } => e,
     })
+}
+
+/// The most thermode reads of a settings or plan file (device, material, skin, gains, experiment, answers, session
+/// sidecar): 16 MiB, some thousand times a real one (a device file is about 5 KiB).
+pub const MAX_SETTINGS_BYTES: u64 = 16 << 20;
+
+/// The most thermode reads of a data file (a CSV to analyse or export): 1 GiB (an hour of `render` at 1 kHz is
+/// about half of that).
+pub const MAX_DATA_BYTES: u64 = 1 << 30;
+
+/// A reader that yields at most `limit` bytes of `inner` and then fails with `InvalidData` if there is more, where
+/// `Read::take` would end quietly and hand on a cut file.
+#[derive(Debug)]
+pub struct AtMost<R> {
+    inner: R,
+    /// Bytes that may still be read.
+    left: u64,
+    /// The limit, for the error message \[bytes\].
+    limit: u64,
+}
+
+impl<R: Read> AtMost<R> {
+    /// `inner`, read to at most `limit` bytes.
+    pub fn new(inner: R, limit: u64) -> Self {
+        Self {
+            inner,
+            left: limit,
+            limit,
+        }
+    }
+}
+
+impl<R: Read> Read for AtMost<R> {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        if buf.is_empty() {
+            return Ok(0);
+        }
+        if self.left == 0 {
+            let mut probe = [0u8; 1];
+            return match self.inner.read(&mut probe)? {
+                0 => Ok(0),
+                _ => Err(io::Error::new(
+                    io::ErrorKind::InvalidData,
+                    format!(
+                        "larger than {}, the most thermode reads of such a file",
+                        byte_size(self.limit)
+                    ),
+                )),
+            };
+        }
+        let wanted = buf.len().min(usize::try_from(self.left).unwrap_or(usize::MAX));
+        let got = self.inner.read(&mut buf[..wanted])?;
+        self.left -= got as u64;
+        Ok(got)
+    }
+}
+
+/// `path` opened to read at most `limit` bytes.
+pub fn open_at_most(path: &Path, limit: u64) -> io::Result<AtMost<File>> {
+    Ok(AtMost::new(File::open(path)?, limit))
+}
+
+/// The text of `path`, at most `limit` bytes: more is `InvalidData`, and so is text that is not UTF-8.
+pub fn read_text_at_most(path: &Path, limit: u64) -> io::Result<String> {
+    let mut text = String::new();
+    open_at_most(path, limit)?.read_to_string(&mut text)?;
+    Ok(text)
+}
+
+/// `bytes` for a person: in MiB when a whole number of them, else in bytes.
+fn byte_size(bytes: u64) -> String {
+    if bytes >= 1 << 20 && bytes.is_multiple_of(1 << 20) {
+        format!("{} MiB", bytes >> 20)
+    } else {
+        format!("{bytes} bytes")
+    }
 }
 
 /// Whether `path` exists and is not a regular file (following links).
@@ -137,5 +217,35 @@ mod tests {
         write_bytes_atomically(null, b"discarded").expect("write to /dev/null");
         let meta = std::fs::metadata(null).expect("metadata");
         assert!(!meta.is_file(), "/dev/null was replaced by a regular file");
+    }
+
+    #[test]
+    fn a_file_up_to_the_limit_is_read_and_one_byte_more_is_an_error() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let path = dir.path().join("settings.toml");
+        std::fs::write(&path, "x = 1\n").expect("write");
+        assert_eq!(read_text_at_most(&path, 6).expect("six bytes"), "x = 1\n");
+        let error = read_text_at_most(&path, 5).expect_err("seven bytes");
+        assert_eq!(error.kind(), io::ErrorKind::InvalidData);
+        assert_eq!(
+            error.to_string(),
+            "larger than 5 bytes, the most thermode reads of such a file"
+        );
+        std::fs::write(&path, [0xff, 0xfe]).expect("write");
+        let not_text = read_text_at_most(&path, 6).expect_err("not UTF-8");
+        assert_eq!(not_text.kind(), io::ErrorKind::InvalidData);
+    }
+
+    #[test]
+    fn an_endless_device_is_an_error_not_a_full_memory() {
+        let path = Path::new("/dev/zero");
+        if !path.exists() {
+            return;
+        }
+        let error = read_text_at_most(path, MAX_SETTINGS_BYTES).expect_err("endless");
+        assert_eq!(
+            error.to_string(),
+            "larger than 16 MiB, the most thermode reads of such a file"
+        );
     }
 }

@@ -9,13 +9,14 @@ use thermode_device::DeviceConfig;
 use thermode_model::materials::{self, Material};
 use thermode_model::Skin;
 use thermode_pipeline::controllers::gains_from_toml_str;
+use thermode_platform::fs::{read_text_at_most, MAX_SETTINGS_BYTES};
 
 /// The name that stands for the paper's five materials (Table 1) in every `--material` option.
 pub const ALL_PAPER: &str = "all-paper";
 
-/// Reads a text file; the error names it.
+/// Reads a settings file (at most [`MAX_SETTINGS_BYTES`]); the error names it.
 pub fn read(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))
+    read_text_at_most(path, MAX_SETTINGS_BYTES).with_context(|| format!("cannot read {}", path.display()))
 }
 
 /// The library materials named on the command line (`all-paper` expanded), followed by the material files.

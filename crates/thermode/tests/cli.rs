@@ -281,6 +281,14 @@ fn bad_input_gets_a_clear_message_and_exit_code_2() {
     );
     expect_error(&["simulate", "--material", "wood", "--plot", "x.jpg"], ".svg or .png");
     expect_error(&["simulate", "--material-file", "/nonexistent/m.toml"], "cannot read");
+    // An endless file given for a settings file is refused at 16 MiB, not read until the memory is gone.
+    for option in ["--material-file", "--skin"] {
+        let mut args = vec!["simulate", option, "/dev/zero"];
+        if option == "--skin" {
+            args.extend(["--material", "wood"]);
+        }
+        expect_error(&args, "cannot read /dev/zero: larger than 16 MiB");
+    }
     let dir = tempfile::tempdir().expect("tempdir");
     let material = dir.path().join("m.toml");
     std::fs::write(&material, "name = \"x\"\nconductivity_w_mk = 1.0\nconductivity_cal_cm_s_c = 0.002\ndensity_kg_m3 = 1000\nspecific_heat_j_kgk = 1000\n").expect("write");

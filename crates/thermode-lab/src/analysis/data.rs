@@ -19,6 +19,7 @@ use serde::Serialize;
 use thermode_model::materials::find;
 use thermode_model::units::{conductivity_to_cgs, specific_heat_to_cgs};
 use thermode_model::ParamError;
+use thermode_platform::fs::{open_at_most, MAX_DATA_BYTES};
 
 use crate::design::Condition;
 use crate::error::LabError;
@@ -89,7 +90,7 @@ impl CsvTable {
     /// Reads `path`; a row with a different number of fields than the header or a file without data rows is an
     /// error naming the file (and line).
     pub fn read(path: &Path) -> Result<CsvTable, LabError> {
-        let file = std::fs::File::open(path).map_err(|e| LabError::io(path, e))?;
+        let file = open_at_most(path, MAX_DATA_BYTES).map_err(|e| LabError::io(path, e))?;
         let mut reader = csv::ReaderBuilder::new()
             .flexible(true)
             .has_headers(true)

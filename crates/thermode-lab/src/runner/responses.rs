@@ -7,6 +7,7 @@
 use std::path::{Path, PathBuf};
 
 use thermode_model::materials::find;
+use thermode_platform::fs::{read_text_at_most, MAX_SETTINGS_BYTES};
 
 use super::console::Console;
 use super::stimulus::TrialMeasurement;
@@ -104,7 +105,7 @@ pub struct ScriptedResponses {
 impl ScriptedResponses {
     /// Reads and checks the answers of `path` against `options`; there must be exactly `trials` of them.
     pub fn load(path: &Path, options: &[String], trials: usize) -> Result<ScriptedResponses, RunError> {
-        let text = std::fs::read_to_string(path).map_err(|e| RunError::Responses {
+        let text = read_text_at_most(path, MAX_SETTINGS_BYTES).map_err(|e| RunError::Responses {
             file: path.to_path_buf(),
             line: None,
             message: e.to_string(),
