@@ -812,6 +812,11 @@ fn dash_is_standard_output_and_a_bad_second_output_leaves_nothing_behind() {
         "--plot /nonexistent-dir/p.png: cannot write in /nonexistent-dir",
     );
     assert!(!csv_path.exists(), "the CSV was left behind");
+    // Commands that work for minutes before they write check their output first.
+    expect_error(
+        &["tune", "--out", "/nonexistent-dir/gains.toml"],
+        "--out /nonexistent-dir/gains.toml: cannot write in /nonexistent-dir",
+    );
 }
 
 #[test]
@@ -1096,7 +1101,8 @@ fn lab_run_needs_a_display_or_an_explicit_simulation() {
     expect_error(&[&base[..], &["--display", "http://x"]].concat(), "ws://HOST:PORT");
 }
 
-/// `thermode identify` writes a device file that `render` reads, and refuses a display that reports no voltage.
+/// `thermode identify` writes a device file that `render` reads, and refuses a display that reports no voltage or
+/// an output it could not write, before it starts.
 #[test]
 fn identify_writes_a_device_file_render_reads_and_refuses_a_display_without_voltage() {
     let tmp = tempfile::tempdir().expect("temp dir");
@@ -1108,4 +1114,10 @@ fn identify_writes_a_device_file_render_reads_and_refuses_a_display_without_volt
     let summary = expect_success(&["render", "--material", "wood", "--device-file", &out_arg, "--summary"]);
     assert!(summary.contains("wood"), "{summary}");
     expect_error(&["identify", "--device", "serial:/dev/null"], "Peltier voltage");
+    // A folder that cannot take the file is refused before the excitation, not after it.
+    let refused = thermode(&["identify", "--out", "/nonexistent-dir/identified.toml"]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("cannot write in /nonexistent-dir"), "{stderr}");
+    assert!(!stderr.contains("excitation"), "started the excitation first: {stderr}");
 }

@@ -19,7 +19,7 @@ use thermode_render::identify::{fit, record, sample_of, Excitation, DURATION_S, 
 
 use super::serve::{build_display, ControllerArg, DisplayArgs};
 
-use crate::output::{print_stdout, write_atomically};
+use crate::output::{check_outputs, print_stdout, write_atomically};
 use crate::resolve;
 
 /// A fit whose sensor residual exceeds this many times the sensor's noise is refused: 10 (the fits of a bare
@@ -68,15 +68,17 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
         bail!("--duration {}: must be between 30 and {DURATION_S} s", args.duration);
     }
     let believed = resolve::device_config(args.device_file.as_deref())?;
+    let plant = match &args.plant_device {
+        Some(path) => resolve::device_config(Some(path))?,
+        None => believed,
+    };
+    // Every input read and the output's folder writable before minutes of excitation.
+    check_outputs(&[("--out", args.out.as_deref())])?;
     eprintln!(
         "identify: {} s of excitation on {}, no finger on the plate…",
         args.duration, args.device
     );
     let samples = if sim {
-        let plant = match &args.plant_device {
-            Some(path) => resolve::device_config(Some(path))?,
-            None => believed,
-        };
         record(&believed, &plant, args.seed, args.duration)?
     } else {
         record_in_real_time(args, &believed)?

@@ -10,7 +10,7 @@ use thermode_pipeline::controllers::gains_to_toml_string;
 use thermode_render::tune::{tune_with_progress, TuneResult, TuneSpec};
 
 use crate::cmd::render::RendererArg;
-use crate::output::{print_stdout, write_atomically};
+use crate::output::{check_outputs, print_stdout, write_atomically};
 use crate::resolve;
 
 /// Arguments of `thermode tune`.
@@ -37,6 +37,7 @@ pub struct TuneArgs {
 pub fn run(args: &TuneArgs) -> Result<()> {
     let device = resolve::device_config(args.device_file.as_deref())?;
     let origin = resolve::device_origin(args.device_file.as_deref());
+    check_outputs(&[("--out", args.out.as_deref())])?;
     let mut spec = TuneSpec::new(device);
     spec.renderer = args.model.into();
     spec.seed = args.seed;
