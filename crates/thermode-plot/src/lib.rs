@@ -179,6 +179,12 @@ pub fn palette(index: usize) -> RGBColor {
     COLORS[index % COLORS.len()]
 }
 
+/// Whether `path` names a figure [`write_figure`] can write: it ends in `.svg` or `.png` (any case).
+pub fn is_figure_path(path: &Path) -> bool {
+    let extension = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    matches!(extension.as_deref(), Some("svg" | "png"))
+}
+
 /// Writes `figure` to `path`; the format follows the extension (`svg` or `png`, any case).
 pub fn write_figure(figure: &Figure, path: &Path) -> Result<(), PlotError> {
     let extension = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);

@@ -21,7 +21,8 @@ pub fn is_stdout(path: &Path) -> bool {
 
 /// Checks, before any work is done, that every output in `outputs` (option name, path) can be written: `-`
 /// (standard output) always can; otherwise the folder must exist and take a new file (probed by creating and
-/// removing one), and a path that exists must not be a folder. Errors name the option and the path.
+/// removing one), a path that exists must not be a folder, and a `--plot` must end in `.svg` or `.png`. Errors name
+/// the option and the path.
 pub fn check_outputs(outputs: &[(&str, Option<&Path>)]) -> Result<()> {
     for (option, path) in outputs {
         let Some(path) = path.filter(|p| !is_stdout(p)) else {
@@ -29,6 +30,9 @@ pub fn check_outputs(outputs: &[(&str, Option<&Path>)]) -> Result<()> {
         };
         if path.is_dir() {
             bail!("{option} {}: is a folder, not a file", path.display());
+        }
+        if *option == "--plot" && !thermode_plot::is_figure_path(path) {
+            bail!("--plot {}: plots are written as .svg or .png", path.display());
         }
         let folder = match path.parent() {
             Some(p) if !p.as_os_str().is_empty() => p,

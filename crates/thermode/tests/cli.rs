@@ -817,6 +817,13 @@ fn dash_is_standard_output_and_a_bad_second_output_leaves_nothing_behind() {
         &["tune", "--out", "/nonexistent-dir/gains.toml"],
         "--out /nonexistent-dir/gains.toml: cannot write in /nonexistent-dir",
     );
+    let refused = thermode(&["render", "--material", "wood", "--plot", "figure.jpg"]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "{stderr}");
+    assert_eq!(
+        stderr.trim(),
+        "thermode: error: --plot figure.jpg: plots are written as .svg or .png"
+    );
 }
 
 #[test]
