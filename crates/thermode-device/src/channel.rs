@@ -40,6 +40,11 @@ use crate::sensor::{quantise, Pt100, SensorCondition, SensorSample};
 /// (`tests/integration/plant.rs`, Richardson estimate), below the sensor's 0.01 °C resolution from about 2 ms down.
 pub const MAX_SUBSTEP_S: f64 = 0.01;
 
+/// Most halvings of a substep whose system is not positive definite: 12 (4096 pieces; a display within the device
+/// file's bounds needs none at [`MAX_SUBSTEP_S`]: the default plate's C/h of 28 W/K dwarfs the module's temperature
+/// coefficients, hundredths of a W/K).
+const MAX_HALVINGS: u32 = 12;
+
 /// Fraction of the water conductance left by default after a pump failure: 0.1. Estimate: the box's water is still;
 /// natural convection in it and conduction through the hoses carry about a tenth of the forced-flow heat.
 pub const PUMP_FAILURE_REMAINING_FRACTION: f64 = 0.1;
@@ -224,17 +229,18 @@ impl<F: PlateFinger> SimulatedChannel<F> {
         }
     }
 
-    /// One implicit substep of `h` \[s\]; halves itself if the 2×2 system is not positive definite.
+    /// One implicit substep of `h` \[s\]; halves itself (at most [`MAX_HALVINGS`] times) while the 2×2 system's
+    /// determinant is finite but not positive. A determinant that is not finite (NaN from a broken finger, numbers
+    /// beyond any display) is not helped by halving: the step is taken as it is and the NaN shows in the readings.
     fn advance(&mut self, h: f64, current_a: f64, ledger: &mut Ledger, depth: u32) {
         let (offset, slope) = self.finger.receptor_affine(h, self.finger_conductance_w_m2k);
-        let Some((plate_c, hot_c)) = self.solve(h, current_a, offset, slope).or_else(|| {
-            // Past 30 halvings the system is broken (NaN from the finger); take the step as it is.
-            (depth >= 30).then(|| self.solve_unchecked(h, current_a, offset, slope))
-        }) else {
+        let det = self.determinant(h, current_a, offset, slope);
+        if det.is_finite() && det <= 0.0 && depth < MAX_HALVINGS {
             self.advance(h / 2.0, current_a, ledger, depth + 1);
             self.advance(h / 2.0, current_a, ledger, depth + 1);
             return;
-        };
+        }
+        let (plate_c, hot_c) = self.solve_unchecked(h, current_a, offset, slope);
         let area_g = self.config.plate.area_m2 * self.finger_conductance_w_m2k;
         ledger.peltier_plate_j += h * self.module.heat_into_display_w(current_a, plate_c, hot_c);
         ledger.peltier_hot_j += h * self.module.heat_into_hot_side_w(current_a, plate_c, hot_c);
@@ -268,11 +274,10 @@ impl<F: PlateFinger> SimulatedChannel<F> {
         (plate, hot)
     }
 
-    /// Solves the step's system; `None` unless its determinant is finite and positive.
-    fn solve(&self, h: f64, current_a: f64, offset: f64, slope: f64) -> Option<(f64, f64)> {
+    /// The determinant of the step's system.
+    fn determinant(&self, h: f64, current_a: f64, offset: f64, slope: f64) -> f64 {
         let ([a11, a12, _], [a21, a22, _]) = self.system(h, current_a, offset, slope);
-        let det = a11 * a22 - a12 * a21;
-        (det.is_finite() && det > 0.0).then(|| self.solve_unchecked(h, current_a, offset, slope))
+        a11 * a22 - a12 * a21
     }
 
     fn solve_unchecked(&self, h: f64, current_a: f64, offset: f64, slope: f64) -> (f64, f64) {

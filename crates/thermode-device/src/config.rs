@@ -193,7 +193,7 @@ impl DeviceConfig {
             Field {
                 section: "peltier",
                 key: "imax_a",
-                rule: Rule::Positive,
+                rule: limits::PELTIER_CURRENT.rule(),
                 value: &mut self.peltier.imax_a,
                 doc: "Datasheet maximum current I_max [A] (the current of the largest temperature difference).",
                 source: MODULE_SOURCE,
@@ -201,7 +201,7 @@ impl DeviceConfig {
             Field {
                 section: "peltier",
                 key: "vmax_v",
-                rule: Rule::Positive,
+                rule: limits::PELTIER_VOLTAGE.rule(),
                 value: &mut self.peltier.vmax_v,
                 doc: "Datasheet voltage at I_max and ΔT_max, V_max [V].",
                 source: MODULE_SOURCE,
@@ -209,7 +209,7 @@ impl DeviceConfig {
             Field {
                 section: "peltier",
                 key: "qmax_w",
-                rule: Rule::Positive,
+                rule: limits::PELTIER_POWER.rule(),
                 value: &mut self.peltier.qmax_w,
                 doc: "Datasheet cooling power at I_max and ΔT = 0, Q_max [W]; checked against the other values (±30 \
                       %).",
@@ -218,7 +218,7 @@ impl DeviceConfig {
             Field {
                 section: "peltier",
                 key: "dtmax_k",
-                rule: Rule::Positive,
+                rule: limits::PELTIER_DELTA_T.rule(),
                 value: &mut self.peltier.dtmax_k,
                 doc: "Datasheet largest temperature difference at I_max and zero load, ΔT_max [K].",
                 source: MODULE_SOURCE,
@@ -226,7 +226,7 @@ impl DeviceConfig {
             Field {
                 section: "peltier",
                 key: "hot_side_k",
-                rule: Rule::Positive,
+                rule: limits::DATASHEET_HOT_SIDE.rule(),
                 value: &mut self.peltier.hot_side_k,
                 doc: "Hot-side temperature at which the datasheet values are quoted, T_h [K].",
                 source: "25 °C: these values are a 25–27 °C datasheet set (S = V_max/T_h = 6.37 mV/K matches \
@@ -236,7 +236,7 @@ impl DeviceConfig {
             Field {
                 section: "plate",
                 key: "heat_capacity_j_k",
-                rule: Rule::Positive,
+                rule: limits::PLATE_HEAT_CAPACITY.rule(),
                 value: &mut self.plate.heat_capacity_j_k,
                 doc: "Heat capacity of the display node: plate, cold ceramic, half the thermoelectric legs [J/K].",
                 source: "Estimate (model.md §5: 0.1–0.3): aluminium plate 8 × 8 × 1 mm (ρc = 2702 × 903 J/(m³·K), \
@@ -258,7 +258,7 @@ impl DeviceConfig {
             Field {
                 section: "plate",
                 key: "area_m2",
-                rule: Rule::Positive,
+                rule: limits::CONTACT_AREA.rule(),
                 value: &mut self.plate.area_m2,
                 doc: "Contact area of the finger on the plate [m²].",
                 source: "The 8 × 8 mm face of the paper's element (section 3.1), fully covered by the phalanx pad.",
@@ -266,7 +266,7 @@ impl DeviceConfig {
             Field {
                 section: "hot_side",
                 key: "heat_capacity_j_k",
-                rule: Rule::Positive,
+                rule: limits::HOT_SIDE_HEAT_CAPACITY.rule(),
                 value: &mut self.hot_side.heat_capacity_j_k,
                 doc:
                     "Heat capacity of the hot node: hot ceramic, half the legs, the aluminium box and the water in it \
@@ -278,7 +278,7 @@ impl DeviceConfig {
             Field {
                 section: "hot_side",
                 key: "water_conductance_w_k",
-                rule: Rule::NonNegative,
+                rule: limits::WATER_CONDUCTANCE.rule(),
                 value: &mut self.hot_side.water_conductance_w_k,
                 doc: "Conductance from the hot node to the cooling water [W/K]; a pump failure lowers it.",
                 source: "model.md §5 (about 0.3 W/K); check: laminar flow through the box (11 × 4 mm channel, \
@@ -288,7 +288,7 @@ impl DeviceConfig {
             Field {
                 section: "sensor",
                 key: "time_constant_s",
-                rule: Rule::NonNegative,
+                rule: limits::SENSOR_LAG.rule(),
                 value: &mut self.sensor.time_constant_s,
                 doc: "First-order lag of the PT-100 behind the plate temperature [s]; 0 = none.",
                 source: "model.md §5 (0.2–0.6 s): a thin-film PT-100 chip glued into the 1 mm plate.",
@@ -296,7 +296,7 @@ impl DeviceConfig {
             Field {
                 section: "sensor",
                 key: "noise_c",
-                rule: Rule::NonNegative,
+                rule: limits::SENSOR_ERROR.rule(),
                 value: &mut self.sensor.noise_c,
                 doc: "Standard deviation of the Gaussian measurement noise [°C]; 0 = none.",
                 source: "Estimate: two steps of the 0.01 °C resolution (1 mA through a PT-100 gives 3.85 µV per 0.01 \
@@ -306,7 +306,7 @@ impl DeviceConfig {
             Field {
                 section: "sensor",
                 key: "resolution_c",
-                rule: Rule::NonNegative,
+                rule: limits::SENSOR_ERROR.rule(),
                 value: &mut self.sensor.resolution_c,
                 doc: "Quantisation step of the reading [°C]; 0 = none.",
                 source: "The paper, section 3: 'a resolution of 0.01 °C'.",
@@ -314,7 +314,7 @@ impl DeviceConfig {
             Field {
                 section: "sensor",
                 key: "sample_rate_hz",
-                rule: Rule::Positive,
+                rule: limits::SENSOR_SAMPLE_RATE.rule(),
                 value: &mut self.sensor.sample_rate_hz,
                 doc: "Sampling rate of the sensor [Hz]; the reading is held between samples.",
                 source: "Estimate: the paper gives none; 100 Hz is a usual rate of a Simulink real-time loop on a \

@@ -170,6 +170,65 @@ ranges! {
     SETPOINT_RATE = "set-point rate [°C/s]", 0.01, 300.0;
     used by "the safety envelope (`max_setpoint_rate_c_per_s`), device files \
              (`render.max_setpoint_rate_c_per_s`), `render --max-rate`, API `setpoint.rate_c_s`";
+
+    /// A Peltier module's datasheet maximum current I_max, 0.01 to 100 A: from the smallest micro-modules (tens of
+    /// mA) to the largest single modules (about 30 A) with room; beyond it there is no thermoelectric module.
+    PELTIER_CURRENT = "Peltier maximum current [A]", 0.01, 100.0;
+    used by "device files (`peltier.imax_a`)";
+
+    /// A Peltier module's datasheet voltage V_max, 0.01 to 100 V: from one couple (about 0.05 V at 25 °C) to a
+    /// 254-couple module (about 30 V) with room.
+    PELTIER_VOLTAGE = "Peltier maximum voltage [V]", 0.01, 100.0;
+    used by "device files (`peltier.vmax_v`)";
+
+    /// A Peltier module's datasheet cooling power Q_max, 1 mW to 1 kW: from a micro-module to the largest single
+    /// modules (about 300 W) with room.
+    PELTIER_POWER = "Peltier maximum cooling power [W]", 0.001, 1000.0;
+    used by "device files (`peltier.qmax_w`)";
+
+    /// A Peltier module's datasheet ΔT_max, 1 to 150 K: single-stage Bi₂Te₃ modules reach about 70 K, the best
+    /// multi-stage stacks about 130 K.
+    PELTIER_DELTA_T = "Peltier largest temperature difference [K]", 1.0, 150.0;
+    used by "device files (`peltier.dtmax_k`)";
+
+    /// The hot-side temperature at which a datasheet quotes its values, 250 to 400 K: datasheets quote 25 to 85 °C,
+    /// and Bi₂Te₃ modules are soldered for at most about 200 °C.
+    DATASHEET_HOT_SIDE = "datasheet hot-side temperature [K]", 250.0, 400.0;
+    used by "device files (`peltier.hot_side_k`)";
+
+    /// Heat capacity of a display's plate node, 0.1 mJ/K to 1 kJ/K: from a 1 mm² foil to a 0.4 kg aluminium block,
+    /// far beyond a plate a Peltier element can move at a finger's pace (the default is 0.28 J/K).
+    PLATE_HEAT_CAPACITY = "plate heat capacity [J/K]", 1e-4, 1000.0;
+    used by "device files (`plate.heat_capacity_j_k`)";
+
+    /// Contact area of the finger on the plate, 1 mm² to 0.1 m²: from a pin-point stimulator to a palm-sized plate
+    /// and beyond (a whole hand is about 0.02 m²).
+    CONTACT_AREA = "contact area [m²]", 1e-6, 0.1;
+    used by "device files (`plate.area_m2`)";
+
+    /// Heat capacity of a display's hot side (ceramic, heat sink, its water), 1 mJ/K to 100 kJ/K: up to a 20 l
+    /// water bath.
+    HOT_SIDE_HEAT_CAPACITY = "hot-side heat capacity [J/K]", 1e-3, 1e5;
+    used by "device files (`hot_side.heat_capacity_j_k`)";
+
+    /// Conductance from the hot side to the cooling water or air, 0 to 1 kW/K: from no flow at all to far more
+    /// than any liquid cold plate under a module (a few W/K).
+    WATER_CONDUCTANCE = "water conductance [W/K]", 0.0, 1000.0;
+    used by "device files (`hot_side.water_conductance_w_k`)";
+
+    /// First-order lag of a display's temperature sensor behind its plate, 0 to 10 s: from none to a sensor so
+    /// slow that the safety envelope, which bounds the plate by it, allows no more.
+    SENSOR_LAG = "sensor time constant [s]", 0.0, 10.0;
+    used by "device files (`sensor.time_constant_s`), the safety envelope (`sensor_time_constant_s`)";
+
+    /// Noise or quantisation step of a display's temperature reading, 0 to 10 °C: a reading worse than that tells
+    /// nothing about a plate a finger can bear.
+    SENSOR_ERROR = "sensor noise or resolution [°C]", 0.0, 10.0;
+    used by "device files (`sensor.noise_c`, `sensor.resolution_c`)";
+
+    /// Sampling rate of a display's temperature sensor, 1 Hz to 100 kHz: the tick rates thermode runs at.
+    SENSOR_SAMPLE_RATE = "sensor sample rate [Hz]", 1.0, 100_000.0;
+    used by "device files (`sensor.sample_rate_hz`)";
 }
 
 /// Largest memory one command's results may take \[bytes\]: 1 GiB. The estimate (rows × bytes per row, summed over

@@ -242,7 +242,12 @@ impl EnvelopeConfig {
             ),
             ("stuck_current_fraction", &mut self.stuck_current_fraction, 0.5, 1.0),
             ("stuck_at_limit_s", &mut self.stuck_at_limit_s, 0.1, 60.0),
-            ("sensor_time_constant_s", &mut self.sensor_time_constant_s, 0.0, 10.0),
+            (
+                "sensor_time_constant_s",
+                &mut self.sensor_time_constant_s,
+                limits::SENSOR_LAG.min,
+                limits::SENSOR_LAG.max,
+            ),
         ]
     }
 

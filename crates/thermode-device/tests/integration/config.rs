@@ -224,6 +224,25 @@ fn every_number_is_validated() {
         bad_value_key("[plate]\ncontact_conductance_w_m2k = 1e9"),
         "plate.contact_conductance_w_m2k"
     );
+    // A display's parts (docs/ranges.md): an exponent too many, or an endless number, is refused by its key
+    // instead of a plant whose fastest time constant underflows (each of these spun `render` for hours).
+    for (full, bad) in [
+        ("peltier.dtmax_k", "1e-300"),
+        ("plate.heat_capacity_j_k", "1e308"),
+        ("plate.area_m2", "1e308"),
+        ("hot_side.heat_capacity_j_k", "1e308"),
+        ("hot_side.water_conductance_w_k", "1e308"),
+        ("sensor.sample_rate_hz", "1e308"),
+        ("sensor.sample_rate_hz", "1e-300"),
+        ("sensor.time_constant_s", "11"),
+    ] {
+        let (section, key) = full.split_once('.').unwrap_or(("", ""));
+        assert_eq!(
+            bad_value_key(&format!("[{section}]\n{key} = {bad}")),
+            full,
+            "{full} = {bad}"
+        );
+    }
     assert_eq!(
         parse("[render]\nmax_setpoint_rate_c_per_s = 300")
             .render
