@@ -225,7 +225,8 @@ fn every_number_is_validated() {
         "plate.contact_conductance_w_m2k"
     );
     // A display's parts (docs/ranges.md): an exponent too many, or an endless number, is refused by its key
-    // instead of a plant whose fastest time constant underflows (each of these spun `render` for hours).
+    // instead of a plant whose fastest time constant underflows (each of these kept `render` busy past a
+    // two-minute timeout).
     for (full, bad) in [
         ("peltier.dtmax_k", "1e-300"),
         ("plate.heat_capacity_j_k", "1e308"),
