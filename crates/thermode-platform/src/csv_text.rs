@@ -6,7 +6,8 @@
 //! [`Precision`]; [`CsvText::push_field`] quotes a text field as the `csv` crate does (only when needed).
 //!
 //! [`write_rows`] formats the rows of a large CSV in blocks on two threads (the caller's and one helper) and writes
-//! them in order: the same bytes as one thread writes, in about half the time on two cores.
+//! them in order: the same bytes as one thread writes (the exact form about a fifth faster on this project's
+//! two-core machine, docs/performance.md).
 //!
 //! A number is written into a fixed run of scratch bytes past the text and the length then advanced (no copy of
 //! varying length per number); the buffer doubles, rarely, when the run does not fit.
