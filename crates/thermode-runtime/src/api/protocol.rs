@@ -5,8 +5,14 @@
 //! `thermode_model::params`.
 //!
 //! A request is a JSON object with `type` and `id` (a string of at most 128 characters or a number; replies
-//! carry it back unchanged). Unknown fields are refused (`unknown_field`), so a misspelt key never goes unnoticed.
+//! carry it back unchanged). Unknown fields are refused (`unknown_field`), so a misspelt key never goes unnoticed,
+//! and so is a key given twice in one object (`bad_json`): JSON readers differ on which of the two counts, so a
+//! proxy that checked the first `type` must not see thermode act on the second.
 
+use std::collections::HashSet;
+use std::fmt;
+
+use serde::de::{self, Deserialize, Deserializer, MapAccess, SeqAccess, Visitor};
 use serde_json::{json, Map, Value};
 use thermode_model::limits;
 use thermode_model::materials::{self, Material, DEFAULT_THICKNESS_M};
@@ -172,6 +178,12 @@ pub fn parse(text: &str, limits: &RequestLimits, owner: Owner) -> (Value, Result
         );
         return (Value::Null, Err(ApiError::new(ErrorCode::TooLarge, message)));
     }
+    if let Err(e) = serde_json::from_str::<UniqueKeys>(text) {
+        return (
+            Value::Null,
+            Err(ApiError::new(ErrorCode::BadJson, format!("not valid JSON: {e}"))),
+        );
+    }
     let value: Value = match serde_json::from_str(text) {
         Ok(value) => value,
         Err(e) => {
@@ -193,6 +205,66 @@ pub fn parse(text: &str, limits: &RequestLimits, owner: Owner) -> (Value, Result
     };
     let request = parse_object(&map, limits, owner);
     (id, request)
+}
+
+/// A JSON text read only to check that no object in it names a key twice (`serde_json::Value` keeps the last).
+struct UniqueKeys;
+
+impl<'de> Deserialize<'de> for UniqueKeys {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        deserializer.deserialize_any(UniqueKeysVisitor)
+    }
+}
+
+struct UniqueKeysVisitor;
+
+impl<'de> Visitor<'de> for UniqueKeysVisitor {
+    type Value = UniqueKeys;
+
+    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+        f.write_str("any JSON value")
+    }
+
+    fn visit_bool<E: de::Error>(self, _: bool) -> Result<UniqueKeys, E> {
+        Ok(UniqueKeys)
+    }
+
+    fn visit_i64<E: de::Error>(self, _: i64) -> Result<UniqueKeys, E> {
+        Ok(UniqueKeys)
+    }
+
+    fn visit_u64<E: de::Error>(self, _: u64) -> Result<UniqueKeys, E> {
+        Ok(UniqueKeys)
+    }
+
+    fn visit_f64<E: de::Error>(self, _: f64) -> Result<UniqueKeys, E> {
+        Ok(UniqueKeys)
+    }
+
+    fn visit_str<E: de::Error>(self, _: &str) -> Result<UniqueKeys, E> {
+        Ok(UniqueKeys)
+    }
+
+    fn visit_unit<E: de::Error>(self) -> Result<UniqueKeys, E> {
+        Ok(UniqueKeys)
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut items: A) -> Result<UniqueKeys, A::Error> {
+        while items.next_element::<UniqueKeys>()?.is_some() {}
+        Ok(UniqueKeys)
+    }
+
+    fn visit_map<A: MapAccess<'de>>(self, mut entries: A) -> Result<UniqueKeys, A::Error> {
+        let mut keys = HashSet::new();
+        while let Some(key) = entries.next_key::<String>()? {
+            if keys.contains(&key) {
+                return Err(de::Error::custom(format!("the key `{key}` is given twice")));
+            }
+            entries.next_value::<UniqueKeys>()?;
+            keys.insert(key);
+        }
+        Ok(UniqueKeys)
+    }
 }
 
 fn request_id(map: &Map<String, Value>) -> Result<Value, ApiError> {
@@ -669,6 +741,11 @@ mod tests {
         let cases = [
             ("{", "bad_json"),
             ("[1,2]", "bad_json"),
+            (r#"{"type":"touch","type":"release","id":1,"channel":0}"#, "bad_json"),
+            (
+                r#"{"type":"touch","id":1,"channel":0,"properties":{"density_kg_m3":1,"density_kg_m3":2}}"#,
+                "bad_json",
+            ),
             (r#"{"type":"touch"}"#, "missing_field"),
             (r#"{"type":"fly","id":1}"#, "unknown_type"),
             (r#"{"type":"touch","id":1,"channel":0}"#, "missing_field"),
@@ -724,6 +801,9 @@ mod tests {
         let props = r#"{"type":"touch","id":1,"channel":0,"properties":{"conductivity_w_mk":-1,
             "density_kg_m3":1,"specific_heat_j_kgk":1}}"#;
         assert_eq!(code_of(props), Some("bad_value"));
+        let (_, twice) = parse_text(r#"{"type":"touch","type":"release","id":1,"channel":0}"#);
+        let message = twice.map(drop).unwrap_err().message;
+        assert!(message.contains("the key `type` is given twice"), "{message}");
     }
 
     #[test]
