@@ -177,12 +177,19 @@ impl Pt100 {
     }
 }
 
-/// Rounds `value` to the nearest multiple of `step` (no rounding when `step` is 0).
+/// Rounds `value` to the nearest multiple of `step` (no rounding when `step` is 0). A step that divides one into a
+/// whole number of parts (0.01 °C: a hundred) gives the reading as that count divided by them, the `f64` nearest
+/// to the decimal (31.99, where the count times the step gives 31.990000000000002).
 pub fn quantise(value: f64, step: f64) -> f64 {
-    if step > 0.0 {
-        (value / step).round() * step
+    if step <= 0.0 || step.is_nan() {
+        return value;
+    }
+    let steps = (value / step).round();
+    let parts = (1.0 / step).round();
+    if parts >= 1.0 && parts * step == 1.0 {
+        steps / parts
     } else {
-        value
+        steps * step
     }
 }
 
