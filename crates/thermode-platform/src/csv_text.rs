@@ -107,17 +107,9 @@ impl CsvText {
     #[inline(always)]
     pub fn push_earlier(&mut self, span: (usize, usize)) {
         let (start, end) = span;
-        let len = end - start;
-        if len <= FIXED_POINT_LEN && start + FIXED_POINT_LEN <= self.len {
-            // A fixed run of bytes (their tail is overwritten by what follows): no call, no varying length.
-            let mut run = [0u8; FIXED_POINT_LEN];
-            run.copy_from_slice(&self.bytes[start..start + FIXED_POINT_LEN]);
-            self.room(FIXED_POINT_LEN).copy_from_slice(&run);
-        } else {
-            self.room(len);
-            self.bytes.copy_within(start..end, self.len);
-        }
-        self.len += len;
+        self.room(end - start);
+        self.bytes.copy_within(start..end, self.len);
+        self.len += end - start;
     }
 
     /// Appends a text field, quoted (with doubled quotes) only when it holds a comma, a quote or a line break, as
@@ -612,7 +604,7 @@ mod tests {
     }
 
     /// Rows of a test CSV: a number exact, copied right after it (as `simulate` copies an equal column), with
-    /// twelve decimals, and copied again from more than a fixed run of bytes back.
+    /// twelve decimals, and copied again further back.
     fn format_rows(rows: Range<usize>, text: &mut CsvText) {
         for row in rows {
             let x = (row as f64).sqrt() * 1.37 - 7.0;

@@ -717,14 +717,15 @@ fn the_forecast_range_limits_heating_by_its_upper_end_without_driving_the_other_
         rig.tick += 1;
         d
     };
-    // The model says 46 °C; the bound says the plate may be 3 °C further: heating would pass 48 − margin.
-    let widened = WidenedPlate {
+    let widened_by = |upper_c: f64| WidenedPlate {
         plate: LinearPlate {
             plate_c: 46.0,
             slope_c_per_a: 0.2,
         },
-        upper_c: 3.0,
+        upper_c,
     };
+    // The model says 46 °C; the bound says the plate may be 3 °C further: heating would pass 48 − margin.
+    let widened = widened_by(3.0);
     let d = gate(&widened, 2.8);
     assert!(d.limited_by().heating_limited_by_plate, "{d:?}");
     assert!(
@@ -733,13 +734,7 @@ fn the_forecast_range_limits_heating_by_its_upper_end_without_driving_the_other_
         d.current_a()
     );
     // A smaller widening leaves the heating the range allows: 46 + 0.2 I + 1.5 ≤ 48 − margin.
-    let slight = WidenedPlate {
-        plate: LinearPlate {
-            plate_c: 46.0,
-            slope_c_per_a: 0.2,
-        },
-        upper_c: 1.5,
-    };
+    let slight = widened_by(1.5);
     let d = gate(&slight, 2.8);
     let want_a = (config.max_display_c - margin_c - 1.5 - slight.plate.plate_c) / slight.plate.slope_c_per_a;
     assert!(
