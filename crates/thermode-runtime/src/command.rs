@@ -12,18 +12,19 @@
 //! that tick's answer, which follows within the tick). So [`CommandError::Busy`] always means that nothing was
 //! queued, or that what was queued was withdrawn and will never be applied.
 
+use std::future::Future;
 use std::sync::atomic::{AtomicU64, AtomicU8, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, TrySendError};
 use std::sync::Arc;
-use std::time::Duration;
+use std::task::Poll;
 
 use serde::Serialize;
 use thermode_model::materials::Material;
 use thermode_safety::FaultCode;
 use thiserror::Error;
-use tokio::sync::oneshot;
 
 use crate::engine::{EngineError, Stimulus};
+use crate::reply::{self, Closed, ReplyReceiver, ReplySender};
 
 /// Who set a channel's stimulus. Contacts of a WebSocket client are released when it disconnects (after a grace
 /// period); OSC and script contacts have no connection and stay until released.
@@ -229,7 +230,7 @@ pub struct Queued {
     /// The command.
     pub command: Command,
     /// Where the answer goes (`None`: nobody waits).
-    pub reply: Option<oneshot::Sender<Reply>>,
+    pub reply: Option<ReplySender<Reply>>,
     /// The requester's claim (`None`: the command cannot be withdrawn).
     pub claim: Option<Arc<Claim>>,
     /// Sequence number, in the order commands were sent (both lanes).
@@ -239,25 +240,33 @@ pub struct Queued {
 /// The loop's answer to a request, to be awaited.
 #[derive(Debug)]
 pub struct Answer {
-    receiver: oneshot::Receiver<Reply>,
+    receiver: ReplyReceiver<Reply>,
     claim: Arc<Claim>,
 }
 
 impl Answer {
-    /// Waits for the answer without a time limit (threads outside an async runtime, tests).
-    pub fn blocking_recv(self) -> Result<Reply, oneshot::error::RecvError> {
+    /// Waits for the answer without a time limit (threads outside an async executor, tests).
+    pub fn blocking_recv(self) -> Result<Reply, Closed> {
         self.receiver.blocking_recv()
     }
 
-    /// Waits up to `wait` for the answer. When the time is over the command is withdrawn, unless the loop has taken
-    /// it already; then the answer of that tick is awaited (it follows within the tick). `Err(Busy)` means the loop
-    /// never applied the command and never will; `Err(Stopped)` that the loop stopped.
-    pub async fn wait(mut self, wait: Duration) -> Reply {
-        match tokio::time::timeout(wait, &mut self.receiver).await {
-            Ok(Ok(reply)) => reply,
-            Ok(Err(_)) => Err(CommandError::Stopped),
-            Err(_) if self.claim.withdraw() => Err(CommandError::Busy),
-            Err(_) => self.receiver.await.unwrap_or(Err(CommandError::Stopped)),
+    /// Waits for the answer until `timer` completes (the adapter's timer, e.g. a tokio sleep of the reply
+    /// timeout). When the time is over the command is withdrawn, unless the loop has taken it already; then the
+    /// answer of that tick is awaited (it follows within the tick). `Err(Busy)` means the loop never applied the
+    /// command and never will; `Err(Stopped)` that the loop stopped.
+    pub async fn wait_until(mut self, timer: impl Future<Output = ()>) -> Reply {
+        let mut timer = std::pin::pin!(timer);
+        let answered = std::future::poll_fn(|cx| {
+            if let Poll::Ready(reply) = std::pin::Pin::new(&mut self.receiver).poll(cx) {
+                return Poll::Ready(Some(reply));
+            }
+            timer.as_mut().poll(cx).map(|()| None)
+        })
+        .await;
+        match answered {
+            Some(reply) => reply.unwrap_or(Err(CommandError::Stopped)),
+            None if self.claim.withdraw() => Err(CommandError::Busy),
+            None => self.receiver.await.unwrap_or(Err(CommandError::Stopped)),
         }
     }
 }
@@ -286,7 +295,7 @@ impl CommandSender {
 
     /// Queues `command` and returns the loop's [`Answer`].
     pub fn request(&self, command: Command) -> Result<Answer, CommandError> {
-        let (reply, receiver) = oneshot::channel();
+        let (reply, receiver) = reply::slot();
         let claim = Arc::new(Claim::default());
         self.push(command, Some(reply), Some(claim.clone()))?;
         Ok(Answer { receiver, claim })
@@ -295,7 +304,7 @@ impl CommandSender {
     fn push(
         &self,
         command: Command,
-        reply: Option<oneshot::Sender<Reply>>,
+        reply: Option<ReplySender<Reply>>,
         claim: Option<Arc<Claim>>,
     ) -> Result<(), CommandError> {
         let lane = match command {

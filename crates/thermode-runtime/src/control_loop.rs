@@ -337,7 +337,7 @@ struct ControlLoop {
     shared: Arc<Shared>,
     feeds: Vec<SyncSender<TickRecord>>,
     /// Answers of this tick's commands, sent after the publish.
-    answers: Vec<(tokio::sync::oneshot::Sender<Reply>, Reply)>,
+    answers: Vec<(crate::reply::ReplySender<Reply>, Reply)>,
     periods: Window,
     work: Window,
     stats: LoopStats,
@@ -447,7 +447,7 @@ impl ControlLoop {
             self.account(&tick, done_s, ticker.missed_total());
             self.publish(tick.index);
             for (reply, answer) in self.answers.drain(..) {
-                let _ = reply.send(answer);
+                reply.send(answer);
             }
         }
         self.shutdown()
@@ -843,7 +843,7 @@ fn claim(status: &mut ChannelStatus, owner: Owner) {
 
 /// Real-time scheduling and locked memory for the calling (loop) thread, and the last CPU to itself when there are
 /// two or more (the network threads keep off it: see [`network_cpus`]).
-pub(crate) fn request_realtime_alone() -> Realtime {
+pub fn request_realtime_alone() -> Realtime {
     let mut realtime = thermode_platform::rt::request_realtime(thermode_platform::rt::DEFAULT_FIFO_PRIORITY, true);
     if let Some((loop_cpu, _)) = thermode_platform::rt::split_cpus() {
         if thermode_platform::rt::pin_current_thread(&[loop_cpu]).is_ok() {

@@ -1,5 +1,5 @@
-//! Typed errors of the runtime: refused configurations (including an insecure bind), engines that cannot be built,
-//! device failures at start-up, and I/O errors of the listeners and the recorder.
+//! Typed errors of the loop core: refused configurations, engines that cannot be built, device failures at
+//! start-up, the dose ledger, and I/O errors of the recorder and the loop's threads.
 
 use thermode_device::DeviceError;
 use thermode_model::params::BadValue;
@@ -20,35 +20,14 @@ pub enum RuntimeError {
     /// The channel engines could not be built.
     #[error("cannot build the channel engines: {0}")]
     Engine(EngineError),
-    /// Binding a non-loopback address without a token is refused (a stranger on the network could heat a finger).
-    #[error(
-        "refusing to listen on {addr} without --token: a non-loopback address is reachable from the network, and \
-         anyone who can reach it could drive the display. Give --token SECRET (clients then present it), or bind \
-         127.0.0.1"
-    )]
-    InsecureBind {
-        /// The address asked for.
-        addr: String,
-    },
     /// The device refused an operation at start-up.
     #[error("device: {0}")]
     Device(#[from] DeviceError),
-    /// A socket could not be bound.
-    #[error("cannot listen on {addr}{}: {source}", bind_hint(source))]
-    Bind {
-        /// The address.
-        addr: String,
-        /// The operating system's reason.
-        source: std::io::Error,
-    },
     /// The dose ledger of the state directory cannot be used (corrupt, unreadable, unwritable, or in use by
     /// another process): the daemon refuses to start rather than forget a dose.
     #[error("dose ledger: {0}")]
     Ledger(#[from] LedgerError),
-    /// `--lsl` was asked for but Lab Streaming Layer cannot be used (liblsl missing or unusable).
-    #[error("Lab Streaming Layer: {0}")]
-    Lsl(#[from] crate::lsl::LslError),
-    /// Another I/O failure (recording directory, thread start).
+    /// Another I/O failure (recording directory, the loop's and the writers' threads).
     #[error("{context}: {source}")]
     Io {
         /// What was being done.
@@ -56,14 +35,4 @@ pub enum RuntimeError {
         /// The operating system's reason.
         source: std::io::Error,
     },
-}
-
-/// What to do about a port that is taken: the usual cause is another thermode daemon.
-fn bind_hint(source: &std::io::Error) -> &'static str {
-    if source.kind() == std::io::ErrorKind::AddrInUse {
-        " (another program, perhaps another `thermode serve` or `thermode demo`, holds this port; stop it, or choose \
-         another with --port or --osc-port, 0 for a free one)"
-    } else {
-        ""
-    }
 }

@@ -31,12 +31,11 @@ use std::io::{Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, PoisonError};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use thermode_platform::utc_stamp;
-use tokio::sync::watch;
 
 use crate::error::RuntimeError;
 use crate::interlock::Interlock;
@@ -96,8 +95,24 @@ pub struct RecordStatus {
     earlier: Mutex<Vec<(PathBuf, u64)>>,
     /// An acknowledgement asked the writer to go on in a new file.
     resume_requested: AtomicBool,
-    /// Failures, acknowledgements and resumptions, bumped at each; WebSocket connections watch it for their events.
-    changed: watch::Sender<RecordEvents>,
+    /// Failures, acknowledgements and resumptions, bumped at each.
+    events: Mutex<RecordEvents>,
+    /// Who is told of every change (the network side's event feeds).
+    listeners: Listeners,
+}
+
+/// Told the new counts at every failure, acknowledgement and resumption (called on the thread that made the change:
+/// it must only hand them on, never block).
+pub type RecordListener = Box<dyn Fn(RecordEvents) + Send + Sync>;
+
+#[derive(Default)]
+struct Listeners(Mutex<Vec<RecordListener>>);
+
+impl std::fmt::Debug for Listeners {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let count = self.0.lock().map_or(0, |l| l.len());
+        write!(f, "{count} listener(s)")
+    }
 }
 
 /// Counts of what happened to a recording, for those who report it as events.
@@ -121,7 +136,8 @@ impl RecordStatus {
             error: Mutex::new(None),
             earlier: Mutex::new(Vec::new()),
             resume_requested: AtomicBool::new(false),
-            changed: watch::Sender::new(RecordEvents::default()),
+            events: Mutex::new(RecordEvents::default()),
+            listeners: Listeners::default(),
         }
     }
 
@@ -169,9 +185,30 @@ impl RecordStatus {
         self.error.lock().ok().and_then(|e| e.clone())
     }
 
-    /// A receiver of the event counts: it sees every failure, acknowledgement and resumption.
-    pub fn subscribe(&self) -> watch::Receiver<RecordEvents> {
-        self.changed.subscribe()
+    /// The counts of failures, acknowledgements and resumptions so far.
+    pub fn events(&self) -> RecordEvents {
+        *self.events.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// `listener` is told the counts at every later change (the adapter's event port).
+    pub fn listen(&self, listener: RecordListener) {
+        self.listeners
+            .0
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(listener);
+    }
+
+    /// Bumps one count and tells every listener.
+    fn changed(&self, bump: impl FnOnce(&mut RecordEvents)) {
+        let events = {
+            let mut events = self.events.lock().unwrap_or_else(PoisonError::into_inner);
+            bump(&mut events);
+            *events
+        };
+        for listener in self.listeners.0.lock().unwrap_or_else(PoisonError::into_inner).iter() {
+            listener(events);
+        }
     }
 
     /// An operator acknowledged the failure: counted for the events, and, while the recording is failed, the writer
@@ -180,7 +217,7 @@ impl RecordStatus {
         if self.state() == RecordState::Failed {
             self.resume_requested.store(true, Ordering::SeqCst);
         }
-        self.changed.send_modify(|e| e.acknowledgements += 1);
+        self.changed(|e| e.acknowledgements += 1);
     }
 
     fn take_resume_request(&self) -> bool {
@@ -191,7 +228,7 @@ impl RecordStatus {
         if let Ok(mut slot) = self.error.lock() {
             *slot = Some(error);
         }
-        self.changed.send_modify(|e| e.failures += 1);
+        self.changed(|e| e.failures += 1);
     }
 
     /// The writer goes on in `path`: the current file joins the earlier ones and the error is cleared.
@@ -205,7 +242,7 @@ impl RecordStatus {
         if let Ok(mut slot) = self.error.lock() {
             *slot = None;
         }
-        self.changed.send_modify(|e| e.resumptions += 1);
+        self.changed(|e| e.resumptions += 1);
     }
 }
 

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use anyhow::Result;
 use clap::{Args, ValueEnum};
 use thermode_platform::{Clock, MonotonicClock};
-use thermode_runtime::bench::{self, BenchConfig};
+use thermode_serve::bench::{self, BenchConfig};
 
 use super::serve::{build_display, DisplayArgs};
 use crate::output::print_stdout;

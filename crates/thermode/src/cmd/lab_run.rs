@@ -44,7 +44,7 @@ use thermode_model::materials::{find, Material};
 use thermode_pipeline::controllers::GainsSource;
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::MonotonicClock;
-use thermode_runtime::Daemon;
+use thermode_serve::Daemon;
 
 use super::serve::{self, ControllerArg, DisplayArgs};
 use crate::resolve;

@@ -17,9 +17,10 @@ use thermode_link::spec::{is_hardware, open_hardware, HardwareContext};
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::engine::pipeline_engines;
-use thermode_runtime::lsl::LslConfig;
 use thermode_runtime::recorder::RecordErrorPolicy;
-use thermode_runtime::{Daemon, DaemonConfig, EngineFactory, LoopConfig, ServerConfig};
+use thermode_runtime::{CoreConfig, EngineFactory, LoopConfig};
+use thermode_serve::lsl::LslConfig;
+use thermode_serve::{Daemon, DaemonConfig, ServerConfig};
 
 use crate::resolve;
 use crate::signals::StopSignals;
@@ -80,10 +81,10 @@ pub struct ServeArgs {
     #[arg(long, value_name = "ADDR", default_value = "127.0.0.1")]
     pub bind: IpAddr,
     /// HTTP/WebSocket port (0 picks a free one).
-    #[arg(long, value_name = "P", default_value_t = thermode_runtime::DEFAULT_PORT)]
+    #[arg(long, value_name = "P", default_value_t = thermode_serve::DEFAULT_PORT)]
     pub port: u16,
     /// OSC (UDP) port (0 picks a free one). OSC listens on loopback binds only.
-    #[arg(long = "osc-port", value_name = "P", default_value_t = thermode_runtime::DEFAULT_OSC_PORT)]
+    #[arg(long = "osc-port", value_name = "P", default_value_t = thermode_serve::DEFAULT_OSC_PORT)]
     pub osc_port: u16,
     /// Do not listen for OSC.
     #[arg(long = "no-osc")]
@@ -280,22 +281,24 @@ fn start_quiet(args: &ServeArgs) -> Result<(Daemon, String)> {
     server.validate()?;
     let display = build_display(&args.display, &clock)?;
     let config = DaemonConfig {
-        loop_config: LoopConfig {
-            rate_hz: args.rate,
-            release_after_disconnect_s: args.release_after,
-            realtime: !args.no_realtime,
-            ..LoopConfig::default()
+        core: CoreConfig {
+            loop_config: LoopConfig {
+                rate_hz: args.rate,
+                release_after_disconnect_s: args.release_after,
+                realtime: !args.no_realtime,
+                ..LoopConfig::default()
+            },
+            record_dir: args.record.clone(),
+            record_policy: match args.on_record_error {
+                OnRecordError::Stop => RecordErrorPolicy::Stop,
+                OnRecordError::Continue => RecordErrorPolicy::Continue,
+            },
+            record_max_bytes: args.record_max_bytes,
+            state_dir: Some(super::dose::state_dir(args.state_dir.as_deref())?),
         },
         server,
-        record_dir: args.record.clone(),
-        record_policy: match args.on_record_error {
-            OnRecordError::Stop => RecordErrorPolicy::Stop,
-            OnRecordError::Continue => RecordErrorPolicy::Continue,
-        },
-        record_max_bytes: args.record_max_bytes,
         device_label: display.label,
         channel_names: display.names.clone(),
-        state_dir: Some(super::dose::state_dir(args.state_dir.as_deref())?),
         lsl: args.lsl.then(|| LslConfig {
             name: args.lsl_name.clone(),
             source_id: args.lsl_name.clone(),

@@ -347,7 +347,7 @@ fn a_failing_read_gets_zero_current_then_a_latched_fault_that_can_be_cleared() {
 #[test]
 fn a_device_cut_is_shown_on_its_channel_with_zero_current_until_the_device_releases_it() {
     use thermode_device::DeviceCut;
-    use thermode_runtime::api::protocol::channel_status;
+    use thermode_serve::api::protocol::channel_status;
     let rig = Rig::new(2, pipelines(), LoopConfig::default());
     rig.step(20);
     rig.control
@@ -641,7 +641,10 @@ fn a_command_withdrawn_after_its_wait_is_answered_busy_and_never_applied() {
         .request(touch(0, "wood", Owner::Script))
         .expect("queued");
     // The clock does not move: the loop never takes the command within the wait.
-    let reply = common::client_runtime().block_on(answer.wait(std::time::Duration::from_millis(50)));
+    let reply = common::client_runtime().block_on(thermode_serve::api::answer_within(
+        answer,
+        std::time::Duration::from_millis(50),
+    ));
     assert!(matches!(reply, Err(CommandError::Busy)), "{reply:?}");
     rig.step(3);
     let s = rig.snapshot();
@@ -657,7 +660,8 @@ fn a_command_withdrawn_after_its_wait_is_answered_busy_and_never_applied() {
         .request(touch(1, "wood", Owner::Script))
         .expect("queued");
     rig.step(1);
-    let reply = common::client_runtime().block_on(answer.wait(std::time::Duration::ZERO));
+    let reply =
+        common::client_runtime().block_on(thermode_serve::api::answer_within(answer, std::time::Duration::ZERO));
     assert!(reply.is_ok(), "{reply:?}");
 }
 

@@ -13,7 +13,7 @@ use thermode_device::{DefaultFinger, DeviceConfig, SimulatedDisplay};
 use thermode_link::emulator::{Emulator, EmulatorConfig, PtyEmulator};
 use thermode_link::serial::{SerialConfig, SerialDevice};
 use thermode_platform::{Clock, MonotonicClock};
-use thermode_runtime::Daemon;
+use thermode_serve::Daemon;
 
 #[test]
 fn the_daemon_renders_through_the_serial_protocol_and_survives_a_vanished_port() {

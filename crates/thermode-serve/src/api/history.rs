@@ -9,7 +9,7 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 
-use crate::snapshot::{Shared, Snapshot};
+use thermode_runtime::snapshot::{Shared, Snapshot};
 
 /// Samples kept per second \[Hz\].
 pub const HISTORY_RATE_HZ: f64 = 10.0;

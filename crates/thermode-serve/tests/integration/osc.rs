@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 
 use common::{ask, client_runtime, get_json, pipelines, start, test_config, ws_connect, SpyDevice};
 use thermode_device::Fault;
-use thermode_runtime::osc::{decode, encode, OscArg, OscMessage, MAX_SUBSCRIBERS};
 use thermode_safety::FaultCode;
+use thermode_serve::osc::{decode, encode, OscArg, OscMessage, MAX_SUBSCRIBERS};
 
 /// A loopback client socket that gives up a read after 100 ms.
 fn client() -> UdpSocket {

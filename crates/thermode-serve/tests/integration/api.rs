@@ -12,7 +12,7 @@ use common::{
 };
 use futures_util::SinkExt;
 use serde_json::{json, Value};
-use thermode_runtime::osc::{encode, OscArg};
+use thermode_serve::osc::{encode, OscArg};
 use tokio_tungstenite::tungstenite::Message;
 
 fn status_of(addr: std::net::SocketAddr) -> Value {
@@ -372,7 +372,7 @@ fn osc_touch_release_stop_and_malformed_packets() {
 #[test]
 fn a_vanished_clients_contacts_are_released_after_the_grace_period() {
     let mut config = test_config();
-    config.loop_config.release_after_disconnect_s = 1.0;
+    config.core.loop_config.release_after_disconnect_s = 1.0;
     let daemon = start(config, SpyDevice::new(5), pipelines());
     let addr = daemon.http_addr();
     let rt = client_runtime();
@@ -412,7 +412,7 @@ fn a_vanished_clients_contacts_are_released_after_the_grace_period() {
 /// The `bad_value` message of a refused WebSocket request, and the OSC refusal of the same stimulus (its
 /// `last_error`), once the OSC listener has counted it.
 fn refusals(
-    daemon: &thermode_runtime::Daemon,
+    daemon: &thermode_serve::Daemon,
     ws_request: &str,
     osc_address: &str,
     osc_args: &[OscArg],

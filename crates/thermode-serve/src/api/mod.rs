@@ -21,14 +21,14 @@ use axum::routing::get;
 use axum::{Json, Router};
 use serde_json::{json, Value};
 
-use crate::command::CommandSender;
-use crate::interlock::Interlock;
-use crate::ledger::WriterStatus;
-use crate::recorder::{RecordErrorPolicy, RecordState, RecordStatus};
-use crate::snapshot::{Mode, Shared};
 use access::Access;
 use protocol::{ApiError, ErrorCode, RequestLimits};
 use thermode_platform::Clock;
+use thermode_runtime::command::{Answer, CommandSender, Reply};
+use thermode_runtime::interlock::Interlock;
+use thermode_runtime::ledger::WriterStatus;
+use thermode_runtime::recorder::{RecordErrorPolicy, RecordState, RecordStatus};
+use thermode_runtime::snapshot::{Mode, Shared};
 
 /// The dashboard page (one static file, inline script, hand-drawn canvas plots).
 pub const DASHBOARD_HTML: &str = include_str!("../dashboard.html");
@@ -95,7 +95,7 @@ impl Default for NetLimits {
 
 impl NetLimits {
     /// Every duration finite and positive (at most a day), every rate and count positive.
-    pub fn validate(&self) -> Result<(), crate::error::RuntimeError> {
+    pub fn validate(&self) -> Result<(), crate::error::ServeError> {
         let durations = [
             ("reply_timeout_s", self.reply_timeout_s),
             ("idle_timeout_s", self.idle_timeout_s),
@@ -112,31 +112,31 @@ impl NetLimits {
         ];
         for (name, value) in durations {
             if !(value.is_finite() && value > 0.0 && value <= 86_400.0) {
-                return Err(crate::error::RuntimeError::Config(format!(
+                return Err(crate::error::ServeError::Config(format!(
                     "{name} = {value} s must lie in (0, 86400]"
                 )));
             }
         }
         for (name, value) in rates {
             if !(value.is_finite() && value >= 1.0) {
-                return Err(crate::error::RuntimeError::Config(format!(
+                return Err(crate::error::ServeError::Config(format!(
                     "{name} = {value} must be finite and ≥ 1"
                 )));
             }
         }
         if self.max_connections == 0 || self.hard_message_bytes < 1024 {
-            return Err(crate::error::RuntimeError::Config(
+            return Err(crate::error::ServeError::Config(
                 "max_connections must be ≥ 1 and hard_message_bytes ≥ 1024".into(),
             ));
         }
         if self.max_http_connections <= self.max_connections {
-            return Err(crate::error::RuntimeError::Config(format!(
+            return Err(crate::error::ServeError::Config(format!(
                 "max_http_connections ({}) must exceed max_connections ({}): WebSockets are HTTP connections too",
                 self.max_http_connections, self.max_connections
             )));
         }
         if !(self.header_timeout_s.is_finite() && self.header_timeout_s > 0.0 && self.header_timeout_s <= 10.0) {
-            return Err(crate::error::RuntimeError::Config(format!(
+            return Err(crate::error::ServeError::Config(format!(
                 "header_timeout_s = {} s must lie in (0, 10]",
                 self.header_timeout_s
             )));
@@ -193,6 +193,8 @@ pub struct App {
     pub(crate) dose_ledger: Option<Arc<WriterStatus>>,
     /// The recording, if any.
     pub(crate) recording: Option<Arc<RecordStatus>>,
+    /// The recording's event counts, fed by its event port ([`RecordStatus::listen`]), if recording.
+    pub(crate) record_events: Option<tokio::sync::watch::Receiver<thermode_runtime::recorder::RecordEvents>>,
     /// What a failed recording does.
     pub(crate) record_policy: RecordErrorPolicy,
     /// The interlock the loop obeys (tripped by a failed recording under the policy `stop`).
@@ -227,6 +229,23 @@ impl std::fmt::Debug for App {
             .field("info", &self.info)
             .finish_non_exhaustive()
     }
+}
+
+/// Waits up to `wait` for the loop's answer to a request (the loop core's [`Answer::wait_until`] on a tokio timer):
+/// `Err(Busy)` means nothing was applied and nothing will be.
+pub async fn answer_within(answer: Answer, wait: Duration) -> Reply {
+    answer.wait_until(tokio::time::sleep(wait)).await
+}
+
+/// The recording's event counts as a watch channel, fed by the recorder's event port.
+pub(crate) fn record_events(
+    recording: &RecordStatus,
+) -> tokio::sync::watch::Receiver<thermode_runtime::recorder::RecordEvents> {
+    let (sender, receiver) = tokio::sync::watch::channel(recording.events());
+    recording.listen(Box::new(move |events| {
+        sender.send_replace(events);
+    }));
+    receiver
 }
 
 /// The router with every route behind the access check.

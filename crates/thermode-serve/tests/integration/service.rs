@@ -11,8 +11,8 @@ use std::net::{SocketAddr, TcpStream, UdpSocket};
 use std::time::Duration;
 
 use common::{client_runtime, get_json, http_get, start, test_config, trackers, SpyDevice};
-use thermode_runtime::api::NetLimits;
-use thermode_runtime::osc::{encode, OscArg};
+use thermode_serve::api::NetLimits;
+use thermode_serve::osc::{encode, OscArg};
 
 /// A raw HTTP exchange: sends `request`, returns what arrives until the server closes or `limit_s` passes.
 fn raw_exchange(addr: SocketAddr, request: &str, limit_s: f64) -> String {

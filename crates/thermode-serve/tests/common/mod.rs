@@ -16,8 +16,9 @@ use thermode_device::{DefaultFinger, Device, DeviceConfig, DeviceCut, DeviceErro
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::engine::{pipeline_engines, tracking_engines};
-use thermode_runtime::{Daemon, DaemonConfig, EngineFactory, ServerConfig};
+use thermode_runtime::EngineFactory;
 use thermode_safety::DriveCommand;
+use thermode_serve::{Daemon, DaemonConfig, ServerConfig};
 use tokio::net::TcpStream as TokioTcpStream;
 use tokio_tungstenite::tungstenite::Message;
 use tokio_tungstenite::{MaybeTlsStream, WebSocketStream};

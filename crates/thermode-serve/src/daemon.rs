@@ -1,16 +1,14 @@
-//! The daemon: the control loop, the optional recorder, and the network side (HTTP + WebSocket on one port, OSC
-//! on another), started together by [`Daemon::start`] and stopped by [`Daemon::stop`] (or [`Daemon::shutdown`]):
-//! the loop first (every drive to 0 A at once), then the network side, then the recorder (flushed and synced).
+//! The daemon: the loop core and the network side (HTTP + WebSocket on one port, OSC on another, LSL), started
+//! together by [`Daemon::start`] and stopped by [`Daemon::stop`] (or [`Daemon::shutdown`]): the loop first (every
+//! drive to 0 A at once), then the network side, then the dose ledger and the recorder (flushed and synced).
 //!
 //! Security rules applied here, before anything listens: a non-loopback bind address needs a token
-//! ([`RuntimeError::InsecureBind`] otherwise). OSC cannot carry a token: it listens only on loopback binds, and when
+//! ([`ServeError::InsecureBind`] otherwise). OSC cannot carry a token: it listens only on loopback binds, and when
 //! a token is set not at all unless [`ServerConfig::osc_without_token`] asks for it (then on loopback only).
 //!
-//! With a state directory ([`DaemonConfig::state_dir`]) the thermal dose survives restarts ([`crate::ledger`]): the
-//! directory is locked, its ledger read (a corrupt or unreadable one refuses the start: [`RuntimeError::Ledger`])
-//! and written back once (an unwritable directory refuses the start), every channel's dose is restored into its
-//! engine before the loop's first tick, and a writer thread keeps the ledger up to date until the shutdown, whose
-//! final write follows the loop's last tick.
+//! The loop core itself (dose ledger, recorder, loop, ledger writer) is `thermode_runtime::LoopCore`; the daemon
+//! binds the sockets before it starts it, attaches the adapters to its ports, and stops them between the loop's
+//! stop and the core's final writes.
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddr, TcpListener, UdpSocket};
 use std::path::{Path, PathBuf};
@@ -18,22 +16,22 @@ use std::sync::atomic::{AtomicU64, AtomicUsize};
 use std::sync::Arc;
 use std::time::Duration;
 
-use thermode_device::{Device, DeviceError};
+use thermode_device::Device;
+use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
+use thermode_platform::Clock;
+use thermode_runtime::command::CommandSender;
+use thermode_runtime::control_loop::LoopHandle;
+use thermode_runtime::engine::EngineFactory;
+use thermode_runtime::interlock::Interlock;
+use thermode_runtime::recorder::RecordStatus;
+use thermode_runtime::snapshot::Snapshot;
+use thermode_runtime::{CoreConfig, CoreStop, LoopCore};
 
 use crate::api::access::Access;
 use crate::api::protocol::RequestLimits;
 use crate::api::{router, App, Info, NetLimits, OscCounters};
-use crate::command::CommandSender;
-use crate::control_loop::{LoopConfig, LoopHandle};
-use crate::engine::{with_restored_doses, EngineFactory};
-use crate::error::RuntimeError;
-use crate::interlock::Interlock;
-use crate::ledger::{DoseWriter, StateDir};
+use crate::error::ServeError;
 use crate::lsl::{LslConfig, LslCounters, LslStreams, MarkerSender};
-use crate::recorder::{RecordErrorPolicy, RecordState, RecordStatus, Recorder, RESUME_FAILED};
-use crate::snapshot::Snapshot;
-use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
-use thermode_platform::Clock;
 
 /// Default HTTP/WebSocket port.
 pub const DEFAULT_PORT: u16 = 8765;
@@ -92,22 +90,22 @@ impl Default for ServerConfig {
 
 impl ServerConfig {
     /// Refuses an insecure or malformed configuration (see the module documentation).
-    pub fn validate(&self) -> Result<(), RuntimeError> {
+    pub fn validate(&self) -> Result<(), ServeError> {
         if let Some(token) = &self.token {
             let printable = token.chars().all(|c| c.is_ascii_graphic());
             if token.is_empty() || token.len() > MAX_TOKEN_CHARS || !printable {
-                return Err(RuntimeError::Config(format!(
+                return Err(ServeError::Config(format!(
                     "the token must be 1 to {MAX_TOKEN_CHARS} printable ASCII characters without spaces"
                 )));
             }
         } else if !self.bind.is_loopback() {
-            return Err(RuntimeError::InsecureBind {
+            return Err(ServeError::InsecureBind {
                 addr: self.bind.to_string(),
             });
         }
         self.net.validate()?;
         if self.max_message_bytes == 0 || self.max_message_bytes > self.net.hard_message_bytes {
-            return Err(RuntimeError::Config(format!(
+            return Err(ServeError::Config(format!(
                 "message limit {} bytes must lie in 1..={} bytes",
                 self.max_message_bytes, self.net.hard_message_bytes
             )));
@@ -144,16 +142,10 @@ impl ServerConfig {
 /// Everything [`Daemon::start`] needs besides the device, the engines and the clock.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct DaemonConfig {
-    /// The control loop.
-    pub loop_config: LoopConfig,
+    /// The loop core: the loop, the recording, the state directory of the dose ledger.
+    pub core: CoreConfig,
     /// The network side.
     pub server: ServerConfig,
-    /// Directory for the session CSV, if recording.
-    pub record_dir: Option<PathBuf>,
-    /// What a failed recording does. Default [`RecordErrorPolicy::Stop`].
-    pub record_policy: RecordErrorPolicy,
-    /// Largest session file \[bytes\]; a recording that reaches it fails as on a full disk. Default none.
-    pub record_max_bytes: Option<u64>,
     /// The device as shown in `/api/status` (e.g. `sim`).
     pub device_label: String,
     /// A name per channel (e.g. the fingers), or empty.
@@ -161,37 +153,17 @@ pub struct DaemonConfig {
     /// Lab Streaming Layer outlets (`serve --lsl`), or `None` (then liblsl is never loaded). The daemon fills in
     /// the rate, the channel count and the device label. Default `None`.
     pub lsl: Option<LslConfig>,
-    /// The state directory of the dose ledger ([`crate::ledger`]), or `None`: then each channel's dose lives only
-    /// as long as the daemon (tests, the bench). Default `None`; `thermode serve` always gives one.
-    pub state_dir: Option<PathBuf>,
 }
 
-/// What [`Daemon::stop`] did.
-#[derive(Debug)]
-pub struct StopReport {
-    /// The device's answer to switching every drive off at once: `Ok` when it took the command (on a serial display:
-    /// the `AllOff` frame was written); `None` if the loop had already stopped.
-    pub all_off: Option<Result<(), DeviceError>>,
-    /// Loop time of the last tick \[s\].
-    pub last_tick_s: f64,
-    /// Rows recorded (written, whole, flushed and synced), if recording.
-    pub rows: Option<u64>,
-    /// Why the recording failed, if it did (the file then holds `rows` whole rows).
-    pub recording_error: Option<String>,
-}
+/// What [`Daemon::stop`] did: the loop core's stop.
+pub type StopReport = CoreStop;
 
 /// A running daemon.
 #[derive(Debug)]
 pub struct Daemon {
     runtime: Option<tokio::runtime::Runtime>,
-    control: Option<LoopHandle>,
-    recorder: Option<Recorder>,
+    core: LoopCore,
     lsl: Option<LslStreams>,
-    dose_writer: Option<DoseWriter>,
-    ledger_path: Option<PathBuf>,
-    recording: Option<Arc<RecordStatus>>,
-    interlock: Arc<Interlock>,
-    notices: std::sync::Mutex<Notices>,
     http_addr: SocketAddr,
     osc_addr: Option<SocketAddr>,
     token: Option<String>,
@@ -204,7 +176,7 @@ impl Daemon {
         device: Box<dyn Device + Send>,
         engines: EngineFactory,
         clock: Arc<dyn Clock>,
-    ) -> Result<Daemon, RuntimeError> {
+    ) -> Result<Daemon, ServeError> {
         Daemon::start_with_taps(config, device, engines, clock, Vec::new())
     }
 
@@ -214,22 +186,11 @@ impl Daemon {
         device: Box<dyn Device + Send>,
         engines: EngineFactory,
         clock: Arc<dyn Clock>,
-        mut taps: Vec<std::sync::mpsc::SyncSender<crate::snapshot::TickRecord>>,
-    ) -> Result<Daemon, RuntimeError> {
+        mut taps: Vec<std::sync::mpsc::SyncSender<thermode_runtime::snapshot::TickRecord>>,
+    ) -> Result<Daemon, ServeError> {
         let server = &config.server;
         server.validate()?;
-        config.loop_config.validate()?;
-        // The dose ledger before anything listens or drives: a corrupt, unreadable or unwritable one refuses the
-        // start.
-        let ledger = match &config.state_dir {
-            Some(dir) => {
-                let state = StateDir::open(dir)?;
-                let ledger = state.load()?;
-                state.store(&ledger)?;
-                Some((state, ledger))
-            }
-            None => None,
-        };
+        config.core.loop_config.validate()?;
         let http = bind_tcp(SocketAddr::new(server.bind, server.port))?;
         let http_addr = local_addr(&http, server.bind)?;
         let osc = match server.osc_port.filter(|_| server.osc_enabled()) {
@@ -240,72 +201,26 @@ impl Daemon {
             .as_ref()
             .map(|s| s.local_addr())
             .transpose()
-            .map_err(|source| RuntimeError::Io {
+            .map_err(|source| ServeError::Io {
                 context: "OSC socket".into(),
                 source,
             })?;
-        let interlock = Arc::new(Interlock::new());
-        let mut start_notices = Vec::new();
-        let recorder = match &config.record_dir {
-            Some(dir) => {
-                let trips = (config.record_policy == RecordErrorPolicy::Stop).then(|| interlock.clone());
-                let (recorder, feed) = Recorder::start_with(dir, config.record_max_bytes, trips)?;
-                for (path, bytes) in recorder.repaired() {
-                    start_notices.push(format!(
-                        "thermode: {} ended in a torn row (a daemon killed mid-write): cut back to its last whole row \
-                         ({bytes} bytes removed)",
-                        path.display()
-                    ));
-                }
-                taps.push(feed);
-                Some(recorder)
-            }
-            None => None,
-        };
-        let engines = match &ledger {
-            Some((_, saved)) => {
-                let saved = saved.clone();
-                with_restored_doses(engines, move |channel| saved.dose(channel))
-            }
-            None => engines,
-        };
-        if let Some(recorder) = &recorder {
-            write_clock_sidecar(&recorder.path(), clock.as_ref())?;
-        }
+        let prepared = LoopCore::prepare(config.core.clone(), clock.as_ref())?;
         let (lsl, markers) = match &config.lsl {
             Some(wanted) => {
                 let (streams, feed, markers) = start_lsl(wanted, &config, device.channel_count(), clock.as_ref())?;
                 taps.push(feed);
-                if let Some(recorder) = &recorder {
-                    write_lsl_sidecar(&recorder.path(), &streams, &wanted.name)?;
+                if let Some(path) = prepared.recording_path() {
+                    write_lsl_sidecar(&path, &streams, &wanted.name)?;
                 }
                 (Some(streams), Some(markers))
             }
             None => (None, None),
         };
-        let recording = recorder.as_ref().map(Recorder::status);
-        let control = LoopHandle::spawn_with_interlock(
-            config.loop_config.clone(),
-            device,
-            engines,
-            clock.clone(),
-            taps,
-            interlock.clone(),
-        )?;
+        let core = prepared.start(device, engines, clock.clone(), taps)?;
+        let control = core.control().expect("a core just started has its loop");
         let realtime_loop = control.realtime().cpu.is_some();
-        let ledger_path = ledger.as_ref().map(|(state, _)| state.ledger_path());
-        let dose_writer = match ledger {
-            Some((state, saved)) => {
-                Some(
-                    DoseWriter::start(state, saved, control.shared()).map_err(|source| RuntimeError::Io {
-                        context: "cannot start the dose ledger thread".into(),
-                        source,
-                    })?,
-                )
-            }
-            None => None,
-        };
-        let limits = request_limits(&config, &control);
+        let limits = request_limits(&config, control);
         limits.stimulus.object_c.check(limits.default_object_c)?;
         let app = Arc::new(App {
             commands: control.commands(),
@@ -317,15 +232,18 @@ impl Daemon {
                 device: config.device_label.clone(),
                 channel_names: config.channel_names.clone(),
                 osc_port: osc_addr.map(|a| a.port()),
-                recording: recorder.as_ref().map(|r| r.path().display().to_string()),
+                recording: core.recording_path().map(|p| p.display().to_string()),
             },
             osc: Arc::new(OscCounters::default()),
-            dose_ledger: dose_writer.as_ref().map(DoseWriter::status),
-            recording: recording.clone(),
-            record_policy: config.record_policy,
-            interlock: interlock.clone(),
+            dose_ledger: core.dose_ledger(),
+            recording: core.recording(),
+            record_events: core.recording().as_deref().map(crate::api::record_events),
+            record_policy: config.core.record_policy,
+            interlock: core.interlock(),
             clock,
-            reply_wait: Duration::from_secs_f64(server.net.reply_timeout_s.max(2.0 * config.loop_config.period_s())),
+            reply_wait: Duration::from_secs_f64(
+                server.net.reply_timeout_s.max(2.0 * config.core.loop_config.period_s()),
+            ),
             clients: AtomicUsize::new(0),
             next_client: AtomicU64::new(1),
             http: Arc::new(crate::api::server::HttpCounters::default()),
@@ -346,17 +264,8 @@ impl Daemon {
         let runtime = start_network(app, http, osc, realtime_loop)?;
         Ok(Daemon {
             runtime: Some(runtime),
-            control: Some(control),
-            recorder,
+            core,
             lsl,
-            dose_writer,
-            ledger_path,
-            recording,
-            interlock,
-            notices: std::sync::Mutex::new(Notices {
-                pending: start_notices,
-                ..Notices::default()
-            }),
             http_addr,
             osc_addr,
             token: server.token.clone(),
@@ -389,96 +298,43 @@ impl Daemon {
 
     /// The dose ledger file, when the daemon has a state directory.
     pub fn ledger_path(&self) -> Option<&Path> {
-        self.ledger_path.as_deref()
+        self.core.ledger_path()
     }
 
     /// The session CSV, when recording.
     pub fn recording_path(&self) -> Option<PathBuf> {
-        self.recorder.as_ref().map(|r| r.path().to_path_buf())
+        self.core.recording_path()
     }
 
     /// A sender for the loop's command queue (the demo script uses it).
     pub fn commands(&self) -> Option<CommandSender> {
-        self.control.as_ref().map(LoopHandle::commands)
+        self.core.commands()
     }
 
     /// What real-time treatment the control loop obtained.
     pub fn realtime(&self) -> Option<thermode_platform::rt::Realtime> {
-        self.control.as_ref().map(|c| c.realtime().clone())
+        self.core.control().map(|c| c.realtime().clone())
     }
 
     /// A copy of the loop's newest snapshot.
     pub fn snapshot(&self) -> Option<Snapshot> {
-        self.control.as_ref().map(LoopHandle::snapshot)
+        self.core.snapshot()
     }
 
     /// The recording's shared state, when recording.
     pub fn recording(&self) -> Option<Arc<RecordStatus>> {
-        self.recording.clone()
+        self.core.recording()
     }
 
     /// The interlock the loop obeys.
     pub fn interlock(&self) -> Arc<Interlock> {
-        self.interlock.clone()
+        self.core.interlock()
     }
 
     /// What the operator must be told since the last call, one line each (a failed recording; the device link going
     /// down and coming back). `thermode serve` prints them on standard error.
     pub fn take_notices(&self) -> Vec<String> {
-        let mut lines = Vec::new();
-        let Ok(mut seen) = self.notices.lock() else {
-            return lines;
-        };
-        lines.append(&mut seen.pending);
-        if let Some(r) = &self.recording {
-            let events = *r.subscribe().borrow();
-            if events.failures > seen.recording_failures && r.state() == RecordState::Failed {
-                seen.recording_failures = events.failures;
-                let error = r.error().unwrap_or_default();
-                let what = if error.starts_with(RESUME_FAILED) {
-                    "the acknowledgement stands (stimuli allowed, unrecorded); acknowledge again to retry"
-                } else if self.interlock.engaged() {
-                    "every stimulus released; new ones are refused until an operator acknowledges \
-                     (ack_recording, or the dashboard's button), which also goes on in a new file"
-                } else {
-                    "stimuli go on unrecorded (--on-record-error continue); an acknowledgement (ack_recording) \
-                     goes on in a new file"
-                };
-                lines.push(format!(
-                    "thermode: recording to {} FAILED: {}; {} rows written, the file ends with a whole row; {what}",
-                    r.path().display(),
-                    error,
-                    r.rows_written(),
-                ));
-            }
-            if events.resumptions > seen.recording_resumptions {
-                seen.recording_resumptions = events.resumptions;
-                lines.push(format!(
-                    "thermode: recording goes on in {} (segment {}); rows produced meanwhile are lost ({} so far)",
-                    r.path().display(),
-                    r.segment(),
-                    r.rows_lost(),
-                ));
-            }
-        }
-        if let Some(link) = self.control.as_ref().and_then(LoopHandle::link_health) {
-            let (failures, reconnects) = (link.failures(), link.reconnects());
-            if failures > seen.link_failures {
-                seen.link_failures = failures;
-                lines.push(format!(
-                    "thermode: device link DOWN: {}; reconnecting with back-off (every channel faulted, 0 A)",
-                    link.error().unwrap_or_default()
-                ));
-            }
-            if reconnects > seen.link_reconnects {
-                seen.link_reconnects = reconnects;
-                lines.push(format!(
-                    "thermode: device link back up (reconnection {reconnects}); channels resume once their faults are \
-                     cleared (clear_fault)"
-                ));
-            }
-        }
-        lines
+        self.core.take_notices()
     }
 
     /// The LSL streams' counters and clock mapping, when `--lsl` is on.
@@ -490,16 +346,16 @@ impl Daemon {
 
     /// Tick records the recorder or a tap could not take (their queue was full).
     pub fn dropped_records(&self) -> u64 {
-        self.control.as_ref().map_or(0, |c| c.shared().dropped_records())
+        self.core.shared().map_or(0, |s| s.dropped_records())
     }
 
     /// Stops the loop first (its last act: every drive to 0 A at once, within one loop period), then the network
     /// side, then the dose ledger (its final write holds the loop's last tick) and the recorder (every queued row
     /// written, flushed and synced). Returns the rows recorded, if recording.
-    pub fn shutdown(mut self) -> Result<Option<u64>, RuntimeError> {
+    pub fn shutdown(mut self) -> Result<Option<u64>, ServeError> {
         let report = self.stop_parts()?;
         match report.recording_error {
-            Some(error) => Err(RuntimeError::Io {
+            Some(error) => Err(ServeError::Io {
                 context: format!("the recording failed ({} rows written)", report.rows.unwrap_or(0)),
                 source: std::io::Error::other(error),
             }),
@@ -508,53 +364,20 @@ impl Daemon {
     }
 
     /// As [`Daemon::shutdown`], with what the stop did.
-    pub fn stop(mut self) -> Result<StopReport, RuntimeError> {
+    pub fn stop(mut self) -> Result<StopReport, ServeError> {
         self.stop_parts()
     }
 
-    fn stop_parts(&mut self) -> Result<StopReport, RuntimeError> {
-        let mut report = StopReport {
-            all_off: None,
-            last_tick_s: f64::NAN,
-            rows: None,
-            recording_error: None,
-        };
-        if let Some(mut control) = self.control.take() {
-            report.all_off = control.stop();
-            report.last_tick_s = control.snapshot().time_s;
-        }
+    fn stop_parts(&mut self) -> Result<StopReport, ServeError> {
+        self.core.stop_loop();
         if let Some(runtime) = self.runtime.take() {
             runtime.shutdown_timeout(Duration::from_millis(500));
         }
         if let Some(lsl) = self.lsl.take() {
             lsl.finish();
         }
-        let ledger = self.dose_writer.take().map(DoseWriter::finish).transpose();
-        if let Some(recorder) = self.recorder.take() {
-            let status = recorder.status();
-            match recorder.finish() {
-                Ok(rows) => report.rows = Some(rows),
-                Err(e) => {
-                    report.rows = Some(status.rows_written());
-                    report.recording_error = Some(e.to_string());
-                }
-            }
-        }
-        ledger?;
-        Ok(report)
+        Ok(self.core.finish()?)
     }
-}
-
-/// What [`Daemon::take_notices`] has told already.
-#[derive(Debug, Default)]
-struct Notices {
-    /// Lines from the start, not told yet.
-    pending: Vec<String>,
-    /// The recording's failures and resumptions already told.
-    recording_failures: u64,
-    recording_resumptions: u64,
-    link_failures: u64,
-    link_reconnects: u64,
 }
 
 impl Drop for Daemon {
@@ -583,13 +406,13 @@ fn start_lsl(
 ) -> Result<
     (
         LslStreams,
-        std::sync::mpsc::SyncSender<crate::snapshot::TickRecord>,
+        std::sync::mpsc::SyncSender<thermode_runtime::snapshot::TickRecord>,
         MarkerSender,
     ),
-    RuntimeError,
+    ServeError,
 > {
     let lsl = LslConfig {
-        rate_hz: config.loop_config.rate_hz,
+        rate_hz: config.core.loop_config.rate_hz,
         channels,
         device: config.device_label.clone(),
         ..wanted.clone()
@@ -597,31 +420,9 @@ fn start_lsl(
     Ok(LslStreams::start(&lsl, clock)?)
 }
 
-/// Writes `<recording stem>.clock.json` beside the session CSV: what its `time_s` column is (the daemon's loop
-/// clock, monotonic seconds) and the wall-clock time (UTC, ISO 8601 and Unix seconds) of its zero, so that a lab can
-/// align the recording with EEG or other streams (`unix_time_s = loop_time_zero_unix_s + time_s`). The session's
-/// later segment files (`_seg2`, …) share the same clock.
-fn write_clock_sidecar(csv: &Path, clock: &dyn Clock) -> Result<(), RuntimeError> {
-    let (now_s, unix_s) = (clock.now_s(), clock.unix_time_s());
-    let zero_unix_s = unix_s - now_s;
-    let text = serde_json::json!({
-        "recording": csv.file_name().map(|n| n.to_string_lossy().into_owned()),
-        "time_s": "loop time: monotonic seconds of the daemon's clock (CLOCK_MONOTONIC), about 0 at the start",
-        "loop_time_zero_utc": thermode_platform::utc_iso8601_ms(zero_unix_s),
-        "loop_time_zero_unix_s": zero_unix_s,
-        "measured_at_loop_time_s": now_s,
-        "alignment": "unix_time_s = loop_time_zero_unix_s + time_s; with --lsl see the .lsl.json beside it",
-    });
-    let path = csv.with_extension("clock.json");
-    std::fs::write(&path, format!("{text:#}\n")).map_err(|source| RuntimeError::Io {
-        context: format!("cannot write {}", path.display()),
-        source,
-    })
-}
-
 /// Writes `<recording stem>.lsl.json` beside the session CSV: the LSL clock and the loop clock at the same instant
 /// and their offset (`lsl_time_s = time_s + lsl_offset_s` for the CSV's `time_s`).
-fn write_lsl_sidecar(csv: &Path, streams: &LslStreams, name: &str) -> Result<(), RuntimeError> {
+fn write_lsl_sidecar(csv: &Path, streams: &LslStreams, name: &str) -> Result<(), ServeError> {
     let clock = streams.clock();
     let text = serde_json::json!({
         "recording": csv.file_name().map(|n| n.to_string_lossy().into_owned()),
@@ -634,7 +435,7 @@ fn write_lsl_sidecar(csv: &Path, streams: &LslStreams, name: &str) -> Result<(),
         "liblsl": streams.library(),
     });
     let path = csv.with_extension("lsl.json");
-    std::fs::write(&path, format!("{text:#}\n")).map_err(|source| RuntimeError::Io {
+    std::fs::write(&path, format!("{text:#}\n")).map_err(|source| ServeError::Io {
         context: format!("cannot write {}", path.display()),
         source,
     })
@@ -647,37 +448,37 @@ fn request_limits(config: &DaemonConfig, control: &LoopHandle) -> RequestLimits 
         channel_count: control.channel_count(),
         max_message_bytes: server.max_message_bytes,
         stimulus: control.stimulus_limits(),
-        max_subscribe_hz: server.max_subscribe_hz.min(config.loop_config.rate_hz),
+        max_subscribe_hz: server.max_subscribe_hz.min(config.core.loop_config.rate_hz),
         default_object_c: server.default_object_c,
     }
 }
 
-fn bind_tcp(addr: SocketAddr) -> Result<TcpListener, RuntimeError> {
-    let listener = TcpListener::bind(addr).map_err(|source| RuntimeError::Bind {
+fn bind_tcp(addr: SocketAddr) -> Result<TcpListener, ServeError> {
+    let listener = TcpListener::bind(addr).map_err(|source| ServeError::Bind {
         addr: addr.to_string(),
         source,
     })?;
-    listener.set_nonblocking(true).map_err(|source| RuntimeError::Bind {
+    listener.set_nonblocking(true).map_err(|source| ServeError::Bind {
         addr: addr.to_string(),
         source,
     })?;
     Ok(listener)
 }
 
-fn bind_udp(addr: SocketAddr) -> Result<UdpSocket, RuntimeError> {
-    let socket = UdpSocket::bind(addr).map_err(|source| RuntimeError::Bind {
+fn bind_udp(addr: SocketAddr) -> Result<UdpSocket, ServeError> {
+    let socket = UdpSocket::bind(addr).map_err(|source| ServeError::Bind {
         addr: format!("{addr} (OSC)"),
         source,
     })?;
-    socket.set_nonblocking(true).map_err(|source| RuntimeError::Bind {
+    socket.set_nonblocking(true).map_err(|source| ServeError::Bind {
         addr: format!("{addr} (OSC)"),
         source,
     })?;
     Ok(socket)
 }
 
-fn local_addr(listener: &TcpListener, bind: IpAddr) -> Result<SocketAddr, RuntimeError> {
-    listener.local_addr().map_err(|source| RuntimeError::Bind {
+fn local_addr(listener: &TcpListener, bind: IpAddr) -> Result<SocketAddr, ServeError> {
+    listener.local_addr().map_err(|source| ServeError::Bind {
         addr: bind.to_string(),
         source,
     })
@@ -689,20 +490,23 @@ fn start_network(
     http: TcpListener,
     osc: Option<UdpSocket>,
     keep_off_loop_cpu: bool,
-) -> Result<tokio::runtime::Runtime, RuntimeError> {
+) -> Result<tokio::runtime::Runtime, ServeError> {
     let mut builder = tokio::runtime::Builder::new_multi_thread();
     builder.worker_threads(2).thread_name("thermode-net").enable_all();
-    if let Some(cpus) = keep_off_loop_cpu.then(crate::control_loop::network_cpus).flatten() {
+    if let Some(cpus) = keep_off_loop_cpu
+        .then(thermode_runtime::control_loop::network_cpus)
+        .flatten()
+    {
         // Their socket traffic raises soft interrupts on the CPU that sends it: keep it off the loop's.
         builder.on_thread_start(move || {
             let _ = thermode_platform::rt::pin_current_thread(&cpus);
         });
     }
-    let runtime = builder.build().map_err(|source| RuntimeError::Io {
+    let runtime = builder.build().map_err(|source| ServeError::Io {
         context: "cannot start the network runtime".into(),
         source,
     })?;
-    let io_error = |source| RuntimeError::Io {
+    let io_error = |source| ServeError::Io {
         context: "cannot register the listening sockets".into(),
         source,
     };

@@ -24,8 +24,8 @@ use tokio::time::{interval, timeout, Instant, Interval, MissedTickBehavior};
 
 use super::protocol::{self, ApiError, ApiRequest, ErrorCode};
 use super::{error_response, recording_json, status_json, App};
-use crate::command::{Command, CommandError, Owner};
-use crate::recorder::{RecordEvents, RecordState};
+use thermode_runtime::command::{Command, CommandError, Owner};
+use thermode_runtime::recorder::{RecordEvents, RecordState};
 
 /// The close code for a text frame that is not UTF-8 (RFC 6455 §7.4.1: invalid frame payload data).
 pub const CLOSE_INVALID_PAYLOAD: u16 = 1007;
@@ -106,7 +106,7 @@ impl Connection {
     fn new(app: Arc<App>, socket: WebSocket, client: u64) -> Self {
         let bucket = super::limit::TokenBucket::new(app.net.requests_per_s, app.net.burst);
         let now = Instant::now();
-        let recording = app.recording.as_ref().map(|r| r.subscribe());
+        let recording = app.record_events.clone();
         Connection {
             app,
             socket,
@@ -322,7 +322,7 @@ fn marker(app: &App, text: String, channel: Option<usize>, id: &Value) -> Result
 async fn to_loop(app: &App, command: Command, id: &Value) -> Result<Value, ApiError> {
     let (name, extra) = (command.name(), protocol::command_reply_fields(&command));
     let answer = app.commands.request(command).map_err(loop_error)?;
-    let applied = answer.wait(app.reply_wait).await.map_err(loop_error)?;
+    let applied = super::answer_within(answer, app.reply_wait).await.map_err(loop_error)?;
     let mut reply = protocol::ok_reply(id, name, extra);
     if let Value::Object(map) = &mut reply {
         map.insert("tick".into(), json!(applied.tick));

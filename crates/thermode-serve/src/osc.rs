@@ -33,9 +33,9 @@ use tokio::time::Instant;
 use crate::api::limit::TokenBucket;
 use crate::api::protocol::{self, ApiError, ErrorCode};
 use crate::api::{App, OscCounters};
-use crate::command::{Command, Owner};
-use crate::engine::Stimulus;
-use crate::snapshot::ChannelStatus;
+use thermode_runtime::command::{Command, Owner};
+use thermode_runtime::engine::Stimulus;
+use thermode_runtime::snapshot::ChannelStatus;
 
 /// Largest datagram read \[bytes\]; longer ones are truncated and so malformed.
 pub const MAX_PACKET_BYTES: usize = 8192;
@@ -471,7 +471,9 @@ pub async fn serve(socket: UdpSocket, app: Arc<App>) {
                         // busy).
                         let (counters, address, wait) = (app.osc.clone(), message.address.clone(), app.reply_wait);
                         tokio::spawn(async move {
-                            let reply = answer.wait(wait).await.map_err(crate::api::ws::loop_error);
+                            let reply = crate::api::answer_within(answer, wait)
+                                .await
+                                .map_err(crate::api::ws::loop_error);
                             count(&counters, &address, reply.map(|_| ()));
                         });
                     }

@@ -21,12 +21,13 @@ use serde::Serialize;
 use thermode_device::Device;
 use tokio_tungstenite::tungstenite::Message;
 
-use crate::control_loop::LoopConfig;
 use crate::daemon::{Daemon, DaemonConfig, ServerConfig};
-use crate::engine::EngineFactory;
-use crate::error::RuntimeError;
-use crate::snapshot::TickRecord;
+use crate::error::ServeError;
 use thermode_platform::{Clock, MonotonicClock};
+use thermode_runtime::control_loop::LoopConfig;
+use thermode_runtime::engine::EngineFactory;
+use thermode_runtime::snapshot::TickRecord;
+use thermode_runtime::CoreConfig;
 
 /// A drive change larger than this marks the touch's effect on the drive \[A\].
 pub const DRIVE_CHANGE_A: f64 = 0.05;
@@ -242,18 +243,18 @@ fn timing(wakes: &[(f64, f64)], period_s: f64) -> (Spread, Spread) {
 }
 
 /// Measures the timer's floor at `rate_hz` for `duration_s` \[s\], asking for real-time scheduling when `realtime`.
-pub fn timer_floor(rate_hz: f64, duration_s: f64, realtime: bool) -> Result<FloorReport, RuntimeError> {
+pub fn timer_floor(rate_hz: f64, duration_s: f64, realtime: bool) -> Result<FloorReport, ServeError> {
     if !(rate_hz.is_finite() && (1.0..=10_000.0).contains(&rate_hz)) {
-        return Err(RuntimeError::Config("the floor's rate must lie in 1..=10000 Hz".into()));
+        return Err(ServeError::Config("the floor's rate must lie in 1..=10000 Hz".into()));
     }
     if !(duration_s.is_finite() && (0.1..=3600.0).contains(&duration_s)) {
-        return Err(RuntimeError::Config("bench duration must lie in 0.1..=3600 s".into()));
+        return Err(ServeError::Config("bench duration must lie in 0.1..=3600 s".into()));
     }
     let thread = std::thread::Builder::new()
         .name("thermode-floor".into())
         .spawn(move || {
             let obtained = if realtime {
-                crate::control_loop::request_realtime_alone()
+                thermode_runtime::control_loop::request_realtime_alone()
             } else {
                 thermode_platform::rt::Realtime::not_requested("not asked (--realtime)")
             };
@@ -261,7 +262,7 @@ pub fn timer_floor(rate_hz: f64, duration_s: f64, realtime: bool) -> Result<Floo
             let period_s = 1.0 / rate_hz;
             let stop = std::sync::atomic::AtomicBool::new(false);
             let mut ticker = thermode_platform::Ticker::new(period_s, clock.now_s() + period_s)
-                .map_err(|e| RuntimeError::Config(e.to_string()))?;
+                .map_err(|e| ServeError::Config(e.to_string()))?;
             let mut wakes = Vec::new();
             while let Some(tick) = ticker.wait(&clock, &stop) {
                 wakes.push((tick.woke_s, tick.scheduled_s));
@@ -280,13 +281,13 @@ pub fn timer_floor(rate_hz: f64, duration_s: f64, realtime: bool) -> Result<Floo
                 realtime: obtained.describe(),
             })
         });
-    let thread = thread.map_err(|source| RuntimeError::Io {
+    let thread = thread.map_err(|source| ServeError::Io {
         context: "cannot start the floor thread".into(),
         source,
     })?;
     thread
         .join()
-        .unwrap_or_else(|_| Err(RuntimeError::Config("the floor thread panicked".into())))
+        .unwrap_or_else(|_| Err(ServeError::Config("the floor thread panicked".into())))
 }
 
 /// A touch sent by the bench client.
@@ -309,10 +310,10 @@ pub fn run(
     config: &BenchConfig,
     device: Box<dyn Device + Send>,
     engines: EngineFactory,
-) -> Result<BenchReport, RuntimeError> {
+) -> Result<BenchReport, ServeError> {
     let interval_ok = config.touch_interval_s.is_finite() && (0.01..=60.0).contains(&config.touch_interval_s);
     if !(config.duration_s.is_finite() && (0.1..=3600.0).contains(&config.duration_s) && interval_ok) {
-        return Err(RuntimeError::Config(
+        return Err(ServeError::Config(
             "bench duration must lie in 0.1..=3600 s and the touch interval in 0.01..=60 s".into(),
         ));
     }
@@ -321,10 +322,13 @@ pub fn run(
     let (tap, records) = sync_channel::<TickRecord>(1 << 16);
     let collector = std::thread::spawn(move || collect(records));
     let daemon_config = DaemonConfig {
-        loop_config: LoopConfig {
-            rate_hz: config.rate_hz,
-            realtime: config.realtime,
-            ..LoopConfig::default()
+        core: CoreConfig {
+            loop_config: LoopConfig {
+                rate_hz: config.rate_hz,
+                realtime: config.realtime,
+                ..LoopConfig::default()
+            },
+            ..CoreConfig::default()
         },
         server: ServerConfig {
             port: 0,
@@ -347,7 +351,7 @@ pub fn run(
     daemon.shutdown()?;
     let rows = collector
         .join()
-        .map_err(|_| RuntimeError::Config("bench collector panicked".into()))?;
+        .map_err(|_| ServeError::Config("bench collector panicked".into()))?;
     let (sent, telemetry_messages) = sent?;
     let stats = snapshot.map(|s| s.stats).unwrap_or_default();
     let mut report = report(config, channels, &rows, &sent, stats);
@@ -368,7 +372,7 @@ fn collect(records: Receiver<TickRecord>) -> Vec<Row> {
             current_a: [0.0; thermode_device::MAX_CHANNELS],
         };
         for (i, r) in record.channels().iter().enumerate() {
-            row.air[i] = r.mode == crate::snapshot::Mode::Air;
+            row.air[i] = r.mode == thermode_runtime::snapshot::Mode::Air;
             row.current_a[i] = r.telemetry.current_a;
         }
         rows.push(row);
@@ -383,8 +387,8 @@ fn drive_client(
     config: &BenchConfig,
     channels: usize,
     clock: &dyn Clock,
-) -> Result<(Vec<Sent>, u64), RuntimeError> {
-    let io = |e: std::io::Error| RuntimeError::Io {
+) -> Result<(Vec<Sent>, u64), ServeError> {
+    let io = |e: std::io::Error| ServeError::Io {
         context: "bench client".into(),
         source: e,
     };
@@ -393,7 +397,11 @@ fn drive_client(
         .build()
         .map_err(io)?;
     // The clients stand for other processes: off the loop's CPU, as the daemon's network threads are.
-    if let Some(cpus) = config.realtime.then(crate::control_loop::network_cpus).flatten() {
+    if let Some(cpus) = config
+        .realtime
+        .then(thermode_runtime::control_loop::network_cpus)
+        .flatten()
+    {
         let _ = thermode_platform::rt::pin_current_thread(&cpus);
     }
     let url = format!("ws://{}/api/ws", daemon.http_addr());
@@ -454,7 +462,7 @@ fn report(
     channels: usize,
     rows: &[Row],
     sent: &[Sent],
-    stats: crate::snapshot::LoopStats,
+    stats: thermode_runtime::snapshot::LoopStats,
 ) -> BenchReport {
     let period_s = 1.0 / config.rate_hz;
     let wakes: Vec<(f64, f64)> = rows.iter().map(|r| (r.woke_s, r.deadline_s)).collect();

@@ -18,10 +18,10 @@ use thermode_model::limits;
 use thermode_model::materials::{self, Material, DEFAULT_THICKNESS_M};
 use thermode_model::params::{BadValue, Range};
 
-use crate::command::{Command, Owner};
-use crate::engine::Stimulus;
-use crate::limits::StimulusLimits;
-use crate::snapshot::{ChannelStatus, Mode, Snapshot};
+use thermode_runtime::command::{Command, Owner};
+use thermode_runtime::engine::Stimulus;
+use thermode_runtime::limits::StimulusLimits;
+use thermode_runtime::snapshot::{ChannelStatus, Mode, Snapshot};
 
 /// Stable error codes of the API (they never change meaning).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

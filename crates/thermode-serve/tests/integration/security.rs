@@ -9,8 +9,8 @@ use std::sync::Arc;
 
 use common::{ask, client_runtime, http_get, start, test_config, trackers, SpyDevice};
 use thermode_platform::{Clock, MonotonicClock};
-use thermode_runtime::api::NetLimits;
-use thermode_runtime::{Daemon, RuntimeError, ServerConfig, DEFAULT_OSC_PORT, DEFAULT_PORT};
+use thermode_serve::api::NetLimits;
+use thermode_serve::{Daemon, ServeError, ServerConfig, DEFAULT_OSC_PORT, DEFAULT_PORT};
 use tokio_tungstenite::tungstenite::client::IntoClientRequest;
 use tokio_tungstenite::tungstenite::http::HeaderValue;
 
@@ -49,7 +49,7 @@ fn a_non_loopback_bind_without_a_token_refuses_to_start() {
         let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
         let started = Daemon::start(config, Box::new(SpyDevice::new(1)), trackers(), clock);
         match started {
-            Err(e @ RuntimeError::InsecureBind { .. }) => {
+            Err(e @ ServeError::InsecureBind { .. }) => {
                 let text = e.to_string();
                 assert!(text.contains("--token") && text.contains(bind), "{text}");
             }
@@ -72,7 +72,7 @@ fn a_non_loopback_bind_without_a_token_refuses_to_start() {
             ..ServerConfig::default()
         };
         assert!(
-            matches!(config.validate(), Err(RuntimeError::Config(_))),
+            matches!(config.validate(), Err(ServeError::Config(_))),
             "token {bad:?} accepted"
         );
     }

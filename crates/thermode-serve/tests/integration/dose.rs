@@ -14,16 +14,15 @@ use std::sync::Arc;
 use common::{get_json, pid_pipelines, pipelines, test_config, wait_until, SpyDevice};
 use thermode_platform::{Clock, ManualClock};
 use thermode_runtime::ledger::{read_ledger, LedgerError, LEDGER_FILE};
-use thermode_runtime::{Command, Daemon, DaemonConfig, EngineFactory, Owner, RuntimeError};
+use thermode_runtime::{Command, EngineFactory, Owner, RuntimeError};
+use thermode_serve::{Daemon, ServeError};
 
 /// A daemon with the state directory `dir` on a jumping clock, one channel, and its spy's shared log.
 fn start(dir: &std::path::Path, engines: EngineFactory) -> (Daemon, Arc<std::sync::Mutex<common::SpyLog>>) {
     let device = SpyDevice::new(1);
     let log = device.log.clone();
-    let config = DaemonConfig {
-        state_dir: Some(dir.to_path_buf()),
-        ..test_config()
-    };
+    let mut config = test_config();
+    config.core.state_dir = Some(dir.to_path_buf());
     let clock: Arc<dyn Clock> = Arc::new(ManualClock::jumping());
     let daemon = Daemon::start(config, Box::new(device), engines, clock).expect("daemon starts");
     (daemon, log)
@@ -126,14 +125,12 @@ fn a_corrupt_ledger_or_a_state_directory_in_use_refuses_the_start() {
         "{\"format\": \"thermode-dose-ledger\", \"version\": 1, \"channels\": [",
     )
     .expect("write");
-    let config = DaemonConfig {
-        state_dir: Some(tmp.path().to_path_buf()),
-        ..test_config()
-    };
+    let mut config = test_config();
+    config.core.state_dir = Some(tmp.path().to_path_buf());
     let clock: Arc<dyn Clock> = Arc::new(ManualClock::new());
     let refused = Daemon::start(config.clone(), Box::new(SpyDevice::new(1)), pipelines(), clock.clone());
     match refused {
-        Err(RuntimeError::Ledger(LedgerError::Corrupt { .. })) => {}
+        Err(ServeError::Runtime(RuntimeError::Ledger(LedgerError::Corrupt { .. }))) => {}
         other => panic!("a corrupt ledger: {other:?}"),
     }
     assert_eq!(
@@ -146,7 +143,10 @@ fn a_corrupt_ledger_or_a_state_directory_in_use_refuses_the_start() {
         Daemon::start(config.clone(), Box::new(SpyDevice::new(1)), pipelines(), clock.clone()).expect("first daemon");
     let second = Daemon::start(config, Box::new(SpyDevice::new(1)), pipelines(), clock);
     assert!(
-        matches!(second, Err(RuntimeError::Ledger(LedgerError::InUse { .. }))),
+        matches!(
+            second,
+            Err(ServeError::Runtime(RuntimeError::Ledger(LedgerError::InUse { .. })))
+        ),
         "a second daemon on the same state directory: {second:?}"
     );
     first.shutdown().expect("shutdown");

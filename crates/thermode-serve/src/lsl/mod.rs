@@ -31,8 +31,8 @@ use std::time::Duration;
 use serde_json::json;
 use thermode_platform::Clock;
 
-use crate::snapshot::{Mode, RecordRow, TickRecord};
 pub use ffi::{ChannelSpec, Liblsl, LslError, Outlet, StreamSpec};
+use thermode_runtime::snapshot::{Mode, RecordRow, TickRecord};
 
 /// Capacity of the queue from the loop to the streaming thread \[ticks\] (10 s at 100 Hz).
 pub const LSL_QUEUE_TICKS: usize = 1024;
@@ -399,7 +399,7 @@ fn stimulus_event(channel: usize, before: &RecordRow, now: &RecordRow) -> Option
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::snapshot::EMPTY_TELEMETRY;
+    use thermode_runtime::snapshot::EMPTY_TELEMETRY;
     use thermode_safety::FaultCode;
 
     fn row(mode: Mode, label: &str) -> RecordRow {

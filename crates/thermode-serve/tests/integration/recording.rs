@@ -93,7 +93,7 @@ fn every_tick_of_every_channel_is_recorded_in_order() {
 fn the_file_is_flushed_while_the_daemon_runs() {
     let dir = tempfile::tempdir().expect("temp dir");
     let mut config = common::test_config();
-    config.record_dir = Some(dir.path().to_path_buf());
+    config.core.record_dir = Some(dir.path().to_path_buf());
     let daemon = common::start(config, SpyDevice::new(2), trackers());
     let path = daemon.recording_path().expect("recording");
     let flushed = common::wait_until(5.0, || {
@@ -222,9 +222,9 @@ fn a_failed_recording_stops_every_stimulus_until_acknowledged_and_says_so_everyw
     use thermode_runtime::recorder::RecordErrorPolicy;
     let dir = tempfile::tempdir().expect("temp dir");
     let mut config = common::test_config();
-    config.record_dir = Some(dir.path().to_path_buf());
-    config.record_max_bytes = Some(16 * 1024);
-    assert_eq!(config.record_policy, RecordErrorPolicy::Stop, "the default policy");
+    config.core.record_dir = Some(dir.path().to_path_buf());
+    config.core.record_max_bytes = Some(16 * 1024);
+    assert_eq!(config.core.record_policy, RecordErrorPolicy::Stop, "the default policy");
     let daemon = common::start(config, SpyDevice::new(2), trackers());
     let addr = daemon.http_addr();
     let path = daemon.recording_path().expect("recording");
@@ -334,9 +334,9 @@ fn with_the_policy_continue_a_failed_recording_is_reported_and_stimuli_go_on() {
     use thermode_runtime::recorder::RecordErrorPolicy;
     let dir = tempfile::tempdir().expect("temp dir");
     let mut config = common::test_config();
-    config.record_dir = Some(dir.path().to_path_buf());
-    config.record_max_bytes = Some(4 * 1024);
-    config.record_policy = RecordErrorPolicy::Continue;
+    config.core.record_dir = Some(dir.path().to_path_buf());
+    config.core.record_max_bytes = Some(4 * 1024);
+    config.core.record_policy = RecordErrorPolicy::Continue;
     let daemon = common::start(config, SpyDevice::new(2), trackers());
     let addr = daemon.http_addr();
     assert!(
@@ -474,7 +474,7 @@ fn a_torn_row_left_by_a_killed_daemon_is_cut_back_at_the_next_start_but_a_live_f
     // The daemon tells the operator.
     std::fs::write(&torn, format!("{rows}0.0")).expect("write");
     let mut config = common::test_config();
-    config.record_dir = Some(dir.path().to_path_buf());
+    config.core.record_dir = Some(dir.path().to_path_buf());
     let daemon = common::start(config, SpyDevice::new(1), trackers());
     let notices = daemon.take_notices();
     assert!(
