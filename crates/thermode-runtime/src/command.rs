@@ -26,20 +26,8 @@ use thiserror::Error;
 use crate::engine::{EngineError, Stimulus};
 use crate::reply::{self, Closed, ReplyReceiver, ReplySender};
 
-/// Who set a channel's stimulus. Contacts of a WebSocket client are released when it disconnects (after a grace
-/// period); OSC and script contacts have no connection and stay until released.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case", tag = "kind", content = "id")]
-pub enum Owner {
-    /// Nobody (air, or released).
-    Nobody,
-    /// A WebSocket connection, by its connection number.
-    Client(u64),
-    /// An OSC sender.
-    Osc,
-    /// The demo script or the daemon itself.
-    Script,
-}
+/// Who set a channel's stimulus: the wire's vocabulary (`thermode_protocol::Owner`).
+pub use thermode_protocol::Owner;
 
 /// A command for the control loop: the one vocabulary of the WebSocket API, OSC, the demo script and tests. What
 /// a channel should show travels as the pipeline's [`Stimulus`], so nothing between the wire and the engine spells

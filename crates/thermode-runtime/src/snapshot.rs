@@ -30,17 +30,8 @@ pub const EMPTY_TELEMETRY: Telemetry = Telemetry {
     fault: None,
 };
 
-/// What a channel renders.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Mode {
-    /// Air: no contact.
-    Air,
-    /// A material contact.
-    Touch,
-    /// Direct set-point mode.
-    Direct,
-}
+/// What a channel renders: the wire's vocabulary (`thermode_protocol::Mode`).
+pub use thermode_protocol::Mode;
 
 /// One channel as the loop last saw it.
 #[derive(Debug, Clone, PartialEq)]

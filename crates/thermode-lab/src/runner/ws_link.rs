@@ -10,6 +10,9 @@ use std::time::Duration;
 
 use serde_json::{json, Value};
 use thermode_model::materials::Material;
+use thermode_protocol::request::{Marker, NoFields, OnChannel, Subscribe};
+use thermode_protocol::status::Status;
+use thermode_protocol::{Done, Request, Response, Telemetry};
 use tungstenite::client::IntoClientRequest;
 use tungstenite::{Message, WebSocket};
 
@@ -29,7 +32,7 @@ pub struct WsLink {
     channel: usize,
     next_id: u64,
     pending: VecDeque<DisplaySample>,
-    status: Value,
+    status: Option<Status>,
     /// The wall-clock time of the daemon's loop time zero \[s since 1970, UTC\], from the status at connect.
     loop_time_zero_unix_s: f64,
     /// Half the status request's round trip: the uncertainty of that zero \[s\].
@@ -90,38 +93,38 @@ impl WsLink {
             channel,
             next_id: 0,
             pending: VecDeque::new(),
-            status: Value::Null,
+            status: None,
             loop_time_zero_unix_s: f64::NAN,
             loop_time_zero_uncertainty_s: f64::NAN,
         };
         let sent_unix_s = unix_now_s();
-        link.status = link.request(json!({"type": "status"}))?;
+        let Response::Status(reply) = link.request(Request::Status(NoFields {}))? else {
+            return Err(device(format!("{url} answered `status` with another message")));
+        };
+        let status = reply.status;
         let received_unix_s = unix_now_s();
-        if let Some(loop_s) = link.status["time_s"].as_f64() {
-            link.loop_time_zero_unix_s = 0.5 * (sent_unix_s + received_unix_s) - loop_s;
-            link.loop_time_zero_uncertainty_s = 0.5 * (received_unix_s - sent_unix_s);
-        }
-        let count = link.status["channel_count"].as_u64().unwrap_or(0) as usize;
+        link.loop_time_zero_unix_s = 0.5 * (sent_unix_s + received_unix_s) - status.time_s;
+        link.loop_time_zero_uncertainty_s = 0.5 * (received_unix_s - sent_unix_s);
+        let count = status.channel_count;
         if channel >= count {
             return Err(device(format!(
                 "{url} has {count} channel(s); channel {channel} does not exist"
             )));
         }
-        let rate_hz = link.status["loop"]["rate_hz"]
-            .as_f64()
-            .unwrap_or(TELEMETRY_HZ)
-            .min(TELEMETRY_HZ);
-        link.request(json!({"type": "subscribe", "rate_hz": rate_hz}))?;
+        let rate_hz = status.loop_stats.rate_hz.min(TELEMETRY_HZ);
+        link.status = Some(status);
+        link.request(Request::Subscribe(Subscribe { rate_hz }))?;
         Ok(link)
     }
 
     /// The daemon's status at connect (`GET /api/status`).
-    pub fn status(&self) -> &Value {
-        &self.status
+    pub fn status(&self) -> Option<&Status> {
+        self.status.as_ref()
     }
 
-    /// The next message as JSON; a silent or closed link is an error.
-    fn read(&mut self) -> Result<Value, StimulusError> {
+    /// The next message the daemon sends (one this runner does not know, from a newer daemon, is passed over); a
+    /// silent or closed link is an error.
+    fn read(&mut self) -> Result<Response, StimulusError> {
         loop {
             let message = self.socket.read().map_err(|e| {
                 device(match e {
@@ -136,89 +139,112 @@ impl WsLink {
                     other => format!("the link to the display at {} failed: {other}", self.url),
                 })
             })?;
-            if let Message::Text(text) = message {
-                return serde_json::from_str(text.as_str())
-                    .map_err(|e| device(format!("the display sent a malformed message: {e}")));
+            let Message::Text(text) = message else { continue };
+            let value: Value = serde_json::from_str(text.as_str())
+                .map_err(|e| device(format!("the display sent a malformed message: {e}")))?;
+            let known = ["ok", "error", "status", "telemetry", "event"];
+            if !known.iter().any(|kind| value["type"] == *kind) {
+                continue;
             }
+            return serde_json::from_value(value)
+                .map_err(|e| device(format!("the display sent a malformed message: {e}")));
         }
     }
 
-    /// Sends `body` with a fresh id and waits for its reply (keeping telemetry that arrives meanwhile).
-    fn request(&mut self, mut body: Value) -> Result<Value, StimulusError> {
+    /// Sends `request` with a fresh id and waits for its reply (keeping telemetry that arrives meanwhile).
+    fn request(&mut self, request: Request) -> Result<Response, StimulusError> {
         self.next_id += 1;
-        let id = self.next_id;
-        body["id"] = json!(id);
+        let kind = request.kind();
+        let id = thermode_protocol::RequestId::from(self.next_id);
+        let text = request.with_id(id.clone()).to_text();
         self.socket
-            .send(Message::text(body.to_string()))
+            .send(Message::text(text))
             .map_err(|e| device(format!("the link to the display at {} failed: {e}", self.url)))?;
         loop {
-            let message = self.read()?;
-            if message["type"] == "telemetry" {
-                if let Some(sample) = self.sample_of(&message) {
-                    self.pending.push_back(sample);
+            let reply = match self.read()? {
+                Response::Telemetry(telemetry) => {
+                    self.pending.extend(self.sample_of(&telemetry));
+                    continue;
                 }
+                Response::Event(_) => continue,
+                reply => reply,
+            };
+            let reply_id = match &reply {
+                Response::Ok(ok) => Some(&ok.id),
+                Response::Status(status) => Some(&status.id),
+                Response::Error(error) => error.id.as_ref(),
+                Response::Telemetry(_) | Response::Event(_) => None,
+            };
+            if reply_id != Some(&id) {
                 continue;
             }
-            if message["id"] != json!(id) {
-                continue;
-            }
-            if message["type"] == "error" {
+            if let Response::Error(error) = reply {
                 return Err(device(format!(
-                    "the display refused `{}`: {} ({})",
-                    body["type"].as_str().unwrap_or("?"),
-                    message["message"].as_str().unwrap_or(""),
-                    message["code"].as_str().unwrap_or("?")
+                    "the display refused `{kind}`: {} ({})",
+                    error.message,
+                    error.code.as_str()
                 )));
             }
-            return Ok(message);
+            return Ok(reply);
+        }
+    }
+
+    /// What a request did (an `ok` reply), or an error for any other answer.
+    fn done(&mut self, request: Request) -> Result<Done, StimulusError> {
+        match self.request(request)? {
+            Response::Ok(ok) => Ok(ok.done),
+            _ => Err(device("the display answered with a message that is not an `ok`")),
         }
     }
 
     /// This channel's sample in a telemetry message.
-    fn sample_of(&self, telemetry: &Value) -> Option<DisplaySample> {
-        let channel = telemetry["channels"]
-            .as_array()?
-            .iter()
-            .find(|c| c["channel"].as_u64() == Some(self.channel as u64))?;
-        let number = |key: &str| channel[key].as_f64().unwrap_or(f64::NAN);
+    fn sample_of(&self, telemetry: &Telemetry) -> Option<DisplaySample> {
+        let channel = telemetry.channels.iter().find(|c| c.channel == self.channel)?;
+        let number = |value: Option<f64>| value.unwrap_or(f64::NAN);
         Some(DisplaySample {
-            loop_time_s: telemetry["time_s"].as_f64()?,
-            target_skin_c: number("target_skin_c"),
-            skin_c: number("skin_c"),
-            finger_c: number("finger_c"),
-            sensor_c: number("sensor_c"),
-            display_setpoint_c: number("display_setpoint_c"),
-            current_a: number("current_a"),
-            fault: channel["fault"].as_u64().unwrap_or(0).min(u16::MAX as u64) as u16,
-            contact: channel["contact"].as_bool().unwrap_or(false),
+            loop_time_s: telemetry.time_s,
+            target_skin_c: number(channel.target_skin_c),
+            skin_c: number(channel.skin_c),
+            finger_c: number(channel.finger_c),
+            sensor_c: number(channel.sensor_c),
+            display_setpoint_c: number(channel.display_setpoint_c),
+            current_a: number(channel.current_a),
+            fault: channel.fault,
+            contact: channel.contact,
         })
     }
 
-    /// The loop time of a reply \[s\].
-    fn time_of(reply: &Value) -> Result<f64, StimulusError> {
-        reply["time_s"]
-            .as_f64()
-            .ok_or_else(|| device("the display's reply has no loop time"))
+    /// The loop time at which a command was applied \[s\].
+    fn applied_time_s(done: Done) -> Result<f64, StimulusError> {
+        match done {
+            Done::Touch { applied, .. } | Done::Release { applied, .. } => Ok(applied.time_s),
+            _ => Err(device("the display's reply has no loop time")),
+        }
     }
 }
 
 impl DisplayLink for WsLink {
     fn touch(&mut self, material: &Material) -> Result<f64, StimulusError> {
-        let reply = self.request(json!({"type": "touch", "channel": self.channel, "material": material.name}))?;
-        Self::time_of(&reply)
+        let done = self.done(Request::touch(self.channel, &material.name))?;
+        Self::applied_time_s(done)
     }
 
     fn release(&mut self) -> Result<f64, StimulusError> {
-        let reply = self.request(json!({"type": "release", "channel": self.channel}))?;
-        Self::time_of(&reply)
+        let done = self.done(Request::Release(OnChannel {
+            channel: self.channel as i64,
+        }))?;
+        Self::applied_time_s(done)
     }
 
     fn marker(&mut self, text: &str) -> Result<Option<f64>, StimulusError> {
-        let reply = self.request(json!({"type": "marker", "text": text, "channel": self.channel}))?;
-        Ok(reply["lsl_time_s"]
-            .as_f64()
-            .zip(reply["time_s"].as_f64())
-            .map(|(lsl_s, loop_s)| lsl_s - loop_s))
+        let marker = Request::Marker(Marker {
+            text: text.to_string(),
+            channel: Some(self.channel as i64),
+        });
+        match self.done(marker)? {
+            Done::Marker { time_s, lsl_time_s, .. } => Ok(lsl_time_s.map(|lsl_s| lsl_s - time_s)),
+            _ => Err(device("the display answered `marker` with another reply")),
+        }
     }
 
     fn next_sample(&mut self) -> Result<DisplaySample, StimulusError> {
@@ -226,9 +252,8 @@ impl DisplayLink for WsLink {
             if let Some(sample) = self.pending.pop_front() {
                 return Ok(sample);
             }
-            let message = self.read()?;
-            if message["type"] == "telemetry" {
-                if let Some(sample) = self.sample_of(&message) {
+            if let Response::Telemetry(telemetry) = self.read()? {
+                if let Some(sample) = self.sample_of(&telemetry) {
                     return Ok(sample);
                 }
             }
@@ -236,13 +261,14 @@ impl DisplayLink for WsLink {
     }
 
     fn describe(&self) -> Value {
+        let status = self.status.as_ref();
         json!({
             "url": self.url,
             "channel": self.channel,
-            "daemon_version": self.status["version"],
-            "device": self.status["device"],
-            "loop_rate_hz": self.status["loop"]["rate_hz"],
-            "limits": self.status["limits"],
+            "daemon_version": status.map(|s| &s.version),
+            "device": status.map(|s| &s.device),
+            "loop_rate_hz": status.map(|s| s.loop_stats.rate_hz),
+            "limits": status.map(|s| &s.limits),
             "loop_time_zero_utc": thermode_platform::utc_iso8601_ms(self.loop_time_zero_unix_s),
             "loop_time_zero_unix_s": self.loop_time_zero_unix_s,
             "loop_time_zero_uncertainty_s": self.loop_time_zero_uncertainty_s,
@@ -255,8 +281,10 @@ impl Drop for WsLink {
     /// Releases the channel and closes the connection (best effort: the daemon releases a gone client's contacts
     /// after its grace period anyway).
     fn drop(&mut self) {
-        let release = json!({"type": "release", "id": 0, "channel": self.channel});
-        let _ = self.socket.send(Message::text(release.to_string()));
+        let release = Request::Release(OnChannel {
+            channel: self.channel as i64,
+        });
+        let _ = self.socket.send(Message::text(release.with_id(0).to_text()));
         let _ = self.socket.close(None);
         let _ = self.socket.flush();
     }

@@ -7,7 +7,7 @@ use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
-use serde_json::{json, Value};
+use thermode_protocol::reply::{self, ChannelHistory};
 
 use thermode_runtime::snapshot::{Shared, Snapshot};
 
@@ -50,7 +50,7 @@ impl History {
     }
 
     /// The `/api/history` body: per channel, parallel arrays over the kept samples (null where not finite).
-    pub fn to_json(&self) -> Value {
+    pub fn to_history(&self) -> reply::History {
         let samples = self.samples.lock().unwrap_or_else(|e| e.into_inner());
         let time_s: Vec<f64> = samples.iter().map(|(t, _)| *t).collect();
         let count = samples.back().map_or(0, |(_, rows)| rows.len());
@@ -60,13 +60,20 @@ impl History {
                 .map(|(_, rows)| rows.get(i).map(|r| r[k]).filter(|v| v.is_finite()))
                 .collect()
         };
-        let channels: Vec<Value> = (0..count)
-            .map(|i| {
-                json!({"channel": i, "target_skin_c": column(i, 0), "skin_c": column(i, 1),
-                       "sensor_c": column(i, 2), "display_setpoint_c": column(i, 3), "current_a": column(i, 4)})
-            })
-            .collect();
-        json!({"rate_hz": HISTORY_RATE_HZ, "window_s": HISTORY_WINDOW_S, "time_s": time_s, "channels": channels})
+        let channels = (0..count).map(|i| ChannelHistory {
+            channel: i,
+            target_skin_c: column(i, 0),
+            skin_c: column(i, 1),
+            sensor_c: column(i, 2),
+            display_setpoint_c: column(i, 3),
+            current_a: column(i, 4),
+        });
+        reply::History {
+            rate_hz: HISTORY_RATE_HZ,
+            window_s: HISTORY_WINDOW_S,
+            time_s,
+            channels: channels.collect(),
+        }
     }
 }
 

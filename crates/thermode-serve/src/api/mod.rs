@@ -19,7 +19,11 @@ use axum::middleware::{self, Next};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
 use axum::{Json, Router};
-use serde_json::{json, Value};
+use thermode_protocol::finite;
+use thermode_protocol::status::{
+    Auth, Commands, Contact, DeviceCutEntry, DoseLedgerStatus, EarlierFile, FaultEntry, HttpStatus, InterlockStatus,
+    LinkStatus, LoopStatus, LslStatus, OscStatus, RealtimeStatus, Recording, Status,
+};
 
 use access::Access;
 use protocol::{ApiError, ErrorCode, RequestLimits};
@@ -28,7 +32,7 @@ use thermode_runtime::command::{Answer, CommandSender, Reply};
 use thermode_runtime::interlock::Interlock;
 use thermode_runtime::ledger::WriterStatus;
 use thermode_runtime::recorder::{RecordErrorPolicy, RecordState, RecordStatus};
-use thermode_runtime::snapshot::{Mode, Shared};
+use thermode_runtime::snapshot::{Mode, Shared, Snapshot};
 
 /// The dashboard page (one static file, inline script, hand-drawn canvas plots).
 pub const DASHBOARD_HTML: &str = include_str!("../dashboard.html");
@@ -252,7 +256,7 @@ pub(crate) fn record_events(
 pub fn router(app: Arc<App>) -> Router {
     Router::new()
         .route("/", get(dashboard))
-        .route("/api/status", get(status))
+        .route("/api/status", get(status_route))
         .route("/api/materials", get(materials))
         .route("/api/history", get(history_route))
         .route("/api/ws", get(ws::upgrade))
@@ -263,7 +267,7 @@ pub fn router(app: Arc<App>) -> Router {
 
 /// An error as an HTTP response with a JSON body.
 pub(crate) fn error_response(status: StatusCode, error: &ApiError) -> Response {
-    (status, Json(error.to_json(&Value::Null))).into_response()
+    (status, Json(error.reply(None))).into_response()
 }
 
 async fn check_access(State(app): State<Arc<App>>, request: Request, next: Next) -> Response {
@@ -299,16 +303,16 @@ async fn dashboard() -> Response {
     response
 }
 
-async fn status(State(app): State<Arc<App>>) -> Json<Value> {
-    Json(status_json(&app))
+async fn status_route(State(app): State<Arc<App>>) -> Json<Status> {
+    Json(status(&app))
 }
 
-async fn history_route(State(app): State<Arc<App>>) -> Json<Value> {
-    Json(app.history.to_json())
+async fn history_route(State(app): State<Arc<App>>) -> Json<thermode_protocol::reply::History> {
+    Json(app.history.to_history())
 }
 
-async fn materials() -> Json<Value> {
-    Json(protocol::materials_json())
+async fn materials() -> Json<Vec<thermode_protocol::MaterialInfo>> {
+    Json(thermode_protocol::materials::library_info())
 }
 
 async fn not_found() -> Response {
@@ -320,160 +324,188 @@ async fn not_found() -> Response {
 }
 
 /// The daemon's status (the `/api/status` body and the WebSocket `status` reply without `type` and `id`).
-pub fn status_json(app: &App) -> Value {
+pub fn status(app: &App) -> Status {
     let snapshot = app.shared.snapshot();
     let name = |i: usize| app.info.channel_names.get(i).map(String::as_str);
-    let channels: Vec<Value> = snapshot
-        .channels
-        .iter()
-        .map(|c| protocol::channel_status(c, name(c.channel)))
-        .collect();
-    let contacts: Vec<Value> = snapshot
-        .channels
-        .iter()
-        .filter(|c| c.mode != Mode::Air)
-        .map(|c| json!({"channel": c.channel, "material": &*c.label, "mode": c.mode, "owner": c.owner}))
-        .collect();
-    let faults: Vec<Value> = snapshot
-        .channels
-        .iter()
-        .filter_map(|c| c.telemetry.fault.map(|f| (c.channel, f)))
-        .map(|(channel, f)| json!({"channel": channel, "fault": f.code(), "description": f.description()}))
-        .collect();
-    let device_cuts: Vec<Value> = snapshot
-        .channels
-        .iter()
-        .filter_map(|c| c.device_cut.map(|cut| (c.channel, cut)))
-        .map(|(channel, cut)| json!({"channel": channel, "cut": cut.name(), "description": cut.to_string()}))
-        .collect();
-    let s = &snapshot.stats;
-    let osc = &app.osc;
     let count = |a: &AtomicU64| a.load(Ordering::Relaxed);
-    let osc_last_error = osc.last_error.lock().map(|e| e.clone()).unwrap_or(None);
-    json!({
-        "version": env!("CARGO_PKG_VERSION"),
-        "device": app.info.device,
-        "running": snapshot.running,
-        "time_s": snapshot.time_s,
-        "tick": snapshot.tick,
-        "channel_count": snapshot.channels.len(),
-        "channels": channels,
-        "contacts": contacts,
-        "faults": faults,
-        "device_cuts": device_cuts,
-        "loop": {
-            "rate_hz": s.rate_hz,
-            "period_s": s.period_s,
-            "period_p50_s": s.period.p50_s,
-            "period_p99_s": s.period.p99_s,
-            "period_max_s": s.period.max_s,
-            "work_p50_s": s.work.p50_s,
-            "work_p99_s": s.work.p99_s,
-            "work_max_s": s.work.max_s,
-            "window_ticks": s.period.count,
-            "missed_deadlines": s.missed_deadlines,
-            "ticks": s.ticks,
-            "skipped_publishes": app.shared.skipped_publishes(),
-            "realtime": {
-                "scheduling": if app.realtime.fifo_priority.is_some() { "SCHED_FIFO" } else { "normal" },
-                "priority": app.realtime.fifo_priority,
-                "scheduling_error": app.realtime.scheduling_error,
-                "memory_locked": app.realtime.memory_locked,
-                "memory_error": app.realtime.memory_error,
-                "cpu": app.realtime.cpu,
-            },
+    Status {
+        version: env!("CARGO_PKG_VERSION").to_string(),
+        device: app.info.device.clone(),
+        running: snapshot.running,
+        time_s: snapshot.time_s,
+        tick: snapshot.tick,
+        channel_count: snapshot.channels.len(),
+        channels: snapshot
+            .channels
+            .iter()
+            .map(|c| protocol::channel_status(c, name(c.channel)))
+            .collect(),
+        contacts: contacts(&snapshot),
+        faults: faults(&snapshot),
+        device_cuts: device_cuts(&snapshot),
+        loop_stats: loop_status(app, &snapshot),
+        commands: Commands {
+            applied: snapshot.commands_applied,
+            refused: snapshot.commands_refused,
+            withdrawn: snapshot.commands_withdrawn,
         },
-        "commands": {
-            "applied": snapshot.commands_applied,
-            "refused": snapshot.commands_refused,
-            "withdrawn": snapshot.commands_withdrawn,
+        device_errors: snapshot.device_errors,
+        clients: app.clients.load(Ordering::Relaxed),
+        http: HttpStatus {
+            open: count(&app.http.open),
+            max_connections: app.http_cap,
+            header_timeout_s: app.net.header_timeout_s,
+            idle_timeout_s: app.net.http_idle_timeout_s,
+            accepted: count(&app.http.accepted),
+            evicted: count(&app.http.evicted),
+            timed_out: count(&app.http.timed_out),
+            refused: count(&app.http.refused),
+            accept_errors: count(&app.http.accept_errors),
         },
-        "device_errors": snapshot.device_errors,
-        "clients": app.clients.load(Ordering::Relaxed),
-        "http": {
-            "open": count(&app.http.open),
-            "max_connections": app.http_cap,
-            "header_timeout_s": app.net.header_timeout_s,
-            "idle_timeout_s": app.net.http_idle_timeout_s,
-            "accepted": count(&app.http.accepted),
-            "evicted": count(&app.http.evicted),
-            "timed_out": count(&app.http.timed_out),
-            "refused": count(&app.http.refused),
-            "accept_errors": count(&app.http.accept_errors),
+        auth: Auth {
+            token_required: app.access.token_required(),
         },
-        "auth": {"token_required": app.access.token_required()},
-        "limits": protocol::merged(json!({
-            "max_message_bytes": app.limits.max_message_bytes,
-            "requests_per_s": app.net.requests_per_s,
-            "burst": app.net.burst,
-            "max_subscribe_hz": app.limits.max_subscribe_hz,
-        }), protocol::limits_json(&app.limits.stimulus)),
-        "osc": {
-            "enabled": app.info.osc_port.is_some(),
-            "port": app.info.osc_port,
-            "packets": count(&osc.packets),
-            "applied": count(&osc.applied),
-            "malformed": count(&osc.malformed),
-            "refused": count(&osc.refused),
-            "rate_limited": count(&osc.rate_limited),
-            "subscribers": osc.subscribers.load(Ordering::Relaxed),
-            "sent": count(&osc.sent),
-            "last_error": osc_last_error,
+        limits: protocol::limits_status(&app.limits, app.net.requests_per_s, app.net.burst),
+        osc: osc_status(app),
+        recording: app.recording.as_ref().map(|r| recording_status(app, r)),
+        lsl: app.lsl.as_ref().map(|l| LslStatus {
+            library: l.library.clone(),
+            lsl_offset_s: l.clock.offset_s,
+            lsl_clock_at_start_s: l.clock.lsl_at_start_s,
+            samples: count(&l.counters.samples),
+            markers: count(&l.counters.markers),
+            failed: count(&l.counters.failed),
+        }),
+        link: app.link.as_ref().map(|l| LinkStatus {
+            state: if l.is_up() { "up" } else { "down" }.to_string(),
+            reconnects: l.reconnects(),
+            failures: l.failures(),
+            attempts: l.attempts(),
+            error: l.error(),
+        }),
+        dose_ledger: app.dose_ledger.as_ref().map(|w| DoseLedgerStatus {
+            path: w.path.display().to_string(),
+            writes: count(&w.writes),
+            errors: count(&w.errors),
+            last_error: w.last_error.lock().map(|e| e.clone()).unwrap_or(None),
+        }),
+        interlock: InterlockStatus {
+            engaged: app.interlock.engaged(),
+            trips: app.interlock.trips(),
+            reason: app.interlock.reason(),
         },
-        "recording": app.recording.as_ref().map(|r| recording_json(app, r)),
-        "lsl": app.lsl.as_ref().map(|l| json!({
-            "library": l.library,
-            "lsl_offset_s": l.clock.offset_s,
-            "lsl_clock_at_start_s": l.clock.lsl_at_start_s,
-            "samples": count(&l.counters.samples),
-            "markers": count(&l.counters.markers),
-            "failed": count(&l.counters.failed),
-        })),
-        "link": app.link.as_ref().map(|l| json!({
-            "state": if l.is_up() { "up" } else { "down" },
-            "reconnects": l.reconnects(),
-            "failures": l.failures(),
-            "attempts": l.attempts(),
-            "error": l.error(),
-        })),
-        "dose_ledger": app.dose_ledger.as_ref().map(|w| json!({
-            "path": w.path.display().to_string(),
-            "writes": count(&w.writes),
-            "errors": count(&w.errors),
-            "last_error": w.last_error.lock().map(|e| e.clone()).unwrap_or(None),
-        })),
-        "interlock": {
-            "engaged": app.interlock.engaged(),
-            "trips": app.interlock.trips(),
-            "reason": app.interlock.reason(),
-        },
+    }
+}
+
+fn contacts(snapshot: &Snapshot) -> Vec<Contact> {
+    let shown = snapshot.channels.iter().filter(|c| c.mode != Mode::Air);
+    shown
+        .map(|c| Contact {
+            channel: c.channel,
+            material: c.label.to_string(),
+            mode: c.mode,
+            owner: c.owner,
+        })
+        .collect()
+}
+
+fn faults(snapshot: &Snapshot) -> Vec<FaultEntry> {
+    let faulted = snapshot
+        .channels
+        .iter()
+        .filter_map(|c| c.telemetry.fault.map(|f| (c.channel, f)));
+    faulted
+        .map(|(channel, f)| FaultEntry {
+            channel,
+            fault: f.code(),
+            description: f.description().to_string(),
+        })
+        .collect()
+}
+
+fn device_cuts(snapshot: &Snapshot) -> Vec<DeviceCutEntry> {
+    let cut = snapshot
+        .channels
+        .iter()
+        .filter_map(|c| c.device_cut.map(|cut| (c.channel, cut)));
+    cut.map(|(channel, cut)| DeviceCutEntry {
+        channel,
+        cut: cut.name().to_string(),
+        description: cut.to_string(),
     })
+    .collect()
+}
+
+fn loop_status(app: &App, snapshot: &Snapshot) -> LoopStatus {
+    let (s, rt) = (&snapshot.stats, &app.realtime);
+    LoopStatus {
+        rate_hz: s.rate_hz,
+        period_s: s.period_s,
+        period_p50_s: finite(s.period.p50_s),
+        period_p99_s: finite(s.period.p99_s),
+        period_max_s: finite(s.period.max_s),
+        work_p50_s: finite(s.work.p50_s),
+        work_p99_s: finite(s.work.p99_s),
+        work_max_s: finite(s.work.max_s),
+        window_ticks: s.period.count,
+        missed_deadlines: s.missed_deadlines,
+        ticks: s.ticks,
+        skipped_publishes: app.shared.skipped_publishes(),
+        realtime: RealtimeStatus {
+            scheduling: if rt.fifo_priority.is_some() {
+                "SCHED_FIFO"
+            } else {
+                "normal"
+            }
+            .to_string(),
+            priority: rt.fifo_priority,
+            scheduling_error: rt.scheduling_error.clone(),
+            memory_locked: rt.memory_locked,
+            memory_error: rt.memory_error.clone(),
+            cpu: rt.cpu,
+        },
+    }
+}
+
+fn osc_status(app: &App) -> OscStatus {
+    let (osc, count) = (&app.osc, |a: &AtomicU64| a.load(Ordering::Relaxed));
+    OscStatus {
+        enabled: app.info.osc_port.is_some(),
+        port: app.info.osc_port,
+        packets: count(&osc.packets),
+        applied: count(&osc.applied),
+        malformed: count(&osc.malformed),
+        refused: count(&osc.refused),
+        rate_limited: count(&osc.rate_limited),
+        subscribers: osc.subscribers.load(Ordering::Relaxed),
+        sent: count(&osc.sent),
+        last_error: osc.last_error.lock().map(|e| e.clone()).unwrap_or(None),
+    }
 }
 
 /// `/api/status` `recording`: the file, `state` (`ok` or `failed`), the `error`, the rows in the file, and what the
 /// policy does.
-pub fn recording_json(app: &App, r: &RecordStatus) -> Value {
+pub fn recording_status(app: &App, r: &RecordStatus) -> Recording {
     let state = match r.state() {
         RecordState::Ok => "ok",
         RecordState::Failed => "failed",
     };
-    let earlier: Vec<Value> = r
-        .earlier_files()
-        .into_iter()
-        .map(|(path, rows)| json!({"path": path.display().to_string(), "rows_written": rows}))
-        .collect();
-    json!({
-        "path": r.path().display().to_string(),
-        "segment": r.segment(),
-        "earlier_files": earlier,
-        "state": state,
-        "error": r.error(),
-        "rows_written": r.rows_written(),
-        "rows": r.rows_written(),
-        "bytes_written": r.bytes_written(),
-        "rows_lost": r.rows_lost(),
-        "dropped_ticks": app.shared.dropped_records(),
-        "on_error": app.record_policy.name(),
-        "stimuli_refused": r.state() == RecordState::Failed && app.interlock.engaged(),
-    })
+    let earlier = r.earlier_files().into_iter().map(|(path, rows)| EarlierFile {
+        path: path.display().to_string(),
+        rows_written: rows,
+    });
+    Recording {
+        path: r.path().display().to_string(),
+        segment: r.segment(),
+        earlier_files: earlier.collect(),
+        state: state.to_string(),
+        error: r.error(),
+        rows_written: r.rows_written(),
+        rows: r.rows_written(),
+        bytes_written: r.bytes_written(),
+        rows_lost: r.rows_lost(),
+        dropped_ticks: app.shared.dropped_records(),
+        on_error: app.record_policy.name().to_string(),
+        stimuli_refused: r.state() == RecordState::Failed && app.interlock.engaged(),
+    }
 }

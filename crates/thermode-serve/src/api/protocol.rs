@@ -1,123 +1,21 @@
-//! The contact API's messages: parsing and validating a request into an [`ApiRequest`] (a loop [`Command`], or one
-//! of the requests only the connection handles), the stable error codes, and the JSON of replies, telemetry and
-//! status. Every check happens here, before anything reaches the control loop; a stimulus is checked by
-//! [`stimulus_command`] against the limits the channels enforce (shared with OSC), every other number with
-//! `thermode_model::params`.
-//!
-//! A request is a JSON object with `type` and `id` (a string of at most 128 characters or a number; replies
-//! carry it back unchanged). Unknown fields are refused (`unknown_field`), so a misspelt key never goes unnoticed,
-//! and so is a key given twice in one object (`bad_json`): JSON readers differ on which of the two counts, so a
-//! proxy that checked the first `type` must not see thermode act on the second.
+//! The daemon's side of the wire vocabulary (`thermode_protocol`): a request, read and typed by
+//! `thermode_protocol::parse_request`, is checked against what this daemon offers (its channels, the library, the
+//! limits its channels enforce) and becomes an [`ApiRequest`] (a loop [`Command`], or one of the requests only the
+//! connection handles); the loop's snapshot becomes the protocol's telemetry and channel states. Every check happens
+//! here, before anything reaches the control loop; a stimulus is checked by [`stimulus_command`] against the limits
+//! the channels enforce (shared with OSC), every other number with `thermode_model::params`.
 
-use std::collections::HashSet;
-use std::fmt;
-
-use serde::de::{self, Deserialize, Deserializer, MapAccess, SeqAccess, Visitor};
-use serde_json::{json, Map, Value};
-use thermode_model::limits;
-use thermode_model::materials::{self, Material, DEFAULT_THICKNESS_M};
-use thermode_model::params::{BadValue, Range};
-
+use thermode_model::materials::{self, Material};
+use thermode_model::params::Range;
+use thermode_protocol::request::{Marker, Setpoint, Touch};
+pub use thermode_protocol::request::{MAX_ID_CHARS, MAX_MARKER_CHARS, MAX_NAME_CHARS, MIN_SUBSCRIBE_HZ};
+use thermode_protocol::status::Limits;
+use thermode_protocol::{finite, AppliedAt, ChannelState, ChannelTelemetry, Done, Request, RequestId, Telemetry};
+pub use thermode_protocol::{ApiError, ErrorCode};
 use thermode_runtime::command::{Command, Owner};
 use thermode_runtime::engine::Stimulus;
 use thermode_runtime::limits::StimulusLimits;
 use thermode_runtime::snapshot::{ChannelStatus, Mode, Snapshot};
-
-/// Stable error codes of the API (they never change meaning).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ErrorCode {
-    /// The message is not valid JSON, not an object, or a binary frame.
-    BadJson,
-    /// `type` names no request.
-    UnknownType,
-    /// A required field is missing.
-    MissingField,
-    /// A field the request does not have.
-    UnknownField,
-    /// A field has the wrong type or a value out of range (NaN, huge, negative…).
-    BadValue,
-    /// The channel does not exist.
-    UnknownChannel,
-    /// The material is not in the library.
-    UnknownMaterial,
-    /// The message exceeds the size limit.
-    TooLarge,
-    /// The connection sends faster than its rate limit.
-    RateLimited,
-    /// Missing or wrong token.
-    Unauthorized,
-    /// The request's Host or Origin is not allowed (another web site, DNS rebinding).
-    Forbidden,
-    /// The channel has a latched safety fault; its drive is off.
-    DeviceFault,
-    /// The control loop is overloaded or did not answer in time; nothing changed.
-    Busy,
-    /// Too many WebSocket connections.
-    TooManyConnections,
-    /// A `stop_all` sent after this request was applied first; nothing changed.
-    Cancelled,
-    /// The recording failed and the policy is `stop`: stimuli are refused until `ack_recording`.
-    RecordingFailed,
-}
-
-impl ErrorCode {
-    /// The code as it appears in messages.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            ErrorCode::BadJson => "bad_json",
-            ErrorCode::UnknownType => "unknown_type",
-            ErrorCode::MissingField => "missing_field",
-            ErrorCode::UnknownField => "unknown_field",
-            ErrorCode::BadValue => "bad_value",
-            ErrorCode::UnknownChannel => "unknown_channel",
-            ErrorCode::UnknownMaterial => "unknown_material",
-            ErrorCode::TooLarge => "too_large",
-            ErrorCode::RateLimited => "rate_limited",
-            ErrorCode::Unauthorized => "unauthorized",
-            ErrorCode::Forbidden => "forbidden",
-            ErrorCode::DeviceFault => "device_fault",
-            ErrorCode::Busy => "busy",
-            ErrorCode::TooManyConnections => "too_many_connections",
-            ErrorCode::Cancelled => "cancelled",
-            ErrorCode::RecordingFailed => "recording_failed",
-        }
-    }
-}
-
-/// An error reply's code and message.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ApiError {
-    /// The stable code.
-    pub code: ErrorCode,
-    /// A human-readable explanation.
-    pub message: String,
-}
-
-impl From<BadValue> for ApiError {
-    fn from(e: BadValue) -> Self {
-        ApiError::bad_value(&e)
-    }
-}
-
-impl ApiError {
-    /// An error with `code` and `message`.
-    pub fn new(code: ErrorCode, message: impl Into<String>) -> Self {
-        ApiError {
-            code,
-            message: message.into(),
-        }
-    }
-
-    /// A refused number (`bad_value`).
-    pub fn bad_value(e: &impl std::fmt::Display) -> Self {
-        ApiError::new(ErrorCode::BadValue, e.to_string())
-    }
-
-    /// The error as a message: `{"type": "error", "id", "code", "message"}`.
-    pub fn to_json(&self, id: &Value) -> Value {
-        json!({"type": "error", "id": id, "code": self.code.as_str(), "message": self.message})
-    }
-}
 
 /// Limits every request is checked against.
 #[derive(Debug, Clone, PartialEq)]
@@ -134,13 +32,6 @@ pub struct RequestLimits {
     /// Object temperature when a touch gives none \[°C\] (default 23, room temperature).
     pub default_object_c: f64,
 }
-
-/// Slowest telemetry subscription \[Hz\] (one message every 100 s).
-pub const MIN_SUBSCRIBE_HZ: f64 = 0.01;
-/// Longest accepted `id` string \[characters\].
-pub const MAX_ID_CHARS: usize = 128;
-/// Longest accepted name (material or custom label) \[characters\].
-pub const MAX_NAME_CHARS: usize = 64;
 
 /// A validated request: a command for the control loop, or one the connection answers itself.
 #[derive(Debug, Clone)]
@@ -160,194 +51,74 @@ pub enum ApiRequest {
     AckRecording,
     /// A client's event marker (forwarded to the LSL marker stream under `serve --lsl`).
     Marker {
-        /// The text (at most [`crate::lsl::MAX_MARKER_CHARS`] characters, no NUL).
+        /// The text (at most [`MAX_MARKER_CHARS`] characters, no NUL).
         text: String,
         /// The channel it concerns, if any.
         channel: Option<usize>,
     },
 }
 
-/// Parses and validates one text message from `owner`. Returns the `id` to answer with (null when there is none or
-/// it is invalid) and the request or the error.
-pub fn parse(text: &str, limits: &RequestLimits, owner: Owner) -> (Value, Result<ApiRequest, ApiError>) {
-    if text.len() > limits.max_message_bytes {
-        let message = format!(
-            "message of {} bytes exceeds the limit of {} bytes",
-            text.len(),
-            limits.max_message_bytes
-        );
-        return (Value::Null, Err(ApiError::new(ErrorCode::TooLarge, message)));
-    }
-    if let Err(e) = serde_json::from_str::<UniqueKeys>(text) {
-        return (
-            Value::Null,
-            Err(ApiError::new(ErrorCode::BadJson, format!("not valid JSON: {e}"))),
-        );
-    }
-    let value: Value = match serde_json::from_str(text) {
-        Ok(value) => value,
-        Err(e) => {
-            return (
-                Value::Null,
-                Err(ApiError::new(ErrorCode::BadJson, format!("not valid JSON: {e}"))),
-            )
-        }
-    };
-    let Value::Object(map) = value else {
-        return (
-            Value::Null,
-            Err(ApiError::new(ErrorCode::BadJson, "a message must be a JSON object")),
-        );
-    };
-    let id = match request_id(&map) {
-        Ok(id) => id,
-        Err(e) => return (Value::Null, Err(e)),
-    };
-    let request = parse_object(&map, limits, owner);
-    (id, request)
+/// Reads and validates one text message from `owner`: the `id` to answer with (`None` when there is none or it is
+/// invalid) and the request or the error.
+pub fn parse(text: &str, limits: &RequestLimits, owner: Owner) -> (Option<RequestId>, Result<ApiRequest, ApiError>) {
+    let (id, request) = thermode_protocol::parse_request(text, limits.max_message_bytes);
+    (id, request.and_then(|request| validate(request, limits, owner)))
 }
 
-/// A JSON text read only to check that no object in it names a key twice (`serde_json::Value` keeps the last).
-struct UniqueKeys;
-
-impl<'de> Deserialize<'de> for UniqueKeys {
-    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        deserializer.deserialize_any(UniqueKeysVisitor)
-    }
-}
-
-struct UniqueKeysVisitor;
-
-impl<'de> Visitor<'de> for UniqueKeysVisitor {
-    type Value = UniqueKeys;
-
-    fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
-        f.write_str("any JSON value")
-    }
-
-    fn visit_bool<E: de::Error>(self, _: bool) -> Result<UniqueKeys, E> {
-        Ok(UniqueKeys)
-    }
-
-    fn visit_i64<E: de::Error>(self, _: i64) -> Result<UniqueKeys, E> {
-        Ok(UniqueKeys)
-    }
-
-    fn visit_u64<E: de::Error>(self, _: u64) -> Result<UniqueKeys, E> {
-        Ok(UniqueKeys)
-    }
-
-    fn visit_f64<E: de::Error>(self, _: f64) -> Result<UniqueKeys, E> {
-        Ok(UniqueKeys)
-    }
-
-    fn visit_str<E: de::Error>(self, _: &str) -> Result<UniqueKeys, E> {
-        Ok(UniqueKeys)
-    }
-
-    fn visit_unit<E: de::Error>(self) -> Result<UniqueKeys, E> {
-        Ok(UniqueKeys)
-    }
-
-    fn visit_seq<A: SeqAccess<'de>>(self, mut items: A) -> Result<UniqueKeys, A::Error> {
-        while items.next_element::<UniqueKeys>()?.is_some() {}
-        Ok(UniqueKeys)
-    }
-
-    fn visit_map<A: MapAccess<'de>>(self, mut entries: A) -> Result<UniqueKeys, A::Error> {
-        let mut keys = HashSet::new();
-        while let Some(key) = entries.next_key::<String>()? {
-            if keys.contains(&key) {
-                return Err(de::Error::custom(format!("the key `{key}` is given twice")));
-            }
-            entries.next_value::<UniqueKeys>()?;
-            keys.insert(key);
-        }
-        Ok(UniqueKeys)
-    }
-}
-
-fn request_id(map: &Map<String, Value>) -> Result<Value, ApiError> {
-    match map.get("id") {
-        None => Err(ApiError::new(ErrorCode::MissingField, "every request needs an `id`")),
-        Some(Value::String(s)) if s.chars().count() <= MAX_ID_CHARS => Ok(Value::String(s.clone())),
-        Some(Value::Number(n)) => Ok(Value::Number(n.clone())),
-        Some(_) => Err(ApiError::new(
-            ErrorCode::BadValue,
-            format!("`id` must be a number or a string of at most {MAX_ID_CHARS} characters"),
-        )),
-    }
-}
-
-fn parse_object(map: &Map<String, Value>, limits: &RequestLimits, owner: Owner) -> Result<ApiRequest, ApiError> {
-    let fields = Fields { map };
-    let kind = fields.string("type")?;
-    let command = match kind {
-        "touch" => parse_touch(&fields, limits, owner)?,
-        "release" => {
-            fields.only(&["channel"])?;
-            Command::Release {
-                channel: fields.channel(limits.channel_count)?,
-            }
-        }
-        "setpoint" => parse_setpoint(&fields, limits, owner)?,
-        "clear_fault" => {
-            fields.only(&["channel"])?;
-            Command::ClearFault {
-                channel: fields.channel(limits.channel_count)?,
-            }
-        }
-        "stop_all" => fields.only(&[]).map(|()| Command::StopAll)?,
-        "subscribe" => {
-            fields.only(&["rate_hz"])?;
+/// What this daemon does with a well-formed request, once its numbers pass this daemon's limits.
+fn validate(request: Request, limits: &RequestLimits, owner: Owner) -> Result<ApiRequest, ApiError> {
+    let channel = |channel: i64| channel_index(channel, limits.channel_count);
+    let command = match request {
+        Request::Touch(touch) => touch_command(touch, limits, owner)?,
+        Request::Release(on) => Command::Release {
+            channel: channel(on.channel)?,
+        },
+        Request::Setpoint(Setpoint {
+            channel: c,
+            temp_c,
+            rate_c_s,
+        }) => stimulus_command(channel(c)?, Stimulus::Direct { temp_c, rate_c_s }, owner, limits)?,
+        Request::ClearFault(on) => Command::ClearFault {
+            channel: channel(on.channel)?,
+        },
+        Request::StopAll(_) => Command::StopAll,
+        Request::Subscribe(subscribe) => {
             let rate = Range {
                 name: "rate_hz",
                 min: MIN_SUBSCRIBE_HZ,
                 max: limits.max_subscribe_hz,
             };
-            let rate_hz = rate.check(fields.number("rate_hz")?)?;
+            let rate_hz = rate.check(subscribe.rate_hz)?;
             return Ok(ApiRequest::Subscribe { rate_hz });
         }
-        "unsubscribe" => return fields.only(&[]).map(|()| ApiRequest::Unsubscribe),
-        "status" => return fields.only(&[]).map(|()| ApiRequest::Status),
-        "ack_recording" => return fields.only(&[]).map(|()| ApiRequest::AckRecording),
-        "marker" => return parse_marker(&fields, limits),
-        other => Err(ApiError::new(
-            ErrorCode::UnknownType,
-            format!(
-                "unknown request type {:?}; known: touch, release, setpoint, clear_fault, stop_all, subscribe, unsubscribe, \
-                 status, ack_recording, marker",
-                truncate(other)
-            ),
-        ))?,
+        Request::Unsubscribe(_) => return Ok(ApiRequest::Unsubscribe),
+        Request::Status(_) => return Ok(ApiRequest::Status),
+        Request::AckRecording(_) => return Ok(ApiRequest::AckRecording),
+        Request::Marker(marker) => return marker_request(marker, limits),
     };
     Ok(ApiRequest::Command(command))
 }
 
-fn parse_marker(fields: &Fields, limits: &RequestLimits) -> Result<ApiRequest, ApiError> {
-    fields.only(&["text", "channel"])?;
-    let text = fields.string("text")?;
-    let max = crate::lsl::MAX_MARKER_CHARS;
-    if text.chars().count() > max || text.contains('\0') {
+fn marker_request(marker: Marker, limits: &RequestLimits) -> Result<ApiRequest, ApiError> {
+    if marker.text.chars().count() > MAX_MARKER_CHARS || marker.text.contains('\0') {
         return Err(ApiError::new(
             ErrorCode::BadValue,
-            format!("`text` must be at most {max} characters without NUL"),
+            format!("`text` must be at most {MAX_MARKER_CHARS} characters without NUL"),
         ));
     }
-    let channel = match fields.map.get("channel") {
-        None => None,
-        Some(_) => Some(fields.channel(limits.channel_count)?),
-    };
+    let channel = marker
+        .channel
+        .map(|c| channel_index(c, limits.channel_count))
+        .transpose()?;
     Ok(ApiRequest::Marker {
-        text: text.to_string(),
+        text: marker.text,
         channel,
     })
 }
 
-fn parse_touch(fields: &Fields, limits: &RequestLimits, owner: Owner) -> Result<Command, ApiError> {
-    fields.only(&["channel", "material", "properties", "object_temp_c"])?;
-    let channel = fields.channel(limits.channel_count)?;
-    let material = match (fields.map.get("material"), fields.map.get("properties")) {
+fn touch_command(touch: Touch, limits: &RequestLimits, owner: Owner) -> Result<Command, ApiError> {
+    let channel = channel_index(touch.channel, limits.channel_count)?;
+    let material = match (touch.material, touch.properties) {
         (Some(_), Some(_)) => {
             return Err(ApiError::new(
                 ErrorCode::BadValue,
@@ -360,22 +131,11 @@ fn parse_touch(fields: &Fields, limits: &RequestLimits, owner: Owner) -> Result<
                 "touch needs `material` (a library name) or `properties`",
             ))
         }
-        (Some(_), None) => material_by_name(fields.string("material")?)?,
-        (None, Some(properties)) => material_from_properties(properties)?,
+        (Some(name), None) => material_by_name(&name)?,
+        (None, Some(properties)) => properties.to_material().map_err(|e| ApiError::bad_value(&e))?,
     };
-    let object_c = match fields.map.get("object_temp_c") {
-        None => limits.default_object_c,
-        Some(_) => fields.number("object_temp_c")?,
-    };
+    let object_c = touch.object_temp_c.unwrap_or(limits.default_object_c);
     stimulus_command(channel, Stimulus::Touch { material, object_c }, owner, limits)
-}
-
-fn parse_setpoint(fields: &Fields, limits: &RequestLimits, owner: Owner) -> Result<Command, ApiError> {
-    fields.only(&["channel", "temp_c", "rate_c_s"])?;
-    let channel = fields.channel(limits.channel_count)?;
-    let temp_c = fields.number("temp_c")?;
-    let rate_c_s = fields.number("rate_c_s")?;
-    stimulus_command(channel, Stimulus::Direct { temp_c, rate_c_s }, owner, limits)
 }
 
 /// The command showing `stimulus` on `channel` (already a valid channel) for `owner`, once the stimulus passes the
@@ -391,9 +151,8 @@ pub fn stimulus_command(
     Ok(Command::stimulate(channel, stimulus, owner))
 }
 
-/// The reply's fields for a command the loop applied (the request's name is [`Command::name`]) (`touch`: channel, material and object
-/// temperature; `setpoint`: channel, temperature and rate; `release`, `clear_fault`: channel).
-pub fn command_reply_fields(command: &Command) -> Value {
+/// What the reply says of a command the loop applied at `applied`.
+pub fn done(command: &Command, applied: AppliedAt) -> Done {
     match command {
         Command::Stimulate {
             channel,
@@ -401,28 +160,49 @@ pub fn command_reply_fields(command: &Command) -> Value {
             label,
             ..
         } => match stimulus {
-            Stimulus::Touch { object_c, .. } => {
-                json!({"channel": channel, "material": &**label, "object_temp_c": object_c})
-            }
-            Stimulus::Direct { temp_c, rate_c_s } => {
-                json!({"channel": channel, "temp_c": temp_c, "rate_c_s": rate_c_s})
-            }
-            Stimulus::Air => json!({"channel": channel}),
+            Stimulus::Touch { object_c, .. } => Done::Touch {
+                channel: *channel,
+                material: label.to_string(),
+                object_temp_c: *object_c,
+                applied,
+            },
+            Stimulus::Direct { temp_c, rate_c_s } => Done::Setpoint {
+                channel: *channel,
+                temp_c: *temp_c,
+                rate_c_s: *rate_c_s,
+                applied,
+            },
+            Stimulus::Air => Done::Release {
+                channel: *channel,
+                applied,
+            },
         },
-        Command::Release { channel } | Command::ClearFault { channel } => json!({"channel": channel}),
-        Command::StopAll | Command::ClientGone { .. } => json!({}),
+        Command::Release { channel } => Done::Release {
+            channel: *channel,
+            applied,
+        },
+        Command::ClearFault { channel } => Done::ClearFault {
+            channel: *channel,
+            applied,
+        },
+        Command::StopAll | Command::ClientGone { .. } => Done::StopAll { applied },
     }
 }
 
-/// The stimulus limits as published in `/api/status` (`limits`): what the API and the loop enforce.
-pub fn limits_json(limits: &StimulusLimits) -> Value {
-    json!({
-        "display_min_c": limits.display_c.min,
-        "display_max_c": limits.display_c.max,
-        "max_rate_c_s": limits.max_rate_c_s,
-        "object_temp_min_c": limits.object_c.min,
-        "object_temp_max_c": limits.object_c.max,
-    })
+/// The limits as published in `/api/status` (`limits`): what the API and the loop enforce.
+pub fn limits_status(limits: &RequestLimits, requests_per_s: f64, burst: f64) -> Limits {
+    let stimulus = &limits.stimulus;
+    Limits {
+        max_message_bytes: limits.max_message_bytes,
+        requests_per_s,
+        burst,
+        max_subscribe_hz: limits.max_subscribe_hz,
+        display_min_c: stimulus.display_c.min,
+        display_max_c: stimulus.display_c.max,
+        max_rate_c_s: stimulus.max_rate_c_s,
+        object_temp_min_c: stimulus.object_c.min,
+        object_temp_max_c: stimulus.object_c.max,
+    }
 }
 
 /// A library material by name (case-insensitive, aliases as in `thermode materials`).
@@ -450,207 +230,56 @@ pub fn channel_index(channel: i64, count: usize) -> Result<usize, ApiError> {
     }
 }
 
-fn material_from_properties(value: &Value) -> Result<Material, ApiError> {
-    let Value::Object(map) = value else {
-        return Err(ApiError::new(ErrorCode::BadValue, "`properties` must be an object"));
-    };
-    let fields = Fields { map };
-    fields.only(&[
-        "name",
-        "conductivity_w_mk",
-        "density_kg_m3",
-        "specific_heat_j_kgk",
-        "thickness_m",
-    ])?;
-    let name = match map.get("name") {
-        None => "custom".to_string(),
-        Some(_) => label(fields.string("name")?)?,
-    };
-    // The physical ranges of material properties (docs/ranges.md), as for material files.
-    let property = |key: &'static str, range: Range| -> Result<f64, ApiError> {
-        Ok(range.rule().check(key, fields.number(key)?)?)
-    };
-    let thickness_m = match map.get("thickness_m") {
-        None => DEFAULT_THICKNESS_M,
-        Some(_) => property("thickness_m", limits::OBJECT_THICKNESS)?,
-    };
-    let material = Material {
-        name,
-        conductivity_w_mk: property("conductivity_w_mk", limits::CONDUCTIVITY)?,
-        density_kg_m3: property("density_kg_m3", limits::DENSITY)?,
-        specific_heat_j_kgk: property("specific_heat_j_kgk", limits::SPECIFIC_HEAT)?,
-        thickness_m,
-        source: "contact API properties".to_string(),
-    };
-    material.validate("properties").map_err(|e| ApiError::bad_value(&e))?;
-    Ok(material)
-}
-
-/// A custom material's label: 1 to 64 of `A–Z a–z 0–9 _ - .`.
-fn label(name: &str) -> Result<String, ApiError> {
-    let ok = !name.is_empty()
-        && name.chars().count() <= MAX_NAME_CHARS
-        && name.chars().all(|c| c.is_ascii_alphanumeric() || "_-.".contains(c));
-    if ok {
-        Ok(name.to_string())
-    } else {
-        Err(ApiError::new(
-            ErrorCode::BadValue,
-            format!("`name` must be 1 to {MAX_NAME_CHARS} of A-Z a-z 0-9 _ - ."),
-        ))
-    }
-}
-
-/// At most 40 characters of a client's string, for messages.
-fn truncate(text: &str) -> String {
-    text.chars().take(40).collect()
-}
-
-/// Typed access to a request's fields.
-struct Fields<'a> {
-    map: &'a Map<String, Value>,
-}
-
-impl Fields<'_> {
-    /// Refuses fields other than `type`, `id` and `allowed`.
-    fn only(&self, allowed: &[&str]) -> Result<(), ApiError> {
-        let unknown = self
-            .map
-            .keys()
-            .find(|k| !matches!(k.as_str(), "type" | "id") && !allowed.contains(&k.as_str()));
-        match unknown {
-            Some(key) => Err(ApiError::new(
-                ErrorCode::UnknownField,
-                format!("unknown field {:?}", truncate(key)),
-            )),
-            None => Ok(()),
-        }
-    }
-
-    fn get(&self, key: &str) -> Result<&Value, ApiError> {
-        self.map
-            .get(key)
-            .ok_or_else(|| ApiError::new(ErrorCode::MissingField, format!("missing field `{key}`")))
-    }
-
-    fn string(&self, key: &str) -> Result<&str, ApiError> {
-        self.get(key)?
-            .as_str()
-            .ok_or_else(|| ApiError::new(ErrorCode::BadValue, format!("`{key}` must be a string")))
-    }
-
-    fn number(&self, key: &str) -> Result<f64, ApiError> {
-        self.get(key)?
-            .as_f64()
-            .filter(|v| v.is_finite())
-            .ok_or_else(|| ApiError::new(ErrorCode::BadValue, format!("`{key}` must be a finite number")))
-    }
-
-    fn channel(&self, count: usize) -> Result<usize, ApiError> {
-        let value = self.get("channel")?;
-        let channel = value.as_i64().ok_or_else(|| {
-            ApiError::new(
-                ErrorCode::BadValue,
-                format!("`channel` must be an integer, not {value}"),
-            )
-        })?;
-        channel_index(channel, count)
-    }
-}
-
-/// A successful reply: `{"type": "ok", "id", "request": <type>, ...extra}`.
-pub fn ok_reply(id: &Value, request: &str, extra: Value) -> Value {
-    merged(json!({"type": "ok", "id": id, "request": request}), extra)
-}
-
-/// `base` with the fields of `extra` added (both objects; otherwise `base` unchanged).
-pub fn merged(mut base: Value, extra: Value) -> Value {
-    if let (Value::Object(base), Value::Object(extra)) = (&mut base, extra) {
-        base.extend(extra);
-    }
-    base
-}
-
-/// The fault of a channel as a number: the stable code, 0 for none.
-fn fault_code(status: &ChannelStatus) -> u16 {
-    status.telemetry.fault.map_or(0, |f| f.code())
-}
-
-/// One channel's telemetry object (the `render` CSV names).
-pub fn channel_telemetry(status: &ChannelStatus) -> Value {
+/// One channel's telemetry (the `render` CSV names).
+pub fn channel_telemetry(status: &ChannelStatus) -> ChannelTelemetry {
     let t = &status.telemetry;
-    json!({
-        "channel": status.channel,
-        "contact": status.mode == Mode::Touch,
-        "material": (status.mode == Mode::Touch).then_some(&*status.label),
-        "mode": status.mode,
-        "target_skin_c": finite(t.target_skin_c),
-        "skin_c": finite(t.skin_c),
-        "display_setpoint_c": finite(t.display_setpoint_c),
-        "sensor_c": finite(t.sensor_c),
-        "plate_estimate_c": finite(t.plate_estimate_c),
-        "finger_c": finite(t.finger_c),
-        "current_a": finite(t.current_a),
-        "hot_side_c": finite(t.hot_side_c),
-        "fault": fault_code(status),
-        "cem43_min": finite(status.dose.cem43_min),
-        "time_at_or_above_43_s": finite(status.dose.time_at_or_above_43_s),
-        "dose_lockout": status.dose.lockout,
-    })
-}
-
-/// A number, or null when it is not finite (JSON has no NaN).
-fn finite(value: f64) -> Value {
-    if value.is_finite() {
-        json!(value)
-    } else {
-        Value::Null
+    let touch = status.mode == Mode::Touch;
+    ChannelTelemetry {
+        channel: status.channel,
+        contact: touch,
+        material: touch.then(|| status.label.to_string()),
+        mode: status.mode,
+        target_skin_c: finite(t.target_skin_c),
+        skin_c: finite(t.skin_c),
+        display_setpoint_c: finite(t.display_setpoint_c),
+        sensor_c: finite(t.sensor_c),
+        plate_estimate_c: finite(t.plate_estimate_c),
+        finger_c: finite(t.finger_c),
+        current_a: finite(t.current_a),
+        hot_side_c: finite(t.hot_side_c),
+        fault: t.fault.map_or(0, |f| f.code()),
+        cem43_min: finite(status.dose.cem43_min),
+        time_at_or_above_43_s: finite(status.dose.time_at_or_above_43_s),
+        dose_lockout: status.dose.lockout,
     }
 }
 
 /// A telemetry message.
-pub fn telemetry_message(snapshot: &Snapshot) -> Value {
-    let channels: Vec<Value> = snapshot.channels.iter().map(channel_telemetry).collect();
-    json!({"type": "telemetry", "time_s": snapshot.time_s, "tick": snapshot.tick, "channels": channels})
+pub fn telemetry_message(snapshot: &Snapshot) -> Telemetry {
+    Telemetry {
+        time_s: snapshot.time_s,
+        tick: snapshot.tick,
+        channels: snapshot.channels.iter().map(channel_telemetry).collect(),
+    }
 }
 
 /// One channel's status: its telemetry plus mode, fault text, owner and pending release.
-pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> Value {
-    let extra = json!({
-        "name": name,
-        "fault_description": status.telemetry.fault.map(|f| f.description()),
-        "object_temp_c": status.object_c,
-        "direct_temp_c": status.direct.map(|d| d.0),
-        "direct_rate_c_s": status.direct.map(|d| d.1),
-        "held_off": status.held_off,
-        "owner": status.owner,
-        "release_at_s": status.release_at_s,
-        "link_ok": status.link_ok,
-        "device_cut": status.device_cut.map(|c| c.name()),
-        "device_cut_description": status.device_cut.map(|c| c.to_string()),
-        "engine_failed": status.engine_failed,
-    });
-    merged(channel_telemetry(status), extra)
-}
-
-/// The library as JSON: the fields of `thermode materials --format json`.
-pub fn materials_json() -> Value {
-    let rows: Vec<Value> = materials::library()
-        .iter()
-        .map(|m| {
-            json!({
-                "name": m.name,
-                "conductivity_w_mk": m.conductivity_w_mk,
-                "density_kg_m3": m.density_kg_m3,
-                "specific_heat_j_kgk": m.specific_heat_j_kgk,
-                "effusivity": m.effusivity(),
-                "diffusivity_m2_s": m.diffusivity_m2_s(),
-                "thickness_m": m.thickness_m,
-                "source": m.source,
-            })
-        })
-        .collect();
-    Value::Array(rows)
+pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> ChannelState {
+    ChannelState {
+        telemetry: channel_telemetry(status),
+        name: name.map(str::to_string),
+        fault_description: status.telemetry.fault.map(|f| f.description().to_string()),
+        object_temp_c: status.object_c,
+        direct_temp_c: status.direct.map(|d| d.0),
+        direct_rate_c_s: status.direct.map(|d| d.1),
+        held_off: status.held_off,
+        owner: status.owner,
+        release_at_s: status.release_at_s,
+        link_ok: status.link_ok,
+        device_cut: status.device_cut.map(|c| c.name().to_string()),
+        device_cut_description: status.device_cut.map(|c| c.to_string()),
+        engine_failed: status.engine_failed,
+    }
 }
 
 #[cfg(test)]
@@ -667,7 +296,7 @@ mod tests {
         }
     }
 
-    fn parse_text(text: &str) -> (Value, Result<ApiRequest, ApiError>) {
+    fn parse_text(text: &str) -> (Option<RequestId>, Result<ApiRequest, ApiError>) {
         parse(text, &limits(), Owner::Client(1))
     }
 
@@ -699,7 +328,7 @@ mod tests {
         );
         let long = format!(
             r#"{{"type":"marker","id":1,"text":"{}"}}"#,
-            "a".repeat(crate::lsl::MAX_MARKER_CHARS + 1)
+            "a".repeat(MAX_MARKER_CHARS + 1)
         );
         assert_eq!(code_of(&long), Some("bad_value"));
     }
@@ -707,7 +336,7 @@ mod tests {
     #[test]
     fn a_touch_by_name_and_by_properties() {
         let (id, touch) = parse_text(r#"{"type":"touch","id":7,"channel":1,"material":"Aluminum","object_temp_c":30}"#);
-        assert_eq!(id, json!(7));
+        assert_eq!(id, Some(RequestId::from(7)));
         match touch {
             Ok(ApiRequest::Command(Command::Stimulate {
                 channel: 1,
@@ -730,7 +359,10 @@ mod tests {
                 label,
                 ..
             })) => {
-                assert_eq!((material.thickness_m, &*label), (DEFAULT_THICKNESS_M, "custom"));
+                assert_eq!(
+                    (material.thickness_m, &*label),
+                    (materials::DEFAULT_THICKNESS_M, "custom")
+                );
             }
             other => panic!("got {other:?}"),
         }
@@ -809,7 +441,7 @@ mod tests {
     #[test]
     fn ids_are_echoed_even_with_errors() {
         let (id, result) = parse_text(r#"{"type":"fly","id":"abc"}"#);
-        assert_eq!(id, json!("abc"));
+        assert_eq!(id, Some(RequestId::Text("abc".into())));
         assert!(result.is_err());
     }
 }

@@ -18,12 +18,12 @@ use axum::extract::State;
 use axum::http::{HeaderMap, StatusCode};
 use axum::response::Response;
 use axum::Extension;
-use serde_json::{json, Value};
+use thermode_protocol::{AppliedAt, Done, Event, OkReply, RecordingEvent, RequestId, Response as Reply, StatusReply};
 use tokio::sync::watch;
 use tokio::time::{interval, timeout, Instant, Interval, MissedTickBehavior};
 
 use super::protocol::{self, ApiError, ApiRequest, ErrorCode};
-use super::{error_response, recording_json, status_json, App};
+use super::{error_response, recording_status, status, App};
 use thermode_runtime::command::{Command, CommandError, Owner};
 use thermode_runtime::recorder::{RecordEvents, RecordState};
 
@@ -160,11 +160,11 @@ impl Connection {
         match message {
             Message::Text(text) => {
                 let reply = self.answer(text.as_str()).await;
-                self.send(reply).await
+                self.send(&reply).await
             }
             Message::Binary(_) => {
                 let e = ApiError::new(ErrorCode::BadJson, "binary frames are not supported; send JSON text");
-                self.send(e.to_json(&Value::Null)).await
+                self.send(&e.reply(None)).await
             }
             Message::Pong(payload) => {
                 if let Ok(bytes) = <[u8; 8]>::try_from(payload.as_ref()) {
@@ -181,7 +181,7 @@ impl Connection {
     }
 
     /// The reply to one text message.
-    async fn answer(&mut self, text: &str) -> Value {
+    async fn answer(&mut self, text: &str) -> Reply {
         let owner = Owner::Client(self.client);
         let now_s = self.origin.elapsed().as_secs_f64();
         if !self.bucket.take(now_s) {
@@ -190,58 +190,62 @@ impl Connection {
                 "more than {} requests per second (burst {}); slow down",
                 self.app.net.requests_per_s, self.app.net.burst
             );
-            return ApiError::new(ErrorCode::RateLimited, message).to_json(&id);
+            return ApiError::new(ErrorCode::RateLimited, message).reply(id);
         }
-        let (id, request) = protocol::parse(text, &self.app.limits, owner);
-        match request {
-            Ok(request) => self.execute(request, &id).await.unwrap_or_else(|e| e.to_json(&id)),
-            Err(e) => e.to_json(&id),
+        match protocol::parse(text, &self.app.limits, owner) {
+            (Some(id), Ok(request)) => match self.execute(request, id.clone()).await {
+                Ok(reply) => reply,
+                Err(e) => e.reply(Some(id)),
+            },
+            (id, Err(e)) => e.reply(id),
+            (None, Ok(_)) => unreachable!("a request that parses has an id"),
         }
     }
 
-    async fn execute(&mut self, request: ApiRequest, id: &Value) -> Result<Value, ApiError> {
-        match request {
-            ApiRequest::Command(command) => to_loop(&self.app, command, id).await,
+    async fn execute(&mut self, request: ApiRequest, id: RequestId) -> Result<Reply, ApiError> {
+        let done = match request {
+            ApiRequest::Command(command) => to_loop(&self.app, command).await?,
             ApiRequest::Subscribe { rate_hz } => {
                 let mut every = interval(Duration::from_secs_f64(1.0 / rate_hz));
                 every.set_missed_tick_behavior(MissedTickBehavior::Skip);
                 self.subscription = Some(every);
-                Ok(protocol::ok_reply(id, "subscribe", json!({"rate_hz": rate_hz})))
+                Done::Subscribe { rate_hz }
             }
             ApiRequest::Unsubscribe => {
                 self.subscription = None;
-                Ok(protocol::ok_reply(id, "unsubscribe", json!({})))
+                Done::Unsubscribe {}
             }
-            ApiRequest::AckRecording => {
-                let mut acknowledged = self.app.interlock.acknowledge();
-                if let Some(recording) = &self.app.recording {
-                    // Also under the policy `continue` (no interlock): a failed recording goes on in a new file.
-                    acknowledged |= recording.state() == RecordState::Failed;
-                    if acknowledged {
-                        recording.request_resume();
-                    }
-                }
-                let mut extra = json!({"acknowledged": acknowledged});
-                if let (Value::Object(map), Some(recording)) = (&mut extra, &self.app.recording) {
-                    map.insert("recording".into(), recording_json(&self.app, recording));
-                }
-                Ok(protocol::ok_reply(id, "ack_recording", extra))
-            }
-            ApiRequest::Marker { text, channel } => marker(&self.app, text, channel, id),
+            ApiRequest::AckRecording => self.acknowledge(),
+            ApiRequest::Marker { text, channel } => marker(&self.app, text, channel)?,
             ApiRequest::Status => {
-                let mut status = status_json(&self.app);
-                if let Value::Object(map) = &mut status {
-                    map.insert("type".into(), json!("status"));
-                    map.insert("id".into(), id.clone());
-                }
-                Ok(status)
+                let status = status(&self.app);
+                return Ok(Reply::Status(StatusReply { id, status }));
             }
+        };
+        Ok(Reply::Ok(OkReply { id, done }))
+    }
+
+    /// An operator acknowledges a failed recording (also under the policy `continue`, without an interlock: a
+    /// failed recording goes on in a new file).
+    fn acknowledge(&self) -> Done {
+        let mut acknowledged = self.app.interlock.acknowledge();
+        if let Some(recording) = &self.app.recording {
+            acknowledged |= recording.state() == RecordState::Failed;
+            if acknowledged {
+                recording.request_resume();
+            }
+        }
+        let recording = self.app.recording.as_ref().map(|r| recording_status(&self.app, r));
+        Done::AckRecording {
+            acknowledged,
+            recording,
         }
     }
 
     async fn send_telemetry(&mut self) -> bool {
         let snapshot = self.app.shared.snapshot();
-        self.send(protocol::telemetry_message(&snapshot)).await
+        self.send(&Reply::Telemetry(protocol::telemetry_message(&snapshot)))
+            .await
     }
 
     /// Closes a connection that sent nothing for the idle timeout, or left a ping unanswered for the send timeout
@@ -262,22 +266,18 @@ impl Connection {
     }
 
     /// Tells the client the recording failed, or that an operator acknowledged the failure.
-    async fn send_event(&mut self, event: Option<&'static str>) -> bool {
+    async fn send_event(&mut self, event: Option<RecordingEvent>) -> bool {
         let (Some(event), Some(recording)) = (event, self.app.recording.clone()) else {
             // The recorder is gone (the daemon is stopping): no more events.
             self.recording = None;
             return true;
         };
-        let message = json!({
-            "type": "event",
-            "event": event,
-            "recording": recording_json(&self.app, &recording),
-        });
-        self.send(message).await
+        let recording = recording_status(&self.app, &recording);
+        self.send(&Reply::Event(Event { event, recording })).await
     }
 
-    async fn send(&mut self, value: Value) -> bool {
-        self.send_message(Message::Text(value.to_string().into())).await
+    async fn send(&mut self, reply: &Reply) -> bool {
+        self.send_message(Message::Text(reply.to_text().into())).await
     }
 
     async fn send_message(&mut self, message: Message) -> bool {
@@ -299,7 +299,7 @@ async fn goodbye(app: &App, client: u64) {
 
 /// A client marker: stamped with the loop clock now, forwarded to the LSL marker stream when there is one;
 /// answered with the loop time (and the LSL time under `--lsl`).
-fn marker(app: &App, text: String, channel: Option<usize>, id: &Value) -> Result<Value, ApiError> {
+fn marker(app: &App, text: String, channel: Option<usize>) -> Result<Done, ApiError> {
     let time_s = app.clock.now_s();
     let lsl_time_s = match &app.markers {
         Some(markers) => {
@@ -314,21 +314,23 @@ fn marker(app: &App, text: String, channel: Option<usize>, id: &Value) -> Result
         }
         None => None,
     };
-    let extra = json!({"channel": channel, "time_s": time_s, "lsl_time_s": lsl_time_s, "lsl": lsl_time_s.is_some()});
-    Ok(protocol::ok_reply(id, "marker", extra))
+    Ok(Done::Marker {
+        channel,
+        time_s,
+        lsl_time_s,
+        lsl: lsl_time_s.is_some(),
+    })
 }
 
 /// Sends `command` to the loop and waits (bounded) for its answer.
-async fn to_loop(app: &App, command: Command, id: &Value) -> Result<Value, ApiError> {
-    let (name, extra) = (command.name(), protocol::command_reply_fields(&command));
-    let answer = app.commands.request(command).map_err(loop_error)?;
+async fn to_loop(app: &App, command: Command) -> Result<Done, ApiError> {
+    let answer = app.commands.request(command.clone()).map_err(loop_error)?;
     let applied = super::answer_within(answer, app.reply_wait).await.map_err(loop_error)?;
-    let mut reply = protocol::ok_reply(id, name, extra);
-    if let Value::Object(map) = &mut reply {
-        map.insert("tick".into(), json!(applied.tick));
-        map.insert("time_s".into(), json!(applied.time_s));
-    }
-    Ok(reply)
+    let at = AppliedAt {
+        tick: applied.tick,
+        time_s: applied.time_s,
+    };
+    Ok(protocol::done(&command, at))
 }
 
 /// Waits for the subscription's next tick, or forever without one.
@@ -343,7 +345,7 @@ async fn tick(subscription: &mut Option<Interval>) {
 
 /// Waits for the recording's next change: `recording_failed` or `recording_acknowledged`; forever without a
 /// recording; `None` once the recorder is gone.
-async fn changed(recording: &mut Option<watch::Receiver<RecordEvents>>) -> Option<&'static str> {
+async fn changed(recording: &mut Option<watch::Receiver<RecordEvents>>) -> Option<RecordingEvent> {
     let Some(receiver) = recording else {
         return std::future::pending().await;
     };
@@ -351,11 +353,11 @@ async fn changed(recording: &mut Option<watch::Receiver<RecordEvents>>) -> Optio
     receiver.changed().await.ok()?;
     let after = *receiver.borrow_and_update();
     Some(if after.failures != before.failures {
-        "recording_failed"
+        RecordingEvent::RecordingFailed
     } else if after.resumptions != before.resumptions {
-        "recording_resumed"
+        RecordingEvent::RecordingResumed
     } else {
-        "recording_acknowledged"
+        RecordingEvent::RecordingAcknowledged
     })
 }
 

@@ -362,7 +362,7 @@ fn a_device_cut_is_shown_on_its_channel_with_zero_current_until_the_device_relea
     assert_eq!(s.channels[0].device_cut, None, "the other channel");
     let currents = rig.currents_since(1, cut_from);
     assert!(currents.iter().all(|&a| a == 0.0), "drive while cut: {currents:?}");
-    let json = channel_status(&s.channels[1], None);
+    let json = serde_json::to_value(channel_status(&s.channels[1], None)).expect("serialises");
     println!("status of the cut channel: {json}");
     assert_eq!(json["device_cut"], "over_temperature");
     let description = json["device_cut_description"].as_str().unwrap_or_default();

@@ -294,7 +294,7 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
     }
     let result = (|| {
         let link = WsLink::connect(&url, token.as_deref(), args.channel)?;
-        let device = link.status()["device"].as_str().unwrap_or_default().to_string();
+        let device = link.status().map(|s| s.device.clone()).unwrap_or_default();
         if device.starts_with("tcs2:") || device.contains("mode=temperature") {
             bail!(
                 "{device} regulates its plate itself, so the plate's heat balance cannot measure the finger on it \

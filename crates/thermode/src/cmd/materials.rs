@@ -2,9 +2,9 @@
 
 use anyhow::Result;
 use clap::{Args, ValueEnum};
-use serde::Serialize;
 use thermode_model::materials::{self, Material};
 use thermode_model::units;
+use thermode_protocol::MaterialInfo;
 
 use crate::output::print_stdout;
 
@@ -28,40 +28,12 @@ pub struct MaterialsArgs {
     cgs: bool,
 }
 
-/// One material as JSON: the SI properties plus the derived effusivity and diffusivity.
-#[derive(Serialize)]
-struct MaterialJson<'a> {
-    name: &'a str,
-    conductivity_w_mk: f64,
-    density_kg_m3: f64,
-    specific_heat_j_kgk: f64,
-    effusivity: f64,
-    diffusivity_m2_s: f64,
-    thickness_m: f64,
-    source: &'a str,
-}
-
-impl<'a> From<&'a Material> for MaterialJson<'a> {
-    fn from(m: &'a Material) -> Self {
-        MaterialJson {
-            name: &m.name,
-            conductivity_w_mk: m.conductivity_w_mk,
-            density_kg_m3: m.density_kg_m3,
-            specific_heat_j_kgk: m.specific_heat_j_kgk,
-            effusivity: m.effusivity(),
-            diffusivity_m2_s: m.diffusivity_m2_s(),
-            thickness_m: m.thickness_m,
-            source: &m.source,
-        }
-    }
-}
-
 /// Runs `thermode materials`.
 pub fn run(args: &MaterialsArgs) -> Result<()> {
     let library = materials::library();
     let text = match args.format {
         MaterialsFormat::Json => {
-            let rows: Vec<MaterialJson> = library.iter().map(MaterialJson::from).collect();
+            let rows: Vec<MaterialInfo> = library.iter().map(MaterialInfo::from).collect();
             serde_json::to_string_pretty(&rows)? + "\n"
         }
         MaterialsFormat::Table => table(&library, args.cgs),

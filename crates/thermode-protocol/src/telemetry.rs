@@ -1,0 +1,120 @@
+//! What the daemon says of each channel: its telemetry ([`ChannelTelemetry`], the columns of `render`'s CSV), its
+//! status ([`ChannelState`]: telemetry plus mode, fault text, owner, link), what it renders ([`Mode`]) and who set
+//! it ([`Owner`]), and the telemetry message a subscription sends ([`Telemetry`]).
+//!
+//! A number the device cannot measure, or that is not known yet, is `null` (`None`), never a plausible guess.
+
+use schemars::JsonSchema;
+use serde::{Deserialize, Serialize};
+
+/// What a channel renders.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// Air: no contact.
+    Air,
+    /// A material contact.
+    Touch,
+    /// Direct set-point mode.
+    Direct,
+}
+
+/// Who set a channel's stimulus. Contacts of a WebSocket client are released when it disconnects (after a grace
+/// period); OSC and script contacts have no connection and stay until released.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case", tag = "kind", content = "id")]
+pub enum Owner {
+    /// Nobody (air, or released).
+    Nobody,
+    /// A WebSocket connection, by its connection number.
+    Client(u64),
+    /// An OSC sender.
+    Osc,
+    /// The demo script or the daemon itself.
+    Script,
+}
+
+/// `value` when it is finite, else `None` (JSON has no NaN: an unknown number is `null`).
+pub fn finite(value: f64) -> Option<f64> {
+    value.is_finite().then_some(value)
+}
+
+/// One channel's numbers at a tick (the names of `render`'s CSV columns).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct ChannelTelemetry {
+    /// The channel (from 0).
+    pub channel: usize,
+    /// A material contact is rendered.
+    pub contact: bool,
+    /// The touched material's name, during a contact.
+    pub material: Option<String>,
+    /// What the channel renders.
+    pub mode: Mode,
+    /// The skin temperature the contact would give \[°C\].
+    pub target_skin_c: Option<f64>,
+    /// The rendered skin temperature (the display's finger model) \[°C\].
+    pub skin_c: Option<f64>,
+    /// The display set-point after the safety envelope \[°C\].
+    pub display_setpoint_c: Option<f64>,
+    /// The plate sensor's reading \[°C\].
+    pub sensor_c: Option<f64>,
+    /// The envelope's estimate of the true plate \[°C\].
+    pub plate_estimate_c: Option<f64>,
+    /// The finger's surface as the controller's observer estimates it \[°C\]; null where nothing measures it.
+    pub finger_c: Option<f64>,
+    /// The drive current \[A\] (positive heats the display); null where the device does not report it.
+    pub current_a: Option<f64>,
+    /// The module's hot side \[°C\]; null where the device does not report it.
+    pub hot_side_c: Option<f64>,
+    /// The latched safety fault's stable code, 0 for none.
+    pub fault: u16,
+    /// The channel's thermal dose \[CEM43-minutes\].
+    pub cem43_min: Option<f64>,
+    /// Time at or above 43 °C \[s\].
+    pub time_at_or_above_43_s: Option<f64>,
+    /// The dose budget is spent: the channel may no longer heat.
+    pub dose_lockout: bool,
+}
+
+/// One channel's status (`/api/status` `channels`): its telemetry and what drives it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct ChannelState {
+    /// The numbers.
+    #[serde(flatten)]
+    pub telemetry: ChannelTelemetry,
+    /// The channel's name (e.g. the finger), if the display names its channels.
+    pub name: Option<String>,
+    /// The latched fault, in words.
+    pub fault_description: Option<String>,
+    /// The contact's object temperature \[°C\] (touch only).
+    pub object_temp_c: Option<f64>,
+    /// The direct-mode target \[°C\] (direct only).
+    pub direct_temp_c: Option<f64>,
+    /// The direct-mode rate \[°C/s\] (direct only).
+    pub direct_rate_c_s: Option<f64>,
+    /// After stop-all: the drive is held at 0 A until the channel's next command.
+    pub held_off: bool,
+    /// Who set the stimulus.
+    pub owner: Owner,
+    /// Loop time at which the contact of a disconnected client will be released \[s\].
+    pub release_at_s: Option<f64>,
+    /// The device answered the last read.
+    pub link_ok: bool,
+    /// The device's own protection has cut this channel: its name.
+    pub device_cut: Option<String>,
+    /// The device's cut, in words.
+    pub device_cut_description: Option<String>,
+    /// The channel's engine failed: its drive is off for the rest of the session.
+    pub engine_failed: bool,
+}
+
+/// A telemetry message (`type` `telemetry`), sent at a subscription's rate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct Telemetry {
+    /// Loop time of the tick \[s\].
+    pub time_s: f64,
+    /// The tick's index.
+    pub tick: u64,
+    /// Every channel.
+    pub channels: Vec<ChannelTelemetry>,
+}
