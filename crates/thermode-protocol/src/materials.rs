@@ -9,7 +9,8 @@ use thermode_model::limits;
 use thermode_model::materials::{Material, DEFAULT_THICKNESS_M};
 use thermode_model::params::BadValue;
 
-use crate::request::MAX_NAME_CHARS;
+/// Longest accepted name (material or custom label) \[characters\].
+pub const MAX_NAME_CHARS: usize = 64;
 
 /// A material given by its SI properties (a `touch` request's `properties`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]

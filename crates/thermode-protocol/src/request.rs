@@ -10,6 +10,7 @@ use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
 use crate::materials::MaterialProperties;
+pub use crate::materials::MAX_NAME_CHARS;
 
 /// A request's `id`: a number or a string of at most [`MAX_ID_CHARS`] characters, echoed unchanged in the reply.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -29,8 +30,6 @@ impl From<u64> for RequestId {
 
 /// Longest accepted `id` string \[characters\].
 pub const MAX_ID_CHARS: usize = 128;
-/// Longest accepted name (material or custom label) \[characters\].
-pub const MAX_NAME_CHARS: usize = 64;
 /// Longest client marker text \[characters\].
 pub const MAX_MARKER_CHARS: usize = 1024;
 /// Slowest telemetry subscription \[Hz\] (one message every 100 s).

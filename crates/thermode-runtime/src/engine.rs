@@ -8,33 +8,14 @@
 //! engine cannot bypass the envelope.
 
 use thermode_device::Reading;
-use thermode_model::params::{BadValue, Rule};
-use thermode_pipeline::{ChannelPipeline, PipelineError};
-use thermode_safety::{
-    DoseLedger, DriveCommand, EnvelopeConfig, EnvelopeError, FaultCode, MeasuredOnly, SafetyEnvelope,
-};
-use thiserror::Error;
+use thermode_model::params::Rule;
+use thermode_pipeline::ChannelPipeline;
+use thermode_safety::{DoseLedger, DriveCommand, EnvelopeConfig, FaultCode, MeasuredOnly, SafetyEnvelope};
 
 use crate::limits::StimulusLimits;
 
+pub use crate::limits::EngineError;
 pub use thermode_pipeline::{Stimulus, Telemetry};
-
-/// Why an engine (or the loop on its behalf) refused a stimulus, a fault clearing or its own construction.
-#[derive(Debug, Clone, PartialEq, Error)]
-pub enum EngineError {
-    /// A number outside the channel's limits ([`StimulusLimits`]) or an engine parameter out of range.
-    #[error(transparent)]
-    BadValue(#[from] BadValue),
-    /// The render pipeline refused (a stimulus's material, its configuration, or clearing a fault).
-    #[error(transparent)]
-    Pipeline(#[from] PipelineError),
-    /// The safety envelope refused (clearing a fault whose cause persists, or its configuration).
-    #[error(transparent)]
-    Envelope(#[from] EnvelopeError),
-    /// The engine failed (panicked) earlier or while handling this request; the channel is off for the session.
-    #[error("the channel's engine failed; restart the daemon")]
-    Failed,
-}
 
 /// One channel's renderer + controller + safety envelope, as the loop sees it.
 pub trait ChannelEngine {

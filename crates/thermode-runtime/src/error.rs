@@ -5,8 +5,8 @@ use thermode_device::DeviceError;
 use thermode_model::params::BadValue;
 use thiserror::Error;
 
-use crate::engine::EngineError;
 use crate::ledger::LedgerError;
+use crate::limits::EngineError;
 
 /// Why the runtime could not start (or a part of it failed).
 #[derive(Debug, Error)]

@@ -3,14 +3,32 @@
 //! envelope the channel really runs ([`StimulusLimits::of_envelope`]). Every engine reports its limits
 //! ([`crate::ChannelEngine::limits`]); the control loop checks every stimulus against its channel's limits before the
 //! engine sees it, the API checks it against the limits of all channels together before it is queued (so a refusal
-//! has a reply), and `/api/status` publishes those same limits. [`StimulusLimits::check`] is the one validation.
+//! has a reply), and `/api/status` publishes those same limits. [`StimulusLimits::check`] is the one validation, and
+//! [`EngineError`] what an engine (or the loop on its behalf) refuses.
 
 use thermode_model::params::{BadValue, Range, Rule};
 use thermode_pipeline::stimulus::{DIRECT_RATE, DIRECT_TEMPERATURE, OBJECT_TEMPERATURE};
+use thermode_pipeline::PipelineError;
 use thermode_pipeline::Stimulus;
-use thermode_safety::EnvelopeConfig;
+use thermode_safety::{EnvelopeConfig, EnvelopeError};
+use thiserror::Error;
 
-use crate::engine::EngineError;
+/// Why an engine (or the loop on its behalf) refused a stimulus, a fault clearing or its own construction.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum EngineError {
+    /// A number outside the channel's limits ([`StimulusLimits`]) or an engine parameter out of range.
+    #[error(transparent)]
+    BadValue(#[from] BadValue),
+    /// The render pipeline refused (a stimulus's material, its configuration, or clearing a fault).
+    #[error(transparent)]
+    Pipeline(#[from] PipelineError),
+    /// The safety envelope refused (clearing a fault whose cause persists, or its configuration).
+    #[error(transparent)]
+    Envelope(#[from] EnvelopeError),
+    /// The engine failed (panicked) earlier or while handling this request; the channel is off for the session.
+    #[error("the channel's engine failed; restart the daemon")]
+    Failed,
+}
 
 /// What a channel accepts as a stimulus.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -255,7 +255,7 @@ impl Daemon {
             realtime: control.realtime().clone(),
             history: Arc::new(crate::api::history::History::default()),
             markers,
-            lsl: lsl.as_ref().map(|s| LslInfo {
+            lsl: lsl.as_ref().map(|s| crate::lsl::LslInfo {
                 library: s.library().to_string(),
                 clock: s.clock(),
                 counters: s.counters(),
@@ -384,17 +384,6 @@ impl Drop for Daemon {
     fn drop(&mut self) {
         let _ = self.stop_parts();
     }
-}
-
-/// What `/api/status` says of the LSL streams.
-#[derive(Debug, Clone)]
-pub(crate) struct LslInfo {
-    /// Where liblsl was loaded from.
-    pub library: String,
-    /// Loop time to LSL clock.
-    pub clock: crate::lsl::LslClock,
-    /// The streaming thread's counters.
-    pub counters: Arc<LslCounters>,
 }
 
 /// Starts the LSL streams for a device of `channels` channels at the loop's rate.

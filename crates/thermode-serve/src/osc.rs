@@ -237,9 +237,9 @@ fn channel_command(channel: usize, action: &str, args: &[OscArg], app: &App) -> 
     }
 }
 
-/// How long a subscription lasts unless renewed (by sending `/thermode/subscribe` again) \[s\]: the default of
-/// [`crate::api::NetLimits::osc_subscription_ttl_s`].
-pub const SUBSCRIPTION_TTL_S: f64 = 10.0;
+/// How long a subscription lasts unless renewed \[s\] (the default of `NetLimits::osc_subscription_ttl_s`).
+pub use crate::api::SUBSCRIPTION_TTL_S;
+
 /// Most OSC subscribers at once; a further one is refused until one leaves or expires.
 pub const MAX_SUBSCRIBERS: usize = 8;
 /// Longest the sender sleeps between looks at the faults and the subscriptions' expiry \[s\].

@@ -37,6 +37,10 @@ use thermode_runtime::snapshot::{Mode, Shared, Snapshot};
 /// The dashboard page (one static file, inline script, hand-drawn canvas plots).
 pub const DASHBOARD_HTML: &str = include_str!("../dashboard.html");
 
+/// How long an OSC subscription lasts unless renewed (by sending `/thermode/subscribe` again) \[s\]: the default of
+/// [`NetLimits::osc_subscription_ttl_s`].
+pub const SUBSCRIPTION_TTL_S: f64 = 10.0;
+
 /// Limits of the network side.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NetLimits {
@@ -72,7 +76,7 @@ pub struct NetLimits {
     /// OSC burst. Default 400.
     pub osc_burst: f64,
     /// An OSC telemetry subscription not renewed for this long ends \[s\]. Default 10
-    /// ([`crate::osc::SUBSCRIPTION_TTL_S`]).
+    /// ([`SUBSCRIPTION_TTL_S`]).
     pub osc_subscription_ttl_s: f64,
 }
 
@@ -92,7 +96,7 @@ impl Default for NetLimits {
             send_timeout_s: 5.0,
             osc_messages_per_s: 200.0,
             osc_burst: 400.0,
-            osc_subscription_ttl_s: crate::osc::SUBSCRIPTION_TTL_S,
+            osc_subscription_ttl_s: SUBSCRIPTION_TTL_S,
         }
     }
 }
@@ -222,7 +226,7 @@ pub struct App {
     /// Where client markers go (`serve --lsl`), or `None`.
     pub(crate) markers: Option<crate::lsl::MarkerSender>,
     /// The LSL streams, for `/api/status`.
-    pub(crate) lsl: Option<crate::daemon::LslInfo>,
+    pub(crate) lsl: Option<crate::lsl::LslInfo>,
 }
 
 impl std::fmt::Debug for App {

@@ -495,3 +495,14 @@ mod tests {
         );
     }
 }
+
+/// What `/api/status` says of the LSL streams.
+#[derive(Debug, Clone)]
+pub(crate) struct LslInfo {
+    /// Where liblsl was loaded from.
+    pub library: String,
+    /// Loop time to LSL clock.
+    pub clock: LslClock,
+    /// The streaming thread's counters.
+    pub counters: Arc<LslCounters>,
+}
