@@ -26,6 +26,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use thermode_device::{Device, DeviceError, Reading, MAX_CHANNELS};
+use thermode_model::params::Rule;
 use thermode_safety::{DoseLedger, DriveCommand, FaultCode};
 
 use crate::command::{
@@ -89,29 +90,17 @@ impl Default for LoopConfig {
 }
 
 impl LoopConfig {
-    /// Checks every field.
+    /// Checks every field: each number against its rule, named by its key.
     pub fn validate(&self) -> Result<(), RuntimeError> {
-        if !(self.rate_hz.is_finite() && (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&self.rate_hz)) {
-            return Err(RuntimeError::Config(format!(
-                "loop rate {} Hz must lie in {MIN_RATE_HZ}..={MAX_RATE_HZ} Hz",
-                self.rate_hz
-            )));
-        }
-        let grace = self.release_after_disconnect_s;
-        if !(grace.is_finite() && (0.0..=60.0).contains(&grace)) {
-            return Err(RuntimeError::Config(format!(
-                "release-after-disconnect {grace} s must lie in 0..=60 s"
-            )));
-        }
-        if self.command_queue_len == 0 {
-            return Err(RuntimeError::Config("command queue length must be at least 1".into()));
-        }
-        if !(self.stats_window_s.is_finite() && self.stats_window_s > 0.0) {
-            return Err(RuntimeError::Config(format!(
-                "statistics window {} s must be finite and positive",
-                self.stats_window_s
-            )));
-        }
+        let rate = Rule::Within {
+            min: MIN_RATE_HZ,
+            max: MAX_RATE_HZ,
+        };
+        rate.check("rate_hz", self.rate_hz)?;
+        let grace = Rule::Within { min: 0.0, max: 60.0 };
+        grace.check("release_after_disconnect_s", self.release_after_disconnect_s)?;
+        Rule::AtLeast { min: 1.0 }.check("command_queue_len", self.command_queue_len as f64)?;
+        Rule::Positive.check("stats_window_s", self.stats_window_s)?;
         Ok(())
     }
 

@@ -23,6 +23,7 @@ use tokio_tungstenite::tungstenite::Message;
 
 use crate::daemon::{Daemon, DaemonConfig, ServerConfig};
 use crate::error::ServeError;
+use thermode_model::params::Rule;
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::control_loop::LoopConfig;
 use thermode_runtime::engine::EngineFactory;
@@ -242,14 +243,17 @@ fn timing(wakes: &[(f64, f64)], period_s: f64) -> (Spread, Spread) {
     (Spread::of(&deviation), Spread::of(&lateness))
 }
 
+/// How long a bench may run \[s\].
+const BENCH_DURATION: Rule = Rule::Within { min: 0.1, max: 3600.0 };
+
 /// Measures the timer's floor at `rate_hz` for `duration_s` \[s\], asking for real-time scheduling when `realtime`.
 pub fn timer_floor(rate_hz: f64, duration_s: f64, realtime: bool) -> Result<FloorReport, ServeError> {
-    if !(rate_hz.is_finite() && (1.0..=10_000.0).contains(&rate_hz)) {
-        return Err(ServeError::Config("the floor's rate must lie in 1..=10000 Hz".into()));
+    Rule::Within {
+        min: 1.0,
+        max: 10_000.0,
     }
-    if !(duration_s.is_finite() && (0.1..=3600.0).contains(&duration_s)) {
-        return Err(ServeError::Config("bench duration must lie in 0.1..=3600 s".into()));
-    }
+    .check("rate_hz", rate_hz)?;
+    BENCH_DURATION.check("duration_s", duration_s)?;
     let thread = std::thread::Builder::new()
         .name("thermode-floor".into())
         .spawn(move || {
@@ -311,12 +315,9 @@ pub fn run(
     device: Box<dyn Device + Send>,
     engines: EngineFactory,
 ) -> Result<BenchReport, ServeError> {
-    let interval_ok = config.touch_interval_s.is_finite() && (0.01..=60.0).contains(&config.touch_interval_s);
-    if !(config.duration_s.is_finite() && (0.1..=3600.0).contains(&config.duration_s) && interval_ok) {
-        return Err(ServeError::Config(
-            "bench duration must lie in 0.1..=3600 s and the touch interval in 0.01..=60 s".into(),
-        ));
-    }
+    BENCH_DURATION.check("duration_s", config.duration_s)?;
+    let interval = Rule::Within { min: 0.01, max: 60.0 };
+    interval.check("touch_interval_s", config.touch_interval_s)?;
     let channels = device.channel_count();
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
     let (tap, records) = sync_channel::<TickRecord>(1 << 16);

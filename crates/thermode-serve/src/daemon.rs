@@ -17,6 +17,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use thermode_device::Device;
+use thermode_model::params::Rule;
 use thermode_pipeline::stimulus::OBJECT_TEMPERATURE;
 use thermode_platform::Clock;
 use thermode_runtime::command::CommandSender;
@@ -104,12 +105,11 @@ impl ServerConfig {
             });
         }
         self.net.validate()?;
-        if self.max_message_bytes == 0 || self.max_message_bytes > self.net.hard_message_bytes {
-            return Err(ServeError::Config(format!(
-                "message limit {} bytes must lie in 1..={} bytes",
-                self.max_message_bytes, self.net.hard_message_bytes
-            )));
-        }
+        let message = Rule::Within {
+            min: 1.0,
+            max: self.net.hard_message_bytes as f64,
+        };
+        message.check("max_message_bytes", self.max_message_bytes as f64)?;
         OBJECT_TEMPERATURE.check(self.default_object_c)?;
         Ok(())
     }

@@ -278,13 +278,7 @@ fn subscribe(
         .first()
         .and_then(OscArg::as_f64)
         .ok_or_else(|| ApiError::new(ErrorCode::BadValue, "argument 0 (rate in Hz) must be a number"))?;
-    let max_hz = app.limits.max_subscribe_hz;
-    if !(protocol::MIN_SUBSCRIBE_HZ..=max_hz).contains(&rate_hz) {
-        return Err(ApiError::new(
-            ErrorCode::BadValue,
-            format!("rate {rate_hz} Hz outside {}..={max_hz} Hz", protocol::MIN_SUBSCRIBE_HZ),
-        ));
-    }
+    let rate_hz = protocol::subscription_rate(rate_hz, &app.limits)?;
     let to = reply_address(message.args.get(1), from)?;
     let now = Instant::now();
     let ttl_s = app.net.osc_subscription_ttl_s;

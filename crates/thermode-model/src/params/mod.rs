@@ -24,6 +24,11 @@ pub enum Rule {
     Positive,
     /// A finite number not below zero.
     NonNegative,
+    /// A finite number not below `min` (a count of at least one, a size of at least a kibibyte).
+    AtLeast {
+        /// Smallest allowed value.
+        min: f64,
+    },
     /// A finite number in `[min, max]` (both inclusive).
     Within {
         /// Smallest allowed value.
@@ -73,6 +78,7 @@ impl Rule {
                 Rule::Finite | Rule::Custom(_) => true,
                 Rule::Positive => value > 0.0,
                 Rule::NonNegative => value >= 0.0,
+                Rule::AtLeast { min } => value >= min,
                 Rule::Within { min, max } => value >= min && value <= max,
                 Rule::Between { min, max } => value > min && value < max,
                 Rule::AtMost { max, .. } => value <= max,
@@ -101,6 +107,7 @@ impl fmt::Display for Rule {
             Rule::Finite => f.write_str("must be a finite number"),
             Rule::Positive => f.write_str("must be a finite number greater than zero"),
             Rule::NonNegative => f.write_str("must be a finite number not below zero"),
+            Rule::AtLeast { min } => write!(f, "must be a finite number not below {min}"),
             Rule::Within { min, max } => write!(f, "must be a finite number in [{min}, {max}]"),
             Rule::Custom(text) => f.write_str(text),
             Rule::Between { min, max } => write!(f, "must be a finite number strictly between {min} and {max}"),

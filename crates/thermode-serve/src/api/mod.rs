@@ -27,7 +27,10 @@ use thermode_protocol::status::{
 
 use access::Access;
 use protocol::{ApiError, ErrorCode, RequestLimits};
+use thermode_model::params::Rule;
 use thermode_platform::Clock;
+
+use crate::error::ServeError;
 use thermode_runtime::command::{Answer, CommandSender, Reply};
 use thermode_runtime::interlock::Interlock;
 use thermode_runtime::ledger::WriterStatus;
@@ -102,8 +105,14 @@ impl Default for NetLimits {
 }
 
 impl NetLimits {
-    /// Every duration finite and positive (at most a day), every rate and count positive.
-    pub fn validate(&self) -> Result<(), crate::error::ServeError> {
+    /// Every duration in (0, 86400] s (the header timeout in (0, 10] s), every rate and burst at least 1, at
+    /// least one WebSocket connection, a hard message limit of at least 1 KiB and more HTTP connections than
+    /// WebSockets: each refused number is a `BadValue` naming its key.
+    pub fn validate(&self) -> Result<(), ServeError> {
+        let day = Rule::AtMost {
+            max: 86_400.0,
+            what: "a day [s]",
+        };
         let durations = [
             ("reply_timeout_s", self.reply_timeout_s),
             ("idle_timeout_s", self.idle_timeout_s),
@@ -112,43 +121,31 @@ impl NetLimits {
             ("http_idle_timeout_s", self.http_idle_timeout_s),
             ("osc_subscription_ttl_s", self.osc_subscription_ttl_s),
         ];
-        let rates = [
+        for (name, value) in durations {
+            Rule::Positive.check(name, value)?;
+            day.check(name, value)?;
+        }
+        let at_least_one = Rule::AtLeast { min: 1.0 };
+        for (name, value) in [
             ("requests_per_s", self.requests_per_s),
             ("burst", self.burst),
             ("osc_messages_per_s", self.osc_messages_per_s),
             ("osc_burst", self.osc_burst),
-        ];
-        for (name, value) in durations {
-            if !(value.is_finite() && value > 0.0 && value <= 86_400.0) {
-                return Err(crate::error::ServeError::Config(format!(
-                    "{name} = {value} s must lie in (0, 86400]"
-                )));
-            }
+            ("max_connections", self.max_connections as f64),
+        ] {
+            at_least_one.check(name, value)?;
         }
-        for (name, value) in rates {
-            if !(value.is_finite() && value >= 1.0) {
-                return Err(crate::error::ServeError::Config(format!(
-                    "{name} = {value} must be finite and ≥ 1"
-                )));
-            }
-        }
-        if self.max_connections == 0 || self.hard_message_bytes < 1024 {
-            return Err(crate::error::ServeError::Config(
-                "max_connections must be ≥ 1 and hard_message_bytes ≥ 1024".into(),
-            ));
-        }
-        if self.max_http_connections <= self.max_connections {
-            return Err(crate::error::ServeError::Config(format!(
-                "max_http_connections ({}) must exceed max_connections ({}): WebSockets are HTTP connections too",
-                self.max_http_connections, self.max_connections
-            )));
-        }
-        if !(self.header_timeout_s.is_finite() && self.header_timeout_s > 0.0 && self.header_timeout_s <= 10.0) {
-            return Err(crate::error::ServeError::Config(format!(
-                "header_timeout_s = {} s must lie in (0, 10]",
-                self.header_timeout_s
-            )));
-        }
+        Rule::AtLeast { min: 1024.0 }.check("hard_message_bytes", self.hard_message_bytes as f64)?;
+        let above_websockets = Rule::AtLeast {
+            min: self.max_connections as f64 + 1.0,
+        };
+        above_websockets.check("max_http_connections", self.max_http_connections as f64)?;
+        Rule::Positive.check("header_timeout_s", self.header_timeout_s)?;
+        let header = Rule::AtMost {
+            max: 10.0,
+            what: "the longest header timeout [s]",
+        };
+        header.check("header_timeout_s", self.header_timeout_s)?;
         Ok(())
     }
 }

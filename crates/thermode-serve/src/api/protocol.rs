@@ -83,12 +83,7 @@ fn validate(request: Request, limits: &RequestLimits, owner: Owner) -> Result<Ap
         },
         Request::StopAll(_) => Command::StopAll,
         Request::Subscribe(subscribe) => {
-            let rate = Range {
-                name: "rate_hz",
-                min: MIN_SUBSCRIBE_HZ,
-                max: limits.max_subscribe_hz,
-            };
-            let rate_hz = rate.check(subscribe.rate_hz)?;
+            let rate_hz = subscription_rate(subscribe.rate_hz, limits)?;
             return Ok(ApiRequest::Subscribe { rate_hz });
         }
         Request::Unsubscribe(_) => return Ok(ApiRequest::Unsubscribe),
@@ -97,6 +92,16 @@ fn validate(request: Request, limits: &RequestLimits, owner: Owner) -> Result<Ap
         Request::Marker(marker) => return marker_request(marker, limits),
     };
     Ok(ApiRequest::Command(command))
+}
+
+/// A telemetry subscription's rate \[Hz\], from [`MIN_SUBSCRIBE_HZ`] to the daemon's maximum (WebSocket and OSC).
+pub fn subscription_rate(rate_hz: f64, limits: &RequestLimits) -> Result<f64, ApiError> {
+    let rate = Range {
+        name: "rate_hz",
+        min: MIN_SUBSCRIBE_HZ,
+        max: limits.max_subscribe_hz,
+    };
+    Ok(rate.check(rate_hz)?)
 }
 
 fn marker_request(marker: Marker, limits: &RequestLimits) -> Result<ApiRequest, ApiError> {
