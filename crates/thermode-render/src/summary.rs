@@ -48,7 +48,8 @@
 use serde::Serialize;
 
 use crate::error::RenderError;
-use crate::run::{ContactState, RenderSpec, Trajectory};
+use crate::spec::RenderSpec;
+use crate::trajectory::{finger_at_depth_c, ContactState, Trajectory};
 
 /// Smallest drop (or rise) of the target for which a lag is defined \[°C\]: 0.05.
 pub const MIN_DROP_C: f64 = 0.05;
@@ -365,7 +366,7 @@ pub fn actuator_limit(
         for _ in 0..substeps {
             ideal_substep(channel, h, limit_a, &bound, bound_c);
         }
-        let skin_c = crate::run::finger_at_depth_c(channel, depth_m);
+        let skin_c = finger_at_depth_c(channel, depth_m);
         if result.lag_s.is_none() && sign * (half.level_c - skin_c) >= 0.0 {
             let skin_time_s = interpolate(previous, (t, skin_c), half.level_c);
             result.lag_s = half.target_time_s.map(|target_s| (skin_time_s - target_s).max(0.0));
