@@ -28,8 +28,9 @@ use thermode_pipeline::{ControllerKind, PipelineConfig};
 use thermode_render::run::{render, render_all, RenderRun, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ};
 use thermode_render::{RenderError, RenderSpec};
 
+use super::trace::TrialTrace;
 use crate::design::Condition;
-use crate::participant::{standard_normal, trial_rng};
+use crate::random::{standard_normal, trial_rng};
 
 /// Why a stimulus could not be presented or measured.
 #[derive(Debug, Error)]
@@ -114,7 +115,7 @@ pub struct TrialMeasurement {
     /// simulation); the session keeps them in different columns.
     pub measured: bool,
     /// The trial's curve on a real display (kept beside the session CSV), if the stimulus records one.
-    pub trace: Option<crate::runner::live::TrialTrace>,
+    pub trace: Option<TrialTrace>,
 }
 
 impl TrialMeasurement {
