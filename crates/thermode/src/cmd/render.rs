@@ -17,19 +17,9 @@ use thermode_render::run::{render_all, write_csv, DEFAULT_DURATION_S, DEFAULT_PR
 use thermode_render::summary::{summary_table, Summary};
 use thermode_render::RenderSpec;
 
+use crate::controller::{ControllerArg, RENDER_CONTROLLERS};
 use crate::output::{check_outputs, csv_precision, is_stdout, print_stdout, write_atomically};
 use crate::resolve;
-
-/// The controller(s) to run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum ControllerArg {
-    /// The paper's PID on the low-pass filtered sensor (tuned gains).
-    Pid,
-    /// thermode's model-based controller (observer, Peltier feedforward).
-    Model,
-    /// Both, one after the other (one panel each in the plot).
-    Both,
-}
 
 /// The renderer (and display-inverse finger model).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -68,7 +58,7 @@ pub struct RenderArgs {
     #[arg(long = "material-file", value_name = "FILE")]
     material_files: Vec<PathBuf>,
     /// Controller.
-    #[arg(long, value_enum, default_value = "model")]
+    #[arg(long, default_value = "model", value_parser = ControllerArg::parser(&RENDER_CONTROLLERS))]
     controller: ControllerArg,
     /// Renderer: the finger model that computes the target and runs on the display. The target is its receptor
     /// (fv: the skin surface; kron: T1, the centre of the epidermis), and the simulated finger (`skin_c`) and the
