@@ -242,13 +242,7 @@ impl ModelStimulus {
     /// A model stimulus; `finger_drift_sd_c` \[°C\] (≥ 0, default choice 0) is the standard deviation of the
     /// finger's start temperature around its resting value from trial to trial.
     pub fn new(contact: FvContact, finger_drift_sd_c: f64, seed: u64) -> Result<ModelStimulus, StimulusError> {
-        if !(finger_drift_sd_c.is_finite() && finger_drift_sd_c >= 0.0) {
-            return Err(StimulusError::BadSetting {
-                key: "finger_drift_sd_c",
-                value: finger_drift_sd_c,
-                requirement: "must be a finite number not below 0",
-            });
-        }
+        check_drift_sd(finger_drift_sd_c)?;
         let resting_c = contact.resting_surface_c()?;
         Ok(ModelStimulus {
             contact,
@@ -283,8 +277,7 @@ impl ModelStimulus {
         if self.finger_drift_sd_c == 0.0 {
             return None;
         }
-        let mut rng = trial_rng(self.seed ^ DRIFT_SALT, participant_index, trial);
-        Some(self.resting_c + self.finger_drift_sd_c * standard_normal(&mut rng))
+        Some(self.resting_c + trial_drift_c(self.finger_drift_sd_c, self.seed ^ DRIFT_SALT, participant_index, trial))
     }
 }
 
@@ -460,13 +453,7 @@ impl DisplayStimulus {
     /// A display stimulus; `finger_drift_sd_c` \[°C\] (≥ 0; 0 = every trial starts at rest) as for
     /// [`ModelStimulus`]; `seed` seeds the sensor noise and the drift.
     pub fn new(setup: DisplaySetup, finger_drift_sd_c: f64, seed: u64) -> Result<DisplayStimulus, StimulusError> {
-        if !(finger_drift_sd_c.is_finite() && finger_drift_sd_c >= 0.0) {
-            return Err(StimulusError::BadSetting {
-                key: "finger_drift_sd_c",
-                value: finger_drift_sd_c,
-                requirement: "must be a finite number not below 0",
-            });
-        }
+        check_drift_sd(finger_drift_sd_c)?;
         setup.validate()?;
         Ok(DisplayStimulus {
             setup,
@@ -544,8 +531,12 @@ impl DisplayStimulus {
         if self.finger_drift_sd_c == 0.0 {
             return 0.0;
         }
-        let mut rng = trial_rng(self.seed ^ DISPLAY_DRIFT_SALT, participant_index, trial);
-        self.finger_drift_sd_c * standard_normal(&mut rng)
+        trial_drift_c(
+            self.finger_drift_sd_c,
+            self.seed ^ DISPLAY_DRIFT_SALT,
+            participant_index,
+            trial,
+        )
     }
 }
 
@@ -570,6 +561,26 @@ impl Stimulus for DisplayStimulus {
             trace: None,
         })
     }
+}
+
+/// `Ok` if `finger_drift_sd_c` \[°C\] is a valid standard deviation of the finger's start temperature (finite, at
+/// least 0).
+fn check_drift_sd(finger_drift_sd_c: f64) -> Result<(), StimulusError> {
+    if !(finger_drift_sd_c.is_finite() && finger_drift_sd_c >= 0.0) {
+        return Err(StimulusError::BadSetting {
+            key: "finger_drift_sd_c",
+            value: finger_drift_sd_c,
+            requirement: "must be a finite number not below 0",
+        });
+    }
+    Ok(())
+}
+
+/// The finger's offset from rest in one trial \[°C\]: `sd_c` \[°C\] times a standard normal number from the trial's
+/// stream of `seed` ([`trial_rng`]).
+fn trial_drift_c(sd_c: f64, seed: u64, participant_index: usize, trial: usize) -> f64 {
+    let mut rng = trial_rng(seed, participant_index, trial);
+    sd_c * standard_normal(&mut rng)
 }
 
 #[cfg(test)]
