@@ -119,6 +119,18 @@ pub struct TrialMeasurement {
 }
 
 impl TrialMeasurement {
+    /// A simulation's measurement of a trial: the finger at the first and the last point of `curve` (which must not
+    /// be empty), with the curve, no trace.
+    pub fn modelled(curve: SkinCurve) -> Self {
+        TrialMeasurement {
+            finger_start_c: curve.skin_c[0],
+            finger_end_c: curve.skin_c[curve.skin_c.len() - 1],
+            curve: Some(curve),
+            measured: false,
+            trace: None,
+        }
+    }
+
     /// Checks that the temperatures are finite and the curve (if any) is valid.
     pub fn validate(&self) -> Result<(), StimulusError> {
         if !(self.finger_start_c.is_finite() && self.finger_end_c.is_finite()) {
@@ -297,13 +309,7 @@ impl Stimulus for ModelStimulus {
                 curve
             }
         };
-        Ok(TrialMeasurement {
-            finger_start_c: curve.skin_c[0],
-            finger_end_c: curve.skin_c[curve.skin_c.len() - 1],
-            curve: Some(curve),
-            measured: false,
-            trace: None,
-        })
+        Ok(TrialMeasurement::modelled(curve))
     }
 }
 
@@ -553,13 +559,7 @@ impl Stimulus for DisplayStimulus {
             time_s: base.time_s.clone(),
             skin_c: base.skin_c.iter().map(|c| c + drift_c).collect(),
         };
-        Ok(TrialMeasurement {
-            finger_start_c: curve.skin_c[0],
-            finger_end_c: curve.skin_c[curve.skin_c.len() - 1],
-            curve: Some(curve),
-            measured: false,
-            trace: None,
-        })
+        Ok(TrialMeasurement::modelled(curve))
     }
 }
 
