@@ -29,4 +29,4 @@ pub mod tune;
 
 pub use error::RenderError;
 pub use run::{render, RenderRun, RenderSpec, Trajectory};
-pub use summary::Summary;
+pub use summary::RenderSummary;

@@ -57,7 +57,7 @@ pub use crate::spec::{
     check_result_bytes, RenderSpec, BYTES_PER_ROW, DEFAULT_DURATION_S, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ,
     DEFAULT_SEED, MAX_RUN_S, PLANT_SUBSTEP_S,
 };
-use crate::summary::{actuator_limit, summarise, Summary};
+use crate::summary::{actuator_limit, summarise, RenderSummary};
 pub use crate::trajectory::{finger_at_depth_c, ContactState, Plant, Trajectory};
 use crate::truth::truth_skin_c;
 
@@ -69,7 +69,7 @@ pub struct RenderRun {
     /// Every tick.
     pub trajectory: Trajectory,
     /// The metrics of the paper's Figure 3.
-    pub summary: Summary,
+    pub summary: RenderSummary,
 }
 
 /// The seed of a run's sensor noise: `seed` XOR the 64-bit FNV-1a hash of the material's name. Each material gets

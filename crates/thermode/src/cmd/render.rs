@@ -14,7 +14,7 @@ use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, Render
 use thermode_plot::write_figure;
 use thermode_render::figure::figure3;
 use thermode_render::run::{render_all, write_csv, DEFAULT_DURATION_S, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ};
-use thermode_render::summary::{summary_table, Summary};
+use thermode_render::summary::{summary_table, RenderSummary};
 use thermode_render::RenderSpec;
 
 use crate::controller::{ControllerArg, RENDER_CONTROLLERS};
@@ -162,8 +162,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 }
 
 /// The summaries as JSON objects whose window keys follow the windows actually used (`rms_skin_5_10_c` for a 10 s
-/// run; [`Summary::json_key`]).
-fn summaries_json(summaries: &[Summary]) -> Result<Vec<serde_json::Value>> {
+/// run; [`RenderSummary::json_key`]).
+fn summaries_json(summaries: &[RenderSummary]) -> Result<Vec<serde_json::Value>> {
     summaries
         .iter()
         .map(|s| {
