@@ -11,7 +11,7 @@
 //! - [`error`]: the typed error [`LabError`] shared by the lab's modules.
 //! - [`design`]: experiment files (TOML); [`plan`]: the counterbalanced trial plan (Williams designs);
 //!   [`session`]: durable session CSVs and sidecars; [`runner`]: the trial runner and its stimulus, clock, console
-//!   and responder seams; [`participant`]: the simulated participant.
+//!   and responder seams; [`participant`]: the simulated participant; [`random`]: the per-trial random streams.
 
 pub mod analysis;
 pub mod design;
@@ -19,6 +19,7 @@ pub mod error;
 pub mod export;
 pub mod participant;
 pub mod plan;
+pub mod random;
 pub mod runner;
 pub mod session;
 

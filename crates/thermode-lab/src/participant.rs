@@ -27,6 +27,7 @@ use rand_chacha::ChaCha8Rng;
 use thermode_model::materials::find;
 use thiserror::Error;
 
+pub use crate::random::{standard_normal, trial_rng};
 use crate::runner::stimulus::{FvContact, SkinCurve, StimulusError};
 
 /// The paper's rate of correct identification of real materials (section 4.2 a: 66 %, five options).
@@ -37,7 +38,7 @@ pub const PAPER_CALIBRATED_NOISE_SD: f64 = 0.0981;
 /// Window of the initial cooling rate \[s\].
 pub const INITIAL_WINDOW_S: f64 = 2.0;
 /// Perception scale of the cooling rate \[°C/s\] (the smallest detectable rate of change, `model.md` §6).
-pub const RATE_SCALE_C_S: f64 = 0.1;
+pub const RATE_SCALE_C_PER_S: f64 = 0.1;
 /// Perception scale of the temperature drop \[°C\].
 pub const DROP_SCALE_C: f64 = 0.1;
 /// Seed salt of the simulated participant's per-trial noise streams.
@@ -90,7 +91,7 @@ pub enum ParticipantError {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CurveFeatures {
     /// Mean cooling rate over the first [`INITIAL_WINDOW_S`] seconds, `(T(0) − T(2 s)) / 2 s` \[°C/s\].
-    pub initial_cooling_rate_c_s: f64,
+    pub initial_cooling_rate_c_per_s: f64,
     /// Temperature drop at the end of the curve, `T(0) − T(end)` \[°C\].
     pub end_drop_c: f64,
 }
@@ -105,7 +106,7 @@ impl CurveFeatures {
         }
         let t0 = curve.skin_c[0];
         Ok(CurveFeatures {
-            initial_cooling_rate_c_s: (t0 - curve.at(INITIAL_WINDOW_S)) / INITIAL_WINDOW_S,
+            initial_cooling_rate_c_per_s: (t0 - curve.at(INITIAL_WINDOW_S)) / INITIAL_WINDOW_S,
             end_drop_c: t0 - curve.skin_c[curve.skin_c.len() - 1],
         })
     }
@@ -113,7 +114,7 @@ impl CurveFeatures {
     /// The features as perceived: `asinh(rate / 0.1 °C/s)`, `asinh(drop / 0.1 °C)`.
     pub fn perceived(&self) -> [f64; 2] {
         [
-            (self.initial_cooling_rate_c_s / RATE_SCALE_C_S).asinh(),
+            (self.initial_cooling_rate_c_per_s / RATE_SCALE_C_PER_S).asinh(),
             (self.end_drop_c / DROP_SCALE_C).asinh(),
         ]
     }
@@ -315,27 +316,13 @@ impl SimulatedParticipant {
     }
 }
 
-/// A standard normal number (Box–Muller on two uniforms from `rng`).
-pub fn standard_normal(rng: &mut impl Rng) -> f64 {
-    let u1: f64 = 1.0 - rng.gen::<f64>(); // (0, 1]: the logarithm stays finite
-    let u2: f64 = rng.gen::<f64>();
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-}
-
-/// The random stream of one trial: ChaCha8 seeded with `seed`, stream number `participant_index · 2³² + trial`.
-pub fn trial_rng(seed: u64, participant_index: usize, trial: usize) -> ChaCha8Rng {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    rng.set_stream(((participant_index as u64) << 32) | (trial as u64 & 0xffff_ffff));
-    rng
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn linear_curve(rate_c_s: f64, duration_s: f64) -> SkinCurve {
+    fn linear_curve(rate_c_per_s: f64, duration_s: f64) -> SkinCurve {
         let time_s: Vec<f64> = (0..=(duration_s * 10.0) as usize).map(|i| i as f64 * 0.1).collect();
-        let skin_c = time_s.iter().map(|t| 32.0 - rate_c_s * t).collect();
+        let skin_c = time_s.iter().map(|t| 32.0 - rate_c_per_s * t).collect();
         SkinCurve { time_s, skin_c }
     }
 
@@ -343,9 +330,9 @@ mod tests {
     fn features_of_a_linear_curve_are_its_slope_and_total_drop() {
         let f = CurveFeatures::of(&linear_curve(0.25, 30.0)).expect("valid curve");
         assert!(
-            (f.initial_cooling_rate_c_s - 0.25).abs() < 1e-12,
+            (f.initial_cooling_rate_c_per_s - 0.25).abs() < 1e-12,
             "rate {}",
-            f.initial_cooling_rate_c_s
+            f.initial_cooling_rate_c_per_s
         );
         assert!((f.end_drop_c - 7.5).abs() < 1e-9, "drop {}", f.end_drop_c);
         let p = f.perceived();
@@ -394,7 +381,7 @@ mod tests {
     fn two_well_separated_options_follow_the_normal_law() {
         // Two references 2d apart on the first perceived axis: with noise σ the correct rate is Φ(d/σ).
         let f = |rate: f64| CurveFeatures {
-            initial_cooling_rate_c_s: RATE_SCALE_C_S * rate.sinh(),
+            initial_cooling_rate_c_per_s: RATE_SCALE_C_PER_S * rate.sinh(),
             end_drop_c: DROP_SCALE_C * 3f64.sinh(),
         };
         let mut simulated = SimulatedParticipant::new(vec!["a".into(), "b".into()], vec![f(2.0), f(2.4)], 9);

@@ -36,41 +36,34 @@ use crate::plan::{ParticipantPlan, PlannedTrial};
 /// lists them and says why the others differ. Finger temperatures measured on a display and those of a simulation
 /// are never in the same column: `finger_*` hold measurements, `model_finger_*` a simulation's (the other set is
 /// empty).
-pub const SESSION_COLUMNS: [&str; 25] = [
-    "participant",
-    "expName",
-    "session_date",
-    "seed",
-    "software_version",
-    "trials.thisN",
-    "trial",
-    "block",
-    "repetition",
-    "condition",
-    "position",
-    "presented",
-    "identified",
-    "key_resp.keys",
-    "key_resp.rt",
-    "presentation_s",
-    "finger_baseline_c",
-    "finger_start_c",
-    "finger_end_c",
-    "model_finger_baseline_c",
-    "model_finger_start_c",
-    "model_finger_end_c",
-    "excluded",
-    "exclusion_reason",
-    "curve_file",
-];
+pub const SESSION_COLUMNS: [&str; 25] = columns(&[
+    &[
+        "participant",
+        "expName",
+        "session_date",
+        "seed",
+        "software_version",
+        "trials.thisN",
+    ],
+    &PLAN_COLUMNS,
+    &["key_resp.keys", "key_resp.rt", "presentation_s"],
+    &FINGER_COLUMNS,
+    &["model_finger_baseline_c", "model_finger_start_c", "model_finger_end_c"],
+    &EXCLUSION_COLUMNS,
+    &["curve_file"],
+]);
 
 /// The columns of format 1 (thermode 0.1 before PsychoPy's names), still read and continued on a resume.
-pub const SESSION_COLUMNS_V1: [&str; 20] = [
-    "participant",
-    "experiment",
-    "session_date",
-    "seed",
-    "software_version",
+pub const SESSION_COLUMNS_V1: [&str; 20] = columns(&[
+    &["participant", "experiment", "session_date", "seed", "software_version"],
+    &PLAN_COLUMNS,
+    &["response_key", "response_time_s", "presentation_s"],
+    &FINGER_COLUMNS,
+    &EXCLUSION_COLUMNS,
+]);
+
+/// The columns of a trial's place in the plan and its answer, the same in both formats.
+const PLAN_COLUMNS: [&str; 7] = [
     "trial",
     "block",
     "repetition",
@@ -78,15 +71,27 @@ pub const SESSION_COLUMNS_V1: [&str; 20] = [
     "position",
     "presented",
     "identified",
-    "response_key",
-    "response_time_s",
-    "presentation_s",
-    "finger_baseline_c",
-    "finger_start_c",
-    "finger_end_c",
-    "excluded",
-    "exclusion_reason",
 ];
+/// The finger temperatures measured on a display, the same in both formats.
+const FINGER_COLUMNS: [&str; 3] = ["finger_baseline_c", "finger_start_c", "finger_end_c"];
+/// The exclusion rule's verdict, the same in both formats.
+const EXCLUSION_COLUMNS: [&str; 2] = ["excluded", "exclusion_reason"];
+
+/// The column names of `parts`, one after the other; `N` must be their number (checked when compiled).
+const fn columns<const N: usize>(parts: &[&[&'static str]]) -> [&'static str; N] {
+    let mut out = [""; N];
+    let (mut part, mut n) = (0, 0);
+    while part < parts.len() {
+        let mut i = 0;
+        while i < parts[part].len() {
+            out[n] = parts[part][i];
+            (i, n) = (i + 1, n + 1);
+        }
+        part += 1;
+    }
+    assert!(n == N, "the column count differs from the parts' total");
+    out
+}
 
 /// Format-1 names of the columns that format 2 renamed to PsychoPy's: (format 2, format 1).
 const RENAMED: [(&str, &str); 3] = [

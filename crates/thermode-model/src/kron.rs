@@ -356,14 +356,7 @@ impl PlateCoupled for KronModel {
 /// reachable open interval (the message states the interval).
 pub fn calibrate_to_surface(skin: &Skin, ambient_c: f64, surface_c: f64) -> Result<Skin, ParamError> {
     const ORIGIN: &str = "surface calibration";
-    limits::AMBIENT_TEMPERATURE
-        .rule()
-        .check("ambient_c", ambient_c)
-        .at(ORIGIN)?;
-    limits::SKIN_TEMPERATURE
-        .rule()
-        .check("surface_c", surface_c)
-        .at(ORIGIN)?;
+    limits::check_resting_temperatures(ORIGIN, ambient_c, surface_c)?;
     let model = KronModel::new(skin)?;
     if model.perfusion_w_m2k.iter().all(|&p| p == 0.0) {
         return Err(ParamError::Invalid {

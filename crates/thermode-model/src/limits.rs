@@ -14,6 +14,7 @@
 //!
 //! Besides the ranges, [`MAX_RESULT_BYTES`] caps the memory one command's results may take.
 
+use crate::error::{At, ParamError};
 use crate::params::Range;
 
 /// One documented range: the constant's name, the range, why its bounds are where they are, and who checks it.
@@ -250,6 +251,24 @@ pub fn check_result_bytes(estimate_bytes: u64) -> Result<(), String> {
         mb(estimate_bytes),
         mb(MAX_RESULT_BYTES)
     ))
+}
+
+/// Checks the two temperatures of a touch, in this order: the ambient `ambient_c` \[°C\] against
+/// [`AMBIENT_TEMPERATURE`] and the object's `object_c` \[°C\] against [`OBJECT_TEMPERATURE`]; a refused one is a
+/// [`ParamError::BadValue`] from `origin` naming `ambient_c` or `object_c`.
+pub fn check_touch_temperatures(origin: &str, ambient_c: f64, object_c: f64) -> Result<(), ParamError> {
+    AMBIENT_TEMPERATURE.rule().check("ambient_c", ambient_c).at(origin)?;
+    OBJECT_TEMPERATURE.rule().check("object_c", object_c).at(origin)?;
+    Ok(())
+}
+
+/// Checks the two temperatures of a resting-surface calibration, in this order: the ambient `ambient_c` \[°C\]
+/// against [`AMBIENT_TEMPERATURE`] and the skin surface `surface_c` \[°C\] against [`SKIN_TEMPERATURE`]; a refused
+/// one is a [`ParamError::BadValue`] from `origin` naming `ambient_c` or `surface_c`.
+pub fn check_resting_temperatures(origin: &str, ambient_c: f64, surface_c: f64) -> Result<(), ParamError> {
+    AMBIENT_TEMPERATURE.rule().check("ambient_c", ambient_c).at(origin)?;
+    SKIN_TEMPERATURE.rule().check("surface_c", surface_c).at(origin)?;
+    Ok(())
 }
 
 /// The table of `docs/ranges.md`: one row per entry of [`ALL`] (constant, quantity with unit, minimum, maximum,

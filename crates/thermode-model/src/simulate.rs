@@ -171,14 +171,7 @@ impl SimulationSpec {
             origin: ORIGIN.into(),
             message: format!("{message}: use a longer dt_s or a shorter duration_s"),
         })?;
-        limits::AMBIENT_TEMPERATURE
-            .rule()
-            .check("ambient_c", self.ambient_c)
-            .at(ORIGIN)?;
-        limits::OBJECT_TEMPERATURE
-            .rule()
-            .check("object_c", self.object_c)
-            .at(ORIGIN)?;
+        limits::check_touch_temperatures(ORIGIN, self.ambient_c, self.object_c)?;
         match self.initial {
             Initial::Steady => {}
             Initial::Uniform(c) => {

@@ -208,10 +208,10 @@ pub struct Telemetry {
 enum Mode {
     /// The renderer and the display inverse.
     Render,
-    /// A direct ramp to `temp_c` at `rate_c_s`; `ramp_c` is where the ramp stands (`None` before its first tick).
+    /// A direct ramp to `temp_c` at `rate_c_per_s`; `ramp_c` is where the ramp stands (`None` before its first tick).
     Direct {
         temp_c: f64,
-        rate_c_s: f64,
+        rate_c_per_s: f64,
         ramp_c: Option<f64>,
     },
 }
@@ -391,11 +391,11 @@ impl SetpointStage {
             }
             Mode::Direct {
                 temp_c,
-                rate_c_s,
+                rate_c_per_s,
                 ramp_c,
             } => {
                 let from_c = ramp_c.unwrap_or(*temp_c);
-                let max_step_c = *rate_c_s * dt_s;
+                let max_step_c = *rate_c_per_s * dt_s;
                 let next_c = from_c + (*temp_c - from_c).clamp(-max_step_c, max_step_c);
                 *ramp_c = Some(next_c);
                 (f64::NAN, next_c)
@@ -437,9 +437,9 @@ impl SetpointStage {
         self.mode = Mode::Render;
     }
 
-    /// Direct mode: a ramp to `temp_c` \[°C\] at `rate_c_s` \[°C/s\], continuing from where the display stands (the
+    /// Direct mode: a ramp to `temp_c` \[°C\] at `rate_c_per_s` \[°C/s\], continuing from where the display stands (the
     /// ramp's position, or `last_setpoint_c` \[°C\] when coming from render mode).
-    fn direct(&mut self, temp_c: f64, rate_c_s: f64, last_setpoint_c: Option<f64>) {
+    fn direct(&mut self, temp_c: f64, rate_c_per_s: f64, last_setpoint_c: Option<f64>) {
         let ramp_c = match self.mode {
             Mode::Direct { ramp_c, .. } => ramp_c,
             Mode::Render => last_setpoint_c,
@@ -447,7 +447,7 @@ impl SetpointStage {
         self.renderer.release();
         self.mode = Mode::Direct {
             temp_c,
-            rate_c_s,
+            rate_c_per_s,
             ramp_c,
         };
     }
@@ -620,10 +620,14 @@ impl ChannelPipeline {
         match stimulus {
             Stimulus::Air => self.setpoint.release(),
             Stimulus::Touch { material, object_c } => self.touch(&material, object_c)?,
-            Stimulus::Direct { temp_c, rate_c_s } => {
+            Stimulus::Direct {
+                temp_c,
+                rate_c_s: rate_c_per_s,
+            } => {
                 // After a hold there is no set-point to continue from: the ramp starts where the plate stands.
                 let plate_c = Some(self.drive.plate_estimate_c()).filter(|p| p.is_finite());
-                self.setpoint.direct(temp_c, rate_c_s, self.last_setpoint_c.or(plate_c))
+                self.setpoint
+                    .direct(temp_c, rate_c_per_s, self.last_setpoint_c.or(plate_c))
             }
         }
         Ok(())

@@ -2,6 +2,8 @@
 //!
 //! - [`run`]: offline rendering of `thermode-pipeline`'s channel pipeline against the simulated display with the
 //!   ground truth (the finger touching the real material), as `thermode render` runs it.
+//! - [`spec`]: what one render is ([`RenderSpec`]: settings, defaults, ranges, result memory).
+//! - [`trajectory`]: what one render records ([`Trajectory`]) and the simulated display it runs on.
 //! - [`summary`]: the metrics of the paper's Figure 3 and its two flaws (RMS errors, overshoot, lag at half drop next
 //!   to the actuator limit).
 //! - [`tune`]: the PID tuner behind `thermode tune` (Nelder–Mead in log-gain space, materials in parallel), composed
@@ -19,10 +21,12 @@ pub mod figure;
 pub mod identify;
 pub mod nelder_mead;
 pub mod run;
+pub mod spec;
 pub mod summary;
+pub mod trajectory;
 pub mod truth;
 pub mod tune;
 
 pub use error::RenderError;
 pub use run::{render, RenderRun, RenderSpec, Trajectory};
-pub use summary::Summary;
+pub use summary::RenderSummary;

@@ -22,7 +22,7 @@
 //!   (see [`crate::truth`]). The renderer's target is the same physics on the renderer's coarse grid, one step per
 //!   tick, with the light-touch resistance [`LIGHT_TOUCH_RESISTANCE_M2K_W`]: with the default finger and display
 //!   they differ only by the renderer's discretisation (a few hundredths of a °C at the first rows after a touch;
-//!   the pipeline's calibration at the touch, [`PipelineConfig::calibrate_finger_at_touch`], leaves a finger that
+//!   the pipeline's calibration at the touch, [`PipelineConfig::calibrate_finger_at_touch`](thermode_pipeline::pipeline::PipelineConfig::calibrate_finger_at_touch), leaves a finger that
 //!   matches the model as it is; a different finger gets a target computed for it, while the truth is that
 //!   finger's own contact).
 //! - Receptor depth: the target is the renderer's receptor — the skin surface for the fv renderer, the epidermis
@@ -44,326 +44,22 @@
 
 use std::io::Write;
 
-use thermode_device::{Device, DeviceConfig, PlateFinger, SimulatedChannel, SimulatedDisplay};
+use thermode_device::{Device, SimulatedDisplay};
 use thermode_model::fv::{FvConfig, FvModel};
-use thermode_model::{BadValue, Material, Skin};
-pub use thermode_platform::csv_text::Precision;
-use thermode_platform::csv_text::{self, CsvText};
-use thermode_safety::FaultCode;
-
-use thermode_model::limits::{self, CONTACT_CONDUCTANCE, DURATION, OBJECT_TEMPERATURE, TICK_RATE};
-use thermode_model::Rule;
-
-use crate::error::RenderError;
-use crate::summary::{actuator_limit, summarise, Summary};
-use crate::truth::truth_skin_c;
-use thermode_pipeline::pipeline::{ChannelPipeline, PipelineConfig, Telemetry};
+use thermode_pipeline::pipeline::{ChannelPipeline, Telemetry};
 use thermode_pipeline::renderer::{fv_config, Renderer, RendererKind, LIGHT_TOUCH_RESISTANCE_M2K_W};
 use thermode_pipeline::stimulus::Stimulus;
+pub use thermode_platform::csv_text::Precision;
+use thermode_platform::csv_text::{self, CsvText};
 
-/// Default largest plant substep \[s\]: 2 ms (see the module documentation for the measured effect).
-pub const PLANT_SUBSTEP_S: f64 = 0.002;
-/// Default tick rate \[Hz\]: 100, the PT-100's sample rate (a faster tick sees the same held sample again).
-pub const DEFAULT_RATE_HZ: f64 = 100.0;
-/// Default contact duration \[s\]: 90, the paper's recordings (section 4.1).
-pub const DEFAULT_DURATION_S: f64 = 90.0;
-/// Default time the finger rests on the display rendering air before the touch \[s\]: 5.
-pub const DEFAULT_PRE_CONTACT_S: f64 = 5.0;
-/// Default seed of the sensor noise.
-pub const DEFAULT_SEED: u64 = 1;
-/// Longest run accepted (pre-contact plus contact) \[s\]: two hours, so that an hour of contact (the thermal-dose
-/// check `--duration 3600`) fits with any pre-contact of up to an hour.
-pub const MAX_RUN_S: f64 = 7200.0;
-/// Estimated memory of one row of a run \[bytes\]: the [`Trajectory`] row (twelve numbers, the contact flag and
-/// the fault) plus a figure's copy of up to four of its curves as (time, value) pairs (`--plot`).
-pub const BYTES_PER_ROW: u64 = (12 * std::mem::size_of::<f64>()
-    + std::mem::size_of::<bool>()
-    + std::mem::size_of::<Option<FaultCode>>()
-    + 4 * 2 * std::mem::size_of::<f64>()) as u64;
-
-/// The simulated display of a run: one channel with the finite-volume finger.
-pub type Plant = SimulatedDisplay<FvModel>;
-
-/// Everything one offline render needs.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RenderSpec {
-    /// The channel pipeline (device, renderer, controller, envelope, the controller's finger model, ambient).
-    pub pipeline: PipelineConfig,
-    /// The simulated finger's own skin. Default [`Skin::fingertip`] (then it matches the controller's model).
-    pub finger_skin: Skin,
-    /// The simulated finger's skin-to-plate contact conductance [W/(m²·K)]; `None` = the device file's.
-    pub finger_contact_w_m2k: Option<f64>,
-    /// The simulated hardware, when it differs from the device file the pipeline believes (`pipeline.device`):
-    /// real displays differ from their datasheets. Default `None`: the plant is the pipeline's device.
-    pub hardware: Option<DeviceConfig>,
-    /// The touched material.
-    pub material: Material,
-    /// Object temperature at the touch \[°C\]; `None` = the ambient temperature (the paper's objects lay in the room).
-    pub object_c: Option<f64>,
-    /// Recorded time after the touch \[s\]. Default [`DEFAULT_DURATION_S`].
-    pub duration_s: f64,
-    /// Time the finger rests on the display rendering air before the touch \[s\] (≥ 0). Default
-    /// [`DEFAULT_PRE_CONTACT_S`].
-    pub pre_contact_s: f64,
-    /// Time after the touch at which the finger lets go \[s\]; `None` = never.
-    pub release_at_s: Option<f64>,
-    /// Tick rate of the pipeline \[Hz\]. Default [`DEFAULT_RATE_HZ`].
-    pub rate_hz: f64,
-    /// Largest plant substep \[s\]. Default [`PLANT_SUBSTEP_S`].
-    pub plant_substep_s: f64,
-    /// Seed of the sensor noise (combined with the material's name, see [`noise_seed`]). Default [`DEFAULT_SEED`].
-    pub seed: u64,
-}
-
-impl RenderSpec {
-    /// The defaults above for `pipeline` and `material`.
-    pub fn new(pipeline: PipelineConfig, material: Material) -> Self {
-        RenderSpec {
-            pipeline,
-            finger_skin: Skin::fingertip(),
-            finger_contact_w_m2k: None,
-            hardware: None,
-            material,
-            object_c: None,
-            duration_s: DEFAULT_DURATION_S,
-            pre_contact_s: DEFAULT_PRE_CONTACT_S,
-            release_at_s: None,
-            rate_hz: DEFAULT_RATE_HZ,
-            plant_substep_s: PLANT_SUBSTEP_S,
-            seed: DEFAULT_SEED,
-        }
-    }
-
-    /// Checks every number of the run against its physical range ([`thermode_model::limits`]: object
-    /// temperature, contact conductance, duration with the pre-contact time, tick rate; the pipeline, models and
-    /// device check their own when built), and that the run's results fit in memory ([`RenderSpec::result_bytes`]
-    /// at most [`limits::MAX_RESULT_BYTES`]), before anything is allocated.
-    pub fn validate(&self) -> Result<(), RenderError> {
-        self.pipeline.validate()?;
-        self.finger_skin.validate("finger skin")?;
-        self.material.validate(&format!("material `{}`", self.material.name))?;
-        if let Some(g) = self.finger_contact_w_m2k {
-            CONTACT_CONDUCTANCE
-                .rule()
-                .check("finger contact conductance [W/(m²·K)]", g)?;
-        }
-        if let Some(c) = self.object_c {
-            OBJECT_TEMPERATURE.check(c)?;
-        }
-        Rule::Positive.check("duration [s]", self.duration_s)?;
-        DURATION.check(self.duration_s)?;
-        DURATION.rule().check("pre-contact time [s]", self.pre_contact_s)?;
-        Rule::AtMost {
-            max: MAX_RUN_S,
-            what: "the longest run [s]",
-        }
-        .check(
-            "duration [s] (with the pre-contact time)",
-            self.duration_s + self.pre_contact_s,
-        )?;
-        if let Some(r) = self.release_at_s {
-            Rule::Within {
-                min: 0.0,
-                max: self.duration_s,
-            }
-            .check("release time [s]", r)?;
-        }
-        TICK_RATE.check(self.rate_hz)?;
-        Rule::Within { min: 1e-6, max: 0.01 }.check("plant substep [s]", self.plant_substep_s)?;
-        if (self.duration_s * self.rate_hz).round() < 1.0 {
-            return Err(BadValue::custom("duration [s]", self.duration_s, "must last at least one tick").into());
-        }
-        check_result_bytes(std::slice::from_ref(self))
-    }
-
-    /// Number of rows the run records: one per tick, before and after the touch. Meaningful for a spec whose
-    /// times and tick rate are finite (saturates otherwise).
-    pub fn rows(&self) -> u64 {
-        let ticks = |s: f64| (s * self.rate_hz).round().max(0.0) as u64;
-        ticks(self.pre_contact_s).saturating_add(ticks(self.duration_s).max(1))
-    }
-
-    /// Estimated memory of the run's results \[bytes\]: [`RenderSpec::rows`] × [`BYTES_PER_ROW`].
-    pub fn result_bytes(&self) -> u64 {
-        self.rows().saturating_mul(BYTES_PER_ROW)
-    }
-
-    /// The tick length \[s\].
-    pub fn tick_s(&self) -> f64 {
-        1.0 / self.rate_hz
-    }
-
-    /// The object temperature at the touch \[°C\].
-    pub fn object_temperature_c(&self) -> f64 {
-        self.object_c.unwrap_or(self.pipeline.ambient_c)
-    }
-
-    /// Ticks before the touch, ticks of contact, and the tick of the release (if any).
-    pub(crate) fn tick_counts(&self) -> (usize, usize, Option<usize>) {
-        let ticks = |s: f64| (s * self.rate_hz).round() as usize;
-        let release = self.release_at_s.map(|r| ticks(r).max(1));
-        (ticks(self.pre_contact_s), ticks(self.duration_s).max(1), release)
-    }
-
-    /// Plant substeps per tick.
-    pub(crate) fn substeps(&self) -> usize {
-        ((self.tick_s() / self.plant_substep_s) - 1e-9).ceil().max(1.0) as usize
-    }
-
-    /// Depth below the skin surface at which the simulated finger (`skin_c`) and the truth (`truth_skin_c`) are
-    /// read \[m\]: the renderer's receptor depth in the simulated finger's own skin
-    /// ([`RendererKind::receptor_depth_m`] of [`RenderSpec::finger_skin`]): half its epidermis (Kron's T1) for the
-    /// kron renderer, 0 (the surface) for the fv renderer. See the module documentation.
-    pub fn receptor_depth_m(&self) -> f64 {
-        self.pipeline.renderer.receptor_depth_m(&self.finger_skin)
-    }
-
-    /// The pipeline as the controller believes it: [`RenderSpec::pipeline`], whose device file is exact
-    /// ([`DeviceConfig::exact_for_its_simulation`]) when the plant is built from it (no [`RenderSpec::hardware`]).
-    pub fn believed_pipeline(&self) -> PipelineConfig {
-        let mut config = self.pipeline.clone();
-        if self.hardware.is_none() {
-            config.device = config.device.exact_for_its_simulation();
-        }
-        config
-    }
-
-    /// The device as the plant sees it: the hardware (default: the pipeline's device file) with the simulated
-    /// finger's contact conductance.
-    pub fn plant_device(&self) -> DeviceConfig {
-        let mut device = self.hardware.unwrap_or(self.pipeline.device);
-        if let Some(g) = self.finger_contact_w_m2k {
-            device.plate.contact_conductance_w_m2k = g;
-        }
-        device
-    }
-}
-
-/// One column per recorded quantity, one row per tick.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct Trajectory {
-    /// Time since the touch at the end of the tick \[s\] (0 at contact, negative before).
-    pub time_s: Vec<f64>,
-    /// Ground truth: the simulated finger touching the real material, at the receptor depth
-    /// ([`RenderSpec::receptor_depth_m`]: surface for fv, epidermis centre for kron) \[°C\].
-    pub truth_skin_c: Vec<f64>,
-    /// The renderer's target: its receptor (fv: the skin surface; kron: T1, the epidermis centre) \[°C\].
-    pub target_skin_c: Vec<f64>,
-    /// The simulated finger on the display at the receptor depth ([`RenderSpec::receptor_depth_m`]: surface for
-    /// fv, epidermis centre for kron) \[°C\].
-    pub skin_c: Vec<f64>,
-    /// The pipeline's finger model on the display (what it believes the finger feels) \[°C\].
-    pub model_skin_c: Vec<f64>,
-    /// The set-point the inverse asked for, before the envelope \[°C\].
-    pub requested_setpoint_c: Vec<f64>,
-    /// The set-point after the envelope \[°C\].
-    pub display_setpoint_c: Vec<f64>,
-    /// The true plate temperature \[°C\].
-    pub display_c: Vec<f64>,
-    /// The PT-100 reading \[°C\].
-    pub sensor_c: Vec<f64>,
-    /// The safety envelope's estimate of the true plate (`display_c`) from the reading \[°C\].
-    pub plate_estimate_c: Vec<f64>,
-    /// The gated drive current \[A\].
-    pub current_a: Vec<f64>,
-    /// The true hot-side temperature \[°C\].
-    pub hot_side_c: Vec<f64>,
-    /// Whether the rendered finger touched the object.
-    pub contact: Vec<bool>,
-    /// The latched fault, if any.
-    pub fault: Vec<Option<FaultCode>>,
-}
-
-impl Trajectory {
-    fn with_capacity(rows: usize) -> Self {
-        let v = || Vec::with_capacity(rows);
-        Trajectory {
-            time_s: v(),
-            truth_skin_c: v(),
-            target_skin_c: v(),
-            skin_c: v(),
-            model_skin_c: v(),
-            requested_setpoint_c: v(),
-            display_setpoint_c: v(),
-            display_c: v(),
-            sensor_c: v(),
-            plate_estimate_c: v(),
-            current_a: v(),
-            hot_side_c: v(),
-            contact: Vec::with_capacity(rows),
-            fault: Vec::with_capacity(rows),
-        }
-    }
-
-    /// The numeric columns with their CSV names, in CSV order.
-    pub fn numbers(&self) -> impl Iterator<Item = (&'static str, &[f64])> {
-        [
-            ("time_s", &self.time_s),
-            ("truth_skin_c", &self.truth_skin_c),
-            ("target_skin_c", &self.target_skin_c),
-            ("skin_c", &self.skin_c),
-            ("model_skin_c", &self.model_skin_c),
-            ("display_setpoint_c", &self.display_setpoint_c),
-            ("requested_setpoint_c", &self.requested_setpoint_c),
-            ("display_c", &self.display_c),
-            ("sensor_c", &self.sensor_c),
-            ("plate_estimate_c", &self.plate_estimate_c),
-            ("current_a", &self.current_a),
-            ("hot_side_c", &self.hot_side_c),
-        ]
-        .into_iter()
-        .map(|(name, column)| (name, column.as_slice()))
-    }
-
-    /// The first numeric column (in CSV order) holding a number that is not finite, with the row of its first
-    /// such number; `None` if every number is finite.
-    pub fn first_non_finite(&self) -> Option<(&'static str, usize)> {
-        self.numbers()
-            .find_map(|(name, column)| column.iter().position(|v| !v.is_finite()).map(|row| (name, row)))
-    }
-
-    /// Number of rows.
-    pub fn len(&self) -> usize {
-        self.time_s.len()
-    }
-
-    /// Whether there are no rows.
-    pub fn is_empty(&self) -> bool {
-        self.time_s.is_empty()
-    }
-
-    fn record(&mut self, time_s: f64, truth_c: f64, telemetry: &Telemetry, plant: &Plant, depth_m: f64) {
-        let Ok(channel) = plant.channel(0) else {
-            return;
-        };
-        let state = channel.state();
-        self.time_s.push(time_s);
-        self.truth_skin_c.push(truth_c);
-        self.target_skin_c.push(telemetry.target_skin_c);
-        self.skin_c.push(finger_at_depth_c(channel, depth_m));
-        self.model_skin_c.push(telemetry.skin_c);
-        self.requested_setpoint_c.push(telemetry.requested_setpoint_c);
-        self.display_setpoint_c.push(telemetry.display_setpoint_c);
-        self.display_c.push(state.plate_c);
-        self.sensor_c.push(state.sensor.value_c);
-        self.plate_estimate_c.push(telemetry.plate_estimate_c);
-        self.current_a.push(state.applied_current_a);
-        self.hot_side_c.push(state.hot_side_c);
-        self.contact.push(telemetry.contact);
-        self.fault.push(telemetry.fault);
-    }
-}
-
-/// The state at the moment of touch.
-#[derive(Debug, Clone)]
-pub struct ContactState {
-    /// The renderer's target at the touch \[°C\] (T0 of the lag).
-    pub target_c: f64,
-    /// The simulated finger at the receptor depth at the touch \[°C\] ([`RenderSpec::receptor_depth_m`]).
-    pub skin_c: f64,
-    /// The plant at the touch (for the actuator-limit run).
-    pub plant: Plant,
-}
+use crate::error::RenderError;
+pub use crate::spec::{
+    check_result_bytes, RenderSpec, BYTES_PER_ROW, DEFAULT_DURATION_S, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ,
+    DEFAULT_SEED, MAX_RUN_S, PLANT_SUBSTEP_S,
+};
+use crate::summary::{actuator_limit, summarise, RenderSummary};
+pub use crate::trajectory::{finger_at_depth_c, ContactState, Plant, Trajectory};
+use crate::truth::truth_skin_c;
 
 /// One offline render: its spec, its trajectory and its summary.
 #[derive(Debug, Clone)]
@@ -373,7 +69,7 @@ pub struct RenderRun {
     /// Every tick.
     pub trajectory: Trajectory,
     /// The metrics of the paper's Figure 3.
-    pub summary: Summary,
+    pub summary: RenderSummary,
 }
 
 /// The seed of a run's sensor noise: `seed` XOR the 64-bit FNV-1a hash of the material's name. Each material gets
@@ -420,21 +116,6 @@ pub fn render(spec: &RenderSpec) -> Result<RenderRun, RenderError> {
     spec.validate()?;
     let pipeline = ChannelPipeline::new(&spec.believed_pipeline())?;
     render_with(spec, pipeline)
-}
-
-/// `Ok` if the results of all `specs` together fit in [`limits::MAX_RESULT_BYTES`] (the sum of their
-/// [`RenderSpec::result_bytes`]), else [`RenderError::TooLarge`].
-pub fn check_result_bytes(specs: &[RenderSpec]) -> Result<(), RenderError> {
-    let total = specs
-        .iter()
-        .fold(0u64, |sum, spec| sum.saturating_add(spec.result_bytes()));
-    limits::check_result_bytes(total).map_err(|message| {
-        let rows = specs.iter().fold(0u64, |sum, spec| sum.saturating_add(spec.rows()));
-        RenderError::TooLarge(format!(
-            "{} run(s) of {rows} rows in all at {BYTES_PER_ROW} bytes per row: {message}",
-            specs.len()
-        ))
-    })
 }
 
 /// Runs every spec, in parallel threads (one per spec); results in the order of `specs`. The first error is
@@ -504,16 +185,6 @@ pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<R
         trajectory,
         summary,
     })
-}
-
-/// The simulated finger's skin at `depth_m` \[m\] below its surface \[°C\]: its receptor (the surface) at depth 0
-/// — exactly the channel state's `receptor_c` — otherwise [`PlateFinger::temperature_at_depth_c`].
-pub fn finger_at_depth_c(channel: &SimulatedChannel<FvModel>, depth_m: f64) -> f64 {
-    if depth_m == 0.0 {
-        channel.state().receptor_c
-    } else {
-        channel.finger().temperature_at_depth_c(depth_m)
-    }
 }
 
 /// One tick of the pipeline on the plant's newest reading, then the plant advanced by `dt` in `substeps` equal

@@ -8,7 +8,7 @@
 //!   surface for the fv renderer, at the centre of the simulated finger's epidermis (Kron's T1) for the kron
 //!   renderer, in the simulated finger on the display, in the truth and in the actuator-limit run alike.
 //! - RMS skin error: √(mean of (skin − target)²) over the rows with 0 < t ≤ 5 s, 5 < t ≤ 90 s, and 0 < t ≤ 90 s (90 s
-//!   or the run's duration if shorter, [`Summary::window_end_s`]; the labels follow it).
+//!   or the run's duration if shorter, [`RenderSummary::window_end_s`]; the labels follow it).
 //! - RMS against the truth: the same for skin − truth over 0 < t ≤ 90 s.
 //! - RMS display tracking: true plate minus the shaped set-point held over the tick, over 0 < t ≤ 90 s.
 //! - Direction: T0 is the target at the touch; the target drops (cooling) if T0 − min target ≥ max target − T0,
@@ -48,7 +48,8 @@
 use serde::Serialize;
 
 use crate::error::RenderError;
-use crate::run::{ContactState, RenderSpec, Trajectory};
+use crate::spec::RenderSpec;
+use crate::trajectory::{finger_at_depth_c, ContactState, Trajectory};
 
 /// Smallest drop (or rise) of the target for which a lag is defined \[°C\]: 0.05.
 pub const MIN_DROP_C: f64 = 0.05;
@@ -64,7 +65,7 @@ const TIME_SLACK_S: f64 = 1e-9;
 /// The metrics of one render. Temperatures and errors in °C, times in s; `None` where undefined (empty window, no
 /// crossing).
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Summary {
+pub struct RenderSummary {
     /// The touched material.
     pub material: String,
     /// The controller (`pid`, `model`).
@@ -73,7 +74,7 @@ pub struct Summary {
     pub renderer: String,
     /// End of the windows the run covers \[s\]: its duration after the touch, at most [`FULL_WINDOW_S`] (90). The
     /// fields named `…_90_…` cover 0 (or 5) to this time, and the table and the JSON name them after it
-    /// ([`Summary::window_label`]).
+    /// ([`RenderSummary::window_label`]).
     pub window_end_s: f64,
     /// RMS of skin − target over 0 < t ≤ 5 s.
     pub rms_skin_0_5_c: Option<f64>,
@@ -365,7 +366,7 @@ pub fn actuator_limit(
         for _ in 0..substeps {
             ideal_substep(channel, h, limit_a, &bound, bound_c);
         }
-        let skin_c = crate::run::finger_at_depth_c(channel, depth_m);
+        let skin_c = finger_at_depth_c(channel, depth_m);
         if result.lag_s.is_none() && sign * (half.level_c - skin_c) >= 0.0 {
             let skin_time_s = interpolate(previous, (t, skin_c), half.level_c);
             result.lag_s = half.target_time_s.map(|target_s| (skin_time_s - target_s).max(0.0));
@@ -404,7 +405,7 @@ pub fn summarise(
     t: &Trajectory,
     contact: &ContactState,
     limit: ActuatorLimit,
-) -> Summary {
+) -> RenderSummary {
     let rms = |a: &[f64], b: &[f64], from: f64, to: f64| rms_between(&t.time_s, a, b, from, to);
     let half = half_drop(t, contact.target_c);
     let skin_half_time_s = (half.drop_c >= MIN_DROP_C)
@@ -413,7 +414,7 @@ pub fn summarise(
     let sign = if half.cooling { 1.0 } else { -1.0 };
     let overshoot_c = overshoot_c(t, sign);
     let first_fault = t.fault.iter().position(Option::is_some);
-    Summary {
+    RenderSummary {
         material: spec.material.name.clone(),
         controller: controller.to_string(),
         renderer: spec.pipeline.renderer.name().to_string(),
@@ -438,7 +439,7 @@ pub fn summarise(
     }
 }
 
-impl Summary {
+impl RenderSummary {
     /// The end of the windows as the labels spell it: `90` for a full run, `10` for `--duration 10`, `7.5` for
     /// 7.5 s (the shortest decimal that reads back as the number).
     pub fn window_label(&self) -> String {
@@ -457,7 +458,7 @@ impl Summary {
 
 /// A fixed-width text table of summaries, one row per run. The window labels follow the first summary's windows
 /// (`rms5-10` for 10 s runs); runs of different lengths get one table each.
-pub fn summary_table(summaries: &[Summary]) -> String {
+pub fn summary_table(summaries: &[RenderSummary]) -> String {
     let mut out = String::new();
     let mut rest = summaries;
     while let Some(first) = rest.first() {
@@ -468,10 +469,10 @@ pub fn summary_table(summaries: &[Summary]) -> String {
     out
 }
 
-fn table_of(summaries: &[Summary]) -> String {
+fn table_of(summaries: &[RenderSummary]) -> String {
     let end = summaries
         .first()
-        .map_or_else(|| format!("{FULL_WINDOW_S}"), Summary::window_label);
+        .map_or_else(|| format!("{FULL_WINDOW_S}"), RenderSummary::window_label);
     let mut out = format!(
         "{:<10} {:<6} {:<4} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>9} {:>7} {:>7} {:>7}  {}\n",
         "material",
@@ -526,7 +527,7 @@ mod tests {
 
     #[test]
     fn labels_and_json_keys_follow_the_windows_actually_used() {
-        let summary = |end: f64| Summary {
+        let summary = |end: f64| RenderSummary {
             material: "wood".into(),
             controller: "model".into(),
             renderer: "fv".into(),

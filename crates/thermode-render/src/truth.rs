@@ -21,7 +21,7 @@ use thermode_model::fv::{FvConfig, FvEnvironment, FvModel};
 use thermode_model::ParamError;
 
 use crate::error::RenderError;
-use crate::run::RenderSpec;
+use crate::spec::RenderSpec;
 
 /// Local error tolerance of the truth's adaptive time steps \[K\].
 pub const TRUTH_TOLERANCE_C: f64 = 2e-5;

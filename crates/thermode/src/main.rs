@@ -6,6 +6,8 @@
 #![allow(rustdoc::broken_intra_doc_links)]
 
 mod cmd;
+mod controller;
+mod display;
 mod output;
 mod resolve;
 mod signals;

@@ -18,6 +18,7 @@ pub mod console;
 pub mod live;
 pub mod responses;
 pub mod stimulus;
+pub mod trace;
 pub mod ws_link;
 
 use std::path::{Path, PathBuf};

@@ -28,8 +28,9 @@ use thermode_pipeline::{ControllerKind, PipelineConfig};
 use thermode_render::run::{render, render_all, RenderRun, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ};
 use thermode_render::{RenderError, RenderSpec};
 
+use super::trace::TrialTrace;
 use crate::design::Condition;
-use crate::participant::{standard_normal, trial_rng};
+use crate::random::{standard_normal, trial_rng};
 
 /// Why a stimulus could not be presented or measured.
 #[derive(Debug, Error)]
@@ -114,10 +115,22 @@ pub struct TrialMeasurement {
     /// simulation); the session keeps them in different columns.
     pub measured: bool,
     /// The trial's curve on a real display (kept beside the session CSV), if the stimulus records one.
-    pub trace: Option<crate::runner::live::TrialTrace>,
+    pub trace: Option<TrialTrace>,
 }
 
 impl TrialMeasurement {
+    /// A simulation's measurement of a trial: the finger at the first and the last point of `curve` (which must not
+    /// be empty), with the curve, no trace.
+    pub fn modelled(curve: SkinCurve) -> Self {
+        TrialMeasurement {
+            finger_start_c: curve.skin_c[0],
+            finger_end_c: curve.skin_c[curve.skin_c.len() - 1],
+            curve: Some(curve),
+            measured: false,
+            trace: None,
+        }
+    }
+
     /// Checks that the temperatures are finite and the curve (if any) is valid.
     pub fn validate(&self) -> Result<(), StimulusError> {
         if !(self.finger_start_c.is_finite() && self.finger_end_c.is_finite()) {
@@ -241,13 +254,7 @@ impl ModelStimulus {
     /// A model stimulus; `finger_drift_sd_c` \[°C\] (≥ 0, default choice 0) is the standard deviation of the
     /// finger's start temperature around its resting value from trial to trial.
     pub fn new(contact: FvContact, finger_drift_sd_c: f64, seed: u64) -> Result<ModelStimulus, StimulusError> {
-        if !(finger_drift_sd_c.is_finite() && finger_drift_sd_c >= 0.0) {
-            return Err(StimulusError::BadSetting {
-                key: "finger_drift_sd_c",
-                value: finger_drift_sd_c,
-                requirement: "must be a finite number not below 0",
-            });
-        }
+        check_drift_sd(finger_drift_sd_c)?;
         let resting_c = contact.resting_surface_c()?;
         Ok(ModelStimulus {
             contact,
@@ -282,8 +289,7 @@ impl ModelStimulus {
         if self.finger_drift_sd_c == 0.0 {
             return None;
         }
-        let mut rng = trial_rng(self.seed ^ DRIFT_SALT, participant_index, trial);
-        Some(self.resting_c + self.finger_drift_sd_c * standard_normal(&mut rng))
+        Some(self.resting_c + trial_drift_c(self.finger_drift_sd_c, self.seed ^ DRIFT_SALT, participant_index, trial))
     }
 }
 
@@ -303,13 +309,7 @@ impl Stimulus for ModelStimulus {
                 curve
             }
         };
-        Ok(TrialMeasurement {
-            finger_start_c: curve.skin_c[0],
-            finger_end_c: curve.skin_c[curve.skin_c.len() - 1],
-            curve: Some(curve),
-            measured: false,
-            trace: None,
-        })
+        Ok(TrialMeasurement::modelled(curve))
     }
 }
 
@@ -459,13 +459,7 @@ impl DisplayStimulus {
     /// A display stimulus; `finger_drift_sd_c` \[°C\] (≥ 0; 0 = every trial starts at rest) as for
     /// [`ModelStimulus`]; `seed` seeds the sensor noise and the drift.
     pub fn new(setup: DisplaySetup, finger_drift_sd_c: f64, seed: u64) -> Result<DisplayStimulus, StimulusError> {
-        if !(finger_drift_sd_c.is_finite() && finger_drift_sd_c >= 0.0) {
-            return Err(StimulusError::BadSetting {
-                key: "finger_drift_sd_c",
-                value: finger_drift_sd_c,
-                requirement: "must be a finite number not below 0",
-            });
-        }
+        check_drift_sd(finger_drift_sd_c)?;
         setup.validate()?;
         Ok(DisplayStimulus {
             setup,
@@ -543,8 +537,12 @@ impl DisplayStimulus {
         if self.finger_drift_sd_c == 0.0 {
             return 0.0;
         }
-        let mut rng = trial_rng(self.seed ^ DISPLAY_DRIFT_SALT, participant_index, trial);
-        self.finger_drift_sd_c * standard_normal(&mut rng)
+        trial_drift_c(
+            self.finger_drift_sd_c,
+            self.seed ^ DISPLAY_DRIFT_SALT,
+            participant_index,
+            trial,
+        )
     }
 }
 
@@ -561,14 +559,28 @@ impl Stimulus for DisplayStimulus {
             time_s: base.time_s.clone(),
             skin_c: base.skin_c.iter().map(|c| c + drift_c).collect(),
         };
-        Ok(TrialMeasurement {
-            finger_start_c: curve.skin_c[0],
-            finger_end_c: curve.skin_c[curve.skin_c.len() - 1],
-            curve: Some(curve),
-            measured: false,
-            trace: None,
-        })
+        Ok(TrialMeasurement::modelled(curve))
     }
+}
+
+/// `Ok` if `finger_drift_sd_c` \[°C\] is a valid standard deviation of the finger's start temperature (finite, at
+/// least 0).
+fn check_drift_sd(finger_drift_sd_c: f64) -> Result<(), StimulusError> {
+    if !(finger_drift_sd_c.is_finite() && finger_drift_sd_c >= 0.0) {
+        return Err(StimulusError::BadSetting {
+            key: "finger_drift_sd_c",
+            value: finger_drift_sd_c,
+            requirement: "must be a finite number not below 0",
+        });
+    }
+    Ok(())
+}
+
+/// The finger's offset from rest in one trial \[°C\]: `sd_c` \[°C\] times a standard normal number from the trial's
+/// stream of `seed` ([`trial_rng`]).
+fn trial_drift_c(sd_c: f64, seed: u64, participant_index: usize, trial: usize) -> f64 {
+    let mut rng = trial_rng(seed, participant_index, trial);
+    sd_c * standard_normal(&mut rng)
 }
 
 #[cfg(test)]

@@ -376,23 +376,37 @@ impl FvModel {
     /// meaningless (possibly non-finite) temperatures. In [`FvEnvironment::Object`] skin and object are advanced
     /// together; otherwise the object is left as it is.
     pub fn step(&mut self, dt_s: f64, env: FvEnvironment) {
+        let scheme = self.scheme;
+        self.try_step(env, |bodies, state, next, work| {
+            (Some(bodies.advance(scheme, dt_s, state, next, work)), ())
+        });
+    }
+
+    /// Computes one step in `env` into the work space's next-state buffers with `compute`, and takes it if
+    /// `compute` says so. `compute` gets the bodies in `env`, the present (skin, object) state, the (skin, object)
+    /// buffers of the next state and the work space; it returns the step's energy flows if the step is to be taken
+    /// (`None` leaves the model unchanged) and the value this returns. Never allocates: the buffers go back to the
+    /// work space.
+    fn try_step<R>(
+        &mut self,
+        env: FvEnvironment,
+        compute: impl FnOnce(&Bodies, (&[f64], &[f64]), (&mut [f64], &mut [f64]), &mut Work) -> (Option<StepFlows>, R),
+    ) -> R {
         let side = self.side(env);
         let bodies = Bodies::new(&self.skin, self.object.as_ref(), side);
         let contact = matches!(side, Side::Contact { .. });
         let work = self.work.get_mut();
         let mut next_skin = std::mem::take(&mut work.next_skin);
         let mut next_object = std::mem::take(&mut work.next_object);
-        let flows = bodies.advance(
-            self.scheme,
-            dt_s,
-            (&self.skin_t, &self.object_t),
-            (&mut next_skin, &mut next_object),
-            work,
-        );
-        self.accept(&mut next_skin, &mut next_object, contact, flows, env);
+        let state = (self.skin_t.as_slice(), self.object_t.as_slice());
+        let (flows, result) = compute(&bodies, state, (&mut next_skin, &mut next_object), work);
+        if let Some(flows) = flows {
+            self.accept(&mut next_skin, &mut next_object, contact, flows, env);
+        }
         let work = self.work.get_mut();
         work.next_skin = next_skin;
         work.next_object = next_object;
+        result
     }
 
     /// Takes a computed step: its end state (swapped in; the object's only in contact), energy flows and
@@ -421,28 +435,12 @@ impl FvModel {
     /// error `(C − d·h·J)⁻¹·h·Σ(b − b̂)ᵢF(Tᵢ)` \[K\]. Never allocates; reuses the cached elimination while the step
     /// and the environment stay bit-identical. `dt_s` and `env` must be valid as for [`Self::step`].
     pub fn step_with_error(&mut self, dt_s: f64, env: FvEnvironment, tolerance_c: f64) -> f64 {
-        let side = self.side(env);
-        let bodies = Bodies::new(&self.skin, self.object.as_ref(), side);
-        let contact = matches!(side, Side::Contact { .. });
-        let work = self.work.get_mut();
-        let mut next_skin = std::mem::take(&mut work.next_skin);
-        let mut next_object = std::mem::take(&mut work.next_object);
-        let state = (self.skin_t.as_slice(), self.object_t.as_slice());
-        let flows = bodies.advance(
-            TimeScheme::TrBdf2,
-            dt_s,
-            state,
-            (&mut next_skin, &mut next_object),
-            work,
-        );
-        let error_c = bodies.tr_bdf2_error(dt_s, state, (&next_skin, &next_object), work);
-        if error_c <= tolerance_c {
-            self.accept(&mut next_skin, &mut next_object, contact, flows, env);
-        }
-        let work = self.work.get_mut();
-        work.next_skin = next_skin;
-        work.next_object = next_object;
-        error_c
+        self.try_step(env, |bodies, state, (next_skin, next_object), work| {
+            let next = (&mut *next_skin, &mut *next_object);
+            let flows = bodies.advance(TimeScheme::TrBdf2, dt_s, state, next, work);
+            let error_c = bodies.tr_bdf2_error(dt_s, state, (next_skin, next_object), work);
+            ((error_c <= tolerance_c).then_some(flows), error_c)
+        })
     }
 
     /// Sets `probe`'s state to the cubic Hermite interpolant at `theta` ∈ \[0, 1\] of the last step of `dt_s`
@@ -585,14 +583,7 @@ impl FvModel {
     /// model in that state. Returns the scale. Errors, leaving the model unchanged, if the surface temperature cannot
     /// be reached with a scale between 0 and 1e6.
     pub fn calibrate_to_surface(&mut self, ambient_c: f64, surface_c: f64) -> Result<f64, ParamError> {
-        limits::AMBIENT_TEMPERATURE
-            .rule()
-            .check("ambient_c", ambient_c)
-            .at(ORIGIN)?;
-        limits::SKIN_TEMPERATURE
-            .rule()
-            .check("surface_c", surface_c)
-            .at(ORIGIN)?;
+        limits::check_resting_temperatures(ORIGIN, ambient_c, surface_c)?;
         let saved = (
             self.skin_t.clone(),
             self.object_t.clone(),

@@ -62,14 +62,7 @@ impl ContactSpec {
     /// temperature, duration), the output interval positive, at most 10⁷ output rows.
     pub fn validate(&self) -> Result<(), ParamError> {
         const ORIGIN: &str = "fv contact";
-        limits::AMBIENT_TEMPERATURE
-            .rule()
-            .check("ambient_c", self.ambient_c)
-            .at(ORIGIN)?;
-        limits::OBJECT_TEMPERATURE
-            .rule()
-            .check("object_c", self.object_c)
-            .at(ORIGIN)?;
+        limits::check_touch_temperatures(ORIGIN, self.ambient_c, self.object_c)?;
         Rule::Positive.check("duration_s", self.duration_s).at(ORIGIN)?;
         limits::DURATION
             .rule()

@@ -29,7 +29,7 @@ use common::{pid, plant_off_file, spec, Loop};
 use thermode_model::Skin;
 use thermode_pipeline::{ControllerKind, ShippedDisplay, Stimulus};
 use thermode_render::run::{render_all, Trajectory};
-use thermode_render::{RenderRun, RenderSpec, Summary};
+use thermode_render::{RenderRun, RenderSpec, RenderSummary as Summary};
 
 const PAPER: [&str; 5] = ["aluminium", "steel", "stone", "wood", "rubber"];
 

@@ -9,7 +9,7 @@ use clap::{Args, ValueEnum};
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_serve::bench::{self, BenchConfig};
 
-use super::serve::{build_display, DisplayArgs};
+use crate::display::{build_display, DisplayArgs};
 use crate::output::print_stdout;
 
 /// Output format of `thermode bench`.

@@ -21,6 +21,7 @@ use thermode_device::{DefaultFinger, SimulatedDisplay};
 use thermode_link::emulator::{Emulator, EmulatorConfig, LinkFaults, PtyEmulator, RunEnd};
 use thermode_platform::MonotonicClock;
 
+use super::emulate_hw::{self, HardwareArgs, Protocol};
 use crate::resolve;
 
 /// Arguments of `thermode emulate`.
@@ -51,22 +52,9 @@ pub struct EmulateArgs {
     /// plate [°C], the sensor's latest sample [°C], the delivered current [A]); replaces FILE.
     #[arg(long, value_name = "FILE")]
     trace: Option<PathBuf>,
-    /// The protocol spoken: `own` (thermode's), `mecom` (a Meerstetter TEC controller) or `tcs2` (a QST.Lab TCS II).
-    #[arg(long, value_enum, default_value = "own")]
-    pub protocol: super::emulate_hw::Protocol,
-    /// MeCom only: listen on this TCP address (e.g. `127.0.0.1:0`; the first line printed is the address) instead
-    /// of a pseudo-terminal.
-    #[arg(long, value_name = "ADDR")]
-    pub tcp: Option<String>,
-    /// MeCom only: the device address, 1 to 254 (frames to address 0 are answered too).
-    #[arg(long, value_name = "N", default_value_t = 1)]
-    pub address: u8,
-    /// TCS II only: stream temperature lines at this rate [Hz] even when muted (a test of the host).
-    #[arg(long = "stream-hz", value_name = "HZ")]
-    pub stream_hz: Option<f64>,
-    /// MeCom and TCS II: no finger on the simulated plates (the bare display `thermode identify` measures).
-    #[arg(long = "no-finger")]
-    pub no_finger: bool,
+    /// The protocol and the options of the MeCom and TCS II emulators.
+    #[command(flatten)]
+    pub hardware: HardwareArgs,
     /// Also publish the pseudo-terminal as the symbolic link PATH (replaced if it exists; removed at a clean end),
     /// so a host opening PATH finds a restarted emulator there.
     #[arg(long, value_name = "PATH")]
@@ -83,19 +71,12 @@ fn publish_link(link: &std::path::Path, target: &str) -> Result<()> {
     std::fs::rename(&tmp, link).with_context(|| format!("cannot publish the link {}", link.display()))
 }
 
-impl EmulateArgs {
-    /// Channels, device file and seed: what every protocol's emulator is built from.
-    pub fn plant(&self) -> (usize, Option<&std::path::Path>, u64) {
-        (self.channels, self.device_file.as_deref(), self.seed)
-    }
-}
-
 /// Runs `thermode emulate`.
 pub fn run(args: &EmulateArgs) -> Result<()> {
-    if args.protocol != super::emulate_hw::Protocol::Own {
-        return super::emulate_hw::run(args);
+    if args.hardware.protocol != Protocol::Own {
+        return emulate_hw::run(&args.hardware, args.channels, args.device_file.as_deref(), args.seed);
     }
-    if args.no_finger {
+    if args.hardware.no_finger {
         bail!("--no-finger is for --protocol mecom and tcs2 (thermode's own protocol reports no Peltier voltage, so identify does not run on it)");
     }
     let device = resolve::device_config(args.device_file.as_deref())?;

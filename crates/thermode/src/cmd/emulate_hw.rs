@@ -6,10 +6,11 @@
 //! the port picked), flushed at once; the emulator then runs in real time until the process is ended.
 
 use std::io::Write;
+use std::path::Path;
 use std::sync::Arc;
 
 use anyhow::{bail, Result};
-use clap::ValueEnum;
+use clap::{Args, ValueEnum};
 use thermode_device::{DefaultFinger, Device, NoFinger, PlateFinger, SimulatedDisplay};
 use thermode_link::emulator::RunEnd;
 use thermode_link::firmware::{Firmware, PtyFirmware, TcpFirmware};
@@ -17,7 +18,6 @@ use thermode_link::mecom::emulator::{MecomEmulator, MecomEmulatorConfig};
 use thermode_link::tcs2::emulator::{Tcs2Emulator, Tcs2EmulatorConfig};
 use thermode_platform::{Clock, MonotonicClock};
 
-use super::emulate::EmulateArgs;
 use crate::resolve;
 
 /// The protocol `thermode emulate` speaks.
@@ -31,9 +31,31 @@ pub enum Protocol {
     Tcs2,
 }
 
-/// Runs the MeCom or TCS II emulator of `args`.
-pub fn run(args: &EmulateArgs) -> Result<()> {
-    let (channels, device_file, seed) = args.plant();
+/// The protocol of `thermode emulate` and the options of its MeCom and TCS II emulators (flattened into
+/// `EmulateArgs`).
+#[derive(Args, Debug)]
+pub struct HardwareArgs {
+    /// The protocol spoken: `own` (thermode's), `mecom` (a Meerstetter TEC controller) or `tcs2` (a QST.Lab TCS II).
+    #[arg(long, value_enum, default_value = "own")]
+    pub protocol: Protocol,
+    /// MeCom only: listen on this TCP address (e.g. `127.0.0.1:0`; the first line printed is the address) instead
+    /// of a pseudo-terminal.
+    #[arg(long, value_name = "ADDR")]
+    pub tcp: Option<String>,
+    /// MeCom only: the device address, 1 to 254 (frames to address 0 are answered too).
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub address: u8,
+    /// TCS II only: stream temperature lines at this rate [Hz] even when muted (a test of the host).
+    #[arg(long = "stream-hz", value_name = "HZ")]
+    pub stream_hz: Option<f64>,
+    /// MeCom and TCS II: no finger on the simulated plates (the bare display `thermode identify` measures).
+    #[arg(long = "no-finger")]
+    pub no_finger: bool,
+}
+
+/// Runs the MeCom or TCS II emulator of `args` with `channels` channels (1 to 10) of the display in `device_file`
+/// (default: the built-in default display), sensor noise seeded with `seed`.
+pub fn run(args: &HardwareArgs, channels: usize, device_file: Option<&Path>, seed: u64) -> Result<()> {
     let device = resolve::device_config(device_file)?;
     let (firmware, what, spelling) = match args.no_finger {
         true => firmware(args, SimulatedDisplay::<NoFinger>::fingertips(&device, channels, seed)?)?,
@@ -47,7 +69,7 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
 
 /// The emulator of `args.protocol` over `display`, what it is, and the `--device` spelling that connects to it.
 fn firmware<F: PlateFinger + Send + 'static>(
-    args: &EmulateArgs,
+    args: &HardwareArgs,
     display: SimulatedDisplay<F>,
 ) -> Result<(Box<dyn Firmware>, String, &'static str)> {
     let channels = display.channel_count();
@@ -85,7 +107,7 @@ fn firmware<F: PlateFinger + Send + 'static>(
 }
 
 /// Serves `firmware` on TCP or a pseudo-terminal until it ends.
-fn serve_firmware(args: &EmulateArgs, firmware: Box<dyn Firmware>, what: &str, spelling: &str) -> Result<()> {
+fn serve_firmware(args: &HardwareArgs, firmware: Box<dyn Firmware>, what: &str, spelling: &str) -> Result<()> {
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
     let mut stdout = std::io::stdout().lock();
     let end = if let Some(bind) = &args.tcp {

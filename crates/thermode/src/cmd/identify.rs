@@ -17,7 +17,8 @@ use thermode_device::DeviceConfig;
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_render::identify::{fit, record, sample_of, Excitation, DURATION_S, RATE_HZ};
 
-use super::serve::{build_display, ControllerArg, DisplayArgs};
+use crate::controller::ControllerArg;
+use crate::display::{build_display, DisplayArgs};
 
 use crate::output::{check_outputs, print_stdout, write_atomically};
 use crate::resolve;

@@ -46,7 +46,9 @@ use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::MonotonicClock;
 use thermode_serve::Daemon;
 
-use super::serve::{self, ControllerArg, DisplayArgs};
+use super::serve;
+use crate::controller::{ControllerArg, LAB_CONTROLLERS};
+use crate::display::DisplayArgs;
 use crate::resolve;
 use crate::signals::{StopSignals, SECOND_SIGNAL_EXIT_CODE};
 
@@ -58,15 +60,6 @@ pub enum StimulusArg {
     Display,
     /// Real contact under the fv model for both conditions (no display in the loop).
     Model,
-}
-
-/// The display's controller.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum LabControllerArg {
-    /// thermode's model-based controller (observer, Peltier feedforward).
-    Model,
-    /// The paper's PID (the tuned gains of the shipped display that matches the device).
-    Pid,
 }
 
 /// Noise draws per option when calibrating the simulated participant.
@@ -110,8 +103,8 @@ pub struct LabRunArgs {
     #[arg(long, value_enum, default_value = "display")]
     stimulus: StimulusArg,
     /// The display's controller (with `--stimulus display`; default model).
-    #[arg(long, value_enum)]
-    controller: Option<LabControllerArg>,
+    #[arg(long, value_parser = ControllerArg::parser(&LAB_CONTROLLERS))]
+    controller: Option<ControllerArg>,
     /// The display's device file (TOML; with `--device` or `--stimulus display`); default: the built-in default
     /// display.
     #[arg(long, value_name = "FILE")]
@@ -274,10 +267,7 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
                 device: device.clone(),
                 device_file: args.device_file.clone(),
                 channels: None,
-                controller: match args.controller {
-                    Some(LabControllerArg::Pid) => ControllerArg::Pid,
-                    _ => ControllerArg::Model,
-                },
+                controller: args.controller.unwrap_or(ControllerArg::Model),
                 seed: 1, // the simulated display's sensor noise, as `serve`'s default
             };
             let (daemon, token) = serve::start_private(&display, args.state_dir.clone())?;
@@ -547,9 +537,10 @@ fn contact_references(contact: &FvContact, options: &[Material], duration_s: f64
 /// The display's controller: `model` (default), or `pid` with the tuned gains of the shipped display that matches
 /// `device`.
 fn controller(args: &LabRunArgs, device: &DeviceConfig) -> Result<ControllerKind> {
-    match args.controller.unwrap_or(LabControllerArg::Model) {
-        LabControllerArg::Model => Ok(ControllerKind::Model),
-        LabControllerArg::Pid => {
+    match args.controller.unwrap_or(ControllerArg::Model) {
+        ControllerArg::Model => Ok(ControllerKind::Model),
+        ControllerArg::Both => bail!("a display runs one controller: --controller model or pid"),
+        ControllerArg::Pid => {
             let (gains, source) = gains_for_device(device)?;
             if source == GainsSource::DefaultFallback {
                 eprintln!(

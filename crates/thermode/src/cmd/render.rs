@@ -14,22 +14,12 @@ use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, Render
 use thermode_plot::write_figure;
 use thermode_render::figure::figure3;
 use thermode_render::run::{render_all, write_csv, DEFAULT_DURATION_S, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ};
-use thermode_render::summary::{summary_table, Summary};
+use thermode_render::summary::{summary_table, RenderSummary};
 use thermode_render::RenderSpec;
 
+use crate::controller::{ControllerArg, RENDER_CONTROLLERS};
 use crate::output::{check_outputs, csv_precision, is_stdout, print_stdout, write_atomically};
 use crate::resolve;
-
-/// The controller(s) to run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum ControllerArg {
-    /// The paper's PID on the low-pass filtered sensor (tuned gains).
-    Pid,
-    /// thermode's model-based controller (observer, Peltier feedforward).
-    Model,
-    /// Both, one after the other (one panel each in the plot).
-    Both,
-}
 
 /// The renderer (and display-inverse finger model).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -68,7 +58,7 @@ pub struct RenderArgs {
     #[arg(long = "material-file", value_name = "FILE")]
     material_files: Vec<PathBuf>,
     /// Controller.
-    #[arg(long, value_enum, default_value = "model")]
+    #[arg(long, default_value = "model", value_parser = ControllerArg::parser(&RENDER_CONTROLLERS))]
     controller: ControllerArg,
     /// Renderer: the finger model that computes the target and runs on the display. The target is its receptor
     /// (fv: the skin surface; kron: T1, the centre of the epidermis), and the simulated finger (`skin_c`) and the
@@ -172,8 +162,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 }
 
 /// The summaries as JSON objects whose window keys follow the windows actually used (`rms_skin_5_10_c` for a 10 s
-/// run; [`Summary::json_key`]).
-fn summaries_json(summaries: &[Summary]) -> Result<Vec<serde_json::Value>> {
+/// run; [`RenderSummary::json_key`]).
+fn summaries_json(summaries: &[RenderSummary]) -> Result<Vec<serde_json::Value>> {
     summaries
         .iter()
         .map(|s| {

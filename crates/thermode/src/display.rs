@@ -1,0 +1,137 @@
+//! The display set-up shared by the commands that run a display in real time (`serve`, `demo`, `bench`,
+//! `identify`, `lab run --device`): the `--device`, `--device-file`, `--channels`, `--controller` and `--seed`
+//! arguments ([`DisplayArgs`]) and the device with its pipelines built from them ([`build_display`]).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use thermode_device::{DefaultFinger, Device, SimulatedDisplay, MAX_CHANNELS};
+use thermode_link::spec::{is_hardware, open_hardware, HardwareContext};
+use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
+use thermode_platform::Clock;
+use thermode_runtime::engine::pipeline_engines;
+use thermode_runtime::EngineFactory;
+
+use crate::controller::{ControllerArg, DISPLAY_CONTROLLERS};
+use crate::resolve;
+
+/// How the display is set up (shared by serve, demo and bench).
+#[derive(Args, Debug, Clone)]
+pub struct DisplayArgs {
+    /// The display: `sim` (the simulated display), `serial:PATH` (thermode's own protocol), `mecom:PATH[?OPTIONS]` or
+    /// `mecom-tcp:HOST:PORT[?OPTIONS]` (Meerstetter TEC controllers; `mode=current|temperature`), `tcs2:PATH` (a
+    /// QST.Lab TCS II); a real display or `thermode emulate`. See docs/hardware.md.
+    #[arg(
+        long,
+        value_name = "sim|serial:PATH|mecom:PATH|mecom-tcp:HOST:PORT|tcs2:PATH",
+        default_value = "sim"
+    )]
+    pub device: String,
+    /// Device file (TOML) describing the display's hardware; default: the built-in default display.
+    #[arg(long = "device-file", value_name = "FILE")]
+    pub device_file: Option<PathBuf>,
+    /// Number of channels (fingers) of the simulated display, 1 to 10 [default: 5; a serial device reports its own].
+    #[arg(long, value_name = "N")]
+    pub channels: Option<usize>,
+    /// Controller of every channel.
+    #[arg(long, default_value = "model", value_parser = ControllerArg::parser(&DISPLAY_CONTROLLERS))]
+    pub controller: ControllerArg,
+    /// Seed of the simulated sensor noise.
+    #[arg(long, value_name = "N", default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// A display ready for the loop.
+pub struct Display {
+    /// The device.
+    pub device: Box<dyn Device + Send>,
+    /// One pipeline per channel.
+    pub engines: EngineFactory,
+    /// `sim` or `serial:PATH`.
+    pub label: String,
+    /// Finger names.
+    pub names: Vec<String>,
+    /// Human description for the start-up banner.
+    pub description: String,
+}
+
+/// Finger names for five (one hand) or ten (two hands) channels.
+fn finger_names(count: usize) -> Vec<String> {
+    const HAND: [&str; 5] = ["thumb", "index", "middle", "ring", "little"];
+    match count {
+        5 => HAND.iter().map(|s| s.to_string()).collect(),
+        10 => ["left", "right"]
+            .iter()
+            .flat_map(|side| HAND.iter().map(move |f| format!("{side} {f}")))
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// Builds the device and the pipelines from the arguments; `clock` stamps a serial device's readings.
+pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Display> {
+    let device_config = resolve::device_config(args.device_file.as_deref())?;
+    let controller = match args.controller {
+        ControllerArg::Model => ControllerKind::Model,
+        ControllerArg::Pid => ControllerKind::Pid(gains_for_device(&device_config)?.0),
+        ControllerArg::Both => bail!("a display runs one controller: --controller model or pid"),
+    };
+    let mut pipeline = PipelineConfig::new(device_config, controller);
+    pipeline.validate()?;
+    let (device, label): (Box<dyn Device + Send>, String) = if args.device == "sim" {
+        // The simulated display is built from this very file, so the file is exact for it.
+        pipeline.device = device_config.exact_for_its_simulation();
+        let count = args.channels.unwrap_or(5);
+        if count == 0 || count > MAX_CHANNELS {
+            bail!("--channels must be 1 to {MAX_CHANNELS}, not {count}");
+        }
+        let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device_config, count, args.seed)?;
+        (Box::new(display), "sim".to_string())
+    } else if is_hardware(&args.device) {
+        let context = HardwareContext {
+            device: pipeline.device,
+            envelope: pipeline.envelope,
+        };
+        let device = open_hardware(&args.device, &context, clock.clone())
+            .with_context(|| format!("cannot open {}", args.device))?;
+        if let Some(n) = args.channels.filter(|&n| n != device.channel_count()) {
+            bail!(
+                "--channels {n}, but {} has {} channels",
+                args.device,
+                device.channel_count()
+            );
+        }
+        (device, args.device.clone())
+    } else {
+        bail!(
+            "--device must be `sim`, `serial:PATH`, `mecom:PATH`, `mecom-tcp:HOST:PORT` or `tcs2:PATH`, not {:?}",
+            args.device
+        );
+    };
+    let count = device.channel_count();
+    let names = finger_names(count);
+    let what = if label == "sim" {
+        "simulated display".to_string()
+    } else {
+        format!("display on {label}")
+    };
+    let fingers = if names.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", names.join(", "))
+    };
+    let plural = if count == 1 { "" } else { "s" };
+    let description = format!(
+        "{what}, {count} channel{plural}{fingers}, {} controller",
+        pipeline.controller.name()
+    );
+    Ok(Display {
+        device,
+        engines: pipeline_engines(pipeline),
+        label,
+        names,
+        description,
+    })
+}
