@@ -620,10 +620,7 @@ impl ChannelPipeline {
         match stimulus {
             Stimulus::Air => self.setpoint.release(),
             Stimulus::Touch { material, object_c } => self.touch(&material, object_c)?,
-            Stimulus::Direct {
-                temp_c,
-                rate_c_s: rate_c_per_s,
-            } => {
+            Stimulus::Direct { temp_c, rate_c_per_s } => {
                 // After a hold there is no set-point to continue from: the ramp starts where the plate stands.
                 let plate_c = Some(self.drive.plate_estimate_c()).filter(|p| p.is_finite());
                 self.setpoint

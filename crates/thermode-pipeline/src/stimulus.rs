@@ -45,7 +45,7 @@ pub enum Stimulus {
         /// [[`ABSOLUTE_MIN_C`], [`ABSOLUTE_MAX_C`]].
         temp_c: f64,
         /// Rate of approach \[°C/s\], in [`DIRECT_RATE`].
-        rate_c_s: f64,
+        rate_c_per_s: f64,
     },
 }
 
@@ -60,9 +60,9 @@ impl Stimulus {
                 OBJECT_TEMPERATURE.check(*object_c)?;
                 Ok(())
             }
-            Stimulus::Direct { temp_c, rate_c_s } => {
+            Stimulus::Direct { temp_c, rate_c_per_s } => {
                 DIRECT_TEMPERATURE.check(*temp_c)?;
-                DIRECT_RATE.check(*rate_c_s)?;
+                DIRECT_RATE.check(*rate_c_per_s)?;
                 Ok(())
             }
         }
@@ -91,7 +91,7 @@ mod tests {
             object_c: 23.0,
         };
         assert!(stimulus.validate().is_err(), "material with NaN density accepted");
-        let direct = |temp_c, rate_c_s| Stimulus::Direct { temp_c, rate_c_s };
+        let direct = |temp_c, rate_c_per_s| Stimulus::Direct { temp_c, rate_c_per_s };
         assert!(direct(30.0, 2.0).validate().is_ok());
         for (t, r) in [
             (f64::NAN, 1.0),

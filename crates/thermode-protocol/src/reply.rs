@@ -114,7 +114,8 @@ pub enum Done {
         /// The set-point \[°C\].
         temp_c: f64,
         /// The rate \[°C/s\].
-        rate_c_s: f64,
+        #[serde(rename = "rate_c_s")]
+        rate_c_per_s: f64,
         /// When.
         #[serde(flatten)]
         applied: AppliedAt,

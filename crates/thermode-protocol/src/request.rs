@@ -112,7 +112,8 @@ pub struct Setpoint {
     /// The set-point \[°C\], within the display's range.
     pub temp_c: f64,
     /// The rate \[°C/s\], positive, at most the envelope's rate limit.
-    pub rate_c_s: f64,
+    #[serde(rename = "rate_c_s")]
+    pub rate_c_per_s: f64,
 }
 
 /// `subscribe`: telemetry at a rate.
@@ -201,7 +202,7 @@ mod tests {
             Request::Setpoint(Setpoint {
                 channel: 0,
                 temp_c: 30.0,
-                rate_c_s: 1.0,
+                rate_c_per_s: 1.0,
             }),
             Request::ClearFault(OnChannel { channel: 0 }),
             Request::StopAll(NoFields {}),

@@ -198,7 +198,8 @@ pub struct Limits {
     /// Highest display set-point \[°C\].
     pub display_max_c: f64,
     /// Fastest set-point rate \[°C/s\].
-    pub max_rate_c_s: f64,
+    #[serde(rename = "max_rate_c_s")]
+    pub max_rate_c_per_s: f64,
     /// Coldest object of a touch \[°C\].
     pub object_temp_min_c: f64,
     /// Hottest object of a touch \[°C\].

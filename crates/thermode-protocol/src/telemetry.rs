@@ -91,7 +91,8 @@ pub struct ChannelState {
     /// The direct-mode target \[°C\] (direct only).
     pub direct_temp_c: Option<f64>,
     /// The direct-mode rate \[°C/s\] (direct only).
-    pub direct_rate_c_s: Option<f64>,
+    #[serde(rename = "direct_rate_c_s")]
+    pub direct_rate_c_per_s: Option<f64>,
     /// After stop-all: the drive is held at 0 A until the channel's next command.
     pub held_off: bool,
     /// Who set the stimulus.

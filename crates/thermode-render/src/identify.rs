@@ -82,7 +82,7 @@ impl Excitation {
         while let Some(&(_, temp_c)) = self.schedule.get(self.next_step).filter(|s| s.0 <= since_s) {
             self.pipeline.set_stimulus(Stimulus::Direct {
                 temp_c,
-                rate_c_s: STEP_RATE_C_PER_S,
+                rate_c_per_s: STEP_RATE_C_PER_S,
             })?;
             self.next_step += 1;
         }

@@ -93,7 +93,7 @@ fn a_tick_never_allocates() {
             assert_eq!(counted_ticks(&mut lp, 500, dt_s), 0, "{what}: after the change to wood");
             let direct = Stimulus::Direct {
                 temp_c: 38.0,
-                rate_c_s: 5.0,
+                rate_c_per_s: 5.0,
             };
             lp.pipeline.set_stimulus(direct).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(counted_ticks(&mut lp, 500, dt_s), 0, "{what}: direct");

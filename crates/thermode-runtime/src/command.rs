@@ -92,8 +92,8 @@ impl Command {
     }
 
     /// Direct mode: the display set-point of `channel` goes to `temp_c` \[°C\] at `rate_c_s` \[°C/s\].
-    pub fn direct(channel: usize, temp_c: f64, rate_c_s: f64, owner: Owner) -> Command {
-        Command::stimulate(channel, Stimulus::Direct { temp_c, rate_c_s }, owner)
+    pub fn direct(channel: usize, temp_c: f64, rate_c_per_s: f64, owner: Owner) -> Command {
+        Command::stimulate(channel, Stimulus::Direct { temp_c, rate_c_per_s }, owner)
     }
 
     /// The request's name on the wire: `touch`, `setpoint`, `release`, `clear_fault`, `stop_all` (and

@@ -579,7 +579,7 @@ impl ControlLoop {
             } => {
                 let (mode, object_c, direct) = match &stimulus {
                     Stimulus::Touch { object_c, .. } => (Mode::Touch, Some(*object_c), None),
-                    Stimulus::Direct { temp_c, rate_c_s } => (Mode::Direct, None, Some((*temp_c, *rate_c_s))),
+                    Stimulus::Direct { temp_c, rate_c_per_s } => (Mode::Direct, None, Some((*temp_c, *rate_c_per_s))),
                     Stimulus::Air => {
                         self.exists(channel)?;
                         self.release(channel);

@@ -127,12 +127,12 @@ impl TrackingEngine {
     }
 
     fn requested_setpoint_c(&mut self, dt_s: f64) -> f64 {
-        let Stimulus::Direct { temp_c, rate_c_s } = self.stimulus else {
+        let Stimulus::Direct { temp_c, rate_c_per_s } = self.stimulus else {
             self.direct_c = None;
             return self.target_c();
         };
         let from_c = self.direct_c.unwrap_or(self.rest_c);
-        let step_c = rate_c_s * dt_s.max(0.0);
+        let step_c = rate_c_per_s * dt_s.max(0.0);
         let next_c = from_c + (temp_c - from_c).clamp(-step_c, step_c);
         self.direct_c = Some(next_c);
         next_c

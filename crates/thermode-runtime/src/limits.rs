@@ -40,7 +40,7 @@ pub struct StimulusLimits {
     /// Fastest direct-mode ramp \[°C/s\]: the envelope's `max_setpoint_rate_c_per_s`, the rate the channel really
     /// enforces (for a rendering pipeline the device file's `render.max_setpoint_rate_c_per_s`). Every rate must
     /// also be at least the smallest set-point rate ([`DIRECT_RATE`]).
-    pub max_rate_c_s: f64,
+    pub max_rate_c_per_s: f64,
 }
 
 impl StimulusLimits {
@@ -53,7 +53,7 @@ impl StimulusLimits {
                 min: envelope.min_display_c,
                 max: envelope.max_display_c,
             },
-            max_rate_c_s: envelope.max_setpoint_rate_c_per_s,
+            max_rate_c_per_s: envelope.max_setpoint_rate_c_per_s,
         }
     }
 
@@ -62,7 +62,7 @@ impl StimulusLimits {
         StimulusLimits {
             object_c: OBJECT_TEMPERATURE,
             display_c: DIRECT_TEMPERATURE,
-            max_rate_c_s: DIRECT_RATE.max,
+            max_rate_c_per_s: DIRECT_RATE.max,
         }
     }
 
@@ -76,7 +76,7 @@ impl StimulusLimits {
         StimulusLimits {
             object_c: both(self.object_c, other.object_c),
             display_c: both(self.display_c, other.display_c),
-            max_rate_c_s: self.max_rate_c_s.min(other.max_rate_c_s),
+            max_rate_c_per_s: self.max_rate_c_per_s.min(other.max_rate_c_per_s),
         }
     }
 
@@ -88,9 +88,9 @@ impl StimulusLimits {
             Stimulus::Touch { object_c, .. } => {
                 self.object_c.check(*object_c)?;
             }
-            Stimulus::Direct { temp_c, rate_c_s } => {
+            Stimulus::Direct { temp_c, rate_c_per_s } => {
                 self.display_c.check(*temp_c)?;
-                self.rate_c_s(*rate_c_s)?;
+                self.rate_c_per_s(*rate_c_per_s)?;
             }
         }
         stimulus.validate()?;
@@ -99,12 +99,12 @@ impl StimulusLimits {
 
     /// A direct-mode rate: in the physical range of set-point rates ([`DIRECT_RATE`]), at most
     /// [`StimulusLimits::max_rate_c_s`].
-    fn rate_c_s(&self, rate_c_s: f64) -> Result<f64, BadValue> {
+    fn rate_c_per_s(&self, rate_c_per_s: f64) -> Result<f64, BadValue> {
         Rule::Within {
             min: DIRECT_RATE.min,
-            max: self.max_rate_c_s,
+            max: self.max_rate_c_per_s,
         }
-        .check(DIRECT_RATE.name, rate_c_s)
+        .check(DIRECT_RATE.name, rate_c_per_s)
     }
 }
 
@@ -121,7 +121,7 @@ mod tests {
             ..EnvelopeConfig::default()
         };
         let limits = StimulusLimits::of_envelope(&envelope);
-        let direct = |temp_c, rate_c_s| Stimulus::Direct { temp_c, rate_c_s };
+        let direct = |temp_c, rate_c_per_s| Stimulus::Direct { temp_c, rate_c_per_s };
         assert_eq!(limits.check(&direct(18.0, 7.0)), Ok(()));
         for (t, r) in [(17.9, 1.0), (44.1, 1.0), (30.0, 7.1), (30.0, 0.0), (f64::NAN, 1.0)] {
             assert!(

@@ -226,8 +226,13 @@ fn channel_command(channel: usize, action: &str, args: &[OscArg], app: &App) -> 
             protocol::stimulus_command(channel, Stimulus::Touch { material, object_c }, Owner::Osc, &app.limits)
         }
         "setpoint" => {
-            let (temp_c, rate_c_s) = (number(0, "temperature")?, number(1, "rate")?);
-            protocol::stimulus_command(channel, Stimulus::Direct { temp_c, rate_c_s }, Owner::Osc, &app.limits)
+            let (temp_c, rate_c_per_s) = (number(0, "temperature")?, number(1, "rate")?);
+            protocol::stimulus_command(
+                channel,
+                Stimulus::Direct { temp_c, rate_c_per_s },
+                Owner::Osc,
+                &app.limits,
+            )
         }
         "release" => Ok(Command::Release { channel }),
         _ => Err(ApiError::new(

@@ -657,7 +657,7 @@ fn dose_show_and_reset_and_a_corrupt_ledger_is_refused_never_reset() {
 }
 
 /// An OSC message `/thermode/channel/<channel>/setpoint f f`.
-fn osc_setpoint(channel: usize, temp_c: f32, rate_c_s: f32) -> Vec<u8> {
+fn osc_setpoint(channel: usize, temp_c: f32, rate_c_per_s: f32) -> Vec<u8> {
     fn padded(text: &str) -> Vec<u8> {
         let mut bytes = text.as_bytes().to_vec();
         bytes.push(0);
@@ -669,7 +669,7 @@ fn osc_setpoint(channel: usize, temp_c: f32, rate_c_s: f32) -> Vec<u8> {
     let mut message = padded(&format!("/thermode/channel/{channel}/setpoint"));
     message.extend(padded(",ff"));
     message.extend(temp_c.to_be_bytes());
-    message.extend(rate_c_s.to_be_bytes());
+    message.extend(rate_c_per_s.to_be_bytes());
     message
 }
 

@@ -116,7 +116,7 @@ fn a_pump_failure_is_detected_when_the_hot_side_passes_its_limit() {
         lp.pipeline
             .set_stimulus(Stimulus::Direct {
                 temp_c: 15.0,
-                rate_c_s: 10.0,
+                rate_c_per_s: 10.0,
             })
             .unwrap_or_else(|e| panic!("{e}"));
         let limit_c = lp.pipeline.envelope().config().hot_side_max_c;
@@ -221,15 +221,15 @@ fn broken_numbers_latch_at_once_and_nan_stimuli_are_refused() {
         },
         Stimulus::Direct {
             temp_c: f64::NAN,
-            rate_c_s: 1.0,
+            rate_c_per_s: 1.0,
         },
         Stimulus::Direct {
             temp_c: 30.0,
-            rate_c_s: f64::INFINITY,
+            rate_c_per_s: f64::INFINITY,
         },
         Stimulus::Direct {
             temp_c: 60.0,
-            rate_c_s: 1.0,
+            rate_c_per_s: 1.0,
         },
     ] {
         assert!(

@@ -52,7 +52,7 @@ fn direct_mode_ramps_at_the_requested_rate_and_settles() {
         lp.pipeline
             .set_stimulus(Stimulus::Direct {
                 temp_c: 40.0,
-                rate_c_s: 2.0,
+                rate_c_per_s: 2.0,
             })
             .unwrap_or_else(|e| panic!("{e}"));
         let ticks = lp.run(1200);

@@ -57,7 +57,7 @@ fn stimulus() -> impl Strategy<Value = Stimulus> {
         1 => Just(Stimulus::Air),
         3 => (random_material(), hostile(-60.0..160.0))
             .prop_map(|(material, object_c)| Stimulus::Touch { material, object_c }),
-        2 => (hostile(0.0..60.0), hostile(-5.0..30.0)).prop_map(|(temp_c, rate_c_s)| Stimulus::Direct { temp_c, rate_c_s }),
+        2 => (hostile(0.0..60.0), hostile(-5.0..30.0)).prop_map(|(temp_c, rate_c_per_s)| Stimulus::Direct { temp_c, rate_c_per_s }),
     ]
 }
 

@@ -76,8 +76,8 @@ fn validate(request: Request, limits: &RequestLimits, owner: Owner) -> Result<Ap
         Request::Setpoint(Setpoint {
             channel: c,
             temp_c,
-            rate_c_s,
-        }) => stimulus_command(channel(c)?, Stimulus::Direct { temp_c, rate_c_s }, owner, limits)?,
+            rate_c_per_s,
+        }) => stimulus_command(channel(c)?, Stimulus::Direct { temp_c, rate_c_per_s }, owner, limits)?,
         Request::ClearFault(on) => Command::ClearFault {
             channel: channel(on.channel)?,
         },
@@ -171,10 +171,10 @@ pub fn done(command: &Command, applied: AppliedAt) -> Done {
                 object_temp_c: *object_c,
                 applied,
             },
-            Stimulus::Direct { temp_c, rate_c_s } => Done::Setpoint {
+            Stimulus::Direct { temp_c, rate_c_per_s } => Done::Setpoint {
                 channel: *channel,
                 temp_c: *temp_c,
-                rate_c_s: *rate_c_s,
+                rate_c_per_s: *rate_c_per_s,
                 applied,
             },
             Stimulus::Air => Done::Release {
@@ -204,7 +204,7 @@ pub fn limits_status(limits: &RequestLimits, requests_per_s: f64, burst: f64) ->
         max_subscribe_hz: limits.max_subscribe_hz,
         display_min_c: stimulus.display_c.min,
         display_max_c: stimulus.display_c.max,
-        max_rate_c_s: stimulus.max_rate_c_s,
+        max_rate_c_per_s: stimulus.max_rate_c_per_s,
         object_temp_min_c: stimulus.object_c.min,
         object_temp_max_c: stimulus.object_c.max,
     }
@@ -276,7 +276,7 @@ pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> ChannelStat
         fault_description: status.telemetry.fault.map(|f| f.description().to_string()),
         object_temp_c: status.object_c,
         direct_temp_c: status.direct.map(|d| d.0),
-        direct_rate_c_s: status.direct.map(|d| d.1),
+        direct_rate_c_per_s: status.direct.map(|d| d.1),
         held_off: status.held_off,
         owner: status.owner,
         release_at_s: status.release_at_s,

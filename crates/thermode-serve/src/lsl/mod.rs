@@ -6,7 +6,7 @@
 //!   `ch{c}_current_a` (A), in that order ([`TELEMETRY_FIELDS`]), labelled with unit and type in the stream's XML
 //!   description (`<desc><channels><channel><label/><unit/><type/>`);
 //! - **markers** (`thermode markers`, type `Markers`, one string channel, irregular): one JSON object per event —
-//!   `touch` (channel, material, object_temp_c), `release`, `setpoint` (channel, temp_c, rate_c_s), `stop`,
+//!   `touch` (channel, material, object_temp_c), `release`, `setpoint` (channel, temp_c, rate_c_per_s), `stop`,
 //!   `fault` (channel, code), `fault_cleared`, and the clients' own markers (`marker`: text, channel), sent with
 //!   the API request `marker` (docs/api.md).
 //!
@@ -388,8 +388,8 @@ fn stimulus_event(channel: usize, before: &RecordRow, now: &RecordRow) -> Option
             "event": "touch", "channel": channel, "material": &*now.label, "object_temp_c": now.object_c,
         }),
         Mode::Direct => {
-            let (temp_c, rate_c_s) = now.direct.map_or((None, None), |(t, r)| (Some(t), Some(r)));
-            json!({"event": "setpoint", "channel": channel, "temp_c": temp_c, "rate_c_s": rate_c_s})
+            let (temp_c, rate_c_per_s) = now.direct.map_or((None, None), |(t, r)| (Some(t), Some(r)));
+            json!({"event": "setpoint", "channel": channel, "temp_c": temp_c, "rate_c_s": rate_c_per_s})
         }
         Mode::Air => json!({"event": "release", "channel": channel}),
     };

@@ -525,8 +525,9 @@ fn the_status_limits_are_those_of_the_envelope_the_channels_run() {
             "ok",
             "the published limits are accepted"
         );
-        for (i, (temp_c, rate_c_s)) in [(17.9, 1.0), (44.1, 1.0), (30.0, 7.1)].into_iter().enumerate() {
-            let text = format!(r#"{{"type":"setpoint","id":{i},"channel":1,"temp_c":{temp_c},"rate_c_s":{rate_c_s}}}"#);
+        for (i, (temp_c, rate_c_per_s)) in [(17.9, 1.0), (44.1, 1.0), (30.0, 7.1)].into_iter().enumerate() {
+            let text =
+                format!(r#"{{"type":"setpoint","id":{i},"channel":1,"temp_c":{temp_c},"rate_c_s":{rate_c_per_s}}}"#);
             assert_eq!(ask(&mut ws, &text).await["code"], "bad_value", "{text}");
         }
     });

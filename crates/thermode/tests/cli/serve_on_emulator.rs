@@ -164,9 +164,12 @@ pub(crate) fn osc(address: &str, args: &[f32]) -> Vec<u8> {
 }
 
 /// Direct mode on `channel`: `temp_c` at `rate_c_s`.
-fn setpoint(osc_port: u16, channel: usize, temp_c: f32, rate_c_s: f32) {
+fn setpoint(osc_port: u16, channel: usize, temp_c: f32, rate_c_per_s: f32) {
     let socket = UdpSocket::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("udp: {e}"));
-    let message = osc(&format!("/thermode/channel/{channel}/setpoint"), &[temp_c, rate_c_s]);
+    let message = osc(
+        &format!("/thermode/channel/{channel}/setpoint"),
+        &[temp_c, rate_c_per_s],
+    );
     socket
         .send_to(&message, ("127.0.0.1", osc_port))
         .unwrap_or_else(|e| panic!("osc: {e}"));
@@ -281,12 +284,12 @@ enum KillAt {
 
 /// One run: emulator and host on `device_file`, 48 °C at `rate_c_s` on channel 0, SIGKILL at `at`; the peak of the
 /// true plate over the whole trace, the plate at the kill, and the time from the set-point to the kill.
-fn kill_while_heating(dir: &Path, device_file: Option<&Path>, rate_c_s: f32, at: KillAt) -> (f64, f64, f64) {
+fn kill_while_heating(dir: &Path, device_file: Option<&Path>, rate_c_per_s: f32, at: KillAt) -> (f64, f64, f64) {
     let trace = dir.join("trace.csv");
     let (emulator, pty) = emulate(1, device_file, &trace);
     let mut host = serve(&pty, device_file, None);
     let mut tail = Tail::open(&trace);
-    setpoint(host.osc_port, 0, 48.0, rate_c_s);
+    setpoint(host.osc_port, 0, 48.0, rate_c_per_s);
     let started = Instant::now();
     let mut plate_at_kill = f64::NAN;
     let mut hot_since: Option<Instant> = None;
@@ -335,7 +338,7 @@ fn device_file(name: &str) -> PathBuf {
 fn a_host_killed_while_heating_never_lets_the_true_plate_pass_48_5() {
     let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
     // The largest rate the daemon allows, read from a throwaway run's status.
-    let rate_c_s = {
+    let rate_c_per_s = {
         let (_emulator, pty) = emulate(1, None, &dir.path().join("probe.csv"));
         let host = serve(&pty, None, None);
         let limits = &status(host.http_port)["limits"];
@@ -356,9 +359,9 @@ fn a_host_killed_while_heating_never_lets_the_true_plate_pass_48_5() {
             KillAt::Holding(rng.gen_range(0.2..1.0)),
         ];
         for at in moments {
-            let (peak, at_kill, after_s) = kill_while_heating(dir.path(), file.as_deref(), rate_c_s, at);
+            let (peak, at_kill, after_s) = kill_while_heating(dir.path(), file.as_deref(), rate_c_per_s, at);
             println!(
-                "{name} display, 48 °C at {rate_c_s} °C/s, SIGKILL at {at:?} ({after_s:.2} s, plate {at_kill:.2} °C): \
+                "{name} display, 48 °C at {rate_c_per_s} °C/s, SIGKILL at {at:?} ({after_s:.2} s, plate {at_kill:.2} °C): \
                  peak true plate {peak:.3} °C"
             );
             assert!(
