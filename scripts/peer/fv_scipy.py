@@ -26,7 +26,8 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
+
+import common  # scripts/peer/common.py
 
 try:
     import numpy as np
@@ -200,14 +201,8 @@ def thermode_surface(level, tolerance=None):
             return np.array([float(r["skin_surface_c"]) for r in csv.DictReader(f)])
 
 
-def timed(cmd):
-    start = time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True)
-    return time.perf_counter() - start
-
-
 def main():
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = common.parser(__doc__)
     parser.add_argument("--levels", default="0,1,2,3,4")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--run", type=int, help=argparse.SUPPRESS)
@@ -243,7 +238,7 @@ def main():
             out_t, out_p = os.path.join(tmp, "t.csv"), os.path.join(tmp, "p.csv")
             peer_cmd = [sys.executable, os.path.abspath(__file__), "--run", str(level), "--rtol", repr(rtol),
                         "--out", out_p]
-            pairs = [(timed(thermode_cmd(level, out_t)), timed(peer_cmd)) for _ in range(args.repeats)]
+            pairs = [(common.timed(thermode_cmd(level, out_t)), common.timed(peer_cmd)) for _ in range(args.repeats)]
         t_s = statistics.median(p[0] for p in pairs)
         p_s = statistics.median(p[1] for p in pairs)
         log(f"level {level}: thermode error {error_thermode:.2e} °C at its default tolerance; BDF rtol = atol = {rtol}"

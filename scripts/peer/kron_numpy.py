@@ -22,7 +22,6 @@ Usage: scripts/peer/kron_numpy.py [--repeats 5]
 Environment: THERMODE_BIN, thermode's release binary (default target/release/thermode). Needs numpy.
 """
 
-import argparse
 import csv
 import json
 import os
@@ -30,7 +29,8 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import time
+
+import common  # scripts/peer/common.py
 
 try:
     import numpy as np
@@ -163,14 +163,8 @@ def check_agreement(tmp):
         print(f"kron_numpy: {kind} agrees with thermode: {temps:.2e} °C, flux {flux:.2e} relative", file=sys.stderr)
 
 
-def timed(cmd):
-    start = time.perf_counter()
-    subprocess.run(cmd, check=True, capture_output=True)
-    return time.perf_counter() - start
-
-
 def main():
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = common.parser(__doc__)
     parser.add_argument("--run", choices=["python", "numpy"])
     parser.add_argument("--out")
     parser.add_argument("--repeats", type=int, default=5)
@@ -183,7 +177,7 @@ def main():
         check_agreement(tmp)
         out = os.path.join(tmp, "timed.csv")
         for kind, label in (("python", "plain Python loop"), ("numpy", "vectorised NumPy")):
-            pairs = [(timed(thermode_cmd(out)), timed(peer_cmd(kind, out))) for _ in range(args.repeats)]
+            pairs = [(common.timed(thermode_cmd(out)), common.timed(peer_cmd(kind, out))) for _ in range(args.repeats)]
             t_s = statistics.median(p[0] for p in pairs)
             p_s = statistics.median(p[1] for p in pairs)
             print(f"| kron aluminium 90 s at 1 ms with CSV vs {label} | {t_s:.3f} | {p_s:.3f} | {p_s / t_s:.1f} |")
