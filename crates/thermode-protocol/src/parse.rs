@@ -222,11 +222,11 @@ mod tests {
     #[test]
     fn every_kind_of_malformed_message_has_its_code_and_names_its_key() {
         let cases = [
-            ("{", "bad_json"),
+            (r#"{"id":1}"#, "missing_field"),
+            (r#"{"type":"touch"}"#, "missing_field"),
             ("[1,2]", "bad_json"),
             (r#"{"type":"touch","type":"release","id":1,"channel":0}"#, "bad_json"),
-            (r#"{"type":"touch"}"#, "missing_field"),
-            (r#"{"id":1}"#, "missing_field"),
+            ("{", "bad_json"),
             (r#"{"type":7,"id":1}"#, "bad_value"),
             (r#"{"type":"fly","id":1}"#, "unknown_type"),
             (r#"{"type":"touch","id":1,"material":"wood"}"#, "missing_field"),

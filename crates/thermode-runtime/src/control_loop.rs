@@ -142,20 +142,10 @@ type Started = Result<(Arc<Shared>, Vec<StimulusLimits>, Realtime), RuntimeError
 
 impl LoopHandle {
     /// Starts the loop on its own thread. `engines` builds one engine per device channel on that thread. Each of
-    /// `feeds` receives a [`TickRecord`] per tick (the recorder, the bench); the loop never waits for them. Returns once the
-    /// engines are built (their error, if any, is returned).
+    /// `feeds` receives a [`TickRecord`] per tick (the recorder, the bench); the loop never waits for them. The loop
+    /// obeys `interlock` (the recorder trips it; `Arc::default()` for one nobody trips). Returns once the engines
+    /// are built (their error, if any, is returned).
     pub fn spawn(
-        config: LoopConfig,
-        device: Box<dyn Device + Send>,
-        engines: EngineFactory,
-        clock: Arc<dyn Clock>,
-        feeds: Vec<SyncSender<TickRecord>>,
-    ) -> Result<LoopHandle, RuntimeError> {
-        LoopHandle::spawn_with_interlock(config, device, engines, clock, feeds, Arc::new(Interlock::new()))
-    }
-
-    /// As [`LoopHandle::spawn`], with an [`Interlock`] the loop obeys (the daemon's recorder trips it).
-    pub fn spawn_with_interlock(
         config: LoopConfig,
         device: Box<dyn Device + Send>,
         engines: EngineFactory,

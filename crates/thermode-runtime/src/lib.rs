@@ -34,7 +34,7 @@
 //! let display = SimulatedDisplay::<DefaultFinger>::fingertips(&DeviceConfig::default(), 2, 1)?;
 //! let clock = Arc::new(ManualClock::new());
 //! let engines = tracking_engines(32.0, 0.5, 2.8);
-//! let control = LoopHandle::spawn(LoopConfig::default(), Box::new(display), engines, clock.clone(), vec![])?;
+//! let control = LoopHandle::spawn(LoopConfig::default(), Box::new(display), engines, clock.clone(), vec![], Arc::default())?;
 //! let answer = control.commands().request(Command::StopAll)?;
 //! clock.set(0.01); // the tick at 10 ms runs (if the one at 0 s has not taken the command already)
 //! let applied = answer.blocking_recv()??;

@@ -271,7 +271,7 @@ impl PreparedCore {
             }
             None => engines,
         };
-        let control = LoopHandle::spawn_with_interlock(
+        let control = LoopHandle::spawn(
             self.config.loop_config.clone(),
             device,
             engines,

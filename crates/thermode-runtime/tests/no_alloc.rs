@@ -70,6 +70,7 @@ fn steady_ticks_allocate_nothing_on_the_loop_thread() {
         marking,
         clock.clone(),
         vec![feed],
+        Arc::default(),
     )
     .expect("loop");
     let run_to = |k: u64| {

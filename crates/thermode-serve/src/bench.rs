@@ -342,9 +342,10 @@ pub fn run(
             ..ServerConfig::default()
         },
         device_label: "bench".into(),
+        taps: vec![tap],
         ..DaemonConfig::default()
     };
-    let daemon = Daemon::start_with_taps(daemon_config, device, engines, clock.clone(), vec![tap])?;
+    let daemon = Daemon::start(daemon_config, device, engines, clock.clone())?;
     let realtime = daemon.realtime().map(|r| r.describe()).unwrap_or_default();
     let sent = drive_client(&daemon, config, channels, clock.as_ref());
     let snapshot = daemon.snapshot();

@@ -140,7 +140,7 @@ impl ServerConfig {
 }
 
 /// Everything [`Daemon::start`] needs besides the device, the engines and the clock.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, Default)]
 pub struct DaemonConfig {
     /// The loop core: the loop, the recording, the state directory of the dose ledger.
     pub core: CoreConfig,
@@ -153,6 +153,8 @@ pub struct DaemonConfig {
     /// Lab Streaming Layer outlets (`serve --lsl`), or `None` (then liblsl is never loaded). The daemon fills in
     /// the rate, the channel count and the device label. Default `None`.
     pub lsl: Option<LslConfig>,
+    /// Extra consumers of the per-tick records (the bench); the loop never waits for them. Default none.
+    pub taps: Vec<std::sync::mpsc::SyncSender<thermode_runtime::snapshot::TickRecord>>,
 }
 
 /// What [`Daemon::stop`] did: the loop core's stop.
@@ -172,22 +174,12 @@ pub struct Daemon {
 impl Daemon {
     /// Checks the configuration, binds the sockets, and starts the loop, the recorder and the network side.
     pub fn start(
-        config: DaemonConfig,
+        mut config: DaemonConfig,
         device: Box<dyn Device + Send>,
         engines: EngineFactory,
         clock: Arc<dyn Clock>,
     ) -> Result<Daemon, ServeError> {
-        Daemon::start_with_taps(config, device, engines, clock, Vec::new())
-    }
-
-    /// As [`Daemon::start`], with extra consumers of the per-tick records (the bench).
-    pub fn start_with_taps(
-        config: DaemonConfig,
-        device: Box<dyn Device + Send>,
-        engines: EngineFactory,
-        clock: Arc<dyn Clock>,
-        mut taps: Vec<std::sync::mpsc::SyncSender<thermode_runtime::snapshot::TickRecord>>,
-    ) -> Result<Daemon, ServeError> {
+        let mut taps = std::mem::take(&mut config.taps);
         let server = &config.server;
         server.validate()?;
         config.core.loop_config.validate()?;

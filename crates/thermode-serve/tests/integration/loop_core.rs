@@ -32,7 +32,15 @@ impl Rig {
         let device = SpyDevice::new(channels);
         let (log, control) = (device.log.clone(), device.control.clone());
         let clock = Arc::new(ManualClock::new());
-        let handle = LoopHandle::spawn(config, Box::new(device), engines, clock.clone(), Vec::new()).expect("loop");
+        let handle = LoopHandle::spawn(
+            config,
+            Box::new(device),
+            engines,
+            clock.clone(),
+            Vec::new(),
+            Arc::default(),
+        )
+        .expect("loop");
         let rig = Rig {
             index: std::cell::Cell::new(0),
             handle,
@@ -716,7 +724,15 @@ fn at_one_hertz_a_disconnect_under_a_flood_releases_within_the_grace_period() {
     );
     let device = SpyDevice::new(2);
     let clock = Arc::new(ManualClock::new());
-    let handle = LoopHandle::spawn(config, Box::new(device), trackers(), clock.clone(), Vec::new()).expect("loop");
+    let handle = LoopHandle::spawn(
+        config,
+        Box::new(device),
+        trackers(),
+        clock.clone(),
+        Vec::new(),
+        Arc::default(),
+    )
+    .expect("loop");
     let wait_tick = |t: f64| {
         assert!(
             common::wait_until(10.0, || handle.snapshot().time_s >= t - 1e-9

@@ -25,6 +25,7 @@ fn every_tick_of_every_channel_is_recorded_in_order() {
         trackers(),
         clock.clone(),
         vec![feed],
+        Arc::default(),
     )
     .expect("loop");
     // Tick 0 runs at clock time 0; moving the clock before it ran would skip it as a missed deadline.
@@ -152,7 +153,7 @@ fn a_file_that_fills_up_keeps_whole_rows_counts_only_them_and_trips_the_interloc
     .expect("recorder");
     let status = recorder.status();
     let clock = Arc::new(ManualClock::new());
-    let mut handle = LoopHandle::spawn_with_interlock(
+    let mut handle = LoopHandle::spawn(
         LoopConfig::default(),
         Box::new(SpyDevice::new(3)),
         trackers(),
@@ -377,6 +378,7 @@ fn after_an_acknowledgement_a_failed_recording_goes_on_in_a_new_file() {
         trackers(),
         clock.clone(),
         vec![feed],
+        Arc::default(),
     )
     .expect("loop");
     let mut tick = 0u64;

@@ -173,6 +173,7 @@ fn start_quiet(args: &ServeArgs) -> Result<(Daemon, String)> {
             source_id: args.lsl_name.clone(),
             ..LslConfig::default()
         }),
+        taps: Vec::new(),
     };
     let daemon = Daemon::start(config, display.device, display.engines, clock)?;
     Ok((daemon, display.description))
