@@ -25,6 +25,7 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use thermode_model::materials::find;
+use thermode_model::params::{BadValue, Rule};
 use thiserror::Error;
 
 pub use crate::random::{standard_normal, trial_rng};
@@ -62,16 +63,9 @@ pub enum ParticipantError {
         /// Duration of the curve \[s\].
         duration_s: f64,
     },
-    /// A setting is out of range.
-    #[error("simulated: `{key}` = {value}: {requirement}")]
-    BadSetting {
-        /// The setting.
-        key: &'static str,
-        /// The value given.
-        value: f64,
-        /// What is required.
-        requirement: &'static str,
-    },
+    /// A setting is out of range (the one `BadValue` of `thermode_model::params`, naming the key).
+    #[error("simulated: {0}")]
+    BadSetting(#[from] BadValue),
     /// The target identification rate cannot be reached with these options.
     #[error(
         "simulated: a rate of {target} cannot be reached: with these options the rate stays between {lowest:.3} \
@@ -191,13 +185,7 @@ impl SimulatedParticipant {
 
     /// Sets the noise scale (finite, ≥ 0).
     pub fn set_noise_sd(&mut self, noise_sd: f64) -> Result<(), ParticipantError> {
-        if !(noise_sd.is_finite() && noise_sd >= 0.0) {
-            return Err(ParticipantError::BadSetting {
-                key: "noise_sd",
-                value: noise_sd,
-                requirement: "must be a finite number not below 0",
-            });
-        }
+        Rule::NonNegative.check("noise_sd", noise_sd)?;
         self.noise_sd = noise_sd;
         Ok(())
     }
@@ -260,20 +248,8 @@ impl SimulatedParticipant {
         samples_per_option: usize,
         seed: u64,
     ) -> Result<NoiseCalibration, ParticipantError> {
-        if !(target_rate.is_finite() && target_rate > 0.0 && target_rate < 1.0) {
-            return Err(ParticipantError::BadSetting {
-                key: "target_rate",
-                value: target_rate,
-                requirement: "must be between 0 and 1",
-            });
-        }
-        if samples_per_option == 0 {
-            return Err(ParticipantError::BadSetting {
-                key: "samples_per_option",
-                value: 0.0,
-                requirement: "must be at least 1",
-            });
-        }
+        Rule::Between { min: 0.0, max: 1.0 }.check("target_rate", target_rate)?;
+        Rule::AtLeast { min: 1.0 }.check("samples_per_option", samples_per_option as f64)?;
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let draws: Vec<Vec<[f64; 2]>> = (0..self.options.len())
             .map(|_| {

@@ -20,6 +20,7 @@
 
 use serde_json::json;
 use thermode_model::materials::Material;
+use thermode_model::params::BadValue;
 
 use super::stimulus::{SkinCurve, Stimulus, StimulusError, StimulusRequest, TrialMeasurement};
 pub use super::trace::{DisplaySample, TrialTrace, TRACE_COLUMNS};
@@ -97,12 +98,9 @@ impl<L: DisplayLink> LiveStimulus<L> {
             && s.min_rest_s <= s.max_rest_s
             && 2.0 * s.window_s <= s.max_rest_s;
         if !ok {
-            return Err(StimulusError::BadSetting {
-                key: "live settings",
-                value: s.window_s,
-                requirement:
-                    "windows, tolerance and rests must be positive, min_rest_s ≤ max_rest_s, 2 windows ≤ max_rest_s",
-            });
+            let requirement =
+                "windows, tolerance and rests must be positive, min_rest_s ≤ max_rest_s, 2 windows ≤ max_rest_s";
+            return Err(BadValue::custom("live settings", s.window_s, requirement).into());
         }
         Ok(LiveStimulus {
             link,

@@ -205,14 +205,10 @@ impl Responder for ScriptedResponses {
 impl Responder for SimulatedParticipant {
     fn respond(&mut self, query: &ResponseQuery, _console: &mut dyn Console) -> Result<usize, RunError> {
         if self.options() != query.options {
-            return Err(RunError::Participant(
-                crate::participant::ParticipantError::BadSetting {
-                    key: "options",
-                    value: self.options().len() as f64,
-                    requirement:
-                        "the simulated participant's references must be the experiment's response options, in order",
-                },
-            ));
+            let requirement =
+                "the simulated participant's references must be the experiment's response options, in order";
+            let refused = thermode_model::params::BadValue::custom("options", self.options().len() as f64, requirement);
+            return Err(RunError::Participant(refused.into()));
         }
         let curve = query
             .measurement

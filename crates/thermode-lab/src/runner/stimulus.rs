@@ -20,6 +20,7 @@ use std::collections::HashMap;
 use serde_json::json;
 use thermode_model::fv::{simulate_contact, ContactSpec, FvConfig, FvModel, InitialState};
 use thermode_model::materials::Material;
+use thermode_model::params::{BadValue, Rule};
 use thermode_model::skin::Skin;
 use thermode_model::ParamError;
 use thiserror::Error;
@@ -47,16 +48,9 @@ pub enum StimulusError {
     /// The measurement is unusable (non-finite temperature, malformed curve, …).
     #[error("stimulus measurement: {0}")]
     BadMeasurement(String),
-    /// A stimulus setting is out of range.
-    #[error("stimulus setting `{key}` = {value}: {requirement}")]
-    BadSetting {
-        /// The setting.
-        key: &'static str,
-        /// The value given.
-        value: f64,
-        /// What is required.
-        requirement: &'static str,
-    },
+    /// A stimulus setting is out of range (the one `BadValue` of `thermode_model::params`, naming the key).
+    #[error("stimulus setting {0}")]
+    BadSetting(#[from] BadValue),
 }
 
 /// A skin surface temperature curve: `skin_c[i]` at `time_s[i]` seconds after the touch.
@@ -362,11 +356,8 @@ impl DisplaySetup {
         self.pipeline.validate().map_err(RenderError::from)?;
         let ticks = self.pre_contact_s * self.rate_hz;
         if !(ticks.is_finite() && ticks.round() >= 1.0) {
-            return Err(StimulusError::BadSetting {
-                key: "pre_contact_s",
-                value: self.pre_contact_s,
-                requirement: "must last at least one tick of the pipeline (the curve starts at the touch)",
-            });
+            let requirement = "must last at least one tick of the pipeline (the curve starts at the touch)";
+            return Err(BadValue::custom("pre_contact_s", self.pre_contact_s, requirement).into());
         }
         Ok(())
     }
@@ -566,13 +557,7 @@ impl Stimulus for DisplayStimulus {
 /// `Ok` if `finger_drift_sd_c` \[°C\] is a valid standard deviation of the finger's start temperature (finite, at
 /// least 0).
 fn check_drift_sd(finger_drift_sd_c: f64) -> Result<(), StimulusError> {
-    if !(finger_drift_sd_c.is_finite() && finger_drift_sd_c >= 0.0) {
-        return Err(StimulusError::BadSetting {
-            key: "finger_drift_sd_c",
-            value: finger_drift_sd_c,
-            requirement: "must be a finite number not below 0",
-        });
-    }
+    Rule::NonNegative.check("finger_drift_sd_c", finger_drift_sd_c)?;
     Ok(())
 }
 

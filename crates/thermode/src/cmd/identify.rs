@@ -14,6 +14,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use thermode_control::identify::{IdSample, PARAMETERS};
 use thermode_device::DeviceConfig;
+use thermode_model::params::Rule;
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_render::identify::{fit, record, sample_of, Excitation, DURATION_S, RATE_HZ};
 
@@ -65,9 +66,11 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
     if args.plant_device.is_some() && !sim {
         bail!("--plant-device sets the simulated display's hardware; it needs --device sim");
     }
-    if !(args.duration.is_finite() && (30.0..=DURATION_S).contains(&args.duration)) {
-        bail!("--duration {}: must be between 30 and {DURATION_S} s", args.duration);
-    }
+    let duration = Rule::Within {
+        min: 30.0,
+        max: DURATION_S,
+    };
+    duration.check("--duration [s]", args.duration)?;
     let believed = resolve::device_config(args.device_file.as_deref())?;
     let plant = match &args.plant_device {
         Some(path) => resolve::device_config(Some(path))?,

@@ -136,12 +136,7 @@ pub struct LabRunArgs {
 /// Runs `thermode lab run`.
 pub fn run(args: &LabRunArgs) -> Result<()> {
     let experiment = ExperimentFile::load(&args.experiment)?;
-    if !(args.time_scale.is_finite() && args.time_scale >= 0.0) {
-        bail!(
-            "--time-scale {}: must be a finite number of at least 0",
-            args.time_scale
-        );
-    }
+    thermode_model::params::Rule::NonNegative.check("--time-scale", args.time_scale)?;
     let participants = if args.all_participants {
         experiment.experiment.participant_ids.clone()
     } else {

@@ -10,8 +10,9 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
+use thermode_model::params::Rule;
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::recorder::RecordErrorPolicy;
 use thermode_runtime::{CoreConfig, LoopConfig};
@@ -235,10 +236,10 @@ pub enum Ended {
 
 /// `--duration`: a finite number of seconds ≥ 0, if given.
 fn check_duration(duration_s: Option<f64>) -> Result<()> {
-    match duration_s {
-        Some(d) if !(d.is_finite() && d >= 0.0) => bail!("--duration must be a finite number of seconds ≥ 0, not {d}"),
-        _ => Ok(()),
+    if let Some(d) = duration_s {
+        Rule::NonNegative.check("--duration [s]", d)?;
     }
+    Ok(())
 }
 
 /// Runs until `duration_s` has passed (forever without one) or a stop signal arrives, calling `every_100ms` in
