@@ -198,7 +198,8 @@ impl Connection {
                 Err(e) => e.reply(Some(id)),
             },
             (id, Err(e)) => e.reply(id),
-            (None, Ok(_)) => unreachable!("a request that parses has an id"),
+            // parse_request gives every request it accepts its id; answered as a missing one all the same.
+            (None, Ok(_)) => ApiError::new(ErrorCode::MissingField, "every request needs an `id`").reply(None),
         }
     }
 
