@@ -59,6 +59,8 @@ pub struct PreparedCore {
 #[derive(Debug)]
 pub struct LoopCore {
     control: Option<LoopHandle>,
+    /// What stopping the loop gave: the device's answer to all-off and the last tick's loop time \[s\].
+    loop_stop: Option<(Option<Result<(), DeviceError>>, f64)>,
     recorder: Option<Recorder>,
     dose_writer: Option<DoseWriter>,
     ledger_path: Option<PathBuf>,
@@ -210,22 +212,20 @@ impl LoopCore {
         lines
     }
 
-    /// Stops the loop (its last act: every drive to 0 A at once, within one loop period): the device's answer to
-    /// that and the loop time of the last tick \[s\]. Later calls do nothing.
-    pub fn stop_loop(&mut self) -> (Option<Result<(), DeviceError>>, f64) {
-        match self.control.take() {
-            Some(mut control) => {
-                let all_off = control.stop();
-                (all_off, control.snapshot().time_s)
-            }
-            None => (None, f64::NAN),
+    /// Stops the loop (its last act: every drive to 0 A at once, within one loop period); what it gave goes into
+    /// [`LoopCore::finish`]'s report. Later calls do nothing.
+    pub fn stop_loop(&mut self) {
+        if let Some(mut control) = self.control.take() {
+            let all_off = control.stop();
+            self.loop_stop = Some((all_off, control.snapshot().time_s));
         }
     }
 
     /// Stops the loop if it still runs, then the dose ledger's writer (its final write holds the loop's last tick)
     /// and the recorder (every queued row written, flushed and synced). Later calls do nothing.
     pub fn finish(&mut self) -> Result<CoreStop, RuntimeError> {
-        let (all_off, last_tick_s) = self.stop_loop();
+        self.stop_loop();
+        let (all_off, last_tick_s) = self.loop_stop.take().unwrap_or((None, f64::NAN));
         let mut report = CoreStop {
             all_off,
             last_tick_s,
@@ -294,6 +294,7 @@ impl PreparedCore {
         Ok(LoopCore {
             recording: self.recorder.as_ref().map(Recorder::status),
             control: Some(control),
+            loop_stop: None,
             recorder: self.recorder,
             dose_writer,
             ledger_path,
