@@ -2,7 +2,7 @@
 //!
 //! | spelling | device |
 //! | --- | --- |
-//! | `serial:PATH` | thermode's own protocol ([`crate::serial::SerialDevice`]) |
+//! | `serial:PATH` | thermode's own protocol ([`crate::own::host::SerialDevice`]) |
 //! | `mecom:PATH[?OPTIONS]` | Meerstetter TEC controller(s) over a serial port ([`crate::mecom::host::MecomDevice`]) |
 //! | `mecom-tcp:HOST:PORT[?OPTIONS]` | the same over TCP |
 //! | `tcs2:PATH[?OPTIONS]` | QST.Lab TCS II in follow mode ([`crate::tcs2::host::Tcs2Device`]) |
@@ -20,7 +20,7 @@ use thermode_platform::Clock;
 use thermode_safety::{EnvelopeConfig, ABSOLUTE_MAX_C, ABSOLUTE_MIN_C};
 
 use crate::mecom::host::{MecomChannel, MecomConfig, MecomDevice, MecomMode};
-use crate::serial::{SerialConfig, SerialDevice, SERIAL_PREFIX};
+use crate::own::host::{SerialConfig, SerialDevice, SERIAL_PREFIX};
 use crate::tcs2::host::{Tcs2Config, Tcs2Device, DEFAULT_HOLD_MAX_C};
 
 /// Prefix of a MeCom serial device: `mecom:`.

@@ -3,7 +3,7 @@
 //! ([`super`] lists the sources), so the MeCom host ([`super::host::MecomDevice`]) is tested without hardware.
 //!
 //! What it emulates, per instance (channel):
-//! - the parameters thermode reads and writes ([`super::payload::param`]): identity `?IF`, device type, status and
+//! - the parameters thermode reads and writes ([`super::codec::payload::param`]): identity `?IF`, device type, status and
 //!   error number, object (the plate's sensor reading) and sink (hot-side reading) temperature, target, actual
 //!   current and voltage; input selection (static, live current, temperature controller), output stage enable
 //!   (static off/on, live off/on), current and voltage limitation, positive-current sign, object temperature error
@@ -21,15 +21,15 @@
 //! Not emulated: error 139 (temperature changing too fast; the threshold is stored), the voltage limitation's
 //! effect (stored), flash wear, the bootloader, `?VB`/`VB` big data (answered `+01`).
 //!
-//! Time runs in fixed ticks (default 1 ms) as in [`crate::emulator`]; answers leave as soon as their frame is read.
+//! Time runs in fixed ticks (default 1 ms) as in [`crate::own::emulator`]; answers leave as soon as their frame is read.
 
 use thermode_device::{Device, DeviceError, PlateFinger, SimulatedDisplay, MAX_CHANNELS};
 use thermode_model::peltier::PeltierModule;
 
-use super::frame::{encode_ack, encode_frame, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
-use super::payload::{error_number, param, status, Request};
-use crate::emulator::EmulatorError;
-use crate::firmware::{Firmware, FirmwareStatus};
+use super::codec::frame::{encode_ack, encode_frame, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
+use super::codec::payload::{error_number, param, status, Request};
+use crate::runner::EmulatorError;
+use crate::runner::{Firmware, FirmwareStatus};
 
 /// The identity the emulator answers to `?IF` (20 characters).
 pub const EMULATOR_IDENTITY: &str = "thermode-TEC EMU G01";

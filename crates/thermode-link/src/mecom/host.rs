@@ -41,8 +41,8 @@ use thermode_model::{BadValue, Rule};
 use thermode_platform::Clock;
 use thermode_safety::DriveCommand;
 
-use super::frame::{encode_frame, FrameCounters, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
-use super::payload::{check_answer, describe_error, error_number, param, status, AnswerError, Request};
+use super::codec::frame::{encode_frame, FrameCounters, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
+use super::codec::payload::{check_answer, describe_error, error_number, param, status, AnswerError, Request};
 use thermode_device::{Device, DeviceCut, DeviceError, Reading, MAX_CHANNELS};
 
 /// Default baud rate of a MeCom serial port \[bit/s\]: 57600 (the TEC family's default and the rate its service
@@ -50,7 +50,7 @@ use thermode_device::{Device, DeviceCut, DeviceError, Reading, MAX_CHANNELS};
 pub const DEFAULT_MECOM_BAUD_RATE: u32 = 57_600;
 
 /// The longest communication watchdog thermode sets \[s\]: 0.25, as for its own protocol
-/// ([`crate::serial::MAX_DEVICE_WATCHDOG_MS`]); the device's range starts at 0.1.
+/// ([`crate::own::host::MAX_DEVICE_WATCHDOG_MS`]); the device's range starts at 0.1.
 pub const MAX_MECOM_WATCHDOG_S: f64 = 0.25;
 
 /// What the device regulates.

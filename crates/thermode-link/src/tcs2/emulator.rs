@@ -16,9 +16,9 @@
 
 use thermode_device::{Device, PlateFinger, SimulatedDisplay, MAX_CHANNELS};
 
-use super::protocol::{parse_command, Command, ParseStep, Temperatures, TCS2_ZONES};
-use crate::emulator::EmulatorError;
-use crate::firmware::{Firmware, FirmwareStatus};
+use super::codec::{parse_command, Command, ParseStep, Temperatures, TCS2_ZONES};
+use crate::runner::EmulatorError;
+use crate::runner::{Firmware, FirmwareStatus};
 
 /// Settings of the emulated stimulator.
 #[derive(Debug, Clone, Copy, PartialEq)]

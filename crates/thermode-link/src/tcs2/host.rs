@@ -31,7 +31,7 @@ use thermode_model::{BadValue, Rule};
 use thermode_platform::Clock;
 use thermode_safety::DriveCommand;
 
-use super::protocol::{tenths, Command, Line, LineDecoder, TCS2_BAUD_RATE, TCS2_MAX_C, TCS2_MIN_C, TCS2_ZONES};
+use super::codec::{tenths, Command, Line, LineDecoder, TCS2_BAUD_RATE, TCS2_MAX_C, TCS2_MIN_C, TCS2_ZONES};
 use thermode_device::{Device, DeviceError, Reading};
 
 /// The warmest set-point thermode streams to a TCS II in follow mode by default \[°C\]: 43 (the temperature a
@@ -169,11 +169,11 @@ fn read_port(port: Box<dyn Read + Send>, shared: Arc<Mutex<Shared>>, stop: Arc<A
             state.error = Some(message);
         }
     };
-    crate::port::read_until_stopped(port, &stop, clock.as_ref(), 512, received, failed);
+    crate::host::read_until_stopped(port, &stop, clock.as_ref(), 512, received, failed);
 }
 
 impl Shared {
-    fn take(&mut self, line: Result<Line, super::protocol::LineError>, now_s: f64) {
+    fn take(&mut self, line: Result<Line, super::codec::LineError>, now_s: f64) {
         match line {
             Ok(Line::Temperatures(t)) => {
                 self.stats.temperature_lines += 1;

@@ -13,9 +13,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use thermode_device::{Device, DeviceConfig, DeviceError, Reading, SimulatedDisplay};
-use thermode_link::emulator::{Emulator, EmulatorConfig, EmulatorStatus, LinkFaults, PtyEmulator, SentLog};
-use thermode_link::protocol::DeviceMessage;
-use thermode_link::serial::{serial_path, SerialConfig, SerialDevice, MAX_DEVICE_WATCHDOG_MS};
+use thermode_link::own::codec::DeviceMessage;
+use thermode_link::own::emulator::{Emulator, EmulatorConfig, EmulatorStatus, LinkFaults, PtyEmulator, SentLog};
+use thermode_link::own::host::{serial_path, SerialConfig, SerialDevice, MAX_DEVICE_WATCHDOG_MS};
 use thermode_model::kron::KronModel;
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_safety::{EnvelopeConfig, MeasuredOnly, SafetyEnvelope};
@@ -493,7 +493,8 @@ fn bad_paths_and_settings_are_errors() {
 #[test]
 fn runs_over_a_socket_pair_and_switches_off_on_drop() {
     use std::os::unix::net::UnixStream;
-    use thermode_link::emulator::{EmulatorControl, RunEnd};
+    use thermode_link::own::emulator::EmulatorControl;
+    use thermode_link::runner::RunEnd;
 
     let (mut device_end, host_end) = UnixStream::pair().unwrap_or_else(|e| panic!("socket pair: {e}"));
     device_end

@@ -18,7 +18,7 @@
 //!   valid frame, so the drives are off at most one period plus one tick after the host went silent.
 //!
 //! - before every plant step, each channel's [`PlateGuard`] (the firmware's own over- and under-temperature cut,
-//!   [`crate::guard`]) may remove heating or cooling from the step and latch that cut (report bits
+//!   [`crate::own::guard`]) may remove heating or cooling from the step and latch that cut (report bits
 //!   `OVER_TEMPERATURE`, `UNDER_TEMPERATURE`); `ClearFault` releases a cut once the plate is back inside.
 //!
 //! Bytes are stamped with the time they were handed over, after the ticks up to that time have run: a command that
@@ -36,14 +36,14 @@ use std::time::Duration;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use thermode_platform::Clock;
-use thiserror::Error;
 
-use crate::guard::{Cuts, GuardTrip, PlateGuard};
-use crate::protocol::{
+use super::codec::{
     encode_frame, to_centi_c, to_milli_c, ChannelFaults, ChannelReport, DecodeError, DeviceMessage, DriveFrame,
     FirmwareVersion, Frame, HostMessage, Identify, LinkCounters, NackCode, ReportFlags, SensorReport, StreamDecoder,
     DEFAULT_REPORT_INTERVAL_MS, DEFAULT_WATCHDOG_MS, SENSOR_OPEN_THRESHOLD_C, SENSOR_SHORT_THRESHOLD_C,
 };
+use super::guard::{Cuts, GuardTrip, PlateGuard};
+use crate::runner::{EmulatorError, RunEnd};
 use thermode_device::DeviceError;
 use thermode_device::PlateFinger;
 use thermode_device::{Device, SimulatedDisplay, MAX_CHANNELS};
@@ -54,27 +54,6 @@ pub const EMULATOR_FIRMWARE: FirmwareVersion = FirmwareVersion {
     minor: 1,
     patch: 0,
 };
-
-/// Why the emulator refused a setting or stopped.
-#[derive(Debug, Clone, PartialEq, Error)]
-pub enum EmulatorError {
-    /// A setting outside its range.
-    #[error("emulator setting {what} = {value} is invalid: {requirement}")]
-    BadSetting {
-        /// Which setting.
-        what: &'static str,
-        /// Its value.
-        value: f64,
-        /// What it must satisfy.
-        requirement: &'static str,
-    },
-    /// The simulated display refused something.
-    #[error(transparent)]
-    Device(#[from] DeviceError),
-    /// The port failed.
-    #[error("emulator port: {0}")]
-    Io(String),
-}
 
 /// Timing of the emulated firmware.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -348,7 +327,7 @@ impl<F: PlateFinger> Emulator<F> {
             last_valid_s: 0.0,
             last_command_seq: 0,
             tx_seq: 0,
-            frame: Vec::with_capacity(crate::protocol::MAX_ENCODED_LEN + 1),
+            frame: Vec::with_capacity(super::codec::MAX_ENCODED_LEN + 1),
             stats: EmulatorStats::default(),
             log: None,
             trace: None,
@@ -770,7 +749,7 @@ impl<F: PlateFinger> Emulator<F> {
         ChannelReport {
             sensor_milli_c: to_milli_c(sensor_c),
             hot_side_centi_c: to_centi_c(channel.hot_side_reading_c()),
-            applied_ma: crate::protocol::to_milliamps(state.applied_current_a).unwrap_or(0),
+            applied_ma: super::codec::to_milliamps(state.applied_current_a).unwrap_or(0),
             sample_seq: (state.sensor.seq & 0xFFFF) as u16,
             sample_age_ms: age_ms as u16,
             faults: ChannelFaults(faults),
@@ -870,17 +849,6 @@ pub struct EmulatorStatus {
     pub link_faults: LinkFaults,
     /// The statistics.
     pub stats: EmulatorStats,
-}
-
-/// How [`Emulator::run`] ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RunEnd {
-    /// [`EmulatorControl::stop`] was called.
-    Stopped,
-    /// [`EmulatorControl::close_port`] was called: the port is dropped (the host sees it vanish).
-    PortClosed,
-    /// The port reported its end (a read of 0 bytes, or the other end closed: broken pipe, connection reset).
-    HostClosed,
 }
 
 /// Controls a running emulator from another thread and reads its status.

@@ -56,7 +56,7 @@
 use thermode_device::{DeviceConfig, SensorSample};
 use thermode_model::peltier::PeltierModule;
 
-use crate::protocol::{SENSOR_OPEN_THRESHOLD_C, SENSOR_SHORT_THRESHOLD_C};
+use super::codec::{SENSOR_OPEN_THRESHOLD_C, SENSOR_SHORT_THRESHOLD_C};
 
 /// The device cuts heating before its plate can pass this temperature \[°C\]: 48 (the absolute maximum of the host's
 /// safety envelope, IEC 60601-1's limit for 1–10 min contact).

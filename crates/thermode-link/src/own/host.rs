@@ -1,5 +1,5 @@
 //! [`SerialDevice`]: a real display (or the emulator) behind a serial port, speaking the device protocol
-//! ([`crate::protocol`], `docs/protocol.md`), as a [`Device`].
+//! ([`crate::own::codec`], `docs/protocol.md`), as a [`Device`].
 //!
 //! - **Open** (`serial:PATH`): the port in raw mode at [`SerialConfig::baud_rate`], then the handshake: `Hello`
 //!   until the device answers `Identify`, then `ClearFault` until a report shows the drives released, all within
@@ -46,7 +46,7 @@ use thermode_model::{BadValue, Rule};
 use thermode_platform::Clock;
 use thermode_safety::DriveCommand;
 
-use crate::protocol::{
+use super::codec::{
     encode_frame, to_milliamps, ChannelFaults, DeviceMessage, DriveFrame, Frame, HostMessage, Identify, LinkCounters,
     NackCode, SensorReport, StreamDecoder, DEFAULT_BAUD_RATE, DELIMITER,
 };
@@ -206,7 +206,7 @@ struct Track {
 }
 
 impl Track {
-    fn update(&mut self, report: &crate::protocol::ChannelReport, received_s: f64) {
+    fn update(&mut self, report: &super::codec::ChannelReport, received_s: f64) {
         let sample_time_s = received_s - f64::from(report.sample_age_ms) * 1e-3;
         match self.seq16 {
             None => {
@@ -292,7 +292,7 @@ fn read_port(port: Box<dyn Read + Send>, shared: Arc<Mutex<Shared>>, stop: Arc<A
             state.error = Some(message);
         }
     };
-    crate::port::read_until_stopped(port, &stop, clock.as_ref(), 1024, received, failed);
+    crate::host::read_until_stopped(port, &stop, clock.as_ref(), 1024, received, failed);
 }
 
 /// A display behind a serial port. See the module documentation.
@@ -464,7 +464,7 @@ impl SerialDevice {
                 report_interval_ms: 0,
             },
             tx_seq: 0,
-            out: Vec::with_capacity(crate::protocol::MAX_ENCODED_LEN + 1),
+            out: Vec::with_capacity(super::codec::MAX_ENCODED_LEN + 1),
             pending_ma: [0; MAX_CHANNELS],
             sent_ma: [0; MAX_CHANNELS],
             round: 0,

@@ -1,7 +1,7 @@
 //! Running an emulated device in real time: the byte-in, byte-out core of any protocol's emulator ([`Firmware`])
 //! driven over a port by [`run_firmware`], on a pseudo-terminal ([`PtyFirmware`]) or a TCP listener
 //! ([`TcpFirmware`]), each in its own thread. The MeCom and TCS II emulators ([`crate::mecom::emulator`],
-//! [`crate::tcs2::emulator`]) run this way; thermode's own protocol keeps its [`crate::emulator::PtyEmulator`].
+//! [`crate::tcs2::emulator`]) run this way; thermode's own protocol keeps its [`crate::own::emulator::PtyEmulator`].
 //!
 //! The loop is the one of the own protocol's emulator: read what arrived (reads wait about a tick), hand it to the
 //! firmware stamped with the clock's time, let the firmware's time run to now, write what it answered. A
@@ -18,7 +18,40 @@ use std::time::Duration;
 use thermode_device::MAX_CHANNELS;
 use thermode_platform::Clock;
 
-use crate::emulator::{EmulatorError, RunEnd};
+use thermode_device::DeviceError;
+use thiserror::Error;
+
+/// Why the emulator refused a setting or stopped.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum EmulatorError {
+    /// A setting outside its range.
+    #[error("emulator setting {what} = {value} is invalid: {requirement}")]
+    BadSetting {
+        /// Which setting.
+        what: &'static str,
+        /// Its value.
+        value: f64,
+        /// What it must satisfy.
+        requirement: &'static str,
+    },
+    /// The simulated display refused something.
+    #[error(transparent)]
+    Device(#[from] DeviceError),
+    /// The port failed.
+    #[error("emulator port: {0}")]
+    Io(String),
+}
+
+/// How a run of an emulated device ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RunEnd {
+    /// `stop` was called.
+    Stopped,
+    /// `close_port` was called: the port is dropped (the host sees it vanish).
+    PortClosed,
+    /// The port reported its end (a read of 0 bytes, or the other end closed: broken pipe, connection reset).
+    HostClosed,
+}
 
 /// What an emulated device shows of itself between loops.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -14,16 +14,16 @@
 //!   releases the latch.
 //! - **Time**: both ends run on an injected monotonic `thermode_platform::Clock`.
 
-pub mod codec;
 pub mod frame;
+pub mod layout;
 pub mod message;
 
-pub use codec::{
-    decode_payload, encode_frame, DecodeError, LinkCounters, StreamDecoder, WireMessage, HEADER_LEN, PROTOCOL_VERSION,
-};
 pub use frame::{
     cobs_decode, cobs_encode, crc32, write_frame, FrameDecoder, FrameError, DELIMITER, MAX_ENCODED_LEN, MAX_FRAME_LEN,
     MAX_PAYLOAD_LEN,
+};
+pub use layout::{
+    decode_payload, encode_frame, DecodeError, LinkCounters, StreamDecoder, WireMessage, HEADER_LEN, PROTOCOL_VERSION,
 };
 pub use message::{
     to_centi_c, to_milli_c, to_milliamps, ChannelFaults, ChannelReport, DeviceMessage, DriveFrame, FirmwareVersion,
