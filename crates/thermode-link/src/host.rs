@@ -34,3 +34,13 @@ pub(crate) fn read_until_stopped(
         }
     }
 }
+
+/// The I/O error kind behind a serial port error (`Other` when it has none).
+pub(crate) fn serial_error_kind(error: &serialport::Error) -> io::ErrorKind {
+    match error.kind() {
+        serialport::ErrorKind::Io(kind) => kind,
+        serialport::ErrorKind::NoDevice => io::ErrorKind::NotFound,
+        serialport::ErrorKind::InvalidInput => io::ErrorKind::InvalidInput,
+        serialport::ErrorKind::Unknown => io::ErrorKind::Other,
+    }
+}

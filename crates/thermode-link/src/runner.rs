@@ -1,12 +1,13 @@
-//! Running an emulated device in real time: the byte-in, byte-out core of any protocol's emulator ([`Firmware`])
-//! driven over a port by [`run_firmware`], on a pseudo-terminal ([`PtyFirmware`]) or a TCP listener
-//! ([`TcpFirmware`]), each in its own thread. The MeCom and TCS II emulators ([`crate::mecom::emulator`],
-//! [`crate::tcs2::emulator`]) run this way; thermode's own protocol keeps its [`crate::own::emulator::PtyEmulator`].
+//! The emulator runner: any protocol's emulated device in real time, on a port ([`run`]), on a pseudo-terminal
+//! ([`PtyRunner`]) or behind a TCP listener ([`TcpRunner`]), each in its own thread. All three protocols run this
+//! way: thermode's own emulator ([`crate::own::emulator::Emulator`], whose runner is
+//! [`crate::own::emulator::PtyEmulator`]) and the MeCom and TCS II emulators (through the [`Firmware`] trait:
+//! [`PtyFirmware`], [`TcpFirmware`]).
 //!
-//! The loop is the one of the own protocol's emulator: read what arrived (reads wait about a tick), hand it to the
-//! firmware stamped with the clock's time, let the firmware's time run to now, write what it answered. A
-//! [`FirmwareControl`] stops it, closes its port, makes the device fall silent (it then takes commands but answers
-//! nothing) and publishes a [`FirmwareStatus`] after every loop.
+//! The loop: read what arrived (reads wait about a tick), hand it to the device stamped with the clock's time (or,
+//! with nothing read, let its time run to now), write what it answered, publish its status. A [`Control`] stops it,
+//! closes its port, makes the device fall silent (it then takes commands but answers nothing), corrupts its writes
+//! for tests, and hands the device a command of its own kind (the own emulator's link faults) at the next loop.
 
 use std::io::{self, Read, Write};
 use std::net::{SocketAddr, TcpListener, TcpStream};
@@ -15,11 +16,11 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use thermode_device::MAX_CHANNELS;
+use thermode_device::{DeviceError, MAX_CHANNELS};
 use thermode_platform::Clock;
-
-use thermode_device::DeviceError;
 use thiserror::Error;
+
+use crate::host::serial_error_kind;
 
 /// Why the emulator refused a setting or stopped.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -39,15 +40,61 @@ pub enum EmulatorError {
     Device(#[from] DeviceError),
     /// The port failed.
     #[error("emulator port: {0}")]
-    Io(String),
+    Io(PortFailure),
+}
+
+/// What the runner was doing when its port failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
+pub enum PortStep {
+    /// Reading from or writing to the host.
+    #[error("host I/O")]
+    Transfer,
+    /// Opening the pseudo-terminal pair.
+    #[error("pseudo-terminal")]
+    PseudoTerminal,
+    /// The pseudo-terminal's side for the host has no path.
+    #[error("pseudo-terminal has no path")]
+    PseudoTerminalPath,
+    /// Starting the emulator's thread.
+    #[error("cannot start the emulator thread")]
+    Thread,
+    /// The emulator's thread panicked.
+    #[error("the emulator thread panicked")]
+    Panicked,
+    /// Binding or configuring the TCP listener.
+    #[error("TCP listener")]
+    TcpListener,
+    /// Accepting a TCP connection.
+    #[error("TCP accept")]
+    TcpAccept,
+    /// Configuring an accepted TCP connection.
+    #[error("TCP connection")]
+    TcpConnection,
+}
+
+/// A failed step of the runner and the kind of I/O error behind it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
+#[error("{step}: {kind}")]
+pub struct PortFailure {
+    /// What the runner was doing.
+    pub step: PortStep,
+    /// The I/O error's kind.
+    pub kind: io::ErrorKind,
+}
+
+impl EmulatorError {
+    /// A port failure at `step` of kind `kind`.
+    pub fn io(step: PortStep, kind: io::ErrorKind) -> Self {
+        EmulatorError::Io(PortFailure { step, kind })
+    }
 }
 
 /// How a run of an emulated device ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RunEnd {
-    /// `stop` was called.
+    /// [`Control::stop`] was called.
     Stopped,
-    /// `close_port` was called: the port is dropped (the host sees it vanish).
+    /// [`Control::close_port`] was called: the port is dropped (the host sees it vanish).
     PortClosed,
     /// The port reported its end (a read of 0 bytes, or the other end closed: broken pipe, connection reset).
     HostClosed,
@@ -93,7 +140,7 @@ impl FirmwareStatus {
     }
 }
 
-/// The I/O-free core of an emulated device.
+/// The I/O-free core of a MeCom or TCS II emulated device (run through [`Emulated`] as a `Box<dyn Firmware>`).
 pub trait Firmware: Send {
     /// Takes bytes from the host that arrived at `now_s` \[s\] (after running the device's time up to then); answers
     /// are appended to `out`.
@@ -106,20 +153,80 @@ pub trait Firmware: Send {
     fn status(&self) -> FirmwareStatus;
 }
 
-/// Controls a running emulated device from another thread and reads its status.
-#[derive(Debug, Default)]
-pub struct FirmwareControl {
+/// A command no device takes (the [`Firmware`] devices have none of their own).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoCommand {}
+
+/// What the runner drives: an emulated device, byte in, byte out, with its own status and command types.
+pub trait Emulated: Send {
+    /// What the device publishes after every loop.
+    type Status: Copy + Send + 'static;
+    /// What a [`Control`] can hand the device between loops.
+    type Command: Send + 'static;
+    /// Takes bytes from the host that arrived at `now_s` \[s\]; answers are appended to `out`.
+    fn receive(&mut self, bytes: &[u8], now_s: f64, out: &mut Vec<u8>);
+    /// Runs the device's time up to `now_s` \[s\]; anything it sends by itself is appended to `out`.
+    fn advance_to(&mut self, now_s: f64, out: &mut Vec<u8>);
+    /// The device's tick \[s\]: the port's read timeout.
+    fn tick_s(&self) -> f64;
+    /// A snapshot of the device.
+    fn snapshot(&self) -> Self::Status;
+    /// Carries out a command handed over by the control; an error stops the run.
+    fn command(&mut self, command: Self::Command) -> Result<(), EmulatorError>;
+    /// A write to the host timed out and its bytes are lost. Default: nothing to count.
+    fn write_stalled(&mut self) {}
+}
+
+impl<T: Firmware + ?Sized> Emulated for Box<T> {
+    type Status = FirmwareStatus;
+    type Command = NoCommand;
+
+    fn receive(&mut self, bytes: &[u8], now_s: f64, out: &mut Vec<u8>) {
+        (**self).receive(bytes, now_s, out);
+    }
+
+    fn advance_to(&mut self, now_s: f64, out: &mut Vec<u8>) {
+        (**self).advance_to(now_s, out);
+    }
+
+    fn tick_s(&self) -> f64 {
+        (**self).tick_s()
+    }
+
+    fn snapshot(&self) -> FirmwareStatus {
+        (**self).status()
+    }
+
+    fn command(&mut self, command: NoCommand) -> Result<(), EmulatorError> {
+        match command {}
+    }
+}
+
+/// Controls a running emulated device from another thread and reads its status `S`; hands it commands `C`.
+#[derive(Debug)]
+pub struct Control<S, C> {
     stop: AtomicBool,
     close: AtomicBool,
     mute: AtomicBool,
     corrupt_one_in: AtomicU64,
-    status: Mutex<Option<FirmwareStatus>>,
+    command: Mutex<Option<C>>,
+    status: Mutex<Option<S>>,
 }
 
-impl FirmwareControl {
+/// The control of a MeCom or TCS II emulated device.
+pub type FirmwareControl = Control<FirmwareStatus, NoCommand>;
+
+impl<S: Copy, C> Control<S, C> {
     /// A control with nothing requested.
     pub fn new() -> Arc<Self> {
-        Arc::new(FirmwareControl::default())
+        Arc::new(Control {
+            stop: AtomicBool::new(false),
+            close: AtomicBool::new(false),
+            mute: AtomicBool::new(false),
+            corrupt_one_in: AtomicU64::new(0),
+            command: Mutex::new(None),
+            status: Mutex::new(None),
+        })
     }
 
     /// Asks the device to stop.
@@ -144,14 +251,52 @@ impl FirmwareControl {
         self.corrupt_one_in.store(n, Ordering::SeqCst);
     }
 
+    /// Hands `command` to the device at its next loop (replacing one not yet taken).
+    pub fn send(&self, command: C) {
+        if let Ok(mut slot) = self.command.lock() {
+            *slot = Some(command);
+        }
+    }
+
     /// The latest published status (None before the first loop).
-    pub fn status(&self) -> Option<FirmwareStatus> {
+    pub fn status(&self) -> Option<S> {
         self.status.lock().ok().and_then(|s| *s)
     }
 
-    fn publish(&self, status: FirmwareStatus) {
+    /// How the run must end now, if it must.
+    fn requested_end(&self) -> Option<RunEnd> {
+        if self.stop.load(Ordering::SeqCst) {
+            Some(RunEnd::Stopped)
+        } else if self.close.load(Ordering::SeqCst) {
+            Some(RunEnd::PortClosed)
+        } else {
+            None
+        }
+    }
+
+    fn take_command(&self) -> Option<C> {
+        self.command.lock().ok().and_then(|mut c| c.take())
+    }
+
+    fn publish(&self, status: S) {
         if let Ok(mut slot) = self.status.lock() {
             *slot = Some(status);
+        }
+    }
+
+    /// Applies mute and corruption to `out`, counting the writes that remain in `writes`.
+    fn tamper(&self, out: &mut Vec<u8>, writes: &mut u64) {
+        if self.mute.load(Ordering::SeqCst) {
+            out.clear();
+        }
+        if out.is_empty() {
+            return;
+        }
+        *writes += 1;
+        let every = self.corrupt_one_in.load(Ordering::SeqCst);
+        if every > 0 && writes.is_multiple_of(every) {
+            let middle = out.len() / 2;
+            out[middle] ^= 0x01;
         }
     }
 }
@@ -164,24 +309,24 @@ fn host_went_away(error: &io::Error) -> bool {
     )
 }
 
-/// Drives `firmware` over `port` in real time on `clock` until `control` says stop or close, or the port ends.
+/// Drives `device` over `port` in real time on `clock` until `control` says stop or close, or the port ends.
 /// The port's reads should wait at most about a tick; one that returns at once without data makes the loop sleep
 /// half a tick.
-pub fn run_firmware<P: Read + Write>(
-    firmware: &mut dyn Firmware,
+pub fn run<E: Emulated + ?Sized, P: Read + Write>(
+    device: &mut E,
     port: &mut P,
     clock: &dyn Clock,
-    control: &FirmwareControl,
+    control: &Control<E::Status, E::Command>,
 ) -> Result<RunEnd, EmulatorError> {
     let mut buf = [0u8; 512];
     let mut out = Vec::with_capacity(4096);
     let mut writes = 0u64;
     loop {
-        if control.stop.load(Ordering::SeqCst) {
-            return Ok(RunEnd::Stopped);
+        if let Some(end) = control.requested_end() {
+            return Ok(end);
         }
-        if control.close.load(Ordering::SeqCst) {
-            return Ok(RunEnd::PortClosed);
+        if let Some(command) = control.take_command() {
+            device.command(command)?;
         }
         let (n, idle) = match port.read(&mut buf) {
             Ok(0) => return Ok(RunEnd::HostClosed),
@@ -189,79 +334,111 @@ pub fn run_firmware<P: Read + Write>(
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => (0, true),
             Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::Interrupted) => (0, false),
             Err(e) if host_went_away(&e) => return Ok(RunEnd::HostClosed),
-            Err(e) => return Err(EmulatorError::Io(e.to_string())),
+            Err(e) => return Err(EmulatorError::io(PortStep::Transfer, e.kind())),
         };
         let now_s = clock.now_s();
         if n > 0 {
-            firmware.receive(&buf[..n], now_s, &mut out);
+            device.receive(&buf[..n], now_s, &mut out);
         } else {
-            firmware.advance_to(now_s, &mut out);
+            device.advance_to(now_s, &mut out);
         }
-        if control.mute.load(Ordering::SeqCst) {
-            out.clear();
+        control.tamper(&mut out, &mut writes);
+        if let Some(end) = write_out(device, port, &mut out)? {
+            return Ok(end);
         }
-        if !out.is_empty() {
-            writes += 1;
-            let every = control.corrupt_one_in.load(Ordering::SeqCst);
-            if every > 0 && writes.is_multiple_of(every) {
-                let middle = out.len() / 2;
-                out[middle] ^= 0x01;
-            }
-            let result = port.write_all(&out).and_then(|()| port.flush());
-            out.clear();
-            match result {
-                Ok(()) => {}
-                Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock) => {}
-                Err(e) if host_went_away(&e) => return Ok(RunEnd::HostClosed),
-                Err(e) => return Err(EmulatorError::Io(e.to_string())),
-            }
-        }
-        control.publish(firmware.status());
+        control.publish(device.snapshot());
         if idle {
-            std::thread::sleep(Duration::from_secs_f64(firmware.tick_s() / 2.0));
+            std::thread::sleep(Duration::from_secs_f64(device.tick_s() / 2.0));
         }
     }
 }
 
-/// An emulated device in its own thread on a pseudo-terminal (Unix): the host opens [`PtyFirmware::path`] as its
+/// Writes `out` to the port; a write that times out loses its bytes (the device counts it). `Some` when the host
+/// is gone.
+fn write_out<E: Emulated + ?Sized, P: Write>(
+    device: &mut E,
+    port: &mut P,
+    out: &mut Vec<u8>,
+) -> Result<Option<RunEnd>, EmulatorError> {
+    if out.is_empty() {
+        return Ok(None);
+    }
+    let result = port.write_all(out).and_then(|()| port.flush());
+    out.clear();
+    match result {
+        Ok(()) => Ok(None),
+        Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock) => {
+            device.write_stalled();
+            Ok(None)
+        }
+        Err(e) if host_went_away(&e) => Ok(Some(RunEnd::HostClosed)),
+        Err(e) => Err(EmulatorError::io(PortStep::Transfer, e.kind())),
+    }
+}
+
+/// The thread a runner runs its device in.
+type RunThread = Option<JoinHandle<Result<RunEnd, EmulatorError>>>;
+
+fn join(thread: &mut RunThread) -> Result<RunEnd, EmulatorError> {
+    match thread.take() {
+        Some(thread) => thread
+            .join()
+            .map_err(|_| EmulatorError::io(PortStep::Panicked, io::ErrorKind::Other))?,
+        None => Ok(RunEnd::Stopped),
+    }
+}
+
+/// Starts `body` in a thread named `name`.
+fn start(
+    name: &str,
+    body: impl FnOnce() -> Result<RunEnd, EmulatorError> + Send + 'static,
+) -> Result<RunThread, EmulatorError> {
+    std::thread::Builder::new()
+        .name(name.to_string())
+        .spawn(body)
+        .map(Some)
+        .map_err(|e| EmulatorError::io(PortStep::Thread, e.kind()))
+}
+
+/// An emulated device in its own thread on a pseudo-terminal (Unix): the host opens [`PtyRunner::path`] as its
 /// serial port. Dropping it stops the device and removes the pseudo-terminal.
 #[cfg(unix)]
 #[derive(Debug)]
-pub struct PtyFirmware {
+pub struct PtyRunner<S, C> {
     path: String,
-    control: Arc<FirmwareControl>,
-    thread: Option<JoinHandle<Result<RunEnd, EmulatorError>>>,
+    control: Arc<Control<S, C>>,
+    thread: RunThread,
 }
 
+/// A MeCom or TCS II emulated device on a pseudo-terminal.
 #[cfg(unix)]
-impl PtyFirmware {
-    /// Creates a pseudo-terminal pair and runs `firmware` on its master side in real time on `clock`.
-    pub fn spawn(mut firmware: Box<dyn Firmware>, clock: Arc<dyn Clock>) -> Result<Self, EmulatorError> {
+pub type PtyFirmware = PtyRunner<FirmwareStatus, NoCommand>;
+
+#[cfg(unix)]
+impl<S: Copy + Send + 'static, C: Send + 'static> PtyRunner<S, C> {
+    /// Creates a pseudo-terminal pair and runs `device` on its master side in real time on `clock`.
+    pub fn spawn<E>(mut device: E, clock: Arc<dyn Clock>) -> Result<Self, EmulatorError>
+    where
+        E: Emulated<Status = S, Command = C> + 'static,
+    {
         use serialport::{SerialPort, TTYPort};
-        let io_error = |e: serialport::Error| EmulatorError::Io(format!("pseudo-terminal: {e}"));
+        let io_error = |e: serialport::Error| EmulatorError::io(PortStep::PseudoTerminal, serial_error_kind(&e));
         let (mut master, slave) = TTYPort::pair().map_err(io_error)?;
         let path = slave
             .name()
-            .ok_or_else(|| EmulatorError::Io("pseudo-terminal has no path".to_string()))?;
+            .ok_or(EmulatorError::io(PortStep::PseudoTerminalPath, io::ErrorKind::NotFound))?;
         master
-            .set_timeout(Duration::from_secs_f64(firmware.tick_s()))
+            .set_timeout(Duration::from_secs_f64(device.tick_s()))
             .map_err(io_error)?;
-        let control = FirmwareControl::new();
+        let control = Control::new();
         let thread_control = Arc::clone(&control);
-        let thread = std::thread::Builder::new()
-            .name("thermode-firmware".to_string())
-            .spawn(move || {
-                // The slave side stays open with the device, so the master never reads end-of-file while no host
-                // is attached.
-                let _slave = slave;
-                run_firmware(firmware.as_mut(), &mut master, clock.as_ref(), &thread_control)
-            })
-            .map_err(|e| EmulatorError::Io(format!("cannot start the emulator thread: {e}")))?;
-        Ok(PtyFirmware {
-            path,
-            control,
-            thread: Some(thread),
-        })
+        let thread = start("thermode-emulator", move || {
+            // The slave side stays open with the device, so the master never reads end-of-file while no host is
+            // attached; both close when the run ends.
+            let _slave = slave;
+            run(&mut device, &mut master, clock.as_ref(), &thread_control)
+        })?;
+        Ok(PtyRunner { path, control, thread })
     }
 
     /// Path of the side the host opens, e.g. `/dev/pts/7`.
@@ -270,7 +447,7 @@ impl PtyFirmware {
     }
 
     /// The control of the running device.
-    pub fn control(&self) -> &Arc<FirmwareControl> {
+    pub fn control(&self) -> &Arc<Control<S, C>> {
         &self.control
     }
 
@@ -280,19 +457,10 @@ impl PtyFirmware {
     }
 }
 
-fn join(thread: &mut Option<JoinHandle<Result<RunEnd, EmulatorError>>>) -> Result<RunEnd, EmulatorError> {
-    match thread.take() {
-        Some(thread) => thread
-            .join()
-            .map_err(|_| EmulatorError::Io("the emulator thread panicked".to_string()))?,
-        None => Ok(RunEnd::Stopped),
-    }
-}
-
 #[cfg(unix)]
-impl Drop for PtyFirmware {
+impl<S, C> Drop for PtyRunner<S, C> {
     fn drop(&mut self) {
-        self.control.stop();
+        self.control.stop.store(true, Ordering::SeqCst);
         let _ = join(&mut self.thread);
     }
 }
@@ -301,29 +469,34 @@ impl Drop for PtyFirmware {
 /// connection at a time; when it closes, the device goes on running and the next connection is taken. Dropping it
 /// stops the device.
 #[derive(Debug)]
-pub struct TcpFirmware {
+pub struct TcpRunner<S, C> {
     address: SocketAddr,
-    control: Arc<FirmwareControl>,
-    thread: Option<JoinHandle<Result<RunEnd, EmulatorError>>>,
+    control: Arc<Control<S, C>>,
+    thread: RunThread,
 }
 
-impl TcpFirmware {
-    /// Listens on `bind` (e.g. `127.0.0.1:0` for a free port) and runs `firmware` in real time on `clock`.
-    pub fn spawn(mut firmware: Box<dyn Firmware>, bind: &str, clock: Arc<dyn Clock>) -> Result<Self, EmulatorError> {
-        let io_error = |e: io::Error| EmulatorError::Io(format!("TCP listener on {bind}: {e}"));
+/// A MeCom or TCS II emulated device behind a TCP listener.
+pub type TcpFirmware = TcpRunner<FirmwareStatus, NoCommand>;
+
+impl<S: Copy + Send + 'static, C: Send + 'static> TcpRunner<S, C> {
+    /// Listens on `bind` (e.g. `127.0.0.1:0` for a free port) and runs `device` in real time on `clock`.
+    pub fn spawn<E>(mut device: E, bind: &str, clock: Arc<dyn Clock>) -> Result<Self, EmulatorError>
+    where
+        E: Emulated<Status = S, Command = C> + 'static,
+    {
+        let io_error = |e: io::Error| EmulatorError::io(PortStep::TcpListener, e.kind());
         let listener = TcpListener::bind(bind).map_err(io_error)?;
         listener.set_nonblocking(true).map_err(io_error)?;
         let address = listener.local_addr().map_err(io_error)?;
-        let control = FirmwareControl::new();
+        let control = Control::new();
         let thread_control = Arc::clone(&control);
-        let thread = std::thread::Builder::new()
-            .name("thermode-firmware-tcp".to_string())
-            .spawn(move || serve_tcp(firmware.as_mut(), &listener, clock.as_ref(), &thread_control))
-            .map_err(|e| EmulatorError::Io(format!("cannot start the emulator thread: {e}")))?;
-        Ok(TcpFirmware {
+        let thread = start("thermode-emulator-tcp", move || {
+            serve_tcp(&mut device, &listener, clock.as_ref(), &thread_control)
+        })?;
+        Ok(TcpRunner {
             address,
             control,
-            thread: Some(thread),
+            thread,
         })
     }
 
@@ -333,7 +506,7 @@ impl TcpFirmware {
     }
 
     /// The control of the running device.
-    pub fn control(&self) -> &Arc<FirmwareControl> {
+    pub fn control(&self) -> &Arc<Control<S, C>> {
         &self.control
     }
 
@@ -343,47 +516,47 @@ impl TcpFirmware {
     }
 }
 
-impl Drop for TcpFirmware {
+impl<S, C> Drop for TcpRunner<S, C> {
     fn drop(&mut self) {
-        self.control.stop();
+        self.control.stop.store(true, Ordering::SeqCst);
         let _ = join(&mut self.thread);
     }
 }
 
 /// Accepts one connection after the other; between connections the device's time runs on.
-fn serve_tcp(
-    firmware: &mut dyn Firmware,
+fn serve_tcp<E: Emulated + ?Sized>(
+    device: &mut E,
     listener: &TcpListener,
     clock: &dyn Clock,
-    control: &FirmwareControl,
+    control: &Control<E::Status, E::Command>,
 ) -> Result<RunEnd, EmulatorError> {
-    let tick = Duration::from_secs_f64(firmware.tick_s());
+    let tick = Duration::from_secs_f64(device.tick_s());
     let mut sink = Vec::new();
     loop {
-        if control.stop.load(Ordering::SeqCst) || control.close.load(Ordering::SeqCst) {
+        if control.requested_end().is_some() {
             return Ok(RunEnd::Stopped);
         }
         match listener.accept() {
             Ok((stream, _)) => {
                 let mut stream = configure(stream, tick)?;
-                match run_firmware(firmware, &mut stream, clock, control)? {
+                match run(device, &mut stream, clock, control)? {
                     RunEnd::HostClosed => {}
                     end => return Ok(end),
                 }
             }
             Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
-                firmware.advance_to(clock.now_s(), &mut sink);
+                device.advance_to(clock.now_s(), &mut sink);
                 sink.clear();
-                control.publish(firmware.status());
+                control.publish(device.snapshot());
                 std::thread::sleep(tick);
             }
-            Err(e) => return Err(EmulatorError::Io(format!("TCP accept: {e}"))),
+            Err(e) => return Err(EmulatorError::io(PortStep::TcpAccept, e.kind())),
         }
     }
 }
 
 fn configure(stream: TcpStream, tick: Duration) -> Result<TcpStream, EmulatorError> {
-    let io_error = |e: io::Error| EmulatorError::Io(format!("TCP connection: {e}"));
+    let io_error = |e: io::Error| EmulatorError::io(PortStep::TcpConnection, e.kind());
     stream.set_nonblocking(false).map_err(io_error)?;
     stream.set_read_timeout(Some(tick)).map_err(io_error)?;
     stream

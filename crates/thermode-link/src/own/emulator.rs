@@ -27,11 +27,8 @@
 //! stable for any step) and skips the reports older than that, instead of falling further behind.
 
 use std::collections::VecDeque;
-use std::io::{self, Read, Write};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::io::{Read, Write};
 use std::sync::{Arc, Mutex};
-use std::thread::JoinHandle;
-use std::time::Duration;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -43,7 +40,9 @@ use super::codec::{
     DEFAULT_REPORT_INTERVAL_MS, DEFAULT_WATCHDOG_MS, SENSOR_OPEN_THRESHOLD_C, SENSOR_SHORT_THRESHOLD_C,
 };
 use super::guard::{Cuts, GuardTrip, PlateGuard};
-use crate::runner::{EmulatorError, RunEnd};
+#[cfg(unix)]
+use crate::runner::PtyRunner;
+use crate::runner::{Control, Emulated, EmulatorError, RunEnd};
 use thermode_device::DeviceError;
 use thermode_device::PlateFinger;
 use thermode_device::{Device, SimulatedDisplay, MAX_CHANNELS};
@@ -477,44 +476,19 @@ impl<F: PlateFinger> Emulator<F> {
         self.flush_plant();
     }
 
-    /// Drives a port in real time until `control` says stop or close, or the port ends. The port's reads should
-    /// wait at most about a tick (a read timeout); one that returns at once without data makes the loop sleep half a
-    /// tick.
+    /// Drives a port in real time until `control` says stop or close, or the port ends ([`crate::runner::run`]).
+    /// The port's reads should wait at most about a tick (a read timeout); one that returns at once without data
+    /// makes the loop sleep half a tick.
     pub fn run<P: Read + Write>(
         &mut self,
         port: &mut P,
         clock: &dyn Clock,
         control: &EmulatorControl,
-    ) -> Result<RunEnd, EmulatorError> {
-        let mut buf = [0u8; 512];
-        let mut out = Vec::with_capacity(4096);
-        loop {
-            if control.stop.load(Ordering::SeqCst) {
-                return Ok(RunEnd::Stopped);
-            }
-            if control.close.load(Ordering::SeqCst) {
-                return Ok(RunEnd::PortClosed);
-            }
-            if let Some(faults) = control.take_link_faults() {
-                self.set_link_faults(faults)?;
-            }
-            let (n, idle) = match port.read(&mut buf) {
-                Ok(0) => return Ok(RunEnd::HostClosed),
-                Ok(n) => (n, false),
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => (0, true),
-                Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::Interrupted) => (0, false),
-                Err(e) if host_went_away(&e) => return Ok(RunEnd::HostClosed),
-                Err(e) => return Err(EmulatorError::Io(e.to_string())),
-            };
-            self.receive(&buf[..n], clock.now_s(), &mut out);
-            if let Some(end) = self.write_out(port, &mut out)? {
-                return Ok(end);
-            }
-            control.publish(self.status());
-            if idle {
-                std::thread::sleep(Duration::from_secs_f64(self.config.tick_s / 2.0));
-            }
-        }
+    ) -> Result<RunEnd, EmulatorError>
+    where
+        F: Send,
+    {
+        crate::runner::run(self, port, clock, control)
     }
 
     /// A snapshot of the emulator's state.
@@ -539,24 +513,6 @@ impl<F: PlateFinger> Emulator<F> {
             status.cuts[i] = self.cuts(i);
         }
         status
-    }
-
-    /// Writes `out` to the port; a write that times out loses its bytes (counted). `Some` when the host is gone.
-    fn write_out<P: Write>(&mut self, port: &mut P, out: &mut Vec<u8>) -> Result<Option<RunEnd>, EmulatorError> {
-        if out.is_empty() {
-            return Ok(None);
-        }
-        let result = port.write_all(out).and_then(|()| port.flush());
-        out.clear();
-        match result {
-            Ok(()) => Ok(None),
-            Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock) => {
-                self.stats.write_stalls += 1;
-                Ok(None)
-            }
-            Err(e) if host_went_away(&e) => Ok(Some(RunEnd::HostClosed)),
-            Err(e) => Err(EmulatorError::Io(e.to_string())),
-        }
     }
 
     /// At tick time `t_s`: trips the watchdog if the last valid frame is older than the period.
@@ -818,15 +774,7 @@ impl std::fmt::Debug for Trace {
     }
 }
 
-/// Whether a port error means the other end closed (a socket's peer went away).
-fn host_went_away(error: &io::Error) -> bool {
-    matches!(
-        error.kind(),
-        io::ErrorKind::BrokenPipe | io::ErrorKind::ConnectionReset | io::ErrorKind::ConnectionAborted
-    )
-}
-
-/// A snapshot of an emulator, published by [`Emulator::run`] after every loop.
+/// A snapshot of an emulator, published by the runner after every loop.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EmulatorStatus {
     /// Emulator time \[s\].
@@ -851,126 +799,47 @@ pub struct EmulatorStatus {
     pub stats: EmulatorStats,
 }
 
-/// Controls a running emulator from another thread and reads its status.
-#[derive(Debug, Default)]
-pub struct EmulatorControl {
-    stop: AtomicBool,
-    close: AtomicBool,
-    faults: Mutex<Option<LinkFaults>>,
-    status: Mutex<Option<EmulatorStatus>>,
-}
+/// Controls a running emulator from another thread and reads its status ([`Control`]; its command is the link
+/// faults).
+pub type EmulatorControl = Control<EmulatorStatus, LinkFaults>;
 
-impl EmulatorControl {
-    /// A control with nothing requested.
-    pub fn new() -> Arc<Self> {
-        Arc::new(EmulatorControl::default())
-    }
-
-    /// Asks the emulator to stop.
-    pub fn stop(&self) {
-        self.stop.store(true, Ordering::SeqCst);
-    }
-
-    /// Asks the emulator to stop and drop its port at once (the pseudo-terminal vanishes under the host).
-    pub fn close_port(&self) {
-        self.close.store(true, Ordering::SeqCst);
-    }
-
+impl Control<EmulatorStatus, LinkFaults> {
     /// Sets the link faults from the next loop on (validated there; invalid rates stop the emulator with an error).
     pub fn set_link_faults(&self, faults: LinkFaults) {
-        if let Ok(mut slot) = self.faults.lock() {
-            *slot = Some(faults);
-        }
-    }
-
-    /// The latest published status (None before the first loop).
-    pub fn status(&self) -> Option<EmulatorStatus> {
-        self.status.lock().ok().and_then(|s| *s)
-    }
-
-    fn take_link_faults(&self) -> Option<LinkFaults> {
-        self.faults.lock().ok().and_then(|mut f| f.take())
-    }
-
-    fn publish(&self, status: EmulatorStatus) {
-        if let Ok(mut slot) = self.status.lock() {
-            *slot = Some(status);
-        }
+        self.send(faults);
     }
 }
 
-/// An emulator running in its own thread on a pseudo-terminal (Unix): the host opens [`PtyEmulator::path`] as its
+/// An emulator running in its own thread on a pseudo-terminal (Unix): the host opens [`PtyRunner::path`] as its
 /// serial port. Dropping it stops the emulator and removes the pseudo-terminal.
 #[cfg(unix)]
-#[derive(Debug)]
-pub struct PtyEmulator {
-    path: String,
-    control: Arc<EmulatorControl>,
-    thread: Option<JoinHandle<Result<RunEnd, EmulatorError>>>,
-}
+pub type PtyEmulator = PtyRunner<EmulatorStatus, LinkFaults>;
 
-#[cfg(unix)]
-impl PtyEmulator {
-    /// Creates a pseudo-terminal pair and runs `emulator` on its master side in real time on `clock`.
-    pub fn spawn<F>(mut emulator: Emulator<F>, clock: Arc<dyn Clock>) -> Result<Self, EmulatorError>
-    where
-        F: PlateFinger + Send + 'static,
-    {
-        use serialport::{SerialPort, TTYPort};
-        let io_error = |e: serialport::Error| EmulatorError::Io(format!("pseudo-terminal: {e}"));
-        let (mut master, slave) = TTYPort::pair().map_err(io_error)?;
-        let path = slave
-            .name()
-            .ok_or_else(|| EmulatorError::Io("pseudo-terminal has no path".to_string()))?;
-        let tick = Duration::from_secs_f64(emulator.config().tick_s);
-        master.set_timeout(tick).map_err(io_error)?;
-        let control = EmulatorControl::new();
-        let thread_control = Arc::clone(&control);
-        let thread = std::thread::Builder::new()
-            .name("thermode-emulator".to_string())
-            .spawn(move || {
-                // The emulator keeps the slave side open, so the master never reads end-of-file while no host is
-                // attached; both close when the run ends.
-                let _slave = slave;
-                emulator.run(&mut master, clock.as_ref(), &thread_control)
-            })
-            .map_err(|e| EmulatorError::Io(format!("cannot start the emulator thread: {e}")))?;
-        Ok(PtyEmulator {
-            path,
-            control,
-            thread: Some(thread),
-        })
+impl<F: PlateFinger + Send> Emulated for Emulator<F> {
+    type Status = EmulatorStatus;
+    type Command = LinkFaults;
+
+    fn receive(&mut self, bytes: &[u8], now_s: f64, out: &mut Vec<u8>) {
+        Emulator::receive(self, bytes, now_s, out);
     }
 
-    /// Path of the side the host opens, e.g. `/dev/pts/7`.
-    pub fn path(&self) -> &str {
-        &self.path
+    fn advance_to(&mut self, now_s: f64, out: &mut Vec<u8>) {
+        Emulator::advance_to(self, now_s, out);
     }
 
-    /// The control of the running emulator.
-    pub fn control(&self) -> &Arc<EmulatorControl> {
-        &self.control
+    fn tick_s(&self) -> f64 {
+        self.config.tick_s
     }
 
-    /// Waits until the emulator ends (it runs until stopped, its port closed, or an error).
-    pub fn wait(mut self) -> Result<RunEnd, EmulatorError> {
-        self.join()
+    fn snapshot(&self) -> EmulatorStatus {
+        self.status()
     }
 
-    fn join(&mut self) -> Result<RunEnd, EmulatorError> {
-        match self.thread.take() {
-            Some(thread) => thread
-                .join()
-                .map_err(|_| EmulatorError::Io("the emulator thread panicked".to_string()))?,
-            None => Ok(RunEnd::Stopped),
-        }
+    fn command(&mut self, faults: LinkFaults) -> Result<(), EmulatorError> {
+        self.set_link_faults(faults)
     }
-}
 
-#[cfg(unix)]
-impl Drop for PtyEmulator {
-    fn drop(&mut self) {
-        self.control.stop();
-        let _ = self.join();
+    fn write_stalled(&mut self) {
+        self.stats.write_stalls += 1;
     }
 }
