@@ -44,6 +44,7 @@ pub mod device;
 pub mod error;
 pub mod finger;
 pub mod link;
+pub mod link_error;
 pub mod sensor;
 
 pub use channel::{ChannelState, Fault, HeatFlows, Polarity, SimulatedChannel, MAX_SUBSTEP_S};
@@ -52,6 +53,9 @@ pub use device::{Device, Reading, RecordedCommand, RecordingDevice, SimulatedDis
 pub use error::{DeviceCut, DeviceError};
 pub use finger::{default_finger, DefaultFinger, NoFinger, PlateFinger};
 pub use link::LinkHealth;
+pub use link_error::{
+    Awaited, DownReason, LinkError, LinkFault, MecomSetup, OpenStep, RequestFault, Silence, SpecFault,
+};
 pub use sensor::{Pt100, SensorCondition, SensorSample, SENSOR_OPEN_READING_C, SENSOR_SHORT_READING_C};
 
 /// The default device file (`devices/default.toml`): equal to [`DeviceConfig::default`].
