@@ -21,6 +21,7 @@ use thermode_safety::{EnvelopeConfig, ABSOLUTE_MAX_C, ABSOLUTE_MIN_C};
 
 use crate::mecom::host::{MecomChannel, MecomConfig, MecomDevice, MecomMode};
 use crate::own::host::{SerialConfig, SerialDevice, SERIAL_PREFIX};
+use crate::tcs2::codec::TCS2_MIN_C;
 use crate::tcs2::host::{Tcs2Config, Tcs2Device, DEFAULT_HOLD_MAX_C};
 
 /// Prefix of a MeCom serial device: `mecom:`.
@@ -176,7 +177,7 @@ pub fn tcs2_config(spec: &str, options: &[(&str, &str)], context: &HardwareConte
     }
     config.hold_max_c = config.hold_max_c.min(DEFAULT_HOLD_MAX_C).min(envelope.max_display_c);
     config.max_c = envelope.max_display_c.max(config.hold_max_c);
-    config.hold_min_c = envelope.min_display_c.max(10.0).min(config.neutral_c);
+    config.hold_min_c = envelope.min_display_c.max(TCS2_MIN_C).min(config.neutral_c);
     config.validate()?;
     Ok(config)
 }

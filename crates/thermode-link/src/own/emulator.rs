@@ -27,7 +27,7 @@
 //! stable for any step) and skips the reports older than that, instead of falling further behind.
 
 use std::collections::VecDeque;
-use std::io::{Read, Write};
+use std::io::{self, Read, Write};
 use std::sync::{Arc, Mutex};
 
 use rand::{Rng, SeedableRng};
@@ -427,9 +427,9 @@ impl<F: PlateFinger> Emulator<F> {
         self.trace = Some(trace);
     }
 
-    /// Why the trace stopped, if it did (a write to its sink failed).
-    pub fn trace_error(&self) -> Option<&str> {
-        self.trace.as_ref().and_then(|t| t.error.as_deref())
+    /// Why the trace stopped, if it did: the kind of the error of the write to its sink that failed.
+    pub fn trace_error(&self) -> Option<io::ErrorKind> {
+        self.trace.as_ref().and_then(|t| t.error)
     }
 
     /// Takes bytes from the host that arrived at `now_s` \[s\]: first runs the ticks up to `now_s`, then decodes the
@@ -753,14 +753,14 @@ pub const TRACE_HEADER: &str = "time_s,channel,plate_c,sensor_c,current_a";
 struct Trace {
     out: Box<dyn Write + Send>,
     line: Vec<u8>,
-    error: Option<String>,
+    error: Option<io::ErrorKind>,
 }
 
 impl Trace {
     /// Writes the pending rows in one call and flushes; a failure stops the trace.
     fn write(&mut self) {
         if let Err(e) = self.out.write_all(&self.line).and_then(|()| self.out.flush()) {
-            self.error = Some(format!("trace write failed: {e}"));
+            self.error = Some(e.kind());
         }
         self.line.clear();
     }
