@@ -18,7 +18,7 @@ use std::io::{self, Read, Write};
 use std::net::{TcpStream, ToSocketAddrs};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TryRecvError};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::Duration;
@@ -66,7 +66,7 @@ pub(crate) fn split(
     port: Box<dyn serialport::SerialPort>,
     path: &str,
     write_timeout: Duration,
-) -> Result<(Box<dyn Read + Send>, Box<dyn Write + Send>), DeviceError> {
+) -> Result<Streams, DeviceError> {
     let failed = |step, e: serialport::Error| open_failed(Path::new(path), step, serial_error_kind(&e));
     let mut writer = port.try_clone().map_err(|e| failed(OpenStep::Share, e))?;
     writer
@@ -98,6 +98,9 @@ pub(crate) fn open_tcp(
         .map_err(|e| open_failed(device, OpenStep::Configure, e.kind()))?;
     Ok(stream)
 }
+
+/// The reading and the writing end of a port.
+pub(crate) type Streams = (Box<dyn Read + Send>, Box<dyn Write + Send>);
 
 /// Starts `body` in a thread named `name`; a thread that cannot start fails the link of `device`.
 pub(crate) fn start_thread<T: Send + 'static>(
@@ -205,18 +208,17 @@ pub(crate) struct ReaderSpec {
     pub(crate) thread: &'static str,
     /// The read buffer \[bytes\].
     pub(crate) buffer_len: usize,
-    /// Whether dropping waits for the thread.
-    pub(crate) join: bool,
 }
 
 impl<S: LineState> Line<S> {
-    /// Starts the reader thread on `reader` and keeps `writer` for frames to the device `name`.
+    /// Starts the reader thread on `reader` and keeps `writer` for frames to the device `name`; `join`: dropping
+    /// waits for the reader (a port opened by path; a stream given by the caller may not time out).
     pub(crate) fn start(
         name: &str,
-        reader: Box<dyn Read + Send>,
-        writer: Box<dyn Write + Send>,
+        (reader, writer): Streams,
         clock: Arc<dyn Clock>,
         spec: &ReaderSpec,
+        join: bool,
     ) -> Result<Self, DeviceError> {
         let shared = Arc::new(Mutex::new(S::default()));
         let stop = Arc::new(AtomicBool::new(false));
@@ -235,7 +237,7 @@ impl<S: LineState> Line<S> {
             reader: Reader {
                 stop,
                 thread: Some(thread),
-                join: spec.join,
+                join,
             },
             clock,
             failed: None,
@@ -385,10 +387,7 @@ impl<D: Send + 'static> Reconnector<D> {
 
     /// A new link, if the thread made one.
     pub(crate) fn take(&mut self) -> Option<D> {
-        match self.fresh.try_recv() {
-            Ok(link) => Some(link),
-            Err(TryRecvError::Empty | TryRecvError::Disconnected) => None,
-        }
+        self.fresh.try_recv().ok()
     }
 }
 

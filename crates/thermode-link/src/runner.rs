@@ -16,7 +16,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use thermode_device::{DeviceError, MAX_CHANNELS};
+use thermode_device::{DeviceError, PlateFinger, SimulatedDisplay, MAX_CHANNELS};
 use thermode_platform::Clock;
 use thiserror::Error;
 
@@ -124,6 +124,25 @@ pub struct FirmwareStatus {
 }
 
 impl FirmwareStatus {
+    /// The status of the first `channel_count` channels of `display` at device time `time_s` \[s\]: each plate from
+    /// the display, each channel's delivered current \[A\] and output state from `channel`; no frames counted yet.
+    pub fn of_display<F: PlateFinger>(
+        display: &SimulatedDisplay<F>,
+        channel_count: usize,
+        time_s: f64,
+        channel: impl Fn(usize) -> (f64, bool),
+    ) -> Self {
+        let mut status = FirmwareStatus::new(channel_count);
+        status.time_s = time_s;
+        for i in 0..channel_count.min(MAX_CHANNELS) {
+            if let Ok(plate) = display.channel(i) {
+                status.plate_c[i] = plate.state().plate_c;
+            }
+            (status.applied_a[i], status.output_on[i]) = channel(i);
+        }
+        status
+    }
+
     /// A status of `channel_count` channels at time 0, every output off.
     pub fn new(channel_count: usize) -> Self {
         FirmwareStatus {
@@ -564,4 +583,40 @@ fn configure(stream: TcpStream, tick: Duration) -> Result<TcpStream, EmulatorErr
         .map_err(io_error)?;
     stream.set_nodelay(true).map_err(io_error)?;
     Ok(stream)
+}
+
+/// The accessors every emulator around a `SimulatedDisplay` offers, written once: `time_s` (device time \[s\], whole
+/// ticks since start: its `tick` field times its config's `tick_s`), `display` and `display_mut` (its `display` field:
+/// initial temperatures, plant faults).
+macro_rules! display_accessors {
+    () => {
+        /// Device time \[s\]: whole ticks since start.
+        pub fn time_s(&self) -> f64 {
+            self.tick as f64 * self.config.tick_s
+        }
+
+        /// The simulated display.
+        pub fn display(&self) -> &SimulatedDisplay<F> {
+            &self.display
+        }
+
+        /// The simulated display, mutable (initial temperatures, plant faults).
+        pub fn display_mut(&mut self) -> &mut SimulatedDisplay<F> {
+            &mut self.display
+        }
+    };
+}
+pub(crate) use display_accessors;
+
+/// The tick a device whose ticks last `tick_s` \[s\] has reached at `now_s` \[s\] (None for a time that is not finite).
+pub(crate) fn tick_at(now_s: f64, tick_s: f64) -> Option<u64> {
+    now_s
+        .is_finite()
+        .then(|| (now_s / tick_s + 1e-9).floor().max(0.0) as u64)
+}
+
+/// The one merged plant step \[s\] from `tick` to `target` when that is more than 0.1 s (the plant is implicit and
+/// stable for any step), else None (step tick by tick).
+pub(crate) fn merged_step_s(tick: u64, target: u64, tick_s: f64) -> Option<f64> {
+    (target > tick + (0.1 / tick_s) as u64).then(|| (target - tick) as f64 * tick_s)
 }

@@ -347,26 +347,19 @@ impl Link {
         Ok(None)
     }
 
+    /// The 32 bits of parameter `id` of `channel` (`?VR`; 0 if the answer carries none).
+    fn read_bits(&mut self, channel: MecomChannel, id: u16) -> Result<u32, RequestFault> {
+        let instance = channel.instance;
+        let bits = self.transact(channel.address, &Request::Read { id, instance })?;
+        Ok(bits.unwrap_or(0))
+    }
+
     fn read_i32(&mut self, channel: MecomChannel, id: u16) -> Result<i32, RequestFault> {
-        let bits = self.transact(
-            channel.address,
-            &Request::Read {
-                id,
-                instance: channel.instance,
-            },
-        )?;
-        Ok(bits.unwrap_or(0) as i32)
+        Ok(self.read_bits(channel, id)? as i32)
     }
 
     fn read_f32(&mut self, channel: MecomChannel, id: u16) -> Result<f64, RequestFault> {
-        let bits = self.transact(
-            channel.address,
-            &Request::Read {
-                id,
-                instance: channel.instance,
-            },
-        )?;
-        Ok(f64::from(f32::from_bits(bits.unwrap_or(0))))
+        Ok(f64::from(f32::from_bits(self.read_bits(channel, id)?)))
     }
 
     fn set(&mut self, channel: MecomChannel, request: Request) -> Result<(), RequestFault> {

@@ -344,20 +344,7 @@ impl<F: PlateFinger> Emulator<F> {
         &self.config
     }
 
-    /// Emulator time \[s\]: whole ticks since start.
-    pub fn time_s(&self) -> f64 {
-        self.tick as f64 * self.config.tick_s
-    }
-
-    /// The simulated display.
-    pub fn display(&self) -> &SimulatedDisplay<F> {
-        &self.display
-    }
-
-    /// The simulated display, mutable (plant fault injection, initial temperatures).
-    pub fn display_mut(&mut self) -> &mut SimulatedDisplay<F> {
-        &mut self.display
-    }
+    crate::runner::display_accessors!();
 
     /// The current commanded on `channel` \[A\] (0 for a channel that does not exist).
     pub fn commanded_current_a(&self, channel: usize) -> f64 {

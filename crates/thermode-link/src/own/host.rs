@@ -308,6 +308,12 @@ impl Shared {
     }
 }
 
+/// The reader thread of a serial link.
+const READER: ReaderSpec = ReaderSpec {
+    thread: "thermode-serial-reader",
+    buffer_len: 1024,
+};
+
 /// A display behind a serial port. See the module documentation.
 pub struct SerialDevice {
     line: Line<Shared>,
@@ -382,8 +388,8 @@ impl SerialDevice {
         let read_timeout = Duration::from_secs_f64(config.read_poll_s);
         // Stale bytes in either direction (an earlier session's frames) are discarded.
         let port = host::open_serial(path, config.baud_rate, read_timeout, serialport::ClearBuffer::All)?;
-        let (reader, writer) = host::split(port, path, Duration::from_secs_f64(config.write_timeout_s))?;
-        SerialDevice::start(path, reader, writer, config, clock, true)
+        let streams = host::split(port, path, Duration::from_secs_f64(config.write_timeout_s))?;
+        SerialDevice::start(Line::start(path, streams, clock, &READER, true)?, config)
     }
 
     /// As [`SerialDevice::open`] for a `serial:PATH` specification.
@@ -403,24 +409,13 @@ impl SerialDevice {
         clock: Arc<dyn Clock>,
     ) -> Result<Self, DeviceError> {
         config.validate()?;
-        SerialDevice::start(name, reader, writer, config, clock, false)
+        SerialDevice::start(Line::start(name, (reader, writer), clock, &READER, false)?, config)
     }
 
-    fn start(
-        name: &str,
-        reader: Box<dyn Read + Send>,
-        writer: Box<dyn Write + Send>,
-        config: &SerialConfig,
-        clock: Arc<dyn Clock>,
-        join_reader: bool,
-    ) -> Result<Self, DeviceError> {
-        let spec = ReaderSpec {
-            thread: "thermode-serial-reader",
-            buffer_len: 1024,
-            join: join_reader,
-        };
+    /// The device on `line`, after the handshake.
+    fn start(line: Line<Shared>, config: &SerialConfig) -> Result<Self, DeviceError> {
         let mut device = SerialDevice {
-            line: Line::start(name, reader, writer, clock, &spec)?,
+            line,
             config: *config,
             identify: Identify {
                 channel_count: 0,

@@ -199,6 +199,12 @@ impl Shared {
     }
 }
 
+/// The reader thread of a TCS II link.
+const READER: ReaderSpec = ReaderSpec {
+    thread: "thermode-tcs2-reader",
+    buffer_len: 512,
+};
+
 /// A TCS II stimulator in follow mode. See the module documentation.
 pub struct Tcs2Device {
     line: Line<Shared>,
@@ -232,8 +238,11 @@ impl Tcs2Device {
             Duration::from_millis(5),
             serialport::ClearBuffer::Input,
         )?;
-        let (reader, writer) = host::split(port, path, Duration::from_millis(50))?;
-        Tcs2Device::start(&format!("tcs2:{path}"), reader, writer, config, clock, true)
+        let streams = host::split(port, path, Duration::from_millis(50))?;
+        Tcs2Device::start(
+            Line::start(&format!("tcs2:{path}"), streams, clock, &READER, true)?,
+            config,
+        )
     }
 
     /// A stimulator over any byte streams, named `name` in messages (the reader should time out within a few
@@ -246,24 +255,13 @@ impl Tcs2Device {
         clock: Arc<dyn Clock>,
     ) -> Result<Self, DeviceError> {
         config.validate()?;
-        Tcs2Device::start(name, reader, writer, config, clock, false)
+        Tcs2Device::start(Line::start(name, (reader, writer), clock, &READER, false)?, config)
     }
 
-    fn start(
-        name: &str,
-        reader: Box<dyn Read + Send>,
-        writer: Box<dyn Write + Send>,
-        config: &Tcs2Config,
-        clock: Arc<dyn Clock>,
-        join_reader: bool,
-    ) -> Result<Self, DeviceError> {
-        let spec = ReaderSpec {
-            thread: "thermode-tcs2-reader",
-            buffer_len: 512,
-            join: join_reader,
-        };
+    /// The stimulator on `line`, connected and in follow mode.
+    fn start(line: Line<Shared>, config: &Tcs2Config) -> Result<Self, DeviceError> {
         let mut device = Tcs2Device {
-            line: Line::start(name, reader, writer, clock, &spec)?,
+            line,
             config: *config,
             sent: [None; TCS2_ZONES],
             following: false,
