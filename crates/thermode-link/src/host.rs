@@ -1,18 +1,19 @@
 //! The host skeleton every protocol's host runs on:
 //!
-//! - [`Port`]: a byte stream both ways with a read timeout; [`open_serial`], [`split`] and [`open_tcp`] open one and
-//!   set its timeouts, with typed failures ([`LinkFault::Open`]).
-//! - [`Reader`]: the background thread that reads the port (a host's [`Line`] state behind a mutex held for
-//!   microseconds), stamps what arrives with the injected clock's time, sleeps 1 ms on `WouldBlock`, rides out
-//!   timeouts and interrupts, and ends on stop, on the port's end or on a read error, which it reports once.
-//! - [`Line`]: the port's writer, the reader's shared state, the clock and the link's latched failure: writing a
-//!   frame (a failed write fails the link), reading the shared state, and the handshake's retry loop timed on the
-//!   clock ([`Line::retry_until`]).
-//! - [`Reconnector`]: re-opening a failed link in a thread of its own with back-off, handing the new link over
-//!   without blocking the control loop.
+//! - [`Port`]: a byte stream both ways with a read timeout; `open_serial`, `split` and `open_tcp` open one and set
+//!   its timeouts, with typed failures (`LinkFault::Open`).
+//! - `Reader`: the background thread that reads the port into a host's `LineState` behind a mutex held for
+//!   microseconds, stamps what arrives with the injected clock's time, sleeps 1 ms on `WouldBlock`, rides out
+//!   timeouts and interrupts, and ends on stop, on the port's end or on a read error, which it records once.
+//! - `Line`: the port's writer, the reader's shared state, the clock and the link's latched failure: writing a frame
+//!   (a failed write fails the link for good), reading the shared state, typed errors naming the device; and
+//!   `retry_until`, the handshake's loop (send every so often until the reader saw the answer) timed on the clock.
+//! - `Reconnector`: re-opening a failed link in a thread of its own with back-off on the clock
+//!   ([`FIRST_BACKOFF_S`], doubling), handing the new link over without blocking the control loop.
 //!
-//! thermode's own protocol and the TCS II host run their reader on a [`Line`]; the MeCom host's worker owns its
-//! [`Port`] and runs request by request, but opens it here.
+//! thermode's own protocol ([`crate::own::host`]) and the TCS II host ([`crate::tcs2::host`]) run on a `Line`; the
+//! MeCom host ([`crate::mecom::host`]) asks and waits request by request in a worker that owns its [`Port`], opened
+//! here, with its handshake on the same clock.
 
 use std::io::{self, Read, Write};
 use std::net::{TcpStream, ToSocketAddrs};

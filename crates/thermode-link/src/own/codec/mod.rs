@@ -4,7 +4,7 @@
 //! - **Framing** ([`frame`]): each frame is COBS-stuffed `payload ‖ CRC-32` ending in a 0x00 delimiter; at most
 //!   [`MAX_PAYLOAD_LEN`] payload bytes. Bytes that do not make a valid frame (bad stuffing, bad CRC, too short,
 //!   too long) are dropped and counted, and the receiver is back in step at the next 0x00.
-//! - **Messages** ([`message`], [`codec`]): a 4-byte header (version [`PROTOCOL_VERSION`], type, sequence number)
+//! - **Messages** ([`message`], [`layout`]): a 4-byte header (version [`PROTOCOL_VERSION`], type, sequence number)
 //!   and a little-endian body. Host → device: `Hello`, `Heartbeat`, `Drive` (currents in mA for a range of
 //!   channels), `AllOff`, `ClearFault`. Device → host: `Identify`, `SensorReport` (every channel: sensor in m°C,
 //!   hot side in c°C, delivered current in mA, sample sequence and age, fault bits), `Ack`, `Nack`.
