@@ -5,6 +5,7 @@
 //! enum of reasons, so callers can match on them; the messages read as the hosts' messages always did.
 
 use std::io;
+use std::ops::Range;
 use std::path::PathBuf;
 
 use thiserror::Error;
@@ -21,7 +22,7 @@ pub enum LinkError {
         fault: LinkFault,
     },
     /// A `--device` spelling that names no real display.
-    #[error("--device {spec:?}: {fault}")]
+    #[error("--device {spec:?}: {}", fault.describe(&spec.to_string_lossy()))]
     Spec {
         /// The spelling as given.
         spec: PathBuf,
@@ -400,32 +401,63 @@ pub enum MecomSetup {
     },
 }
 
-/// What is wrong with a `--device` spelling.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
+/// What is wrong with a `--device` spelling. The text at fault is named by its byte range in the spelling (which
+/// [`LinkError::Spec`] carries), so the message quotes it as typed.
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub enum SpecFault {
+    /// `serial:` with no path.
+    NoPath,
     /// No path or address after the prefix.
-    #[error("no path or address")]
     NoTarget,
     /// An option is not `key=value`.
-    #[error("an option is not key=value")]
-    NotKeyValue,
+    NotKeyValue {
+        /// The option.
+        option: Range<usize>,
+    },
     /// An option the protocol does not take.
-    #[error("unknown {protocol} option (it takes {takes})")]
     UnknownOption {
         /// The protocol (`MeCom`, `TCS II`).
         protocol: &'static str,
-        /// The options it takes.
-        takes: &'static str,
+        /// The option's key.
+        key: Range<usize>,
     },
-    /// An option's value is out of its range or not a number.
-    #[error("option {key} {requirement}")]
+    /// An option's value is not one the option takes.
     BadValue {
         /// The option.
         key: &'static str,
-        /// What its value must be.
+        /// Its value.
+        value: Range<usize>,
+        /// What is wrong, as the message goes on after the quoted value (`": use current or temperature"`,
+        /// `" is not a number"`).
         requirement: &'static str,
     },
+    /// A MeCom channel that is not `ADDRESS:INSTANCE`.
+    NotAChannel {
+        /// The channel as given.
+        channel: Range<usize>,
+    },
     /// No known prefix.
-    #[error("not a real display: use serial:PATH, mecom:PATH, mecom-tcp:HOST:PORT or tcs2:PATH")]
     NotHardware,
+}
+
+impl SpecFault {
+    /// What is wrong with `spec`, quoting the text at fault.
+    pub fn describe(&self, spec: &str) -> String {
+        let text = |range: &Range<usize>| spec.get(range.clone()).unwrap_or_default().to_string();
+        match self {
+            SpecFault::NoPath => "no path".to_string(),
+            SpecFault::NoTarget => "no path or address".to_string(),
+            SpecFault::NotKeyValue { option } => format!("option {:?} is not key=value", text(option)),
+            SpecFault::UnknownOption { protocol, key } => format!("unknown {protocol} option {:?}", text(key)),
+            SpecFault::BadValue {
+                key,
+                value,
+                requirement,
+            } => format!("{key}={:?}{requirement}", text(value)),
+            SpecFault::NotAChannel { channel } => format!("channel {:?} is not ADDRESS:INSTANCE", text(channel)),
+            SpecFault::NotHardware => {
+                "not a real display: use serial:PATH, mecom:PATH, mecom-tcp:HOST:PORT or tcs2:PATH".to_string()
+            }
+        }
+    }
 }

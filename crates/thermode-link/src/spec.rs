@@ -13,6 +13,7 @@
 //! `hold_max=C` (the warmest set-point streamed, at most 43 °C; default 43), `neutral=C` (20 to 40 °C; default 32).
 //! Everything else follows the device file and the envelope ([`HardwareContext`]).
 
+use std::ops::Range;
 use std::sync::Arc;
 
 use thermode_device::{Device, DeviceConfig, DeviceError, LinkError, SpecFault};
@@ -56,9 +57,25 @@ fn bad_spec(spec: &str, fault: SpecFault) -> DeviceError {
     .into()
 }
 
-/// The spelling's option `key` has a value that is not `requirement`.
-fn bad_value(spec: &str, key: &'static str, requirement: &'static str) -> DeviceError {
-    bad_spec(spec, SpecFault::BadValue { key, requirement })
+/// The byte range of `part`, a slice of `spec`, in `spec`.
+fn span(spec: &str, part: &str) -> Range<usize> {
+    let start = (part.as_ptr() as usize)
+        .saturating_sub(spec.as_ptr() as usize)
+        .min(spec.len());
+    start..(start + part.len()).min(spec.len())
+}
+
+/// The spelling's option `key` has the value `value` (a slice of `spec`), which is wrong as `requirement` says.
+fn bad_value(spec: &str, key: &'static str, value: &str, requirement: &'static str) -> DeviceError {
+    let value = span(spec, value);
+    bad_spec(
+        spec,
+        SpecFault::BadValue {
+            key,
+            value,
+            requirement,
+        },
+    )
 }
 
 /// `key=value` options, in order.
@@ -72,9 +89,14 @@ fn split_options<'a>(spec: &str, rest: &'a str) -> Result<(&'a str, Options<'a>)
     }
     let mut pairs = Vec::new();
     for pair in options.split('&').filter(|p| !p.is_empty()) {
-        let (key, value) = pair
-            .split_once('=')
-            .ok_or_else(|| bad_spec(spec, SpecFault::NotKeyValue))?;
+        let (key, value) = pair.split_once('=').ok_or_else(|| {
+            bad_spec(
+                spec,
+                SpecFault::NotKeyValue {
+                    option: span(spec, pair),
+                },
+            )
+        })?;
         pairs.push((key, value));
     }
     Ok((target, pairs))
@@ -85,7 +107,7 @@ fn number(spec: &str, key: &'static str, value: &str) -> Result<f64, DeviceError
         .parse::<f64>()
         .ok()
         .filter(|v| v.is_finite())
-        .ok_or_else(|| bad_value(spec, key, "is not a number"))
+        .ok_or_else(|| bad_value(spec, key, value, " is not a number"))
 }
 
 /// The MeCom settings of `spec`'s options over the defaults of `context`.
@@ -108,7 +130,7 @@ pub fn mecom_config(
                 config.mode = match value {
                     "current" => MecomMode::Current,
                     "temperature" => MecomMode::Temperature,
-                    _ => return Err(bad_value(spec, "mode", "takes current or temperature")),
+                    _ => return Err(bad_value(spec, "mode", value, ": use current or temperature")),
                 }
             }
             "channels" => {
@@ -120,27 +142,34 @@ pub fn mecom_config(
                             .and_then(|(a, i)| Some((a.parse::<u8>().ok()?, i.parse::<u8>().ok()?)));
                         parsed
                             .map(|(address, instance)| MecomChannel { address, instance })
-                            .ok_or_else(|| bad_value(spec, "channels", "takes ADDRESS:INSTANCE,…"))
+                            .ok_or_else(|| {
+                                bad_spec(
+                                    spec,
+                                    SpecFault::NotAChannel {
+                                        channel: span(spec, pair),
+                                    },
+                                )
+                            })
                     })
                     .collect::<Result<_, _>>()?;
             }
             "baud" => {
                 config.baud_rate = value
                     .parse()
-                    .map_err(|_| bad_value(spec, "baud", "takes a whole number"))?;
+                    .map_err(|_| bad_value(spec, "baud", value, " is not a whole number"))?;
             }
             "watchdog" => config.watchdog_s = number(spec, "watchdog", value)?,
             "address" => {
                 config.discover_address = value
                     .parse()
-                    .map_err(|_| bad_value(spec, "address", "takes 0 to 254"))?;
+                    .map_err(|_| bad_value(spec, "address", value, " is not 0 to 254"))?;
             }
             _ => {
                 return Err(bad_spec(
                     spec,
                     SpecFault::UnknownOption {
                         protocol: "MeCom",
-                        takes: "mode, channels, baud, watchdog, address",
+                        key: span(spec, key),
                     },
                 ))
             }
@@ -160,7 +189,9 @@ pub fn tcs2_config(spec: &str, options: &[(&str, &str)], context: &HardwareConte
     for &(key, value) in options {
         match key {
             "zones" => {
-                config.zones = value.parse().map_err(|_| bad_value(spec, "zones", "takes 1 to 5"))?;
+                config.zones = value
+                    .parse()
+                    .map_err(|_| bad_value(spec, "zones", value, " is not 1 to 5"))?;
             }
             "hold_max" => config.hold_max_c = number(spec, "hold_max", value)?,
             "neutral" => config.neutral_c = number(spec, "neutral", value)?,
@@ -169,7 +200,7 @@ pub fn tcs2_config(spec: &str, options: &[(&str, &str)], context: &HardwareConte
                     spec,
                     SpecFault::UnknownOption {
                         protocol: "TCS II",
-                        takes: "zones, hold_max, neutral",
+                        key: span(spec, key),
                     },
                 ))
             }
@@ -190,7 +221,7 @@ pub fn open_hardware(
 ) -> Result<Box<dyn Device + Send>, DeviceError> {
     if let Some(rest) = spec.strip_prefix(SERIAL_PREFIX) {
         if rest.is_empty() {
-            return Err(bad_spec(spec, SpecFault::NoTarget));
+            return Err(bad_spec(spec, SpecFault::NoPath));
         }
         return Ok(Box::new(SerialDevice::open(rest, &SerialConfig::default(), clock)?));
     }
