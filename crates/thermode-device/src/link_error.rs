@@ -183,7 +183,7 @@ pub enum LinkFault {
     #[error("cannot encode a frame")]
     Encode,
     /// The handshake did not finish within its timeout.
-    #[error("{awaited} within {timeout_s} s{}", if *other_version { " (it speaks another protocol version)" } else { "" })]
+    #[error("{awaited} within {timeout_s} s{}", handshake_hint(*awaited, *other_version))]
     Handshake {
         /// What the host waited for.
         awaited: Awaited,
@@ -289,6 +289,15 @@ pub enum LinkFault {
     /// MeCom: connecting or configuring failed.
     #[error("{0}")]
     Setup(MecomSetup),
+}
+
+/// What a handshake's message adds after its timeout.
+fn handshake_hint(awaited: Awaited, other_version: bool) -> &'static str {
+    match (awaited, other_version) {
+        (_, true) => " (it speaks another protocol version)",
+        (Awaited::Released, false) => " of the handshake",
+        _ => "",
+    }
 }
 
 /// Why the link was taken down.

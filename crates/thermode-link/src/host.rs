@@ -246,8 +246,13 @@ impl<S: LineState> Line<S> {
     }
 
     /// The link error `fault` of this device.
+    pub(crate) fn link_error(&self, fault: LinkFault) -> LinkError {
+        LinkError::device(&self.name, fault)
+    }
+
+    /// The device error of the link error `fault` of this device.
     pub(crate) fn error(&self, fault: LinkFault) -> DeviceError {
-        LinkError::device(&self.name, fault).into()
+        self.link_error(fault).into()
     }
 
     /// The reader's state, or why it is gone.

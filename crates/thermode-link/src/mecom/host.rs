@@ -101,7 +101,7 @@ pub struct MecomConfig {
     /// Longest wait for an answer before the request is sent once more \[s\], in (0, 1]. Default 0.05 (a request and
     /// its answer take about 7 ms at 57600 baud).
     pub answer_timeout_s: f64,
-    /// Longest time for the connection and the configuration \[s\], wall clock, in (0, 60]. Default 3.
+    /// Longest time for the connection and the configuration \[s\], on the host clock, in (0, 60]. Default 3.
     pub handshake_timeout_s: f64,
     /// Longest time without a good answer from a channel before its readings fail \[s\], in (0, 10]. Default 0.5.
     pub link_timeout_s: f64,

@@ -72,7 +72,7 @@ pub const MAX_DEVICE_WATCHDOG_MS: u16 = 250;
 pub struct SerialConfig {
     /// Baud rate \[bit/s\]. Default [`DEFAULT_BAUD_RATE`] (115200).
     pub baud_rate: u32,
-    /// Longest time for the handshake (`Hello` → `Identify`, `ClearFault` → released) \[s\], wall clock, in
+    /// Longest time for the handshake (`Hello` → `Identify`, `ClearFault` → released) \[s\], on the host clock, in
     /// (0, 60]. Default 3 (boards that reset when the port opens take 1–2 s to boot; `Hello` is repeated every
     /// 0.2 s meanwhile).
     pub handshake_timeout_s: f64,
@@ -480,7 +480,7 @@ impl SerialDevice {
     /// Closes the port (so the same path can be opened again) and asks the reconnector for a new link.
     fn take_down(&mut self, reason: DownReason) {
         let fault = LinkFault::Down { reason };
-        self.health.down(self.line.error(fault.clone()).to_string());
+        self.health.down(self.line.link_error(fault.clone()).to_string());
         self.line.failed = Some(fault);
         self.line.writer = Box::new(Closed);
         // The reader thread ends within its read timeout and closes its end of the port; not waited for here.
@@ -498,7 +498,7 @@ impl SerialDevice {
                 now: usize::from(fresh.identify.channel_count),
                 before: usize::from(self.identify.channel_count),
             };
-            self.health.set_error(self.line.error(fault).to_string());
+            self.health.set_error(self.line.link_error(fault).to_string());
             fresh.line.failed = Some(LinkFault::Replaced);
             if let Some(recovery) = &mut self.recovery {
                 recovery.request();

@@ -63,7 +63,7 @@ pub struct Tcs2Config {
     pub error_poll_interval_s: f64,
     /// Longest time without a temperature line before readings fail \[s\], in (0, 10]. Default 0.5.
     pub link_timeout_s: f64,
-    /// Longest time for the connection \[s\], wall clock, in (0, 60]. Default 3.
+    /// Longest time for the connection \[s\], on the host clock, in (0, 60]. Default 3.
     pub handshake_timeout_s: f64,
 }
 
