@@ -5,8 +5,9 @@
 //! [`Emulator`] is the core, free of I/O: bytes in with the time they arrived ([`Emulator::receive`]), time moves
 //! on ([`Emulator::advance_to`]), bytes out. [`Emulator::run`] drives it in real time over any `Read + Write` port
 //! with an injected [`Clock`]; [`PtyEmulator`] runs it on a pseudo-terminal in a thread (what `thermode emulate`
-//! does). For tests it injects link faults ([`LinkFaults`]: corrupted bytes, dropped frames, a device that stops
-//! answering) and, through [`EmulatorControl`], closes the port.
+//! does). Both are the emulator runner every protocol shares ([`crate::runner`]), with the link faults as the
+//! device's command. For tests it injects link faults ([`LinkFaults`]: corrupted bytes, dropped frames, a device
+//! that stops answering) and, through [`EmulatorControl`], closes the port.
 //!
 //! Time runs in fixed ticks (default 1 ms): each tick the watchdog is checked and the plant advanced; every
 //! report interval (default 10 ms) a report is sent. The firmware's state machine:
