@@ -12,7 +12,8 @@
 //!   files in `devices/` are the default display, a weakly cooled one and one with a lagging sensor.
 //!
 //! Real displays connect through `thermode-link` (wire protocols, serial hosts, emulators), which implements
-//! [`Device`] for each.
+//! [`Device`] for each; their failures are typed here ([`LinkError`], carried by [`DeviceError::Link`]) and their
+//! reconnections counted in [`LinkHealth`].
 //!
 //! Temperatures in °C at the interfaces, currents in A (**positive current heats the display**), times in s.
 //! Deterministic: the only randomness is the sensor noise, from ChaCha8 with an explicit seed.
