@@ -31,6 +31,32 @@ use thermode_platform::Clock;
 pub trait Port: Read + Write + Send {}
 impl<T: Read + Write + Send> Port for T {}
 
+/// What one read of a port with a read timeout gave.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ReadStep {
+    /// This many bytes.
+    Data(usize),
+    /// Nothing at once (`WouldBlock`): the caller sleeps before it reads again.
+    Idle,
+    /// Nothing within the timeout, or interrupted: read again.
+    Retry,
+    /// The port reached its end (the other side closed).
+    Closed,
+    /// The port failed.
+    Failed(io::ErrorKind),
+}
+
+/// Reads `port` once into `buf`: how every host, reader and emulator runner reads its port.
+pub(crate) fn read_step<P: Read + ?Sized>(port: &mut P, buf: &mut [u8]) -> ReadStep {
+    match port.read(buf) {
+        Ok(0) => ReadStep::Closed,
+        Ok(n) => ReadStep::Data(n),
+        Err(e) if e.kind() == io::ErrorKind::WouldBlock => ReadStep::Idle,
+        Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::Interrupted) => ReadStep::Retry,
+        Err(e) => ReadStep::Failed(e.kind()),
+    }
+}
+
 /// The I/O error kind behind a serial port error (`Other` when it has none).
 pub(crate) fn serial_error_kind(error: &serialport::Error) -> io::ErrorKind {
     match error.kind() {
@@ -175,18 +201,18 @@ fn read_until_stopped<S: LineState>(
         }
     };
     while !stop.load(Ordering::SeqCst) {
-        match port.read(&mut buf) {
-            Ok(0) => return failed(LinkFault::PortClosed),
-            Ok(n) => {
+        match read_step(port.as_mut(), &mut buf) {
+            ReadStep::Closed => return failed(LinkFault::PortClosed),
+            ReadStep::Data(n) => {
                 let received_s = clock.now_s();
                 let Ok(mut state) = shared.lock() else {
                     return;
                 };
                 state.take(&buf[..n], received_s);
             }
-            Err(e) if e.kind() == io::ErrorKind::WouldBlock => std::thread::sleep(Duration::from_millis(1)),
-            Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::Interrupted) => {}
-            Err(e) => return failed(LinkFault::ReadFailed { kind: e.kind() }),
+            ReadStep::Idle => std::thread::sleep(Duration::from_millis(1)),
+            ReadStep::Retry => {}
+            ReadStep::Failed(kind) => return failed(LinkFault::ReadFailed { kind }),
         }
     }
 }

@@ -20,7 +20,7 @@ use thermode_device::{DeviceError, PlateFinger, SimulatedDisplay, MAX_CHANNELS};
 use thermode_platform::Clock;
 use thiserror::Error;
 
-use crate::host::serial_error_kind;
+use crate::host::{read_step, serial_error_kind, ReadStep};
 
 /// Why the emulator refused a setting or stopped.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -320,10 +320,10 @@ impl<S: Copy, C> Control<S, C> {
     }
 }
 
-/// Whether a port error means the other end went away.
-fn host_went_away(error: &io::Error) -> bool {
+/// Whether a port error of `kind` means the other end went away.
+fn host_went_away(kind: io::ErrorKind) -> bool {
     matches!(
-        error.kind(),
+        kind,
         io::ErrorKind::BrokenPipe | io::ErrorKind::ConnectionReset | io::ErrorKind::ConnectionAborted
     )
 }
@@ -347,13 +347,13 @@ pub fn run<E: Emulated + ?Sized, P: Read + Write>(
         if let Some(command) = control.take_command() {
             device.command(command)?;
         }
-        let (n, idle) = match port.read(&mut buf) {
-            Ok(0) => return Ok(RunEnd::HostClosed),
-            Ok(n) => (n, false),
-            Err(e) if e.kind() == io::ErrorKind::WouldBlock => (0, true),
-            Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::Interrupted) => (0, false),
-            Err(e) if host_went_away(&e) => return Ok(RunEnd::HostClosed),
-            Err(e) => return Err(EmulatorError::io(PortStep::Transfer, e.kind())),
+        let (n, idle) = match read_step(port, &mut buf) {
+            ReadStep::Data(n) => (n, false),
+            ReadStep::Idle => (0, true),
+            ReadStep::Retry => (0, false),
+            ReadStep::Closed => return Ok(RunEnd::HostClosed),
+            ReadStep::Failed(kind) if host_went_away(kind) => return Ok(RunEnd::HostClosed),
+            ReadStep::Failed(kind) => return Err(EmulatorError::io(PortStep::Transfer, kind)),
         };
         let now_s = clock.now_s();
         if n > 0 {
@@ -390,7 +390,7 @@ fn write_out<E: Emulated + ?Sized, P: Write>(
             device.write_stalled();
             Ok(None)
         }
-        Err(e) if host_went_away(&e) => Ok(Some(RunEnd::HostClosed)),
+        Err(e) if host_went_away(e.kind()) => Ok(Some(RunEnd::HostClosed)),
         Err(e) => Err(EmulatorError::io(PortStep::Transfer, e.kind())),
     }
 }

@@ -44,7 +44,7 @@ use thermode_safety::{DriveCommand, ABSOLUTE_MAX_C, ABSOLUTE_MIN_C};
 use super::codec::frame::{encode_frame, FrameCounters, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
 use super::codec::payload::{check_answer, describe_error, error_number, param, status, Request};
 pub use crate::host::Port;
-use crate::host::{self, start_thread};
+use crate::host::{self, read_step, start_thread, ReadStep};
 use thermode_device::{
     Device, DeviceCut, DeviceError, LinkError, LinkFault, MecomSetup, Reading, RequestFault, MAX_CHANNELS,
 };
@@ -313,19 +313,19 @@ impl Link {
     /// Reads until the answer with the current sequence number from `address` arrives, or the answer timeout.
     fn await_answer(&mut self, address: u8, sent_s: f64) -> Result<Option<String>, RequestFault> {
         while self.clock.now_s() - sent_s < self.answer_timeout_s {
-            let n = match self.port.read(&mut self.buf) {
-                Ok(0) => {
+            let n = match read_step(self.port.as_mut(), &mut self.buf) {
+                ReadStep::Data(n) => n,
+                ReadStep::Retry => continue,
+                ReadStep::Idle => {
+                    std::thread::sleep(Duration::from_micros(200));
+                    continue;
+                }
+                ReadStep::Closed => {
                     return Err(RequestFault::Port {
                         kind: io::ErrorKind::UnexpectedEof,
                     })
                 }
-                Ok(n) => n,
-                Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::Interrupted) => continue,
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
-                    std::thread::sleep(Duration::from_micros(200));
-                    continue;
-                }
-                Err(e) => return Err(RequestFault::Port { kind: e.kind() }),
+                ReadStep::Failed(kind) => return Err(RequestFault::Port { kind }),
             };
             let mut found = None;
             let (seq, stats) = (self.seq, &mut self.stats);
