@@ -2,8 +2,12 @@
 //! configuration, link failures of real devices, a device whose watchdog is too slow, and a channel that a device's
 //! own protection cut ([`DeviceCut`]).
 
+use std::path::PathBuf;
+
 use thermode_model::{BadValue, ParamError};
 use thiserror::Error;
+
+use crate::link_error::LinkError;
 
 /// Why a device operation was refused.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -32,16 +36,17 @@ pub enum DeviceError {
     Config(#[from] ParamError),
     /// A real device could not be reached or answered wrongly.
     #[error("device link: {0}")]
-    Link(String),
+    Link(#[from] LinkError),
     /// A real device announced a watchdog period longer than the host accepts: after the host's last frame its
     /// drives would stay on for longer than `max_ms`.
     #[error(
-        "{device}: the device's watchdog is {device_ms} ms, longer than the {max_ms} ms this host accepts (its drives \
-         must go off within {max_ms} ms of the host's last frame); set the device's watchdog to at most {max_ms} ms"
+        "{}: the device's watchdog is {device_ms} ms, longer than the {max_ms} ms this host accepts (its drives \
+         must go off within {max_ms} ms of the host's last frame); set the device's watchdog to at most {max_ms} ms",
+        device.display()
     )]
     WatchdogTooLong {
-        /// The device (e.g. its port).
-        device: String,
+        /// The device (e.g. its port's path).
+        device: PathBuf,
         /// The period it announced \[ms\].
         device_ms: u16,
         /// The longest period the host accepts \[ms\].

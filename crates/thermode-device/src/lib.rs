@@ -12,7 +12,8 @@
 //!   files in `devices/` are the default display, a weakly cooled one and one with a lagging sensor.
 //!
 //! Real displays connect through `thermode-link` (wire protocols, serial hosts, emulators), which implements
-//! [`Device`] for each.
+//! [`Device`] for each; their failures are typed here ([`LinkError`], carried by [`DeviceError::Link`]) and their
+//! reconnections counted in [`LinkHealth`].
 //!
 //! Temperatures in °C at the interfaces, currents in A (**positive current heats the display**), times in s.
 //! Deterministic: the only randomness is the sensor noise, from ChaCha8 with an explicit seed.
@@ -44,6 +45,7 @@ pub mod device;
 pub mod error;
 pub mod finger;
 pub mod link;
+pub mod link_error;
 pub mod sensor;
 
 pub use channel::{ChannelState, Fault, HeatFlows, Polarity, SimulatedChannel, MAX_SUBSTEP_S};
@@ -52,6 +54,9 @@ pub use device::{Device, Reading, RecordedCommand, RecordingDevice, SimulatedDis
 pub use error::{DeviceCut, DeviceError};
 pub use finger::{default_finger, DefaultFinger, NoFinger, PlateFinger};
 pub use link::LinkHealth;
+pub use link_error::{
+    Awaited, DownReason, LinkError, LinkFault, MecomSetup, OpenStep, RequestFault, Silence, SpecFault,
+};
 pub use sensor::{Pt100, SensorCondition, SensorSample, SENSOR_OPEN_READING_C, SENSOR_SHORT_READING_C};
 
 /// The default device file (`devices/default.toml`): equal to [`DeviceConfig::default`].

@@ -2,7 +2,7 @@
 //!
 //! | spelling | device |
 //! | --- | --- |
-//! | `serial:PATH` | thermode's own protocol ([`crate::serial::SerialDevice`]) |
+//! | `serial:PATH` | thermode's own protocol ([`crate::own::host::SerialDevice`]) |
 //! | `mecom:PATH[?OPTIONS]` | Meerstetter TEC controller(s) over a serial port ([`crate::mecom::host::MecomDevice`]) |
 //! | `mecom-tcp:HOST:PORT[?OPTIONS]` | the same over TCP |
 //! | `tcs2:PATH[?OPTIONS]` | QST.Lab TCS II in follow mode ([`crate::tcs2::host::Tcs2Device`]) |
@@ -13,14 +13,16 @@
 //! `hold_max=C` (the warmest set-point streamed, at most 43 °C; default 43), `neutral=C` (20 to 40 °C; default 32).
 //! Everything else follows the device file and the envelope ([`HardwareContext`]).
 
+use std::ops::Range;
 use std::sync::Arc;
 
-use thermode_device::{Device, DeviceConfig, DeviceError};
+use thermode_device::{Device, DeviceConfig, DeviceError, LinkError, SpecFault};
 use thermode_platform::Clock;
 use thermode_safety::{EnvelopeConfig, ABSOLUTE_MAX_C, ABSOLUTE_MIN_C};
 
 use crate::mecom::host::{MecomChannel, MecomConfig, MecomDevice, MecomMode};
-use crate::serial::{SerialConfig, SerialDevice, SERIAL_PREFIX};
+use crate::own::host::{SerialConfig, SerialDevice, SERIAL_PREFIX};
+use crate::tcs2::codec::TCS2_MIN_C;
 use crate::tcs2::host::{Tcs2Config, Tcs2Device, DEFAULT_HOLD_MAX_C};
 
 /// Prefix of a MeCom serial device: `mecom:`.
@@ -47,8 +49,33 @@ pub fn is_hardware(spec: &str) -> bool {
         .any(|p| spec.starts_with(p))
 }
 
-fn bad_spec(spec: &str, why: impl std::fmt::Display) -> DeviceError {
-    DeviceError::Link(format!("--device {spec:?}: {why}"))
+fn bad_spec(spec: &str, fault: SpecFault) -> DeviceError {
+    LinkError::Spec {
+        spec: spec.into(),
+        fault,
+    }
+    .into()
+}
+
+/// The byte range of `part`, a slice of `spec`, in `spec`.
+fn span(spec: &str, part: &str) -> Range<usize> {
+    let start = (part.as_ptr() as usize)
+        .saturating_sub(spec.as_ptr() as usize)
+        .min(spec.len());
+    start..(start + part.len()).min(spec.len())
+}
+
+/// The spelling's option `key` has the value `value` (a slice of `spec`), which is wrong as `requirement` says.
+fn bad_value(spec: &str, key: &'static str, value: &str, requirement: &'static str) -> DeviceError {
+    let value = span(spec, value);
+    bad_spec(
+        spec,
+        SpecFault::BadValue {
+            key,
+            value,
+            requirement,
+        },
+    )
 }
 
 /// `key=value` options, in order.
@@ -58,24 +85,29 @@ type Options<'a> = Vec<(&'a str, &'a str)>;
 fn split_options<'a>(spec: &str, rest: &'a str) -> Result<(&'a str, Options<'a>), DeviceError> {
     let (target, options) = rest.split_once('?').unwrap_or((rest, ""));
     if target.is_empty() {
-        return Err(bad_spec(spec, "no path or address"));
+        return Err(bad_spec(spec, SpecFault::NoTarget));
     }
     let mut pairs = Vec::new();
     for pair in options.split('&').filter(|p| !p.is_empty()) {
-        let (key, value) = pair
-            .split_once('=')
-            .ok_or_else(|| bad_spec(spec, format!("option {pair:?} is not key=value")))?;
+        let (key, value) = pair.split_once('=').ok_or_else(|| {
+            bad_spec(
+                spec,
+                SpecFault::NotKeyValue {
+                    option: span(spec, pair),
+                },
+            )
+        })?;
         pairs.push((key, value));
     }
     Ok((target, pairs))
 }
 
-fn number(spec: &str, key: &str, value: &str) -> Result<f64, DeviceError> {
+fn number(spec: &str, key: &'static str, value: &str) -> Result<f64, DeviceError> {
     value
         .parse::<f64>()
         .ok()
         .filter(|v| v.is_finite())
-        .ok_or_else(|| bad_spec(spec, format!("{key}={value:?} is not a number")))
+        .ok_or_else(|| bad_value(spec, key, value, " is not a number"))
 }
 
 /// The MeCom settings of `spec`'s options over the defaults of `context`.
@@ -98,7 +130,7 @@ pub fn mecom_config(
                 config.mode = match value {
                     "current" => MecomMode::Current,
                     "temperature" => MecomMode::Temperature,
-                    _ => return Err(bad_spec(spec, format!("mode={value:?}: use current or temperature"))),
+                    _ => return Err(bad_value(spec, "mode", value, ": use current or temperature")),
                 }
             }
             "channels" => {
@@ -110,22 +142,37 @@ pub fn mecom_config(
                             .and_then(|(a, i)| Some((a.parse::<u8>().ok()?, i.parse::<u8>().ok()?)));
                         parsed
                             .map(|(address, instance)| MecomChannel { address, instance })
-                            .ok_or_else(|| bad_spec(spec, format!("channel {pair:?} is not ADDRESS:INSTANCE")))
+                            .ok_or_else(|| {
+                                bad_spec(
+                                    spec,
+                                    SpecFault::NotAChannel {
+                                        channel: span(spec, pair),
+                                    },
+                                )
+                            })
                     })
                     .collect::<Result<_, _>>()?;
             }
             "baud" => {
                 config.baud_rate = value
                     .parse()
-                    .map_err(|_| bad_spec(spec, format!("baud={value:?} is not a whole number")))?;
+                    .map_err(|_| bad_value(spec, "baud", value, " is not a whole number"))?;
             }
-            "watchdog" => config.watchdog_s = number(spec, key, value)?,
+            "watchdog" => config.watchdog_s = number(spec, "watchdog", value)?,
             "address" => {
                 config.discover_address = value
                     .parse()
-                    .map_err(|_| bad_spec(spec, format!("address={value:?} is not 0 to 254")))?;
+                    .map_err(|_| bad_value(spec, "address", value, " is not 0 to 254"))?;
             }
-            _ => return Err(bad_spec(spec, format!("unknown MeCom option {key:?}"))),
+            _ => {
+                return Err(bad_spec(
+                    spec,
+                    SpecFault::UnknownOption {
+                        protocol: "MeCom",
+                        key: span(spec, key),
+                    },
+                ))
+            }
         }
     }
     config.validate()?;
@@ -144,16 +191,24 @@ pub fn tcs2_config(spec: &str, options: &[(&str, &str)], context: &HardwareConte
             "zones" => {
                 config.zones = value
                     .parse()
-                    .map_err(|_| bad_spec(spec, format!("zones={value:?} is not 1 to 5")))?;
+                    .map_err(|_| bad_value(spec, "zones", value, " is not 1 to 5"))?;
             }
-            "hold_max" => config.hold_max_c = number(spec, key, value)?,
-            "neutral" => config.neutral_c = number(spec, key, value)?,
-            _ => return Err(bad_spec(spec, format!("unknown TCS II option {key:?}"))),
+            "hold_max" => config.hold_max_c = number(spec, "hold_max", value)?,
+            "neutral" => config.neutral_c = number(spec, "neutral", value)?,
+            _ => {
+                return Err(bad_spec(
+                    spec,
+                    SpecFault::UnknownOption {
+                        protocol: "TCS II",
+                        key: span(spec, key),
+                    },
+                ))
+            }
         }
     }
     config.hold_max_c = config.hold_max_c.min(DEFAULT_HOLD_MAX_C).min(envelope.max_display_c);
     config.max_c = envelope.max_display_c.max(config.hold_max_c);
-    config.hold_min_c = envelope.min_display_c.max(10.0).min(config.neutral_c);
+    config.hold_min_c = envelope.min_display_c.max(TCS2_MIN_C).min(config.neutral_c);
     config.validate()?;
     Ok(config)
 }
@@ -166,7 +221,7 @@ pub fn open_hardware(
 ) -> Result<Box<dyn Device + Send>, DeviceError> {
     if let Some(rest) = spec.strip_prefix(SERIAL_PREFIX) {
         if rest.is_empty() {
-            return Err(bad_spec(spec, "no path"));
+            return Err(bad_spec(spec, SpecFault::NoPath));
         }
         return Ok(Box::new(SerialDevice::open(rest, &SerialConfig::default(), clock)?));
     }
@@ -185,8 +240,5 @@ pub fn open_hardware(
         let config = tcs2_config(spec, &options, context)?;
         return Ok(Box::new(Tcs2Device::open(path, &config, clock)?));
     }
-    Err(bad_spec(
-        spec,
-        "not a real display: use serial:PATH, mecom:PATH, mecom-tcp:HOST:PORT or tcs2:PATH",
-    ))
+    Err(bad_spec(spec, SpecFault::NotHardware))
 }

@@ -3,7 +3,7 @@
 //! ([`super`] lists the sources), so the MeCom host ([`super::host::MecomDevice`]) is tested without hardware.
 //!
 //! What it emulates, per instance (channel):
-//! - the parameters thermode reads and writes ([`super::payload::param`]): identity `?IF`, device type, status and
+//! - the parameters thermode reads and writes ([`super::codec::payload::param`]): identity `?IF`, device type, status and
 //!   error number, object (the plate's sensor reading) and sink (hot-side reading) temperature, target, actual
 //!   current and voltage; input selection (static, live current, temperature controller), output stage enable
 //!   (static off/on, live off/on), current and voltage limitation, positive-current sign, object temperature error
@@ -21,15 +21,15 @@
 //! Not emulated: error 139 (temperature changing too fast; the threshold is stored), the voltage limitation's
 //! effect (stored), flash wear, the bootloader, `?VB`/`VB` big data (answered `+01`).
 //!
-//! Time runs in fixed ticks (default 1 ms) as in [`crate::emulator`]; answers leave as soon as their frame is read.
+//! Time runs in fixed ticks (default 1 ms) as in [`crate::own::emulator`]; answers leave as soon as their frame is read.
 
-use thermode_device::{Device, DeviceError, PlateFinger, SimulatedDisplay, MAX_CHANNELS};
+use thermode_device::{Device, DeviceError, PlateFinger, SimulatedDisplay};
 use thermode_model::peltier::PeltierModule;
 
-use super::frame::{encode_ack, encode_frame, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
-use super::payload::{error_number, param, status, Request};
-use crate::emulator::EmulatorError;
-use crate::firmware::{Firmware, FirmwareStatus};
+use super::codec::frame::{encode_ack, encode_frame, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
+use super::codec::payload::{error_number, param, status, Request};
+use crate::runner::EmulatorError;
+use crate::runner::{merged_step_s, tick_at, Firmware, FirmwareStatus};
 
 /// The identity the emulator answers to `?IF` (20 characters).
 pub const EMULATOR_IDENTITY: &str = "thermode-TEC EMU G01";
@@ -215,20 +215,7 @@ impl<F: PlateFinger> MecomEmulator<F> {
         })
     }
 
-    /// Device time \[s\]: whole ticks since start.
-    pub fn time_s(&self) -> f64 {
-        self.tick as f64 * self.config.tick_s
-    }
-
-    /// The simulated display.
-    pub fn display(&self) -> &SimulatedDisplay<F> {
-        &self.display
-    }
-
-    /// The simulated display, mutable (initial temperatures, plant faults).
-    pub fn display_mut(&mut self) -> &mut SimulatedDisplay<F> {
-        &mut self.display
-    }
+    crate::runner::display_accessors!();
 
     /// The error state's number, if the device is in it.
     pub fn error_number(&self) -> Option<i32> {
@@ -549,13 +536,11 @@ impl<F: PlateFinger + Send> Firmware for MecomEmulator<F> {
     }
 
     fn advance_to(&mut self, now_s: f64, _out: &mut Vec<u8>) {
-        if !now_s.is_finite() {
+        let Some(target) = tick_at(now_s, self.config.tick_s) else {
             return;
-        }
-        let target = (now_s / self.config.tick_s + 1e-9).floor().max(0.0) as u64;
-        // Beyond 0.1 s behind, the plant takes one merged step (it is implicit and stable for any step).
-        if target > self.tick + (0.1 / self.config.tick_s) as u64 {
-            let dt_s = (target - self.tick) as f64 * self.config.tick_s;
+        };
+        // Beyond 0.1 s behind, the plant takes one merged step.
+        if let Some(dt_s) = merged_step_s(self.tick, target, self.config.tick_s) {
             self.tick = target;
             self.check_watchdog_and_restart(self.time_s());
             self.step_plant(dt_s);
@@ -573,15 +558,13 @@ impl<F: PlateFinger + Send> Firmware for MecomEmulator<F> {
     }
 
     fn status(&self) -> FirmwareStatus {
-        let mut status = FirmwareStatus::new(self.instances.len());
-        status.time_s = self.time_s();
-        for (i, inst) in self.instances.iter().enumerate().take(MAX_CHANNELS) {
-            if let Ok(channel) = self.display.channel(i) {
-                status.plate_c[i] = channel.state().plate_c;
-            }
-            status.applied_a[i] = inst.applied_a;
-            status.output_on[i] = self.error.is_none() && inst.enabled();
-        }
+        let on = |inst: &Instance| self.error.is_none() && inst.enabled();
+        let instance = |i: usize| {
+            self.instances
+                .get(i)
+                .map_or((0.0, false), |inst| (inst.applied_a, on(inst)))
+        };
+        let mut status = FirmwareStatus::of_display(&self.display, self.instances.len(), self.time_s(), instance);
         status.frames_in = self.frames_in;
         status.frames_refused = self.frames_refused;
         status.frames_out = self.frames_out;

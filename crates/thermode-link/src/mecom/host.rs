@@ -30,27 +30,31 @@
 //! - **Stopping**: [`Device::all_off`] disables every output and waits for the device's acknowledges; dropping the
 //!   device does the same before the worker ends.
 
-use std::io::{self, Read, Write};
-use std::net::{TcpStream, ToSocketAddrs};
+use std::io;
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use thermode_model::{BadValue, Rule};
 use thermode_platform::Clock;
-use thermode_safety::DriveCommand;
+use thermode_safety::{DriveCommand, ABSOLUTE_MAX_C, ABSOLUTE_MIN_C};
 
-use super::frame::{encode_frame, FrameCounters, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
-use super::payload::{check_answer, describe_error, error_number, param, status, AnswerError, Request};
-use thermode_device::{Device, DeviceCut, DeviceError, Reading, MAX_CHANNELS};
+use super::codec::frame::{encode_frame, FrameCounters, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
+use super::codec::payload::{check_answer, describe_error, error_number, param, status, Request};
+pub use crate::host::Port;
+use crate::host::{self, read_step, start_thread, ReadStep};
+use thermode_device::{
+    Device, DeviceCut, DeviceError, LinkError, LinkFault, MecomSetup, Reading, RequestFault, MAX_CHANNELS,
+};
 
 /// Default baud rate of a MeCom serial port \[bit/s\]: 57600 (the TEC family's default and the rate its service
 /// software always listens on).
 pub const DEFAULT_MECOM_BAUD_RATE: u32 = 57_600;
 
 /// The longest communication watchdog thermode sets \[s\]: 0.25, as for its own protocol
-/// ([`crate::serial::MAX_DEVICE_WATCHDOG_MS`]); the device's range starts at 0.1.
+/// ([`crate::own::host::MAX_DEVICE_WATCHDOG_MS`]); the device's range starts at 0.1.
 pub const MAX_MECOM_WATCHDOG_S: f64 = 0.25;
 
 /// What the device regulates.
@@ -97,7 +101,7 @@ pub struct MecomConfig {
     /// Longest wait for an answer before the request is sent once more \[s\], in (0, 1]. Default 0.05 (a request and
     /// its answer take about 7 ms at 57600 baud).
     pub answer_timeout_s: f64,
-    /// Longest time for the connection and the configuration \[s\], wall clock, in (0, 60]. Default 3.
+    /// Longest time for the connection and the configuration \[s\], on the host clock, in (0, 60]. Default 3.
     pub handshake_timeout_s: f64,
     /// Longest time without a good answer from a channel before its readings fail \[s\], in (0, 10]. Default 0.5.
     pub link_timeout_s: f64,
@@ -136,8 +140,8 @@ impl Default for MecomConfig {
             watchdog_s: MAX_MECOM_WATCHDOG_S,
             current_limit_a: 2.8,
             voltage_limit_v: 4.0,
-            lower_error_c: 10.0,
-            upper_error_c: 48.0,
+            lower_error_c: ABSOLUTE_MIN_C,
+            upper_error_c: ABSOLUTE_MAX_C,
             max_change_c_per_s: 50.0,
             reset_on_error: true,
         }
@@ -178,10 +182,11 @@ impl MecomConfig {
             });
         }
         if let Some(c) = self.channels.iter().find(|c| c.instance == 0 || c.address == 255) {
-            return Err(DeviceError::Link(format!(
-                "MeCom channel {}:{}: addresses are 0 to 254 and instances start at 1",
-                c.address, c.instance
-            )));
+            return Err(LinkError::BadChannel {
+                address: c.address,
+                instance: c.instance,
+            }
+            .into());
         }
         Ok(())
     }
@@ -229,7 +234,7 @@ struct Track {
     /// Host clock time of the last good answer from this channel \[s\].
     last_answer_s: Option<f64>,
     /// Why the last request failed, if it did.
-    last_failure: Option<String>,
+    last_failure: Option<RequestFault>,
 }
 
 /// What the device holds for one channel, as commanded.
@@ -249,41 +254,18 @@ struct Shared {
     off_done: u64,
     stats: MecomStats,
     /// Set when the port failed; permanent.
-    error: Option<String>,
-}
-
-/// A port both ways with a read timeout.
-pub trait Port: Read + Write + Send {}
-impl<T: Read + Write + Send> Port for T {}
-
-/// Why a request got no usable answer.
-#[derive(Debug)]
-enum Failure {
-    /// No answer even when repeated.
-    Timeout,
-    /// A server error or an answer of the wrong shape.
-    Answer(AnswerError),
-    /// The port failed.
-    Io(String),
-}
-
-impl std::fmt::Display for Failure {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Failure::Timeout => write!(f, "no answer"),
-            Failure::Answer(e) => write!(f, "{e}"),
-            Failure::Io(e) => write!(f, "port failed: {e}"),
-        }
-    }
+    error: Option<LinkFault>,
 }
 
 /// The port and the request/answer machinery (used by the connecting thread, then by the worker).
 struct Link {
-    name: String,
+    name: PathBuf,
     port: Box<dyn Port>,
     decoder: FrameDecoder,
     seq: u16,
-    answer_timeout: Duration,
+    clock: Arc<dyn Clock>,
+    /// How long a request waits for its answer \[s\].
+    answer_timeout_s: f64,
     out: Vec<u8>,
     buf: [u8; 256],
     stats: MecomStats,
@@ -292,9 +274,14 @@ struct Link {
 }
 
 impl Link {
+    /// The link error `fault` of this device.
+    fn error(&self, fault: LinkFault) -> DeviceError {
+        LinkError::device(&self.name, fault).into()
+    }
+
     /// Sends `request` to `address` and waits for its answer (once more with the same sequence number after the
     /// answer timeout).
-    fn transact(&mut self, address: u8, request: &Request) -> Result<Option<u32>, Failure> {
+    fn transact(&mut self, address: u8, request: &Request) -> Result<Option<u32>, RequestFault> {
         self.seq = self.seq.wrapping_add(1);
         let payload = request.payload();
         self.out.clear();
@@ -303,38 +290,42 @@ impl Link {
             if attempt > 0 {
                 self.stats.repeats += 1;
             }
-            let sent = Instant::now();
+            let sent_s = self.clock.now_s();
             self.port
                 .write_all(&self.out)
                 .and_then(|()| self.port.flush())
-                .map_err(|e| Failure::Io(e.to_string()))?;
+                .map_err(|e| RequestFault::Port { kind: e.kind() })?;
             self.stats.requests += 1;
-            if let Some(answer) = self.await_answer(address, sent)? {
+            if let Some(answer) = self.await_answer(address, sent_s)? {
                 self.answered += 1;
-                self.round_trip_total_s += sent.elapsed().as_secs_f64();
+                self.round_trip_total_s += self.clock.now_s() - sent_s;
                 self.stats.mean_round_trip_s = self.round_trip_total_s / self.answered as f64;
                 return check_answer(request, crc, &answer).map_err(|e| {
                     self.stats.bad_answers += 1;
-                    Failure::Answer(e)
+                    RequestFault::from(e)
                 });
             }
         }
         self.stats.timeouts += 1;
-        Err(Failure::Timeout)
+        Err(RequestFault::NoAnswer)
     }
 
     /// Reads until the answer with the current sequence number from `address` arrives, or the answer timeout.
-    fn await_answer(&mut self, address: u8, sent: Instant) -> Result<Option<String>, Failure> {
-        while sent.elapsed() < self.answer_timeout {
-            let n = match self.port.read(&mut self.buf) {
-                Ok(0) => return Err(Failure::Io("the port reached its end (closed)".to_string())),
-                Ok(n) => n,
-                Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::Interrupted) => continue,
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+    fn await_answer(&mut self, address: u8, sent_s: f64) -> Result<Option<String>, RequestFault> {
+        while self.clock.now_s() - sent_s < self.answer_timeout_s {
+            let n = match read_step(self.port.as_mut(), &mut self.buf) {
+                ReadStep::Data(n) => n,
+                ReadStep::Retry => continue,
+                ReadStep::Idle => {
                     std::thread::sleep(Duration::from_micros(200));
                     continue;
                 }
-                Err(e) => return Err(Failure::Io(e.to_string())),
+                ReadStep::Closed => {
+                    return Err(RequestFault::Port {
+                        kind: io::ErrorKind::UnexpectedEof,
+                    })
+                }
+                ReadStep::Failed(kind) => return Err(RequestFault::Port { kind }),
             };
             let mut found = None;
             let (seq, stats) = (self.seq, &mut self.stats);
@@ -356,29 +347,22 @@ impl Link {
         Ok(None)
     }
 
-    fn read_i32(&mut self, channel: MecomChannel, id: u16) -> Result<i32, Failure> {
-        let bits = self.transact(
-            channel.address,
-            &Request::Read {
-                id,
-                instance: channel.instance,
-            },
-        )?;
-        Ok(bits.unwrap_or(0) as i32)
+    /// The 32 bits of parameter `id` of `channel` (`?VR`; 0 if the answer carries none).
+    fn read_bits(&mut self, channel: MecomChannel, id: u16) -> Result<u32, RequestFault> {
+        let instance = channel.instance;
+        let bits = self.transact(channel.address, &Request::Read { id, instance })?;
+        Ok(bits.unwrap_or(0))
     }
 
-    fn read_f32(&mut self, channel: MecomChannel, id: u16) -> Result<f64, Failure> {
-        let bits = self.transact(
-            channel.address,
-            &Request::Read {
-                id,
-                instance: channel.instance,
-            },
-        )?;
-        Ok(f64::from(f32::from_bits(bits.unwrap_or(0))))
+    fn read_i32(&mut self, channel: MecomChannel, id: u16) -> Result<i32, RequestFault> {
+        Ok(self.read_bits(channel, id)? as i32)
     }
 
-    fn set(&mut self, channel: MecomChannel, request: Request) -> Result<(), Failure> {
+    fn read_f32(&mut self, channel: MecomChannel, id: u16) -> Result<f64, RequestFault> {
+        Ok(f64::from(f32::from_bits(self.read_bits(channel, id)?)))
+    }
+
+    fn set(&mut self, channel: MecomChannel, request: Request) -> Result<(), RequestFault> {
         self.transact(channel.address, &request).map(|_| ())
     }
 }
@@ -393,7 +377,7 @@ struct ChannelSetup {
 
 /// A Meerstetter TEC controller (or several on one bus) over MeCom. See the module documentation.
 pub struct MecomDevice {
-    name: String,
+    name: PathBuf,
     config: MecomConfig,
     channels: Vec<ChannelSetup>,
     identity: Vec<(u8, String)>,
@@ -417,30 +401,24 @@ impl MecomDevice {
     /// Opens the serial port `path` (raw, 8N1, [`MecomConfig::baud_rate`]), connects and configures the device.
     pub fn open_serial(path: &str, config: &MecomConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
         config.validate()?;
-        let port = serialport::new(path, config.baud_rate)
-            .timeout(Duration::from_millis(2))
-            .open()
-            .map_err(|e| DeviceError::Link(format!("cannot open serial port {path}: {e}")))?;
-        let _ = port.clear(serialport::ClearBuffer::Input);
+        let port = host::open_serial(
+            path,
+            config.baud_rate,
+            Duration::from_millis(2),
+            serialport::ClearBuffer::Input,
+        )?;
         MecomDevice::open(&format!("mecom:{path}"), Box::new(port), config, clock)
     }
 
     /// Connects to `address` (`HOST:PORT`) over TCP, then connects and configures the device.
     pub fn open_tcp(address: &str, config: &MecomConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
         config.validate()?;
-        let link = |what: &str, e: io::Error| DeviceError::Link(format!("{what} {address}: {e}"));
-        let target = address
-            .to_socket_addrs()
-            .map_err(|e| link("cannot resolve", e))?
-            .next()
-            .ok_or_else(|| DeviceError::Link(format!("{address} resolves to no address")))?;
-        let timeout = Duration::from_secs_f64(config.handshake_timeout_s);
-        let stream = TcpStream::connect_timeout(&target, timeout).map_err(|e| link("cannot connect to", e))?;
-        stream
-            .set_read_timeout(Some(Duration::from_millis(2)))
-            .and_then(|()| stream.set_write_timeout(Some(Duration::from_millis(100))))
-            .and_then(|()| stream.set_nodelay(true))
-            .map_err(|e| link("cannot configure the connection to", e))?;
+        let stream = host::open_tcp(
+            address,
+            Duration::from_secs_f64(config.handshake_timeout_s),
+            Duration::from_millis(2),
+            Duration::from_millis(100),
+        )?;
         MecomDevice::open(&format!("mecom-tcp:{address}"), Box::new(stream), config, clock)
     }
 
@@ -455,27 +433,28 @@ impl MecomDevice {
     ) -> Result<Self, DeviceError> {
         config.validate()?;
         let mut link = Link {
-            name: name.to_string(),
+            name: PathBuf::from(name),
             port,
             decoder: FrameDecoder::new(DEVICE_CONTROL),
             // The specification recommends a random start; the time is random enough and keeps tests deterministic
             // in what matters (answers are matched by sequence number, whatever it starts at).
             seq: (clock.now_s() * 1e6) as u64 as u16,
-            answer_timeout: Duration::from_secs_f64(config.answer_timeout_s),
+            clock: Arc::clone(&clock),
+            answer_timeout_s: config.answer_timeout_s,
             out: Vec::with_capacity(64),
             buf: [0; 256],
             stats: MecomStats::default(),
             answered: 0,
             round_trip_total_s: 0.0,
         };
-        let deadline = Instant::now() + Duration::from_secs_f64(config.handshake_timeout_s);
-        let (channels, identity) = connect(&mut link, config, deadline)?;
+        let deadline_s = clock.now_s() + config.handshake_timeout_s;
+        let (channels, identity) = connect(&mut link, config, deadline_s).map_err(|e| link.error(e))?;
         let shared = Arc::new(Mutex::new(Shared {
             tracks: vec![Track::default(); MAX_CHANNELS],
             ..Shared::default()
         }));
         let mut device = MecomDevice {
-            name: name.to_string(),
+            name: PathBuf::from(name),
             config: config.clone(),
             channels,
             identity,
@@ -495,10 +474,7 @@ impl MecomDevice {
         };
         worker.cycle();
         let stop = Arc::clone(&device.stop);
-        let thread = std::thread::Builder::new()
-            .name("thermode-mecom".to_string())
-            .spawn(move || worker.run(&stop))
-            .map_err(|e| DeviceError::Link(format!("cannot start the MeCom worker: {e}")))?;
+        let thread = start_thread(&device.name, "thermode-mecom", move || worker.run(&stop))?;
         device.worker = Some(thread);
         Ok(device)
     }
@@ -532,9 +508,12 @@ impl MecomDevice {
     }
 
     fn lock(&self) -> Result<MutexGuard<'_, Shared>, DeviceError> {
-        self.shared
-            .lock()
-            .map_err(|_| DeviceError::Link(format!("{}: the MeCom worker failed", self.name)))
+        self.shared.lock().map_err(|_| self.error(LinkFault::ReaderFailed))
+    }
+
+    /// The link error `fault` of this device.
+    fn error(&self, fault: LinkFault) -> DeviceError {
+        LinkError::device(&self.name, fault).into()
     }
 
     fn check_channel(&self, channel: usize) -> Result<(), DeviceError> {
@@ -550,10 +529,10 @@ impl MecomDevice {
 /// The configured channels and each address's identity.
 type Connected = (Vec<ChannelSetup>, Vec<(u8, String)>);
 
-/// Identifies the device(s), finds the channels and configures them. Returns the channels and identities.
-fn connect(link: &mut Link, config: &MecomConfig, deadline: Instant) -> Result<Connected, DeviceError> {
-    let name = link.name.clone();
-    let fail = |what: String| DeviceError::Link(format!("{name}: {what}"));
+/// Identifies the device(s), finds the channels and configures them, before `deadline_s` on the link's clock.
+/// Returns the channels and identities.
+fn connect(link: &mut Link, config: &MecomConfig, deadline_s: f64) -> Result<Connected, LinkFault> {
+    let fail = |setup: MecomSetup| LinkFault::Setup(setup);
     let mut addresses: Vec<u8> = config.channels.iter().map(|c| c.address).collect();
     if addresses.is_empty() {
         addresses.push(config.discover_address);
@@ -561,34 +540,10 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline: Instant) -> Result<C
     addresses.dedup();
     let mut identity = Vec::new();
     for &address in &addresses {
-        identity.push((address, identify(link, address, deadline)?));
+        identity.push((address, identify(link, address, deadline_s)?));
     }
-    let channels: Vec<MecomChannel> = if config.channels.is_empty() {
-        let first = MecomChannel {
-            address: config.discover_address,
-            instance: 1,
-        };
-        let count = link
-            .transact(
-                first.address,
-                &Request::Meta {
-                    id: param::OBJECT_TEMPERATURE,
-                    instance: 1,
-                },
-            )
-            .map_err(|e| fail(format!("cannot count the TEC instances (?VM of parameter 1000): {e}")))?
-            .unwrap_or(0) as usize;
-        if count == 0 || count > MAX_CHANNELS {
-            return Err(fail(format!(
-                "the device has {count} TEC instances; thermode drives 1 to {MAX_CHANNELS}"
-            )));
-        }
-        (1..=count as u8)
-            .map(|instance| MecomChannel {
-                address: config.discover_address,
-                instance,
-            })
-            .collect()
+    let channels = if config.channels.is_empty() {
+        discover(link, config.discover_address)?
     } else {
         config.channels.clone()
     };
@@ -597,30 +552,31 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline: Instant) -> Result<C
         let probe = MecomChannel { address, instance: 1 };
         let device_status = link
             .read_i32(probe, param::DEVICE_STATUS)
-            .map_err(|e| fail(format!("cannot read the device status (104) of address {address}: {e}")))?;
+            .map_err(|why| fail(MecomSetup::ReadStatus { address, why }))?;
         if device_status == status::ERROR {
             let number = link.read_i32(probe, param::ERROR_NUMBER).unwrap_or(-1);
             if !config.reset_on_error {
-                return Err(fail(format!(
-                    "address {address} is in its error state, error {number} ({}); clear it or allow the reset",
-                    describe_error(number)
-                )));
+                return Err(fail(MecomSetup::InErrorState {
+                    address,
+                    number,
+                    meaning: describe_error(number),
+                }));
             }
             link.set(probe, Request::Reset)
-                .map_err(|e| fail(format!("cannot reset address {address} from error {number}: {e}")))?;
+                .map_err(|why| fail(MecomSetup::Reset { address, number, why }))?;
             link.stats.reset_at_connect = Some(number);
             // No pause: the device restarts within 200 ms, and `?IF` until it answers also keeps a stored watchdog
             // fed from its first moment.
-            identify(link, address, deadline)?;
+            identify(link, address, deadline_s)?;
         }
     }
     let mut setups = Vec::with_capacity(channels.len());
     for &channel in &channels {
-        configure(link, config, channel).map_err(&fail)?;
+        configure(link, config, channel).map_err(fail)?;
         let sign = match link.read_i32(channel, param::POSITIVE_CURRENT_IS) {
             Ok(0) => -1.0,
             Ok(_) => 1.0,
-            Err(e) => return Err(fail(format!("cannot read 'positive current is' (3034): {e}"))),
+            Err(why) => return Err(fail(MecomSetup::ReadSign(why))),
         };
         setups.push(ChannelSetup { channel, sign });
     }
@@ -630,13 +586,12 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline: Instant) -> Result<C
             probe,
             Request::set_f32(param::WATCHDOG_TIMEOUT, 1, config.watchdog_s as f32),
         )
-        .map_err(|e| {
-            fail(format!(
-                "address {address} did not take the communication watchdog (2060 = {} s): {e}. thermode drives \
-                     no TEC controller that keeps its output on when the host is gone: update its firmware, or \
-                     use its hardware enable with a dead-man switch (docs/hardware.md)",
-                config.watchdog_s
-            ))
+        .map_err(|why| {
+            fail(MecomSetup::Watchdog {
+                address,
+                watchdog_s: config.watchdog_s,
+                why,
+            })
         })?;
     }
     for setup in &setups {
@@ -645,34 +600,54 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline: Instant) -> Result<C
             link.read_i32(setup.channel, param::ERROR_NUMBER),
         );
         if let (Ok(status::ERROR), Ok(number)) = (device_status, number) {
-            return Err(fail(format!(
-                "address {} entered its error state while being configured: error {number} ({})",
-                setup.channel.address,
-                describe_error(number)
-            )));
+            return Err(fail(MecomSetup::ErrorWhileConfiguring {
+                address: setup.channel.address,
+                number,
+                meaning: describe_error(number),
+            }));
         }
     }
     Ok((setups, identity))
 }
 
-/// `?IF` to `address` until it answers or `deadline`.
-fn identify(link: &mut Link, address: u8, deadline: Instant) -> Result<String, DeviceError> {
-    let mut last = String::from("no answer");
-    while Instant::now() < deadline {
+/// Every instance of `address` (counted with `?VM` on its object temperature).
+fn discover(link: &mut Link, address: u8) -> Result<Vec<MecomChannel>, LinkFault> {
+    let count = link
+        .transact(
+            address,
+            &Request::Meta {
+                id: param::OBJECT_TEMPERATURE,
+                instance: 1,
+            },
+        )
+        .map_err(|why| LinkFault::Setup(MecomSetup::CountInstances(why)))?
+        .unwrap_or(0) as usize;
+    if count == 0 || count > MAX_CHANNELS {
+        return Err(LinkFault::Setup(MecomSetup::InstanceCount {
+            count,
+            max: MAX_CHANNELS,
+        }));
+    }
+    Ok((1..=count as u8)
+        .map(|instance| MecomChannel { address, instance })
+        .collect())
+}
+
+/// `?IF` to `address` until it answers or `deadline_s` on the link's clock.
+fn identify(link: &mut Link, address: u8, deadline_s: f64) -> Result<String, LinkFault> {
+    let mut last = RequestFault::NoAnswer;
+    while link.clock.now_s() < deadline_s {
         link.seq = link.seq.wrapping_add(1);
         match link.transact(address, &Request::Identify) {
             Ok(_) => {
                 // The identity text itself: ask once more and keep the payload (check_answer only checks its length).
                 return Ok(identity_text(link, address).unwrap_or_default());
             }
-            Err(Failure::Io(e)) => return Err(DeviceError::Link(format!("{}: {e}", link.name))),
-            Err(e) => last = e.to_string(),
+            Err(port @ RequestFault::Port { .. }) => return Err(LinkFault::Request(port)),
+            Err(e) => last = e,
         }
     }
-    Err(DeviceError::Link(format!(
-        "{}: address {address} did not identify itself (?IF) before the handshake timeout: {last}",
-        link.name
-    )))
+    Err(LinkFault::Setup(MecomSetup::NoIdentity { address, last }))
 }
 
 /// The identity string of `address` (one more `?IF`, keeping the payload).
@@ -682,16 +657,17 @@ fn identity_text(link: &mut Link, address: u8) -> Option<String> {
     encode_frame(HOST_CONTROL, address, link.seq, "?IF", &mut link.out);
     link.port.write_all(&link.out).ok()?;
     link.port.flush().ok()?;
-    link.await_answer(address, Instant::now())
+    let sent_s = link.clock.now_s();
+    link.await_answer(address, sent_s)
         .ok()
         .flatten()
         .map(|s| s.trim_end().to_string())
 }
 
 /// The per-channel configuration: output off first, then the device's own limits, then the mode.
-fn configure(link: &mut Link, config: &MecomConfig, channel: MecomChannel) -> Result<(), String> {
+fn configure(link: &mut Link, config: &MecomConfig, channel: MecomChannel) -> Result<(), MecomSetup> {
     let i = channel.instance;
-    let mut steps: Vec<(&str, Request)> = vec![
+    let mut steps: Vec<(&'static str, Request)> = vec![
         (
             "output stage enable off (2010 = 0)",
             Request::set_i32(param::OUTPUT_STAGE_ENABLE, i, 0),
@@ -743,7 +719,7 @@ fn configure(link: &mut Link, config: &MecomConfig, channel: MecomChannel) -> Re
         MecomMode::Temperature => {
             let object_c = link
                 .read_f32(channel, param::OBJECT_TEMPERATURE)
-                .map_err(|e| format!("cannot read the object temperature (1000): {e}"))?;
+                .map_err(MecomSetup::ReadObject)?;
             steps.push((
                 "live target at the plate (50012)",
                 Request::set_f32(param::LIVE_TARGET, i, object_c as f32),
@@ -762,9 +738,13 @@ fn configure(link: &mut Link, config: &MecomConfig, channel: MecomChannel) -> Re
         "output stage enable live off/on (2010 = 2)",
         Request::set_i32(param::OUTPUT_STAGE_ENABLE, i, 2),
     ));
-    for (what, request) in steps {
-        link.set(channel, request)
-            .map_err(|e| format!("address {} instance {i} refused {what}: {e}", channel.address))?;
+    for (step, request) in steps {
+        link.set(channel, request).map_err(|why| MecomSetup::Refused {
+            address: channel.address,
+            instance: i,
+            step,
+            why,
+        })?;
     }
     Ok(())
 }
@@ -782,14 +762,15 @@ struct Worker {
 
 impl Worker {
     fn run(mut self, stop: &AtomicBool) {
-        let interval = Duration::from_secs_f64(self.config.cycle_interval_s);
+        let interval_s = self.config.cycle_interval_s;
         while !stop.load(Ordering::SeqCst) {
-            let start = Instant::now();
+            let start_s = self.clock.now_s();
             if !self.cycle() {
                 return;
             }
-            if let Some(rest) = interval.checked_sub(start.elapsed()) {
-                std::thread::sleep(rest);
+            let rest_s = interval_s - (self.clock.now_s() - start_s);
+            if rest_s >= 0.0 {
+                std::thread::sleep(Duration::from_secs_f64(rest_s));
             }
         }
         // Dropped: every output off before the worker ends.
@@ -798,7 +779,7 @@ impl Worker {
 
     /// One cycle over every channel; false when the port failed.
     fn cycle(&mut self) -> bool {
-        let start = Instant::now();
+        let start_s = self.clock.now_s();
         let (commands, off_requested) = match self.shared.lock() {
             Ok(state) => (state.commands, state.off_requested),
             Err(_) => return false,
@@ -813,14 +794,14 @@ impl Worker {
             }
         }
         for (index, command) in commands.into_iter().enumerate().take(self.channels.len()) {
-            if let Err(Failure::Io(e)) = self.drive(index, command) {
-                return self.port_failed(e);
+            if let Err(port @ RequestFault::Port { .. }) = self.drive(index, command) {
+                return self.port_failed(port);
             }
-            if let Err(Failure::Io(e)) = self.sample(index) {
-                return self.port_failed(e);
+            if let Err(port @ RequestFault::Port { .. }) = self.sample(index) {
+                return self.port_failed(port);
             }
         }
-        let elapsed_s = start.elapsed().as_secs_f64();
+        let elapsed_s = self.clock.now_s() - start_s;
         self.link.stats.cycles += 1;
         self.link.stats.last_cycle_s = elapsed_s;
         self.link.stats.max_cycle_s = self.link.stats.max_cycle_s.max(elapsed_s);
@@ -830,16 +811,16 @@ impl Worker {
         true
     }
 
-    fn port_failed(&mut self, error: String) -> bool {
+    fn port_failed(&mut self, fault: RequestFault) -> bool {
         if let Ok(mut state) = self.shared.lock() {
-            state.error = Some(format!("{}: {error}", self.link.name));
+            state.error = Some(LinkFault::Request(fault));
             state.stats = self.link.stats;
         }
         false
     }
 
     /// Writes channel `index`'s command: the live current or target, and live enable when it changes.
-    fn drive(&mut self, index: usize, command: Command) -> Result<(), Failure> {
+    fn drive(&mut self, index: usize, command: Command) -> Result<(), RequestFault> {
         let ChannelSetup { channel, sign } = self.channels[index];
         let i = channel.instance;
         let (enable, value) = match self.config.mode {
@@ -883,9 +864,9 @@ impl Worker {
     }
 
     /// Reads channel `index`'s object and sink temperature, current, voltage, status and error number.
-    fn sample(&mut self, index: usize) -> Result<(), Failure> {
+    fn sample(&mut self, index: usize) -> Result<(), RequestFault> {
         let ChannelSetup { channel, sign } = self.channels[index];
-        let read = (|| -> Result<Track, Failure> {
+        let read = (|| -> Result<Track, RequestFault> {
             let object_c = self.link.read_f32(channel, param::OBJECT_TEMPERATURE)?;
             Ok(Track {
                 time_s: self.clock.now_s(),
@@ -922,9 +903,9 @@ impl Worker {
         }
     }
 
-    fn note_failure(&mut self, index: usize, failure: &Failure) {
+    fn note_failure(&mut self, index: usize, failure: &RequestFault) {
         if let Some(track) = self.shared.lock().ok().as_mut().and_then(|s| s.tracks.get_mut(index)) {
-            track.last_failure = Some(failure.to_string());
+            track.last_failure = Some(*failure);
         }
     }
 
@@ -953,7 +934,7 @@ impl Device for MecomDevice {
         }
         let mut state = self.lock()?;
         if let Some(error) = &state.error {
-            return Err(DeviceError::Link(error.clone()));
+            return Err(self.error(error.clone()));
         }
         state.commands[channel] = Command {
             current_a,
@@ -967,7 +948,7 @@ impl Device for MecomDevice {
         let now_s = self.clock.now_s();
         let state = self.lock()?;
         if let Some(error) = &state.error {
-            return Err(DeviceError::Link(error.clone()));
+            return Err(self.error(error.clone()));
         }
         let Some(track) = state.tracks.get(channel) else {
             return Err(DeviceError::NoSuchChannel {
@@ -976,18 +957,16 @@ impl Device for MecomDevice {
             });
         };
         let Some(last_s) = track.last_answer_s else {
-            return Err(DeviceError::Link(format!(
-                "{}: no reading of channel {channel} yet",
-                self.name
-            )));
+            return Err(self.error(LinkFault::NoReading { channel }));
         };
         let silent_s = now_s - last_s;
         if silent_s > self.config.link_timeout_s {
-            let why = track.last_failure.as_deref().unwrap_or("no answer");
-            return Err(DeviceError::Link(format!(
-                "{}: channel {channel} has not answered for {silent_s:.3} s (link timeout {} s): {why}",
-                self.name, self.config.link_timeout_s
-            )));
+            return Err(self.error(LinkFault::NotAnswered {
+                channel,
+                silent_s,
+                timeout_s: self.config.link_timeout_s,
+                why: track.last_failure.unwrap_or(RequestFault::NoAnswer),
+            }));
         }
         if track.device_status == status::ERROR {
             return Err(match track.error_number {
@@ -999,12 +978,10 @@ impl Device for MecomDevice {
                     channel,
                     cut: DeviceCut::UnderTemperature,
                 },
-                number => DeviceError::Link(format!(
-                    "{}: the device is in its error state with its output off: error {number} ({}); reconnect \
-                     to reset it",
-                    self.name,
-                    describe_error(number)
-                )),
+                number => self.error(LinkFault::ErrorState {
+                    number,
+                    meaning: describe_error(number),
+                }),
             });
         }
         Ok(Reading {
@@ -1031,23 +1008,20 @@ impl Device for MecomDevice {
         };
         let wait_s = self.config.cycle_interval_s
             + 2.0 * (1.0 + self.channels.len() as f64) * 4.0 * self.config.answer_timeout_s;
-        let deadline = Instant::now() + Duration::from_secs_f64(wait_s);
-        while Instant::now() < deadline {
+        let deadline_s = self.clock.now_s() + wait_s;
+        while self.clock.now_s() < deadline_s {
             {
                 let state = self.lock()?;
                 if state.off_done >= wanted {
                     return Ok(());
                 }
                 if let Some(error) = &state.error {
-                    return Err(DeviceError::Link(error.clone()));
+                    return Err(self.error(error.clone()));
                 }
             }
             std::thread::sleep(Duration::from_millis(1));
         }
-        Err(DeviceError::Link(format!(
-            "{}: the device did not acknowledge switching every output off within {wait_s:.2} s",
-            self.name
-        )))
+        Err(self.error(LinkFault::OffNotAcknowledged { wait_s }))
     }
 }
 

@@ -1,4 +1,4 @@
-//! Meerstetter TEC controllers over MeCom: the frame codec ([`frame`]), payloads and parameters ([`payload`]), the
+//! Meerstetter TEC controllers over MeCom: the frame codec ([`codec::frame`]), payloads and parameters ([`codec::payload`]), the
 //! host side ([`host::MecomDevice`], `--device mecom:PATH` or `mecom-tcp:HOST:PORT`) and the device side emulated
 //! ([`emulator::MecomEmulator`], `thermode emulate --protocol mecom`).
 //!
@@ -9,7 +9,6 @@
 //! *TEC-Family User Manual* 5216G (device status, error numbers, error state and its auto-restart delay).
 //! `docs/hardware.md` says which parameters thermode writes and why.
 
+pub mod codec;
 pub mod emulator;
-pub mod frame;
 pub mod host;
-pub mod payload;

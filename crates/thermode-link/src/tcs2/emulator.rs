@@ -14,11 +14,11 @@
 //! even when muted (a test of the host's separation of streamed lines from replies). Unknown bytes are skipped and
 //! counted.
 
-use thermode_device::{Device, PlateFinger, SimulatedDisplay, MAX_CHANNELS};
+use thermode_device::{Device, PlateFinger, SimulatedDisplay};
 
-use super::protocol::{parse_command, Command, ParseStep, Temperatures, TCS2_ZONES};
-use crate::emulator::EmulatorError;
-use crate::firmware::{Firmware, FirmwareStatus};
+use super::codec::{parse_command, Command, ParseStep, Temperatures, TCS2_ZONES};
+use crate::runner::EmulatorError;
+use crate::runner::{merged_step_s, tick_at, Firmware, FirmwareStatus};
 
 /// Settings of the emulated stimulator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -133,20 +133,7 @@ impl<F: PlateFinger> Tcs2Emulator<F> {
         })
     }
 
-    /// Stimulator time \[s\].
-    pub fn time_s(&self) -> f64 {
-        self.tick as f64 * self.config.tick_s
-    }
-
-    /// The simulated display.
-    pub fn display(&self) -> &SimulatedDisplay<F> {
-        &self.display
-    }
-
-    /// The simulated display, mutable.
-    pub fn display_mut(&mut self) -> &mut SimulatedDisplay<F> {
-        &mut self.display
-    }
+    crate::runner::display_accessors!();
 
     /// Whether it is in follow mode.
     pub fn following(&self) -> bool {
@@ -353,12 +340,10 @@ impl<F: PlateFinger + Send> Firmware for Tcs2Emulator<F> {
     }
 
     fn advance_to(&mut self, now_s: f64, out: &mut Vec<u8>) {
-        if !now_s.is_finite() {
+        let Some(target) = tick_at(now_s, self.config.tick_s) else {
             return;
-        }
-        let target = (now_s / self.config.tick_s + 1e-9).floor().max(0.0) as u64;
-        if target > self.tick + (0.1 / self.config.tick_s) as u64 {
-            let dt_s = (target - self.tick) as f64 * self.config.tick_s;
+        };
+        if let Some(dt_s) = merged_step_s(self.tick, target, self.config.tick_s) {
             self.tick = target;
             self.step(dt_s);
         }
@@ -374,15 +359,8 @@ impl<F: PlateFinger + Send> Firmware for Tcs2Emulator<F> {
     }
 
     fn status(&self) -> FirmwareStatus {
-        let mut status = FirmwareStatus::new(self.zones.len());
-        status.time_s = self.time_s();
-        for (i, zone) in self.zones.iter().enumerate().take(MAX_CHANNELS) {
-            if let Ok(channel) = self.display.channel(i) {
-                status.plate_c[i] = channel.state().plate_c;
-            }
-            status.applied_a[i] = zone.applied_a;
-            status.output_on[i] = true;
-        }
+        let zone = |i: usize| self.zones.get(i).map_or((0.0, false), |zone| (zone.applied_a, true));
+        let mut status = FirmwareStatus::of_display(&self.display, self.zones.len(), self.time_s(), zone);
         status.frames_in = self.commands;
         status.frames_refused = self.skipped_bytes;
         status.frames_out = self.lines_out;

@@ -22,17 +22,18 @@
 //!   that fails, or a zone in error (`Q`).
 
 use std::io::{Read, Write};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
-use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::sync::Arc;
+use std::time::Duration;
 
 use thermode_model::{BadValue, Rule};
 use thermode_platform::Clock;
-use thermode_safety::DriveCommand;
+use thermode_safety::{DriveCommand, ABSOLUTE_MAX_C};
 
-use super::protocol::{tenths, Command, Line, LineDecoder, TCS2_BAUD_RATE, TCS2_MAX_C, TCS2_MIN_C, TCS2_ZONES};
-use thermode_device::{Device, DeviceError, Reading};
+use super::codec::{
+    tenths, Command, Line as TextLine, LineDecoder, TCS2_BAUD_RATE, TCS2_MAX_C, TCS2_MIN_C, TCS2_ZONES,
+};
+use crate::host::{self, Line, LineState, OnLine, ReaderSpec};
+use thermode_device::{Awaited, Device, DeviceError, LinkFault, Reading, Silence};
 
 /// The warmest set-point thermode streams to a TCS II in follow mode by default \[°C\]: 43 (the temperature a
 /// finger can rest on indefinitely: IEC 60601-1 allows 43 °C for long skin contact, and 43 °C is CEM43's reference,
@@ -62,7 +63,7 @@ pub struct Tcs2Config {
     pub error_poll_interval_s: f64,
     /// Longest time without a temperature line before readings fail \[s\], in (0, 10]. Default 0.5.
     pub link_timeout_s: f64,
-    /// Longest time for the connection \[s\], wall clock, in (0, 60]. Default 3.
+    /// Longest time for the connection \[s\], on the host clock, in (0, 60]. Default 3.
     pub handshake_timeout_s: f64,
 }
 
@@ -73,7 +74,7 @@ impl Default for Tcs2Config {
             neutral_c: 32.0,
             hold_max_c: DEFAULT_HOLD_MAX_C,
             hold_min_c: 15.0,
-            max_c: 48.0,
+            max_c: ABSOLUTE_MAX_C,
             speed_c_per_s: 10.0,
             poll_interval_s: 0.01,
             error_poll_interval_s: 0.5,
@@ -142,7 +143,8 @@ pub struct Tcs2Stats {
 }
 
 #[derive(Debug, Default)]
-struct Shared {
+pub(crate) struct Shared {
+    decoder: LineDecoder,
     identified: bool,
     sample_seq: u64,
     time_s: f64,
@@ -151,31 +153,30 @@ struct Shared {
     last_line_s: Option<f64>,
     error_codes: Option<Vec<u8>>,
     stats: Tcs2Stats,
-    error: Option<String>,
+    error: Option<LinkFault>,
 }
 
-/// The reader thread: splits what the stimulator sends into lines for `shared` until `stop` or a port error.
-fn read_port(port: Box<dyn Read + Send>, shared: Arc<Mutex<Shared>>, stop: Arc<AtomicBool>, clock: Arc<dyn Clock>) {
-    let mut decoder = LineDecoder::new();
-    let received = |bytes: &[u8], now_s: f64| {
-        let Ok(mut state) = shared.lock() else {
-            return false;
-        };
-        decoder.feed(bytes, |line| state.take(line, now_s));
-        true
-    };
-    let failed = |message| {
-        if let Ok(mut state) = shared.lock() {
-            state.error = Some(message);
-        }
-    };
-    crate::port::read_until_stopped(port, &stop, clock.as_ref(), 512, received, failed);
+impl LineState for Shared {
+    /// Splits what the stimulator sent into lines.
+    fn take(&mut self, bytes: &[u8], now_s: f64) {
+        let mut decoder = std::mem::take(&mut self.decoder);
+        decoder.feed(bytes, |line| self.take_line(line, now_s));
+        self.decoder = decoder;
+    }
+
+    fn port_fault(&self) -> Option<&LinkFault> {
+        self.error.as_ref()
+    }
+
+    fn set_port_fault(&mut self, fault: LinkFault) {
+        self.error = Some(fault);
+    }
 }
 
 impl Shared {
-    fn take(&mut self, line: Result<Line, super::protocol::LineError>, now_s: f64) {
+    fn take_line(&mut self, line: Result<TextLine, super::codec::LineError>, now_s: f64) {
         match line {
-            Ok(Line::Temperatures(t)) => {
+            Ok(TextLine::Temperatures(t)) => {
                 self.stats.temperature_lines += 1;
                 self.sample_seq += 1;
                 self.time_s = self.time_s.max(now_s);
@@ -184,37 +185,36 @@ impl Shared {
                 self.neutral_c = t.neutral_c;
                 self.last_line_s = Some(now_s);
             }
-            Ok(Line::Identity) => {
+            Ok(TextLine::Identity) => {
                 self.stats.identity_replies += 1;
                 self.identified = true;
             }
-            Ok(Line::ErrorState(codes)) => {
+            Ok(TextLine::ErrorState(codes)) => {
                 self.stats.error_replies += 1;
                 self.error_codes = Some(codes);
             }
-            Ok(Line::Other(_)) => self.stats.other_lines += 1,
+            Ok(TextLine::Other(_)) => self.stats.other_lines += 1,
             Err(_) => self.stats.dropped_lines += 1,
         }
     }
 }
 
+/// The reader thread of a TCS II link.
+const READER: ReaderSpec = ReaderSpec {
+    thread: "thermode-tcs2-reader",
+    buffer_len: 512,
+};
+
 /// A TCS II stimulator in follow mode. See the module documentation.
 pub struct Tcs2Device {
-    name: String,
+    line: Line<Shared>,
     config: Tcs2Config,
-    writer: Box<dyn Write + Send>,
-    shared: Arc<Mutex<Shared>>,
-    stop: Arc<AtomicBool>,
-    reader: Option<JoinHandle<()>>,
-    join_reader: bool,
-    clock: Arc<dyn Clock>,
     /// Tenths of a degree last sent per zone (None: not since follow mode was entered).
     sent: [Option<u16>; TCS2_ZONES],
     following: bool,
     last_poll_s: f64,
     last_error_poll_s: f64,
     out: Vec<u8>,
-    failed: Option<String>,
     polls: u64,
     setpoints_sent: u64,
 }
@@ -222,7 +222,7 @@ pub struct Tcs2Device {
 impl std::fmt::Debug for Tcs2Device {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Tcs2Device")
-            .field("name", &self.name)
+            .field("name", &self.line.name)
             .field("config", &self.config)
             .finish_non_exhaustive()
     }
@@ -232,23 +232,16 @@ impl Tcs2Device {
     /// Opens the serial port `path` (115200 8N1), connects and enters follow mode.
     pub fn open(path: &str, config: &Tcs2Config, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
         config.validate()?;
-        let link = |what: &str, e: serialport::Error| DeviceError::Link(format!("{what} {path}: {e}"));
-        let port = serialport::new(path, TCS2_BAUD_RATE)
-            .timeout(Duration::from_millis(5))
-            .open()
-            .map_err(|e| link("cannot open serial port", e))?;
-        let _ = port.clear(serialport::ClearBuffer::Input);
-        let mut writer = port.try_clone().map_err(|e| link("cannot share serial port", e))?;
-        writer
-            .set_timeout(Duration::from_millis(50))
-            .map_err(|e| link("cannot set the write timeout of", e))?;
+        let port = host::open_serial(
+            path,
+            TCS2_BAUD_RATE,
+            Duration::from_millis(5),
+            serialport::ClearBuffer::Input,
+        )?;
+        let streams = host::split(port, path, Duration::from_millis(50))?;
         Tcs2Device::start(
-            &format!("tcs2:{path}"),
-            Box::new(port),
-            Box::new(writer),
+            Line::start(&format!("tcs2:{path}"), streams, clock, &READER, true)?,
             config,
-            clock,
-            true,
         )
     }
 
@@ -262,41 +255,19 @@ impl Tcs2Device {
         clock: Arc<dyn Clock>,
     ) -> Result<Self, DeviceError> {
         config.validate()?;
-        Tcs2Device::start(name, reader, writer, config, clock, false)
+        Tcs2Device::start(Line::start(name, (reader, writer), clock, &READER, false)?, config)
     }
 
-    fn start(
-        name: &str,
-        reader: Box<dyn Read + Send>,
-        writer: Box<dyn Write + Send>,
-        config: &Tcs2Config,
-        clock: Arc<dyn Clock>,
-        join_reader: bool,
-    ) -> Result<Self, DeviceError> {
-        let shared = Arc::new(Mutex::new(Shared::default()));
-        let stop = Arc::new(AtomicBool::new(false));
-        let thread = {
-            let (shared, stop, clock) = (Arc::clone(&shared), Arc::clone(&stop), Arc::clone(&clock));
-            std::thread::Builder::new()
-                .name("thermode-tcs2-reader".to_string())
-                .spawn(move || read_port(reader, shared, stop, clock))
-                .map_err(|e| DeviceError::Link(format!("cannot start the TCS II reader: {e}")))?
-        };
+    /// The stimulator on `line`, connected and in follow mode.
+    fn start(line: Line<Shared>, config: &Tcs2Config) -> Result<Self, DeviceError> {
         let mut device = Tcs2Device {
-            name: name.to_string(),
+            line,
             config: *config,
-            writer,
-            shared,
-            stop,
-            reader: Some(thread),
-            join_reader,
-            clock,
             sent: [None; TCS2_ZONES],
             following: false,
             last_poll_s: f64::NEG_INFINITY,
             last_error_poll_s: f64::NEG_INFINITY,
             out: Vec::with_capacity(64),
-            failed: None,
             polls: 0,
             setpoints_sent: 0,
         };
@@ -305,12 +276,12 @@ impl Tcs2Device {
     }
 
     fn connect(&mut self) -> Result<(), DeviceError> {
-        let deadline = Instant::now() + Duration::from_secs_f64(self.config.handshake_timeout_s);
+        let deadline_s = self.line.deadline_s(self.config.handshake_timeout_s);
         self.wait_for(
-            deadline,
+            deadline_s,
             Command::Identify,
             |s| s.identified,
-            "did not answer TCS to '?'",
+            Awaited::StimulatorIdentity,
         )?;
         let c = self.config;
         let t = |celsius: f64| tenths(celsius).unwrap_or(0);
@@ -334,53 +305,41 @@ impl Tcs2Device {
         }
         self.enter_follow()?;
         self.wait_for(
-            deadline,
+            deadline_s,
             Command::ErrorState,
             |s| s.error_codes.is_some(),
-            "did not answer 'Q'",
+            Awaited::StimulatorErrorState,
         )?;
         let first = self.lock()?.sample_seq;
         self.wait_for(
-            deadline,
+            deadline_s,
             Command::Temperatures,
             |s| s.sample_seq > first,
-            "sent no temperatures",
+            Awaited::StimulatorTemperatures,
         )?;
-        if let Some(why) = self.zone_error(None)? {
-            return Err(DeviceError::Link(why));
+        if let Some(fault) = self.zone_error(None)? {
+            return Err(self.line.error(fault));
         }
         Ok(())
     }
 
-    /// Sends `command` every 0.1 s until `done` holds, or `deadline`.
+    /// Sends `command` every 0.1 s until `done` holds, or `deadline_s` on the clock.
     fn wait_for(
         &mut self,
-        deadline: Instant,
+        deadline_s: f64,
         command: Command,
         done: impl Fn(&Shared) -> bool,
-        what: &str,
+        awaited: Awaited,
     ) -> Result<(), DeviceError> {
-        let mut next = Instant::now();
-        while Instant::now() < deadline {
-            {
-                let state = self.lock()?;
-                if let Some(error) = &state.error {
-                    return Err(DeviceError::Link(format!("{}: {error}", self.name)));
-                }
-                if done(&state) {
-                    return Ok(());
-                }
-            }
-            if Instant::now() >= next {
-                self.send(command)?;
-                next = Instant::now() + Duration::from_millis(100);
-            }
-            std::thread::sleep(Duration::from_millis(1));
+        let send = |device: &mut Tcs2Device| device.send(command);
+        match host::retry_until(self, deadline_s, 0.1, send, |s| done(s).then_some(()))? {
+            Some(()) => Ok(()),
+            None => Err(self.line.error(LinkFault::Handshake {
+                awaited,
+                timeout_s: self.config.handshake_timeout_s,
+                other_version: false,
+            })),
         }
-        Err(DeviceError::Link(format!(
-            "{}: the stimulator {what} within {} s",
-            self.name, self.config.handshake_timeout_s
-        )))
     }
 
     /// The settings.
@@ -396,10 +355,8 @@ impl Tcs2Device {
         stats
     }
 
-    fn lock(&self) -> Result<MutexGuard<'_, Shared>, DeviceError> {
-        self.shared
-            .lock()
-            .map_err(|_| DeviceError::Link(format!("{}: the TCS II reader failed", self.name)))
+    fn lock(&self) -> Result<std::sync::MutexGuard<'_, Shared>, DeviceError> {
+        self.line.lock()
     }
 
     fn check_channel(&self, channel: usize) -> Result<(), DeviceError> {
@@ -412,17 +369,13 @@ impl Tcs2Device {
     }
 
     fn send(&mut self, command: Command) -> Result<(), DeviceError> {
-        if let Some(error) = &self.failed {
-            return Err(DeviceError::Link(error.clone()));
-        }
+        self.line.check_failed()?;
         self.out.clear();
         command.encode(&mut self.out);
-        let result = self.writer.write_all(&self.out).and_then(|()| self.writer.flush());
-        result.map_err(|e| {
-            let message = format!("{}: serial port write failed: {e}", self.name);
-            self.failed = Some(message.clone());
-            DeviceError::Link(message)
-        })
+        let out = std::mem::take(&mut self.out);
+        let result = self.line.write(&out);
+        self.out = out;
+        result
     }
 
     /// `Od`: follow mode.
@@ -434,7 +387,7 @@ impl Tcs2Device {
 
     /// `E` and `Q` when due.
     fn keep_polling(&mut self) -> Result<(), DeviceError> {
-        let now = self.clock.now_s();
+        let now = self.line.clock.now_s();
         if now - self.last_poll_s >= self.config.poll_interval_s {
             self.last_poll_s = now;
             self.polls += 1;
@@ -448,7 +401,7 @@ impl Tcs2Device {
     }
 
     /// Why the neutral sensor or `channel`'s zone (all zones if None) is in error, from the last `Q` answer.
-    fn zone_error(&self, channel: Option<usize>) -> Result<Option<String>, DeviceError> {
+    fn zone_error(&self, channel: Option<usize>) -> Result<Option<LinkFault>, DeviceError> {
         let state = self.lock()?;
         let Some(codes) = &state.error_codes else {
             return Ok(None);
@@ -463,17 +416,21 @@ impl Tcs2Device {
             .find(|&(_, c)| c != 0);
         Ok(match (neutral, bad) {
             (0, None) => None,
-            (n, _) if n != 0 => Some(format!(
-                "{}: the stimulator reports error {n} on its neutral sensor",
-                self.name
-            )),
-            (_, Some((z, c))) => Some(format!(
-                "{}: the stimulator reports error {c} on zone {}",
-                self.name,
-                z + 1
-            )),
+            (code, _) if code != 0 => Some(LinkFault::Stimulator { zone: None, code }),
+            (_, Some((z, code))) => Some(LinkFault::Stimulator {
+                zone: Some(z + 1),
+                code,
+            }),
             _ => None,
         })
+    }
+}
+
+impl OnLine for Tcs2Device {
+    type State = Shared;
+
+    fn line(&self) -> &Line<Shared> {
+        &self.line
     }
 }
 
@@ -524,31 +481,28 @@ impl Device for Tcs2Device {
     fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
         self.check_channel(channel)?;
         self.keep_polling()?;
-        if let Some(why) = self.zone_error(Some(channel))? {
-            return Err(DeviceError::Link(why));
+        if let Some(fault) = self.zone_error(Some(channel))? {
+            return Err(self.line.error(fault));
         }
-        let now_s = self.clock.now_s();
+        let now_s = self.line.clock.now_s();
         let state = self.lock()?;
-        if let Some(error) = &state.error {
-            return Err(DeviceError::Link(format!("{}: {error}", self.name)));
-        }
+        self.line.check_port(&state)?;
         let Some(last_s) = state.last_line_s else {
-            return Err(DeviceError::Link(format!("{}: no temperatures yet", self.name)));
+            return Err(self.line.error(LinkFault::NothingYet {
+                silence: Silence::Temperatures,
+            }));
         };
         let silent_s = now_s - last_s;
         if silent_s > self.config.link_timeout_s {
-            return Err(DeviceError::Link(format!(
-                "{}: no temperatures for {silent_s:.3} s (link timeout {} s)",
-                self.name, self.config.link_timeout_s
-            )));
+            return Err(self.line.error(LinkFault::Silent {
+                silence: Silence::Temperatures,
+                silent_s,
+                timeout_s: self.config.link_timeout_s,
+            }));
         }
         let sensor_c = state.zones_c[channel];
         if !sensor_c.is_finite() {
-            return Err(DeviceError::Link(format!(
-                "{}: the stimulator's temperatures have no zone {}",
-                self.name,
-                channel + 1
-            )));
+            return Err(self.line.error(LinkFault::NoZone { zone: channel + 1 }));
         }
         Ok(Reading {
             sensor_c,
@@ -572,15 +526,10 @@ impl Device for Tcs2Device {
 }
 
 impl Drop for Tcs2Device {
+    /// `A` (back to neutral) unless the link failed; the reader ends with its field.
     fn drop(&mut self) {
-        if self.failed.is_none() {
+        if self.line.failed.is_none() {
             let _ = self.send(Command::Abort);
-        }
-        self.stop.store(true, Ordering::SeqCst);
-        if let Some(thread) = self.reader.take() {
-            if self.join_reader {
-                let _ = thread.join();
-            }
         }
     }
 }

@@ -1,4 +1,4 @@
-//! The QST.Lab TCS II thermal stimulator: its serial protocol ([`protocol`]), the host in follow mode
+//! The QST.Lab TCS II thermal stimulator: its serial protocol ([`codec`]), the host in follow mode
 //! ([`host::Tcs2Device`], `--device tcs2:PATH`) and the stimulator emulated ([`emulator::Tcs2Emulator`],
 //! `thermode emulate --protocol tcs2`).
 //!
@@ -9,6 +9,6 @@
 //! signed, in tenths of a degree). The manual itself is not public; `docs/hardware.md` lists exactly what thermode
 //! sends.
 
+pub mod codec;
 pub mod emulator;
 pub mod host;
-pub mod protocol;

@@ -9,13 +9,12 @@ use std::sync::Arc;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use thermode_device::{DeviceConfig, Fault, Polarity, SimulatedDisplay};
-use thermode_link::emulator::{
-    Emulator, EmulatorConfig, EmulatorControl, EmulatorError, LinkFaults, RunEnd, SentLog, EMULATOR_FIRMWARE,
-};
-use thermode_link::protocol::{
+use thermode_link::own::codec::{
     encode_frame, to_milli_c, write_frame, ChannelFaults, DeviceMessage, DriveFrame, Frame, HostMessage, LinkCounters,
     NackCode, ReportFlags, SensorReport, StreamDecoder,
 };
+use thermode_link::own::emulator::{Emulator, EmulatorConfig, EmulatorControl, LinkFaults, SentLog, EMULATOR_FIRMWARE};
+use thermode_link::runner::{EmulatorError, RunEnd};
 use thermode_model::kron::KronModel;
 use thermode_platform::{Clock, ManualClock};
 

@@ -1,4 +1,4 @@
-//! The emulated firmware's own over- and under-temperature cut ([`thermode_link::guard`]), without any I/O: a host
+//! The emulated firmware's own over- and under-temperature cut ([`thermode_link::own::guard`]), without any I/O: a host
 //! that commands a current and then goes silent (a 60 s watchdog, so only the device's own cut acts), on the
 //! default display and on the lagging-sensor display (τ 1.5 s). The true plate, which the firmware never sees, must
 //! not pass 48 °C (10 °C when cooling); the cut latches, is reported, keeps later drives from heating, and is
@@ -12,9 +12,9 @@ use std::sync::{Arc, Mutex};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use thermode_device::{DeviceConfig, Fault, SimulatedDisplay, LAGGING_SENSOR_DEVICE_TOML};
-use thermode_link::emulator::{Emulator, EmulatorConfig, TRACE_HEADER};
-use thermode_link::guard::{PLATE_MAX_C, PLATE_MIN_C, RELEASE_HYSTERESIS_C};
-use thermode_link::protocol::{ChannelFaults, DeviceMessage, DriveFrame, Frame, HostMessage, StreamDecoder};
+use thermode_link::own::codec::{ChannelFaults, DeviceMessage, DriveFrame, Frame, HostMessage, StreamDecoder};
+use thermode_link::own::emulator::{Emulator, EmulatorConfig, TRACE_HEADER};
+use thermode_link::own::guard::{PLATE_MAX_C, PLATE_MIN_C, RELEASE_HYSTERESIS_C};
 use thermode_model::kron::KronModel;
 
 const TICK_S: f64 = 1e-3;
@@ -59,7 +59,7 @@ struct Host {
 impl Host {
     fn send(&mut self, emu: &mut Emulator<KronModel>, message: HostMessage) {
         let mut bytes = Vec::new();
-        thermode_link::protocol::encode_frame(self.seq, &message, &mut bytes).unwrap_or_else(|e| panic!("{e}"));
+        thermode_link::own::codec::encode_frame(self.seq, &message, &mut bytes).unwrap_or_else(|e| panic!("{e}"));
         self.seq = self.seq.wrapping_add(1);
         let mut out = Vec::new();
         emu.receive(&bytes, emu.time_s(), &mut out);

@@ -17,12 +17,12 @@ use std::time::Duration;
 use proptest::prelude::*;
 use serialport::SerialPort;
 use thermode_device::{Device, DeviceConfig, DeviceError, SimulatedDisplay};
-use thermode_link::firmware::Firmware;
-use thermode_link::firmware::{FirmwareStatus, PtyFirmware, TcpFirmware};
+use thermode_link::mecom::codec::frame::{FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
+use thermode_link::mecom::codec::payload::{check_answer, Request};
 use thermode_link::mecom::emulator::{MecomEmulator, MecomEmulatorConfig};
-use thermode_link::mecom::frame::{FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
 use thermode_link::mecom::host::{MecomConfig, MecomDevice, MecomMode};
-use thermode_link::mecom::payload::{check_answer, Request};
+use thermode_link::runner::Firmware;
+use thermode_link::runner::{FirmwareStatus, PtyFirmware, TcpFirmware};
 use thermode_model::kron::KronModel;
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_safety::DriveCommand;
@@ -287,7 +287,7 @@ fn a_host_that_vanishes_trips_the_devices_watchdog_and_a_reconnect_resets_it() {
     let failed = wait_for(3.0, || control.device.read(0).is_err());
     assert!(failed.is_some(), "readings go on with the cable pulled");
     match control.device.read(0) {
-        Err(DeviceError::Link(message)) => assert!(message.contains("not answered"), "{message}"),
+        Err(DeviceError::Link(message)) => assert!(message.to_string().contains("not answered"), "{message}"),
         other => panic!("expected a link error, got {other:?}"),
     }
     println!("host-side link error after {:.3} s", clock.now_s() - cut_at);
@@ -390,7 +390,7 @@ proptest! {
             Request::Meta { id, instance },
             Request::Set { id, instance, value },
         ].iter().enumerate() {
-            thermode_link::mecom::frame::encode_frame(HOST_CONTROL, 1, seq as u16, &request.payload(), &mut bytes);
+            thermode_link::mecom::codec::frame::encode_frame(HOST_CONTROL, 1, seq as u16, &request.payload(), &mut bytes);
         }
         let mut out = Vec::new();
         emu.receive(&bytes, 0.01, &mut out);

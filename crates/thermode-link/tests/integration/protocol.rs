@@ -4,7 +4,7 @@
 //! oversized frames, sequence-gap counting.
 
 use proptest::prelude::*;
-use thermode_link::protocol::{
+use thermode_link::own::codec::{
     cobs_decode, cobs_encode, crc32, decode_payload, encode_frame, to_centi_c, to_milli_c, to_milliamps, ChannelFaults,
     ChannelReport, DecodeError, DeviceMessage, DriveFrame, FirmwareVersion, Frame, FrameDecoder, FrameError,
     HostMessage, Identify, NackCode, ReportFlags, SensorReport, StreamDecoder, WireMessage, MAX_ENCODED_LEN,
@@ -188,7 +188,7 @@ fn messages_refuse_bad_channel_ranges() {
 /// Builds a frame with a good CRC around an arbitrary payload.
 fn raw_frame(payload: &[u8]) -> Vec<u8> {
     let mut out = Vec::new();
-    thermode_link::protocol::write_frame(payload, &mut out).unwrap_or_else(|e| panic!("{e}"));
+    thermode_link::own::codec::write_frame(payload, &mut out).unwrap_or_else(|e| panic!("{e}"));
     out
 }
 
@@ -289,11 +289,11 @@ fn oversized_garbage_is_dropped_and_the_stream_resynchronises() {
 fn writing_refuses_oversized_payloads() {
     let mut out = Vec::new();
     assert_eq!(
-        thermode_link::protocol::write_frame(&[1; MAX_PAYLOAD_LEN + 1], &mut out),
+        thermode_link::own::codec::write_frame(&[1; MAX_PAYLOAD_LEN + 1], &mut out),
         Err(FrameError::Oversized { max: MAX_PAYLOAD_LEN })
     );
     assert!(out.is_empty());
-    assert!(thermode_link::protocol::write_frame(&[1; MAX_PAYLOAD_LEN], &mut out).is_ok());
+    assert!(thermode_link::own::codec::write_frame(&[1; MAX_PAYLOAD_LEN], &mut out).is_ok());
     let mut decoder = FrameDecoder::new();
     let results: Vec<_> = out
         .iter()

@@ -13,9 +13,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use thermode_device::{Device, DeviceConfig, DeviceError, Reading, SimulatedDisplay};
-use thermode_link::emulator::{Emulator, EmulatorConfig, EmulatorStatus, LinkFaults, PtyEmulator, SentLog};
-use thermode_link::protocol::DeviceMessage;
-use thermode_link::serial::{serial_path, SerialConfig, SerialDevice, MAX_DEVICE_WATCHDOG_MS};
+use thermode_link::own::codec::DeviceMessage;
+use thermode_link::own::emulator::{Emulator, EmulatorConfig, EmulatorStatus, LinkFaults, PtyEmulator, SentLog};
+use thermode_link::own::host::{serial_path, SerialConfig, SerialDevice, MAX_DEVICE_WATCHDOG_MS};
 use thermode_model::kron::KronModel;
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_safety::{EnvelopeConfig, MeasuredOnly, SafetyEnvelope};
@@ -345,7 +345,7 @@ fn a_device_that_stops_answering_is_a_link_error_within_the_timeout() {
         config.link_timeout_s
     );
     assert!(
-        matches!(&error, Some(DeviceError::Link(m)) if m.contains("no sensor report")),
+        matches!(&error, Some(DeviceError::Link(m)) if m.to_string().contains("no sensor report")),
         "{error:?}"
     );
     assert!(
@@ -434,7 +434,7 @@ fn the_watchdog_switches_drives_off_when_the_host_goes_silent() {
     });
     println!("host after the trip: {after:?}");
     assert!(
-        matches!(&after, Err(DeviceError::Link(m)) if m.contains("watchdog")),
+        matches!(&after, Err(DeviceError::Link(m)) if m.to_string().contains("watchdog")),
         "{after:?}"
     );
     // Recovery: the host commands 0 A everywhere (as a faulted envelope does); the latch is released.
@@ -458,7 +458,7 @@ fn a_missing_device_fails_the_handshake() {
     let waited = started.elapsed().as_secs_f64();
     println!("handshake with nobody: {result:?} after {waited:.3} s");
     assert!(
-        matches!(&result, Err(DeviceError::Link(m)) if m.contains("no Identify")),
+        matches!(&result, Err(DeviceError::Link(m)) if m.to_string().contains("no Identify")),
         "{result:?}"
     );
     assert!((0.29..2.0).contains(&waited), "gave up after {waited} s");
@@ -493,7 +493,8 @@ fn bad_paths_and_settings_are_errors() {
 #[test]
 fn runs_over_a_socket_pair_and_switches_off_on_drop() {
     use std::os::unix::net::UnixStream;
-    use thermode_link::emulator::{EmulatorControl, RunEnd};
+    use thermode_link::own::emulator::EmulatorControl;
+    use thermode_link::runner::RunEnd;
 
     let (mut device_end, host_end) = UnixStream::pair().unwrap_or_else(|e| panic!("socket pair: {e}"));
     device_end

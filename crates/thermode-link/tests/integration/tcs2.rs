@@ -8,10 +8,10 @@ use std::sync::Arc;
 
 use proptest::prelude::*;
 use thermode_device::{Device, DeviceConfig, SimulatedDisplay};
-use thermode_link::firmware::{Firmware, FirmwareStatus, PtyFirmware};
+use thermode_link::runner::{Firmware, FirmwareStatus, PtyFirmware};
+use thermode_link::tcs2::codec::{parse_command, Line, LineDecoder, Temperatures, TCS2_ZONES};
 use thermode_link::tcs2::emulator::{Tcs2Emulator, Tcs2EmulatorConfig};
 use thermode_link::tcs2::host::{Tcs2Config, Tcs2Device};
-use thermode_link::tcs2::protocol::{parse_command, Line, LineDecoder, Temperatures, TCS2_ZONES};
 use thermode_model::kron::KronModel;
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_safety::DriveCommand;

@@ -105,7 +105,10 @@ impl Device for SpyDevice {
     fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
         let control = self.control.lock().expect("spy control");
         if control.failing_reads.contains(&channel) {
-            return Err(DeviceError::Link("spy: read fails".into()));
+            let fault = thermode_device::LinkFault::ReadFailed {
+                kind: std::io::ErrorKind::Other,
+            };
+            return Err(DeviceError::Link(thermode_device::LinkError::device("spy", fault)));
         }
         if let Some(&(_, cut)) = control.cut_reads.iter().find(|(c, _)| *c == channel) {
             return Err(DeviceError::Cut { channel, cut });

@@ -10,8 +10,8 @@ use std::time::Duration;
 
 use common::{ask, channel, client_runtime, get_json, pipelines, test_config, ws_connect};
 use thermode_device::{DefaultFinger, DeviceConfig, SimulatedDisplay};
-use thermode_link::emulator::{Emulator, EmulatorConfig, PtyEmulator};
-use thermode_link::serial::{SerialConfig, SerialDevice};
+use thermode_link::own::emulator::{Emulator, EmulatorConfig, PtyEmulator};
+use thermode_link::own::host::{SerialConfig, SerialDevice};
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_serve::Daemon;
 
@@ -133,7 +133,7 @@ async fn clear_and_render(ws: &mut common::Ws, channels: usize, id: &mut u64) ->
 
 #[test]
 fn the_link_recovers_from_a_silent_device_and_from_an_emulator_restarted_on_the_same_path() {
-    use thermode_link::emulator::LinkFaults;
+    use thermode_link::own::emulator::LinkFaults;
     let dir = tempfile::tempdir().expect("temp dir");
     let link = dir.path().join("thermode-port");
     let first = emulator(2, 3);

@@ -18,7 +18,8 @@ use std::sync::Arc;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use thermode_device::{DefaultFinger, SimulatedDisplay};
-use thermode_link::emulator::{Emulator, EmulatorConfig, LinkFaults, PtyEmulator, RunEnd};
+use thermode_link::own::emulator::{Emulator, EmulatorConfig, LinkFaults, PtyEmulator};
+use thermode_link::runner::RunEnd;
 use thermode_platform::MonotonicClock;
 
 use super::emulate_hw::{self, HardwareArgs, Protocol};

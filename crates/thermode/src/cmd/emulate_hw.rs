@@ -12,9 +12,8 @@ use std::sync::Arc;
 use anyhow::{bail, Result};
 use clap::{Args, ValueEnum};
 use thermode_device::{DefaultFinger, Device, NoFinger, PlateFinger, SimulatedDisplay};
-use thermode_link::emulator::RunEnd;
-use thermode_link::firmware::{Firmware, PtyFirmware, TcpFirmware};
 use thermode_link::mecom::emulator::{MecomEmulator, MecomEmulatorConfig};
+use thermode_link::runner::{Firmware, PtyFirmware, RunEnd, TcpFirmware};
 use thermode_link::tcs2::emulator::{Tcs2Emulator, Tcs2EmulatorConfig};
 use thermode_platform::{Clock, MonotonicClock};
 

@@ -7,6 +7,7 @@
 //! Answers: the value (8 hex), an acknowledge (the set command's own CRC, 4 hex), the identity (20 characters), the
 //! meta data, or a server error `+` and a code (2 hex).
 
+use thermode_device::RequestFault;
 use thiserror::Error;
 
 use super::frame::{parse_hex, push_hex};
@@ -173,6 +174,17 @@ impl Request {
         }
     }
 
+    /// The request's command: `?IF`, `RS`, `?VR`, `?VM` or `VS`.
+    pub fn command(&self) -> &'static str {
+        match self {
+            Request::Identify => "?IF",
+            Request::Reset => "RS",
+            Request::Read { .. } => "?VR",
+            Request::Meta { .. } => "?VM",
+            Request::Set { .. } => "VS",
+        }
+    }
+
     /// The payload text.
     pub fn payload(&self) -> String {
         let mut out = Vec::with_capacity(24);
@@ -249,13 +261,25 @@ pub enum AnswerError {
         code: u8,
     },
     /// The answer has the wrong shape for the request.
-    #[error("unexpected answer {payload:?} to {request}")]
+    #[error("unexpected answer of {length} characters to {request}")]
     Unexpected {
-        /// The answer's payload.
-        payload: String,
-        /// The request, as sent.
-        request: String,
+        /// The answer's payload length \[characters\].
+        length: usize,
+        /// The request's command (`?IF`, `RS`, `?VR`, `?VM`, `VS`).
+        request: &'static str,
     },
+}
+
+impl From<AnswerError> for RequestFault {
+    fn from(error: AnswerError) -> Self {
+        match error {
+            AnswerError::Server { code } => RequestFault::Server {
+                code,
+                meaning: describe_server_error(code),
+            },
+            AnswerError::Unexpected { length, request } => RequestFault::Unexpected { length, request },
+        }
+    }
 }
 
 /// A server error in an answer's payload (`+` and 2 hex digits), if it is one.
@@ -274,8 +298,8 @@ pub fn check_answer(request: &Request, request_crc: u16, payload: &str) -> Resul
         return Err(AnswerError::Server { code });
     }
     let unexpected = || AnswerError::Unexpected {
-        payload: payload.chars().take(40).collect(),
-        request: request.payload(),
+        length: payload.len(),
+        request: request.command(),
     };
     let bytes = payload.as_bytes();
     match request {

@@ -5,8 +5,9 @@
 //! [`Emulator`] is the core, free of I/O: bytes in with the time they arrived ([`Emulator::receive`]), time moves
 //! on ([`Emulator::advance_to`]), bytes out. [`Emulator::run`] drives it in real time over any `Read + Write` port
 //! with an injected [`Clock`]; [`PtyEmulator`] runs it on a pseudo-terminal in a thread (what `thermode emulate`
-//! does). For tests it injects link faults ([`LinkFaults`]: corrupted bytes, dropped frames, a device that stops
-//! answering) and, through [`EmulatorControl`], closes the port.
+//! does). Both are the emulator runner every protocol shares ([`crate::runner`]), with the link faults as the
+//! device's command. For tests it injects link faults ([`LinkFaults`]: corrupted bytes, dropped frames, a device
+//! that stops answering) and, through [`EmulatorControl`], closes the port.
 //!
 //! Time runs in fixed ticks (default 1 ms): each tick the watchdog is checked and the plant advanced; every
 //! report interval (default 10 ms) a report is sent. The firmware's state machine:
@@ -18,7 +19,7 @@
 //!   valid frame, so the drives are off at most one period plus one tick after the host went silent.
 //!
 //! - before every plant step, each channel's [`PlateGuard`] (the firmware's own over- and under-temperature cut,
-//!   [`crate::guard`]) may remove heating or cooling from the step and latch that cut (report bits
+//!   [`crate::own::guard`]) may remove heating or cooling from the step and latch that cut (report bits
 //!   `OVER_TEMPERATURE`, `UNDER_TEMPERATURE`); `ClearFault` releases a cut once the plate is back inside.
 //!
 //! Bytes are stamped with the time they were handed over, after the ticks up to that time have run: a command that
@@ -28,22 +29,21 @@
 
 use std::collections::VecDeque;
 use std::io::{self, Read, Write};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
-use std::thread::JoinHandle;
-use std::time::Duration;
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use thermode_platform::Clock;
-use thiserror::Error;
 
-use crate::guard::{Cuts, GuardTrip, PlateGuard};
-use crate::protocol::{
+use super::codec::{
     encode_frame, to_centi_c, to_milli_c, ChannelFaults, ChannelReport, DecodeError, DeviceMessage, DriveFrame,
     FirmwareVersion, Frame, HostMessage, Identify, LinkCounters, NackCode, ReportFlags, SensorReport, StreamDecoder,
     DEFAULT_REPORT_INTERVAL_MS, DEFAULT_WATCHDOG_MS, SENSOR_OPEN_THRESHOLD_C, SENSOR_SHORT_THRESHOLD_C,
 };
+use super::guard::{Cuts, GuardTrip, PlateGuard};
+#[cfg(unix)]
+use crate::runner::PtyRunner;
+use crate::runner::{Control, Emulated, EmulatorError, RunEnd};
 use thermode_device::DeviceError;
 use thermode_device::PlateFinger;
 use thermode_device::{Device, SimulatedDisplay, MAX_CHANNELS};
@@ -54,27 +54,6 @@ pub const EMULATOR_FIRMWARE: FirmwareVersion = FirmwareVersion {
     minor: 1,
     patch: 0,
 };
-
-/// Why the emulator refused a setting or stopped.
-#[derive(Debug, Clone, PartialEq, Error)]
-pub enum EmulatorError {
-    /// A setting outside its range.
-    #[error("emulator setting {what} = {value} is invalid: {requirement}")]
-    BadSetting {
-        /// Which setting.
-        what: &'static str,
-        /// Its value.
-        value: f64,
-        /// What it must satisfy.
-        requirement: &'static str,
-    },
-    /// The simulated display refused something.
-    #[error(transparent)]
-    Device(#[from] DeviceError),
-    /// The port failed.
-    #[error("emulator port: {0}")]
-    Io(String),
-}
 
 /// Timing of the emulated firmware.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -348,7 +327,7 @@ impl<F: PlateFinger> Emulator<F> {
             last_valid_s: 0.0,
             last_command_seq: 0,
             tx_seq: 0,
-            frame: Vec::with_capacity(crate::protocol::MAX_ENCODED_LEN + 1),
+            frame: Vec::with_capacity(super::codec::MAX_ENCODED_LEN + 1),
             stats: EmulatorStats::default(),
             log: None,
             trace: None,
@@ -366,20 +345,7 @@ impl<F: PlateFinger> Emulator<F> {
         &self.config
     }
 
-    /// Emulator time \[s\]: whole ticks since start.
-    pub fn time_s(&self) -> f64 {
-        self.tick as f64 * self.config.tick_s
-    }
-
-    /// The simulated display.
-    pub fn display(&self) -> &SimulatedDisplay<F> {
-        &self.display
-    }
-
-    /// The simulated display, mutable (plant fault injection, initial temperatures).
-    pub fn display_mut(&mut self) -> &mut SimulatedDisplay<F> {
-        &mut self.display
-    }
+    crate::runner::display_accessors!();
 
     /// The current commanded on `channel` \[A\] (0 for a channel that does not exist).
     pub fn commanded_current_a(&self, channel: usize) -> f64 {
@@ -449,9 +415,9 @@ impl<F: PlateFinger> Emulator<F> {
         self.trace = Some(trace);
     }
 
-    /// Why the trace stopped, if it did (a write to its sink failed).
-    pub fn trace_error(&self) -> Option<&str> {
-        self.trace.as_ref().and_then(|t| t.error.as_deref())
+    /// Why the trace stopped, if it did: the kind of the error of the write to its sink that failed.
+    pub fn trace_error(&self) -> Option<io::ErrorKind> {
+        self.trace.as_ref().and_then(|t| t.error)
     }
 
     /// Takes bytes from the host that arrived at `now_s` \[s\]: first runs the ticks up to `now_s`, then decodes the
@@ -498,44 +464,19 @@ impl<F: PlateFinger> Emulator<F> {
         self.flush_plant();
     }
 
-    /// Drives a port in real time until `control` says stop or close, or the port ends. The port's reads should
-    /// wait at most about a tick (a read timeout); one that returns at once without data makes the loop sleep half a
-    /// tick.
+    /// Drives a port in real time until `control` says stop or close, or the port ends ([`crate::runner::run`]).
+    /// The port's reads should wait at most about a tick (a read timeout); one that returns at once without data
+    /// makes the loop sleep half a tick.
     pub fn run<P: Read + Write>(
         &mut self,
         port: &mut P,
         clock: &dyn Clock,
         control: &EmulatorControl,
-    ) -> Result<RunEnd, EmulatorError> {
-        let mut buf = [0u8; 512];
-        let mut out = Vec::with_capacity(4096);
-        loop {
-            if control.stop.load(Ordering::SeqCst) {
-                return Ok(RunEnd::Stopped);
-            }
-            if control.close.load(Ordering::SeqCst) {
-                return Ok(RunEnd::PortClosed);
-            }
-            if let Some(faults) = control.take_link_faults() {
-                self.set_link_faults(faults)?;
-            }
-            let (n, idle) = match port.read(&mut buf) {
-                Ok(0) => return Ok(RunEnd::HostClosed),
-                Ok(n) => (n, false),
-                Err(e) if e.kind() == io::ErrorKind::WouldBlock => (0, true),
-                Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::Interrupted) => (0, false),
-                Err(e) if host_went_away(&e) => return Ok(RunEnd::HostClosed),
-                Err(e) => return Err(EmulatorError::Io(e.to_string())),
-            };
-            self.receive(&buf[..n], clock.now_s(), &mut out);
-            if let Some(end) = self.write_out(port, &mut out)? {
-                return Ok(end);
-            }
-            control.publish(self.status());
-            if idle {
-                std::thread::sleep(Duration::from_secs_f64(self.config.tick_s / 2.0));
-            }
-        }
+    ) -> Result<RunEnd, EmulatorError>
+    where
+        F: Send,
+    {
+        crate::runner::run(self, port, clock, control)
     }
 
     /// A snapshot of the emulator's state.
@@ -560,24 +501,6 @@ impl<F: PlateFinger> Emulator<F> {
             status.cuts[i] = self.cuts(i);
         }
         status
-    }
-
-    /// Writes `out` to the port; a write that times out loses its bytes (counted). `Some` when the host is gone.
-    fn write_out<P: Write>(&mut self, port: &mut P, out: &mut Vec<u8>) -> Result<Option<RunEnd>, EmulatorError> {
-        if out.is_empty() {
-            return Ok(None);
-        }
-        let result = port.write_all(out).and_then(|()| port.flush());
-        out.clear();
-        match result {
-            Ok(()) => Ok(None),
-            Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::WouldBlock) => {
-                self.stats.write_stalls += 1;
-                Ok(None)
-            }
-            Err(e) if host_went_away(&e) => Ok(Some(RunEnd::HostClosed)),
-            Err(e) => Err(EmulatorError::Io(e.to_string())),
-        }
     }
 
     /// At tick time `t_s`: trips the watchdog if the last valid frame is older than the period.
@@ -770,7 +693,7 @@ impl<F: PlateFinger> Emulator<F> {
         ChannelReport {
             sensor_milli_c: to_milli_c(sensor_c),
             hot_side_centi_c: to_centi_c(channel.hot_side_reading_c()),
-            applied_ma: crate::protocol::to_milliamps(state.applied_current_a).unwrap_or(0),
+            applied_ma: super::codec::to_milliamps(state.applied_current_a).unwrap_or(0),
             sample_seq: (state.sensor.seq & 0xFFFF) as u16,
             sample_age_ms: age_ms as u16,
             faults: ChannelFaults(faults),
@@ -818,14 +741,14 @@ pub const TRACE_HEADER: &str = "time_s,channel,plate_c,sensor_c,current_a";
 struct Trace {
     out: Box<dyn Write + Send>,
     line: Vec<u8>,
-    error: Option<String>,
+    error: Option<io::ErrorKind>,
 }
 
 impl Trace {
     /// Writes the pending rows in one call and flushes; a failure stops the trace.
     fn write(&mut self) {
         if let Err(e) = self.out.write_all(&self.line).and_then(|()| self.out.flush()) {
-            self.error = Some(format!("trace write failed: {e}"));
+            self.error = Some(e.kind());
         }
         self.line.clear();
     }
@@ -839,15 +762,7 @@ impl std::fmt::Debug for Trace {
     }
 }
 
-/// Whether a port error means the other end closed (a socket's peer went away).
-fn host_went_away(error: &io::Error) -> bool {
-    matches!(
-        error.kind(),
-        io::ErrorKind::BrokenPipe | io::ErrorKind::ConnectionReset | io::ErrorKind::ConnectionAborted
-    )
-}
-
-/// A snapshot of an emulator, published by [`Emulator::run`] after every loop.
+/// A snapshot of an emulator, published by the runner after every loop.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EmulatorStatus {
     /// Emulator time \[s\].
@@ -872,137 +787,47 @@ pub struct EmulatorStatus {
     pub stats: EmulatorStats,
 }
 
-/// How [`Emulator::run`] ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum RunEnd {
-    /// [`EmulatorControl::stop`] was called.
-    Stopped,
-    /// [`EmulatorControl::close_port`] was called: the port is dropped (the host sees it vanish).
-    PortClosed,
-    /// The port reported its end (a read of 0 bytes, or the other end closed: broken pipe, connection reset).
-    HostClosed,
-}
+/// Controls a running emulator from another thread and reads its status ([`Control`]; its command is the link
+/// faults).
+pub type EmulatorControl = Control<EmulatorStatus, LinkFaults>;
 
-/// Controls a running emulator from another thread and reads its status.
-#[derive(Debug, Default)]
-pub struct EmulatorControl {
-    stop: AtomicBool,
-    close: AtomicBool,
-    faults: Mutex<Option<LinkFaults>>,
-    status: Mutex<Option<EmulatorStatus>>,
-}
-
-impl EmulatorControl {
-    /// A control with nothing requested.
-    pub fn new() -> Arc<Self> {
-        Arc::new(EmulatorControl::default())
-    }
-
-    /// Asks the emulator to stop.
-    pub fn stop(&self) {
-        self.stop.store(true, Ordering::SeqCst);
-    }
-
-    /// Asks the emulator to stop and drop its port at once (the pseudo-terminal vanishes under the host).
-    pub fn close_port(&self) {
-        self.close.store(true, Ordering::SeqCst);
-    }
-
+impl Control<EmulatorStatus, LinkFaults> {
     /// Sets the link faults from the next loop on (validated there; invalid rates stop the emulator with an error).
     pub fn set_link_faults(&self, faults: LinkFaults) {
-        if let Ok(mut slot) = self.faults.lock() {
-            *slot = Some(faults);
-        }
-    }
-
-    /// The latest published status (None before the first loop).
-    pub fn status(&self) -> Option<EmulatorStatus> {
-        self.status.lock().ok().and_then(|s| *s)
-    }
-
-    fn take_link_faults(&self) -> Option<LinkFaults> {
-        self.faults.lock().ok().and_then(|mut f| f.take())
-    }
-
-    fn publish(&self, status: EmulatorStatus) {
-        if let Ok(mut slot) = self.status.lock() {
-            *slot = Some(status);
-        }
+        self.send(faults);
     }
 }
 
-/// An emulator running in its own thread on a pseudo-terminal (Unix): the host opens [`PtyEmulator::path`] as its
+/// An emulator running in its own thread on a pseudo-terminal (Unix): the host opens [`PtyRunner::path`] as its
 /// serial port. Dropping it stops the emulator and removes the pseudo-terminal.
 #[cfg(unix)]
-#[derive(Debug)]
-pub struct PtyEmulator {
-    path: String,
-    control: Arc<EmulatorControl>,
-    thread: Option<JoinHandle<Result<RunEnd, EmulatorError>>>,
-}
+pub type PtyEmulator = PtyRunner<EmulatorStatus, LinkFaults>;
 
-#[cfg(unix)]
-impl PtyEmulator {
-    /// Creates a pseudo-terminal pair and runs `emulator` on its master side in real time on `clock`.
-    pub fn spawn<F>(mut emulator: Emulator<F>, clock: Arc<dyn Clock>) -> Result<Self, EmulatorError>
-    where
-        F: PlateFinger + Send + 'static,
-    {
-        use serialport::{SerialPort, TTYPort};
-        let io_error = |e: serialport::Error| EmulatorError::Io(format!("pseudo-terminal: {e}"));
-        let (mut master, slave) = TTYPort::pair().map_err(io_error)?;
-        let path = slave
-            .name()
-            .ok_or_else(|| EmulatorError::Io("pseudo-terminal has no path".to_string()))?;
-        let tick = Duration::from_secs_f64(emulator.config().tick_s);
-        master.set_timeout(tick).map_err(io_error)?;
-        let control = EmulatorControl::new();
-        let thread_control = Arc::clone(&control);
-        let thread = std::thread::Builder::new()
-            .name("thermode-emulator".to_string())
-            .spawn(move || {
-                // The emulator keeps the slave side open, so the master never reads end-of-file while no host is
-                // attached; both close when the run ends.
-                let _slave = slave;
-                emulator.run(&mut master, clock.as_ref(), &thread_control)
-            })
-            .map_err(|e| EmulatorError::Io(format!("cannot start the emulator thread: {e}")))?;
-        Ok(PtyEmulator {
-            path,
-            control,
-            thread: Some(thread),
-        })
+impl<F: PlateFinger + Send> Emulated for Emulator<F> {
+    type Status = EmulatorStatus;
+    type Command = LinkFaults;
+
+    fn receive(&mut self, bytes: &[u8], now_s: f64, out: &mut Vec<u8>) {
+        Emulator::receive(self, bytes, now_s, out);
     }
 
-    /// Path of the side the host opens, e.g. `/dev/pts/7`.
-    pub fn path(&self) -> &str {
-        &self.path
+    fn advance_to(&mut self, now_s: f64, out: &mut Vec<u8>) {
+        Emulator::advance_to(self, now_s, out);
     }
 
-    /// The control of the running emulator.
-    pub fn control(&self) -> &Arc<EmulatorControl> {
-        &self.control
+    fn tick_s(&self) -> f64 {
+        self.config.tick_s
     }
 
-    /// Waits until the emulator ends (it runs until stopped, its port closed, or an error).
-    pub fn wait(mut self) -> Result<RunEnd, EmulatorError> {
-        self.join()
+    fn snapshot(&self) -> EmulatorStatus {
+        self.status()
     }
 
-    fn join(&mut self) -> Result<RunEnd, EmulatorError> {
-        match self.thread.take() {
-            Some(thread) => thread
-                .join()
-                .map_err(|_| EmulatorError::Io("the emulator thread panicked".to_string()))?,
-            None => Ok(RunEnd::Stopped),
-        }
+    fn command(&mut self, faults: LinkFaults) -> Result<(), EmulatorError> {
+        self.set_link_faults(faults)
     }
-}
 
-#[cfg(unix)]
-impl Drop for PtyEmulator {
-    fn drop(&mut self) {
-        self.control.stop();
-        let _ = self.join();
+    fn write_stalled(&mut self) {
+        self.stats.write_stalls += 1;
     }
 }

@@ -1,5 +1,5 @@
 //! [`SerialDevice`]: a real display (or the emulator) behind a serial port, speaking the device protocol
-//! ([`crate::protocol`], `docs/protocol.md`), as a [`Device`].
+//! ([`crate::own::codec`], `docs/protocol.md`), as a [`Device`].
 //!
 //! - **Open** (`serial:PATH`): the port in raw mode at [`SerialConfig::baud_rate`], then the handshake: `Hello`
 //!   until the device answers `Identify`, then `ClearFault` until a report shows the drives released, all within
@@ -36,21 +36,23 @@
 //! - **Stopping**: [`Device::all_off`] sends `AllOff` (every drive 0 A at once); so does dropping the device.
 
 use std::io::{self, Read, Write};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender, TryRecvError};
-use std::sync::{Arc, Mutex, MutexGuard};
-use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::sync::Arc;
+use std::time::Duration;
 
 use thermode_model::{BadValue, Rule};
 use thermode_platform::Clock;
 use thermode_safety::DriveCommand;
 
-use crate::protocol::{
-    encode_frame, to_milliamps, ChannelFaults, DeviceMessage, DriveFrame, Frame, HostMessage, Identify, LinkCounters,
-    NackCode, SensorReport, StreamDecoder, DEFAULT_BAUD_RATE, DELIMITER,
+use super::codec::{
+    encode_frame, to_milliamps, ChannelFaults, ChannelReport, DeviceMessage, DriveFrame, Frame, HostMessage, Identify,
+    LinkCounters, NackCode, SensorReport, StreamDecoder, DEFAULT_BAUD_RATE, DELIMITER, MAX_ENCODED_LEN,
 };
-use thermode_device::{Device, DeviceCut, DeviceError, LinkHealth, Reading, MAX_CHANNELS};
+pub use crate::host::FIRST_BACKOFF_S;
+use crate::host::{self, Line, LineState, OnLine, ReaderSpec, Reconnector};
+use thermode_device::{
+    Awaited, Device, DeviceCut, DeviceError, DownReason, LinkError, LinkFault, LinkHealth, Reading, Silence,
+    MAX_CHANNELS,
+};
 
 /// The prefix of a serial device specification: `serial:PATH`.
 pub const SERIAL_PREFIX: &str = "serial:";
@@ -70,7 +72,7 @@ pub const MAX_DEVICE_WATCHDOG_MS: u16 = 250;
 pub struct SerialConfig {
     /// Baud rate \[bit/s\]. Default [`DEFAULT_BAUD_RATE`] (115200).
     pub baud_rate: u32,
-    /// Longest time for the handshake (`Hello` → `Identify`, `ClearFault` → released) \[s\], wall clock, in
+    /// Longest time for the handshake (`Hello` → `Identify`, `ClearFault` → released) \[s\], on the host clock, in
     /// (0, 60]. Default 3 (boards that reset when the port opens take 1–2 s to boot; `Hello` is repeated every
     /// 0.2 s meanwhile).
     pub handshake_timeout_s: f64,
@@ -206,7 +208,7 @@ struct Track {
 }
 
 impl Track {
-    fn update(&mut self, report: &crate::protocol::ChannelReport, received_s: f64) {
+    fn update(&mut self, report: &ChannelReport, received_s: f64) {
         let sample_time_s = received_s - f64::from(report.sample_age_ms) * 1e-3;
         match self.seq16 {
             None => {
@@ -229,18 +231,52 @@ impl Track {
 }
 
 /// State shared between the reader thread and the device.
-#[derive(Debug, Default)]
-struct Shared {
+#[derive(Debug)]
+pub(crate) struct Shared {
+    decoder: StreamDecoder<DeviceMessage>,
     identify: Option<Identify>,
     tracks: [Track; MAX_CHANNELS],
     last_report: Option<ReportSnapshot>,
     stats: SerialStats,
     /// Set when the port failed; permanent.
-    error: Option<String>,
+    error: Option<LinkFault>,
+}
+
+impl Default for Shared {
+    fn default() -> Self {
+        Shared {
+            decoder: StreamDecoder::new(),
+            identify: None,
+            tracks: [Track::default(); MAX_CHANNELS],
+            last_report: None,
+            stats: SerialStats::default(),
+            error: None,
+        }
+    }
+}
+
+impl LineState for Shared {
+    /// Decodes everything the port delivered.
+    fn take(&mut self, bytes: &[u8], received_s: f64) {
+        for &byte in bytes {
+            if let Some(Ok(frame)) = self.decoder.push(byte) {
+                self.take_frame(frame, received_s);
+            }
+        }
+        self.stats.rx = *self.decoder.counters();
+    }
+
+    fn port_fault(&self) -> Option<&LinkFault> {
+        self.error.as_ref()
+    }
+
+    fn set_port_fault(&mut self, fault: LinkFault) {
+        self.error = Some(fault);
+    }
 }
 
 impl Shared {
-    fn take(&mut self, frame: Frame<DeviceMessage>, received_s: f64) {
+    fn take_frame(&mut self, frame: Frame<DeviceMessage>, received_s: f64) {
         match frame.message {
             DeviceMessage::Identify(identify) => self.identify = Some(identify),
             DeviceMessage::SensorReport(report) => self.take_report(frame.seq, report, received_s),
@@ -272,38 +308,15 @@ impl Shared {
     }
 }
 
-/// The reader thread: decodes everything the port delivers into `shared` until `stop` or a port error.
-fn read_port(port: Box<dyn Read + Send>, shared: Arc<Mutex<Shared>>, stop: Arc<AtomicBool>, clock: Arc<dyn Clock>) {
-    let mut decoder = StreamDecoder::<DeviceMessage>::new();
-    let received = |bytes: &[u8], received_s: f64| {
-        let Ok(mut state) = shared.lock() else {
-            return false;
-        };
-        decoder.feed(bytes, |result| {
-            if let Ok(frame) = result {
-                state.take(frame, received_s);
-            }
-        });
-        state.stats.rx = *decoder.counters();
-        true
-    };
-    let failed = |message| {
-        if let Ok(mut state) = shared.lock() {
-            state.error = Some(message);
-        }
-    };
-    crate::port::read_until_stopped(port, &stop, clock.as_ref(), 1024, received, failed);
-}
+/// The reader thread of a serial link.
+const READER: ReaderSpec = ReaderSpec {
+    thread: "thermode-serial-reader",
+    buffer_len: 1024,
+};
 
 /// A display behind a serial port. See the module documentation.
 pub struct SerialDevice {
-    name: String,
-    writer: Box<dyn Write + Send>,
-    shared: Arc<Mutex<Shared>>,
-    stop: Arc<AtomicBool>,
-    reader: Option<JoinHandle<()>>,
-    join_reader: bool,
-    clock: Arc<dyn Clock>,
+    line: Line<Shared>,
     config: SerialConfig,
     identify: Identify,
     tx_seq: u16,
@@ -317,30 +330,14 @@ pub struct SerialDevice {
     last_sent_s: f64,
     last_clear_s: f64,
     tx: SerialStats,
-    failed: Option<String>,
     /// Re-opening the port after a failure (only for a port opened by path).
-    recovery: Option<Recovery>,
+    recovery: Option<Reconnector<SerialDevice>>,
     /// Added to a link's sample numbers, so they keep rising across reconnections (a restarted device counts from
     /// 0 again, and the envelope takes only rising numbers as fresh).
     seq_base: [u64; MAX_CHANNELS],
     /// The last sample number handed out per channel.
     seq_seen: [u64; MAX_CHANNELS],
     health: Arc<LinkHealth>,
-}
-
-/// The first wait between reconnection attempts \[s\]; it doubles up to [`SerialConfig::reconnect_backoff_max_s`].
-pub const FIRST_BACKOFF_S: f64 = 0.5;
-
-/// The device's side of its reconnector thread.
-struct Recovery {
-    /// Asks the thread for a new link.
-    wanted: SyncSender<()>,
-    /// Links the thread made (opened and handshaken).
-    fresh: Receiver<SerialDevice>,
-    /// Ends the thread.
-    stop: Arc<AtomicBool>,
-    /// The link is down and a new one has been asked for.
-    down: bool,
 }
 
 /// A writer for a link that is down: every write fails.
@@ -359,10 +356,10 @@ impl Write for Closed {
 impl std::fmt::Debug for SerialDevice {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("SerialDevice")
-            .field("name", &self.name)
+            .field("name", &self.line.name)
             .field("identify", &self.identify)
             .field("config", &self.config)
-            .field("failed", &self.failed)
+            .field("failed", &self.line.failed)
             .finish_non_exhaustive()
     }
 }
@@ -373,46 +370,31 @@ impl SerialDevice {
     /// module documentation).
     pub fn open(path: &str, config: &SerialConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
         let mut device = SerialDevice::open_once(path, config, clock.clone())?;
-        let (wanted, requests) = sync_channel(1);
-        let (made, fresh) = sync_channel(1);
-        let stop = Arc::new(AtomicBool::new(false));
-        {
-            let (path, config, stop, health) = (path.to_string(), *config, stop.clone(), device.health.clone());
-            std::thread::Builder::new()
-                .name("thermode-serial-reconnect".to_string())
-                .spawn(move || reconnect(&path, &config, &clock, &requests, &made, &stop, &health))
-                .map_err(|e| DeviceError::Link(format!("cannot start the serial reconnector: {e}")))?;
-        }
-        device.recovery = Some(Recovery {
-            wanted,
-            fresh,
-            stop,
-            down: false,
-        });
+        let (owned_path, config) = (path.to_string(), *config);
+        let reopen_clock = Arc::clone(&clock);
+        device.recovery = Some(Reconnector::spawn(
+            path,
+            config.reconnect_backoff_max_s,
+            clock,
+            device.health.clone(),
+            move || SerialDevice::open_once(&owned_path, &config, reopen_clock.clone()),
+        )?);
         Ok(device)
     }
 
     /// Opens the port and performs the handshake, without recovery.
     fn open_once(path: &str, config: &SerialConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
         config.validate()?;
-        let link = |what: &str, e: serialport::Error| DeviceError::Link(format!("{what} {path}: {e}"));
-        let port = serialport::new(path, config.baud_rate)
-            .timeout(Duration::from_secs_f64(config.read_poll_s))
-            .open()
-            .map_err(|e| link("cannot open serial port", e))?;
+        let read_timeout = Duration::from_secs_f64(config.read_poll_s);
         // Stale bytes in either direction (an earlier session's frames) are discarded.
-        let _ = port.clear(serialport::ClearBuffer::All);
-        let mut writer = port.try_clone().map_err(|e| link("cannot share serial port", e))?;
-        writer
-            .set_timeout(Duration::from_secs_f64(config.write_timeout_s))
-            .map_err(|e| link("cannot set the write timeout of", e))?;
-        SerialDevice::start(path, Box::new(port), Box::new(writer), config, clock, true)
+        let port = host::open_serial(path, config.baud_rate, read_timeout, serialport::ClearBuffer::All)?;
+        let streams = host::split(port, path, Duration::from_secs_f64(config.write_timeout_s))?;
+        SerialDevice::start(Line::start(path, streams, clock, &READER, true)?, config)
     }
 
     /// As [`SerialDevice::open`] for a `serial:PATH` specification.
     pub fn open_spec(spec: &str, config: &SerialConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
-        let path = serial_path(spec)
-            .ok_or_else(|| DeviceError::Link(format!("'{spec}' is not a serial device (serial:PATH)")))?;
+        let path = serial_path(spec).ok_or_else(|| LinkError::device(spec, LinkFault::NotSerial))?;
         SerialDevice::open(path, config, clock)
     }
 
@@ -427,34 +409,13 @@ impl SerialDevice {
         clock: Arc<dyn Clock>,
     ) -> Result<Self, DeviceError> {
         config.validate()?;
-        SerialDevice::start(name, reader, writer, config, clock, false)
+        SerialDevice::start(Line::start(name, (reader, writer), clock, &READER, false)?, config)
     }
 
-    fn start(
-        name: &str,
-        reader: Box<dyn Read + Send>,
-        writer: Box<dyn Write + Send>,
-        config: &SerialConfig,
-        clock: Arc<dyn Clock>,
-        join_reader: bool,
-    ) -> Result<Self, DeviceError> {
-        let shared = Arc::new(Mutex::new(Shared::default()));
-        let stop = Arc::new(AtomicBool::new(false));
-        let thread = {
-            let (shared, stop, clock) = (Arc::clone(&shared), Arc::clone(&stop), Arc::clone(&clock));
-            std::thread::Builder::new()
-                .name("thermode-serial-reader".to_string())
-                .spawn(move || read_port(reader, shared, stop, clock))
-                .map_err(|e| DeviceError::Link(format!("cannot start the serial reader: {e}")))?
-        };
+    /// The device on `line`, after the handshake.
+    fn start(line: Line<Shared>, config: &SerialConfig) -> Result<Self, DeviceError> {
         let mut device = SerialDevice {
-            name: name.to_string(),
-            writer,
-            shared,
-            stop,
-            reader: Some(thread),
-            join_reader,
-            clock,
+            line,
             config: *config,
             identify: Identify {
                 channel_count: 0,
@@ -464,7 +425,7 @@ impl SerialDevice {
                 report_interval_ms: 0,
             },
             tx_seq: 0,
-            out: Vec::with_capacity(crate::protocol::MAX_ENCODED_LEN + 1),
+            out: Vec::with_capacity(MAX_ENCODED_LEN + 1),
             pending_ma: [0; MAX_CHANNELS],
             sent_ma: [0; MAX_CHANNELS],
             round: 0,
@@ -473,7 +434,6 @@ impl SerialDevice {
             last_sent_s: f64::NEG_INFINITY,
             last_clear_s: f64::NEG_INFINITY,
             tx: SerialStats::default(),
-            failed: None,
             recovery: None,
             seq_base: [0; MAX_CHANNELS],
             seq_seen: [0; MAX_CHANNELS],
@@ -490,43 +450,43 @@ impl SerialDevice {
             return;
         };
         if recovery.down {
-            match recovery.fresh.try_recv() {
-                Ok(fresh) => self.adopt(fresh),
-                Err(TryRecvError::Empty | TryRecvError::Disconnected) => {}
+            if let Some(fresh) = recovery.take() {
+                self.adopt(fresh);
             }
             return;
         }
-        let now = self.clock.now_s();
-        let reason = self.failed.clone().or_else(|| {
-            let state = self.shared.lock().ok()?;
-            if let Some(error) = &state.error {
-                return Some(error.clone());
-            }
-            let silent_s = now - state.last_report.map_or(f64::NEG_INFINITY, |r| r.received_s);
-            (silent_s > self.config.reconnect_after_silence_s).then(|| {
-                format!(
-                    "no report for {silent_s:.1} s (more than {} s)",
-                    self.config.reconnect_after_silence_s
-                )
-            })
-        });
+        let now = self.line.clock.now_s();
+        let reason = self
+            .line
+            .failed
+            .clone()
+            .map(|f| DownReason::Failed(Box::new(f)))
+            .or_else(|| {
+                let state = self.line.shared.lock().ok()?;
+                if let Some(error) = &state.error {
+                    return Some(DownReason::Failed(Box::new(error.clone())));
+                }
+                let silent_s = now - state.last_report.map_or(f64::NEG_INFINITY, |r| r.received_s);
+                (silent_s > self.config.reconnect_after_silence_s).then_some(DownReason::Silent {
+                    silent_s,
+                    limit_s: self.config.reconnect_after_silence_s,
+                })
+            });
         if let Some(reason) = reason {
-            self.take_down(&reason);
+            self.take_down(reason);
         }
     }
 
     /// Closes the port (so the same path can be opened again) and asks the reconnector for a new link.
-    fn take_down(&mut self, reason: &str) {
-        let message = format!("{}: link down: {reason}", self.name);
-        self.health.down(message.clone());
-        self.failed = Some(message);
-        self.writer = Box::new(Closed);
-        self.stop.store(true, Ordering::SeqCst);
+    fn take_down(&mut self, reason: DownReason) {
+        let fault = LinkFault::Down { reason };
+        self.health.down(self.line.link_error(fault.clone()).to_string());
+        self.line.failed = Some(fault);
+        self.line.writer = Box::new(Closed);
         // The reader thread ends within its read timeout and closes its end of the port; not waited for here.
-        drop(self.reader.take());
+        self.line.reader.detach();
         if let Some(recovery) = &mut self.recovery {
-            recovery.down = true;
-            let _ = recovery.wanted.try_send(());
+            recovery.request();
         }
     }
 
@@ -534,22 +494,21 @@ impl SerialDevice {
     /// faults until the operator clears them.
     fn adopt(&mut self, mut fresh: SerialDevice) {
         if fresh.identify.channel_count != self.identify.channel_count {
-            let error = format!(
-                "{}: the device now has {} channels, not {}: not adopted",
-                self.name, fresh.identify.channel_count, self.identify.channel_count
-            );
-            self.health.set_error(error);
-            fresh.failed = Some("not adopted".into());
+            let fault = LinkFault::ChannelsChanged {
+                now: usize::from(fresh.identify.channel_count),
+                before: usize::from(self.identify.channel_count),
+            };
+            self.health.set_error(self.line.link_error(fault).to_string());
+            fresh.line.failed = Some(LinkFault::Replaced);
             if let Some(recovery) = &mut self.recovery {
-                let _ = recovery.wanted.try_send(());
+                recovery.request();
             }
             return;
         }
-        std::mem::swap(&mut self.writer, &mut fresh.writer);
-        std::mem::swap(&mut self.shared, &mut fresh.shared);
-        std::mem::swap(&mut self.stop, &mut fresh.stop);
-        std::mem::swap(&mut self.reader, &mut fresh.reader);
-        self.join_reader = true;
+        std::mem::swap(&mut self.line.writer, &mut fresh.line.writer);
+        std::mem::swap(&mut self.line.shared, &mut fresh.line.shared);
+        std::mem::swap(&mut self.line.reader, &mut fresh.line.reader);
+        self.line.reader.set_join(true);
         self.identify = fresh.identify;
         self.tx_seq = fresh.tx_seq;
         self.pending_ma = [0; MAX_CHANNELS];
@@ -562,10 +521,10 @@ impl SerialDevice {
         for (base, seen) in self.seq_base.iter_mut().zip(self.seq_seen) {
             *base = seen + 1;
         }
-        self.failed = None;
+        self.line.failed = None;
         // `fresh` now holds the old link's remains: dropped without a frame and without waiting for its reader.
-        fresh.failed = Some("replaced".into());
-        fresh.join_reader = false;
+        fresh.line.failed = Some(LinkFault::Replaced);
+        fresh.line.reader.set_join(false);
         drop(fresh);
         if let Some(recovery) = &mut self.recovery {
             recovery.down = false;
@@ -573,70 +532,57 @@ impl SerialDevice {
         self.health.reconnected();
     }
 
-    /// `Hello` until `Identify`, then `ClearFault` until a report shows the drives released.
+    /// `Hello` until `Identify`, then `ClearFault` until a report shows the drives released, on the clock.
     fn handshake(&mut self) -> Result<(), DeviceError> {
-        let deadline = Instant::now() + Duration::from_secs_f64(self.config.handshake_timeout_s);
-        self.write_raw(&[DELIMITER])?;
-        let identify = self.retry_until(deadline, HostMessage::Hello, |s| s.identify)?;
+        let timeout_s = self.config.handshake_timeout_s;
+        let deadline_s = self.line.deadline_s(timeout_s);
+        self.line.write(&[DELIMITER])?;
+        let identify = self.retry_until(deadline_s, HostMessage::Hello, |s| s.identify)?;
         let Some(identify) = identify else {
-            let nack = self.lock()?.stats.last_nack;
-            let hint = match nack {
-                Some((_, NackCode::UnsupportedVersion)) => " (it speaks another protocol version)",
-                _ => "",
-            };
-            return Err(DeviceError::Link(format!(
-                "{}: no Identify answer to Hello within {} s{hint}",
-                self.name, self.config.handshake_timeout_s
-            )));
+            let nack = self.line.lock()?.stats.last_nack;
+            let other_version = matches!(nack, Some((_, NackCode::UnsupportedVersion)));
+            return Err(self.line.error(LinkFault::Handshake {
+                awaited: Awaited::Identify,
+                timeout_s,
+                other_version,
+            }));
         };
         if identify.watchdog_ms == 0 || identify.watchdog_ms > MAX_DEVICE_WATCHDOG_MS {
             return Err(DeviceError::WatchdogTooLong {
-                device: self.name.clone(),
+                device: self.line.name.clone(),
                 device_ms: identify.watchdog_ms,
                 max_ms: MAX_DEVICE_WATCHDOG_MS,
             });
         }
         self.identify = identify;
-        let released = self.retry_until(deadline, HostMessage::ClearFault, |s| {
+        let released = self.retry_until(deadline_s, HostMessage::ClearFault, |s| {
             s.last_report.filter(|r| !r.report.flags.latched()).map(|_| ())
         })?;
         if released.is_none() {
-            return Err(DeviceError::Link(format!(
-                "{}: no unlatched sensor report within {} s of the handshake",
-                self.name, self.config.handshake_timeout_s
-            )));
+            return Err(self.line.error(LinkFault::Handshake {
+                awaited: Awaited::Released,
+                timeout_s,
+                other_version: false,
+            }));
         }
         Ok(())
     }
 
-    /// Sends `message` every 0.2 s until `done` finds what it waits for in the shared state, or `deadline`.
+    /// Sends `message` every 0.2 s until `done` finds what it waits for in the shared state, or `deadline_s` on the
+    /// clock.
     fn retry_until<T>(
         &mut self,
-        deadline: Instant,
+        deadline_s: f64,
         message: HostMessage,
         done: impl Fn(&Shared) -> Option<T>,
     ) -> Result<Option<T>, DeviceError> {
-        let mut next_send = Instant::now();
-        while Instant::now() < deadline {
-            {
-                let state = self.lock()?;
-                if let Some(error) = &state.error {
-                    return Err(DeviceError::Link(format!("{}: {error}", self.name)));
-                }
-                if let Some(found) = done(&state) {
-                    return Ok(Some(found));
-                }
+        let send = |device: &mut SerialDevice| {
+            if message == HostMessage::ClearFault {
+                device.tx.clear_faults += 1;
             }
-            if Instant::now() >= next_send {
-                if message == HostMessage::ClearFault {
-                    self.tx.clear_faults += 1;
-                }
-                self.send(&message)?;
-                next_send = Instant::now() + Duration::from_millis(200);
-            }
-            std::thread::sleep(Duration::from_millis(1));
-        }
-        Ok(None)
+            device.send(&message)
+        };
+        host::retry_until(self, deadline_s, 0.2, send, done)
     }
 
     /// What the device said about itself.
@@ -651,7 +597,7 @@ impl SerialDevice {
 
     /// The clock reading times are on.
     pub fn clock(&self) -> &Arc<dyn Clock> {
-        &self.clock
+        &self.line.clock
     }
 
     /// What has been seen and done on the link so far.
@@ -689,10 +635,8 @@ impl SerialDevice {
         self.send(&HostMessage::AllOff)
     }
 
-    fn lock(&self) -> Result<MutexGuard<'_, Shared>, DeviceError> {
-        self.shared
-            .lock()
-            .map_err(|_| DeviceError::Link(format!("{}: the serial reader failed", self.name)))
+    fn lock(&self) -> Result<std::sync::MutexGuard<'_, Shared>, DeviceError> {
+        self.line.lock()
     }
 
     fn check_channel(&self, channel: usize) -> Result<(), DeviceError> {
@@ -705,50 +649,36 @@ impl SerialDevice {
     }
 
     fn check_failed(&self) -> Result<(), DeviceError> {
-        match &self.failed {
-            Some(error) => Err(DeviceError::Link(error.clone())),
-            None => Ok(()),
-        }
+        self.line.check_failed()
     }
 
     /// Encodes and writes one frame.
     fn send(&mut self, message: &HostMessage) -> Result<(), DeviceError> {
         self.check_failed()?;
         self.out.clear();
-        encode_frame(self.tx_seq, message, &mut self.out)
-            .map_err(|e| DeviceError::Link(format!("{}: cannot encode a frame: {e}", self.name)))?;
+        encode_frame(self.tx_seq, message, &mut self.out).map_err(|_| self.line.error(LinkFault::Encode))?;
         self.tx_seq = self.tx_seq.wrapping_add(1);
         let out = std::mem::take(&mut self.out);
-        let result = self.write_raw(&out);
+        let result = self.line.write(&out);
         self.out = out;
         result?;
         self.tx.frames_sent += 1;
-        self.last_sent_s = self.clock.now_s();
+        self.last_sent_s = self.line.clock.now_s();
         Ok(())
-    }
-
-    fn write_raw(&mut self, bytes: &[u8]) -> Result<(), DeviceError> {
-        let result = self.writer.write_all(bytes).and_then(|()| self.writer.flush());
-        result.map_err(|e| {
-            let message = format!("{}: serial port write failed: {e}", self.name);
-            self.failed = Some(message.clone());
-            DeviceError::Link(message)
-        })
     }
 
     /// Sends the held currents of every channel as one `Drive` frame, releasing a device latch first when every
     /// channel is at 0 A. Unless `force`, waits for the drive interval (the currents stay pending).
     fn flush_drive(&mut self, force: bool) -> Result<(), DeviceError> {
         self.round = 0;
-        let now = self.clock.now_s();
+        let now = self.line.clock.now_s();
         if !force && now - self.last_drive_s < self.config.drive_interval_s {
             self.dirty = true;
             return Ok(());
         }
         self.release_latch_if_off(now)?;
         let count = self.channel_count();
-        let drive = DriveFrame::new(0, &self.pending_ma[..count])
-            .map_err(|e| DeviceError::Link(format!("{}: {e}", self.name)))?;
+        let drive = DriveFrame::new(0, &self.pending_ma[..count]).map_err(|_| self.line.error(LinkFault::Encode))?;
         self.send(&HostMessage::Drive(drive))?;
         self.tx.drive_frames += 1;
         self.sent_ma = self.pending_ma;
@@ -782,7 +712,7 @@ impl SerialDevice {
 
     /// Keeps the watchdog fed: a pending drive or a heartbeat when nothing went out for a quarter period.
     fn keep_alive(&mut self) -> Result<(), DeviceError> {
-        let now = self.clock.now_s();
+        let now = self.line.clock.now_s();
         let quarter_s = f64::from(self.identify.watchdog_ms) * 1e-3 / 4.0;
         if self.dirty && now - self.last_drive_s >= self.config.drive_interval_s {
             return self.flush_drive(true);
@@ -796,31 +726,26 @@ impl SerialDevice {
 
     /// The reading of `channel` from the shared state, or why there is none.
     fn reading(&mut self, channel: usize) -> Result<Reading, DeviceError> {
-        let now = self.clock.now_s();
+        let now = self.line.clock.now_s();
         let state = self.lock()?;
-        if let Some(error) = &state.error {
-            return Err(DeviceError::Link(format!("{}: {error}", self.name)));
-        }
+        self.line.check_port(&state)?;
         let Some(last) = state.last_report else {
-            return Err(DeviceError::Link(format!("{}: no sensor report yet", self.name)));
+            return Err(self.line.error(LinkFault::NothingYet {
+                silence: Silence::SensorReport,
+            }));
         };
         let silent_s = now - last.received_s;
         if silent_s > self.config.link_timeout_s {
-            return Err(DeviceError::Link(format!(
-                "{}: no sensor report for {silent_s:.3} s (link timeout {} s)",
-                self.name, self.config.link_timeout_s
-            )));
+            return Err(self.line.error(LinkFault::Silent {
+                silence: Silence::SensorReport,
+                silent_s,
+                timeout_s: self.config.link_timeout_s,
+            }));
         }
         if last.report.flags.latched() {
-            let why = if last.report.flags.watchdog_expired() {
-                "its watchdog expired"
-            } else {
-                "it restarted"
-            };
-            return Err(DeviceError::Link(format!(
-                "{}: the device latched its drives off ({why}); they are released once every channel is commanded 0 A",
-                self.name
-            )));
+            return Err(self.line.error(LinkFault::Latched {
+                watchdog: last.report.flags.watchdog_expired(),
+            }));
         }
         let track = state.tracks[channel];
         drop(state);
@@ -896,57 +821,19 @@ fn cut_of(faults: ChannelFaults) -> Option<DeviceCut> {
     )
 }
 
-/// The reconnector thread: on each request, re-opens `path` and repeats the handshake until it succeeds (waiting
-/// [`FIRST_BACKOFF_S`] before the first attempt, doubling up to the configured maximum), then hands the new link
-/// over.
-fn reconnect(
-    path: &str,
-    config: &SerialConfig,
-    clock: &Arc<dyn Clock>,
-    requests: &Receiver<()>,
-    made: &SyncSender<SerialDevice>,
-    stop: &AtomicBool,
-    health: &LinkHealth,
-) {
-    while requests.recv().is_ok() {
-        // The first wait also lets the old port's reader close its end and a restarting device get going.
-        let mut wait_s = FIRST_BACKOFF_S;
-        loop {
-            let until = Instant::now() + Duration::from_secs_f64(wait_s);
-            while Instant::now() < until {
-                if stop.load(Ordering::SeqCst) {
-                    return;
-                }
-                std::thread::sleep(Duration::from_millis(10));
-            }
-            health.attempt();
-            match SerialDevice::open_once(path, config, clock.clone()) {
-                Ok(device) => {
-                    if made.send(device).is_err() {
-                        return;
-                    }
-                    break;
-                }
-                Err(e) => health.set_error(format!("reconnecting to {path}: {e}")),
-            }
-            wait_s = (wait_s * 2.0).min(config.reconnect_backoff_max_s);
-        }
+impl OnLine for SerialDevice {
+    type State = Shared;
+
+    fn line(&self) -> &Line<Shared> {
+        &self.line
     }
 }
 
 impl Drop for SerialDevice {
+    /// `AllOff` unless the link failed; the reader and the reconnector end with their fields.
     fn drop(&mut self) {
-        if let Some(recovery) = &self.recovery {
-            recovery.stop.store(true, Ordering::SeqCst);
-        }
-        if self.failed.is_none() {
+        if self.line.failed.is_none() {
             let _ = self.send(&HostMessage::AllOff);
-        }
-        self.stop.store(true, Ordering::SeqCst);
-        if let Some(thread) = self.reader.take() {
-            if self.join_reader {
-                let _ = thread.join();
-            }
         }
     }
 }

@@ -4,7 +4,7 @@
 //! - **Framing** ([`frame`]): each frame is COBS-stuffed `payload ‖ CRC-32` ending in a 0x00 delimiter; at most
 //!   [`MAX_PAYLOAD_LEN`] payload bytes. Bytes that do not make a valid frame (bad stuffing, bad CRC, too short,
 //!   too long) are dropped and counted, and the receiver is back in step at the next 0x00.
-//! - **Messages** ([`message`], [`codec`]): a 4-byte header (version [`PROTOCOL_VERSION`], type, sequence number)
+//! - **Messages** ([`message`], [`layout`]): a 4-byte header (version [`PROTOCOL_VERSION`], type, sequence number)
 //!   and a little-endian body. Host → device: `Hello`, `Heartbeat`, `Drive` (currents in mA for a range of
 //!   channels), `AllOff`, `ClearFault`. Device → host: `Identify`, `SensorReport` (every channel: sensor in m°C,
 //!   hot side in c°C, delivered current in mA, sample sequence and age, fault bits), `Ack`, `Nack`.
@@ -14,16 +14,16 @@
 //!   releases the latch.
 //! - **Time**: both ends run on an injected monotonic `thermode_platform::Clock`.
 
-pub mod codec;
 pub mod frame;
+pub mod layout;
 pub mod message;
 
-pub use codec::{
-    decode_payload, encode_frame, DecodeError, LinkCounters, StreamDecoder, WireMessage, HEADER_LEN, PROTOCOL_VERSION,
-};
 pub use frame::{
     cobs_decode, cobs_encode, crc32, write_frame, FrameDecoder, FrameError, DELIMITER, MAX_ENCODED_LEN, MAX_FRAME_LEN,
     MAX_PAYLOAD_LEN,
+};
+pub use layout::{
+    decode_payload, encode_frame, DecodeError, LinkCounters, StreamDecoder, WireMessage, HEADER_LEN, PROTOCOL_VERSION,
 };
 pub use message::{
     to_centi_c, to_milli_c, to_milliamps, ChannelFaults, ChannelReport, DeviceMessage, DriveFrame, FirmwareVersion,

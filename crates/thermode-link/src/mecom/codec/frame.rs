@@ -273,6 +273,8 @@ mod tests {
     /// 5136AL §5), carriage return added.
     #[test]
     fn published_frames_are_reproduced() {
+        // One published frame per line: the table is data.
+        #[rustfmt::skip]
         let cases = [
             (HOST_CONTROL, 0x00, 0x15AA, "?IF", "#0015AA?IF62AE\r"),
             (HOST_CONTROL, 0x01, 0x15AA, "?IF", "#0115AA?IF257D\r"),
@@ -280,22 +282,10 @@ mod tests {
             (DEVICE_CONTROL, 0x01, 0x15AC, "+05", "!0115AC+057509\r"),
             (HOST_CONTROL, 0x00, 0x15AB, "?VR006401", "#0015AB?VR0064018000\r"),
             (DEVICE_CONTROL, 0x00, 0x15AB, "00000441", "!0015AB000004411DBD\r"),
-            (
-                HOST_CONTROL,
-                0x00,
-                0x15AE,
-                "VS07DA0100000002",
-                "#0015AEVS07DA01000000028F97\r",
-            ),
+            (HOST_CONTROL, 0x00, 0x15AE, "VS07DA0100000002", "#0015AEVS07DA01000000028F97\r"),
             (HOST_CONTROL, 0x00, 0x15AB, "?VR03E801", "#0015AB?VR03E801C21A\r"),
             (DEVICE_CONTROL, 0x00, 0x15AB, "41CD2F28", "!0015AB41CD2F28D5C2\r"),
-            (
-                HOST_CONTROL,
-                0x00,
-                0x15B0,
-                "VS0BB80141AE0000",
-                "#0015B0VS0BB80141AE0000C482\r",
-            ),
+            (HOST_CONTROL, 0x00, 0x15B0, "VS0BB80141AE0000", "#0015B0VS0BB80141AE0000C482\r"),
             (DEVICE_CONTROL, 0x00, 0x15AC, "+05", "!0015AC+0532DA\r"),
         ];
         for (control, address, seq, payload, expected) in cases {

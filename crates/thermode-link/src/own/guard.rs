@@ -55,16 +55,17 @@
 
 use thermode_device::{DeviceConfig, SensorSample};
 use thermode_model::peltier::PeltierModule;
+use thermode_safety::{ABSOLUTE_MAX_C, ABSOLUTE_MIN_C};
 
-use crate::protocol::{SENSOR_OPEN_THRESHOLD_C, SENSOR_SHORT_THRESHOLD_C};
+use super::codec::{SENSOR_OPEN_THRESHOLD_C, SENSOR_SHORT_THRESHOLD_C};
 
-/// The device cuts heating before its plate can pass this temperature \[°C\]: 48 (the absolute maximum of the host's
-/// safety envelope, IEC 60601-1's limit for 1–10 min contact).
-pub const PLATE_MAX_C: f64 = 48.0;
+/// The device cuts heating before its plate can pass this temperature \[°C\]: 48, the absolute maximum of the host's
+/// safety envelope ([`ABSOLUTE_MAX_C`], IEC 60601-1's limit for 1–10 min contact).
+pub const PLATE_MAX_C: f64 = ABSOLUTE_MAX_C;
 
-/// The device cuts cooling before its plate can pass this temperature \[°C\]: 10 (the host envelope's absolute
-/// minimum, 3 K above the ISO 13732-3 numbness criterion).
-pub const PLATE_MIN_C: f64 = 10.0;
+/// The device cuts cooling before its plate can pass this temperature \[°C\]: 10, the host envelope's absolute
+/// minimum ([`ABSOLUTE_MIN_C`], 3 K above the ISO 13732-3 numbness criterion).
+pub const PLATE_MIN_C: f64 = ABSOLUTE_MIN_C;
 
 /// A cut is released (by `ClearFault`) only once the plate's bound is this far back inside \[K\]: 1 (below 47 °C,
 /// above 11 °C), so a plate at the line does not trip and release over and over.
@@ -269,11 +270,11 @@ impl PlateGuard {
     }
 
     /// The gap bound after `dt_s` at a constant rate bound: the exact solution of `dG/dt = r − G/τ`.
-    fn filtered(&self, gap_c: f64, rate_c_s: f64, dt_s: f64) -> f64 {
+    fn filtered(&self, gap_c: f64, rate_c_per_s: f64, dt_s: f64) -> f64 {
         if self.tau_s <= 0.0 {
             return 0.0;
         }
-        let settled = rate_c_s * self.tau_s;
+        let settled = rate_c_per_s * self.tau_s;
         settled + (gap_c - settled) * (-dt_s / self.tau_s).exp()
     }
 

@@ -2,7 +2,7 @@
 //! with the fixed-point units they carry on the wire and the conversions to and from SI values.
 //!
 //! Every message is a plain value without heap storage (channel arrays are fixed at [`MAX_CHANNELS`]), so encoding
-//! and decoding allocate nothing. Byte layouts are in [`super::codec`] and `docs/protocol.md`.
+//! and decoding allocate nothing. Byte layouts are in [`super::layout`] and `docs/protocol.md`.
 
 use thiserror::Error;
 
