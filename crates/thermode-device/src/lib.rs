@@ -55,7 +55,7 @@ pub use error::{DeviceCut, DeviceError};
 pub use finger::{default_finger, DefaultFinger, NoFinger, PlateFinger};
 pub use link::LinkHealth;
 pub use link_error::{
-    Awaited, DownReason, LinkError, LinkFault, MecomSetup, OpenStep, RequestFault, Silence, SpecFault,
+    Awaited, DownReason, LinkError, LinkFault, MecomSetup, OpenStep, OsError, RequestFault, Silence, SpecFault,
 };
 pub use sensor::{Pt100, SensorCondition, SensorSample, SENSOR_OPEN_READING_C, SENSOR_SHORT_READING_C};
 

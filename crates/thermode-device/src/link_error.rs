@@ -1,14 +1,55 @@
 //! Typed failures of the links to real displays (`thermode-link`), carried by [`crate::DeviceError::Link`]: which
 //! device ([`LinkError::Device`]: its port path, `HOST:PORT`, or the name a host was given) and why
 //! ([`LinkFault`]), a `--device` spelling that names no display ([`LinkError::Spec`], [`SpecFault`]), or a MeCom
-//! channel that cannot exist ([`LinkError::BadChannel`]). Every field is a number, a path, an I/O error kind or an
-//! enum of reasons, so callers can match on them; the messages read as the hosts' messages always did.
+//! channel that cannot exist ([`LinkError::BadChannel`]). Every field is a number, a path, an operating-system error
+//! ([`OsError`]: its kind and errno, no text) or an enum of reasons, so callers can match on them; the messages read as the hosts' messages always did.
 
 use std::io;
 use std::ops::Range;
 use std::path::PathBuf;
 
 use thiserror::Error;
+
+/// An operating-system error as a link keeps it: its kind and, when it has one, its errno, so that the message is
+/// the system's own ("No such file or directory (os error 2)") while the error stays a plain value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct OsError {
+    /// The I/O error's kind.
+    pub kind: io::ErrorKind,
+    /// The system's error number, when the error came from the system.
+    pub code: Option<i32>,
+}
+
+impl From<&io::Error> for OsError {
+    fn from(error: &io::Error) -> Self {
+        OsError {
+            kind: error.kind(),
+            code: error.raw_os_error(),
+        }
+    }
+}
+
+impl From<io::Error> for OsError {
+    fn from(error: io::Error) -> Self {
+        OsError::from(&error)
+    }
+}
+
+impl From<io::ErrorKind> for OsError {
+    fn from(kind: io::ErrorKind) -> Self {
+        OsError { kind, code: None }
+    }
+}
+
+impl std::fmt::Display for OsError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match (self.code, self.kind) {
+            (Some(code), _) => io::Error::from_raw_os_error(code).fmt(f),
+            (None, io::ErrorKind::NotFound) => f.write_str("no such file or device"),
+            (None, kind) => kind.fmt(f),
+        }
+    }
+}
 
 /// Why a link to a real display failed.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -137,10 +178,10 @@ pub enum RequestFault {
         request: &'static str,
     },
     /// The port failed.
-    #[error("port failed: {kind}")]
+    #[error("port failed: {error}")]
     Port {
-        /// The I/O error's kind.
-        kind: io::ErrorKind,
+        /// The system's error.
+        error: OsError,
     },
 }
 
@@ -148,12 +189,12 @@ pub enum RequestFault {
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum LinkFault {
     /// The port could not be opened or set up.
-    #[error("{step}: {kind}")]
+    #[error("{step}: {error}")]
     Open {
         /// What failed.
         step: OpenStep,
-        /// The I/O error's kind.
-        kind: io::ErrorKind,
+        /// The system's error.
+        error: OsError,
     },
     /// `HOST:PORT` resolves to no address.
     #[error("resolves to no address")]
@@ -165,16 +206,16 @@ pub enum LinkFault {
     #[error("the serial port reached its end (closed)")]
     PortClosed,
     /// Reading the port failed.
-    #[error("serial port read failed: {kind}")]
+    #[error("serial port read failed: {error}")]
     ReadFailed {
-        /// The I/O error's kind.
-        kind: io::ErrorKind,
+        /// The system's error.
+        error: OsError,
     },
     /// Writing the port failed (or timed out: the device stopped reading).
-    #[error("serial port write failed: {kind}")]
+    #[error("serial port write failed: {error}")]
     WriteFailed {
-        /// The I/O error's kind.
-        kind: io::ErrorKind,
+        /// The system's error.
+        error: OsError,
     },
     /// The host's reader or worker thread failed (its state is gone).
     #[error("the link's reader failed")]

@@ -24,7 +24,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use thermode_device::{DeviceError, LinkError, LinkFault, LinkHealth, OpenStep};
+use thermode_device::{DeviceError, LinkError, LinkFault, LinkHealth, OpenStep, OsError};
 use thermode_platform::Clock;
 
 /// A port both ways with a read timeout.
@@ -43,7 +43,7 @@ pub(crate) enum ReadStep {
     /// The port reached its end (the other side closed).
     Closed,
     /// The port failed.
-    Failed(io::ErrorKind),
+    Failed(OsError),
 }
 
 /// Reads `port` once into `buf`: how every host, reader and emulator runner reads its port.
@@ -53,23 +53,25 @@ pub(crate) fn read_step<P: Read + ?Sized>(port: &mut P, buf: &mut [u8]) -> ReadS
         Ok(n) => ReadStep::Data(n),
         Err(e) if e.kind() == io::ErrorKind::WouldBlock => ReadStep::Idle,
         Err(e) if matches!(e.kind(), io::ErrorKind::TimedOut | io::ErrorKind::Interrupted) => ReadStep::Retry,
-        Err(e) => ReadStep::Failed(e.kind()),
+        Err(e) => ReadStep::Failed(OsError::from(e)),
     }
 }
 
-/// The I/O error kind behind a serial port error (`Other` when it has none).
-pub(crate) fn serial_error_kind(error: &serialport::Error) -> io::ErrorKind {
-    match error.kind() {
+/// The system's error behind a serial port error (its kind; `serialport` keeps no errno).
+pub(crate) fn serial_error_kind(error: &serialport::Error) -> OsError {
+    let kind = match error.kind() {
         serialport::ErrorKind::Io(kind) => kind,
         serialport::ErrorKind::NoDevice => io::ErrorKind::NotFound,
         serialport::ErrorKind::InvalidInput => io::ErrorKind::InvalidInput,
         serialport::ErrorKind::Unknown => io::ErrorKind::Other,
-    }
+    };
+    OsError::from(kind)
 }
 
 /// The link error of `device` failing to open at `step` with an error of `kind`.
-fn open_failed(device: &Path, step: OpenStep, kind: io::ErrorKind) -> DeviceError {
-    LinkError::device(device, LinkFault::Open { step, kind }).into()
+fn open_failed(device: &Path, step: OpenStep, error: impl Into<OsError>) -> DeviceError {
+    let error = error.into();
+    LinkError::device(device, LinkFault::Open { step, error }).into()
 }
 
 /// Opens the serial port `path` raw, 8N1, at `baud_rate` \[bit/s\] with reads timing out after `read_timeout`, and
@@ -113,16 +115,16 @@ pub(crate) fn open_tcp(
     let device = Path::new(address);
     let target = address
         .to_socket_addrs()
-        .map_err(|e| open_failed(device, OpenStep::Resolve, e.kind()))?
+        .map_err(|e| open_failed(device, OpenStep::Resolve, e))?
         .next()
         .ok_or_else(|| DeviceError::from(LinkError::device(device, LinkFault::NoAddress)))?;
-    let stream = TcpStream::connect_timeout(&target, connect_timeout)
-        .map_err(|e| open_failed(device, OpenStep::Connect, e.kind()))?;
+    let stream =
+        TcpStream::connect_timeout(&target, connect_timeout).map_err(|e| open_failed(device, OpenStep::Connect, e))?;
     stream
         .set_read_timeout(Some(read_timeout))
         .and_then(|()| stream.set_write_timeout(Some(write_timeout)))
         .and_then(|()| stream.set_nodelay(true))
-        .map_err(|e| open_failed(device, OpenStep::Configure, e.kind()))?;
+        .map_err(|e| open_failed(device, OpenStep::Configure, e))?;
     Ok(stream)
 }
 
@@ -138,7 +140,7 @@ pub(crate) fn start_thread<T: Send + 'static>(
     std::thread::Builder::new()
         .name(name.to_string())
         .spawn(body)
-        .map_err(|e| open_failed(device, OpenStep::Thread, e.kind()))
+        .map_err(|e| open_failed(device, OpenStep::Thread, e))
 }
 
 /// The state a host's reader thread keeps: what it decoded, and the port's failure.
@@ -212,7 +214,7 @@ fn read_until_stopped<S: LineState>(
             }
             ReadStep::Idle => std::thread::sleep(Duration::from_millis(1)),
             ReadStep::Retry => {}
-            ReadStep::Failed(kind) => return failed(LinkFault::ReadFailed { kind }),
+            ReadStep::Failed(error) => return failed(LinkFault::ReadFailed { error }),
         }
     }
 }
@@ -307,7 +309,9 @@ impl<S: LineState> Line<S> {
         self.check_failed()?;
         let result = self.writer.write_all(bytes).and_then(|()| self.writer.flush());
         result.map_err(|e| {
-            let fault = LinkFault::WriteFailed { kind: e.kind() };
+            let fault = LinkFault::WriteFailed {
+                error: OsError::from(e),
+            };
             self.failed = Some(fault.clone());
             self.error(fault)
         })

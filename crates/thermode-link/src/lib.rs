@@ -35,4 +35,4 @@ pub use runner::{EmulatorError, Firmware, FirmwareControl, FirmwareStatus, PtyFi
 pub use spec::{is_hardware, open_hardware, HardwareContext};
 pub use tcs2::emulator::{Tcs2Emulator, Tcs2EmulatorConfig};
 pub use tcs2::host::{Tcs2Config, Tcs2Device};
-pub use thermode_device::{LinkError, LinkFault};
+pub use thermode_device::{LinkError, LinkFault, OsError};

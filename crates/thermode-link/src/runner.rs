@@ -16,7 +16,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use thermode_device::{DeviceError, PlateFinger, SimulatedDisplay, MAX_CHANNELS};
+use thermode_device::{DeviceError, OsError, PlateFinger, SimulatedDisplay, MAX_CHANNELS};
 use thermode_platform::Clock;
 use thiserror::Error;
 
@@ -74,18 +74,21 @@ pub enum PortStep {
 
 /// A failed step of the runner and the kind of I/O error behind it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
-#[error("{step}: {kind}")]
+#[error("{step}: {error}")]
 pub struct PortFailure {
     /// What the runner was doing.
     pub step: PortStep,
-    /// The I/O error's kind.
-    pub kind: io::ErrorKind,
+    /// The system's error.
+    pub error: OsError,
 }
 
 impl EmulatorError {
-    /// A port failure at `step` of kind `kind`.
-    pub fn io(step: PortStep, kind: io::ErrorKind) -> Self {
-        EmulatorError::Io(PortFailure { step, kind })
+    /// A port failure at `step` with `error`.
+    pub fn io(step: PortStep, error: impl Into<OsError>) -> Self {
+        EmulatorError::Io(PortFailure {
+            step,
+            error: error.into(),
+        })
     }
 }
 
@@ -352,8 +355,8 @@ pub fn run<E: Emulated + ?Sized, P: Read + Write>(
             ReadStep::Idle => (0, true),
             ReadStep::Retry => (0, false),
             ReadStep::Closed => return Ok(RunEnd::HostClosed),
-            ReadStep::Failed(kind) if host_went_away(kind) => return Ok(RunEnd::HostClosed),
-            ReadStep::Failed(kind) => return Err(EmulatorError::io(PortStep::Transfer, kind)),
+            ReadStep::Failed(error) if host_went_away(error.kind) => return Ok(RunEnd::HostClosed),
+            ReadStep::Failed(error) => return Err(EmulatorError::io(PortStep::Transfer, error)),
         };
         let now_s = clock.now_s();
         if n > 0 {
@@ -391,7 +394,7 @@ fn write_out<E: Emulated + ?Sized, P: Write>(
             Ok(None)
         }
         Err(e) if host_went_away(e.kind()) => Ok(Some(RunEnd::HostClosed)),
-        Err(e) => Err(EmulatorError::io(PortStep::Transfer, e.kind())),
+        Err(e) => Err(EmulatorError::io(PortStep::Transfer, e)),
     }
 }
 
@@ -416,7 +419,7 @@ fn start(
         .name(name.to_string())
         .spawn(body)
         .map(Some)
-        .map_err(|e| EmulatorError::io(PortStep::Thread, e.kind()))
+        .map_err(|e| EmulatorError::io(PortStep::Thread, e))
 }
 
 /// An emulated device in its own thread on a pseudo-terminal (Unix): the host opens [`PtyRunner::path`] as its
@@ -503,7 +506,7 @@ impl<S: Copy + Send + 'static, C: Send + 'static> TcpRunner<S, C> {
     where
         E: Emulated<Status = S, Command = C> + 'static,
     {
-        let io_error = |e: io::Error| EmulatorError::io(PortStep::TcpListener, e.kind());
+        let io_error = |e: io::Error| EmulatorError::io(PortStep::TcpListener, e);
         let listener = TcpListener::bind(bind).map_err(io_error)?;
         listener.set_nonblocking(true).map_err(io_error)?;
         let address = listener.local_addr().map_err(io_error)?;
@@ -569,13 +572,13 @@ fn serve_tcp<E: Emulated + ?Sized>(
                 control.publish(device.snapshot());
                 std::thread::sleep(tick);
             }
-            Err(e) => return Err(EmulatorError::io(PortStep::TcpAccept, e.kind())),
+            Err(e) => return Err(EmulatorError::io(PortStep::TcpAccept, e)),
         }
     }
 }
 
 fn configure(stream: TcpStream, tick: Duration) -> Result<TcpStream, EmulatorError> {
-    let io_error = |e: io::Error| EmulatorError::io(PortStep::TcpConnection, e.kind());
+    let io_error = |e: io::Error| EmulatorError::io(PortStep::TcpConnection, e);
     stream.set_nonblocking(false).map_err(io_error)?;
     stream.set_read_timeout(Some(tick)).map_err(io_error)?;
     stream

@@ -46,7 +46,7 @@ use super::codec::payload::{check_answer, describe_error, error_number, param, s
 pub use crate::host::Port;
 use crate::host::{self, read_step, start_thread, ReadStep};
 use thermode_device::{
-    Device, DeviceCut, DeviceError, LinkError, LinkFault, MecomSetup, Reading, RequestFault, MAX_CHANNELS,
+    Device, DeviceCut, DeviceError, LinkError, LinkFault, MecomSetup, OsError, Reading, RequestFault, MAX_CHANNELS,
 };
 
 /// Default baud rate of a MeCom serial port \[bit/s\]: 57600 (the TEC family's default and the rate its service
@@ -294,7 +294,9 @@ impl Link {
             self.port
                 .write_all(&self.out)
                 .and_then(|()| self.port.flush())
-                .map_err(|e| RequestFault::Port { kind: e.kind() })?;
+                .map_err(|e| RequestFault::Port {
+                    error: OsError::from(e),
+                })?;
             self.stats.requests += 1;
             if let Some(answer) = self.await_answer(address, sent_s)? {
                 self.answered += 1;
@@ -322,10 +324,10 @@ impl Link {
                 }
                 ReadStep::Closed => {
                     return Err(RequestFault::Port {
-                        kind: io::ErrorKind::UnexpectedEof,
+                        error: OsError::from(io::ErrorKind::UnexpectedEof),
                     })
                 }
-                ReadStep::Failed(kind) => return Err(RequestFault::Port { kind }),
+                ReadStep::Failed(error) => return Err(RequestFault::Port { error }),
             };
             let mut found = None;
             let (seq, stats) = (self.seq, &mut self.stats);

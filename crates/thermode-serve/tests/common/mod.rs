@@ -106,7 +106,7 @@ impl Device for SpyDevice {
         let control = self.control.lock().expect("spy control");
         if control.failing_reads.contains(&channel) {
             let fault = thermode_device::LinkFault::ReadFailed {
-                kind: std::io::ErrorKind::Other,
+                error: std::io::ErrorKind::Other.into(),
             };
             return Err(DeviceError::Link(thermode_device::LinkError::device("spy", fault)));
         }
