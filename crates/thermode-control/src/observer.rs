@@ -212,6 +212,13 @@ impl PlantModel {
             .min(0.0)
     }
 
+    /// Plate and hot side \[°C\] after one backward-Euler step of `dt_s` \[s\] from `start` (plate, hot side)
+    /// at `current_a` \[A\] with `finger` on the plate: the model's own step, for open-loop simulations of it (the
+    /// start-up self-test).
+    pub fn nodes_after(&self, dt_s: f64, current_a: f64, start: [f64; 2], finger: Finger) -> [f64; 2] {
+        self.plate_hot_step(dt_s, current_a, start, finger, 0.0).end
+    }
+
     /// Plate and hot side after one backward-Euler step of `dt_s` from (`plate_c`, `hot_c`) at `current_a`, with the
     /// finger heat `g_f (receptor_c − T_p)` and the extra heat `extra_w` into the plate. Returns the end temperatures
     /// and the 2×2 map M⁻¹·diag(C/dt) of the start temperatures into them (for the observer's Jacobian) and M⁻¹e₁

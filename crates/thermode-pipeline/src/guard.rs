@@ -161,6 +161,15 @@ impl PlateGuard {
         }
     }
 
+    /// Bounds the plate from here on with a sensor lag of at least `lag_s` \[s\] (a self-test measured the sensor
+    /// slower than the file; a shorter or NaN `lag_s` changes nothing).
+    pub fn allow_sensor_lag(&mut self, lag_s: f64) {
+        let current_s = self.bound_lag_s.unwrap_or(0.0);
+        if lag_s > current_s {
+            self.bound_lag_s = Some(lag_s);
+        }
+    }
+
     /// The estimated true plate \[°C\] (NaN before the first reading).
     pub fn plate_estimate_c(&self) -> f64 {
         self.observer.estimate().map_or(f64::NAN, |e| e.plate_c)

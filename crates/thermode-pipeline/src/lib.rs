@@ -23,6 +23,7 @@ pub mod error;
 pub mod guard;
 pub mod pipeline;
 pub mod renderer;
+pub mod self_test;
 pub mod stimulus;
 
 pub use controllers::{build_controller, gains_for_device, ControllerKind, GainsSource, ShippedDisplay};

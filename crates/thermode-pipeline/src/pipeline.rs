@@ -813,6 +813,18 @@ impl ChannelPipeline {
         &self.setpoint.renderer
     }
 
+    /// Takes the display's self-test at `now_s` \[s\]: a display unlike the device file this pipeline was built
+    /// for is refused ([`SafetyEnvelope::refuse_display`]: 0 A from now on, a fault that cannot be cleared); one
+    /// within it has its plate bounded with the sensor lag measured ([`crate::self_test::LAG_MARGIN`]) where that
+    /// is longer than the file's allowance.
+    pub fn take_self_test(&mut self, report: &crate::self_test::SelfTestReport, now_s: f64) {
+        if report.off_file().is_some() {
+            self.drive.envelope.refuse_display(now_s);
+        } else {
+            self.drive.guard.allow_sensor_lag(report.guard_lag_s());
+        }
+    }
+
     /// The finger model on the display and its inverse.
     pub fn display_finger(&self) -> &DisplayFinger {
         &self.setpoint.display

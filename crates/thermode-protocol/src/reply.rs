@@ -219,8 +219,8 @@ pub enum Response {
     Ok(OkReply),
     /// A request was refused.
     Error(ErrorReply),
-    /// The reply to `status`.
-    Status(StatusReply),
+    /// The reply to `status` (boxed: it is far larger than the other messages).
+    Status(Box<StatusReply>),
     /// Telemetry of a subscription.
     Telemetry(Telemetry),
     /// An event.

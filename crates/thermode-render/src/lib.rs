@@ -21,6 +21,7 @@ pub mod figure;
 pub mod identify;
 pub mod nelder_mead;
 pub mod run;
+pub mod self_test;
 pub mod spec;
 pub mod summary;
 pub mod trajectory;

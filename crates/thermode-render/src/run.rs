@@ -60,6 +60,7 @@ pub use crate::spec::{
 use crate::summary::{actuator_limit, summarise, RenderSummary};
 pub use crate::trajectory::{finger_at_depth_c, ContactState, Plant, Trajectory};
 use crate::truth::truth_skin_c;
+use thermode_pipeline::self_test::SelfTestReport;
 
 /// One offline render: its spec, its trajectory and its summary.
 #[derive(Debug, Clone)]
@@ -70,6 +71,8 @@ pub struct RenderRun {
     pub trajectory: Trajectory,
     /// The metrics of the paper's Figure 3.
     pub summary: RenderSummary,
+    /// The display's start-up self-test against the pipeline's device file (`None`: the plant is that file).
+    pub self_test: Option<SelfTestReport>,
 }
 
 /// The seed of a run's sensor noise: `seed` XOR the 64-bit FNV-1a hash of the material's name. Each material gets
@@ -140,6 +143,10 @@ pub fn render_all(specs: &[RenderSpec]) -> Result<Vec<RenderRun>, RenderError> {
 pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<RenderRun, RenderError> {
     spec.validate()?;
     let mut plant = resting_plant(spec)?;
+    let self_test = crate::self_test::self_test(spec, &pipeline)?;
+    if let Some(report) = &self_test {
+        pipeline.take_self_test(report, plant.time_s());
+    }
     let (truth, _) = truth_skin_c(spec)?;
     let (pre, contact_ticks, release) = spec.tick_counts();
     let dt = spec.tick_s();
@@ -184,6 +191,7 @@ pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<R
         spec: spec.clone(),
         trajectory,
         summary,
+        self_test,
     })
 }
 

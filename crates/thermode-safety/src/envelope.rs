@@ -719,6 +719,13 @@ impl SafetyEnvelope {
         }
     }
 
+    /// Refuses the display at `now_s` \[s\]: its self-test found it unlike its device file
+    /// ([`FaultCode::DisplayNotAsFiled`], latched unless a fault already is, and never cleared: only an envelope
+    /// built for a file that describes the display drives it).
+    pub fn refuse_display(&mut self, now_s: f64) {
+        self.latch(FaultCode::DisplayNotAsFiled, now_s);
+    }
+
     /// Clears the latched fault at time `now_s` (s). Returns the cleared fault (`None` if none was latched).
     /// Refused while no fresh measurement has arrived since the fault latched
     /// ([`EnvelopeError::NoFreshMeasurement`]) or while the newest measurement still shows a cause
@@ -727,6 +734,9 @@ impl SafetyEnvelope {
         let Some(latch) = self.latch else {
             return Ok(None);
         };
+        if latch.code == FaultCode::DisplayNotAsFiled {
+            return Err(EnvelopeError::FaultPersists(latch.code));
+        }
         Rule::Finite.check("now_s", now_s)?;
         let fresh = self.sample.filter(|s| match latch.seq {
             None => true,

@@ -18,6 +18,10 @@ pub enum FaultCode {
     SensorStale,
     /// The measured display temperature changes faster than `max_measured_rate_c_per_s`.
     SensorRateImplausible,
+    /// The display's self-test found it unlike its device file beyond what the envelope allows for (a plate sensor
+    /// slower, or a plate answering heat faster, than the file says): the channel is refused before any touch,
+    /// and stays refused (only a device file that describes the display lifts it).
+    DisplayNotAsFiled,
     /// Hot (reference) side above `hot_side_max_c`: the water cooling has failed.
     HotSideOverTemperature,
     /// Hot-side sensor below `hot_side_min_c` (shorted or implausible), so cooling failure could go unseen.
@@ -49,12 +53,13 @@ pub enum FaultCode {
 
 impl FaultCode {
     /// Every fault code, in code order.
-    pub const ALL: [FaultCode; 17] = [
+    pub const ALL: [FaultCode; 18] = [
         FaultCode::SensorOpen,
         FaultCode::SensorShort,
         FaultCode::SensorOutOfRange,
         FaultCode::SensorStale,
         FaultCode::SensorRateImplausible,
+        FaultCode::DisplayNotAsFiled,
         FaultCode::HotSideOverTemperature,
         FaultCode::HotSideSensorImplausible,
         FaultCode::DisplayOverTemperature,
@@ -77,6 +82,7 @@ impl FaultCode {
             FaultCode::SensorOutOfRange => 103,
             FaultCode::SensorStale => 104,
             FaultCode::SensorRateImplausible => 105,
+            FaultCode::DisplayNotAsFiled => 106,
             FaultCode::HotSideOverTemperature => 201,
             FaultCode::HotSideSensorImplausible => 202,
             FaultCode::DisplayOverTemperature => 203,
@@ -105,6 +111,7 @@ impl FaultCode {
             FaultCode::SensorOutOfRange => "display sensor out of plausible range",
             FaultCode::SensorStale => "display sensor stale",
             FaultCode::SensorRateImplausible => "display temperature changes implausibly fast",
+            FaultCode::DisplayNotAsFiled => "display unlike its device file (self-test): refused",
             FaultCode::HotSideOverTemperature => "hot side over temperature (cooling failure)",
             FaultCode::HotSideSensorImplausible => "hot-side sensor implausible",
             FaultCode::DisplayOverTemperature => "display above its maximum",

@@ -11,5 +11,6 @@ mod kron_depth;
 mod pipeline;
 mod props;
 mod run;
+mod self_test;
 mod true_plate;
 mod truth;

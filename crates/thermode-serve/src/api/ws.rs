@@ -220,7 +220,7 @@ impl Connection {
             ApiRequest::Marker { text, channel } => marker(&self.app, text, channel)?,
             ApiRequest::Status => {
                 let status = status(&self.app);
-                return Ok(Reply::Status(StatusReply { id, status }));
+                return Ok(Reply::Status(Box::new(StatusReply { id, status })));
             }
         };
         Ok(Reply::Ok(OkReply { id, done }))

@@ -128,6 +128,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     check_outputs(&[("--out", args.out.as_deref()), ("--plot", args.plot.as_deref())])?;
     let runs = render_all(&specs).context("rendering")?;
     for run in &runs {
+        if let Some(report) = run.self_test.filter(|r| r.off_file().is_some()) {
+            eprintln!(
+                "{} ({}): self-test: {report}; the display was refused before the touch",
+                run.summary.material, run.summary.controller
+            );
+        }
         if let Some(fault) = &run.summary.first_fault {
             eprintln!(
                 "{} ({}): fault {fault} at t = {:.2} s; the drive was switched off",
