@@ -53,6 +53,7 @@ pub use thermode_platform::csv_text::Precision;
 use thermode_platform::csv_text::{self, CsvText};
 
 use crate::error::RenderError;
+pub use crate::spec::noise_seed;
 pub use crate::spec::{
     check_result_bytes, RenderSpec, BYTES_PER_ROW, DEFAULT_DURATION_S, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ,
     DEFAULT_SEED, MAX_RUN_S, PLANT_SUBSTEP_S,
@@ -73,16 +74,6 @@ pub struct RenderRun {
     pub summary: RenderSummary,
     /// The display's start-up self-test against the pipeline's device file (`None`: the plant is that file).
     pub self_test: Option<SelfTestReport>,
-}
-
-/// The seed of a run's sensor noise: `seed` XOR the 64-bit FNV-1a hash of the material's name. Each material gets
-/// its own noise realisation (five materials rendered with one seed are five independent draws, so a tuner cannot
-/// profit from one lucky realisation shared by all), and a material's run is the same alone or among others.
-pub fn noise_seed(seed: u64, material: &str) -> u64 {
-    let hash = material.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
-    });
-    seed ^ hash
 }
 
 /// The simulated display of `spec` at rest: the finger steady in air, the plate at the air-rendering temperature,

@@ -24,7 +24,7 @@ pub fn self_test(spec: &RenderSpec, pipeline: &ChannelPipeline) -> Result<Option
     let mut plant = SimulatedDisplay::new(
         &hardware,
         vec![NoFinger],
-        crate::run::noise_seed(spec.seed, "self-test"),
+        crate::spec::noise_seed(spec.seed, "self-test"),
     )?;
     let water_c = hardware.ambient.water_c;
     plant.channel_mut(0)?.set_temperatures(water_c, water_c)?;

@@ -201,3 +201,13 @@ pub fn check_result_bytes(specs: &[RenderSpec]) -> Result<(), RenderError> {
         ))
     })
 }
+
+/// The seed of a run's sensor noise: `seed` XOR the 64-bit FNV-1a hash of the material's name. Each material gets
+/// its own noise realisation (five materials rendered with one seed are five independent draws, so a tuner cannot
+/// profit from one lucky realisation shared by all), and a material's run is the same alone or among others.
+pub fn noise_seed(seed: u64, material: &str) -> u64 {
+    let hash = material.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    });
+    seed ^ hash
+}
