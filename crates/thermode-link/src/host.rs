@@ -74,16 +74,20 @@ fn open_failed(device: &Path, step: OpenStep, error: impl Into<OsError>) -> Devi
     LinkError::device(device, LinkFault::Open { step, error }).into()
 }
 
-/// Opens the serial port `path` raw, 8N1, at `baud_rate` \[bit/s\] with reads timing out after `read_timeout`, and
-/// discards what is buffered in the directions `clear` names.
+/// Opens the serial port `path` raw, 8N1, at `baud_rate` \[bit/s\], exclusively (Unix), with reads timing out after
+/// `read_timeout`, and discards what is buffered in the directions `clear` names.
 pub(crate) fn open_serial(
     path: &str,
     baud_rate: u32,
     read_timeout: Duration,
     clear: serialport::ClearBuffer,
 ) -> Result<Box<dyn serialport::SerialPort>, DeviceError> {
-    let port = serialport::new(path, baud_rate)
-        .timeout(read_timeout)
+    let builder = serialport::new(path, baud_rate).timeout(read_timeout);
+    // Exclusive: TIOCEXCL (no other process opens the terminal, root excepted) and an exclusive `flock` (no other
+    // serialport user, root included), so no second client shares thermode's line.
+    #[cfg(unix)]
+    let builder = builder.exclusive(true);
+    let port = builder
         .open()
         .map_err(|e| open_failed(Path::new(path), OpenStep::Open, serial_error_kind(&e)))?;
     let _ = port.clear(clear);

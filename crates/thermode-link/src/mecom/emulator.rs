@@ -29,7 +29,7 @@ use thermode_model::peltier::PeltierModule;
 use super::codec::frame::{encode_ack, encode_frame, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
 use super::codec::payload::{error_number, param, status, Request};
 use crate::runner::EmulatorError;
-use crate::runner::{merged_step_s, tick_at, Firmware, FirmwareStatus};
+use crate::runner::{merged_step_s, tick_at, Firmware, FirmwareStatus, Trace};
 
 /// The identity the emulator answers to `?IF` (20 characters).
 pub const EMULATOR_IDENTITY: &str = "thermode-TEC EMU G01";
@@ -167,6 +167,7 @@ pub struct MecomEmulator<F> {
     frames_refused: u64,
     frames_out: u64,
     resets: u64,
+    trace: Option<Trace>,
 }
 
 impl<F: PlateFinger> MecomEmulator<F> {
@@ -212,10 +213,12 @@ impl<F: PlateFinger> MecomEmulator<F> {
             frames_refused: 0,
             frames_out: 0,
             resets: 0,
+            trace: None,
         })
     }
 
     crate::runner::display_accessors!();
+    crate::runner::trace_accessors!();
 
     /// The error state's number, if the device is in it.
     pub fn error_number(&self) -> Option<i32> {
@@ -298,6 +301,9 @@ impl<F: PlateFinger> MecomEmulator<F> {
                     self.error = Some((error_number::OBJECT_TOO_LOW, (i + 1) as u8, now_s));
                 }
             }
+        }
+        if let Some(trace) = &mut self.trace {
+            trace.step(now_s, &self.display);
         }
     }
 

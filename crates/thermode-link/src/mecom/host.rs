@@ -44,9 +44,11 @@ use thermode_safety::{DriveCommand, ABSOLUTE_MAX_C, ABSOLUTE_MIN_C};
 use super::codec::frame::{encode_frame, FrameCounters, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
 use super::codec::payload::{check_answer, describe_error, error_number, param, status, Request};
 pub use crate::host::Port;
-use crate::host::{self, read_step, start_thread, ReadStep};
+use crate::host::{self, read_step, start_thread, ReadStep, Reconnector};
+use crate::own::guard::sensor_lag_margin_c;
 use thermode_device::{
-    Device, DeviceCut, DeviceError, LinkError, LinkFault, MecomSetup, OsError, Reading, RequestFault, MAX_CHANNELS,
+    Device, DeviceConfig, DeviceCut, DeviceError, DownReason, LinkError, LinkFault, LinkHealth, MecomSetup, OsError,
+    Reading, RequestFault, MAX_CHANNELS,
 };
 
 /// Default baud rate of a MeCom serial port \[bit/s\]: 57600 (the TEC family's default and the rate its service
@@ -116,7 +118,9 @@ pub struct MecomConfig {
     pub voltage_limit_v: f64,
     /// Lower object temperature error threshold \[°C\] (4010). Default 10 (the envelope's absolute minimum).
     pub lower_error_c: f64,
-    /// Upper object temperature error threshold \[°C\] (4011). Default 48 (the envelope's absolute maximum).
+    /// Upper object temperature error threshold \[°C\] (4011). Default [`upper_error_threshold_c`] of the default
+    /// display: the envelope's absolute maximum (48) less what the sensor's lag can hide at full current (8.3 K),
+    /// 39.7 °C; `--device mecom:…` sets it from the device file.
     pub upper_error_c: f64,
     /// Largest plausible object temperature change \[°C/s\] (4012), in \[1, 200\]. Default 50 (the envelope's
     /// implausible-rate check).
@@ -124,6 +128,12 @@ pub struct MecomConfig {
     /// Reset (`RS`) a device found in its error state at connect (e.g. after the watchdog of an earlier session
     /// tripped) instead of refusing it. Default true.
     pub reset_on_error: bool,
+    /// No answer from any channel for this long takes the link down and starts a reconnection (a port opened by
+    /// path or address) \[s\], in (0, 60]. Default 1.0, as thermode's own serial link.
+    pub reconnect_after_silence_s: f64,
+    /// Longest wait between two reconnection attempts \[s\] (the wait starts at [`host::FIRST_BACKOFF_S`] and
+    /// doubles), in \[0.5, 60\]. Default 5.
+    pub reconnect_backoff_max_s: f64,
 }
 
 impl Default for MecomConfig {
@@ -141,11 +151,24 @@ impl Default for MecomConfig {
             current_limit_a: 2.8,
             voltage_limit_v: 4.0,
             lower_error_c: ABSOLUTE_MIN_C,
-            upper_error_c: ABSOLUTE_MAX_C,
+            // The default display's file is valid; were it not, 10 °C makes `validate` refuse the configuration.
+            upper_error_c: upper_error_threshold_c(&DeviceConfig::default()).unwrap_or(ABSOLUTE_MIN_C),
             max_change_c_per_s: 50.0,
             reset_on_error: true,
+            reconnect_after_silence_s: 1.0,
+            reconnect_backoff_max_s: 5.0,
         }
     }
+}
+
+/// The upper object temperature error threshold \[°C\] thermode sets on a display of the device file `device`: the
+/// envelope's absolute maximum less what the plate sensor's lag can hide at the display's fastest heating
+/// ([`sensor_lag_margin_c`]: τ · r_max). The controller compares only its *reading* with the threshold; a plate that
+/// rises at r_max is r_max·τ ahead of its sensor, so with the output left on (a host killed while another client
+/// feeds the communication watchdog) the plate stops at about 48 °C instead of 48 °C plus the lag.
+pub fn upper_error_threshold_c(device: &DeviceConfig) -> Result<f64, DeviceError> {
+    let margin_c = sensor_lag_margin_c(device).map_err(DeviceError::from)?;
+    Ok(ABSOLUTE_MAX_C - margin_c)
 }
 
 impl MecomConfig {
@@ -162,6 +185,18 @@ impl MecomConfig {
             ("mecom lower_error_c [°C]", self.lower_error_c, -273.0, 1000.0),
             ("mecom upper_error_c [°C]", self.upper_error_c, -273.0, 1000.0),
             ("mecom max_change_c_per_s [°C/s]", self.max_change_c_per_s, 1.0, 200.0),
+            (
+                "mecom reconnect_after_silence_s [s]",
+                self.reconnect_after_silence_s,
+                1e-9,
+                60.0,
+            ),
+            (
+                "mecom reconnect_backoff_max_s [s]",
+                self.reconnect_backoff_max_s,
+                host::FIRST_BACKOFF_S,
+                60.0,
+            ),
         ];
         for (name, value, min, max) in checks {
             Rule::Within { min, max }.check(name, value)?;
@@ -387,6 +422,13 @@ pub struct MecomDevice {
     stop: Arc<AtomicBool>,
     worker: Option<JoinHandle<()>>,
     clock: Arc<dyn Clock>,
+    /// Re-opening the port after a failure or a silence (only for a port opened by path or address).
+    recovery: Option<Reconnector<MecomDevice>>,
+    /// Added to a link's sample numbers, so they keep rising across reconnections (each link counts from 0).
+    seq_base: [u64; MAX_CHANNELS],
+    /// The last sample number handed out per channel.
+    seq_seen: [u64; MAX_CHANNELS],
+    health: Arc<LinkHealth>,
 }
 
 impl std::fmt::Debug for MecomDevice {
@@ -400,8 +442,19 @@ impl std::fmt::Debug for MecomDevice {
 }
 
 impl MecomDevice {
-    /// Opens the serial port `path` (raw, 8N1, [`MecomConfig::baud_rate`]), connects and configures the device.
+    /// Opens the serial port `path` (raw, 8N1, [`MecomConfig::baud_rate`], exclusively: no other process opens it
+    /// while thermode holds it), connects and configures the device. A failed or silent link is re-opened on the
+    /// same path ([`MecomConfig::reconnect_after_silence_s`]).
     pub fn open_serial(path: &str, config: &MecomConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
+        let (owned, reopen) = (path.to_string(), config.clone());
+        MecomDevice::with_recovery(
+            MecomDevice::open_serial_once(path, config, Arc::clone(&clock))?,
+            clock,
+            move |c| MecomDevice::open_serial_once(&owned, &reopen, c),
+        )
+    }
+
+    fn open_serial_once(path: &str, config: &MecomConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
         config.validate()?;
         let port = host::open_serial(
             path,
@@ -412,8 +465,18 @@ impl MecomDevice {
         MecomDevice::open(&format!("mecom:{path}"), Box::new(port), config, clock)
     }
 
-    /// Connects to `address` (`HOST:PORT`) over TCP, then connects and configures the device.
+    /// Connects to `address` (`HOST:PORT`) over TCP, then connects and configures the device. A dropped or silent
+    /// connection is made again to the same address ([`MecomConfig::reconnect_after_silence_s`]).
     pub fn open_tcp(address: &str, config: &MecomConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
+        let (owned, reopen) = (address.to_string(), config.clone());
+        MecomDevice::with_recovery(
+            MecomDevice::open_tcp_once(address, config, Arc::clone(&clock))?,
+            clock,
+            move |c| MecomDevice::open_tcp_once(&owned, &reopen, c),
+        )
+    }
+
+    fn open_tcp_once(address: &str, config: &MecomConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
         config.validate()?;
         let stream = host::open_tcp(
             address,
@@ -422,6 +485,102 @@ impl MecomDevice {
             Duration::from_millis(100),
         )?;
         MecomDevice::open(&format!("mecom-tcp:{address}"), Box::new(stream), config, clock)
+    }
+
+    /// `device` with a reconnector that makes new links with `open` on `clock`.
+    fn with_recovery(
+        mut device: MecomDevice,
+        clock: Arc<dyn Clock>,
+        open: impl Fn(Arc<dyn Clock>) -> Result<MecomDevice, DeviceError> + Send + 'static,
+    ) -> Result<Self, DeviceError> {
+        let reopen_clock = Arc::clone(&clock);
+        device.recovery = Some(Reconnector::spawn(
+            &device.name.to_string_lossy(),
+            device.config.reconnect_backoff_max_s,
+            clock,
+            Arc::clone(&device.health),
+            move || open(Arc::clone(&reopen_clock)),
+        )?);
+        Ok(device)
+    }
+
+    /// Watches a link that can be re-opened: adopts a link the reconnector made, and takes a failed or silent link
+    /// down (its worker stopped, a new link asked for). Never blocks.
+    fn supervise(&mut self) {
+        let Some(recovery) = &mut self.recovery else {
+            return;
+        };
+        if recovery.down {
+            if let Some(fresh) = recovery.take() {
+                self.adopt(fresh);
+            }
+            return;
+        }
+        let now_s = self.clock.now_s();
+        let limit_s = self.config.reconnect_after_silence_s;
+        let reason = self.shared.lock().ok().and_then(|state| {
+            if let Some(error) = &state.error {
+                return Some(DownReason::Failed(Box::new(error.clone())));
+            }
+            let last_s = state
+                .tracks
+                .iter()
+                .filter_map(|t| t.last_answer_s)
+                .fold(f64::NEG_INFINITY, f64::max);
+            let silent_s = now_s - last_s;
+            (silent_s > limit_s).then_some(DownReason::Silent { silent_s, limit_s })
+        });
+        if let Some(reason) = reason {
+            self.take_down(reason);
+        }
+    }
+
+    /// Stops the worker (not waited for: it ends within a cycle and closes the port) and asks for a new link.
+    fn take_down(&mut self, reason: DownReason) {
+        let fault = LinkFault::Down { reason };
+        self.health
+            .down(LinkError::device(&self.name, fault.clone()).to_string());
+        if let Ok(mut state) = self.shared.lock() {
+            state.commands = [Command::default(); MAX_CHANNELS];
+            state.error = Some(fault);
+        }
+        self.stop.store(true, Ordering::SeqCst);
+        drop(self.worker.take());
+        if let Some(recovery) = &mut self.recovery {
+            recovery.request();
+        }
+    }
+
+    /// Takes over a freshly connected and configured link: its worker, its state, its channels' sample numbers
+    /// going on from where the old link's stopped. Every command starts off; the envelopes keep their faults until
+    /// the operator clears them.
+    fn adopt(&mut self, mut fresh: MecomDevice) {
+        if fresh.channels.len() != self.channels.len() {
+            let fault = LinkFault::ChannelsChanged {
+                now: fresh.channels.len(),
+                before: self.channels.len(),
+            };
+            self.health.set_error(LinkError::device(&self.name, fault).to_string());
+            if let Some(recovery) = &mut self.recovery {
+                recovery.request();
+            }
+            return;
+        }
+        std::mem::swap(&mut self.shared, &mut fresh.shared);
+        std::mem::swap(&mut self.stop, &mut fresh.stop);
+        std::mem::swap(&mut self.worker, &mut fresh.worker);
+        self.channels = fresh.channels.clone();
+        self.identity = fresh.identity.clone();
+        for (base, seen) in self.seq_base.iter_mut().zip(self.seq_seen) {
+            *base = seen + 1;
+        }
+        // `fresh` now holds the old link's stopped worker: let it go without waiting.
+        drop(fresh.worker.take());
+        drop(fresh);
+        if let Some(recovery) = &mut self.recovery {
+            recovery.down = false;
+        }
+        self.health.reconnected();
     }
 
     /// Connects over any port (reads should time out within a few milliseconds), named `name` in messages:
@@ -464,6 +623,10 @@ impl MecomDevice {
             stop: Arc::new(AtomicBool::new(false)),
             worker: None,
             clock: Arc::clone(&clock),
+            recovery: None,
+            seq_base: [0; MAX_CHANNELS],
+            seq_seen: [0; MAX_CHANNELS],
+            health: Arc::new(LinkHealth::new()),
         };
         // One cycle here, so the first read after open has values.
         let mut worker = Worker {
@@ -928,6 +1091,7 @@ impl Device for MecomDevice {
     }
 
     fn apply(&mut self, channel: usize, command: &DriveCommand) -> Result<(), DeviceError> {
+        self.supervise();
         self.check_channel(channel)?;
         let current_a = command.current_a();
         Rule::Finite.check("drive current [A]", current_a)?;
@@ -946,8 +1110,10 @@ impl Device for MecomDevice {
     }
 
     fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
+        self.supervise();
         self.check_channel(channel)?;
         let now_s = self.clock.now_s();
+        let seq_base = self.seq_base[channel];
         let state = self.lock()?;
         if let Some(error) = &state.error {
             return Err(self.error(error.clone()));
@@ -986,14 +1152,21 @@ impl Device for MecomDevice {
                 }),
             });
         }
-        Ok(Reading {
+        let reading = Reading {
             sensor_c: track.object_c,
             hot_side_c: track.sink_c,
             time_s: track.time_s,
-            sample_seq: track.sample_seq,
+            sample_seq: seq_base + track.sample_seq,
             current_a: track.current_a,
             voltage_v: track.voltage_v,
-        })
+        };
+        drop(state);
+        self.seq_seen[channel] = reading.sample_seq;
+        Ok(reading)
+    }
+
+    fn link_health(&self) -> Option<Arc<LinkHealth>> {
+        Some(Arc::clone(&self.health))
     }
 
     /// The worker runs in real time: nothing to do.
