@@ -535,14 +535,15 @@ impl MecomDevice {
         }
     }
 
-    /// Stops the worker (not waited for: it ends within a cycle and closes the port) and asks for a new link.
+    /// Stops the worker (not waited for: it ends within a cycle and closes the port) and asks for a new link; the
+    /// reason goes to the link's health.
     fn take_down(&mut self, reason: DownReason) {
         let fault = LinkFault::Down { reason };
         self.health
             .down(LinkError::device(&self.name, fault.clone()).to_string());
+        // The readings go on failing with what took the link down (the port's failure, or no answer).
         if let Ok(mut state) = self.shared.lock() {
             state.commands = [Command::default(); MAX_CHANNELS];
-            state.error = Some(fault);
         }
         self.stop.store(true, Ordering::SeqCst);
         drop(self.worker.take());
