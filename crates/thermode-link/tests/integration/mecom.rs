@@ -450,8 +450,16 @@ fn a_host_killed_mid_heat_with_a_second_client_polling_leaves_the_plate_at_most_
             peak_c <= 48.5,
             "killed at a reading of {kill_at_c} °C: true plate {peak_c:.2} °C > 48.5 °C (threshold {upper_c:.2} °C)"
         );
-        // The second client fed the watchdog (no error 183): the lagged threshold cut the output (138).
-        assert_eq!(error, Some(138), "controller error after the kill at {kill_at_c} °C");
+        // The second client fed the watchdog (no error 183); heating at full current, the lagged threshold cut the
+        // output (138). Killed just below the threshold the envelope may already have been holding or cooling.
+        assert_ne!(
+            error,
+            Some(183),
+            "the watchdog tripped: the second client did not feed it"
+        );
+        if kill_at_c < 37.0 {
+            assert_eq!(error, Some(138), "controller error after the kill at {kill_at_c} °C");
+        }
     }
     // The threshold at 48 °C without the lag's margin, for comparison (not asserted: the red team's figure).
     let (old_peak_c, _) = killed_mid_heat_with_a_second_client(48.0, 40.0);
