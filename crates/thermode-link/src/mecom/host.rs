@@ -5,8 +5,9 @@
 //!   object temperature of the first address gives the number of instances. A device in its error state is reset
 //!   (`RS`) first ([`MecomConfig::reset_on_error`]). Then, per channel, the output goes off (output stage enable
 //!   0, live enable 0) before anything else, and the device's own protection is set as a second line: current and
-//!   voltage limitation, object temperature error thresholds (the envelope's absolute 10–48 °C by default: beyond
-//!   them the device disables its output by itself), the largest plausible temperature change, no automatic
+//!   voltage limitation, object temperature error thresholds (10 °C, and 48 °C less what the sensor's lag hides at
+//!   full current, [`upper_error_threshold_c`]: beyond them the device disables its output by itself, whoever else
+//!   talks to it), the largest plausible temperature change, no automatic
 //!   restart from the error state (6310 = 0), and the communication watchdog (2060, default 0.25 s: with no frame
 //!   for that long the device disables its output, error 183). A device that refuses any of these is refused. Then
 //!   the mode's input selection and the output stage enable "live off/on", so the output runs only while thermode
@@ -27,6 +28,11 @@
 //!   [`Device::read`] fail with [`DeviceError::Link`]; the device's error state reads as [`DeviceError::Cut`] for
 //!   its object temperature thresholds (137, 138) and [`DeviceError::Link`] naming the error otherwise. Malformed
 //!   and CRC-bad answers are counted and dropped.
+//! - **Reconnection** (a port opened by [`MecomDevice::open_serial`] or [`MecomDevice::open_tcp`]): a port that
+//!   fails, or no answer for [`MecomConfig::reconnect_after_silence_s`], takes the link down (the worker stops, the
+//!   readings fail) and the shared [`crate::host`] reconnector connects and configures the device again with
+//!   back-off; the new link is adopted at the next [`Device::read`] or [`Device::apply`], every output off, sample
+//!   numbers still rising. A serial port is held exclusively.
 //! - **Stopping**: [`Device::all_off`] disables every output and waits for the device's acknowledges; dropping the
 //!   device does the same before the worker ends.
 
