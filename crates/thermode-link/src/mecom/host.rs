@@ -50,7 +50,7 @@ use thermode_safety::{DriveCommand, ABSOLUTE_MAX_C, ABSOLUTE_MIN_C};
 use super::codec::frame::{encode_frame, FrameCounters, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
 use super::codec::payload::{check_answer, describe_error, error_number, param, status, Request};
 pub use crate::host::Port;
-use crate::host::{self, read_step, start_thread, ReadStep, Reconnector};
+use crate::host::{self, read_step, start_thread, ReadStep, Reconnector, Recovering};
 use crate::own::guard::sensor_lag_margin_c;
 use thermode_device::{
     Device, DeviceConfig, DeviceCut, DeviceError, DownReason, LinkError, LinkFault, LinkHealth, MecomSetup, OsError,
@@ -508,86 +508,6 @@ impl MecomDevice {
             move || open(Arc::clone(&reopen_clock)),
         )?);
         Ok(device)
-    }
-
-    /// Watches a link that can be re-opened: adopts a link the reconnector made, and takes a failed or silent link
-    /// down (its worker stopped, a new link asked for). Never blocks.
-    fn supervise(&mut self) {
-        let Some(recovery) = &mut self.recovery else {
-            return;
-        };
-        if recovery.down {
-            if let Some(fresh) = recovery.take() {
-                self.adopt(fresh);
-            }
-            return;
-        }
-        let now_s = self.clock.now_s();
-        let limit_s = self.config.reconnect_after_silence_s;
-        let reason = self.shared.lock().ok().and_then(|state| {
-            if let Some(error) = &state.error {
-                return Some(DownReason::Failed(Box::new(error.clone())));
-            }
-            let last_s = state
-                .tracks
-                .iter()
-                .filter_map(|t| t.last_answer_s)
-                .fold(f64::NEG_INFINITY, f64::max);
-            let silent_s = now_s - last_s;
-            (silent_s > limit_s).then_some(DownReason::Silent { silent_s, limit_s })
-        });
-        if let Some(reason) = reason {
-            self.take_down(reason);
-        }
-    }
-
-    /// Stops the worker (not waited for: it ends within a cycle and closes the port) and asks for a new link; the
-    /// reason goes to the link's health.
-    fn take_down(&mut self, reason: DownReason) {
-        let fault = LinkFault::Down { reason };
-        self.health
-            .down(LinkError::device(&self.name, fault.clone()).to_string());
-        // The readings go on failing with what took the link down (the port's failure, or no answer).
-        if let Ok(mut state) = self.shared.lock() {
-            state.commands = [Command::default(); MAX_CHANNELS];
-        }
-        self.stop.store(true, Ordering::SeqCst);
-        drop(self.worker.take());
-        if let Some(recovery) = &mut self.recovery {
-            recovery.request();
-        }
-    }
-
-    /// Takes over a freshly connected and configured link: its worker, its state, its channels' sample numbers
-    /// going on from where the old link's stopped. Every command starts off; the envelopes keep their faults until
-    /// the operator clears them.
-    fn adopt(&mut self, mut fresh: MecomDevice) {
-        if fresh.channels.len() != self.channels.len() {
-            let fault = LinkFault::ChannelsChanged {
-                now: fresh.channels.len(),
-                before: self.channels.len(),
-            };
-            self.health.set_error(LinkError::device(&self.name, fault).to_string());
-            if let Some(recovery) = &mut self.recovery {
-                recovery.request();
-            }
-            return;
-        }
-        std::mem::swap(&mut self.shared, &mut fresh.shared);
-        std::mem::swap(&mut self.stop, &mut fresh.stop);
-        std::mem::swap(&mut self.worker, &mut fresh.worker);
-        self.channels = fresh.channels.clone();
-        self.identity = fresh.identity.clone();
-        for (base, seen) in self.seq_base.iter_mut().zip(self.seq_seen) {
-            *base = seen + 1;
-        }
-        // `fresh` now holds the old link's stopped worker: let it go without waiting.
-        drop(fresh.worker.take());
-        drop(fresh);
-        if let Some(recovery) = &mut self.recovery {
-            recovery.down = false;
-        }
-        self.health.reconnected();
     }
 
     /// Connects over any port (reads should time out within a few milliseconds), named `name` in messages:
@@ -1089,6 +1009,79 @@ impl Worker {
             all &= ok;
         }
         all
+    }
+}
+
+impl Recovering for MecomDevice {
+    fn recovery(&mut self) -> Option<&mut Reconnector<Self>> {
+        self.recovery.as_mut()
+    }
+
+    /// Why the link must go down: it failed, or fell silent for longer than the configured limit.
+    fn down_reason(&mut self) -> Option<DownReason> {
+        let now_s = self.clock.now_s();
+        let limit_s = self.config.reconnect_after_silence_s;
+        self.shared.lock().ok().and_then(|state| {
+            if let Some(error) = &state.error {
+                return Some(DownReason::Failed(Box::new(error.clone())));
+            }
+            let last_s = state
+                .tracks
+                .iter()
+                .filter_map(|t| t.last_answer_s)
+                .fold(f64::NEG_INFINITY, f64::max);
+            let silent_s = now_s - last_s;
+            (silent_s > limit_s).then_some(DownReason::Silent { silent_s, limit_s })
+        })
+    }
+
+    /// Stops the worker (not waited for: it ends within a cycle and closes the port) and asks for a new link; the
+    /// reason goes to the link's health.
+    fn take_down(&mut self, reason: DownReason) {
+        let fault = LinkFault::Down { reason };
+        self.health
+            .down(LinkError::device(&self.name, fault.clone()).to_string());
+        // The readings go on failing with what took the link down (the port's failure, or no answer).
+        if let Ok(mut state) = self.shared.lock() {
+            state.commands = [Command::default(); MAX_CHANNELS];
+        }
+        self.stop.store(true, Ordering::SeqCst);
+        drop(self.worker.take());
+        if let Some(recovery) = &mut self.recovery {
+            recovery.request();
+        }
+    }
+
+    /// Takes over a freshly connected and configured link: its worker, its state, its channels' sample numbers
+    /// going on from where the old link's stopped. Every command starts off; the envelopes keep their faults until
+    /// the operator clears them.
+    fn adopt(&mut self, mut fresh: MecomDevice) {
+        if fresh.channels.len() != self.channels.len() {
+            let fault = LinkFault::ChannelsChanged {
+                now: fresh.channels.len(),
+                before: self.channels.len(),
+            };
+            self.health.set_error(LinkError::device(&self.name, fault).to_string());
+            if let Some(recovery) = &mut self.recovery {
+                recovery.request();
+            }
+            return;
+        }
+        std::mem::swap(&mut self.shared, &mut fresh.shared);
+        std::mem::swap(&mut self.stop, &mut fresh.stop);
+        std::mem::swap(&mut self.worker, &mut fresh.worker);
+        self.channels = fresh.channels.clone();
+        self.identity = fresh.identity.clone();
+        for (base, seen) in self.seq_base.iter_mut().zip(self.seq_seen) {
+            *base = seen + 1;
+        }
+        // `fresh` now holds the old link's stopped worker: let it go without waiting.
+        drop(fresh.worker.take());
+        drop(fresh);
+        if let Some(recovery) = &mut self.recovery {
+            recovery.down = false;
+        }
+        self.health.reconnected();
     }
 }
 

@@ -521,13 +521,21 @@ fn thermode_holds_its_serial_port_exclusively() {
         .unwrap_or_else(|e| panic!("open: {e}"));
     // A second client opening the same line (as any serial program does) is refused while thermode holds it.
     let second = serialport::new(pty.path(), 57_600).open();
-    println!("a second open of {} while thermode holds it: {:?}", pty.path(), second.as_ref().err());
+    println!(
+        "a second open of {} while thermode holds it: {:?}",
+        pty.path(),
+        second.as_ref().err()
+    );
     assert!(second.is_err(), "a second client opened thermode's port");
     drop(second);
     drop(device);
     // Released with the device.
     let again = serialport::new(pty.path(), 57_600).open();
-    assert!(again.is_ok(), "the port stays held after the device is gone: {:?}", again.err());
+    assert!(
+        again.is_ok(),
+        "the port stays held after the device is gone: {:?}",
+        again.err()
+    );
 }
 
 proptest! {
