@@ -12,7 +12,8 @@
 //!   reading, towards the live or stored target) clamped to the current limitation, only while enabled and not in
 //!   the error state;
 //! - the error state (status 3, output disabled, latched): the object reading above the upper threshold (error
-//!   138) or below the lower one (137), or no valid frame for longer than the watchdog timeout (183). It holds
+//!   138) or below the lower one (137), or no valid frame for longer than the watchdog timeout (183; every valid
+//!   frame to its address feeds it, whichever client sends it, as on the device). It holds
 //!   until `RS` resets the device (volatile parameters back to their reset state) or the auto-restart delay passes;
 //! - answers: values, acknowledges (the set command's CRC in place of a payload and frame CRC), server errors (`+01` unknown command, `+04` format,
 //!   `+05` unknown parameter, `+06` read only, `+07` out of range, `+08` no such instance). Frames with a bad CRC

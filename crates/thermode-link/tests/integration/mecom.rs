@@ -514,6 +514,44 @@ fn mecom_over_tcp_reconnects_after_the_connection_drops() {
 }
 
 #[test]
+fn mecom_over_serial_reconnects_after_the_device_falls_silent() {
+    let clock = clock();
+    let pty = PtyFirmware::spawn(Box::new(emulator(1)), Arc::clone(&clock)).unwrap_or_else(|e| panic!("pty: {e}"));
+    let device = MecomDevice::open_serial(pty.path(), &config(MecomMode::Current), Arc::clone(&clock))
+        .unwrap_or_else(|e| panic!("open: {e}"));
+    let health = device.link_health().unwrap_or_else(|| panic!("no link health"));
+    let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
+    // Holding where the plate is: a host that drives blind during the silence would heat the plate into the
+    // controller's own cut, which no reconnection releases (its restart delay is 0).
+    let rest_c = ok(&control.tick(&[30.0])[0]).sensor_c;
+    let before = ok(&control.run(0.3, &[rest_c])[0]);
+    // A cable pulled for 1.5 s: the controller hears the host but the host hears nothing.
+    pty.control().set_mute(true);
+    control.run(1.5, &[rest_c]);
+    let down = !health.is_up();
+    pty.control().set_mute(false);
+    let back = wait_for(10.0, || {
+        let r = control.tick(&[rest_c]).remove(0);
+        std::thread::sleep(Duration::from_millis(10));
+        r.is_ok()
+    });
+    println!(
+        "MeCom over a pty: silent 1.5 s (link down: {down}), readings back {back:?} s after the device spoke again; \
+         reconnects {}",
+        health.reconnects()
+    );
+    assert!(down, "1.5 s of silence did not take the link down");
+    assert!(
+        back.is_some(),
+        "no reading within 10 s of the device speaking again: {:?}",
+        control.device.read(0)
+    );
+    assert!(health.reconnects() >= 1, "reconnects {}", health.reconnects());
+    let after = ok(&control.device.read(0));
+    assert!(after.sample_seq > before.sample_seq, "{before:?} then {after:?}");
+}
+
+#[test]
 fn thermode_holds_its_serial_port_exclusively() {
     let clock = clock();
     let pty = PtyFirmware::spawn(Box::new(emulator(1)), Arc::clone(&clock)).unwrap_or_else(|e| panic!("pty: {e}"));
