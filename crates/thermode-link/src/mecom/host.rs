@@ -5,8 +5,8 @@
 //!   object temperature of the first address gives the number of instances. A device in its error state is reset
 //!   (`RS`) first ([`MecomConfig::reset_on_error`]). Then, per channel, the output goes off (output stage enable
 //!   0, live enable 0) before anything else, and the device's own protection is set as a second line: current and
-//!   voltage limitation, object temperature error thresholds (10 °C, and 48 °C less what the sensor's lag hides at
-//!   full current, [`upper_error_threshold_c`]: beyond them the device disables its output by itself, whoever else
+//!   voltage limitation, object temperature error thresholds (10 °C plus and 48 °C less what the sensor's lag hides
+//!   at the fastest cooling and heating, [`lower_error_threshold_c`], [`upper_error_threshold_c`]: beyond them the device disables its output by itself, whoever else
 //!   talks to it), the largest plausible temperature change, no automatic
 //!   restart from the error state (6310 = 0), and the communication watchdog (2060, default 0.25 s: with no frame
 //!   for that long the device disables its output, error 183). A device that refuses any of these is refused. Then
@@ -51,7 +51,7 @@ use super::codec::frame::{encode_frame, FrameCounters, FrameDecoder, DEVICE_CONT
 use super::codec::payload::{check_answer, describe_error, error_number, param, status, Request};
 pub use crate::host::Port;
 use crate::host::{self, read_step, start_thread, ReadStep, Reconnector, Recovering};
-use crate::own::guard::sensor_lag_margin_c;
+use crate::own::guard::{sensor_lag_cooling_margin_c, sensor_lag_margin_c};
 use thermode_device::{
     Device, DeviceConfig, DeviceCut, DeviceError, DownReason, LinkError, LinkFault, LinkHealth, MecomSetup, OsError,
     Reading, RequestFault, MAX_CHANNELS,
@@ -122,7 +122,9 @@ pub struct MecomConfig {
     pub current_limit_a: f64,
     /// Voltage limitation set on every channel \[V\] (2031), positive. Default 4.0.
     pub voltage_limit_v: f64,
-    /// Lower object temperature error threshold \[°C\] (4010). Default 10 (the envelope's absolute minimum).
+    /// Lower object temperature error threshold \[°C\] (4010). Default [`lower_error_threshold_c`] of the default
+    /// display: the envelope's absolute minimum (10) plus what the sensor's lag can hide at the fastest cooling
+    /// (3.2 K), 13.2 °C; `--device mecom:…` sets it from the device file.
     pub lower_error_c: f64,
     /// Upper object temperature error threshold \[°C\] (4011). Default [`upper_error_threshold_c`] of the default
     /// display: the envelope's absolute maximum (48) less what the sensor's lag can hide at full current (8.3 K),
@@ -156,7 +158,8 @@ impl Default for MecomConfig {
             watchdog_s: MAX_MECOM_WATCHDOG_S,
             current_limit_a: 2.8,
             voltage_limit_v: 4.0,
-            lower_error_c: ABSOLUTE_MIN_C,
+            // As the upper threshold: a valid default file, else 48 °C, which `validate` refuses.
+            lower_error_c: lower_error_threshold_c(&DeviceConfig::default()).unwrap_or(ABSOLUTE_MAX_C),
             // The default display's file is valid; were it not, 10 °C makes `validate` refuse the configuration.
             upper_error_c: upper_error_threshold_c(&DeviceConfig::default()).unwrap_or(ABSOLUTE_MIN_C),
             max_change_c_per_s: 50.0,
@@ -175,6 +178,14 @@ impl Default for MecomConfig {
 pub fn upper_error_threshold_c(device: &DeviceConfig) -> Result<f64, DeviceError> {
     let margin_c = sensor_lag_margin_c(device).map_err(DeviceError::from)?;
     Ok(ABSOLUTE_MAX_C - margin_c)
+}
+
+/// The lower object temperature error threshold \[°C\] thermode sets on a display of the device file `device`: the
+/// envelope's absolute minimum plus what the plate sensor's lag can hide at the display's fastest cooling
+/// ([`sensor_lag_cooling_margin_c`]), the mirror of [`upper_error_threshold_c`].
+pub fn lower_error_threshold_c(device: &DeviceConfig) -> Result<f64, DeviceError> {
+    let margin_c = sensor_lag_cooling_margin_c(device).map_err(DeviceError::from)?;
+    Ok(ABSOLUTE_MIN_C + margin_c)
 }
 
 impl MecomConfig {

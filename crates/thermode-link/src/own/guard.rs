@@ -98,6 +98,27 @@ pub fn sensor_lag_margin_c(config: &DeviceConfig) -> Result<f64, thermode_model:
     Ok(config.sensor.time_constant_s.max(0.0) * rate_c_per_s)
 }
 
+/// What a sensor that lags its plate can hide at the display's fastest cooling \[K\]: the plate's fastest cooling rate
+/// times the sensor's time constant,
+///
+/// `M⁻ = τ · r_cool`, `r_cool = (S·I·T − ½·I²·R) / C_d` at `T` = [`PLATE_MIN_C`] (in kelvin) and the cooling current
+/// that draws the most heat, `I = min(I_max, S·T/R)`,
+///
+/// with the hot side at the plate's temperature and no finger (both only warm a plate below 37 °C). The mirror of
+/// [`sensor_lag_margin_c`] for a line on the reading at `PLATE_MIN_C + M⁻`. Default display: `r_cool` 10.8 K/s,
+/// `M⁻` 3.2 K, a line at 13.2 °C. Fails if the configuration's module is invalid.
+pub fn sensor_lag_cooling_margin_c(config: &DeviceConfig) -> Result<f64, thermode_model::ParamError> {
+    let module = config.module()?;
+    let plate_k = PLATE_MIN_C + 273.15;
+    let current_a = config
+        .drive
+        .current_limit_a
+        .min(module.seebeck_v_k * plate_k / module.resistance_ohm);
+    let cooling_w = -module.heat_into_display_w(-current_a, PLATE_MIN_C, PLATE_MIN_C);
+    let rate_c_per_s = cooling_w.max(0.0) / config.plate.heat_capacity_j_k;
+    Ok(config.sensor.time_constant_s.max(0.0) * rate_c_per_s)
+}
+
 /// What a channel's guard has cut.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Cuts {
@@ -331,6 +352,12 @@ mod tests {
         assert!(
             (margin_c - 8.3).abs() < 0.15,
             "lag margin {margin_c:.3} K, expected about 8.3 K"
+        );
+        let cooling_c = sensor_lag_cooling_margin_c(&DeviceConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        // By hand: (6.37e-3 · 2.8 · 283.15 − ½ · 2.8² · 0.515) / 0.28 · 0.3 = 3.25 K.
+        assert!(
+            (cooling_c - 3.25).abs() < 0.1,
+            "cooling lag margin {cooling_c:.3} K, expected about 3.25 K"
         );
         let mut slower = DeviceConfig::default();
         slower.sensor.time_constant_s *= 2.0;

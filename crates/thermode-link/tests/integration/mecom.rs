@@ -221,12 +221,13 @@ fn connect_sets_the_devices_own_protection() {
         let emu = emu.lock().unwrap_or_else(|e| panic!("{e}"));
         for ch in 0..2 {
             assert_eq!(emu.current_limit_a(ch), Some(1.5), "current limitation of channel {ch}");
-            // The upper threshold sits below 48 °C by what the sensor's lag hides at full current (issue 23).
+            // The thresholds sit inside 10-48 °C by what the sensor's lag hides at full current (issue 23).
+            let lower_c = f64::from(MecomConfig::default().lower_error_c as f32);
             let upper_c = f64::from(MecomConfig::default().upper_error_c as f32);
-            assert!(upper_c < 40.0, "upper threshold {upper_c} °C");
+            assert!(lower_c > 13.0 && upper_c < 40.0, "thresholds {lower_c} / {upper_c} °C");
             assert_eq!(
                 emu.error_thresholds_c(ch),
-                Some((10.0, upper_c)),
+                Some((lower_c, upper_c)),
                 "object error thresholds of {ch}"
             );
             assert_eq!(emu.restart_delay_s(ch), Some(0.0), "auto-restart of {ch}");
@@ -390,11 +391,17 @@ fn poll_as_a_second_client(mut stream: TcpStream, watch_s: f64, mut sample: impl
     }
 }
 
-/// A host heats channel 0 of a `mecom-tcp` emulator (no finger: nothing takes heat off the plate) through an
-/// envelope at full current towards 48 °C with the controller's upper object threshold at `upper_error_c`, and is
-/// killed (its connection shut both ways, no all-off) once the controller's reading passes `kill_at_c`; then another
-/// client polls the controller. The highest true plate seen and the controller's error number at the end.
-fn killed_mid_heat_with_a_second_client(upper_error_c: f64, kill_at_c: f64) -> (f64, Option<i32>) {
+/// A host drives channel 0 of a `mecom-tcp` emulator (no finger: nothing takes heat off the plate) through an
+/// envelope at full current towards `target_c` with the controller's object thresholds at `thresholds_c` (lower,
+/// upper), and is killed (its connection shut both ways, no all-off) once the controller's reading has passed
+/// `kill_at_c` while the output drives towards the target at more than 1 A; then another client polls the
+/// controller. The lowest and highest true plate seen and the
+/// controller's error number at the end.
+fn killed_mid_drive_with_a_second_client(
+    thresholds_c: (f64, f64),
+    target_c: f64,
+    kill_at_c: f64,
+) -> (f64, f64, Option<i32>) {
     let clock = clock();
     let display = SimulatedDisplay::<NoFinger>::fingertips(&DeviceConfig::default(), 1, 5)
         .unwrap_or_else(|e| panic!("display: {e}"));
@@ -407,7 +414,9 @@ fn killed_mid_heat_with_a_second_client(upper_error_c: f64, kill_at_c: f64) -> (
         .and_then(|()| stream.set_nodelay(true))
         .unwrap_or_else(|e| panic!("{e}"));
     let killer = stream.try_clone().unwrap_or_else(|e| panic!("{e}"));
+    let (lower_error_c, upper_error_c) = thresholds_c;
     let config = MecomConfig {
+        lower_error_c,
         upper_error_c,
         ..config(MecomMode::Current)
     };
@@ -415,55 +424,76 @@ fn killed_mid_heat_with_a_second_client(upper_error_c: f64, kill_at_c: f64) -> (
         .unwrap_or_else(|e| panic!("open: {e}"));
     let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
     control.gain_a_per_c = 20.0;
-    let heated = wait_for(10.0, || {
-        let reading = control.tick(&[48.0]).remove(0);
+    let heating = target_c > kill_at_c;
+    let driven = wait_for(10.0, || {
+        let reading = control.tick(&[target_c]).remove(0);
         std::thread::sleep(Duration::from_millis(5));
-        reading.is_ok_and(|r| r.sensor_c >= kill_at_c)
+        // Killed while the output drives towards the target (the envelope's loop may swing both ways).
+        let driving = tcp
+            .control()
+            .status()
+            .is_some_and(|s| (s.applied_a[0] > 0.0) == heating && s.applied_a[0].abs() > 1.0);
+        driving && reading.is_ok_and(|r| (r.sensor_c >= kill_at_c) == heating)
     });
-    assert!(heated.is_some(), "the reading never reached {kill_at_c} °C");
+    assert!(driven.is_some(), "the reading never reached {kill_at_c} °C");
     let at_kill = tcp.control().status().unwrap_or_else(|| panic!("no status"));
     // Killed: the kernel closes the connection; no all-off reaches the controller.
     killer.shutdown(Shutdown::Both).unwrap_or_else(|e| panic!("{e}"));
     drop(control);
-    let mut peak_c = at_kill.plate_c[0];
+    let (mut low_c, mut peak_c) = (at_kill.plate_c[0], at_kill.plate_c[0]);
     let second = TcpStream::connect(tcp.address()).unwrap_or_else(|e| panic!("second client: {e}"));
     poll_as_a_second_client(second, 3.0, || {
         if let Some(status) = tcp.control().status() {
+            low_c = low_c.min(status.plate_c[0]);
             peak_c = peak_c.max(status.plate_c[0]);
         }
     });
     let end = tcp.control().status().unwrap_or_else(|| panic!("no status"));
     println!(
-        "upper threshold {upper_error_c:.2} °C: killed at true plate {:.2} °C ({:.2} A); peak {peak_c:.2} °C, \
-         controller error {:?}, output {}",
+        "thresholds {lower_error_c:.2} / {upper_error_c:.2} °C, towards {target_c} °C: killed at true plate {:.2} °C \
+         ({:.2} A); true plate {low_c:.2} to {peak_c:.2} °C, controller error {:?}, output {}",
         at_kill.plate_c[0], at_kill.applied_a[0], end.error, end.output_on[0]
     );
-    (peak_c, end.error)
+    (low_c, peak_c, end.error)
 }
 
 #[test]
 fn a_host_killed_mid_heat_with_a_second_client_polling_leaves_the_plate_at_most_48_5() {
-    let upper_c = MecomConfig::default().upper_error_c;
-    for kill_at_c in [32.0, 36.0, upper_c - 0.5] {
-        let (peak_c, error) = killed_mid_heat_with_a_second_client(upper_c, kill_at_c);
+    let defaults = MecomConfig::default();
+    let (lower_c, upper_c) = (defaults.lower_error_c, defaults.upper_error_c);
+    for kill_at_c in [32.0, 36.0, upper_c - 1.0] {
+        let (_, peak_c, error) = killed_mid_drive_with_a_second_client((lower_c, upper_c), 48.0, kill_at_c);
         assert!(
             peak_c <= 48.5,
             "killed at a reading of {kill_at_c} °C: true plate {peak_c:.2} °C > 48.5 °C (threshold {upper_c:.2} °C)"
         );
-        // The second client fed the watchdog (no error 183); heating at full current, the lagged threshold cut the
-        // output (138). Killed just below the threshold the envelope may already have been holding or cooling.
+        // The second client fed the watchdog (no error 183); the lagged threshold cut the output (138).
+        assert_eq!(error, Some(138), "controller error after the kill at {kill_at_c} °C");
+    }
+    // The threshold at 48 °C without the lag's margin, for comparison (not asserted: the red team's figure).
+    let (_, old_peak_c, _) = killed_mid_drive_with_a_second_client((lower_c, 48.0), 48.0, 40.0);
+    println!("with the upper threshold at 48 °C the true plate reached {old_peak_c:.2} °C");
+}
+
+#[test]
+fn a_host_killed_mid_cooling_with_a_second_client_polling_leaves_the_plate_above_10() {
+    let defaults = MecomConfig::default();
+    let (lower_c, upper_c) = (defaults.lower_error_c, defaults.upper_error_c);
+    // The envelope holds the set-point at the display's minimum (15 °C), so the reading passes 16 °C at the latest.
+    for kill_at_c in [20.0, 16.0] {
+        let (low_c, _, error) = killed_mid_drive_with_a_second_client((lower_c, upper_c), 10.0, kill_at_c);
+        assert!(
+            low_c >= 10.0 - 0.02,
+            "killed at a reading of {kill_at_c} °C: true plate {low_c:.2} °C < 10 °C (threshold {lower_c:.2} °C)"
+        );
         assert_ne!(
             error,
             Some(183),
             "the watchdog tripped: the second client did not feed it"
         );
-        if kill_at_c < 37.0 {
-            assert_eq!(error, Some(138), "controller error after the kill at {kill_at_c} °C");
-        }
     }
-    // The threshold at 48 °C without the lag's margin, for comparison (not asserted: the red team's figure).
-    let (old_peak_c, _) = killed_mid_heat_with_a_second_client(48.0, 40.0);
-    println!("with the upper threshold at 48 °C the true plate reached {old_peak_c:.2} °C");
+    let (old_low_c, _, _) = killed_mid_drive_with_a_second_client((10.0, upper_c), 10.0, 18.0);
+    println!("with the lower threshold at 10 °C the true plate reached {old_low_c:.2} °C");
 }
 
 #[test]
