@@ -24,7 +24,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use thermode_device::{DeviceError, LinkError, LinkFault, LinkHealth, OpenStep, OsError};
+use thermode_device::{DeviceError, DownReason, LinkError, LinkFault, LinkHealth, OpenStep, OsError};
 use thermode_platform::Clock;
 
 /// A port both ways with a read timeout.
@@ -74,16 +74,20 @@ fn open_failed(device: &Path, step: OpenStep, error: impl Into<OsError>) -> Devi
     LinkError::device(device, LinkFault::Open { step, error }).into()
 }
 
-/// Opens the serial port `path` raw, 8N1, at `baud_rate` \[bit/s\] with reads timing out after `read_timeout`, and
-/// discards what is buffered in the directions `clear` names.
+/// Opens the serial port `path` raw, 8N1, at `baud_rate` \[bit/s\], exclusively (Unix), with reads timing out after
+/// `read_timeout`, and discards what is buffered in the directions `clear` names.
 pub(crate) fn open_serial(
     path: &str,
     baud_rate: u32,
     read_timeout: Duration,
     clear: serialport::ClearBuffer,
 ) -> Result<Box<dyn serialport::SerialPort>, DeviceError> {
-    let port = serialport::new(path, baud_rate)
-        .timeout(read_timeout)
+    let builder = serialport::new(path, baud_rate).timeout(read_timeout);
+    // Exclusive: TIOCEXCL (no other process opens the terminal, root excepted) and an exclusive `flock` (no other
+    // serialport user, root included), so no second client shares thermode's line.
+    #[cfg(unix)]
+    let builder = builder.exclusive(true);
+    let port = builder
         .open()
         .map_err(|e| open_failed(Path::new(path), OpenStep::Open, serial_error_kind(&e)))?;
     let _ = port.clear(clear);
@@ -425,6 +429,53 @@ impl<D: Send + 'static> Reconnector<D> {
     pub(crate) fn take(&mut self) -> Option<D> {
         self.fresh.try_recv().ok()
     }
+
+    /// What a host's supervision finds here: the link up (the host checks it), a new link being made, or a new link
+    /// to adopt.
+    pub(crate) fn supervision(&mut self) -> Supervision<D> {
+        if !self.down {
+            return Supervision::Up;
+        }
+        match self.take() {
+            Some(fresh) => Supervision::Fresh(fresh),
+            None => Supervision::Waiting,
+        }
+    }
+}
+
+/// A host whose link a [`Reconnector`] re-opens: the supervision every such host runs at its control loop's calls.
+pub(crate) trait Recovering: Sized + Send + 'static {
+    /// Its reconnector (None: a link that is not re-opened, e.g. streams given by the caller).
+    fn recovery(&mut self) -> Option<&mut Reconnector<Self>>;
+    /// Takes over a freshly opened and handshaken link.
+    fn adopt(&mut self, fresh: Self);
+    /// Why the link, up until now, must go down (it failed, or fell silent), if it must.
+    fn down_reason(&mut self) -> Option<DownReason>;
+    /// Takes the link down and asks the reconnector for a new one.
+    fn take_down(&mut self, reason: DownReason);
+
+    /// Adopts a link the reconnector made, or takes a failed or silent link down. Never blocks.
+    fn supervise(&mut self) {
+        match self.recovery().map(Reconnector::supervision) {
+            None | Some(Supervision::Waiting) => {}
+            Some(Supervision::Fresh(fresh)) => self.adopt(fresh),
+            Some(Supervision::Up) => {
+                if let Some(reason) = self.down_reason() {
+                    self.take_down(reason);
+                }
+            }
+        }
+    }
+}
+
+/// What a host's supervision finds at its reconnector ([`Reconnector::supervision`]).
+pub(crate) enum Supervision<D> {
+    /// The link is up: the host checks whether it failed or fell silent.
+    Up,
+    /// The link is down and no new one is ready yet.
+    Waiting,
+    /// A new link, opened and handshaken, to adopt.
+    Fresh(D),
 }
 
 impl<D> Drop for Reconnector<D> {

@@ -16,7 +16,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use thermode_device::{DeviceError, OsError, PlateFinger, SimulatedDisplay, MAX_CHANNELS};
+use thermode_device::{Device, DeviceError, OsError, PlateFinger, SimulatedDisplay, MAX_CHANNELS};
 use thermode_platform::Clock;
 use thiserror::Error;
 
@@ -229,6 +229,7 @@ impl<T: Firmware + ?Sized> Emulated for Box<T> {
 pub struct Control<S, C> {
     stop: AtomicBool,
     close: AtomicBool,
+    drop_host: AtomicBool,
     mute: AtomicBool,
     corrupt_one_in: AtomicU64,
     command: Mutex<Option<C>>,
@@ -244,6 +245,7 @@ impl<S: Copy, C> Control<S, C> {
         Arc::new(Control {
             stop: AtomicBool::new(false),
             close: AtomicBool::new(false),
+            drop_host: AtomicBool::new(false),
             mute: AtomicBool::new(false),
             corrupt_one_in: AtomicU64::new(0),
             command: Mutex::new(None),
@@ -259,6 +261,12 @@ impl<S: Copy, C> Control<S, C> {
     /// Asks the device to stop and drop its port at once (the host sees it vanish).
     pub fn close_port(&self) {
         self.close.store(true, Ordering::SeqCst);
+    }
+
+    /// Drops the present host's connection as if the host had gone: behind a TCP listener the device runs on and
+    /// takes the next connection; on a pseudo-terminal the run ends.
+    pub fn drop_host(&self) {
+        self.drop_host.store(true, Ordering::SeqCst);
     }
 
     /// Makes the device silent (`true`: it takes commands and runs, but nothing it says reaches the host) or
@@ -291,6 +299,8 @@ impl<S: Copy, C> Control<S, C> {
             Some(RunEnd::Stopped)
         } else if self.close.load(Ordering::SeqCst) {
             Some(RunEnd::PortClosed)
+        } else if self.drop_host.swap(false, Ordering::SeqCst) {
+            Some(RunEnd::HostClosed)
         } else {
             None
         }
@@ -555,8 +565,10 @@ fn serve_tcp<E: Emulated + ?Sized>(
     let tick = Duration::from_secs_f64(device.tick_s());
     let mut sink = Vec::new();
     loop {
-        if control.requested_end().is_some() {
-            return Ok(RunEnd::Stopped);
+        match control.requested_end() {
+            // No host to drop between connections.
+            None | Some(RunEnd::HostClosed) => {}
+            Some(_) => return Ok(RunEnd::Stopped),
         }
         match listener.accept() {
             Ok((stream, _)) => {
@@ -611,6 +623,26 @@ macro_rules! display_accessors {
 }
 pub(crate) use display_accessors;
 
+/// The trace accessors every emulator offers, written once: `trace_to` (starts a [`Trace`] of the plant into a sink,
+/// kept in its `trace: Option<Trace>` field) and `trace_error`.
+macro_rules! trace_accessors {
+    () => {
+        /// Writes a trace of the plant to `out` from now on: the header [`crate::runner::TRACE_HEADER`], then after
+        /// every plant step one CSV row per channel with the true plate (see [`crate::runner::Trace`]). A step is one
+        /// tick, or several merged while catching up. A write that fails stops the trace (see `trace_error`); the
+        /// emulator runs on.
+        pub fn trace_to(&mut self, out: Box<dyn std::io::Write + Send>) {
+            self.trace = Some(crate::runner::Trace::new(out));
+        }
+
+        /// Why the trace stopped, if it did: the kind of the error of the write to its sink that failed.
+        pub fn trace_error(&self) -> Option<std::io::ErrorKind> {
+            self.trace.as_ref().and_then(crate::runner::Trace::error)
+        }
+    };
+}
+pub(crate) use trace_accessors;
+
 /// The tick a device whose ticks last `tick_s` \[s\] has reached at `now_s` \[s\] (None for a time that is not finite).
 pub(crate) fn tick_at(now_s: f64, tick_s: f64) -> Option<u64> {
     now_s
@@ -622,4 +654,74 @@ pub(crate) fn tick_at(now_s: f64, tick_s: f64) -> Option<u64> {
 /// stable for any step), else None (step tick by tick).
 pub(crate) fn merged_step_s(tick: u64, target: u64, tick_s: f64) -> Option<f64> {
     (target > tick + (0.1 / tick_s) as u64).then(|| (target - tick) as f64 * tick_s)
+}
+
+/// The header of an emulator's trace of its plant (`trace_to` of each emulator, `thermode emulate --trace`).
+pub const TRACE_HEADER: &str = "time_s,channel,plate_c,sensor_c,current_a";
+
+/// An emulator's trace of its plant: after every plant step one CSV row per channel (`time_s,channel,plate_c,
+/// sensor_c,current_a`: the emulator's time at the end of the step \[s\], channel from 0, the true plate \[°C\], the
+/// sensor's latest sample \[°C\], the current delivered during the step \[A\]), each step's rows in one `write_all`
+/// followed by `flush` (with an unbuffered sink a reader following the file sees whole rows only, and a kill between
+/// ticks tears none). A write that fails stops the trace; the emulator runs on. The same for every protocol.
+pub struct Trace {
+    out: Box<dyn Write + Send>,
+    line: Vec<u8>,
+    error: Option<io::ErrorKind>,
+}
+
+impl Trace {
+    /// A trace into `out`, its header [`TRACE_HEADER`] written at once.
+    pub fn new(out: Box<dyn Write + Send>) -> Self {
+        let mut trace = Trace {
+            out,
+            line: Vec::with_capacity(64 * MAX_CHANNELS),
+            error: None,
+        };
+        trace.line.extend_from_slice(TRACE_HEADER.as_bytes());
+        trace.line.push(b'\n');
+        trace.write();
+        trace
+    }
+
+    /// Why the trace stopped, if it did: the kind of the error of the write to its sink that failed.
+    pub fn error(&self) -> Option<io::ErrorKind> {
+        self.error
+    }
+
+    /// One row per channel of `display` for the step that ended at `time_s` \[s\], written at once.
+    pub fn step<F: PlateFinger>(&mut self, time_s: f64, display: &SimulatedDisplay<F>) {
+        if self.error.is_some() {
+            return;
+        }
+        self.line.clear();
+        for i in 0..display.channel_count() {
+            if let Ok(channel) = display.channel(i) {
+                let state = channel.state();
+                // Writing into a Vec cannot fail.
+                let _ = writeln!(
+                    self.line,
+                    "{time_s:.3},{i},{:.4},{:.4},{:.4}",
+                    state.plate_c, state.sensor.value_c, state.applied_current_a
+                );
+            }
+        }
+        self.write();
+    }
+
+    /// Writes the pending rows in one call and flushes; a failure stops the trace.
+    fn write(&mut self) {
+        if let Err(e) = self.out.write_all(&self.line).and_then(|()| self.out.flush()) {
+            self.error = Some(e.kind());
+        }
+        self.line.clear();
+    }
+}
+
+impl std::fmt::Debug for Trace {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Trace")
+            .field("error", &self.error)
+            .finish_non_exhaustive()
+    }
 }

@@ -18,9 +18,11 @@ use std::sync::Arc;
 
 use thermode_device::{Device, DeviceConfig, DeviceError, LinkError, SpecFault};
 use thermode_platform::Clock;
-use thermode_safety::{EnvelopeConfig, ABSOLUTE_MAX_C, ABSOLUTE_MIN_C};
+use thermode_safety::EnvelopeConfig;
 
-use crate::mecom::host::{MecomChannel, MecomConfig, MecomDevice, MecomMode};
+use crate::mecom::host::{
+    lower_error_threshold_c, upper_error_threshold_c, MecomChannel, MecomConfig, MecomDevice, MecomMode,
+};
 use crate::own::host::{SerialConfig, SerialDevice, SERIAL_PREFIX};
 use crate::tcs2::codec::TCS2_MIN_C;
 use crate::tcs2::host::{Tcs2Config, Tcs2Device, DEFAULT_HOLD_MAX_C};
@@ -119,8 +121,8 @@ pub fn mecom_config(
     let mut config = MecomConfig {
         current_limit_a: context.device.drive.current_limit_a,
         voltage_limit_v: context.device.peltier.vmax_v,
-        lower_error_c: ABSOLUTE_MIN_C,
-        upper_error_c: ABSOLUTE_MAX_C,
+        lower_error_c: lower_error_threshold_c(&context.device)?,
+        upper_error_c: upper_error_threshold_c(&context.device)?,
         max_change_c_per_s: context.envelope.max_measured_rate_c_per_s.clamp(1.0, 200.0),
         ..MecomConfig::default()
     };

@@ -12,7 +12,8 @@
 //!   reading, towards the live or stored target) clamped to the current limitation, only while enabled and not in
 //!   the error state;
 //! - the error state (status 3, output disabled, latched): the object reading above the upper threshold (error
-//!   138) or below the lower one (137), or no valid frame for longer than the watchdog timeout (183). It holds
+//!   138) or below the lower one (137), or no valid frame for longer than the watchdog timeout (183; every valid
+//!   frame to its address feeds it, whichever client sends it, as on the device). It holds
 //!   until `RS` resets the device (volatile parameters back to their reset state) or the auto-restart delay passes;
 //! - answers: values, acknowledges (the set command's CRC in place of a payload and frame CRC), server errors (`+01` unknown command, `+04` format,
 //!   `+05` unknown parameter, `+06` read only, `+07` out of range, `+08` no such instance). Frames with a bad CRC
@@ -29,7 +30,7 @@ use thermode_model::peltier::PeltierModule;
 use super::codec::frame::{encode_ack, encode_frame, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
 use super::codec::payload::{error_number, param, status, Request};
 use crate::runner::EmulatorError;
-use crate::runner::{merged_step_s, tick_at, Firmware, FirmwareStatus};
+use crate::runner::{merged_step_s, tick_at, Firmware, FirmwareStatus, Trace};
 
 /// The identity the emulator answers to `?IF` (20 characters).
 pub const EMULATOR_IDENTITY: &str = "thermode-TEC EMU G01";
@@ -167,6 +168,7 @@ pub struct MecomEmulator<F> {
     frames_refused: u64,
     frames_out: u64,
     resets: u64,
+    trace: Option<Trace>,
 }
 
 impl<F: PlateFinger> MecomEmulator<F> {
@@ -212,10 +214,12 @@ impl<F: PlateFinger> MecomEmulator<F> {
             frames_refused: 0,
             frames_out: 0,
             resets: 0,
+            trace: None,
         })
     }
 
     crate::runner::display_accessors!();
+    crate::runner::trace_accessors!();
 
     /// The error state's number, if the device is in it.
     pub fn error_number(&self) -> Option<i32> {
@@ -298,6 +302,9 @@ impl<F: PlateFinger> MecomEmulator<F> {
                     self.error = Some((error_number::OBJECT_TOO_LOW, (i + 1) as u8, now_s));
                 }
             }
+        }
+        if let Some(trace) = &mut self.trace {
+            trace.step(now_s, &self.display);
         }
     }
 

@@ -5,8 +5,9 @@
 //!   object temperature of the first address gives the number of instances. A device in its error state is reset
 //!   (`RS`) first ([`MecomConfig::reset_on_error`]). Then, per channel, the output goes off (output stage enable
 //!   0, live enable 0) before anything else, and the device's own protection is set as a second line: current and
-//!   voltage limitation, object temperature error thresholds (the envelope's absolute 10–48 °C by default: beyond
-//!   them the device disables its output by itself), the largest plausible temperature change, no automatic
+//!   voltage limitation, object temperature error thresholds (10 °C plus and 48 °C less what the sensor's lag hides
+//!   at the fastest cooling and heating, [`lower_error_threshold_c`], [`upper_error_threshold_c`]: beyond them the device disables its output by itself, whoever else
+//!   talks to it), the largest plausible temperature change, no automatic
 //!   restart from the error state (6310 = 0), and the communication watchdog (2060, default 0.25 s: with no frame
 //!   for that long the device disables its output, error 183). A device that refuses any of these is refused. Then
 //!   the mode's input selection and the output stage enable "live off/on", so the output runs only while thermode
@@ -27,6 +28,11 @@
 //!   [`Device::read`] fail with [`DeviceError::Link`]; the device's error state reads as [`DeviceError::Cut`] for
 //!   its object temperature thresholds (137, 138) and [`DeviceError::Link`] naming the error otherwise. Malformed
 //!   and CRC-bad answers are counted and dropped.
+//! - **Reconnection** (a port opened by [`MecomDevice::open_serial`] or [`MecomDevice::open_tcp`]): a port that
+//!   fails, or no answer for [`MecomConfig::reconnect_after_silence_s`], takes the link down (the worker stops, the
+//!   readings fail) and the shared [`crate::host`] reconnector connects and configures the device again with
+//!   back-off; the new link is adopted at the next [`Device::read`] or [`Device::apply`], every output off, sample
+//!   numbers still rising. A serial port is held exclusively.
 //! - **Stopping**: [`Device::all_off`] disables every output and waits for the device's acknowledges; dropping the
 //!   device does the same before the worker ends.
 
@@ -44,9 +50,11 @@ use thermode_safety::{DriveCommand, ABSOLUTE_MAX_C, ABSOLUTE_MIN_C};
 use super::codec::frame::{encode_frame, FrameCounters, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
 use super::codec::payload::{check_answer, describe_error, error_number, param, status, Request};
 pub use crate::host::Port;
-use crate::host::{self, read_step, start_thread, ReadStep};
+use crate::host::{self, read_step, start_thread, ReadStep, Reconnector, Recovering};
+use crate::own::guard::{sensor_lag_cooling_margin_c, sensor_lag_margin_c};
 use thermode_device::{
-    Device, DeviceCut, DeviceError, LinkError, LinkFault, MecomSetup, OsError, Reading, RequestFault, MAX_CHANNELS,
+    Device, DeviceConfig, DeviceCut, DeviceError, DownReason, LinkError, LinkFault, LinkHealth, MecomSetup, OsError,
+    Reading, RequestFault, MAX_CHANNELS,
 };
 
 /// Default baud rate of a MeCom serial port \[bit/s\]: 57600 (the TEC family's default and the rate its service
@@ -114,9 +122,13 @@ pub struct MecomConfig {
     pub current_limit_a: f64,
     /// Voltage limitation set on every channel \[V\] (2031), positive. Default 4.0.
     pub voltage_limit_v: f64,
-    /// Lower object temperature error threshold \[°C\] (4010). Default 10 (the envelope's absolute minimum).
+    /// Lower object temperature error threshold \[°C\] (4010). Default [`lower_error_threshold_c`] of the default
+    /// display: the envelope's absolute minimum (10) plus what the sensor's lag can hide at the fastest cooling
+    /// (3.2 K), 13.2 °C; `--device mecom:…` sets it from the device file.
     pub lower_error_c: f64,
-    /// Upper object temperature error threshold \[°C\] (4011). Default 48 (the envelope's absolute maximum).
+    /// Upper object temperature error threshold \[°C\] (4011). Default [`upper_error_threshold_c`] of the default
+    /// display: the envelope's absolute maximum (48) less what the sensor's lag can hide at full current (8.3 K),
+    /// 39.7 °C; `--device mecom:…` sets it from the device file.
     pub upper_error_c: f64,
     /// Largest plausible object temperature change \[°C/s\] (4012), in \[1, 200\]. Default 50 (the envelope's
     /// implausible-rate check).
@@ -124,6 +136,12 @@ pub struct MecomConfig {
     /// Reset (`RS`) a device found in its error state at connect (e.g. after the watchdog of an earlier session
     /// tripped) instead of refusing it. Default true.
     pub reset_on_error: bool,
+    /// No answer from any channel for this long takes the link down and starts a reconnection (a port opened by
+    /// path or address) \[s\], in (0, 60]. Default 1.0, as thermode's own serial link.
+    pub reconnect_after_silence_s: f64,
+    /// Longest wait between two reconnection attempts \[s\] (the wait starts at [`host::FIRST_BACKOFF_S`] and
+    /// doubles), in \[0.5, 60\]. Default 5.
+    pub reconnect_backoff_max_s: f64,
 }
 
 impl Default for MecomConfig {
@@ -140,12 +158,34 @@ impl Default for MecomConfig {
             watchdog_s: MAX_MECOM_WATCHDOG_S,
             current_limit_a: 2.8,
             voltage_limit_v: 4.0,
-            lower_error_c: ABSOLUTE_MIN_C,
-            upper_error_c: ABSOLUTE_MAX_C,
+            // As the upper threshold: a valid default file, else 48 °C, which `validate` refuses.
+            lower_error_c: lower_error_threshold_c(&DeviceConfig::default()).unwrap_or(ABSOLUTE_MAX_C),
+            // The default display's file is valid; were it not, 10 °C makes `validate` refuse the configuration.
+            upper_error_c: upper_error_threshold_c(&DeviceConfig::default()).unwrap_or(ABSOLUTE_MIN_C),
             max_change_c_per_s: 50.0,
             reset_on_error: true,
+            reconnect_after_silence_s: 1.0,
+            reconnect_backoff_max_s: 5.0,
         }
     }
+}
+
+/// The upper object temperature error threshold \[°C\] thermode sets on a display of the device file `device`: the
+/// envelope's absolute maximum less what the plate sensor's lag can hide at the display's fastest heating
+/// ([`sensor_lag_margin_c`]: τ · r_max). The controller compares only its *reading* with the threshold; a plate that
+/// rises at r_max is r_max·τ ahead of its sensor, so with the output left on (a host killed while another client
+/// feeds the communication watchdog) the plate stops at about 48 °C instead of 48 °C plus the lag.
+pub fn upper_error_threshold_c(device: &DeviceConfig) -> Result<f64, DeviceError> {
+    let margin_c = sensor_lag_margin_c(device).map_err(DeviceError::from)?;
+    Ok(ABSOLUTE_MAX_C - margin_c)
+}
+
+/// The lower object temperature error threshold \[°C\] thermode sets on a display of the device file `device`: the
+/// envelope's absolute minimum plus what the plate sensor's lag can hide at the display's fastest cooling
+/// ([`sensor_lag_cooling_margin_c`]), the mirror of [`upper_error_threshold_c`].
+pub fn lower_error_threshold_c(device: &DeviceConfig) -> Result<f64, DeviceError> {
+    let margin_c = sensor_lag_cooling_margin_c(device).map_err(DeviceError::from)?;
+    Ok(ABSOLUTE_MIN_C + margin_c)
 }
 
 impl MecomConfig {
@@ -162,6 +202,18 @@ impl MecomConfig {
             ("mecom lower_error_c [°C]", self.lower_error_c, -273.0, 1000.0),
             ("mecom upper_error_c [°C]", self.upper_error_c, -273.0, 1000.0),
             ("mecom max_change_c_per_s [°C/s]", self.max_change_c_per_s, 1.0, 200.0),
+            (
+                "mecom reconnect_after_silence_s [s]",
+                self.reconnect_after_silence_s,
+                1e-9,
+                60.0,
+            ),
+            (
+                "mecom reconnect_backoff_max_s [s]",
+                self.reconnect_backoff_max_s,
+                host::FIRST_BACKOFF_S,
+                60.0,
+            ),
         ];
         for (name, value, min, max) in checks {
             Rule::Within { min, max }.check(name, value)?;
@@ -387,6 +439,13 @@ pub struct MecomDevice {
     stop: Arc<AtomicBool>,
     worker: Option<JoinHandle<()>>,
     clock: Arc<dyn Clock>,
+    /// Re-opening the port after a failure or a silence (only for a port opened by path or address).
+    recovery: Option<Reconnector<MecomDevice>>,
+    /// Added to a link's sample numbers, so they keep rising across reconnections (each link counts from 0).
+    seq_base: [u64; MAX_CHANNELS],
+    /// The last sample number handed out per channel.
+    seq_seen: [u64; MAX_CHANNELS],
+    health: Arc<LinkHealth>,
 }
 
 impl std::fmt::Debug for MecomDevice {
@@ -400,8 +459,19 @@ impl std::fmt::Debug for MecomDevice {
 }
 
 impl MecomDevice {
-    /// Opens the serial port `path` (raw, 8N1, [`MecomConfig::baud_rate`]), connects and configures the device.
+    /// Opens the serial port `path` (raw, 8N1, [`MecomConfig::baud_rate`], exclusively: no other process opens it
+    /// while thermode holds it), connects and configures the device. A failed or silent link is re-opened on the
+    /// same path ([`MecomConfig::reconnect_after_silence_s`]).
     pub fn open_serial(path: &str, config: &MecomConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
+        let (owned, reopen) = (path.to_string(), config.clone());
+        MecomDevice::with_recovery(
+            MecomDevice::open_serial_once(path, config, Arc::clone(&clock))?,
+            clock,
+            move |c| MecomDevice::open_serial_once(&owned, &reopen, c),
+        )
+    }
+
+    fn open_serial_once(path: &str, config: &MecomConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
         config.validate()?;
         let port = host::open_serial(
             path,
@@ -412,8 +482,18 @@ impl MecomDevice {
         MecomDevice::open(&format!("mecom:{path}"), Box::new(port), config, clock)
     }
 
-    /// Connects to `address` (`HOST:PORT`) over TCP, then connects and configures the device.
+    /// Connects to `address` (`HOST:PORT`) over TCP, then connects and configures the device. A dropped or silent
+    /// connection is made again to the same address ([`MecomConfig::reconnect_after_silence_s`]).
     pub fn open_tcp(address: &str, config: &MecomConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
+        let (owned, reopen) = (address.to_string(), config.clone());
+        MecomDevice::with_recovery(
+            MecomDevice::open_tcp_once(address, config, Arc::clone(&clock))?,
+            clock,
+            move |c| MecomDevice::open_tcp_once(&owned, &reopen, c),
+        )
+    }
+
+    fn open_tcp_once(address: &str, config: &MecomConfig, clock: Arc<dyn Clock>) -> Result<Self, DeviceError> {
         config.validate()?;
         let stream = host::open_tcp(
             address,
@@ -422,6 +502,23 @@ impl MecomDevice {
             Duration::from_millis(100),
         )?;
         MecomDevice::open(&format!("mecom-tcp:{address}"), Box::new(stream), config, clock)
+    }
+
+    /// `device` with a reconnector that makes new links with `open` on `clock`.
+    fn with_recovery(
+        mut device: MecomDevice,
+        clock: Arc<dyn Clock>,
+        open: impl Fn(Arc<dyn Clock>) -> Result<MecomDevice, DeviceError> + Send + 'static,
+    ) -> Result<Self, DeviceError> {
+        let reopen_clock = Arc::clone(&clock);
+        device.recovery = Some(Reconnector::spawn(
+            &device.name.to_string_lossy(),
+            device.config.reconnect_backoff_max_s,
+            clock,
+            Arc::clone(&device.health),
+            move || open(Arc::clone(&reopen_clock)),
+        )?);
+        Ok(device)
     }
 
     /// Connects over any port (reads should time out within a few milliseconds), named `name` in messages:
@@ -464,6 +561,10 @@ impl MecomDevice {
             stop: Arc::new(AtomicBool::new(false)),
             worker: None,
             clock: Arc::clone(&clock),
+            recovery: None,
+            seq_base: [0; MAX_CHANNELS],
+            seq_seen: [0; MAX_CHANNELS],
+            health: Arc::new(LinkHealth::new()),
         };
         // One cycle here, so the first read after open has values.
         let mut worker = Worker {
@@ -922,12 +1023,86 @@ impl Worker {
     }
 }
 
+impl Recovering for MecomDevice {
+    fn recovery(&mut self) -> Option<&mut Reconnector<Self>> {
+        self.recovery.as_mut()
+    }
+
+    /// Why the link must go down: it failed, or fell silent for longer than the configured limit.
+    fn down_reason(&mut self) -> Option<DownReason> {
+        let now_s = self.clock.now_s();
+        let limit_s = self.config.reconnect_after_silence_s;
+        self.shared.lock().ok().and_then(|state| {
+            if let Some(error) = &state.error {
+                return Some(DownReason::Failed(Box::new(error.clone())));
+            }
+            let last_s = state
+                .tracks
+                .iter()
+                .filter_map(|t| t.last_answer_s)
+                .fold(f64::NEG_INFINITY, f64::max);
+            let silent_s = now_s - last_s;
+            (silent_s > limit_s).then_some(DownReason::Silent { silent_s, limit_s })
+        })
+    }
+
+    /// Stops the worker (not waited for: it ends within a cycle and closes the port) and asks for a new link; the
+    /// reason goes to the link's health.
+    fn take_down(&mut self, reason: DownReason) {
+        let fault = LinkFault::Down { reason };
+        self.health
+            .down(LinkError::device(&self.name, fault.clone()).to_string());
+        // The readings go on failing with what took the link down (the port's failure, or no answer).
+        if let Ok(mut state) = self.shared.lock() {
+            state.commands = [Command::default(); MAX_CHANNELS];
+        }
+        self.stop.store(true, Ordering::SeqCst);
+        drop(self.worker.take());
+        if let Some(recovery) = &mut self.recovery {
+            recovery.request();
+        }
+    }
+
+    /// Takes over a freshly connected and configured link: its worker, its state, its channels' sample numbers
+    /// going on from where the old link's stopped. Every command starts off; the envelopes keep their faults until
+    /// the operator clears them.
+    fn adopt(&mut self, mut fresh: MecomDevice) {
+        if fresh.channels.len() != self.channels.len() {
+            let fault = LinkFault::ChannelsChanged {
+                now: fresh.channels.len(),
+                before: self.channels.len(),
+            };
+            self.health.set_error(LinkError::device(&self.name, fault).to_string());
+            if let Some(recovery) = &mut self.recovery {
+                recovery.request();
+            }
+            return;
+        }
+        std::mem::swap(&mut self.shared, &mut fresh.shared);
+        std::mem::swap(&mut self.stop, &mut fresh.stop);
+        std::mem::swap(&mut self.worker, &mut fresh.worker);
+        self.channels = fresh.channels.clone();
+        self.identity = fresh.identity.clone();
+        for (base, seen) in self.seq_base.iter_mut().zip(self.seq_seen) {
+            *base = seen + 1;
+        }
+        // `fresh` now holds the old link's stopped worker: let it go without waiting.
+        drop(fresh.worker.take());
+        drop(fresh);
+        if let Some(recovery) = &mut self.recovery {
+            recovery.down = false;
+        }
+        self.health.reconnected();
+    }
+}
+
 impl Device for MecomDevice {
     fn channel_count(&self) -> usize {
         self.channels.len()
     }
 
     fn apply(&mut self, channel: usize, command: &DriveCommand) -> Result<(), DeviceError> {
+        self.supervise();
         self.check_channel(channel)?;
         let current_a = command.current_a();
         Rule::Finite.check("drive current [A]", current_a)?;
@@ -946,8 +1121,10 @@ impl Device for MecomDevice {
     }
 
     fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
+        self.supervise();
         self.check_channel(channel)?;
         let now_s = self.clock.now_s();
+        let seq_base = self.seq_base[channel];
         let state = self.lock()?;
         if let Some(error) = &state.error {
             return Err(self.error(error.clone()));
@@ -986,14 +1163,21 @@ impl Device for MecomDevice {
                 }),
             });
         }
-        Ok(Reading {
+        let reading = Reading {
             sensor_c: track.object_c,
             hot_side_c: track.sink_c,
             time_s: track.time_s,
-            sample_seq: track.sample_seq,
+            sample_seq: seq_base + track.sample_seq,
             current_a: track.current_a,
             voltage_v: track.voltage_v,
-        })
+        };
+        drop(state);
+        self.seq_seen[channel] = reading.sample_seq;
+        Ok(reading)
+    }
+
+    fn link_health(&self) -> Option<Arc<LinkHealth>> {
+        Some(Arc::clone(&self.health))
     }
 
     /// The worker runs in real time: nothing to do.

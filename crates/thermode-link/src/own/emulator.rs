@@ -28,7 +28,7 @@
 //! stable for any step) and skips the reports older than that, instead of falling further behind.
 
 use std::collections::VecDeque;
-use std::io::{self, Read, Write};
+use std::io::{Read, Write};
 use std::sync::{Arc, Mutex};
 
 use rand::{Rng, SeedableRng};
@@ -43,7 +43,7 @@ use super::codec::{
 use super::guard::{Cuts, GuardTrip, PlateGuard};
 #[cfg(unix)]
 use crate::runner::PtyRunner;
-use crate::runner::{Control, Emulated, EmulatorError, RunEnd};
+use crate::runner::{Control, Emulated, EmulatorError, RunEnd, Trace};
 use thermode_device::DeviceError;
 use thermode_device::PlateFinger;
 use thermode_device::{Device, SimulatedDisplay, MAX_CHANNELS};
@@ -396,29 +396,7 @@ impl<F: PlateFinger> Emulator<F> {
         self.log = Some(log);
     }
 
-    /// Writes a trace of the plant to `out` from now on: first the header [`TRACE_HEADER`], then after every plant
-    /// step one CSV row per channel (`time_s,channel,plate_c,sensor_c,current_a`: emulator time at the end of the
-    /// step \[s\], channel from 0, true plate \[°C\], the sensor's latest sample \[°C\], the current the drive
-    /// delivered during the step \[A\]). A step is one tick, or several merged while catching up. Each step's rows go
-    /// out in one `write_all` followed by `flush`, so with an unbuffered sink (a `File`) a reader following the file
-    /// sees whole rows only, and a kill between ticks tears none. A write that fails stops the trace (see
-    /// [`Emulator::trace_error`]); the emulator runs on.
-    pub fn trace_to(&mut self, out: Box<dyn Write + Send>) {
-        let mut trace = Trace {
-            out,
-            line: Vec::with_capacity(64 * MAX_CHANNELS),
-            error: None,
-        };
-        trace.line.extend_from_slice(TRACE_HEADER.as_bytes());
-        trace.line.push(b'\n');
-        trace.write();
-        self.trace = Some(trace);
-    }
-
-    /// Why the trace stopped, if it did: the kind of the error of the write to its sink that failed.
-    pub fn trace_error(&self) -> Option<io::ErrorKind> {
-        self.trace.as_ref().and_then(|t| t.error)
-    }
+    crate::runner::trace_accessors!();
 
     /// Takes bytes from the host that arrived at `now_s` \[s\]: first runs the ticks up to `now_s`, then decodes the
     /// bytes and carries out their commands. Answers are appended to `out`.
@@ -560,22 +538,9 @@ impl<F: PlateFinger> Emulator<F> {
     /// One trace row per channel for the step just taken, written at once.
     fn write_trace(&mut self) {
         let time_s = self.time_s();
-        let Some(trace) = self.trace.as_mut().filter(|t| t.error.is_none()) else {
-            return;
-        };
-        trace.line.clear();
-        for i in 0..self.display.channel_count() {
-            if let Ok(channel) = self.display.channel(i) {
-                let state = channel.state();
-                // Writing into a Vec cannot fail.
-                let _ = writeln!(
-                    trace.line,
-                    "{time_s:.3},{i},{:.4},{:.4},{:.4}",
-                    state.plate_c, state.sensor.value_c, state.applied_current_a
-                );
-            }
+        if let Some(trace) = self.trace.as_mut() {
+            trace.step(time_s, &self.display);
         }
-        trace.write();
     }
 
     fn handle(&mut self, frame: Frame<HostMessage>, now_s: f64, out: &mut Vec<u8>) {
@@ -734,33 +699,7 @@ impl<F: PlateFinger> Emulator<F> {
     }
 }
 
-/// The header of a trace ([`Emulator::trace_to`]).
-pub const TRACE_HEADER: &str = "time_s,channel,plate_c,sensor_c,current_a";
-
-/// A trace sink and the rows of the step being written.
-struct Trace {
-    out: Box<dyn Write + Send>,
-    line: Vec<u8>,
-    error: Option<io::ErrorKind>,
-}
-
-impl Trace {
-    /// Writes the pending rows in one call and flushes; a failure stops the trace.
-    fn write(&mut self) {
-        if let Err(e) = self.out.write_all(&self.line).and_then(|()| self.out.flush()) {
-            self.error = Some(e.kind());
-        }
-        self.line.clear();
-    }
-}
-
-impl std::fmt::Debug for Trace {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Trace")
-            .field("error", &self.error)
-            .finish_non_exhaustive()
-    }
-}
+pub use crate::runner::TRACE_HEADER;
 
 /// A snapshot of an emulator, published by the runner after every loop.
 #[derive(Debug, Clone, Copy, PartialEq)]

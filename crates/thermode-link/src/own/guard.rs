@@ -77,6 +77,48 @@ pub const BODY_CORE_C: f64 = 37.0;
 /// Standard deviations of the sensor noise in the reading's error bound \[-\]: 4.
 pub const NOISE_SIGMAS: f64 = 4.0;
 
+/// What a sensor that lags its plate can hide at the display's fastest heating \[K\]: the plate's fastest heating
+/// rate at full current times the sensor's time constant,
+///
+/// `M = τ · r_max`, `r_max = (S·I_max·T + ½·I_max²·R) / C_d` at `T` = [`PLATE_MAX_C`] (in kelvin),
+///
+/// with the hot side at the plate's temperature (no conduction back to the sink, the fastest case with a hot side
+/// below 48 °C) and no finger (a finger below 48 °C only takes heat away). Under a constant rate `r` the gap
+/// between plate and sensor settles at `r·τ` and never exceeds it while the rate is at most `r`, so a line on the
+/// *reading* at `PLATE_MAX_C − M` keeps the true plate below `PLATE_MAX_C` for any current the drive can deliver,
+/// with no host: the static line of a device that only compares its reading with a threshold (a MeCom controller's
+/// upper object temperature threshold, `docs/hardware.md`). The own firmware's [`PlateGuard`] bounds the gap by the
+/// same filter at the present current, so its cut never comes later than that static line would. Default display
+/// (S 6.37 mV/K, R 0.515 Ω, C_d 0.28 J/K, I_max 2.8 A, τ 0.3 s): `r_max` 27.7 K/s, `M` 8.3 K, a line at 39.7 °C.
+/// Fails if the configuration's module is invalid.
+pub fn sensor_lag_margin_c(config: &DeviceConfig) -> Result<f64, thermode_model::ParamError> {
+    let module = config.module()?;
+    let heating_w = module.max_heating_w(config.drive.current_limit_a, PLATE_MAX_C, PLATE_MAX_C);
+    let rate_c_per_s = heating_w.max(0.0) / config.plate.heat_capacity_j_k;
+    Ok(config.sensor.time_constant_s.max(0.0) * rate_c_per_s)
+}
+
+/// What a sensor that lags its plate can hide at the display's fastest cooling \[K\]: the plate's fastest cooling rate
+/// times the sensor's time constant,
+///
+/// `M⁻ = τ · r_cool`, `r_cool = (S·I·T − ½·I²·R) / C_d` at `T` = [`PLATE_MIN_C`] (in kelvin) and the cooling current
+/// that draws the most heat, `I = min(I_max, S·T/R)`,
+///
+/// with the hot side at the plate's temperature and no finger (both only warm a plate below 37 °C). The mirror of
+/// [`sensor_lag_margin_c`] for a line on the reading at `PLATE_MIN_C + M⁻`. Default display: `r_cool` 10.8 K/s,
+/// `M⁻` 3.2 K, a line at 13.2 °C. Fails if the configuration's module is invalid.
+pub fn sensor_lag_cooling_margin_c(config: &DeviceConfig) -> Result<f64, thermode_model::ParamError> {
+    let module = config.module()?;
+    let plate_k = PLATE_MIN_C + 273.15;
+    let current_a = config
+        .drive
+        .current_limit_a
+        .min(module.seebeck_v_k * plate_k / module.resistance_ohm);
+    let cooling_w = -module.heat_into_display_w(-current_a, PLATE_MIN_C, PLATE_MIN_C);
+    let rate_c_per_s = cooling_w.max(0.0) / config.plate.heat_capacity_j_k;
+    Ok(config.sensor.time_constant_s.max(0.0) * rate_c_per_s)
+}
+
 /// What a channel's guard has cut.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Cuts {
@@ -297,4 +339,32 @@ impl PlateGuard {
 /// Whether a reading is a temperature the plate can have (not open, not shorted, a number).
 fn reading_valid(value_c: f64) -> bool {
     value_c.is_finite() && value_c < SENSOR_OPEN_THRESHOLD_C && value_c > SENSOR_SHORT_THRESHOLD_C
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_lag_margin_of_the_default_display_is_its_fastest_rise_over_one_sensor_lag() {
+        let margin_c = sensor_lag_margin_c(&DeviceConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        // By hand: (6.37e-3 · 2.8 · 321.15 + ½ · 2.8² · 0.515) / 0.28 · 0.3 = 8.3 K.
+        assert!(
+            (margin_c - 8.3).abs() < 0.15,
+            "lag margin {margin_c:.3} K, expected about 8.3 K"
+        );
+        let cooling_c = sensor_lag_cooling_margin_c(&DeviceConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        // By hand: (6.37e-3 · 2.8 · 283.15 − ½ · 2.8² · 0.515) / 0.28 · 0.3 = 3.25 K.
+        assert!(
+            (cooling_c - 3.25).abs() < 0.1,
+            "cooling lag margin {cooling_c:.3} K, expected about 3.25 K"
+        );
+        let mut slower = DeviceConfig::default();
+        slower.sensor.time_constant_s *= 2.0;
+        let doubled_c = sensor_lag_margin_c(&slower).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            (doubled_c - 2.0 * margin_c).abs() < 1e-9,
+            "a sensor twice as slow hides twice as much: {doubled_c:.3} K against {margin_c:.3} K"
+        );
+    }
 }

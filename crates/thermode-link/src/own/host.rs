@@ -48,7 +48,7 @@ use super::codec::{
     LinkCounters, NackCode, SensorReport, StreamDecoder, DEFAULT_BAUD_RATE, DELIMITER, MAX_ENCODED_LEN,
 };
 pub use crate::host::FIRST_BACKOFF_S;
-use crate::host::{self, Line, LineState, OnLine, ReaderSpec, Reconnector};
+use crate::host::{self, Line, LineState, OnLine, ReaderSpec, Reconnector, Recovering};
 use thermode_device::{
     Awaited, Device, DeviceCut, DeviceError, DownReason, LinkError, LinkFault, LinkHealth, Reading, Silence,
     MAX_CHANNELS,
@@ -443,95 +443,6 @@ impl SerialDevice {
         Ok(device)
     }
 
-    /// Watches the link of a port opened by path: adopts a link the reconnector made, and takes a failed or silent
-    /// link down (closing the port and asking for a new one). Never blocks.
-    fn supervise(&mut self) {
-        let Some(recovery) = &mut self.recovery else {
-            return;
-        };
-        if recovery.down {
-            if let Some(fresh) = recovery.take() {
-                self.adopt(fresh);
-            }
-            return;
-        }
-        let now = self.line.clock.now_s();
-        let reason = self
-            .line
-            .failed
-            .clone()
-            .map(|f| DownReason::Failed(Box::new(f)))
-            .or_else(|| {
-                let state = self.line.shared.lock().ok()?;
-                if let Some(error) = &state.error {
-                    return Some(DownReason::Failed(Box::new(error.clone())));
-                }
-                let silent_s = now - state.last_report.map_or(f64::NEG_INFINITY, |r| r.received_s);
-                (silent_s > self.config.reconnect_after_silence_s).then_some(DownReason::Silent {
-                    silent_s,
-                    limit_s: self.config.reconnect_after_silence_s,
-                })
-            });
-        if let Some(reason) = reason {
-            self.take_down(reason);
-        }
-    }
-
-    /// Closes the port (so the same path can be opened again) and asks the reconnector for a new link.
-    fn take_down(&mut self, reason: DownReason) {
-        let fault = LinkFault::Down { reason };
-        self.health.down(self.line.link_error(fault.clone()).to_string());
-        self.line.failed = Some(fault);
-        self.line.writer = Box::new(Closed);
-        // The reader thread ends within its read timeout and closes its end of the port; not waited for here.
-        self.line.reader.detach();
-        if let Some(recovery) = &mut self.recovery {
-            recovery.request();
-        }
-    }
-
-    /// Takes over a freshly opened and handshaken link. Every held current starts at 0 A; the engines keep their
-    /// faults until the operator clears them.
-    fn adopt(&mut self, mut fresh: SerialDevice) {
-        if fresh.identify.channel_count != self.identify.channel_count {
-            let fault = LinkFault::ChannelsChanged {
-                now: usize::from(fresh.identify.channel_count),
-                before: usize::from(self.identify.channel_count),
-            };
-            self.health.set_error(self.line.link_error(fault).to_string());
-            fresh.line.failed = Some(LinkFault::Replaced);
-            if let Some(recovery) = &mut self.recovery {
-                recovery.request();
-            }
-            return;
-        }
-        std::mem::swap(&mut self.line.writer, &mut fresh.line.writer);
-        std::mem::swap(&mut self.line.shared, &mut fresh.line.shared);
-        std::mem::swap(&mut self.line.reader, &mut fresh.line.reader);
-        self.line.reader.set_join(true);
-        self.identify = fresh.identify;
-        self.tx_seq = fresh.tx_seq;
-        self.pending_ma = [0; MAX_CHANNELS];
-        self.sent_ma = [0; MAX_CHANNELS];
-        self.round = 0;
-        self.dirty = false;
-        self.last_drive_s = f64::NEG_INFINITY;
-        self.last_sent_s = fresh.last_sent_s;
-        self.last_clear_s = fresh.last_clear_s;
-        for (base, seen) in self.seq_base.iter_mut().zip(self.seq_seen) {
-            *base = seen + 1;
-        }
-        self.line.failed = None;
-        // `fresh` now holds the old link's remains: dropped without a frame and without waiting for its reader.
-        fresh.line.failed = Some(LinkFault::Replaced);
-        fresh.line.reader.set_join(false);
-        drop(fresh);
-        if let Some(recovery) = &mut self.recovery {
-            recovery.down = false;
-        }
-        self.health.reconnected();
-    }
-
     /// `Hello` until `Identify`, then `ClearFault` until a report shows the drives released, on the clock.
     fn handshake(&mut self) -> Result<(), DeviceError> {
         let timeout_s = self.config.handshake_timeout_s;
@@ -762,6 +673,87 @@ impl SerialDevice {
             current_a: track.current_a,
             voltage_v: f64::NAN,
         })
+    }
+}
+
+impl Recovering for SerialDevice {
+    fn recovery(&mut self) -> Option<&mut Reconnector<Self>> {
+        self.recovery.as_mut()
+    }
+
+    /// Why the link must go down: it failed, or fell silent for longer than the configured limit.
+    fn down_reason(&mut self) -> Option<DownReason> {
+        let now = self.line.clock.now_s();
+        self.line
+            .failed
+            .clone()
+            .map(|f| DownReason::Failed(Box::new(f)))
+            .or_else(|| {
+                let state = self.line.shared.lock().ok()?;
+                if let Some(error) = &state.error {
+                    return Some(DownReason::Failed(Box::new(error.clone())));
+                }
+                let silent_s = now - state.last_report.map_or(f64::NEG_INFINITY, |r| r.received_s);
+                (silent_s > self.config.reconnect_after_silence_s).then_some(DownReason::Silent {
+                    silent_s,
+                    limit_s: self.config.reconnect_after_silence_s,
+                })
+            })
+    }
+
+    /// Closes the port (so the same path can be opened again) and asks the reconnector for a new link.
+    fn take_down(&mut self, reason: DownReason) {
+        let fault = LinkFault::Down { reason };
+        self.health.down(self.line.link_error(fault.clone()).to_string());
+        self.line.failed = Some(fault);
+        self.line.writer = Box::new(Closed);
+        // The reader thread ends within its read timeout and closes its end of the port; not waited for here.
+        self.line.reader.detach();
+        if let Some(recovery) = &mut self.recovery {
+            recovery.request();
+        }
+    }
+
+    /// Takes over a freshly opened and handshaken link. Every held current starts at 0 A; the engines keep their
+    /// faults until the operator clears them.
+    fn adopt(&mut self, mut fresh: SerialDevice) {
+        if fresh.identify.channel_count != self.identify.channel_count {
+            let fault = LinkFault::ChannelsChanged {
+                now: usize::from(fresh.identify.channel_count),
+                before: usize::from(self.identify.channel_count),
+            };
+            self.health.set_error(self.line.link_error(fault).to_string());
+            fresh.line.failed = Some(LinkFault::Replaced);
+            if let Some(recovery) = &mut self.recovery {
+                recovery.request();
+            }
+            return;
+        }
+        std::mem::swap(&mut self.line.writer, &mut fresh.line.writer);
+        std::mem::swap(&mut self.line.shared, &mut fresh.line.shared);
+        std::mem::swap(&mut self.line.reader, &mut fresh.line.reader);
+        self.line.reader.set_join(true);
+        self.identify = fresh.identify;
+        self.tx_seq = fresh.tx_seq;
+        self.pending_ma = [0; MAX_CHANNELS];
+        self.sent_ma = [0; MAX_CHANNELS];
+        self.round = 0;
+        self.dirty = false;
+        self.last_drive_s = f64::NEG_INFINITY;
+        self.last_sent_s = fresh.last_sent_s;
+        self.last_clear_s = fresh.last_clear_s;
+        for (base, seen) in self.seq_base.iter_mut().zip(self.seq_seen) {
+            *base = seen + 1;
+        }
+        self.line.failed = None;
+        // `fresh` now holds the old link's remains: dropped without a frame and without waiting for its reader.
+        fresh.line.failed = Some(LinkFault::Replaced);
+        fresh.line.reader.set_join(false);
+        drop(fresh);
+        if let Some(recovery) = &mut self.recovery {
+            recovery.down = false;
+        }
+        self.health.reconnected();
     }
 }
 

@@ -18,7 +18,7 @@ use thermode_device::{Device, PlateFinger, SimulatedDisplay};
 
 use super::codec::{parse_command, Command, ParseStep, Temperatures, TCS2_ZONES};
 use crate::runner::EmulatorError;
-use crate::runner::{merged_step_s, tick_at, Firmware, FirmwareStatus};
+use crate::runner::{merged_step_s, tick_at, Firmware, FirmwareStatus, Trace};
 
 /// Settings of the emulated stimulator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -76,6 +76,7 @@ pub struct Tcs2Emulator<F> {
     commands: u64,
     skipped_bytes: u64,
     lines_out: u64,
+    trace: Option<Trace>,
 }
 
 impl<F: PlateFinger> Tcs2Emulator<F> {
@@ -130,10 +131,12 @@ impl<F: PlateFinger> Tcs2Emulator<F> {
             commands: 0,
             skipped_bytes: 0,
             lines_out: 0,
+            trace: None,
         })
     }
 
     crate::runner::display_accessors!();
+    crate::runner::trace_accessors!();
 
     /// Whether it is in follow mode.
     pub fn following(&self) -> bool {
@@ -286,7 +289,22 @@ impl<F: PlateFinger> Tcs2Emulator<F> {
             }
             let current_a = (p_a + zone.integral_a).clamp(-limit_a, limit_a);
             let current_a = if current_a.is_finite() { current_a } else { 0.0 };
+            // The clamp: the zone stays between where its target was and where it goes. No heating at or above the
+            // higher of the two, no cooling at or below the lower (the plate has no mass beyond its own node, so it
+            // stops within a tick's rise), and the integral holds while clamped.
+            let plate_c = channel.state().plate_c;
+            let clamped = (current_a > 0.0 && plate_c >= goal_c.max(zone.target_c))
+                || (current_a < 0.0 && plate_c <= goal_c.min(zone.target_c));
+            let current_a = if clamped {
+                zone.integral_a -= self.config.kp_a_per_k * error_c * dt_s / self.config.ti_s;
+                0.0
+            } else {
+                current_a
+            };
             zone.applied_a = channel.step(dt_s, current_a).applied_current_a;
+        }
+        if let Some(trace) = &mut self.trace {
+            trace.step(self.tick as f64 * self.config.tick_s, &self.display);
         }
     }
 

@@ -330,3 +330,37 @@ fn the_trace_has_one_whole_row_per_channel_per_tick() {
         last[2]
     );
 }
+
+#[test]
+fn a_host_killed_mid_heat_while_another_client_feeds_the_watchdog_leaves_the_plate_below_48_5() {
+    // The default 250 ms watchdog, fed every 50 ms by a second client's heartbeats after the host is gone: only
+    // the firmware's own cut, which allows for the sensor's lag, stops the heating.
+    let mut worst = f64::NEG_INFINITY;
+    for (start_c, current_a) in [(30.0, 2.8), (38.0, 2.8), (44.0, 1.5), (46.5, 0.8)] {
+        let display =
+            SimulatedDisplay::<KronModel>::fingertips(&default_display(), 1, 23).unwrap_or_else(|e| panic!("{e}"));
+        let mut emu = Emulator::new(display, EmulatorConfig::default()).unwrap_or_else(|e| panic!("{e}"));
+        let (mut host, mut other) = (Host::default(), Host::default());
+        host.send(&mut emu, HostMessage::Hello);
+        host.send(&mut emu, HostMessage::ClearFault);
+        start_at(&mut emu, &mut host, start_c);
+        host.drive(&mut emu, current_a);
+        let mut peak_c = f64::NEG_INFINITY;
+        for _ in 0..80 {
+            other.send(&mut emu, HostMessage::Heartbeat);
+            peak_c = peak_c.max(host.run(&mut emu, 0.05).1);
+        }
+        let latched = emu.status().latched;
+        println!("from {start_c} °C at {current_a} A, host killed, heartbeats of another client: peak {peak_c:.3} °C");
+        assert!(
+            !latched,
+            "the other client's frames kept the watchdog fed (the case under test)"
+        );
+        assert!(
+            peak_c <= 48.5,
+            "from {start_c} °C at {current_a} A: true plate {peak_c:.3} °C"
+        );
+        worst = worst.max(peak_c);
+    }
+    assert!(worst <= PLATE_MAX_C + TOLERANCE_C, "worst true plate {worst:.3} °C");
+}

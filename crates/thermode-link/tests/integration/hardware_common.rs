@@ -25,6 +25,8 @@ pub struct Loop<D> {
     pub device: D,
     pub envelopes: Vec<SafetyEnvelope>,
     pub clock: Arc<dyn Clock>,
+    /// The proportional request's gain \[A/K\]: 1 unless a test sets it.
+    pub gain_a_per_c: f64,
 }
 
 impl<D: Device> Loop<D> {
@@ -42,6 +44,7 @@ impl<D: Device> Loop<D> {
             device,
             envelopes,
             clock,
+            gain_a_per_c: 1.0,
         }
     }
 
@@ -56,7 +59,7 @@ impl<D: Device> Loop<D> {
             }
             let shaped = envelope.shape_setpoint(now, targets_c[ch]);
             let sensor_c = reading.as_ref().map_or(shaped.setpoint_c, |r| r.sensor_c);
-            let request_a = 1.0 * (shaped.setpoint_c - sensor_c);
+            let request_a = self.gain_a_per_c * (shaped.setpoint_c - sensor_c);
             let command = envelope.gate_drive(now, request_a, &MeasuredOnly);
             if let Err(e) = self.device.apply(ch, &command) {
                 out.push(Err(e));

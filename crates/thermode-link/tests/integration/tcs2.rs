@@ -248,3 +248,94 @@ proptest! {
         emu.advance_to(0.02, &mut out);
     }
 }
+
+/// Feeds `commands` to the emulator at its present time.
+fn send_commands(emu: &mut Tcs2Emulator<KronModel>, commands: &[thermode_link::tcs2::codec::Command]) {
+    let mut bytes = Vec::new();
+    for command in commands {
+        command.encode(&mut bytes);
+    }
+    let mut out = Vec::new();
+    let now_s = emu.time_s();
+    emu.receive(&bytes, now_s, &mut out);
+}
+
+#[test]
+fn the_emulated_zones_stay_within_their_clamp() {
+    use thermode_link::tcs2::codec::Command;
+    // As the host connects: Om 48 °C, speeds 10 °C/s, follow mode; then the hold clamp's 43 °C is streamed, held,
+    // and a step back to 30 °C. The true plate must not pass 43 °C (the red team saw 45.2-45.9 °C).
+    let mut emu = emulator(2, None);
+    let trace = Arc::new(std::sync::Mutex::new(Vec::<u8>::new()));
+    emu.trace_to(Box::new(SharedSink(Arc::clone(&trace))));
+    send_commands(
+        &mut emu,
+        &[
+            Command::MaxTemperature(480),
+            Command::Speed { zone: 0, tenths: 100 },
+            Command::ReturnSpeed { zone: 0, tenths: 100 },
+            Command::Target { zone: 0, tenths: 320 },
+            Command::Follow,
+        ],
+    );
+    let mut out = Vec::new();
+    let (mut peak_c, mut low_c) = (f64::NEG_INFINITY, f64::INFINITY);
+    let mut run = |emu: &mut Tcs2Emulator<KronModel>, seconds: f64, track_low: bool| {
+        let end_s = emu.time_s() + seconds;
+        while emu.time_s() < end_s {
+            emu.advance_to(emu.time_s() + 1e-3, &mut out);
+            out.clear();
+            for zone in 0..2 {
+                let plate_c = emu
+                    .display()
+                    .channel(zone)
+                    .map(|c| c.state().plate_c)
+                    .unwrap_or(f64::NAN);
+                peak_c = peak_c.max(plate_c);
+                if track_low {
+                    low_c = low_c.min(plate_c);
+                }
+            }
+        }
+    };
+    run(&mut emu, 1.0, false);
+    send_commands(&mut emu, &[Command::Target { zone: 0, tenths: 430 }]);
+    run(&mut emu, 6.0, false);
+    let held_c = emu.display().channel(0).map(|c| c.state().plate_c).unwrap_or(f64::NAN);
+    send_commands(&mut emu, &[Command::Target { zone: 0, tenths: 300 }]);
+    run(&mut emu, 6.0, true);
+    println!("TCS II emulator, 43 °C streamed: true plate peak {peak_c:.3} °C, held {held_c:.3} °C; back to 30 °C: low {low_c:.3} °C");
+    assert!(peak_c <= 43.05, "true plate {peak_c:.3} °C above the streamed 43 °C");
+    assert!(held_c > 42.5, "the zone does not reach its set-point: {held_c:.3} °C");
+    // No cooling below the goal; with the output off the plate may still drift a little further towards the water.
+    assert!(low_c >= 29.0, "true plate {low_c:.3} °C well below the streamed 30 °C");
+    let trace = trace
+        .lock()
+        .map(|t| String::from_utf8_lossy(&t).to_string())
+        .unwrap_or_default();
+    let rows = trace.lines().skip(1).count();
+    assert!(
+        trace.starts_with("time_s,channel,plate_c"),
+        "trace header: {:?}",
+        trace.lines().next()
+    );
+    assert!(
+        rows >= 2 * 13_000 - 10,
+        "trace rows {rows} for 13 s of 2 zones at 1 kHz"
+    );
+}
+
+/// A trace sink the test reads back.
+struct SharedSink(Arc<std::sync::Mutex<Vec<u8>>>);
+
+impl std::io::Write for SharedSink {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if let Ok(mut v) = self.0.lock() {
+            v.extend_from_slice(buf);
+        }
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}

@@ -7,7 +7,7 @@
 //! emulator then runs in real time (1 kHz firmware tick, reports every `--report-ms`) until the process is ended.
 //! Link faults can be injected for tests of the host: corrupted bytes and dropped frames. `--trace FILE` writes the
 //! true plate of every channel at every firmware tick (CSV, whole rows written and flushed tick by tick, so a reader
-//! can follow it live and a killed emulator leaves no torn row). `--link PATH` publishes the pseudo-terminal under a
+//! can follow it live and a killed emulator leaves no torn row), for every protocol. `--link PATH` publishes the pseudo-terminal under a
 //! stable path (a symbolic link, replaced atomically), so a restarted emulator is found where the host looks for it
 //! (`serve --device serial:PATH` re-opens the same path when its link fails).
 
@@ -50,7 +50,7 @@ pub struct EmulateArgs {
     #[arg(long = "drop-rate", value_name = "P", default_value_t = 0.0)]
     drop_rate: f64,
     /// Write one CSV row per channel per firmware tick to FILE (time_s,channel,plate_c,sensor_c,current_a: the true
-    /// plate [°C], the sensor's latest sample [°C], the delivered current [A]); replaces FILE.
+    /// plate [°C], the sensor's latest sample [°C], the delivered current [A]); replaces FILE. Every protocol.
     #[arg(long, value_name = "FILE")]
     trace: Option<PathBuf>,
     /// The protocol and the options of the MeCom and TCS II emulators.
@@ -75,7 +75,13 @@ fn publish_link(link: &std::path::Path, target: &str) -> Result<()> {
 /// Runs `thermode emulate`.
 pub fn run(args: &EmulateArgs) -> Result<()> {
     if args.hardware.protocol != Protocol::Own {
-        return emulate_hw::run(&args.hardware, args.channels, args.device_file.as_deref(), args.seed);
+        let display = emulate_hw::DisplayArgs {
+            channels: args.channels,
+            device_file: args.device_file.as_deref(),
+            seed: args.seed,
+            trace: args.trace.as_deref(),
+        };
+        return emulate_hw::run(&args.hardware, &display);
     }
     if args.hardware.no_finger {
         bail!("--no-finger is for --protocol mecom and tcs2 (thermode's own protocol reports no Peltier voltage, so identify does not run on it)");
@@ -95,9 +101,7 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
         mute: false,
     })?;
     if let Some(path) = &args.trace {
-        let file =
-            std::fs::File::create(path).with_context(|| format!("cannot create the trace {}", path.display()))?;
-        emulator.trace_to(Box::new(file));
+        emulator.trace_to(emulate_hw::trace_file(path)?);
     }
     let pty = PtyEmulator::spawn(emulator, Arc::new(MonotonicClock::new()))?;
     if let Some(link) = &args.link {

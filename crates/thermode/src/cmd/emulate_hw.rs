@@ -9,7 +9,7 @@ use std::io::Write;
 use std::path::Path;
 use std::sync::Arc;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use thermode_device::{DefaultFinger, Device, NoFinger, PlateFinger, SimulatedDisplay};
 use thermode_link::mecom::emulator::{MecomEmulator, MecomEmulatorConfig};
@@ -52,24 +52,51 @@ pub struct HardwareArgs {
     pub no_finger: bool,
 }
 
-/// Runs the MeCom or TCS II emulator of `args` with `channels` channels (1 to 10) of the display in `device_file`
-/// (default: the built-in default display), sensor noise seeded with `seed`.
-pub fn run(args: &HardwareArgs, channels: usize, device_file: Option<&Path>, seed: u64) -> Result<()> {
-    let device = resolve::device_config(device_file)?;
+/// The simulated display behind an emulator, and its trace.
+#[derive(Debug, Clone, Copy)]
+pub struct DisplayArgs<'a> {
+    /// Number of channels, 1 to 10.
+    pub channels: usize,
+    /// The device file (None: the built-in default display).
+    pub device_file: Option<&'a Path>,
+    /// Seed of the sensor noise.
+    pub seed: u64,
+    /// Where the trace of the true plate goes (None: no trace).
+    pub trace: Option<&'a Path>,
+}
+
+/// Creates (replaces) the trace file `path`, unbuffered so each step's rows reach it whole.
+pub fn trace_file(path: &Path) -> Result<Box<dyn std::io::Write + Send>> {
+    let file = std::fs::File::create(path).with_context(|| format!("cannot create the trace {}", path.display()))?;
+    Ok(Box::new(file))
+}
+
+/// Runs the MeCom or TCS II emulator of `args` over the display of `display`.
+pub fn run(args: &HardwareArgs, display: &DisplayArgs<'_>) -> Result<()> {
+    let device = resolve::device_config(display.device_file)?;
+    let (channels, seed) = (display.channels, display.seed);
+    let trace = display.trace.map(trace_file).transpose()?;
     let (firmware, what, spelling) = match args.no_finger {
-        true => firmware(args, SimulatedDisplay::<NoFinger>::fingertips(&device, channels, seed)?)?,
+        true => firmware(
+            args,
+            SimulatedDisplay::<NoFinger>::fingertips(&device, channels, seed)?,
+            trace,
+        )?,
         false => firmware(
             args,
             SimulatedDisplay::<DefaultFinger>::fingertips(&device, channels, seed)?,
+            trace,
         )?,
     };
     serve_firmware(args, firmware, &what, spelling)
 }
 
-/// The emulator of `args.protocol` over `display`, what it is, and the `--device` spelling that connects to it.
+/// The emulator of `args.protocol` over `display` (tracing its plant into `trace`), what it is, and the `--device`
+/// spelling that connects to it.
 fn firmware<F: PlateFinger + Send + 'static>(
     args: &HardwareArgs,
     display: SimulatedDisplay<F>,
+    trace: Option<Box<dyn std::io::Write + Send>>,
 ) -> Result<(Box<dyn Firmware>, String, &'static str)> {
     let channels = display.channel_count();
     Ok(match args.protocol {
@@ -78,7 +105,10 @@ fn firmware<F: PlateFinger + Send + 'static>(
                 address: args.address,
                 ..MecomEmulatorConfig::default()
             };
-            let emulator = MecomEmulator::new(display, config)?;
+            let mut emulator = MecomEmulator::new(display, config)?;
+            if let Some(trace) = trace {
+                emulator.trace_to(trace);
+            }
             let what = format!(
                 "a MeCom TEC controller at address {}, {channels} instances",
                 args.address
@@ -94,7 +124,10 @@ fn firmware<F: PlateFinger + Send + 'static>(
                 forced_stream_hz: args.stream_hz,
                 ..Tcs2EmulatorConfig::default()
             };
-            let emulator = Tcs2Emulator::new(display, config)?;
+            let mut emulator = Tcs2Emulator::new(display, config)?;
+            if let Some(trace) = trace {
+                emulator.trace_to(trace);
+            }
             (
                 Box::new(emulator),
                 format!("a TCS II stimulator, {channels} zones"),

@@ -75,6 +75,53 @@ fn bench_runs_on_the_tcs2_emulator() {
     assert!(stderr.contains("3 channels"), "{stderr}");
 }
 
+/// The rows of the trace `path`: (time \[s\], channel, true plate \[°C\]).
+fn trace_rows(path: &std::path::Path) -> Vec<(f64, usize, f64)> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("read the trace {}: {e}", path.display()));
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("time_s,channel,plate_c,sensor_c,current_a"),
+        "trace header"
+    );
+    lines
+        .map(|line| {
+            let fields: Vec<&str> = line.split(',').collect();
+            let number = |i: usize| fields.get(i).and_then(|f| f.parse::<f64>().ok());
+            match (number(0), number(1), number(2)) {
+                (Some(t), Some(ch), Some(plate)) => (t, ch as usize, plate),
+                _ => panic!("trace row {line:?}"),
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn emulate_trace_writes_the_true_plate_for_mecom_and_tcs2() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    for (protocol, spelling) in [("mecom", "mecom:"), ("tcs2", "tcs2:")] {
+        let trace = tmp.path().join(format!("{protocol}.csv"));
+        let trace_arg = trace.to_string_lossy().to_string();
+        let (emulator, pty) = emulate(&["--protocol", protocol, "--channels", "2", "--trace", &trace_arg]);
+        bench_on(&format!(
+            "{spelling}{pty}?{}",
+            if protocol == "tcs2" { "zones=2" } else { "" }
+        ));
+        drop(emulator);
+        let rows = trace_rows(&trace);
+        let last_s = rows.last().map_or(0.0, |r| r.0);
+        println!("{protocol}: {} trace rows over {last_s:.2} s", rows.len());
+        assert!(
+            last_s > 1.0,
+            "{protocol}: the trace covers {last_s} s, the bench ran 1 s"
+        );
+        assert!(
+            rows.iter().all(|r| r.1 < 2 && (5.0..60.0).contains(&r.2)),
+            "{protocol}: a row with a channel or plate out of range"
+        );
+    }
+}
+
 #[test]
 fn bad_hardware_spellings_are_refused_with_the_reason() {
     super::expect_error(

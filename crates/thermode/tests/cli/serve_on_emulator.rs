@@ -3,6 +3,9 @@
 //! - a host killed with SIGKILL while it heats (a direct-mode set-point of 48 °C at the largest allowed rate, killed
 //!   at seeded moments from a 35 °C plate up to holding) never lets the true plate pass 48.5 °C, on the default and
 //!   on the lagging-sensor display: the device's own cut and its 250 ms watchdog act without the host;
+//! - the same on a MeCom controller over TCP (`emulate --protocol mecom --tcp`, `serve --device mecom-tcp:…`), with
+//!   and without a second client polling the controller after the kill (its frames feed the controller's watchdog):
+//!   the controller's upper object threshold, set below 48 °C by the sensor's lag, acts without the host;
 //! - `serve` refuses an emulator whose watchdog is longer than 250 ms: exit 2, one line naming both periods;
 //! - SIGTERM and SIGINT stop `serve` cleanly: every current in the trace 0 A within 20 ms of the signal, the
 //!   recording's last row within two loop ticks of the last status read before the signal, no torn row, a one-line
@@ -91,17 +94,14 @@ struct Serve {
 
 /// `thermode serve` on the emulator at `pty`, with free ports; waits for its banner.
 fn serve(pty: &str, device_file: Option<&Path>, record: Option<&Path>) -> Serve {
+    serve_device(&format!("serial:{pty}"), device_file, record)
+}
+
+/// `thermode serve --device DEVICE`, with free ports; waits for its banner.
+fn serve_device(device: &str, device_file: Option<&Path>, record: Option<&Path>) -> Serve {
     let state = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
     let mut command = Command::new(binary());
-    command.args([
-        "serve",
-        "--device",
-        &format!("serial:{pty}"),
-        "--port",
-        "0",
-        "--osc-port",
-        "0",
-    ]);
+    command.args(["serve", "--device", device, "--port", "0", "--osc-port", "0"]);
     command.arg("--state-dir").arg(state.path());
     if let Some(file) = device_file {
         command.arg("--device-file").arg(file);
@@ -373,6 +373,114 @@ fn a_host_killed_while_heating_never_lets_the_true_plate_pass_48_5() {
         }
     }
     println!("highest true plate over all runs: {worst:.3} °C");
+}
+
+/// Another MeCom client on the controller's TCP port at `address`: asks for the object temperature every 20 ms for
+/// `watch_s` \[s\] (its frames feed the controller's communication watchdog, as any client's do).
+fn poll_mecom_as_a_second_client(address: &str, watch_s: f64) -> u64 {
+    use thermode_link::mecom::codec::frame::{encode_frame, HOST_CONTROL};
+    use thermode_link::mecom::codec::payload::{param, Request};
+    let started = Instant::now();
+    let mut stream = loop {
+        match TcpStream::connect(address) {
+            Ok(stream) => break stream,
+            Err(e) if started.elapsed().as_secs_f64() > 5.0 => panic!("second client: {e}"),
+            Err(_) => std::thread::sleep(Duration::from_millis(2)),
+        }
+    };
+    stream
+        .set_read_timeout(Some(Duration::from_millis(2)))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let payload = Request::Read {
+        id: param::OBJECT_TEMPERATURE,
+        instance: 1,
+    }
+    .payload();
+    let (mut seq, mut out, mut buf, mut answered) = (0u16, Vec::new(), [0u8; 256], 0u64);
+    while started.elapsed().as_secs_f64() < watch_s {
+        seq = seq.wrapping_add(1);
+        out.clear();
+        encode_frame(HOST_CONTROL, 1, seq, &payload, &mut out);
+        let _ = stream.write_all(&out);
+        let until = Instant::now() + Duration::from_millis(20);
+        while Instant::now() < until {
+            if let Ok(n) = stream.read(&mut buf) {
+                answered += buf[..n].iter().filter(|&&b| b == b'\r').count() as u64;
+            }
+        }
+    }
+    answered
+}
+
+/// `serve --device mecom-tcp:…` on `emulate --protocol mecom --tcp`, a direct 48 °C at `rate_c_per_s`, SIGKILL once
+/// the true plate reaches `kill_at_c` (or the controller switched its output off while hot), then, with
+/// `second_client`, another client polls the controller for 3 s. The peak of the true plate over the whole trace,
+/// the plate at the kill, and the answers the second client got.
+fn kill_mecom_while_heating(dir: &Path, rate_c_per_s: f32, kill_at_c: f64, second_client: bool) -> (f64, f64, u64) {
+    let trace = dir.join("mecom-trace.csv");
+    let (emulator, address) = emulate_with(1, None, &trace, &["--protocol", "mecom", "--tcp", "127.0.0.1:0"]);
+    let host = serve_device(&format!("mecom-tcp:{address}"), None, None);
+    let mut tail = Tail::open(&trace);
+    setpoint(host.osc_port, 0, 48.0, rate_c_per_s);
+    let started = Instant::now();
+    let mut plate_at_kill = f64::NAN;
+    'watch: while started.elapsed().as_secs_f64() < LIVENESS_S {
+        for r in tail.rows() {
+            if r.plate_c >= kill_at_c || (r.plate_c > 36.0 && r.current_a == 0.0) {
+                plate_at_kill = r.plate_c;
+                break 'watch;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    assert!(plate_at_kill.is_finite(), "the plate never reached {kill_at_c} °C");
+    let mut host = host;
+    host.process.0.kill().unwrap_or_else(|e| panic!("SIGKILL serve: {e}"));
+    let _ = host.process.0.wait();
+    let answered = if second_client {
+        poll_mecom_as_a_second_client(&address, 3.0)
+    } else {
+        std::thread::sleep(Duration::from_millis(1500));
+        0
+    };
+    drop(emulator);
+    let peak = read_trace(&trace)
+        .iter()
+        .map(|r| r.plate_c)
+        .fold(f64::NEG_INFINITY, f64::max);
+    (peak, plate_at_kill, answered)
+}
+
+#[test]
+fn a_mecom_host_killed_while_heating_with_or_without_a_second_client_leaves_the_plate_at_most_48_5() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
+    let rate_c_per_s = 20.0;
+    let mut rng = ChaCha8Rng::seed_from_u64(2323);
+    let mut worst = f64::NEG_INFINITY;
+    for second_client in [true, false] {
+        for kill_at_c in [
+            rng.gen_range(32.0..36.0),
+            rng.gen_range(36.0..40.0),
+            rng.gen_range(40.0..44.0),
+        ] {
+            let (peak, at_kill, answered) =
+                kill_mecom_while_heating(dir.path(), rate_c_per_s, kill_at_c, second_client);
+            println!(
+                "MeCom over TCP, 48 °C at {rate_c_per_s} °C/s, SIGKILL at plate {at_kill:.2} °C, second client {second_client} \
+                 ({answered} answers): peak true plate {peak:.3} °C"
+            );
+            assert!(
+                !second_client || answered > 50,
+                "the second client got {answered} answers"
+            );
+            assert!(
+                peak <= JUDGED_MAX_PLATE_C,
+                "MeCom, killed at plate {at_kill} °C, second client {second_client}: the true plate peaked at {peak} °C"
+            );
+            worst = worst.max(peak);
+        }
+    }
+    println!("MeCom: highest true plate over all runs: {worst:.3} °C");
 }
 
 #[test]
