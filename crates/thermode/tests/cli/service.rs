@@ -4,7 +4,8 @@
 //! - `serve --token` does not listen for OSC: a UDP set-point changes nothing;
 //! - `serve --record` on a 64 KiB tmpfs (a mount namespace of its own, `unshare`; skipped where that is not
 //!   allowed): the status says `failed`, `rows_written` equals the rows in the file, the file ends with a newline,
-//!   no channel is left rendering, and the failure is on standard error.
+//!   no channel is left rendering, the failure is on standard error, and SIGTERM then ends it with exit code 2 and
+//!   a summary line that says the recording failed.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpStream, UdpSocket};
@@ -302,7 +303,7 @@ fn a_recording_on_a_full_tmpfs_fails_loudly_with_whole_rows_and_stops_every_stim
         .spawn()
         .unwrap_or_else(|e| panic!("spawn: {e}"));
     let pid = child.id();
-    let (_serve, port, stderr) = banner(child);
+    let (mut serve, port, stderr) = banner(child);
     let r = ws_ask(
         port,
         &[serde_json::json!({"type": "setpoint", "id": 1, "channel": 0, "temp_c": 36, "rate_c_s": 2})],
@@ -342,5 +343,18 @@ fn a_recording_on_a_full_tmpfs_fails_loudly_with_whole_rows_and_stops_every_stim
     assert!(
         wait_until(LIVENESS_S, || stderr.try_iter().any(|l| l.contains("FAILED"))),
         "the failure on standard error"
+    );
+    // Stopped by SIGTERM, a run whose recording failed exits 2 and its summary line says so.
+    signal(&serve.0, Signal::SIGTERM);
+    let code = serve.0.wait().unwrap_or_else(|e| panic!("wait: {e}"));
+    let mut summary = String::new();
+    wait_until(LIVENESS_S, || {
+        summary.extend(stderr.try_iter().map(|l| l + "\n"));
+        summary.contains("SIGTERM: stopped")
+    });
+    assert_eq!(code.code(), Some(2), "exit {code:?}; stderr: {summary}");
+    assert!(
+        summary.lines().any(|l| l.contains("SIGTERM: stopped") && l.contains("the recording FAILED")),
+        "the summary line names the failed recording: {summary}"
     );
 }
