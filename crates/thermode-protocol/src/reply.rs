@@ -45,6 +45,8 @@ pub enum ErrorCode {
     Cancelled,
     /// The recording failed and the policy is `stop`: stimuli are refused until `ack_recording`.
     RecordingFailed,
+    /// The dose ledger cannot be written: stimuli are refused until a write succeeds again.
+    DoseNotRecorded,
 }
 
 impl ErrorCode {
@@ -67,6 +69,7 @@ impl ErrorCode {
             ErrorCode::TooManyConnections => "too_many_connections",
             ErrorCode::Cancelled => "cancelled",
             ErrorCode::RecordingFailed => "recording_failed",
+            ErrorCode::DoseNotRecorded => "dose_not_recorded",
         }
     }
 }

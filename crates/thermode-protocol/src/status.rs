@@ -312,6 +312,9 @@ pub struct DoseLedgerStatus {
     pub errors: u64,
     /// The last write error.
     pub last_error: Option<String>,
+    /// The ledger cannot be written: every stimulus was stopped and new ones are refused (`dose_not_recorded`)
+    /// until a write succeeds again.
+    pub stimuli_refused: bool,
 }
 
 /// The interlock.

@@ -176,6 +176,13 @@ pub enum CommandError {
     /// refused until an operator acknowledges the failure (`ack_recording`).
     #[error("the recording failed: stimuli are refused until an operator acknowledges it (ack_recording)")]
     RecordingFailed,
+    /// The dose ledger cannot be written (a full disk, a read-only state directory): every stimulus was stopped and
+    /// new ones are refused until a write succeeds again, so that no dose goes unrecorded.
+    #[error(
+        "the dose ledger cannot be written: stimuli are refused until it can (the dose must not be forgotten; free \
+         space or fix the state directory)"
+    )]
+    DoseNotRecorded,
     /// The control loop has stopped.
     #[error("the control loop has stopped")]
     Stopped,

@@ -389,6 +389,7 @@ pub fn status(app: &App) -> Status {
             writes: count(&w.writes),
             errors: count(&w.errors),
             last_error: w.last_error.lock().map(|e| e.clone()).unwrap_or(None),
+            stimuli_refused: app.interlock.dose_held(),
         }),
         interlock: InterlockStatus {
             engaged: app.interlock.engaged(),
