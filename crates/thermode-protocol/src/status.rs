@@ -227,6 +227,12 @@ pub struct OscStatus {
     pub subscribers: usize,
     /// Datagrams sent to subscribers.
     pub sent: u64,
+    /// Subscriptions refused (the daemon's own ports, a port another address subscribed, the cap, a bad rate).
+    pub subscriptions_refused: u64,
+    /// Datagrams not sent because a subscriber's byte budget was spent.
+    pub throttled: u64,
+    /// Most bytes sent to one subscriber per second \[B/s\].
+    pub subscriber_bytes_per_s: f64,
     /// The last refusal.
     pub last_error: Option<String>,
 }

@@ -130,7 +130,10 @@ mod tests {
         let interlock = Interlock::new();
         assert_eq!((interlock.dose_hold(), interlock.stops()), (None, 0));
         assert!(interlock.hold_dose("No space left on device"));
-        assert!(!interlock.hold_dose("still full"), "a hold already on is not a new stop");
+        assert!(
+            !interlock.hold_dose("still full"),
+            "a hold already on is not a new stop"
+        );
         assert_eq!(interlock.stops(), 1);
         assert!(!interlock.acknowledge(), "the recording's latch is separate");
         assert_eq!(interlock.dose_hold().as_deref(), Some("still full"));

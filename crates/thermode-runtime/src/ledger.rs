@@ -320,10 +320,13 @@ impl Ledger {
             max: channel_count.saturating_sub(1) as f64,
         };
         for &channel in self.channels.keys() {
-            last.check("channel", channel as f64).map_err(|bad| LedgerError::Corrupt {
-                path: path.to_path_buf(),
-                reason: format!("{bad} (the display has {channel_count} channels; is this another display's state directory?)"),
-            })?;
+            last.check("channel", channel as f64)
+                .map_err(|bad| LedgerError::Corrupt {
+                    path: path.to_path_buf(),
+                    reason: format!(
+                        "{bad} (the display has {channel_count} channels; is this another display's state directory?)"
+                    ),
+                })?;
         }
         Ok(())
     }
@@ -932,7 +935,10 @@ mod tests {
             assert!(!reason.is_empty(), "{text}");
         }
         let good = entry("9", "1000000000", "0");
-        assert!(Ledger::from_json(&good, path).is_ok(), "the bounds themselves are accepted");
+        assert!(
+            Ledger::from_json(&good, path).is_ok(),
+            "the bounds themselves are accepted"
+        );
     }
 
     #[test]
@@ -943,7 +949,10 @@ mod tests {
         assert!(l.check_channels(5, path).is_ok());
         match l.check_channels(2, path) {
             Err(LedgerError::Corrupt { reason, .. }) => {
-                assert!(reason.contains("`channel` = 4") && reason.contains("2 channels"), "{reason}");
+                assert!(
+                    reason.contains("`channel` = 4") && reason.contains("2 channels"),
+                    "{reason}"
+                );
             }
             other => panic!("channel 4 on a 2-channel display: {other:?}"),
         }

@@ -300,14 +300,14 @@ impl PreparedCore {
         )?;
         let ledger_path = self.ledger.as_ref().map(|(state, _)| state.ledger_path());
         let dose_writer = match self.ledger {
-            Some((state, saved)) => {
-                Some(
-                    DoseWriter::start(state, saved, control.shared(), self.interlock.clone()).map_err(|source| RuntimeError::Io {
+            Some((state, saved)) => Some(
+                DoseWriter::start(state, saved, control.shared(), self.interlock.clone()).map_err(|source| {
+                    RuntimeError::Io {
                         context: "cannot start the dose ledger thread".into(),
                         source,
-                    })?,
-                )
-            }
+                    }
+                })?,
+            ),
             None => None,
         };
         Ok(LoopCore {

@@ -224,6 +224,7 @@ impl Daemon {
                 device: config.device_label.clone(),
                 channel_names: config.channel_names.clone(),
                 osc_port: osc_addr.map(|a| a.port()),
+                http_port: http_addr.port(),
                 recording: core.recording_path().map(|p| p.display().to_string()),
             },
             osc: Arc::new(OscCounters::default()),

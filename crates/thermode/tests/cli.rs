@@ -708,12 +708,26 @@ fn hostile_ledgers_are_refused_at_once_naming_what_is_wrong() {
             }
             (None, _) => std::os::unix::fs::symlink("/dev/zero", &path).expect("symlink"),
         }
-        let serve = ["serve", "--state-dir", dir, "--port", "0", "--no-osc", "--channels", "1", "--duration", "0"];
+        let serve = [
+            "serve",
+            "--state-dir",
+            dir,
+            "--port",
+            "0",
+            "--no-osc",
+            "--channels",
+            "1",
+            "--duration",
+            "0",
+        ];
         for args in [&serve[..], &["dose", "show", "--state-dir", dir][..]] {
             let out = thermode_within_60_s(args);
             let stderr = String::from_utf8_lossy(&out.stderr);
             assert_eq!(out.status.code(), Some(2), "{what}: thermode {args:?}: {stderr}");
-            assert!(stderr.contains(message), "{what}: thermode {args:?}: stderr lacks `{message}`: {stderr}");
+            assert!(
+                stderr.contains(message),
+                "{what}: thermode {args:?}: stderr lacks `{message}`: {stderr}"
+            );
         }
     }
 }

@@ -14,8 +14,8 @@ use std::sync::Arc;
 
 use common::{get_json, pid_pipelines, pipelines, test_config, wait_until, SpyDevice};
 use thermode_platform::{Clock, ManualClock};
-use thermode_runtime::ledger::{read_ledger, LedgerError, LEDGER_FILE};
 use thermode_runtime::command::CommandError;
+use thermode_runtime::ledger::{read_ledger, LedgerError, LEDGER_FILE};
 use thermode_runtime::snapshot::Mode;
 use thermode_runtime::{Command, EngineFactory, Owner, RuntimeError};
 use thermode_serve::{Daemon, ServeError};
@@ -193,7 +193,9 @@ fn an_unwritable_ledger_stops_every_stimulus_until_it_is_written_again() {
     assert!(s["dose_ledger"]["errors"].as_u64() >= Some(1), "{}", s["dose_ledger"]);
     assert!(s["dose_ledger"]["last_error"].is_string(), "{}", s["dose_ledger"]);
     assert!(
-        wait_until(60.0, || daemon.snapshot().is_some_and(|s| s.channels[0].mode == Mode::Air)),
+        wait_until(60.0, || daemon
+            .snapshot()
+            .is_some_and(|s| s.channels[0].mode == Mode::Air)),
         "the stimulus was not stopped: {:?}",
         daemon.snapshot().map(|s| s.channels[0].mode)
     );
@@ -202,7 +204,10 @@ fn an_unwritable_ledger_stops_every_stimulus_until_it_is_written_again() {
         other => panic!("a stimulus while the ledger cannot be written: {other:?}"),
     }
     let notices = daemon.take_notices().join("\n");
-    assert!(notices.contains("the dose ledger cannot be written"), "notices: {notices}");
+    assert!(
+        notices.contains("the dose ledger cannot be written"),
+        "notices: {notices}"
+    );
     let held = daemon.snapshot().expect("snapshot").channels[0].dose;
 
     std::fs::remove_file(&dir).expect("remove the file");
@@ -214,7 +219,10 @@ fn an_unwritable_ledger_stops_every_stimulus_until_it_is_written_again() {
     );
     ask(&daemon, 30.0).expect("a stimulus once the ledger is written again");
     let notices = daemon.take_notices().join("\n");
-    assert!(notices.contains("the dose ledger is written again"), "notices: {notices}");
+    assert!(
+        notices.contains("the dose ledger is written again"),
+        "notices: {notices}"
+    );
     daemon.shutdown().expect("clean shutdown");
     let saved = read_ledger(&dir).expect("ledger").dose(0);
     assert!(
@@ -239,7 +247,10 @@ fn a_ledger_of_another_display_refuses_the_start() {
     let clock: Arc<dyn Clock> = Arc::new(ManualClock::new());
     match Daemon::start(config, Box::new(SpyDevice::new(1)), pipelines(), clock) {
         Err(ServeError::Runtime(RuntimeError::Ledger(LedgerError::Corrupt { reason, .. }))) => {
-            assert!(reason.contains("`channel` = 3") && reason.contains("1 channels"), "{reason}");
+            assert!(
+                reason.contains("`channel` = 3") && reason.contains("1 channels"),
+                "{reason}"
+            );
         }
         other => panic!("a ledger with channel 3 on a one-channel display: {other:?}"),
     }

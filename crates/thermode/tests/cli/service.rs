@@ -354,7 +354,9 @@ fn a_recording_on_a_full_tmpfs_fails_loudly_with_whole_rows_and_stops_every_stim
     });
     assert_eq!(code.code(), Some(2), "exit {code:?}; stderr: {summary}");
     assert!(
-        summary.lines().any(|l| l.contains("SIGTERM: stopped") && l.contains("the recording FAILED")),
+        summary
+            .lines()
+            .any(|l| l.contains("SIGTERM: stopped") && l.contains("the recording FAILED")),
         "the summary line names the failed recording: {summary}"
     );
 }
