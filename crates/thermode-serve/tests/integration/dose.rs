@@ -155,14 +155,14 @@ fn a_corrupt_ledger_or_a_state_directory_in_use_refuses_the_start() {
     first.shutdown().expect("shutdown");
 }
 
-/// Asks channel 0 for `temp_c` (direct, 5 °C/s): the loop's answer.
-fn ask(daemon: &Daemon, temp_c: f64) -> thermode_runtime::command::Reply {
+/// Asks channel 0 for `temp_c` (direct, 5 °C/s): the loop's refusal, or `None` when it applied it.
+fn ask(daemon: &Daemon, temp_c: f64) -> Option<CommandError> {
     let answer = daemon
         .commands()
         .expect("commands")
         .request(Command::direct(0, temp_c, 5.0, Owner::Script))
         .expect("queued");
-    answer.blocking_recv().expect("answered")
+    answer.blocking_recv().expect("answered").err()
 }
 
 /// A ledger that cannot be written (the state directory moved away and a regular file put in its place: the
@@ -174,7 +174,7 @@ fn an_unwritable_ledger_stops_every_stimulus_until_it_is_written_again() {
     let tmp = tempfile::tempdir().expect("temp dir");
     let dir = tmp.path().join("state");
     let (daemon, _log) = start(&dir, pipelines());
-    ask(&daemon, 44.0).expect("44 °C applied");
+    assert!(ask(&daemon, 44.0).is_none(), "44 °C applied");
     let status = || get_json(daemon.http_addr(), "/api/status");
     assert!(
         wait_until(60.0, || status()["dose_ledger"]["writes"].as_u64() >= Some(2)),
@@ -200,7 +200,7 @@ fn an_unwritable_ledger_stops_every_stimulus_until_it_is_written_again() {
         daemon.snapshot().map(|s| s.channels[0].mode)
     );
     match ask(&daemon, 30.0) {
-        Err(CommandError::DoseNotRecorded) => {}
+        Some(CommandError::DoseNotRecorded) => {}
         other => panic!("a stimulus while the ledger cannot be written: {other:?}"),
     }
     let notices = daemon.take_notices().join("\n");
@@ -217,7 +217,11 @@ fn an_unwritable_ledger_stops_every_stimulus_until_it_is_written_again() {
         "still refused: {}",
         status()["dose_ledger"]
     );
-    ask(&daemon, 30.0).expect("a stimulus once the ledger is written again");
+    let refused = ask(&daemon, 30.0);
+    assert!(
+        refused.is_none(),
+        "a stimulus once the ledger is written again: {refused:?}"
+    );
     let notices = daemon.take_notices().join("\n");
     assert!(
         notices.contains("the dose ledger is written again"),
