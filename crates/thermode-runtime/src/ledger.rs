@@ -423,10 +423,24 @@ impl StateDir {
         read_ledger(&self.dir)
     }
 
-    /// Writes `ledger` atomically.
+    /// Writes `ledger` atomically. A ledger file that is not a regular file (a FIFO or a device put in its place,
+    /// which the atomic writer would write in place, and a FIFO without a reader would block for ever) is refused.
     pub fn store(&self, ledger: &Ledger) -> Result<(), LedgerError> {
         let path = self.ledger_path();
-        write_bytes_atomically(&path, ledger.to_json().as_bytes()).map_err(|source| LedgerError::Write { path, source })
+        let write = || match std::fs::metadata(&path) {
+            Ok(meta) if !meta.is_file() => Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "it is {}, not a regular file (a dose ledger is written only as a regular file)",
+                    file_kind(&meta.file_type())
+                ),
+            )),
+            _ => write_bytes_atomically(&path, ledger.to_json().as_bytes()),
+        };
+        write().map_err(|source| LedgerError::Write {
+            path: path.clone(),
+            source,
+        })
     }
 
     /// Appends one line to the reset log and syncs it.
@@ -889,6 +903,12 @@ mod tests {
         .unwrap();
         let reason = unreadable_reason(read_within_10_s(tmp.path()));
         assert!(reason.contains("a FIFO, not a regular file"), "{reason}");
+        // Written: refused too (the atomic writer writes special files in place; a FIFO without a reader blocks).
+        let state = StateDir::open(tmp.path()).unwrap();
+        match state.store(&Ledger::default()) {
+            Err(LedgerError::Write { source, .. }) => assert!(source.to_string().contains("a FIFO"), "{source}"),
+            other => panic!("a FIFO written as the ledger: {other:?}"),
+        }
         // Opened as the reader does (non-blocking), a FIFO does not block either: the second check refuses it.
         let mut options = OpenOptions::new();
         std::os::unix::fs::OpenOptionsExt::custom_flags(options.read(true), rustix::fs::OFlags::NONBLOCK.bits() as i32);
