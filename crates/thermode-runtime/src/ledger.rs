@@ -324,7 +324,9 @@ impl Ledger {
                 .map_err(|bad| LedgerError::Corrupt {
                     path: path.to_path_buf(),
                     reason: format!(
-                        "{bad} (the display has {channel_count} channels; is this another display's state directory?)"
+                        "{bad} (the display has {channel_count} channels: is this another display's state directory? \
+                         use that display's own --state-dir, or clear the channel with `thermode dose reset --channel \
+                         {channel} --reason TEXT`)"
                     ),
                 })?;
         }
