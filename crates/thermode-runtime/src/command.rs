@@ -7,7 +7,7 @@
 //! commands. Every command carries a sequence number: a stop-all cancels every command sent before it that the loop
 //! has not applied yet ([`CommandError::Cancelled`]), so nothing sent before a stop outlives it.
 //!
-//! Honest answers: a request ([`CommandSender::request`]) gives an [`Answer`]. [`Answer::wait`] waits a bounded
+//! Honest answers: a request ([`CommandSender::request`]) gives an [`Answer`]. [`Answer::wait_until`] waits a bounded
 //! time; when the time is over it withdraws the command, unless the loop has already taken it (then it waits for
 //! that tick's answer, which follows within the tick). So [`CommandError::Busy`] always means that nothing was
 //! queued, or that what was queued was withdrawn and will never be applied.

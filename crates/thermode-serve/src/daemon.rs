@@ -68,7 +68,7 @@ pub struct ServerConfig {
     pub max_subscribe_hz: f64,
     /// Object temperature of a touch that gives none \[°C\]. Default 23. Within the pipeline's object range
     /// (`thermode_pipeline::stimulus::OBJECT_TEMPERATURE`). The stimulus limits themselves (display range, rate limit) are not set here:
-    /// they are those of the envelopes the channel engines run ([`crate::ChannelEngine::limits`]).
+    /// they are those of the envelopes the channel engines run ([`thermode_runtime::ChannelEngine::limits`]).
     pub default_object_c: f64,
 }
 
