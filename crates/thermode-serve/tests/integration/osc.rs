@@ -1,6 +1,7 @@
 //! OSC both ways on a running daemon (real clock): a subscriber receives telemetry at about its rate and fault events
 //! (latched and cleared), stops receiving after unsubscribing or when its subscription expires; the subscriber cap;
-//! the all-channels addresses.
+//! the all-channels addresses; subscriptions to the daemon's own ports or to a port another address holds are
+//! refused; the bytes sent to a subscriber stay within its budget.
 
 use crate::common;
 

@@ -2,7 +2,8 @@
 //! "Connections"): slow and silent HTTP connections cannot starve `/api/status` or the WebSocket handshake (STOP
 //! ALL) and are closed by the header-read timeout; OSC cannot bypass the token; WebSocket and HTTP conformance (a
 //! reader that stops reading is closed, 1007 on a text frame that is not UTF-8, a malformed key and a second Host
-//! header are refused); OSC counts the loop's refusals as refusals.
+//! header are refused); OSC counts the loop's refusals as refusals; OSC STOP ALL is applied under a 1000 datagrams/s
+//! flood.
 
 use crate::common;
 
