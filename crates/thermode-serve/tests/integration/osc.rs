@@ -312,3 +312,31 @@ fn the_bytes_sent_to_a_subscriber_stay_within_its_budget() {
         "{bytes} bytes in {window_s} s: telemetry should still flow near the budget"
     );
 }
+
+/// The subscriber byte budget is a checked setting: below 1024 B/s (or not a number) is refused, naming the key; the
+/// default is reported in `/api/status`.
+#[test]
+fn the_subscriber_byte_budget_is_checked_and_reported() {
+    use thermode_serve::api::NetLimits;
+    for bad in [100.0, f64::NAN, -1.0] {
+        let limits = NetLimits {
+            osc_subscriber_bytes_per_s: bad,
+            ..NetLimits::default()
+        };
+        let message = limits.validate().map_err(|e| e.to_string());
+        assert!(
+            message
+                .as_ref()
+                .is_err_and(|m| m.contains("osc_subscriber_bytes_per_s")),
+            "{bad}: {message:?}"
+        );
+    }
+    let daemon = start(test_config(), SpyDevice::new(1), pipelines());
+    let status = get_json(daemon.http_addr(), "/api/status");
+    assert_eq!(
+        status["osc"]["subscriber_bytes_per_s"].as_f64(),
+        Some(NetLimits::default().osc_subscriber_bytes_per_s),
+        "{}",
+        status["osc"]
+    );
+}
