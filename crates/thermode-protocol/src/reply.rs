@@ -45,6 +45,8 @@ pub enum ErrorCode {
     Cancelled,
     /// The recording failed and the policy is `stop`: stimuli are refused until `ack_recording`.
     RecordingFailed,
+    /// The dose ledger cannot be written: stimuli are refused until a write succeeds again.
+    DoseNotRecorded,
 }
 
 impl ErrorCode {
@@ -67,6 +69,7 @@ impl ErrorCode {
             ErrorCode::TooManyConnections => "too_many_connections",
             ErrorCode::Cancelled => "cancelled",
             ErrorCode::RecordingFailed => "recording_failed",
+            ErrorCode::DoseNotRecorded => "dose_not_recorded",
         }
     }
 }
@@ -212,6 +215,9 @@ pub struct Event {
 }
 
 /// Every message the daemon sends on the WebSocket, tagged by `type`.
+// The status reply is large (about 1.1 kB) and rare (a client asks for it); boxing it would change every match on
+// the wire type for nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum Response {

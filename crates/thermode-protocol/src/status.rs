@@ -227,6 +227,12 @@ pub struct OscStatus {
     pub subscribers: usize,
     /// Datagrams sent to subscribers.
     pub sent: u64,
+    /// Subscriptions refused (the daemon's own ports, a port another address subscribed, the cap, a bad rate).
+    pub subscriptions_refused: u64,
+    /// Datagrams not sent because a subscriber's byte budget was spent.
+    pub throttled: u64,
+    /// Most bytes sent to one subscriber per second \[B/s\].
+    pub subscriber_bytes_per_s: f64,
     /// The last refusal.
     pub last_error: Option<String>,
 }
@@ -312,6 +318,9 @@ pub struct DoseLedgerStatus {
     pub errors: u64,
     /// The last write error.
     pub last_error: Option<String>,
+    /// The ledger cannot be written: every stimulus was stopped and new ones are refused (`dose_not_recorded`)
+    /// until a write succeeds again.
+    pub stimuli_refused: bool,
 }
 
 /// The interlock.

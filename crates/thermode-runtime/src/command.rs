@@ -7,7 +7,7 @@
 //! commands. Every command carries a sequence number: a stop-all cancels every command sent before it that the loop
 //! has not applied yet ([`CommandError::Cancelled`]), so nothing sent before a stop outlives it.
 //!
-//! Honest answers: a request ([`CommandSender::request`]) gives an [`Answer`]. [`Answer::wait`] waits a bounded
+//! Honest answers: a request ([`CommandSender::request`]) gives an [`Answer`]. [`Answer::wait_until`] waits a bounded
 //! time; when the time is over it withdraws the command, unless the loop has already taken it (then it waits for
 //! that tick's answer, which follows within the tick). So [`CommandError::Busy`] always means that nothing was
 //! queued, or that what was queued was withdrawn and will never be applied.
@@ -176,6 +176,13 @@ pub enum CommandError {
     /// refused until an operator acknowledges the failure (`ack_recording`).
     #[error("the recording failed: stimuli are refused until an operator acknowledges it (ack_recording)")]
     RecordingFailed,
+    /// The dose ledger cannot be written (a full disk, a read-only state directory): every stimulus was stopped and
+    /// new ones are refused until a write succeeds again, so that no dose goes unrecorded.
+    #[error(
+        "the dose ledger cannot be written: stimuli are refused until it can (the dose must not be forgotten; free \
+         space or fix the state directory)"
+    )]
+    DoseNotRecorded,
     /// The control loop has stopped.
     #[error("the control loop has stopped")]
     Stopped,

@@ -409,7 +409,7 @@ impl ControlLoop {
             period_s: config.period_s(),
             commands_per_tick: config.commands_per_tick(),
             cancel_before_seq: 0,
-            interlock_trips: interlock.trips(),
+            interlock_trips: interlock.stops(),
             interlock,
             air,
             last_woke_s: None,
@@ -438,7 +438,7 @@ impl ControlLoop {
         // and the envelope share one time base.
         self.device.poll(time_s);
         self.time_s = time_s;
-        let trips = self.interlock.trips();
+        let trips = self.interlock.stops();
         if trips != self.interlock_trips {
             self.interlock_trips = trips;
             self.stop_all();
@@ -579,6 +579,9 @@ impl ControlLoop {
                 self.usable(channel)?;
                 if self.interlock.engaged() {
                     return Err(CommandError::RecordingFailed);
+                }
+                if self.interlock.dose_held() {
+                    return Err(CommandError::DoseNotRecorded);
                 }
                 self.set(channel, stimulus)?;
                 let status = &mut self.status[channel];

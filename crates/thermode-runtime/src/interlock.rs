@@ -7,6 +7,11 @@
 //! is engaged, refuses every new stimulus with `CommandError::RecordingFailed`. [`Interlock::acknowledge`] (the
 //! `ack_recording` request, the dashboard's button) disengages it; releases, fault clearing and stop-all are never
 //! refused.
+//!
+//! Beside the latch, the dose hold: the dose ledger's writer puts it on when the ledger cannot be written (the dose
+//! would be forgotten at the next start) and lifts it when a write succeeds again. While it is on, the loop refuses
+//! every new stimulus with `CommandError::DoseNotRecorded`; putting it on stops all at the next tick, as a trip
+//! does. No acknowledgement lifts it: only a successful write.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Mutex;
@@ -20,6 +25,12 @@ pub struct Interlock {
     engaged: AtomicBool,
     /// Why it tripped last.
     reason: Mutex<Option<String>>,
+    /// The dose hold is on.
+    dose_held: AtomicBool,
+    /// Times the dose hold went on; the loop stops all once per new one.
+    dose_holds: AtomicU64,
+    /// Why the dose hold went on last.
+    dose_reason: Mutex<Option<String>>,
 }
 
 impl Interlock {
@@ -57,6 +68,43 @@ impl Interlock {
     pub fn reason(&self) -> Option<String> {
         self.reason.lock().ok().and_then(|r| r.clone())
     }
+
+    /// Puts the dose hold on for `reason` (the ledger cannot be written): the loop stops all at its next tick if the
+    /// hold was off, and refuses stimuli until [`Interlock::lift_dose_hold`]. Returns whether it was off.
+    pub fn hold_dose(&self, reason: impl Into<String>) -> bool {
+        if let Ok(mut last) = self.dose_reason.lock() {
+            *last = Some(reason.into());
+        }
+        let newly = !self.dose_held.swap(true, Ordering::SeqCst);
+        if newly {
+            self.dose_holds.fetch_add(1, Ordering::SeqCst);
+        }
+        newly
+    }
+
+    /// Lifts the dose hold (the ledger was written again). Returns whether it was on.
+    pub fn lift_dose_hold(&self) -> bool {
+        self.dose_held.swap(false, Ordering::SeqCst)
+    }
+
+    /// The dose hold is on: why, else `None`.
+    pub fn dose_hold(&self) -> Option<String> {
+        if self.dose_held.load(Ordering::SeqCst) {
+            Some(self.dose_reason.lock().ok().and_then(|r| r.clone()).unwrap_or_default())
+        } else {
+            None
+        }
+    }
+
+    /// The dose hold is on.
+    pub fn dose_held(&self) -> bool {
+        self.dose_held.load(Ordering::SeqCst)
+    }
+
+    /// Trips plus dose holds so far: the loop stops all once per new one.
+    pub fn stops(&self) -> u64 {
+        self.trips() + self.dose_holds.load(Ordering::SeqCst)
+    }
 }
 
 #[cfg(test)]
@@ -75,5 +123,21 @@ mod tests {
         );
         assert!(interlock.acknowledge());
         assert!(!interlock.engaged() && !interlock.acknowledge());
+    }
+
+    #[test]
+    fn the_dose_hold_stays_until_lifted_and_an_acknowledgement_does_not_lift_it() {
+        let interlock = Interlock::new();
+        assert_eq!((interlock.dose_hold(), interlock.stops()), (None, 0));
+        assert!(interlock.hold_dose("No space left on device"));
+        assert!(
+            !interlock.hold_dose("still full"),
+            "a hold already on is not a new stop"
+        );
+        assert_eq!(interlock.stops(), 1);
+        assert!(!interlock.acknowledge(), "the recording's latch is separate");
+        assert_eq!(interlock.dose_hold().as_deref(), Some("still full"));
+        assert!(interlock.lift_dose_hold());
+        assert!(!interlock.dose_held() && !interlock.lift_dose_hold());
     }
 }

@@ -17,7 +17,13 @@
 //!
 //! Reading refuses anything but a well-formed ledger: unreadable, empty, malformed, unknown format or version,
 //! unknown keys, duplicate channels, negative or non-finite totals are [`LedgerError`]s, never a silent reset. A
-//! missing ledger file is an empty ledger (the first start).
+//! missing ledger file is an empty ledger (the first start). The file is read like every input, through
+//! `thermode_platform::fs::AtMost` (at most [`MAX_LEDGER_BYTES`]), and only from a regular file: its type is checked
+//! before it is opened and again on the open file, which is opened non-blocking, so a device (`/dev/zero`) or a FIFO
+//! put in its place is refused at once instead of eating memory or blocking the start for ever. Every value is
+//! range-checked with a `Rule` naming its key: `channel` below `MAX_CHANNELS` (and, at the loop core's start,
+//! below the display's channel count), `cem43_min` in \[0, [`MAX_CEM43_MIN`]\], `time_at_or_above_43_s` in
+//! \[0, [`MAX_TIME_AT_OR_ABOVE_43_S`]\]; a merge saturates at those bounds, so what is written is always read back.
 //!
 //! The daemon restores every channel's dose into its engine before the loop's first tick, writes the ledger once
 //! at start (so an unwritable state directory is refused before anything is driven), and then a [`DoseWriter`]
@@ -26,6 +32,12 @@
 //! grew at all: a SIGKILL loses at most a quarter of a second (plus one tick) of dose. Every value written is the
 //! larger of what the file holds and what the loop reports ([`Ledger::merge`]), so the ledger on disk never goes
 //! down: only [`StateDir::reset_channel`] and [`StateDir::reset_all`] lower it, and they log first.
+//!
+//! A ledger that cannot be written (a full disk, a read-only directory) must not let the dose be forgotten: the
+//! writer's failure puts the [`Interlock`]'s dose hold on — the loop stops every stimulus and refuses new ones
+//! (`CommandError::DoseNotRecorded`), `/api/status` and standard error say why — and the writer keeps trying every
+//! period; the first write that succeeds again lifts the hold (no acknowledgement needed: the dose is safe on disk
+//! again).
 
 use std::collections::BTreeMap;
 use std::fs::{File, OpenOptions};
@@ -37,10 +49,14 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
+use thermode_device::MAX_CHANNELS;
+use thermode_model::params::{BadValue, Rule};
+use thermode_platform::fs::AtMost;
 use thermode_platform::{utc_iso8601, write_bytes_atomically};
 use thermode_safety::DoseLedger;
 use thiserror::Error;
 
+use crate::interlock::Interlock;
 use crate::snapshot::Shared;
 
 /// The ledger's file name in the state directory.
@@ -63,6 +79,15 @@ pub const SIGNIFICANT_CEM43_MIN: f64 = 1e-6;
 pub const IDLE_WRITE_S: f64 = 60.0;
 /// Most characters of a reset reason.
 pub const MAX_REASON_CHARS: usize = 1000;
+/// Largest ledger file read \[bytes\]: 1 MiB (a ledger of every channel of the largest display is about 2 KiB).
+pub const MAX_LEDGER_BYTES: u64 = 1 << 20;
+/// Largest CEM43 a ledger holds \[CEM43-min\]: 10⁹, a billion times the default budget of 1 (48 °C held for about
+/// 60 years). Finite, so it survives JSON; a merge saturates at it (a channel there is far over any budget) and a
+/// file holding more is corrupt.
+pub const MAX_CEM43_MIN: f64 = 1e9;
+/// Largest time at or above 43 °C a ledger holds \[s\]: 3.2·10⁹ (about a century); a merge saturates at it and a
+/// file holding more is corrupt.
+pub const MAX_TIME_AT_OR_ABOVE_43_S: f64 = 3.2e9;
 
 /// Why the ledger could not be read, written or reset.
 #[derive(Debug, Error)]
@@ -188,16 +213,20 @@ impl Ledger {
     }
 
     /// Merges `dose` into `channel`'s entry: each total becomes the larger of the two and a lockout stays, so a
-    /// merge never lowers the ledger; `now_utc` becomes the entry's time if anything changed. A dose that is not
-    /// valid (negative or non-finite) changes nothing.
+    /// merge never lowers the ledger; `now_utc` becomes the entry's time if anything changed. Totals saturate at
+    /// [`MAX_CEM43_MIN`] and [`MAX_TIME_AT_OR_ABOVE_43_S`] (so +∞ is written as the bound, never lost); a dose that
+    /// is NaN or negative changes nothing.
     pub fn merge(&mut self, channel: usize, dose: &DoseLedger, now_utc: &str) -> Change {
-        if dose.validate().is_err() {
+        let valid = |v: f64| v >= 0.0; // false for NaN
+        if !valid(dose.cem43_min) || !valid(dose.time_at_or_above_43_s) {
             return Change::None;
         }
         let old = self.dose(channel);
         let new = DoseLedger {
-            cem43_min: old.cem43_min.max(dose.cem43_min),
-            time_at_or_above_43_s: old.time_at_or_above_43_s.max(dose.time_at_or_above_43_s),
+            cem43_min: old.cem43_min.max(dose.cem43_min.min(MAX_CEM43_MIN)),
+            time_at_or_above_43_s: old
+                .time_at_or_above_43_s
+                .max(dose.time_at_or_above_43_s.min(MAX_TIME_AT_OR_ABOVE_43_S)),
             lockout: old.lockout || dose.lockout,
         };
         let change = if new.time_at_or_above_43_s > old.time_at_or_above_43_s
@@ -271,8 +300,7 @@ impl Ledger {
                 time_at_or_above_43_s: e.time_at_or_above_43_s,
                 lockout: e.lockout,
             };
-            dose.validate()
-                .map_err(|bad| corrupt(format!("channel {}: {bad}", e.channel)))?;
+            check_entry(e.channel, &dose).map_err(|bad| corrupt(format!("channel {}: {bad}", e.channel)))?;
             let entry = ChannelEntry {
                 dose,
                 updated_utc: e.updated_utc,
@@ -283,6 +311,48 @@ impl Ledger {
         }
         Ok(ledger)
     }
+
+    /// Refuses an entry for a channel the display does not have (`channel_count` channels): a ledger of another
+    /// display, or a damaged one; [`LedgerError::Corrupt`] naming the key `channel` and `path`.
+    pub fn check_channels(&self, channel_count: usize, path: &Path) -> Result<(), LedgerError> {
+        let last = Rule::Within {
+            min: 0.0,
+            max: channel_count.saturating_sub(1) as f64,
+        };
+        for &channel in self.channels.keys() {
+            last.check("channel", channel as f64)
+                .map_err(|bad| LedgerError::Corrupt {
+                    path: path.to_path_buf(),
+                    reason: format!(
+                        "{bad} (the display has {channel_count} channels: is this another display's state directory? \
+                         use that display's own --state-dir, or clear the channel with `thermode dose reset --channel \
+                         {channel} --reason TEXT`)"
+                    ),
+                })?;
+        }
+        Ok(())
+    }
+}
+
+/// One entry's values in their physical ranges: a channel any display can have, each total finite, not negative
+/// and within its bound; the error names the key.
+fn check_entry(channel: usize, dose: &DoseLedger) -> Result<(), BadValue> {
+    let channels = Rule::Within {
+        min: 0.0,
+        max: (MAX_CHANNELS - 1) as f64,
+    };
+    channels.check("channel", channel as f64)?;
+    let cem43 = Rule::Within {
+        min: 0.0,
+        max: MAX_CEM43_MIN,
+    };
+    cem43.check("cem43_min", dose.cem43_min)?;
+    let time = Rule::Within {
+        min: 0.0,
+        max: MAX_TIME_AT_OR_ABOVE_43_S,
+    };
+    time.check("time_at_or_above_43_s", dose.time_at_or_above_43_s)?;
+    Ok(())
 }
 
 /// A state directory, locked for changes while this value lives (see the module documentation).
@@ -313,7 +383,7 @@ impl StateDir {
             Ok(true) => {}
             Ok(false) => {
                 let mut text = String::new();
-                let _ = lock.read_to_string(&mut text);
+                let _ = AtMost::new(&lock, 64).read_to_string(&mut text);
                 let holder = text
                     .trim()
                     .parse::<u32>()
@@ -355,10 +425,24 @@ impl StateDir {
         read_ledger(&self.dir)
     }
 
-    /// Writes `ledger` atomically.
+    /// Writes `ledger` atomically. A ledger file that is not a regular file (a FIFO or a device put in its place,
+    /// which the atomic writer would write in place, and a FIFO without a reader would block for ever) is refused.
     pub fn store(&self, ledger: &Ledger) -> Result<(), LedgerError> {
         let path = self.ledger_path();
-        write_bytes_atomically(&path, ledger.to_json().as_bytes()).map_err(|source| LedgerError::Write { path, source })
+        let write = || match std::fs::metadata(&path) {
+            Ok(meta) if !meta.is_file() => Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "it is {}, not a regular file (a dose ledger is written only as a regular file)",
+                    file_kind(&meta.file_type())
+                ),
+            )),
+            _ => write_bytes_atomically(&path, ledger.to_json().as_bytes()),
+        };
+        write().map_err(|source| LedgerError::Write {
+            path: path.clone(),
+            source,
+        })
     }
 
     /// Appends one line to the reset log and syncs it.
@@ -447,10 +531,64 @@ impl StateDir {
 /// ledger); an empty ledger if the file does not exist.
 pub fn read_ledger(dir: &Path) -> Result<Ledger, LedgerError> {
     let path = dir.join(LEDGER_FILE);
-    match std::fs::read_to_string(&path) {
+    match read_regular_text(&path, MAX_LEDGER_BYTES) {
         Ok(text) => Ledger::from_json(&text, &path),
         Err(e) if e.kind() == io::ErrorKind::NotFound => Ok(Ledger::default()),
         Err(source) => Err(LedgerError::Unreadable { path, source }),
+    }
+}
+
+/// The text of `path`, at most `limit` bytes, only if it is a regular file: the type is checked before the open
+/// (following links) and again on the opened file, which is opened non-blocking so that a FIFO swapped in between
+/// cannot block; anything else is `InvalidInput` naming what it is.
+fn read_regular_text(path: &Path, limit: u64) -> io::Result<String> {
+    let regular = |meta: std::fs::Metadata| {
+        if meta.is_file() {
+            Ok(())
+        } else {
+            Err(io::Error::new(
+                io::ErrorKind::InvalidInput,
+                format!(
+                    "it is {}, not a regular file (a dose ledger is read only from a regular file)",
+                    file_kind(&meta.file_type())
+                ),
+            ))
+        }
+    };
+    regular(std::fs::metadata(path)?)?;
+    let mut options = OpenOptions::new();
+    options.read(true);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::OpenOptionsExt;
+        options.custom_flags(rustix::fs::OFlags::NONBLOCK.bits() as i32);
+    }
+    let file = options.open(path)?;
+    regular(file.metadata()?)?;
+    let mut text = String::new();
+    AtMost::new(file, limit).read_to_string(&mut text)?;
+    Ok(text)
+}
+
+/// What a file that is not a regular file is, in words.
+fn file_kind(kind: &std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if kind.is_fifo() {
+            return "a FIFO";
+        }
+        if kind.is_char_device() || kind.is_block_device() {
+            return "a device";
+        }
+        if kind.is_socket() {
+            return "a socket";
+        }
+    }
+    if kind.is_dir() {
+        "a directory"
+    } else {
+        "not a regular file"
     }
 }
 
@@ -516,8 +654,14 @@ pub struct DoseWriter {
 }
 
 impl DoseWriter {
-    /// Starts the writer of `state`, whose file holds `ledger`, following `shared`'s snapshots.
-    pub fn start(state: StateDir, ledger: Ledger, shared: Arc<Shared>) -> io::Result<DoseWriter> {
+    /// Starts the writer of `state`, whose file holds `ledger`, following `shared`'s snapshots; a failed write puts
+    /// `interlock`'s dose hold on, the next successful one lifts it.
+    pub fn start(
+        state: StateDir,
+        ledger: Ledger,
+        shared: Arc<Shared>,
+        interlock: Arc<Interlock>,
+    ) -> io::Result<DoseWriter> {
         let stop = Arc::new(AtomicBool::new(false));
         let status = Arc::new(WriterStatus {
             path: state.ledger_path(),
@@ -527,7 +671,7 @@ impl DoseWriter {
             let (stop, status) = (stop.clone(), status.clone());
             std::thread::Builder::new()
                 .name("thermode-dose".into())
-                .spawn(move || keep_written(&state, ledger, &shared, &stop, &status))?
+                .spawn(move || keep_written(&state, ledger, &shared, &stop, &status, &interlock))?
         };
         Ok(DoseWriter {
             stop,
@@ -573,6 +717,7 @@ fn keep_written(
     shared: &Shared,
     stop: &AtomicBool,
     status: &WriterStatus,
+    interlock: &Interlock,
 ) -> Result<(), LedgerError> {
     let mut last_write = Instant::now();
     loop {
@@ -596,12 +741,14 @@ fn keep_written(
                     written = next;
                     last_write = Instant::now();
                     status.writes.fetch_add(1, Ordering::Relaxed);
+                    interlock.lift_dose_hold();
                 }
                 Err(e) => {
                     status.errors.fetch_add(1, Ordering::Relaxed);
                     if let Ok(mut last) = status.last_error.lock() {
                         *last = Some(e.to_string());
                     }
+                    interlock.hold_dose(e.to_string());
                 }
             }
         }
@@ -638,21 +785,24 @@ mod tests {
     /// dose, before JSON numbers were parsed with `float_roundtrip`).
     #[test]
     fn a_written_ledger_reads_back_to_the_bit() {
-        let mut l = Ledger::default();
         let values: Vec<f64> = std::iter::once(1.002_317_692_453_837_7)
             .chain((0..2000u64).map(|i| f64::from_bits(0x3ff0_0000_0000_0000 + i * 1_037_353)))
             .collect();
-        for (channel, &value) in values.iter().enumerate() {
-            l.merge(channel, &dose(value, value * 60.0, false), "t");
-        }
-        let back = Ledger::from_json(&l.to_json(), Path::new("ledger.json")).unwrap_or_else(|e| panic!("{e}"));
-        for (channel, &value) in values.iter().enumerate() {
-            let d = back.dose(channel);
-            assert_eq!(
-                (d.cem43_min.to_bits(), d.time_at_or_above_43_s.to_bits()),
-                (value.to_bits(), (value * 60.0).to_bits()),
-                "channel {channel}: {value} read back as {d:?}"
-            );
+        // Ten channels per ledger (MAX_CHANNELS): a channel beyond is refused since issue 23.
+        for chunk in values.chunks(MAX_CHANNELS) {
+            let mut l = Ledger::default();
+            for (channel, &value) in chunk.iter().enumerate() {
+                l.merge(channel, &dose(value, value * 60.0, false), "t");
+            }
+            let back = Ledger::from_json(&l.to_json(), Path::new("ledger.json")).unwrap_or_else(|e| panic!("{e}"));
+            for (channel, &value) in chunk.iter().enumerate() {
+                let d = back.dose(channel);
+                assert_eq!(
+                    (d.cem43_min.to_bits(), d.time_at_or_above_43_s.to_bits()),
+                    (value.to_bits(), (value * 60.0).to_bits()),
+                    "channel {channel}: {value} read back as {d:?}"
+                );
+            }
         }
     }
 
@@ -696,6 +846,148 @@ mod tests {
                 other => panic!("{text:?} read as {other:?}"),
             }
         }
+    }
+
+    /// A ledger holding `entry` (one channel's JSON object, as the file writes it).
+    fn ledger_with(entry: &str) -> String {
+        format!("{{\"format\": \"thermode-dose-ledger\", \"version\": 1, \"channels\": [{entry}]}}")
+    }
+
+    /// Reads the ledger of `dir` on another thread: the answer, or a panic if it blocks for 10 s (a FIFO
+    /// blocked the start for ever).
+    fn read_within_10_s(dir: &Path) -> Result<Ledger, LedgerError> {
+        let (tx, rx) = std::sync::mpsc::channel();
+        let dir = dir.to_path_buf();
+        std::thread::spawn(move || {
+            let _ = tx.send(read_ledger(&dir));
+        });
+        rx.recv_timeout(Duration::from_secs(10))
+            .unwrap_or_else(|_| panic!("reading the ledger blocked for 10 s"))
+    }
+
+    fn unreadable_reason(result: Result<Ledger, LedgerError>) -> String {
+        match result {
+            Err(LedgerError::Unreadable { source, .. }) => source.to_string(),
+            other => panic!("expected an unreadable ledger, got {other:?}"),
+        }
+    }
+
+    fn corrupt_reason(result: Result<Ledger, LedgerError>) -> String {
+        match result {
+            Err(LedgerError::Corrupt { reason, .. }) => reason,
+            other => panic!("expected a corrupt ledger, got {other:?}"),
+        }
+    }
+
+    /// A link to `/dev/zero` grew `serve` to 3.3 GB in 6 s before; now it is refused before it is opened.
+    #[cfg(unix)]
+    #[test]
+    fn a_ledger_linked_to_dev_zero_is_refused_as_a_device() {
+        let tmp = tempfile::tempdir().unwrap();
+        std::os::unix::fs::symlink("/dev/zero", tmp.path().join(LEDGER_FILE)).unwrap();
+        let reason = unreadable_reason(read_within_10_s(tmp.path()));
+        assert!(reason.contains("a device, not a regular file"), "{reason}");
+    }
+
+    /// A FIFO blocked the start for ever (deaf to SIGTERM); now it is refused at once.
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_ledger_is_refused_without_blocking() {
+        let tmp = tempfile::tempdir().unwrap();
+        let path = tmp.path().join(LEDGER_FILE);
+        rustix::fs::mknodat(
+            rustix::fs::CWD,
+            &path,
+            rustix::fs::FileType::Fifo,
+            rustix::fs::Mode::from_raw_mode(0o600),
+            0,
+        )
+        .unwrap();
+        let reason = unreadable_reason(read_within_10_s(tmp.path()));
+        assert!(reason.contains("a FIFO, not a regular file"), "{reason}");
+        // Written: refused too (the atomic writer writes special files in place; a FIFO without a reader blocks).
+        let state = StateDir::open(tmp.path()).unwrap();
+        match state.store(&Ledger::default()) {
+            Err(LedgerError::Write { source, .. }) => assert!(source.to_string().contains("a FIFO"), "{source}"),
+            other => panic!("a FIFO written as the ledger: {other:?}"),
+        }
+        // Opened as the reader does (non-blocking), a FIFO does not block either: the second check refuses it.
+        let mut options = OpenOptions::new();
+        std::os::unix::fs::OpenOptionsExt::custom_flags(options.read(true), rustix::fs::OFlags::NONBLOCK.bits() as i32);
+        let file = options.open(&path).unwrap();
+        assert!(!file.metadata().unwrap().is_file());
+    }
+
+    /// A ledger larger than [`MAX_LEDGER_BYTES`] (a regular file full of spaces) is refused, not read whole.
+    #[test]
+    fn an_oversized_ledger_is_refused() {
+        let tmp = tempfile::tempdir().unwrap();
+        let mut text = " ".repeat(MAX_LEDGER_BYTES as usize);
+        text.push_str(&ledger_with(""));
+        std::fs::write(tmp.path().join(LEDGER_FILE), text).unwrap();
+        let reason = unreadable_reason(read_within_10_s(tmp.path()));
+        assert!(reason.contains("larger than 1 MiB"), "{reason}");
+    }
+
+    /// 1e308, NaN, ∞-like and channel 99 were accepted; each is now refused naming its key.
+    #[test]
+    fn out_of_range_ledger_values_are_refused_naming_the_key() {
+        let entry = |channel: &str, cem43: &str, time: &str| {
+            ledger_with(&format!(
+                "{{\"channel\": {channel}, \"cem43_min\": {cem43}, \"time_at_or_above_43_s\": {time}, \
+                 \"lockout\": false, \"updated_utc\": \"2025-01-31T12:00:00Z\"}}"
+            ))
+        };
+        let path = Path::new("dose-ledger.json");
+        let cases = [
+            (entry("0", "1e308", "0"), "cem43_min"),
+            (entry("0", "1000000001", "0"), "cem43_min"),
+            (entry("0", "0.5", "1e300"), "time_at_or_above_43_s"),
+            (entry("0", "0.5", "-0.1"), "time_at_or_above_43_s"),
+            (entry("99", "0.5", "0"), "`channel` = 99"),
+            (entry("10", "0.5", "0"), "`channel` = 10"),
+        ];
+        for (text, key) in cases {
+            let reason = corrupt_reason(Ledger::from_json(&text, path));
+            assert!(reason.contains(key), "{text}: {reason} does not name {key}");
+        }
+        for nan in ["NaN", "\"NaN\"", "1e999"] {
+            let text = entry("0", nan, "0");
+            let reason = corrupt_reason(Ledger::from_json(&text, path));
+            assert!(!reason.is_empty(), "{text}");
+        }
+        let good = entry("9", "1000000000", "0");
+        assert!(
+            Ledger::from_json(&good, path).is_ok(),
+            "the bounds themselves are accepted"
+        );
+    }
+
+    #[test]
+    fn a_channel_the_display_does_not_have_is_refused_at_the_start() {
+        let mut l = Ledger::default();
+        l.merge(4, &dose(0.1, 0.0, false), "t");
+        let path = Path::new("dose-ledger.json");
+        assert!(l.check_channels(5, path).is_ok());
+        match l.check_channels(2, path) {
+            Err(LedgerError::Corrupt { reason, .. }) => {
+                assert!(
+                    reason.contains("`channel` = 4") && reason.contains("2 channels"),
+                    "{reason}"
+                );
+            }
+            other => panic!("channel 4 on a 2-channel display: {other:?}"),
+        }
+    }
+
+    /// A dose beyond the bounds (an infinite one included) is written as the bound, never dropped, and reads back.
+    #[test]
+    fn a_merge_saturates_at_the_bounds_and_reads_back() {
+        let mut l = Ledger::default();
+        assert_eq!(l.merge(0, &dose(f64::INFINITY, 1e30, true), "t"), Change::Significant);
+        assert_eq!(l.dose(0), dose(MAX_CEM43_MIN, MAX_TIME_AT_OR_ABOVE_43_S, true));
+        let back = Ledger::from_json(&l.to_json(), Path::new("x")).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(back, l);
     }
 
     #[test]

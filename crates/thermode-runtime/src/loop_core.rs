@@ -23,7 +23,7 @@ use crate::control_loop::{LoopConfig, LoopHandle};
 use crate::engine::{with_restored_doses, EngineFactory};
 use crate::error::RuntimeError;
 use crate::interlock::Interlock;
-use crate::ledger::{DoseWriter, Ledger, StateDir};
+use crate::ledger::{DoseWriter, Ledger, StateDir, WRITE_PERIOD_S};
 use crate::recorder::{RecordErrorPolicy, RecordState, RecordStatus, Recorder, RESUME_FAILED};
 use crate::snapshot::{Shared, Snapshot, TickRecord};
 
@@ -79,6 +79,8 @@ struct Notices {
     recording_resumptions: u64,
     link_failures: u64,
     link_reconnects: u64,
+    /// The dose hold (an unwritable ledger) was told as on.
+    dose_hold_told: bool,
 }
 
 /// What stopping the core did.
@@ -192,6 +194,20 @@ impl LoopCore {
         if let Some(r) = &self.recording {
             recording_notices(r, &self.interlock, &mut seen, &mut lines);
         }
+        match (self.interlock.dose_hold(), seen.dose_hold_told) {
+            (Some(reason), false) => {
+                seen.dose_hold_told = true;
+                lines.push(format!(
+                    "thermode: the dose ledger cannot be written ({reason}): every stimulus stopped; new ones are \
+                     refused until a write succeeds again (retried every {WRITE_PERIOD_S} s)"
+                ));
+            }
+            (None, true) => {
+                seen.dose_hold_told = false;
+                lines.push("thermode: the dose ledger is written again: stimuli are accepted".to_string());
+            }
+            _ => {}
+        }
         if let Some(link) = self.control.as_ref().and_then(LoopHandle::link_health) {
             let (failures, reconnects) = (link.failures(), link.reconnects());
             if failures > seen.link_failures {
@@ -264,6 +280,9 @@ impl PreparedCore {
         mut taps: Vec<SyncSender<TickRecord>>,
     ) -> Result<LoopCore, RuntimeError> {
         taps.extend(self.feed);
+        if let Some((state, saved)) = &self.ledger {
+            saved.check_channels(device.channel_count(), &state.ledger_path())?;
+        }
         let engines = match &self.ledger {
             Some((_, saved)) => {
                 let saved = saved.clone();
@@ -281,14 +300,14 @@ impl PreparedCore {
         )?;
         let ledger_path = self.ledger.as_ref().map(|(state, _)| state.ledger_path());
         let dose_writer = match self.ledger {
-            Some((state, saved)) => {
-                Some(
-                    DoseWriter::start(state, saved, control.shared()).map_err(|source| RuntimeError::Io {
+            Some((state, saved)) => Some(
+                DoseWriter::start(state, saved, control.shared(), self.interlock.clone()).map_err(|source| {
+                    RuntimeError::Io {
                         context: "cannot start the dose ledger thread".into(),
                         source,
-                    })?,
-                )
-            }
+                    }
+                })?,
+            ),
             None => None,
         };
         Ok(LoopCore {

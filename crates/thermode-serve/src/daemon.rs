@@ -68,7 +68,7 @@ pub struct ServerConfig {
     pub max_subscribe_hz: f64,
     /// Object temperature of a touch that gives none \[°C\]. Default 23. Within the pipeline's object range
     /// (`thermode_pipeline::stimulus::OBJECT_TEMPERATURE`). The stimulus limits themselves (display range, rate limit) are not set here:
-    /// they are those of the envelopes the channel engines run ([`crate::ChannelEngine::limits`]).
+    /// they are those of the envelopes the channel engines run ([`thermode_runtime::ChannelEngine::limits`]).
     pub default_object_c: f64,
 }
 
@@ -224,6 +224,7 @@ impl Daemon {
                 device: config.device_label.clone(),
                 channel_names: config.channel_names.clone(),
                 osc_port: osc_addr.map(|a| a.port()),
+                http_port: http_addr.port(),
                 recording: core.recording_path().map(|p| p.display().to_string()),
             },
             osc: Arc::new(OscCounters::default()),

@@ -5,7 +5,9 @@
 //! - `/thermode/channel/<i>/touch s [f]` — touch the named material, optionally at an object temperature \[°C\];
 //! - `/thermode/channel/<i>/setpoint f f` — direct mode: temperature \[°C\] and rate \[°C/s\];
 //! - `/thermode/channel/<i>/release` — release (arguments ignored, so a button's `1.0` works);
-//! - `/thermode/stop` (or `/thermode/stop_all`) — stop all;
+//! - `/thermode/stop` (or `/thermode/stop_all`) — stop all, on a path no budget can starve: it is queued on the loop's
+//!   urgent lane before the rate limit is consulted, so a flood of other datagrams (a thousand a second, a
+//!   subscription pointed at the daemon itself) cannot drop it;
 //! - `/thermode/all/<action>` or `/thermode/channel/*/<action>` — `touch`, `setpoint` or `release` on every channel
 //!   (validated for every channel before any is queued);
 //! - `/thermode/subscribe f [i]` — telemetry at that rate \[Hz\] and fault events, to the sender or to the given
@@ -13,6 +15,12 @@
 //!   [`MAX_SUBSCRIBERS`], from loopback only. Sent by a task of the network runtime from the published snapshot,
 //!   never by the loop: `/thermode/channel/<i>/telemetry f f f f f i` (target skin, skin, sensor, plate estimate
 //!   \[°C\], current \[A\], fault code) and `/thermode/channel/<i>/fault i s` (code and description; 0 `cleared`).
+//!   Refused (answered `/thermode/error s s` to the sender, counted as `subscriptions_refused`): the daemon's own
+//!   ports (its OSC and HTTP ports, on any loopback address: a daemon flooding itself spent the OSC budget and
+//!   dropped commands), and a port another address already subscribed (unless the request comes from that very
+//!   port). Each subscriber gets at most `NetLimits::osc_subscriber_bytes_per_s`: a faster subscription is lowered
+//!   to fit (the acknowledgement `/thermode/subscribed f f` says the rate granted and the time to live), and what
+//!   would exceed the budget is not sent (counted as `throttled`).
 //!
 //! Same validation as the WebSocket API: a touch or set-point becomes the same [`Command`] through the same
 //! [`protocol::stimulus_command`], so both refuse the same stimuli with the same message. OSC commands have no
@@ -255,6 +263,10 @@ const FAULT_POLL_S: f64 = 0.05;
 struct Subscriber {
     /// Where its datagrams go.
     to: SocketAddr,
+    /// Who subscribed it (only it, or the port itself, may renew, change or end the subscription).
+    owner: SocketAddr,
+    /// Its byte budget (one token a byte).
+    budget: TokenBucket,
     period: Duration,
     next_due: Instant,
     expires: Instant,
@@ -283,15 +295,31 @@ fn subscribe(
         .first()
         .and_then(OscArg::as_f64)
         .ok_or_else(|| ApiError::new(ErrorCode::BadValue, "argument 0 (rate in Hz) must be a number"))?;
-    let rate_hz = protocol::subscription_rate(rate_hz, &app.limits)?;
+    let asked_hz = protocol::subscription_rate(rate_hz, &app.limits)?;
     let to = reply_address(message.args.get(1), from)?;
+    refuse_own_port(to, &app.info)?;
+    let bytes_per_s = app.net.osc_subscriber_bytes_per_s;
+    let set_bytes = telemetry_set_bytes(app.limits.channel_count);
+    let rate_hz = asked_hz.min(bytes_per_s / set_bytes as f64);
     let now = Instant::now();
     let ttl_s = app.net.osc_subscription_ttl_s;
     let expires = now + Duration::from_secs_f64(ttl_s);
     let period = Duration::from_secs_f64(1.0 / rate_hz);
     let mut list = subscribers.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    if let Some(known) = list.iter_mut().find(|s| s.to == to) {
+    let same_port = list.iter().position(|s| s.to.port() == to.port());
+    if let Some(i) = same_port.filter(|&i| list[i].to != to || !may_change(&list[i], from)) {
+        return Err(ApiError::new(
+            ErrorCode::Busy,
+            format!(
+                "port {} is already subscribed by another address ({}); it renews or ends its own subscription",
+                to.port(),
+                list[i].owner
+            ),
+        ));
+    }
+    if let Some(known) = same_port.map(|i| &mut list[i]) {
         known.expires = expires;
+        known.owner = from;
         if known.period != period {
             known.period = period;
             known.next_due = now;
@@ -304,6 +332,8 @@ fn subscribe(
     } else {
         list.push(Subscriber {
             to,
+            owner: from,
+            budget: TokenBucket::new(bytes_per_s, byte_burst(bytes_per_s, set_bytes)),
             period,
             next_due: now,
             expires,
@@ -318,6 +348,40 @@ fn subscribe(
     Ok((to, ack))
 }
 
+/// Whether a request from `from` may renew, change or end `sub`: its owner, or the subscribed port itself.
+fn may_change(sub: &Subscriber, from: SocketAddr) -> bool {
+    sub.owner == from || sub.to == from
+}
+
+/// Refuses the daemon's own OSC and HTTP ports on any loopback address: a subscription there made the daemon flood
+/// itself.
+fn refuse_own_port(to: SocketAddr, info: &crate::api::Info) -> Result<(), ApiError> {
+    let own = [info.osc_port, Some(info.http_port)];
+    if to.ip().is_loopback() && own.contains(&Some(to.port())) {
+        return Err(ApiError::new(
+            ErrorCode::BadValue,
+            format!(
+                "port {} is the daemon's own (OSC or HTTP): telemetry cannot be sent to the daemon itself",
+                to.port()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Bytes of one round of telemetry (one message per channel).
+fn telemetry_set_bytes(channel_count: usize) -> usize {
+    (0..channel_count)
+        .map(|channel| telemetry_packet(channel, [0.0; 5], 0).len())
+        .sum()
+}
+
+/// A subscriber's burst \[bytes\]: a quarter second of its budget, or one round of telemetry and a fault event of
+/// every channel, whichever is more (so that a round always fits a full budget).
+fn byte_burst(bytes_per_s: f64, set_bytes: usize) -> f64 {
+    (bytes_per_s / 4.0).max(2.0 * set_bytes as f64 + 256.0)
+}
+
 /// The sender's address, or the port `port` names on the sender's host.
 fn reply_address(port: Option<&OscArg>, from: SocketAddr) -> Result<SocketAddr, ApiError> {
     let Some(port) = port else { return Ok(from) };
@@ -330,6 +394,15 @@ fn reply_address(port: Option<&OscArg>, from: SocketAddr) -> Result<SocketAddr, 
 fn unsubscribe(message: &OscMessage, from: SocketAddr, app: &App, subscribers: &Subscribers) -> Result<(), ApiError> {
     let to = reply_address(message.args.first(), from)?;
     let mut list = subscribers.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    if list.iter().any(|s| s.to == to && !may_change(s, from)) {
+        return Err(ApiError::new(
+            ErrorCode::Busy,
+            format!(
+                "port {} was subscribed by another address; only it can unsubscribe",
+                to.port()
+            ),
+        ));
+    }
     list.retain(|s| s.to != to);
     app.osc.subscribers.store(list.len(), Ordering::Relaxed);
     Ok(())
@@ -337,10 +410,12 @@ fn unsubscribe(message: &OscMessage, from: SocketAddr, app: &App, subscribers: &
 
 /// Sends telemetry and fault events to the subscribers, from the network runtime (the loop only publishes its
 /// snapshot): at each subscriber's rate one `/thermode/channel/<i>/telemetry` per channel, and within
-/// [`FAULT_POLL_S`] of a fault latching or clearing a `/thermode/channel/<i>/fault`. Datagrams that cannot be sent at
-/// once are dropped, never waited for.
+/// [`FAULT_POLL_S`] of a fault latching or clearing a `/thermode/channel/<i>/fault`, each within the subscriber's
+/// byte budget (a fault event that does not fit waits for the next look; a round of telemetry that does not fit is
+/// skipped whole and counted as throttled). Datagrams that cannot be sent at once are dropped, never waited for.
 async fn send_to_subscribers(socket: Arc<UdpSocket>, app: Arc<App>, subscribers: Subscribers) {
     let poll = Duration::from_secs_f64(FAULT_POLL_S);
+    let origin = Instant::now();
     loop {
         let wake = {
             let now = Instant::now();
@@ -358,21 +433,29 @@ async fn send_to_subscribers(socket: Arc<UdpSocket>, app: Arc<App>, subscribers:
             }
             let snapshot = app.shared.snapshot();
             let now = Instant::now();
+            let now_s = now.duration_since(origin).as_secs_f64();
             for sub in list.iter_mut() {
                 for (status, sent) in snapshot.channels.iter().zip(sub.faults_sent.iter_mut()) {
                     let fault = status.telemetry.fault;
                     let code = fault.map_or(0, |f| f.code());
                     if code != *sent {
-                        *sent = code;
                         let description = fault.map_or("cleared", |f| f.description());
                         let address = format!("/thermode/channel/{}/fault", status.channel);
                         let args = [OscArg::Int(i32::from(code)), OscArg::Str(description.into())];
-                        out.push((sub.to, encode(&address, &args)));
+                        let packet = encode(&address, &args);
+                        if sub.budget.take_many(packet.len() as f64, now_s) {
+                            *sent = code;
+                            out.push((sub.to, packet));
+                        }
                     }
                 }
                 if now >= sub.next_due {
-                    for status in &snapshot.channels {
-                        out.push((sub.to, telemetry_message(status)));
+                    let round: Vec<Vec<u8>> = snapshot.channels.iter().map(telemetry_message).collect();
+                    let bytes: usize = round.iter().map(Vec::len).sum();
+                    if sub.budget.take_many(bytes as f64, now_s) {
+                        out.extend(round.into_iter().map(|packet| (sub.to, packet)));
+                    } else {
+                        app.osc.throttled.fetch_add(round.len() as u64, Ordering::Relaxed);
                     }
                     sub.next_due += sub.period;
                     if sub.next_due < now {
@@ -393,12 +476,15 @@ async fn send_to_subscribers(socket: Arc<UdpSocket>, app: Arc<App>, subscribers:
 /// (floats, NaN where the JSON telemetry has null) and the latched fault code (0: none).
 fn telemetry_message(status: &ChannelStatus) -> Vec<u8> {
     let t = &status.telemetry;
-    let address = format!("/thermode/channel/{}/telemetry", status.channel);
-    let mut args: Vec<OscArg> = [t.target_skin_c, t.skin_c, t.sensor_c, t.plate_estimate_c, t.current_a]
-        .iter()
-        .map(|&v| OscArg::Float(v as f32))
-        .collect();
-    args.push(OscArg::Int(i32::from(t.fault.map_or(0, |f| f.code()))));
+    let values = [t.target_skin_c, t.skin_c, t.sensor_c, t.plate_estimate_c, t.current_a];
+    telemetry_packet(status.channel, values, i32::from(t.fault.map_or(0, |f| f.code())))
+}
+
+/// `/thermode/channel/<channel>/telemetry` with five floats and a fault code.
+fn telemetry_packet(channel: usize, values: [f64; 5], fault: i32) -> Vec<u8> {
+    let address = format!("/thermode/channel/{channel}/telemetry");
+    let mut args: Vec<OscArg> = values.iter().map(|&v| OscArg::Float(v as f32)).collect();
+    args.push(OscArg::Int(fault));
     encode(&address, &args)
 }
 
@@ -424,6 +510,10 @@ pub async fn serve(socket: UdpSocket, app: Arc<App>) {
             }
         };
         for message in &messages {
+            if is_stop(message) {
+                queue(Command::StopAll, message, &app);
+                continue;
+            }
             if !bucket.take(origin.elapsed().as_secs_f64()) {
                 counters.rate_limited.fetch_add(1, Ordering::Relaxed);
                 continue;
@@ -437,6 +527,7 @@ pub async fn serve(socket: UdpSocket, app: Arc<App>) {
                         }
                         Err(e) => {
                             let args = [OscArg::Str(e.code.as_str().into()), OscArg::Str(e.message.clone())];
+                            counters.subscriptions_refused.fetch_add(1, Ordering::Relaxed);
                             count(counters, &message.address, Err(e));
                             (from, encode("/thermode/error", &args))
                         }
@@ -464,22 +555,31 @@ pub async fn serve(socket: UdpSocket, app: Arc<App>) {
                 }
             };
             for command in commands {
-                match app.commands.request(command).map_err(crate::api::ws::loop_error) {
-                    Ok(answer) => {
-                        // Counted when the loop answers (within the reply wait; a withdrawn command is refused as
-                        // busy).
-                        let (counters, address, wait) = (app.osc.clone(), message.address.clone(), app.reply_wait);
-                        tokio::spawn(async move {
-                            let reply = crate::api::answer_within(answer, wait)
-                                .await
-                                .map_err(crate::api::ws::loop_error);
-                            count(&counters, &address, reply.map(|_| ()));
-                        });
-                    }
-                    Err(e) => count(counters, &message.address, Err(e)),
-                }
+                queue(command, message, &app);
             }
         }
+    }
+}
+
+/// `/thermode/stop` or `/thermode/stop_all`: taken before the rate limit.
+fn is_stop(message: &OscMessage) -> bool {
+    matches!(message.address.as_str(), "/thermode/stop" | "/thermode/stop_all")
+}
+
+/// Queues `command` (a stop-all on the loop's urgent lane) and counts the loop's answer when it comes (within the
+/// reply wait; a withdrawn command is refused as busy); a full queue is counted as refused at once.
+fn queue(command: Command, message: &OscMessage, app: &Arc<App>) {
+    match app.commands.request(command).map_err(crate::api::ws::loop_error) {
+        Ok(answer) => {
+            let (counters, address, wait) = (app.osc.clone(), message.address.clone(), app.reply_wait);
+            tokio::spawn(async move {
+                let reply = crate::api::answer_within(answer, wait)
+                    .await
+                    .map_err(crate::api::ws::loop_error);
+                count(&counters, &address, reply.map(|_| ()));
+            });
+        }
+        Err(e) => count(&app.osc, &message.address, Err(e)),
     }
 }
 

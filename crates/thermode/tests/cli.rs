@@ -656,6 +656,82 @@ fn dose_show_and_reset_and_a_corrupt_ledger_is_refused_never_reset() {
     );
 }
 
+/// `thermode args`, killed and failed if it runs for 60 s (a FIFO ledger blocked `serve` for ever).
+fn thermode_within_60_s(args: &[&str]) -> Output {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("run thermode");
+    let start = std::time::Instant::now();
+    while child.try_wait().expect("wait").is_none() {
+        if start.elapsed().as_secs_f64() > 60.0 {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("thermode {args:?} still runs after 60 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    child.wait_with_output().expect("output")
+}
+
+/// Hostile ledgers: a link to `/dev/zero` (grew `serve` to 3.3 GB in 6 s), a FIFO (blocked it for ever), a dose
+/// of 1e308, an entry for channel 99, NaN. `serve` and `dose show` refuse each at once with exit 2 and a message
+/// naming what is wrong.
+#[cfg(unix)]
+#[test]
+fn hostile_ledgers_are_refused_at_once_naming_what_is_wrong() {
+    let entry = |channel: &str, cem43: &str| {
+        format!(
+            "{{\"format\": \"thermode-dose-ledger\", \"version\": 1, \"channels\": [{{\"channel\": {channel}, \
+             \"cem43_min\": {cem43}, \"time_at_or_above_43_s\": 0, \"lockout\": false, \
+             \"updated_utc\": \"2025-01-31T12:00:00Z\"}}]}}"
+        )
+    };
+    let cases: [(&str, Option<String>, &str); 5] = [
+        ("/dev/zero link", None, "a device, not a regular file"),
+        ("FIFO", None, "a FIFO, not a regular file"),
+        ("1e308", Some(entry("0", "1e308")), "`cem43_min` = 1e308"),
+        ("channel 99", Some(entry("99", "0.5")), "`channel` = 99"),
+        ("NaN", Some(entry("0", "NaN")), "corrupt"),
+    ];
+    for (what, text, message) in cases {
+        let tmp = tempfile::tempdir().expect("temp dir");
+        let dir = tmp.path().to_str().expect("utf-8 path");
+        let path = tmp.path().join("dose-ledger.json");
+        match (&text, what) {
+            (Some(text), _) => std::fs::write(&path, text).expect("write"),
+            (None, "FIFO") => {
+                let made = Command::new("mkfifo").arg(&path).status().expect("mkfifo");
+                assert!(made.success(), "mkfifo");
+            }
+            (None, _) => std::os::unix::fs::symlink("/dev/zero", &path).expect("symlink"),
+        }
+        let serve = [
+            "serve",
+            "--state-dir",
+            dir,
+            "--port",
+            "0",
+            "--no-osc",
+            "--channels",
+            "1",
+            "--duration",
+            "0",
+        ];
+        for args in [&serve[..], &["dose", "show", "--state-dir", dir][..]] {
+            let out = thermode_within_60_s(args);
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert_eq!(out.status.code(), Some(2), "{what}: thermode {args:?}: {stderr}");
+            assert!(
+                stderr.contains(message),
+                "{what}: thermode {args:?}: stderr lacks `{message}`: {stderr}"
+            );
+        }
+    }
+}
+
 /// An OSC message `/thermode/channel/<channel>/setpoint f f`.
 fn osc_setpoint(channel: usize, temp_c: f32, rate_c_per_s: f32) -> Vec<u8> {
     fn padded(text: &str) -> Vec<u8> {

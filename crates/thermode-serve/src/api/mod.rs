@@ -81,6 +81,11 @@ pub struct NetLimits {
     /// An OSC telemetry subscription not renewed for this long ends \[s\]. Default 10
     /// ([`SUBSCRIPTION_TTL_S`]).
     pub osc_subscription_ttl_s: f64,
+    /// Most OSC bytes sent to one subscriber per second (telemetry and fault events; the datagrams' payload)
+    /// \[B/s\]. Default 16384: five channels at 50 Hz (64 bytes a channel's telemetry); a faster
+    /// subscription is lowered to fit (the acknowledgement says the rate granted), and whatever would exceed the
+    /// budget is not sent (counted as `throttled`). At least 1024.
+    pub osc_subscriber_bytes_per_s: f64,
 }
 
 impl Default for NetLimits {
@@ -100,6 +105,7 @@ impl Default for NetLimits {
             osc_messages_per_s: 200.0,
             osc_burst: 400.0,
             osc_subscription_ttl_s: SUBSCRIPTION_TTL_S,
+            osc_subscriber_bytes_per_s: 16_384.0,
         }
     }
 }
@@ -136,6 +142,7 @@ impl NetLimits {
             at_least_one.check(name, value)?;
         }
         Rule::AtLeast { min: 1024.0 }.check("hard_message_bytes", self.hard_message_bytes as f64)?;
+        Rule::AtLeast { min: 1024.0 }.check("osc_subscriber_bytes_per_s", self.osc_subscriber_bytes_per_s)?;
         let above_websockets = Rule::AtLeast {
             min: self.max_connections as f64 + 1.0,
         };
@@ -168,6 +175,11 @@ pub struct OscCounters {
     pub subscribers: AtomicUsize,
     /// OSC datagrams sent to subscribers (telemetry, fault events, acknowledgements).
     pub sent: AtomicU64,
+    /// Subscriptions refused (a daemon's own port, a port another address subscribed, the cap, a bad rate…).
+    pub subscriptions_refused: AtomicU64,
+    /// Datagrams not sent to a subscriber because its byte budget
+    /// ([`NetLimits::osc_subscriber_bytes_per_s`]) was spent.
+    pub throttled: AtomicU64,
     /// The last refusal, for the status page.
     pub last_error: Mutex<Option<String>>,
 }
@@ -181,6 +193,8 @@ pub struct Info {
     pub channel_names: Vec<String>,
     /// The OSC port, when OSC listens.
     pub osc_port: Option<u16>,
+    /// The HTTP port (an OSC subscription to it is refused, as to the OSC port).
+    pub http_port: u16,
     /// The session recording, if any.
     pub recording: Option<String>,
 }
@@ -389,6 +403,7 @@ pub fn status(app: &App) -> Status {
             writes: count(&w.writes),
             errors: count(&w.errors),
             last_error: w.last_error.lock().map(|e| e.clone()).unwrap_or(None),
+            stimuli_refused: app.interlock.dose_held(),
         }),
         interlock: InterlockStatus {
             engaged: app.interlock.engaged(),
@@ -480,6 +495,9 @@ fn osc_status(app: &App) -> OscStatus {
         rate_limited: count(&osc.rate_limited),
         subscribers: osc.subscribers.load(Ordering::Relaxed),
         sent: count(&osc.sent),
+        subscriptions_refused: count(&osc.subscriptions_refused),
+        throttled: count(&osc.throttled),
+        subscriber_bytes_per_s: app.net.osc_subscriber_bytes_per_s,
         last_error: osc.last_error.lock().map(|e| e.clone()).unwrap_or(None),
     }
 }

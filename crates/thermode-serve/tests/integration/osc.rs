@@ -1,6 +1,7 @@
 //! OSC both ways on a running daemon (real clock): a subscriber receives telemetry at about its rate and fault events
 //! (latched and cleared), stops receiving after unsubscribing or when its subscription expires; the subscriber cap;
-//! the all-channels addresses.
+//! the all-channels addresses; subscriptions to the daemon's own ports or to a port another address holds are
+//! refused; the bytes sent to a subscriber stay within its budget.
 
 use crate::common;
 
@@ -212,5 +213,130 @@ fn the_all_channels_addresses_apply_to_every_channel() {
         common::wait_until(5.0, direct),
         "{}",
         get_json(addr, "/api/status")["channels"]
+    );
+}
+
+/// The self-subscription: `/thermode/subscribe 100 <the daemon's OSC port>` made the daemon flood its own port, spend
+/// the OSC budget and drop commands. Refused now for the OSC and the HTTP port, on any loopback address, answered to
+/// the sender and counted; so is a port another address already subscribed (the port itself may still renew).
+#[test]
+fn subscriptions_to_the_daemons_own_ports_or_to_a_port_another_address_holds_are_refused() {
+    let daemon = start(test_config(), SpyDevice::new(2), pipelines());
+    let osc = daemon.osc_addr().expect("OSC listens on loopback");
+    let http_port = daemon.http_addr().port();
+    let sender = client();
+    for port in [osc.port(), http_port] {
+        subscribe(&sender, osc, &[OscArg::Float(100.0), OscArg::Int(i32::from(port))]);
+        let refused = receive_until(&sender, 5.0, |m| m.address == "/thermode/error").expect("refused");
+        assert_eq!(
+            refused.args[0],
+            OscArg::Str("bad_value".into()),
+            "port {port}: {refused:?}"
+        );
+        assert!(
+            matches!(&refused.args[1], OscArg::Str(m) if m.contains("the daemon's own")),
+            "port {port}: {refused:?}"
+        );
+    }
+    // From another loopback address (127.0.0.2): the reply goes to the same host's port, so it is refused too.
+    if let Ok(other) = UdpSocket::bind("127.0.0.2:0") {
+        other
+            .set_read_timeout(Some(Duration::from_millis(100)))
+            .expect("timeout");
+        subscribe(&other, osc, &[OscArg::Float(100.0), OscArg::Int(i32::from(osc.port()))]);
+        let refused = receive_until(&other, 5.0, |m| m.address == "/thermode/error").expect("refused");
+        assert_eq!(refused.args[0], OscArg::Str("bad_value".into()), "{refused:?}");
+    }
+    let status = get_json(daemon.http_addr(), "/api/status");
+    let osc_status = &status["osc"];
+    assert_eq!(osc_status["subscribers"], 0, "{osc_status}");
+    assert!(osc_status["subscriptions_refused"].as_u64() >= Some(2), "{osc_status}");
+    assert!(
+        osc_status["last_error"].as_str().is_some_and(|e| e.contains("own")),
+        "{osc_status}"
+    );
+    assert_eq!(osc_status["rate_limited"], 0, "no flood: {osc_status}");
+
+    // A listener's port subscribed by one client: another client cannot take it over, the listener itself can.
+    let (owner, intruder, listener) = (client(), client(), client());
+    let port = i32::from(listener.local_addr().expect("addr").port());
+    subscribe(&owner, osc, &[OscArg::Float(1.0), OscArg::Int(port)]);
+    assert!(receive_until(&listener, 5.0, |m| m.address == "/thermode/subscribed").is_some());
+    subscribe(&intruder, osc, &[OscArg::Float(100.0), OscArg::Int(port)]);
+    let refused = receive_until(&intruder, 5.0, |m| m.address == "/thermode/error").expect("refused");
+    assert_eq!(refused.args[0], OscArg::Str("busy".into()), "{refused:?}");
+    assert!(
+        matches!(&refused.args[1], OscArg::Str(m) if m.contains("already subscribed by another address")),
+        "{refused:?}"
+    );
+    intruder
+        .send_to(&encode("/thermode/unsubscribe", &[OscArg::Int(port)]), osc)
+        .expect("send");
+    subscribe(&listener, osc, &[OscArg::Float(2.0)]);
+    let ack = receive_until(&listener, 5.0, |m| m.address == "/thermode/subscribed").expect("the port renews");
+    assert_eq!(ack.args[0], OscArg::Float(2.0), "{ack:?}");
+    assert_eq!(get_json(daemon.http_addr(), "/api/status")["osc"]["subscribers"], 1);
+}
+
+/// One 32-byte datagram yielded 20,000 times its size in telemetry. Now a subscriber gets at most
+/// `osc_subscriber_bytes_per_s`: asked for 100 Hz of five channels (320 bytes a round, 32 kB/s) under a 4096 B/s
+/// budget, the acknowledgement grants 12.8 Hz and the bytes received over 3 s stay within the budget plus its
+/// quarter-second burst, while telemetry still flows.
+#[test]
+fn the_bytes_sent_to_a_subscriber_stay_within_its_budget() {
+    let mut config = test_config();
+    config.server.net.osc_subscriber_bytes_per_s = 4096.0;
+    let daemon = start(config, SpyDevice::new(5), pipelines());
+    let osc = daemon.osc_addr().expect("OSC listens on loopback");
+    let socket = client();
+    subscribe(&socket, osc, &[OscArg::Float(100.0)]);
+    let ack = receive_until(&socket, 5.0, |m| m.address == "/thermode/subscribed").expect("acknowledged");
+    let granted_hz = ack.args[0].as_f64().unwrap_or(f64::NAN);
+    assert!((granted_hz - 12.8).abs() < 0.01, "granted {granted_hz} Hz: {ack:?}");
+    receive_until(&socket, 5.0, |m| m.address == "/thermode/channel/4/telemetry").expect("telemetry");
+    let window_s = 3.0;
+    let end = Instant::now() + Duration::from_secs_f64(window_s);
+    let (mut bytes, mut datagrams) = (0usize, 0usize);
+    let mut buffer = [0u8; 2048];
+    while Instant::now() < end {
+        if let Ok((len, _)) = socket.recv_from(&mut buffer) {
+            bytes += len;
+            datagrams += 1;
+        }
+    }
+    let cap = 4096.0 * window_s + 4096.0 / 4.0;
+    println!("OSC byte cap: {bytes} bytes in {datagrams} datagrams over {window_s} s (cap 4096 B/s, bound {cap})");
+    assert!((bytes as f64) <= cap, "{bytes} bytes in {window_s} s, more than {cap}");
+    assert!(
+        (bytes as f64) >= 0.5 * 4096.0 * window_s,
+        "{bytes} bytes in {window_s} s: telemetry should still flow near the budget"
+    );
+}
+
+/// The subscriber byte budget is a checked setting: below 1024 B/s (or not a number) is refused, naming the key; the
+/// default is reported in `/api/status`.
+#[test]
+fn the_subscriber_byte_budget_is_checked_and_reported() {
+    use thermode_serve::api::NetLimits;
+    for bad in [100.0, f64::NAN, -1.0] {
+        let limits = NetLimits {
+            osc_subscriber_bytes_per_s: bad,
+            ..NetLimits::default()
+        };
+        let message = limits.validate().map_err(|e| e.to_string());
+        assert!(
+            message
+                .as_ref()
+                .is_err_and(|m| m.contains("osc_subscriber_bytes_per_s")),
+            "{bad}: {message:?}"
+        );
+    }
+    let daemon = start(test_config(), SpyDevice::new(1), pipelines());
+    let status = get_json(daemon.http_addr(), "/api/status");
+    assert_eq!(
+        status["osc"]["subscriber_bytes_per_s"].as_f64(),
+        Some(NetLimits::default().osc_subscriber_bytes_per_s),
+        "{}",
+        status["osc"]
     );
 }

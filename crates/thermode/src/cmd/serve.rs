@@ -3,7 +3,8 @@
 //! and watched on the live dashboard. The display set-up it shares with other commands is [`crate::display`].
 //!
 //! SIGINT (Ctrl-C) and SIGTERM stop it cleanly ([`crate::signals`]): every drive to 0 A at once (`AllOff` on a
-//! serial display), the recording flushed and synced, one summary line on standard error, exit code 0.
+//! serial display), the recording flushed and synced, one summary line on standard error, exit code 0 — or 2 when
+//! the recording failed at any time during the run (the summary line says so).
 
 use std::net::IpAddr;
 use std::path::PathBuf;
@@ -264,11 +265,20 @@ pub fn run_for(duration_s: Option<f64>, signals: &StopSignals, mut every_100ms: 
 
 /// Stops the daemon (every drive to 0 A at once, then the network, then the recording, flushed and synced) and
 /// reports: after `--duration` the recording on standard output as before; after a signal one summary line on
-/// standard error. A device that did not take the all-off command is an error (exit 2).
+/// standard error. A device that did not take the all-off command is an error (exit 2), and so is a recording that
+/// failed at any time during the run, even one that went on in a new file after an acknowledgement (exit 2; the
+/// summary line says `the recording FAILED`).
 pub fn finish(daemon: Daemon, ended: Ended) -> Result<()> {
     let path = daemon.recording_path();
+    let recording = daemon.recording();
     let report = daemon.stop()?;
-    let recorded = match (&path, report.rows, &report.recording_error) {
+    let write_failures = recording.map_or(0, |r| r.events().failures);
+    let failure = match (&report.recording_error, write_failures) {
+        (Some(error), _) => Some(error.clone()),
+        (None, 0) => None,
+        (None, n) => Some(format!("{n} write failure(s) during the run")),
+    };
+    let recorded = match (&path, report.rows, &failure) {
         (Some(path), Some(rows), Some(error)) => {
             format!(
                 "; the recording FAILED ({error}): {rows} whole rows in {}",
@@ -294,13 +304,16 @@ pub fn finish(daemon: Daemon, ended: Ended) -> Result<()> {
             if let (Some(path), Some(rows)) = (path, report.rows) {
                 println!("recorded {rows} rows to {}", path.display());
             }
-            if let Some(error) = &report.recording_error {
-                eprintln!("thermode: the recording failed: {error}");
+            if let Some(error) = &failure {
+                eprintln!("thermode: the recording FAILED: {error}");
             }
         }
     }
-    match report.all_off {
-        Some(Err(e)) => Err(e).context("switching every drive off at the stop"),
+    match (report.all_off, failure) {
+        (Some(Err(e)), _) => Err(e).context("switching every drive off at the stop"),
+        (_, Some(error)) => Err(anyhow::anyhow!(
+            "the recording failed during the run ({error}): the session is incomplete"
+        )),
         _ => Ok(()),
     }
 }

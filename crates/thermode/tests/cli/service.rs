@@ -4,7 +4,10 @@
 //! - `serve --token` does not listen for OSC: a UDP set-point changes nothing;
 //! - `serve --record` on a 64 KiB tmpfs (a mount namespace of its own, `unshare`; skipped where that is not
 //!   allowed): the status says `failed`, `rows_written` equals the rows in the file, the file ends with a newline,
-//!   no channel is left rendering, and the failure is on standard error.
+//!   no channel is left rendering, the failure is on standard error, and SIGTERM then ends it with exit code 2 and
+//!   a summary line that says the recording failed;
+//! - `serve --state-dir` on a 64 KiB tmpfs that fills up mid-session: heating stops and new stimuli are refused until
+//!   the ledger can be written again; the dose is on disk.
 
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::{TcpStream, UdpSocket};
@@ -302,7 +305,7 @@ fn a_recording_on_a_full_tmpfs_fails_loudly_with_whole_rows_and_stops_every_stim
         .spawn()
         .unwrap_or_else(|e| panic!("spawn: {e}"));
     let pid = child.id();
-    let (_serve, port, stderr) = banner(child);
+    let (mut serve, port, stderr) = banner(child);
     let r = ws_ask(
         port,
         &[serde_json::json!({"type": "setpoint", "id": 1, "channel": 0, "temp_c": 36, "rate_c_s": 2})],
@@ -343,4 +346,131 @@ fn a_recording_on_a_full_tmpfs_fails_loudly_with_whole_rows_and_stops_every_stim
         wait_until(LIVENESS_S, || stderr.try_iter().any(|l| l.contains("FAILED"))),
         "the failure on standard error"
     );
+    // Stopped by SIGTERM, a run whose recording failed exits 2 and its summary line says so.
+    signal(&serve.0, Signal::SIGTERM);
+    let code = serve.0.wait().unwrap_or_else(|e| panic!("wait: {e}"));
+    let mut summary = String::new();
+    wait_until(LIVENESS_S, || {
+        summary.extend(stderr.try_iter().map(|l| l + "\n"));
+        summary.contains("SIGTERM: stopped")
+    });
+    assert_eq!(code.code(), Some(2), "exit {code:?}; stderr: {summary}");
+    assert!(
+        summary
+            .lines()
+            .any(|l| l.contains("SIGTERM: stopped") && l.contains("the recording FAILED")),
+        "the summary line names the failed recording: {summary}"
+    );
+}
+
+/// A disk that fills mid-session: `serve --state-dir` on a 64 KiB tmpfs (own mount namespace, `unshare`; skipped
+/// where that is not allowed) heating one channel at 42 °C over OSC; the test fills the tmpfs. The ledger's write
+/// fails, so every stimulus stops, a new one is refused (`dose_not_recorded`), the status and standard error say
+/// why; once space is freed the next write lifts the hold and the ledger on disk holds at least the dose reported
+/// while it could not be written. Before, the session went on and a restart forgot the dose.
+#[test]
+fn a_state_directory_that_fills_up_stops_heating_until_the_ledger_is_written_again() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
+    let mount = dir.path().join("small");
+    std::fs::create_dir_all(&mount).unwrap_or_else(|e| panic!("{e}"));
+    let probe = Command::new("unshare")
+        .args(["-m", "sh", "-c"])
+        .arg(format!("mount -t tmpfs -o size=64k tmpfs {}", mount.display()))
+        .output();
+    if !probe.is_ok_and(|o| o.status.success()) {
+        eprintln!("SKIPPED: cannot mount a tmpfs in a mount namespace here (unshare -m needs privileges)");
+        return;
+    }
+    let free = UdpSocket::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
+    let osc_port = free.local_addr().unwrap_or_else(|e| panic!("{e}")).port();
+    drop(free);
+    let script = format!(
+        "mount -t tmpfs -o size=64k tmpfs {m} && exec {bin} serve --port 0 --osc-port {osc_port} --channels 1 \
+         --state-dir {m}/state",
+        m = mount.display(),
+        bin = binary()
+    );
+    let child = Command::new("unshare")
+        .args(["-m", "sh", "-c", &script])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("spawn: {e}"));
+    let pid = child.id();
+    let (mut serve, port, stderr) = banner(child);
+    let sender = UdpSocket::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
+    let heat = super::serve_on_emulator::osc("/thermode/channel/0/setpoint", &[42.0, 5.0]);
+    sender
+        .send_to(&heat, ("127.0.0.1", osc_port))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        wait_until(LIVENESS_S, || status(port)["dose_ledger"]["writes"].as_u64() >= Some(3)),
+        "the ledger is written while heating: {}",
+        status(port)["dose_ledger"]
+    );
+    // Fill the tmpfs, as the daemon sees it through its own mount namespace.
+    let inside = format!("/proc/{pid}/root{}", mount.display());
+    let filler = format!("{inside}/filler");
+    let mut file = std::fs::File::create(&filler).unwrap_or_else(|e| panic!("{filler}: {e}"));
+    while file.write_all(&[0u8; 4096]).is_ok() {}
+    drop(file);
+    assert!(
+        wait_until(LIVENESS_S, || status(port)["dose_ledger"]["stimuli_refused"] == true),
+        "a full disk did not stop heating: {}",
+        status(port)["dose_ledger"]
+    );
+    let s = status(port);
+    assert!(
+        s["dose_ledger"]["last_error"]
+            .as_str()
+            .is_some_and(|e| e.contains("space")),
+        "{}",
+        s["dose_ledger"]
+    );
+    let held_cem43 = s["channels"][0]["cem43_min"].as_f64().unwrap_or(f64::NAN);
+    assert!(
+        wait_until(LIVENESS_S, || status(port)["contacts"] == serde_json::json!([])),
+        "still heating: {}",
+        status(port)["contacts"]
+    );
+    sender
+        .send_to(&heat, ("127.0.0.1", osc_port))
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert!(
+        wait_until(LIVENESS_S, || status(port)["osc"]["last_error"]
+            .as_str()
+            .is_some_and(|e| e.contains("dose_not_recorded"))),
+        "a new stimulus is refused: {}",
+        status(port)["osc"]
+    );
+    let mut told = String::new();
+    wait_until(LIVENESS_S, || {
+        told.extend(stderr.try_iter().map(|l| l + "\n"));
+        told.contains("the dose ledger cannot be written")
+    });
+    assert!(told.contains("the dose ledger cannot be written"), "stderr: {told}");
+
+    std::fs::remove_file(&filler).unwrap_or_else(|e| panic!("{filler}: {e}"));
+    assert!(
+        wait_until(LIVENESS_S, || status(port)["dose_ledger"]["stimuli_refused"] == false),
+        "still refused after space was freed: {}",
+        status(port)["dose_ledger"]
+    );
+    wait_until(LIVENESS_S, || {
+        told.extend(stderr.try_iter().map(|l| l + "\n"));
+        told.contains("the dose ledger is written again")
+    });
+    assert!(told.contains("the dose ledger is written again"), "stderr: {told}");
+    let ledger =
+        std::fs::read_to_string(format!("{inside}/state/dose-ledger.json")).unwrap_or_else(|e| panic!("ledger: {e}"));
+    let ledger: Value = serde_json::from_str(&ledger).unwrap_or_else(|e| panic!("ledger: {e}: {ledger}"));
+    let saved = ledger["channels"][0]["cem43_min"].as_f64().unwrap_or(f64::NAN);
+    println!("full state directory: dose at the hold {held_cem43} CEM43-min, on disk after it {saved}");
+    assert!(
+        saved >= held_cem43,
+        "ledger {saved} below the dose reported while the disk was full {held_cem43}"
+    );
+    signal(&serve.0, Signal::SIGTERM);
+    let code = serve.0.wait().unwrap_or_else(|e| panic!("wait: {e}"));
+    assert_eq!(code.code(), Some(0), "exit {code:?}");
 }
