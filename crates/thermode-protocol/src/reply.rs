@@ -215,9 +215,6 @@ pub struct Event {
 }
 
 /// Every message the daemon sends on the WebSocket, tagged by `type`.
-// The status reply is large (about 1.1 kB) and rare (a client asks for it); boxing it would change every match on
-// the wire type for nothing.
-#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum Response {
