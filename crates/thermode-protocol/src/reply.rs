@@ -222,7 +222,8 @@ pub enum Response {
     Ok(OkReply),
     /// A request was refused.
     Error(ErrorReply),
-    /// The reply to `status` (boxed: it is far larger than the other messages).
+    /// The reply to `status`.
+    // Boxed: it is far larger than the other messages.
     Status(Box<StatusReply>),
     /// Telemetry of a subscription.
     Telemetry(Telemetry),
