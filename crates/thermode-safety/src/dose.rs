@@ -201,6 +201,11 @@ pub struct DoseTracker {
     /// timeout, beyond which the drive is cut. The ceiling looks ahead at least this far, also before the first
     /// interval (see [`DoseCap::anticipating_c`]).
     longest_interval_s: f64,
+    /// The time up to which the dose is counted, s: the newest sample's time, or later when unseen time after it
+    /// was counted ([`DoseTracker::count_unseen`]).
+    counted_to_s: f64,
+    /// The temperature the unseen time since the newest sample was counted at, °C (`None` while none was).
+    unseen_c: Option<f64>,
     /// Reference sample of the slope (time, reading), at least the window older than the newest sample.
     slope_older: Option<(f64, f64)>,
     /// The candidate that becomes the reference once the window has passed.
@@ -247,20 +252,52 @@ impl DoseTracker {
     /// Adds the interval from the previous sample to this one (`time_s` in s, `temp_c` the reading in °C, both
     /// finite; the caller validates). A sample not later than the previous one adds nothing but becomes the new
     /// reference.
+    ///
+    /// After unseen time was counted ([`DoseTracker::count_unseen`]), only the rest of the interval is added, at the
+    /// hotter of the unseen temperature and this sample: the held reading of the previous sample is not counted
+    /// again.
     pub fn add_sample(&mut self, time_s: f64, temp_c: f64) {
         let plate_c = self.reconstruct(time_s, temp_c);
         if let Some((t_prev, plate_prev_c)) = self.prev {
-            let dt_s = time_s - t_prev;
-            if dt_s > 0.0 {
-                self.last_interval_s = dt_s;
-                let hot_c = plate_prev_c.max(plate_c);
-                self.cem43_min += cem43_increment_min(hot_c, dt_s);
-                if hot_c >= CEM43_REFERENCE_C {
-                    self.time_at_or_above_43_s += dt_s;
-                }
+            if time_s - t_prev > 0.0 {
+                self.last_interval_s = time_s - t_prev;
+                let hot_c = self.unseen_c.unwrap_or(plate_prev_c).max(plate_c);
+                self.count(time_s - self.counted_to_s.max(t_prev), hot_c);
             }
         }
         self.prev = Some((time_s, plate_c));
+        self.counted_to_s = time_s;
+        self.unseen_c = None;
+    }
+
+    /// Adds `dt_s` seconds (nothing if not positive) at `temp_c` to both totals.
+    fn count(&mut self, dt_s: f64, temp_c: f64) {
+        if dt_s > 0.0 {
+            self.cem43_min += cem43_increment_min(temp_c, dt_s);
+            if temp_c >= CEM43_REFERENCE_C {
+                self.time_at_or_above_43_s += dt_s;
+            }
+        }
+    }
+
+    /// Counts the time from the last counted instant up to `now_s` (s), during which no fresh sample arrived, at
+    /// `worst_c` (°C): the caller's bound on the plate it could not see (see `SafetyEnvelope`, "Unseen time"; −∞
+    /// counts nothing but still marks the time as counted). The next sample adds only the time after `now_s`, at the
+    /// hotter of the last `worst_c` and itself. Nothing happens before the first sample or for a `now_s` not later
+    /// than the last counted instant.
+    pub fn count_unseen(&mut self, now_s: f64, worst_c: f64) {
+        if self.prev.is_none() || now_s <= self.counted_to_s {
+            return;
+        }
+        self.count(now_s - self.counted_to_s, worst_c);
+        self.counted_to_s = now_s;
+        self.unseen_c = Some(worst_c);
+    }
+
+    /// The time up to which the dose is counted, s (the newest sample's time, or later after unseen time; 0 before
+    /// the first sample).
+    pub fn counted_to_s(&self) -> f64 {
+        self.counted_to_s
     }
 
     /// Accumulated thermal dose, CEM43 minutes.
@@ -294,6 +331,11 @@ impl DoseTracker {
             (true, false) => self.last_interval_s,
             (false, _) => self.longest_interval_s,
         }
+    }
+
+    /// The time of the newest sample, s; `None` before the first sample.
+    pub fn last_sample_s(&self) -> Option<f64> {
+        self.prev.map(|(t, _)| t)
     }
 
     /// The plate temperature the last sample was counted at (reconstructed), °C; `None` before the first sample.
