@@ -45,6 +45,9 @@ pub enum ErrorCode {
     Cancelled,
     /// The recording failed and the policy is `stop`: stimuli are refused until `ack_recording`.
     RecordingFailed,
+    /// The channel's thermal-dose budget is spent: its drive is off (0 A) and it accepts nothing but a release
+    /// until the dose ledger is reset (`thermode dose reset`).
+    DoseBudgetSpent,
 }
 
 impl ErrorCode {
@@ -67,6 +70,7 @@ impl ErrorCode {
             ErrorCode::TooManyConnections => "too_many_connections",
             ErrorCode::Cancelled => "cancelled",
             ErrorCode::RecordingFailed => "recording_failed",
+            ErrorCode::DoseBudgetSpent => "dose_budget_spent",
         }
     }
 }

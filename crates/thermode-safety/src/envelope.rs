@@ -45,10 +45,14 @@
 //! sample is older than `stale_timeout_s` (the envelope has then latched [`FaultCode::SensorStale`] and gates 0 A),
 //! every tick ([`SafetyEnvelope::gate_drive`], [`SafetyEnvelope::hold`]) counts the time since the last counted
 //! instant — from that sample on — at the hottest the plate may have been ([`SafetyEnvelope::unseen_plate_bound_c`]):
-//! the last counted plate or, when a heating current was gated since that sample (a device holds its last command
-//! until the next one or its watchdog), [`ABSOLUTE_MAX_C`] + `limit_margin_c` (49 °C by default: the
-//! over-temperature fault; the device's second line, its own cut and watchdog, keeps a plate thermode cannot see
-//! below it); else the warmer of a finger ([`FINGER_MAX_C`], 37 °C) and the last hot-side reading. No cooling is
+//! the last counted plate, raised by what the strongest heating current `I` gated since that sample could add
+//! while it may still have been applied — the stale timeout, then up to [`UNSEEN_DRIVE_HOLD_S`] (0.25 s) of the
+//! device's watchdog, as a device holds its last command — at `max_measured_rate_c_per_s` (50 °C/s, twice the
+//! default display's full-current rate) times `I / current_limit_a` (a Peltier module's heating, `αIT + I²R/2`, is
+//! at most that fraction of its full-current heating); at most [`ABSOLUTE_MAX_C`] + `limit_margin_c` (49 °C by
+//! default: the over-temperature fault; the device's own cut keeps a plate thermode cannot see below it); and never
+//! below the warmer of a finger ([`FINGER_MAX_C`], 37 °C) and the last hot-side reading, where a plate whose drive
+//! does not heat tends to. On a hot touch (47 °C, 1 A) that is 49 °C; at rest (32 °C, 0.1 A) 37 °C. No cooling is
 //! credited while nothing is seen. When samples come back, the rest of the interval counts at the hotter of that
 //! bound and the new sample (never again at the held reading). So the count is never less than the plate's could
 //! have been — until the budget is spent: from then on the channel is off for good (see "Over budget") and unseen
@@ -80,6 +84,11 @@ use crate::plate::{plate_margin_c, search_current_a, PlateForecast};
 /// heat tends to no more than the warmer of its finger and its hot side; the bound on unseen time uses it
 /// ([`SafetyEnvelope::unseen_plate_bound_c`]).
 pub const FINGER_MAX_C: f64 = 37.0;
+
+/// How long a device may go on applying the last current it was sent after thermode stops sending, s: 0.25 (the
+/// longest watchdog the own protocol accepts, `thermode_link::own::MAX_DEVICE_WATCHDOG_MS`; MeCom and TCS II are
+/// configured by thermode to no more). Added to the stale timeout for the heating a plate may have had unseen.
+pub const UNSEEN_DRIVE_HOLD_S: f64 = 0.25;
 
 /// Movement of the measured display in the drive's direction that shows the plate answers a drive at its limit,
 /// °C: 0.5 (50 steps of the PT-100's resolution, well above its noise; a working module at full current moves
@@ -247,10 +256,11 @@ pub struct SafetyEnvelope {
     lockout_at_s: Option<f64>,
     at_48_since_s: Option<f64>,
     at_limit: Option<AtLimit>,
-    /// The last gated drive heated (current > 0 A): a device holds it until the next command or its watchdog.
-    drive_heating: bool,
-    /// A heating drive was gated (or held by the device) since the newest sample the dose counted.
-    heating_since_sample: bool,
+    /// The last gated drive, A: a device holds it until the next command or its watchdog.
+    drive_a: f64,
+    /// The strongest heating current gated (or held by the device) since the newest sample the dose counted, A
+    /// (≥ 0).
+    heating_since_sample_a: f64,
 }
 
 impl SafetyEnvelope {
@@ -279,8 +289,8 @@ impl SafetyEnvelope {
             lockout_at_s: None,
             at_48_since_s: None,
             at_limit: None,
-            drive_heating: false,
-            heating_since_sample: false,
+            drive_a: 0.0,
+            heating_since_sample_a: 0.0,
         })
     }
 
@@ -387,18 +397,19 @@ impl SafetyEnvelope {
     }
 
     /// The hottest the plate may have been while no sample was counted (module documentation, "Unseen time"), °C:
-    /// the hotter of the last counted plate and, if a heating drive may have been applied since,
-    /// [`ABSOLUTE_MAX_C`] + `limit_margin_c` (the envelope's over-temperature fault), else the warmer of a finger
-    /// ([`FINGER_MAX_C`]) and the last hot-side reading (a plate whose drive does not heat tends to neither more).
+    /// the last counted plate raised by the strongest heating current gated since, held for
+    /// [`UNSEEN_DRIVE_HOLD_S`] beyond the stale timeout at the fastest rate a reading may move
+    /// (`max_measured_rate_c_per_s`) in proportion to the current limit, at most [`ABSOLUTE_MAX_C`] +
+    /// `limit_margin_c` (the over-temperature fault); and never below the warmer of a finger ([`FINGER_MAX_C`]) and
+    /// the last hot-side reading (a plate whose drive does not heat tends to no more than they).
     pub fn unseen_plate_bound_c(&self) -> f64 {
+        let c = &self.config;
         let last_c = self.dose.last_plate_c().unwrap_or(f64::NEG_INFINITY);
-        let bound_c = if self.heating_since_sample {
-            ABSOLUTE_MAX_C + self.config.limit_margin_c
-        } else {
-            let hot_side_c = self.sample.map_or(f64::NEG_INFINITY, |s| s.hot_side_c);
-            FINGER_MAX_C.max(hot_side_c)
-        };
-        last_c.max(bound_c)
+        let heating_s = c.stale_timeout_s + UNSEEN_DRIVE_HOLD_S;
+        let rise_c = self.heating_since_sample_a / self.current_limit_a * c.max_measured_rate_c_per_s * heating_s;
+        let heated_c = (last_c + rise_c).min(ABSOLUTE_MAX_C + c.limit_margin_c).max(last_c);
+        let hot_side_c = self.sample.map_or(f64::NEG_INFINITY, |s| s.hot_side_c);
+        heated_c.max(FINGER_MAX_C).max(hot_side_c)
     }
 
     /// Counts the dose of the time without a sample at time `now_s` (s), once the newest counted sample is older
@@ -565,7 +576,7 @@ impl SafetyEnvelope {
         }
         self.check_rate(m);
         self.dose.add_sample(m.time_s, m.sensor_c);
-        self.heating_since_sample = self.drive_heating;
+        self.heating_since_sample_a = self.drive_a.max(0.0);
         if let Some(code) = self.display_limit_fault(m) {
             self.latch(code, m.time_s);
         }
@@ -816,10 +827,10 @@ impl SafetyEnvelope {
         }
     }
 
-    /// Remembers whether the drive just gated (`current_a`, A) heats, for the bound on unseen time.
+    /// Remembers the drive just gated (`current_a`, A), for the bound on unseen time.
     fn note_drive(&mut self, current_a: f64) {
-        self.drive_heating = current_a > 0.0;
-        self.heating_since_sample |= self.drive_heating;
+        self.drive_a = current_a;
+        self.heating_since_sample_a = self.heating_since_sample_a.max(current_a);
     }
 
     /// Clears the latched fault at time `now_s` (s). Returns the cleared fault (`None` if none was latched).

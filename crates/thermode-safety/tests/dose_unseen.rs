@@ -6,6 +6,7 @@
 use thermode_safety::dose::{cem43_increment_min, DOSE_ESTIMATE_ALLOWANCE};
 use thermode_safety::{
     DoseLedger, DriveCommand, EnvelopeConfig, FaultCode, MeasuredOnly, Measurement, SafetyEnvelope, FINGER_MAX_C,
+    UNSEEN_DRIVE_HOLD_S,
 };
 
 const LIMIT_A: f64 = 2.8;
@@ -58,8 +59,8 @@ impl Rig {
     }
 }
 
-/// A hot touch (47 °C, heating) during which the link fails for 14 s and then for 60 s: the unseen time counts at
-/// the bound (49 °C: a heating drive was gated), not at the held 47 °C, until the budget is spent; from then on
+/// A hot touch (47 °C, heating at 1 A) during which the link fails for 14 s and then for 60 s: the unseen time
+/// counts at the bound (47 °C + 1/2.8 · 50 °C/s · 0.45 s, capped at 49 °C), not at the held 47 °C, until the budget is spent; from then on
 /// nothing more, however long the outage. The old count — the whole gap at the held reading — was 3.73 CEM43-min for
 /// 14 s and grew with the outage.
 #[test]
@@ -128,6 +129,26 @@ fn unseen_time_without_a_heating_drive_counts_at_the_finger_bound() {
     println!("30 s unseen at rest: counted {added:.3e} CEM43-min, 37 °C for 30 s {hand:.3e}");
     assert!((added - hand).abs() < 1e-12, "30 s at rest: {added}, want {hand}");
     assert!(!rig.env.dose_budget_spent());
+}
+
+/// The bound follows the strongest heating current gated since the last sample: the rise a first-order heating
+/// rate proportional to the current (50 °C/s at the 2.8 A limit) gives over the stale timeout and the device's
+/// watchdog (0.2 + 0.25 s), capped at 49 °C and never below 37 °C.
+#[test]
+fn the_unseen_bound_follows_the_heating_current() {
+    let heating_s = EnvelopeConfig::default().stale_timeout_s + UNSEEN_DRIVE_HOLD_S;
+    for (plate_c, current_a) in [(35.0, 0.5), (38.0, 1.0), (35.0, 2.8), (32.0, 0.1), (40.0, -2.0)] {
+        let mut rig = Rig::new();
+        rig.run(0.5, Some(plate_c), plate_c, current_a);
+        let got_c = rig.env.unseen_plate_bound_c();
+        let rise_c = current_a.max(0.0) / LIMIT_A * 50.0 * heating_s;
+        let want_c = (plate_c + rise_c).min(49.0).max(FINGER_MAX_C).max(25.0);
+        println!("{plate_c} °C at {current_a} A: bound {got_c:.3} °C, hand {want_c:.3} °C");
+        assert!(
+            (got_c - want_c).abs() < 1e-9,
+            "{plate_c} °C at {current_a} A: bound {got_c} °C, want {want_c} °C"
+        );
+    }
 }
 
 /// A channel over its budget (a restored ledger past the estimate's allowance) asked for 48 °C, and asked to cool:

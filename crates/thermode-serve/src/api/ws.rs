@@ -380,6 +380,7 @@ pub(crate) fn loop_error(e: CommandError) -> ApiError {
         CommandError::Busy | CommandError::Stopped => ErrorCode::Busy,
         CommandError::Cancelled => ErrorCode::Cancelled,
         CommandError::RecordingFailed => ErrorCode::RecordingFailed,
+        CommandError::DoseBudgetSpent { .. } => ErrorCode::DoseBudgetSpent,
     };
     ApiError::new(code, e.to_string())
 }
