@@ -392,8 +392,9 @@ impl SafetyEnvelope {
     /// estimate's allowance is used up; module documentation, "Over budget"). The channel is then off: every drive
     /// is 0 A and the runtime refuses every stimulus but air, until the ledger is reset.
     pub fn dose_budget_spent(&self) -> bool {
-        // Written so that a NaN ceiling (none is expected) counts as spent.
-        !(self.dose_ceiling_c() > self.config.min_display_c)
+        let ceiling_c = self.dose_ceiling_c();
+        // A NaN ceiling (none is expected) counts as spent.
+        ceiling_c.is_nan() || ceiling_c <= self.config.min_display_c
     }
 
     /// The hottest the plate may have been while no sample was counted (module documentation, "Unseen time"), °C:
