@@ -28,6 +28,13 @@
 //! good as τ_s: a τ_s longer than the real one over-counts rises and under-counts falls, a shorter one the reverse
 //! (the device file gives it; a rendering pipeline refuses an envelope τ_s shorter than its device's).
 //!
+//! # Unseen time
+//! Only fresh samples are measurements. Time without one (a link fault, a frozen or held reading) is counted by
+//! [`DoseTracker::count_unseen`] at a temperature the caller bounds the plate by — the envelope's bound
+//! (`SafetyEnvelope::unseen_plate_bound_c`, "Unseen time" in the envelope's documentation) — and the sample that ends
+//! it adds only the rest, at the hotter of that bound and itself: never the whole gap at the held reading (which
+//! counted 3.7–4.2 CEM43-min per 14 s of outage at 47 °C).
+//!
 //! # The cap
 //! With `B` = `cem43_budget_min`, `D` = the accumulated (estimated) CEM43, `rate(T)` the CEM43 rate above and
 //! `c` = [`DOSE_COOLDOWN_RATE_C_PER_S`], the channel's ceiling (the envelope's effective maximum, before the display
@@ -265,8 +272,13 @@ impl DoseTracker {
                 self.count(time_s - self.counted_to_s.max(t_prev), hot_c);
             }
         }
+        // A sample stamped before the unseen time already counted (its age) does not count that time again.
+        self.counted_to_s = if self.prev.is_some() {
+            self.counted_to_s.max(time_s)
+        } else {
+            time_s
+        };
         self.prev = Some((time_s, plate_c));
-        self.counted_to_s = time_s;
         self.unseen_c = None;
     }
 
@@ -650,6 +662,37 @@ mod tests {
             "ceiling {} °C after a 5 s gap: want the continuous {continuous_c} °C less 2 · 5 °C/s · 0.2 s",
             cap.anticipating_c(&d)
         );
+    }
+
+    /// Unseen time counts at the caller's bound; the sample that ends it adds only the rest (at the hotter of the
+    /// bound and itself), never the whole gap at the held reading, and a sample stamped before the counted time
+    /// counts nothing twice.
+    #[test]
+    fn unseen_time_counts_at_the_bound_and_the_next_sample_adds_only_the_rest() {
+        let mut d = DoseTracker::new();
+        d.add_sample(0.0, 44.0);
+        d.count_unseen(2.0, 46.0);
+        let after_unseen = cem43_increment_min(46.0, 2.0);
+        assert!(
+            (d.cem43_min() - after_unseen).abs() < 1e-12,
+            "{} vs {after_unseen}",
+            d.cem43_min()
+        );
+        assert_eq!((d.counted_to_s(), d.time_at_or_above_43_s()), (2.0, 2.0));
+        d.add_sample(2.5, 35.0);
+        let want = after_unseen + cem43_increment_min(46.0, 0.5);
+        assert!((d.cem43_min() - want).abs() < 1e-12, "{} vs {want}", d.cem43_min());
+        // Counted up to 3.2 s at −∞ (nothing); a sample stamped 3.1 s then adds nothing, the next one from 3.2 s.
+        d.count_unseen(3.2, f64::NEG_INFINITY);
+        d.add_sample(3.1, 35.0);
+        assert!((d.cem43_min() - want).abs() < 1e-12, "{} vs {want}", d.cem43_min());
+        d.add_sample(3.3, 35.0);
+        let want = want + cem43_increment_min(35.0, 0.1);
+        assert!((d.cem43_min() - want).abs() < 1e-15, "{} vs {want}", d.cem43_min());
+        // Nothing before the first sample.
+        let mut empty = DoseTracker::new();
+        empty.count_unseen(5.0, 48.0);
+        assert_eq!(empty.cem43_min(), 0.0);
     }
 
     #[test]
