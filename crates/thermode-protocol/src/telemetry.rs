@@ -72,7 +72,8 @@ pub struct ChannelTelemetry {
     pub cem43_min: Option<f64>,
     /// Time at or above 43 °C \[s\].
     pub time_at_or_above_43_s: Option<f64>,
-    /// The dose budget is spent: the channel may no longer heat.
+    /// The dose lockout has engaged (the budget is used): the channel's maximum is below 43 °C and only falls;
+    /// once nothing is left above the display minimum the channel is off (`dose_budget_spent` in its status).
     pub dose_lockout: bool,
 }
 
