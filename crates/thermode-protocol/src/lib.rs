@@ -23,4 +23,4 @@ pub use materials::{MaterialInfo, MaterialProperties};
 pub use parse::{parse_request, ApiError};
 pub use reply::{AppliedAt, Done, ErrorCode, ErrorReply, Event, OkReply, RecordingEvent, Response, StatusReply};
 pub use request::{Envelope, Request, RequestId};
-pub use telemetry::{finite, ChannelState, ChannelTelemetry, Mode, Owner, Telemetry};
+pub use telemetry::{finite, ChannelState, ChannelTelemetry, Mode, OffReason, Owner, Telemetry};

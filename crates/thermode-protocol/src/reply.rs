@@ -47,6 +47,9 @@ pub enum ErrorCode {
     RecordingFailed,
     /// The dose ledger cannot be written: stimuli are refused until a write succeeds again.
     DoseNotRecorded,
+    /// The channel's thermal-dose budget is spent: its drive is off (0 A) and it accepts nothing but a release
+    /// until the dose ledger is reset (`thermode dose reset`).
+    DoseBudgetSpent,
 }
 
 impl ErrorCode {
@@ -70,6 +73,7 @@ impl ErrorCode {
             ErrorCode::Cancelled => "cancelled",
             ErrorCode::RecordingFailed => "recording_failed",
             ErrorCode::DoseNotRecorded => "dose_not_recorded",
+            ErrorCode::DoseBudgetSpent => "dose_budget_spent",
         }
     }
 }

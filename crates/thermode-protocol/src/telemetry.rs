@@ -72,8 +72,28 @@ pub struct ChannelTelemetry {
     pub cem43_min: Option<f64>,
     /// Time at or above 43 °C \[s\].
     pub time_at_or_above_43_s: Option<f64>,
-    /// The dose budget is spent: the channel may no longer heat.
+    /// The dose lockout has engaged (the budget is used): the channel's maximum is below 43 °C and only falls;
+    /// once nothing is left above the display minimum the channel is off (`dose_budget_spent` in its status).
     pub dose_lockout: bool,
+}
+
+/// Why a channel's drive is off (0 A) whatever is asked; the first that applies, in this order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum OffReason {
+    /// The channel's engine failed: off for the rest of the session (restart the daemon).
+    EngineFailed,
+    /// A safety fault is latched (see `fault_description`); clear it once its cause is gone.
+    Fault,
+    /// The device's own protection cut the channel (see `device_cut_description`).
+    DeviceCut,
+    /// The device did not answer the last read.
+    LinkDown,
+    /// The thermal-dose budget is spent: off, and nothing but a release is accepted, until the dose ledger is reset
+    /// (`thermode dose reset`, after checking the skin).
+    DoseBudgetSpent,
+    /// Held at 0 A after a stop-all, until the channel's next command.
+    HeldOff,
 }
 
 /// One channel's status (`/api/status` `channels`): its telemetry and what drives it.
@@ -107,6 +127,10 @@ pub struct ChannelState {
     pub device_cut_description: Option<String>,
     /// The channel's engine failed: its drive is off for the rest of the session.
     pub engine_failed: bool,
+    /// The channel's thermal-dose budget is spent: its drive is off (0 A) until the dose ledger is reset.
+    pub dose_budget_spent: bool,
+    /// Why the drive is off whatever is asked; null while the channel may drive.
+    pub off_reason: Option<OffReason>,
 }
 
 /// A telemetry message (`type` `telemetry`), sent at a subscription's rate.

@@ -186,6 +186,18 @@ pub enum CommandError {
     /// The control loop has stopped.
     #[error("the control loop has stopped")]
     Stopped,
+    /// The channel's thermal-dose budget is spent: its drive is off (0 A) and it renders nothing but air until the
+    /// dose ledger is reset (`thermode dose reset`, after checking the skin).
+    #[error(
+        "channel {channel} is off: its thermal-dose budget is spent ({cem43_min:.3} CEM43-min counted); it renders \
+         nothing but air until the dose is reset (thermode dose reset, after checking the skin)"
+    )]
+    DoseBudgetSpent {
+        /// The channel.
+        channel: usize,
+        /// The dose counted \[CEM43-minutes\].
+        cem43_min: f64,
+    },
 }
 
 /// The loop's answer to one command.

@@ -374,7 +374,10 @@ impl ControlLoop {
         let status: Vec<ChannelStatus> = slots
             .iter()
             .enumerate()
-            .map(|(channel, slot)| air_status(channel, &air, slot.engine.dose()))
+            .map(|(channel, slot)| {
+                let (dose, spent) = (slot.engine.dose(), slot.engine.dose_budget_spent());
+                air_status(channel, &air, dose, spent)
+            })
             .collect();
         let stats = LoopStats {
             rate_hz: config.rate_hz,
@@ -475,13 +478,13 @@ impl ControlLoop {
             let (engine, reading) = (&mut slot.engine, &slot.reading);
             catch_unwind(AssertUnwindSafe(|| {
                 let ticked = engine.tick(time_s, dt_s, reading);
-                (ticked, engine.dose())
+                (ticked, (engine.dose(), engine.dose_budget_spent()))
             }))
             .ok()
         };
         let (command, mut telemetry) = match ticked {
-            Some(((command, telemetry), dose)) => {
-                status.dose = dose;
+            Some(((command, telemetry), (dose, spent))) => {
+                (status.dose, status.dose_budget_spent) = (dose, spent);
                 (Some(command), telemetry)
             }
             None => {
@@ -577,6 +580,7 @@ impl ControlLoop {
                     }
                 };
                 self.usable(channel)?;
+                self.budget_left(channel)?;
                 if self.interlock.engaged() {
                     return Err(CommandError::RecordingFailed);
                 }
@@ -652,6 +656,19 @@ impl ControlLoop {
         match self.status[channel].telemetry.fault {
             Some(fault) => Err(CommandError::Faulted { channel, fault }),
             None => Ok(()),
+        }
+    }
+
+    /// The channel's thermal-dose budget is not spent (a spent channel is off: only air is accepted).
+    fn budget_left(&self, channel: usize) -> Result<(), CommandError> {
+        let status = &self.status[channel];
+        if status.dose_budget_spent {
+            Err(CommandError::DoseBudgetSpent {
+                channel,
+                cem43_min: status.dose.cem43_min,
+            })
+        } else {
+            Ok(())
         }
     }
 
@@ -798,7 +815,7 @@ impl ControlLoop {
 }
 
 /// The status of a channel in air, nobody's, drive free.
-fn air_status(channel: usize, air: &Arc<str>, dose: DoseLedger) -> ChannelStatus {
+fn air_status(channel: usize, air: &Arc<str>, dose: DoseLedger, dose_budget_spent: bool) -> ChannelStatus {
     ChannelStatus {
         channel,
         label: air.clone(),
@@ -813,6 +830,7 @@ fn air_status(channel: usize, air: &Arc<str>, dose: DoseLedger) -> ChannelStatus
         engine_failed: false,
         telemetry: crate::snapshot::EMPTY_TELEMETRY,
         dose,
+        dose_budget_spent,
     }
 }
 

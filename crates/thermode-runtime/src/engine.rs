@@ -42,6 +42,10 @@ pub trait ChannelEngine {
     /// loop after every tick (it publishes it and the daemon saves it): cheap, no allocation.
     fn dose(&self) -> DoseLedger;
 
+    /// Whether the channel's dose budget is spent (`SafetyEnvelope::dose_budget_spent`): its drive is then off and
+    /// the loop refuses every stimulus but air. Called by the loop after every tick: cheap, no allocation.
+    fn dose_budget_spent(&self) -> bool;
+
     /// Restores a saved thermal dose into the channel's safety envelope (`SafetyEnvelope::restore_dose`: never
     /// lowers the dose). The daemon calls it before the first tick.
     fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), EngineError>;
@@ -74,6 +78,10 @@ impl ChannelEngine for ChannelPipeline {
 
     fn dose(&self) -> DoseLedger {
         self.envelope().dose_ledger()
+    }
+
+    fn dose_budget_spent(&self) -> bool {
+        self.envelope().dose_budget_spent()
     }
 
     fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), EngineError> {
@@ -190,6 +198,10 @@ impl ChannelEngine for TrackingEngine {
 
     fn dose(&self) -> DoseLedger {
         self.envelope.dose_ledger()
+    }
+
+    fn dose_budget_spent(&self) -> bool {
+        self.envelope.dose_budget_spent()
     }
 
     fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), EngineError> {

@@ -65,6 +65,9 @@ pub struct ChannelStatus {
     /// The channel's thermal dose after this tick (CEM43, time at or above 43 °C, lockout), as its envelope counts
     /// it; restored from the dose ledger at the start.
     pub dose: DoseLedger,
+    /// The channel's dose budget is spent (`SafetyEnvelope::dose_budget_spent`): its drive is off (0 A) and every
+    /// stimulus but air is refused ([`crate::CommandError::DoseBudgetSpent`]) until the ledger is reset.
+    pub dose_budget_spent: bool,
 }
 
 /// Loop timing: the measured periods (wake to wake) and tick durations over the window, and missed deadlines.

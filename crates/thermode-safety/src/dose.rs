@@ -28,6 +28,13 @@
 //! good as τ_s: a τ_s longer than the real one over-counts rises and under-counts falls, a shorter one the reverse
 //! (the device file gives it; a rendering pipeline refuses an envelope τ_s shorter than its device's).
 //!
+//! # Unseen time
+//! Only fresh samples are measurements. Time without one (a link fault, a frozen or held reading) is counted by
+//! [`DoseTracker::count_unseen`] at a temperature the caller bounds the plate by — the envelope's bound
+//! (`SafetyEnvelope::unseen_plate_bound_c`, "Unseen time" in the envelope's documentation) — and the sample that ends
+//! it adds only the rest, at the hotter of that bound and itself: never the whole gap at the held reading (which
+//! counted 3.7–4.2 CEM43-min per 14 s of outage at 47 °C).
+//!
 //! # The cap
 //! With `B` = `cem43_budget_min`, `D` = the accumulated (estimated) CEM43, `rate(T)` the CEM43 rate above and
 //! `c` = [`DOSE_COOLDOWN_RATE_C_PER_S`], the channel's ceiling (the envelope's effective maximum, before the display
@@ -201,6 +208,11 @@ pub struct DoseTracker {
     /// timeout, beyond which the drive is cut. The ceiling looks ahead at least this far, also before the first
     /// interval (see [`DoseCap::anticipating_c`]).
     longest_interval_s: f64,
+    /// The time up to which the dose is counted, s: the newest sample's time, or later when unseen time after it
+    /// was counted ([`DoseTracker::count_unseen`]).
+    counted_to_s: f64,
+    /// The temperature the unseen time since the newest sample was counted at, °C (`None` while none was).
+    unseen_c: Option<f64>,
     /// Reference sample of the slope (time, reading), at least the window older than the newest sample.
     slope_older: Option<(f64, f64)>,
     /// The candidate that becomes the reference once the window has passed.
@@ -247,20 +259,57 @@ impl DoseTracker {
     /// Adds the interval from the previous sample to this one (`time_s` in s, `temp_c` the reading in °C, both
     /// finite; the caller validates). A sample not later than the previous one adds nothing but becomes the new
     /// reference.
+    ///
+    /// After unseen time was counted ([`DoseTracker::count_unseen`]), only the rest of the interval is added, at the
+    /// hotter of the unseen temperature and this sample: the held reading of the previous sample is not counted
+    /// again.
     pub fn add_sample(&mut self, time_s: f64, temp_c: f64) {
         let plate_c = self.reconstruct(time_s, temp_c);
         if let Some((t_prev, plate_prev_c)) = self.prev {
-            let dt_s = time_s - t_prev;
-            if dt_s > 0.0 {
-                self.last_interval_s = dt_s;
-                let hot_c = plate_prev_c.max(plate_c);
-                self.cem43_min += cem43_increment_min(hot_c, dt_s);
-                if hot_c >= CEM43_REFERENCE_C {
-                    self.time_at_or_above_43_s += dt_s;
-                }
+            if time_s - t_prev > 0.0 {
+                self.last_interval_s = time_s - t_prev;
+                let hot_c = self.unseen_c.unwrap_or(plate_prev_c).max(plate_c);
+                self.count(time_s - self.counted_to_s.max(t_prev), hot_c);
             }
         }
+        // A sample stamped before the unseen time already counted (its age) does not count that time again.
+        self.counted_to_s = if self.prev.is_some() {
+            self.counted_to_s.max(time_s)
+        } else {
+            time_s
+        };
         self.prev = Some((time_s, plate_c));
+        self.unseen_c = None;
+    }
+
+    /// Adds `dt_s` seconds (nothing if not positive) at `temp_c` to both totals.
+    fn count(&mut self, dt_s: f64, temp_c: f64) {
+        if dt_s > 0.0 {
+            self.cem43_min += cem43_increment_min(temp_c, dt_s);
+            if temp_c >= CEM43_REFERENCE_C {
+                self.time_at_or_above_43_s += dt_s;
+            }
+        }
+    }
+
+    /// Counts the time from the last counted instant up to `now_s` (s), during which no fresh sample arrived, at
+    /// `worst_c` (°C): the caller's bound on the plate it could not see (see `SafetyEnvelope`, "Unseen time"; −∞
+    /// counts nothing but still marks the time as counted). The next sample adds only the time after `now_s`, at the
+    /// hotter of the last `worst_c` and itself. Nothing happens before the first sample or for a `now_s` not later
+    /// than the last counted instant.
+    pub fn count_unseen(&mut self, now_s: f64, worst_c: f64) {
+        if self.prev.is_none() || now_s <= self.counted_to_s {
+            return;
+        }
+        self.count(now_s - self.counted_to_s, worst_c);
+        self.counted_to_s = now_s;
+        self.unseen_c = Some(worst_c);
+    }
+
+    /// The time up to which the dose is counted, s (the newest sample's time, or later after unseen time; 0 before
+    /// the first sample).
+    pub fn counted_to_s(&self) -> f64 {
+        self.counted_to_s
     }
 
     /// Accumulated thermal dose, CEM43 minutes.
@@ -294,6 +343,11 @@ impl DoseTracker {
             (true, false) => self.last_interval_s,
             (false, _) => self.longest_interval_s,
         }
+    }
+
+    /// The time of the newest sample, s; `None` before the first sample.
+    pub fn last_sample_s(&self) -> Option<f64> {
+        self.prev.map(|(t, _)| t)
     }
 
     /// The plate temperature the last sample was counted at (reconstructed), °C; `None` before the first sample.
@@ -608,6 +662,37 @@ mod tests {
             "ceiling {} °C after a 5 s gap: want the continuous {continuous_c} °C less 2 · 5 °C/s · 0.2 s",
             cap.anticipating_c(&d)
         );
+    }
+
+    /// Unseen time counts at the caller's bound; the sample that ends it adds only the rest (at the hotter of the
+    /// bound and itself), never the whole gap at the held reading, and a sample stamped before the counted time
+    /// counts nothing twice.
+    #[test]
+    fn unseen_time_counts_at_the_bound_and_the_next_sample_adds_only_the_rest() {
+        let mut d = DoseTracker::new();
+        d.add_sample(0.0, 44.0);
+        d.count_unseen(2.0, 46.0);
+        let after_unseen = cem43_increment_min(46.0, 2.0);
+        assert!(
+            (d.cem43_min() - after_unseen).abs() < 1e-12,
+            "{} vs {after_unseen}",
+            d.cem43_min()
+        );
+        assert_eq!((d.counted_to_s(), d.time_at_or_above_43_s()), (2.0, 2.0));
+        d.add_sample(2.5, 35.0);
+        let want = after_unseen + cem43_increment_min(46.0, 0.5);
+        assert!((d.cem43_min() - want).abs() < 1e-12, "{} vs {want}", d.cem43_min());
+        // Counted up to 3.2 s at −∞ (nothing); a sample stamped 3.1 s then adds nothing, the next one from 3.2 s.
+        d.count_unseen(3.2, f64::NEG_INFINITY);
+        d.add_sample(3.1, 35.0);
+        assert!((d.cem43_min() - want).abs() < 1e-12, "{} vs {want}", d.cem43_min());
+        d.add_sample(3.3, 35.0);
+        let want = want + cem43_increment_min(35.0, 0.1);
+        assert!((d.cem43_min() - want).abs() < 1e-15, "{} vs {want}", d.cem43_min());
+        // Nothing before the first sample.
+        let mut empty = DoseTracker::new();
+        empty.count_unseen(5.0, 48.0);
+        assert_eq!(empty.cem43_min(), 0.0);
     }
 
     #[test]

@@ -40,6 +40,33 @@
 //! on the measured display and, where a forecast is given, on the estimated true plate, which a lagging sensor
 //! would otherwise hide.
 //!
+//! **Unseen time.** A reading that is not fresh (a link fault, a frozen or held reading with an old sample counter,
+//! a non-finite or implausible one) is no measurement of the plate: it adds no dose itself. Once the newest counted
+//! sample is older than `stale_timeout_s` (the envelope has then latched [`FaultCode::SensorStale`] and gates 0 A),
+//! every tick ([`SafetyEnvelope::gate_drive`], [`SafetyEnvelope::hold`]) counts the time since the last counted
+//! instant — from that sample on — at the hottest the plate may have been ([`SafetyEnvelope::unseen_plate_bound_c`]):
+//! the last counted plate, raised by what the strongest heating current `I` gated since that sample could add
+//! while it may still have been applied — the stale timeout, then up to [`UNSEEN_DRIVE_HOLD_S`] (0.25 s) of the
+//! device's watchdog, as a device holds its last command — at `max_measured_rate_c_per_s` (50 °C/s, twice the
+//! default display's full-current rate) times `I / current_limit_a` (a Peltier module's heating, `αIT + I²R/2`, is
+//! at most that fraction of its full-current heating); at most [`ABSOLUTE_MAX_C`] + `limit_margin_c` (49 °C by
+//! default: the over-temperature fault; the device's own cut keeps a plate thermode cannot see below it); and never
+//! below the warmer of a finger ([`FINGER_MAX_C`], 37 °C) and the last hot-side reading, where a plate whose drive
+//! does not heat tends to. On a hot touch (47 °C, 1 A) that is 49 °C; at rest (32 °C, 0.1 A) 37 °C. No cooling is
+//! credited while nothing is seen. When samples come back, the rest of the interval counts at the hotter of that
+//! bound and the new sample (never again at the held reading). So the count is never less than the plate's could
+//! have been — until the budget is spent: from then on the channel is off for good (see "Over budget") and unseen
+//! time adds nothing, so an outage of any length leaves the dose at most at the larger of what it was and the end
+//! of the estimate's allowance, `B·(1 + 2.5 %)`, plus the stale timeout and one tick at the bound (the first count
+//! takes the whole stale timeout at once: 0.21 s at 49 °C and 100 Hz, 0.224 CEM43-min). An outage during a
+//! hot touch therefore usually spends the budget (14 s at 47 °C held used to count 3.7 CEM43-min and grow for as long
+//! as the outage lasted).
+//!
+//! **Over budget.** Once the dose cap leaves no temperature above the display minimum (the estimate's allowance is
+//! used up: [`SafetyEnvelope::dose_budget_spent`]), every drive is 0 A ([`DriveLimits::dose_budget_spent`]) whatever
+//! is asked — not the display minimum at full cooling current, which chills a resting finger — until the ledger is
+//! reset; the runtime refuses every stimulus but air (air is what an off channel does).
+//!
 //! Stuck drive: the time at the current limit counts only while the drive really is at its limit in one
 //! direction and the plate does not answer (the measured display has not moved [`STUCK_PROGRESS_C`] in the
 //! drive's direction since the count started); a change of sign, a drive below the limit, a hold or a fault
@@ -52,6 +79,16 @@ use thermode_model::Rule;
 use crate::error::EnvelopeError;
 use crate::fault::FaultCode;
 use crate::plate::{plate_margin_c, search_current_a, PlateForecast};
+
+/// The warmest a finger on the plate is taken to be, °C: 37 (body core temperature). A plate whose drive does not
+/// heat tends to no more than the warmer of its finger and its hot side; the bound on unseen time uses it
+/// ([`SafetyEnvelope::unseen_plate_bound_c`]).
+pub const FINGER_MAX_C: f64 = 37.0;
+
+/// How long a device may go on applying the last current it was sent after thermode stops sending, s: 0.25 (the
+/// longest watchdog the own protocol accepts, `thermode_link::own::MAX_DEVICE_WATCHDOG_MS`; MeCom and TCS II are
+/// configured by thermode to no more). Added to the stale timeout for the heating a plate may have had unseen.
+pub const UNSEEN_DRIVE_HOLD_S: f64 = 0.25;
 
 /// Movement of the measured display in the drive's direction that shows the plate answers a drive at its limit,
 /// °C: 0.5 (50 steps of the PT-100's resolution, well above its noise; a working module at full current moves
@@ -117,6 +154,9 @@ pub struct DriveLimits {
     /// Cooling limited (or heating imposed): the plate predicted at the end of the tick would pass the minimum
     /// plus the estimate's margin.
     pub cooling_limited_by_plate: bool,
+    /// The thermal-dose budget is spent ([`SafetyEnvelope::dose_budget_spent`]): the drive is off, whatever is
+    /// asked.
+    pub dose_budget_spent: bool,
 }
 
 /// A drive current that has passed the safety envelope. Obtainable only from [`SafetyEnvelope::gate_drive`].
@@ -216,6 +256,11 @@ pub struct SafetyEnvelope {
     lockout_at_s: Option<f64>,
     at_48_since_s: Option<f64>,
     at_limit: Option<AtLimit>,
+    /// The last gated drive, A: a device holds it until the next command or its watchdog.
+    drive_a: f64,
+    /// The strongest heating current gated (or held by the device) since the newest sample the dose counted, A
+    /// (≥ 0).
+    heating_since_sample_a: f64,
 }
 
 impl SafetyEnvelope {
@@ -244,6 +289,8 @@ impl SafetyEnvelope {
             lockout_at_s: None,
             at_48_since_s: None,
             at_limit: None,
+            drive_a: 0.0,
+            heating_since_sample_a: 0.0,
         })
     }
 
@@ -319,12 +366,7 @@ impl SafetyEnvelope {
     /// The highest display set-point now, °C: `max_display_c`, lowered by the dose cap near and after the end of the
     /// budget ([`crate::dose`], "The cap"; from the lockout on never raised again), never below `min_display_c`.
     pub fn effective_max_c(&self) -> f64 {
-        let formula_c = self.dose_cap().ceiling_c(&self.dose);
-        let ceiling_c = if formula_c.is_nan() {
-            formula_c
-        } else {
-            formula_c.min(self.lowest_dose_ceiling_c)
-        };
+        let ceiling_c = self.dose_ceiling_c();
         let (min_c, max_c) = (self.config.min_display_c, self.config.max_display_c);
         // Written so that a NaN ceiling (none is expected) gives the minimum.
         if ceiling_c >= max_c {
@@ -334,6 +376,64 @@ impl SafetyEnvelope {
         } else {
             min_c
         }
+    }
+
+    /// The dose cap's ceiling, °C: the formula's, from the lockout on never raised again (NaN passes through).
+    fn dose_ceiling_c(&self) -> f64 {
+        let formula_c = self.dose_cap().ceiling_c(&self.dose);
+        if formula_c.is_nan() {
+            formula_c
+        } else {
+            formula_c.min(self.lowest_dose_ceiling_c)
+        }
+    }
+
+    /// Whether the thermal-dose budget is spent: the dose cap leaves no temperature above the display minimum (the
+    /// estimate's allowance is used up; module documentation, "Over budget"). The channel is then off: every drive
+    /// is 0 A and the runtime refuses every stimulus but air, until the ledger is reset.
+    pub fn dose_budget_spent(&self) -> bool {
+        let ceiling_c = self.dose_ceiling_c();
+        // A NaN ceiling (none is expected) counts as spent.
+        ceiling_c.is_nan() || ceiling_c <= self.config.min_display_c
+    }
+
+    /// The hottest the plate may have been while no sample was counted (module documentation, "Unseen time"), °C:
+    /// the last counted plate raised by the strongest heating current gated since, held for
+    /// [`UNSEEN_DRIVE_HOLD_S`] beyond the stale timeout at the fastest rate a reading may move
+    /// (`max_measured_rate_c_per_s`) in proportion to the current limit, at most [`ABSOLUTE_MAX_C`] +
+    /// `limit_margin_c` (the over-temperature fault); and never below the warmer of a finger ([`FINGER_MAX_C`]) and
+    /// the last hot-side reading (a plate whose drive does not heat tends to no more than they).
+    pub fn unseen_plate_bound_c(&self) -> f64 {
+        let c = &self.config;
+        let last_c = self.dose.last_plate_c().unwrap_or(f64::NEG_INFINITY);
+        let heating_s = c.stale_timeout_s + UNSEEN_DRIVE_HOLD_S;
+        let rise_c = self.heating_since_sample_a / self.current_limit_a * c.max_measured_rate_c_per_s * heating_s;
+        let heated_c = (last_c + rise_c).min(ABSOLUTE_MAX_C + c.limit_margin_c).max(last_c);
+        let hot_side_c = self.sample.map_or(f64::NEG_INFINITY, |s| s.hot_side_c);
+        heated_c.max(FINGER_MAX_C).max(hot_side_c)
+    }
+
+    /// Counts the dose of the time without a sample at time `now_s` (s), once the newest counted sample is older
+    /// than the stale-sensor timeout: at [`SafetyEnvelope::unseen_plate_bound_c`] until the budget is spent, then
+    /// nothing (the channel is off for good). The lockout engages as on a sample.
+    fn count_unseen_dose(&mut self, now_s: f64) {
+        let Some(last_s) = self.dose.last_sample_s() else {
+            return;
+        };
+        if now_s - last_s <= self.config.stale_timeout_s {
+            return;
+        }
+        let worst_c = if self.dose_budget_spent() {
+            f64::NEG_INFINITY
+        } else {
+            self.unseen_plate_bound_c()
+        };
+        self.dose.count_unseen(now_s, worst_c);
+        if self.dose_lockout_active() {
+            self.dose.lock();
+            self.lockout_at_s.get_or_insert(now_s);
+        }
+        self.lower_dose_ceiling();
     }
 
     /// The newest fresh measurement with finite values, if any.
@@ -477,6 +577,7 @@ impl SafetyEnvelope {
         }
         self.check_rate(m);
         self.dose.add_sample(m.time_s, m.sensor_c);
+        self.heating_since_sample_a = self.drive_a.max(0.0);
         if let Some(code) = self.display_limit_fault(m) {
             self.latch(code, m.time_s);
         }
@@ -600,6 +701,7 @@ impl SafetyEnvelope {
                 self.latch(FaultCode::NonFiniteCommand, now_s);
             }
             self.check_stale(now_s);
+            self.count_unseen_dose(now_s);
         }
         if self.latch.is_some() {
             limits.faulted = true;
@@ -609,6 +711,10 @@ impl SafetyEnvelope {
             limits.no_measurement = true;
             return self.off(limits);
         };
+        if self.dose_budget_spent() {
+            limits.dose_budget_spent = true;
+            return self.off(limits);
+        }
         let limit_a = self.current_limit_a;
         let mut current_a = requested_current_a.clamp(-limit_a, limit_a);
         limits.clamped_to_limit = current_a != requested_current_a;
@@ -627,6 +733,7 @@ impl SafetyEnvelope {
             return self.off(limits);
         }
         let setpoint_c = self.shaped.filter(|s| s.time_s == now_s).map(|s| s.value_c);
+        self.note_drive(current_a);
         DriveCommand {
             current_a,
             fault: None,
@@ -701,6 +808,7 @@ impl SafetyEnvelope {
         if self.advance_clock(now_s) {
             self.armed_at_s.get_or_insert(now_s);
             self.check_stale(now_s);
+            self.count_unseen_dose(now_s);
         }
         self.off(DriveLimits {
             faulted: self.latch.is_some(),
@@ -711,6 +819,7 @@ impl SafetyEnvelope {
     /// A zero-current command carrying the latched fault (if any).
     fn off(&mut self, limits: DriveLimits) -> DriveCommand {
         self.at_limit = None;
+        self.note_drive(0.0);
         DriveCommand {
             current_a: 0.0,
             fault: self.fault(),
@@ -724,6 +833,12 @@ impl SafetyEnvelope {
     /// built for a file that describes the display drives it).
     pub fn refuse_display(&mut self, now_s: f64) {
         self.latch(FaultCode::DisplayNotAsFiled, now_s);
+    }
+
+    /// Remembers the drive just gated (`current_a`, A), for the bound on unseen time.
+    fn note_drive(&mut self, current_a: f64) {
+        self.drive_a = current_a;
+        self.heating_since_sample_a = self.heating_since_sample_a.max(current_a);
     }
 
     /// Clears the latched fault at time `now_s` (s). Returns the cleared fault (`None` if none was latched).

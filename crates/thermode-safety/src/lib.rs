@@ -37,7 +37,10 @@ pub mod plate;
 
 pub use config::{EnvelopeConfig, ABSOLUTE_MAX_C, ABSOLUTE_MAX_RATE_C_PER_S, ABSOLUTE_MIN_C};
 pub use dose::{DoseCap, DoseLedger, DoseTracker};
-pub use envelope::{DriveCommand, DriveLimits, Measurement, SafetyEnvelope, SetpointDecision, SetpointLimits};
+pub use envelope::{
+    DriveCommand, DriveLimits, Measurement, SafetyEnvelope, SetpointDecision, SetpointLimits, FINGER_MAX_C,
+    UNSEEN_DRIVE_HOLD_S,
+};
 pub use error::EnvelopeError;
 pub use fault::FaultCode;
 pub use plate::{MeasuredOnly, PlateForecast, PlateNow};

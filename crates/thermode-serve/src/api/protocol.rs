@@ -10,7 +10,9 @@ use thermode_model::params::Range;
 use thermode_protocol::request::{Marker, Setpoint, Touch};
 pub use thermode_protocol::request::{MAX_ID_CHARS, MAX_MARKER_CHARS, MAX_NAME_CHARS, MIN_SUBSCRIBE_HZ};
 use thermode_protocol::status::Limits;
-use thermode_protocol::{finite, AppliedAt, ChannelState, ChannelTelemetry, Done, Request, RequestId, Telemetry};
+use thermode_protocol::{
+    finite, AppliedAt, ChannelState, ChannelTelemetry, Done, OffReason, Request, RequestId, Telemetry,
+};
 pub use thermode_protocol::{ApiError, ErrorCode};
 use thermode_runtime::command::{Command, Owner};
 use thermode_runtime::engine::Stimulus;
@@ -284,12 +286,63 @@ pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> ChannelStat
         device_cut: status.device_cut.map(|c| c.name().to_string()),
         device_cut_description: status.device_cut.map(|c| c.to_string()),
         engine_failed: status.engine_failed,
+        dose_budget_spent: status.dose_budget_spent,
+        off_reason: off_reason(status),
+    }
+}
+
+/// Why the channel's drive is off whatever is asked (the first that applies, in [`OffReason`]'s order), if it is.
+pub fn off_reason(status: &ChannelStatus) -> Option<OffReason> {
+    if status.engine_failed {
+        Some(OffReason::EngineFailed)
+    } else if status.telemetry.fault.is_some() {
+        Some(OffReason::Fault)
+    } else if status.device_cut.is_some() {
+        Some(OffReason::DeviceCut)
+    } else if !status.link_ok {
+        Some(OffReason::LinkDown)
+    } else if status.dose_budget_spent {
+        Some(OffReason::DoseBudgetSpent)
+    } else if status.held_off {
+        Some(OffReason::HeldOff)
+    } else {
+        None
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every reason a channel is off has its words on the dashboard (`OFF_WORDS` in `dashboard.html`).
+    #[test]
+    fn the_dashboard_says_every_off_reason_in_words() {
+        let every = [
+            OffReason::EngineFailed,
+            OffReason::Fault,
+            OffReason::DeviceCut,
+            OffReason::LinkDown,
+            OffReason::DoseBudgetSpent,
+            OffReason::HeldOff,
+        ];
+        // A new reason must be added to the list above (and to the dashboard): this match has no wildcard.
+        for reason in every {
+            match reason {
+                OffReason::EngineFailed
+                | OffReason::Fault
+                | OffReason::DeviceCut
+                | OffReason::LinkDown
+                | OffReason::DoseBudgetSpent
+                | OffReason::HeldOff => {}
+            }
+            let name = serde_json::to_value(reason).expect("serialize");
+            let key = format!("  {}: \"", name.as_str().expect("a string"));
+            assert!(
+                crate::api::DASHBOARD_HTML.contains(&key),
+                "the dashboard has no words for {name} (looked for {key:?})"
+            );
+        }
+    }
 
     fn limits() -> RequestLimits {
         RequestLimits {

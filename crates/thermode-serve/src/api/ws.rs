@@ -381,6 +381,7 @@ pub(crate) fn loop_error(e: CommandError) -> ApiError {
         CommandError::Cancelled => ErrorCode::Cancelled,
         CommandError::RecordingFailed => ErrorCode::RecordingFailed,
         CommandError::DoseNotRecorded => ErrorCode::DoseNotRecorded,
+        CommandError::DoseBudgetSpent { .. } => ErrorCode::DoseBudgetSpent,
     };
     ApiError::new(code, e.to_string())
 }

@@ -45,6 +45,10 @@ pub struct SpyLog {
     pub min_plate_c: f64,
     /// Largest |current| applied \[A\].
     pub max_abs_current_a: f64,
+    /// Channel 0's true plate after every poll: (device time \[s\], plate \[°C\]).
+    pub plate_trace: Vec<(f64, f64)>,
+    /// The outage of [`SpyControl::outage_when_hot`] once it is scheduled: (from, until) \[s, device time\].
+    pub outage_s: Option<(f64, f64)>,
 }
 
 /// What the test asks the spy to do at the next step.
@@ -58,6 +62,9 @@ pub struct SpyControl {
     pub failing_reads: Vec<usize>,
     /// Channels whose reads say the device's own protection cut them.
     pub cut_reads: Vec<(usize, DeviceCut)>,
+    /// Reads of channel 0 fail for a while once its true plate first reaches a temperature, in device time (so a
+    /// test on a jumping clock gets it at the right moment): (plate \[°C\], delay after that \[s\], length \[s\]).
+    pub outage_when_hot: Option<(f64, f64, f64)>,
 }
 
 /// The simulated display with a recorder and a remote control.
@@ -114,6 +121,13 @@ impl Device for SpyDevice {
             return Err(DeviceError::Cut { channel, cut });
         }
         drop(control);
+        let outage = self.log.lock().expect("spy log").outage_s;
+        if channel == 0 && outage.is_some_and(|(from_s, until_s)| (from_s..until_s).contains(&self.time_s)) {
+            let fault = thermode_device::LinkFault::ReadFailed {
+                error: std::io::ErrorKind::TimedOut.into(),
+            };
+            return Err(DeviceError::Link(thermode_device::LinkError::device("spy", fault)));
+        }
         self.inner.read(channel)
     }
 
@@ -134,6 +148,14 @@ impl Device for SpyDevice {
         self.inner.poll(now_s);
         self.time_s = self.inner.time_s();
         let mut log = self.log.lock().expect("spy log");
+        let plate_0_c = self.inner.channel(0).expect("channel 0").state().plate_c;
+        log.plate_trace.push((self.time_s, plate_0_c));
+        let when_hot = self.control.lock().expect("spy control").outage_when_hot;
+        if let Some((hot_c, delay_s, length_s)) = when_hot.filter(|_| log.outage_s.is_none()) {
+            if plate_0_c >= hot_c {
+                log.outage_s = Some((self.time_s + delay_s, self.time_s + delay_s + length_s));
+            }
+        }
         for channel in 0..self.inner.channel_count() {
             let plate_c = self.inner.channel(channel).expect("channel").state().plate_c;
             log.max_plate_c = log.max_plate_c.max(plate_c);

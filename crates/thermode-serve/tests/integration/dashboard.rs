@@ -281,6 +281,13 @@ fn the_dashboard_touches_plots_and_stops_in_a_real_browser() {
             cdp.wait_for(all_air, 10.0).await,
             "every badge shows air after STOP ALL"
         );
+        // The status's off_reason (held_off after a stop-all) is said in words under each card.
+        let said = "document.getElementById('fault-0').textContent.startsWith('stopped: drive held at 0 A')";
+        assert!(
+            cdp.wait_for(said, 10.0).await,
+            "the card says why the channel is off: {}",
+            cdp.eval("document.getElementById('fault-0').textContent").await
+        );
         png
     });
     let status = get_json(addr, "/api/status");

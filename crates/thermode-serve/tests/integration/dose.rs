@@ -18,18 +18,28 @@ use thermode_runtime::command::CommandError;
 use thermode_runtime::ledger::{read_ledger, LedgerError, LEDGER_FILE};
 use thermode_runtime::snapshot::Mode;
 use thermode_runtime::{Command, EngineFactory, Owner, RuntimeError};
+use thermode_safety::dose::{cem43_increment_min, DOSE_ESTIMATE_ALLOWANCE};
 use thermode_serve::{Daemon, ServeError};
 
 /// A daemon with the state directory `dir` on a jumping clock, one channel, and its spy's shared log.
 fn start(dir: &std::path::Path, engines: EngineFactory) -> (Daemon, Arc<std::sync::Mutex<common::SpyLog>>) {
+    let (daemon, log, _) = start_spy(dir, engines);
+    (daemon, log)
+}
+
+/// [`start`], and the spy's remote control.
+fn start_spy(dir: &std::path::Path, engines: EngineFactory) -> (Daemon, SpyLogShared, SpyControlShared) {
     let device = SpyDevice::new(1);
-    let log = device.log.clone();
+    let (log, control) = (device.log.clone(), device.control.clone());
     let mut config = test_config();
     config.core.state_dir = Some(dir.to_path_buf());
     let clock: Arc<dyn Clock> = Arc::new(ManualClock::jumping());
     let daemon = Daemon::start(config, Box::new(device), engines, clock).expect("daemon starts");
-    (daemon, log)
+    (daemon, log, control)
 }
+
+type SpyLogShared = Arc<std::sync::Mutex<common::SpyLog>>;
+type SpyControlShared = Arc<std::sync::Mutex<common::SpyControl>>;
 
 /// Asks channel 0 for 48 °C (direct, 20 °C/s) and returns the loop time at which it took effect.
 fn ask_48(daemon: &Daemon) -> f64 {
@@ -258,4 +268,145 @@ fn a_ledger_of_another_display_refuses_the_start() {
         }
         other => panic!("a ledger with channel 3 on a one-channel display: {other:?}"),
     }
+}
+
+/// The true plate's dose over the spy's trace of channel 0 from `from_s` until `until_s` \[CEM43-min\]: each interval at the
+/// hotter of its ends (an upper bound of the plate's between them, as the envelope counts).
+fn true_dose_min(trace: &[(f64, f64)], from_s: f64, until_s: f64) -> f64 {
+    trace
+        .windows(2)
+        .filter(|w| w[0].0 >= from_s && w[1].0 <= until_s)
+        .map(|w| cem43_increment_min(w[0].1.max(w[1].1), w[1].0 - w[0].0))
+        .sum()
+}
+
+/// One session on a fresh state directory: direct 47 °C (the model controller); 1.5 s after the true plate first
+/// reaches 46.5 °C the device's reads fail for `outage_s`; 5 s after they are back: (the daemon, its log, the
+/// outage in loop time, the true plate's dose before the outage and the counted dose at the end).
+fn hot_outage(dir: &std::path::Path, outage_s: f64) -> (Daemon, SpyLogShared, (f64, f64), f64, f64) {
+    let (daemon, log, control) = start_spy(dir, pipelines());
+    control.lock().expect("control").outage_when_hot = Some((46.5, 1.5, outage_s));
+    let answer = daemon
+        .commands()
+        .expect("commands")
+        .request(Command::direct(0, 47.0, 20.0, Owner::Script))
+        .expect("queued");
+    answer.blocking_recv().expect("answered").expect("applied");
+    let scheduled = wait_until(60.0, || log.lock().expect("log").outage_s.is_some());
+    assert!(scheduled, "the plate never reached 46.5 °C");
+    let (from_s, until_s) = log.lock().expect("log").outage_s.expect("outage");
+    run_until(&daemon, until_s + 5.0);
+    let log_now = log.lock().expect("log");
+    let sensor_before_c = log_now
+        .plate_trace
+        .iter()
+        .rev()
+        .find(|(t, _)| *t < from_s)
+        .map_or(f64::NAN, |p| p.1);
+    drop(log_now);
+    assert!(
+        sensor_before_c > 46.0,
+        "the plate was {sensor_before_c} °C when the outage began"
+    );
+    let dose_end = daemon.snapshot().expect("snapshot").channels[0].dose.cem43_min;
+    let truth_before = true_dose_min(&log.lock().expect("log").plate_trace, f64::NEG_INFINITY, from_s);
+    (daemon, log, (from_s, until_s), truth_before, dose_end)
+}
+
+/// A hot touch (direct 47 °C, the model controller) during which the device's reads fail for 14 s, and in another
+/// session for 60 s: the dose counts the unseen time at the envelope's bound (49 °C after a heating drive) until
+/// the budget is spent, then nothing — never the held 47 °C for as long as the outage lasts (that counted 3.7
+/// CEM43-min per 14 s) — and never less than the true plate's dose. The channel is then off: after the fault is
+/// cleared, asking it to heat (a set-point, a warm touch) is refused with `dose_budget_spent`, `/api/status` says
+/// `off_reason: dose_budget_spent`, and its drive stays at 0 A while its old 47 °C request still stands (before
+/// this change a channel over budget was driven to 15 °C at −2.8 A).
+#[test]
+fn a_link_fault_during_a_hot_touch_spends_the_budget_at_the_bound_and_the_channel_is_then_off() {
+    let envelope = thermode_safety::EnvelopeConfig::default();
+    let spent_at = envelope.cem43_budget_min * (1.0 + DOSE_ESTIMATE_ALLOWANCE);
+    let bound = spent_at + cem43_increment_min(49.0, envelope.stale_timeout_s + 0.01);
+    let tmp_short = tempfile::tempdir().expect("temp dir");
+    let (short, _, (from_14, until_14), truth_before_14, dose_14) = hot_outage(tmp_short.path(), 14.0);
+    short.shutdown().expect("clean shutdown");
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let (daemon, log, (from_s, until_s), truth_before, dose_60) = hot_outage(tmp.path(), 60.0);
+    let truth = true_dose_min(&log.lock().expect("log").plate_trace, f64::NEG_INFINITY, f64::INFINITY);
+    let held_14 = truth_before_14 + cem43_increment_min(47.0, 14.0);
+    println!(
+        "direct 47 °C, reads failing {from_14:.2}-{until_14:.2} s: dose {dose_14:.4} CEM43-min 5 s after (true plate \
+         {truth_before_14:.4} before the outage; the held 47 °C would have counted {held_14:.4}); reads failing \
+         {from_s:.2}-{until_s:.2} s: {dose_60:.4} (true plate {truth_before:.4} before, {truth:.4} in all); bound \
+         [{spent_at:.4}, {bound:.4}]"
+    );
+    for (what, dose) in [("14 s", dose_14), ("60 s", dose_60)] {
+        assert!(
+            dose >= spent_at && dose <= bound,
+            "{what} outage: {dose} CEM43-min, want within [{spent_at}, {bound}]"
+        );
+    }
+    assert!(dose_60 >= truth, "counted {dose_60} CEM43-min, the true plate {truth}");
+
+    // The outage faulted the channel (stale sensor); once cleared, the spent budget keeps it off.
+    let cleared = daemon
+        .commands()
+        .expect("commands")
+        .request(Command::ClearFault { channel: 0 })
+        .expect("queued")
+        .blocking_recv()
+        .expect("answered");
+    let t_clear = cleared.expect("the fault clears once readings are back").time_s;
+    let refused = daemon
+        .commands()
+        .expect("commands")
+        .request(Command::direct(0, 44.0, 5.0, Owner::Script))
+        .expect("queued")
+        .blocking_recv()
+        .expect("answered");
+    assert!(
+        matches!(refused, Err(CommandError::DoseBudgetSpent { channel: 0, .. })),
+        "{refused:?}"
+    );
+    let addr = daemon.http_addr();
+    let replies = common::client_runtime().block_on(async {
+        let mut ws = common::ws_connect(addr, "").await;
+        let setpoint = r#"{"type":"setpoint","id":1,"channel":0,"temp_c":45,"rate_c_s":2}"#;
+        let touch = r#"{"type":"touch","id":2,"channel":0,"material":"copper","object_temp_c":60}"#;
+        (common::ask(&mut ws, setpoint).await, common::ask(&mut ws, touch).await)
+    });
+    for reply in [&replies.0, &replies.1] {
+        println!("asked to heat over budget: {reply}");
+        assert_eq!(
+            (reply["type"].as_str(), reply["code"].as_str()),
+            (Some("error"), Some("dose_budget_spent")),
+            "{reply}"
+        );
+        assert!(
+            reply["message"].as_str().is_some_and(|m| m.contains("dose reset")),
+            "{reply}"
+        );
+    }
+    run_until(&daemon, t_clear + 5.0);
+    let status = get_json(addr, "/api/status");
+    let ch = &status["channels"][0];
+    assert_eq!(
+        (ch["off_reason"].as_str(), ch["dose_budget_spent"].as_bool()),
+        (Some("dose_budget_spent"), Some(true)),
+        "{ch}"
+    );
+    let log = log.lock().expect("log");
+    let after: Vec<f64> = log
+        .applied
+        .iter()
+        .filter(|a| a.channel == 0 && a.time_s > t_clear + 0.1)
+        .map(|a| a.current_a)
+        .collect();
+    let largest_a = after.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+    println!(
+        "over budget with the 47 °C request standing: {} drives, largest |current| {largest_a} A",
+        after.len()
+    );
+    assert!(after.len() > 100, "{} drives", after.len());
+    assert_eq!(largest_a, 0.0, "a spent channel was driven at {largest_a} A, want 0 A");
+    drop(log);
+    daemon.shutdown().expect("clean shutdown");
 }

@@ -460,6 +460,10 @@ impl thermode_runtime::ChannelEngine for Booby {
         self.inner.dose()
     }
 
+    fn dose_budget_spent(&self) -> bool {
+        self.inner.dose_budget_spent()
+    }
+
     fn restore_dose(&mut self, saved: &thermode_safety::DoseLedger) -> Result<(), thermode_runtime::EngineError> {
         self.inner.restore_dose(saved)
     }

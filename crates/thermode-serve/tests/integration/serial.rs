@@ -1,7 +1,8 @@
 //! The real hardware path end to end without hardware: the daemon drives the emulated firmware (the simulated
 //! display behind the device protocol) over a pseudo-terminal. A touch over the WebSocket cools the emulated plate;
 //! when the port vanishes, every channel faults (stale sensor), its drive is off, touches are refused with
-//! `device_fault`, and the daemon keeps answering.
+//! `device_fault`, and the daemon keeps answering. A device that falls silent during a hot set-point has its unseen
+//! time counted at the envelope's bound on the plate, until the dose budget is spent, then not at all.
 
 use crate::common;
 
@@ -215,4 +216,122 @@ fn the_link_recovers_from_a_silent_device_and_from_an_emulator_restarted_on_the_
         drop(second);
     });
     daemon.shutdown().expect("clean shutdown");
+}
+
+/// The true plate's CEM43 \[min\] in an emulator trace (`time_s,channel,plate_c,…`) of channel 0: each step at the
+/// hotter of its ends.
+fn traced_dose_min(trace: &str) -> f64 {
+    let plate: Vec<(f64, f64)> = trace
+        .lines()
+        .skip(1)
+        .filter_map(|line| {
+            let mut f = line.split(',');
+            let time_s = f.next()?.parse::<f64>().ok()?;
+            let channel = f.next()?;
+            let plate_c = f.next()?.parse::<f64>().ok()?;
+            (channel == "0").then_some((time_s, plate_c))
+        })
+        .collect();
+    plate
+        .windows(2)
+        .map(|w| thermode_safety::dose::cem43_increment_min(w[0].1.max(w[1].1), w[1].0 - w[0].0))
+        .sum()
+}
+
+/// The own protocol's emulator falls silent (LinkFaults mute) during a hot set-point (47 °C): the envelope counts
+/// the unseen time at its bound on the plate until the budget is spent, then nothing — the dose 3 s and 6 s into the
+/// outage is the same, within the bound, and at least the emulated plate's true dose (from its trace) — and after
+/// the link is back the channel is off: `off_reason` `dose_budget_spent` once its fault is cleared.
+#[test]
+fn a_silent_device_during_a_hot_set_point_spends_the_budget_at_the_bound_not_at_the_held_reading() {
+    use thermode_link::own::emulator::LinkFaults;
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let trace_path = tmp.path().join("trace.csv");
+    let display = SimulatedDisplay::<DefaultFinger>::fingertips(&DeviceConfig::default(), 1, 5).expect("display");
+    let mut emulator = Emulator::new(display, EmulatorConfig::default()).expect("emulator");
+    emulator.trace_to(Box::new(std::fs::File::create(&trace_path).expect("trace file")));
+    let pty = PtyEmulator::spawn(emulator, Arc::new(MonotonicClock::new())).expect("pseudo-terminal");
+    let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
+    let serial = SerialDevice::open(pty.path(), &SerialConfig::default(), clock.clone()).expect("handshake");
+    let mut config = test_config();
+    config.device_label = format!("serial:{}", pty.path());
+    let daemon = Daemon::start(config, Box::new(serial), pipelines(), clock).expect("daemon");
+    let addr = daemon.http_addr();
+    let dose = || {
+        get_json(addr, "/api/status")["channels"][0]["cem43_min"]
+            .as_f64()
+            .unwrap_or(f64::NAN)
+    };
+    // A script's set-point: it stays when no client is connected.
+    let answer = daemon
+        .commands()
+        .expect("commands")
+        .request(thermode_runtime::Command::direct(
+            0,
+            47.0,
+            20.0,
+            thermode_runtime::Owner::Script,
+        ))
+        .expect("queued");
+    answer.blocking_recv().expect("answered").expect("applied");
+    let hot = common::wait_until(20.0, || {
+        channel(&get_json(addr, "/api/status"), 0)["sensor_c"]
+            .as_f64()
+            .is_some_and(|c| c >= 46.5)
+    });
+    assert!(
+        hot,
+        "the plate never reached 46.5 °C: {}",
+        channel(&get_json(addr, "/api/status"), 0)
+    );
+    std::thread::sleep(Duration::from_millis(500));
+    let before = dose();
+    pty.control().set_link_faults(LinkFaults {
+        mute: true,
+        ..LinkFaults::default()
+    });
+    std::thread::sleep(Duration::from_secs(3));
+    let at_3_s = dose();
+    std::thread::sleep(Duration::from_secs(3));
+    let at_6_s = dose();
+    pty.control().set_link_faults(LinkFaults::default());
+    let link_state = || get_json(addr, "/api/status")["link"]["state"].clone();
+    assert!(common::wait_until(20.0, || link_state() == "up"), "{}", link_state());
+    std::thread::sleep(Duration::from_secs(1));
+    let cleared = client_runtime().block_on(async {
+        let mut ws = ws_connect(addr, "").await;
+        for id in 10..110 {
+            let r = ask(&mut ws, &format!(r#"{{"type":"clear_fault","id":{id},"channel":0}}"#)).await;
+            if r["type"] == "ok" {
+                return true;
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        false
+    });
+    assert!(cleared, "the fault never cleared");
+    std::thread::sleep(Duration::from_millis(300));
+    let status = get_json(addr, "/api/status");
+    let ch = channel(&status, 0).clone();
+    let end = ch["cem43_min"].as_f64().unwrap_or(f64::NAN);
+    daemon.shutdown().expect("clean shutdown");
+    drop(pty);
+    let truth = traced_dose_min(&std::fs::read_to_string(&trace_path).expect("trace"));
+    let envelope = thermode_safety::EnvelopeConfig::default();
+    let spent_at = envelope.cem43_budget_min * (1.0 + thermode_safety::dose::DOSE_ESTIMATE_ALLOWANCE);
+    let bound = spent_at + thermode_safety::dose::cem43_increment_min(49.0, envelope.stale_timeout_s + 0.01);
+    println!(
+        "own protocol, silent for 6 s at 47 °C: dose {before:.4} before, {at_3_s:.4} after 3 s, {at_6_s:.4} after 6 s, \
+         {end:.4} at the end (bound [{spent_at:.4}, {bound:.4}]); the emulated plate's true dose {truth:.4}; the held \
+         reading would have added {:.4} per 6 s",
+        thermode_safety::dose::cem43_increment_min(47.0, 6.0)
+    );
+    assert!(
+        at_3_s >= spent_at && at_3_s <= bound,
+        "3 s into the outage: {at_3_s} CEM43-min, want within [{spent_at}, {bound}]"
+    );
+    assert_eq!(at_6_s, at_3_s, "the count grew after the budget was spent");
+    assert!(end - at_6_s < 1e-3, "the return added {}", end - at_6_s);
+    assert!(end >= truth, "counted {end} CEM43-min, the emulated plate {truth}");
+    assert_eq!(ch["off_reason"], "dose_budget_spent", "{ch}");
 }
