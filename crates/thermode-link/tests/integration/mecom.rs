@@ -461,7 +461,9 @@ fn killed_mid_drive_with_a_second_client(
 fn a_host_killed_mid_heat_with_a_second_client_polling_leaves_the_plate_at_most_48_5() {
     let defaults = MecomConfig::default();
     let (lower_c, upper_c) = (defaults.lower_error_c, defaults.upper_error_c);
-    for kill_at_c in [32.0, 36.0, upper_c - 1.0] {
+    // The last kill comes 2.5 °C below the threshold: the reading crosses that window in about 0.15 s at full
+    // current, wide enough for a loop ticking every 5 ms on a loaded machine (1 °C was missed under load).
+    for kill_at_c in [32.0, 36.0, upper_c - 2.5] {
         let (_, peak_c, error) = killed_mid_drive_with_a_second_client((lower_c, upper_c), 48.0, kill_at_c);
         assert!(
             peak_c <= 48.5,
