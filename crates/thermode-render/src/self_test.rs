@@ -52,5 +52,5 @@ pub fn self_test(spec: &RenderSpec, pipeline: &ChannelPipeline) -> Result<Option
     }
     let model = plant_model(&believed)?;
     let uncertainty = believed.render.sensor_lag_uncertainty;
-    Ok(Some(assess(&model, 0.0, uncertainty, &record)))
+    Ok(Some(assess(&model, uncertainty, &record)))
 }

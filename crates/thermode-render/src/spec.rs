@@ -59,7 +59,7 @@ pub struct RenderSpec {
     pub rate_hz: f64,
     /// Largest plant substep \[s\]. Default [`PLANT_SUBSTEP_S`].
     pub plant_substep_s: f64,
-    /// Seed of the sensor noise (combined with the material's name, see [`noise_seed`](crate::run::noise_seed)). Default [`DEFAULT_SEED`].
+    /// Seed of the sensor noise (combined with the material's name, see [`noise_seed`]). Default [`DEFAULT_SEED`].
     pub seed: u64,
 }
 
