@@ -93,9 +93,10 @@ pub struct LabRunArgs {
     /// Let the simulated participant answer (calibrated to the paper's 66 % real identification rate).
     #[arg(long, alias = "observer")]
     simulated_participant: bool,
-    /// Multiplies every wait (1 = real time, 0 = no waiting).
-    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
-    time_scale: f64,
+    /// Multiplies every wait of a simulated session (1 = real time, e.g. to pace a demo; default 0: a simulation
+    /// does not wait). A display presents in real time (1).
+    #[arg(long, allow_negative_numbers = true)]
+    time_scale: Option<f64>,
     /// Standard deviation of the model finger's start temperature from trial to trial [°C] (0 = always at rest).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     finger_drift_sd_c: f64,
@@ -136,7 +137,9 @@ pub struct LabRunArgs {
 /// Runs `thermode lab run`.
 pub fn run(args: &LabRunArgs) -> Result<()> {
     let experiment = ExperimentFile::load(&args.experiment)?;
-    thermode_model::params::Rule::NonNegative.check("--time-scale", args.time_scale)?;
+    if let Some(scale) = args.time_scale {
+        thermode_model::params::Rule::NonNegative.check("--time-scale", scale)?;
+    }
     let participants = if args.all_participants {
         experiment.experiment.participant_ids.clone()
     } else {
@@ -157,8 +160,8 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
         let [participant] = participants.as_slice() else {
             bail!("a display presents to one participant at a time: give one --participant");
         };
-        if args.time_scale != 1.0 {
-            bail!("--time-scale {}: a display presents in real time (1)", args.time_scale);
+        if let Some(scale) = args.time_scale.filter(|&s| s != 1.0) {
+            bail!("--time-scale {scale}: a display presents in real time (1)");
         }
         return run_live(args, &experiment, participant, &mut stdout);
     }
@@ -449,7 +452,7 @@ fn session(
     let device = json!({
         "stimulus": description,
         "answers": who.answers,
-        "time_scale": args.time_scale,
+        "time_scale": simulated_time_scale(args),
     });
     let interactive = !args.simulated_participant && args.responses.is_none();
     let mut console = TerminalConsole::new(input, out);
@@ -461,7 +464,7 @@ fn session(
         stimulus,
         responder: responder.as_mut(),
         clock: &clock,
-        time_scale: args.time_scale,
+        time_scale: simulated_time_scale(args),
         console: &mut console,
         interactive,
     }
@@ -546,4 +549,9 @@ fn controller(args: &LabRunArgs, device: &DeviceConfig) -> Result<ControllerKind
             Ok(ControllerKind::Pid(gains))
         }
     }
+}
+
+/// How a simulated session paces its waits: `--time-scale`, else 0 (a simulation does not wait).
+fn simulated_time_scale(args: &LabRunArgs) -> f64 {
+    args.time_scale.unwrap_or(0.0)
 }
