@@ -38,7 +38,7 @@ pub struct ServeArgs {
     #[command(flatten)]
     pub display: DisplayArgs,
     /// Control-loop rate [Hz], 1 to 1000.
-    #[arg(long, value_name = "HZ", default_value_t = 100.0)]
+    #[arg(long, value_name = "HZ", default_value_t = 100.0, allow_negative_numbers = true)]
     pub rate: f64,
     /// Address to listen on. Anything but loopback requires --token.
     #[arg(long, value_name = "ADDR", default_value = "127.0.0.1")]
@@ -74,10 +74,10 @@ pub struct ServeArgs {
     #[arg(long = "record-max-bytes", value_name = "BYTES")]
     pub record_max_bytes: Option<u64>,
     /// Release a disconnected client's contacts after this grace period [s].
-    #[arg(long = "release-after", value_name = "S", default_value_t = 2.0)]
+    #[arg(long = "release-after", value_name = "S", default_value_t = 2.0, allow_negative_numbers = true)]
     pub release_after: f64,
     /// Stop after this many seconds (default: run until interrupted).
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
     pub duration: Option<f64>,
     /// Directory of the dose ledger, which keeps each channel's thermal dose across restarts (see `thermode dose`)
     /// [default: $XDG_STATE_HOME/thermode, else ~/.local/state/thermode].
