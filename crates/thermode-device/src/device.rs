@@ -51,6 +51,27 @@ impl Reading {
     }
 }
 
+/// What a device measures or drives itself, so that the numbers it cannot give are reported as unknown (`null`),
+/// never as the controller's or the model's guess.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Measures {
+    /// The device drives the Peltier current thermode asks for and reports what it delivers. False for a
+    /// temperature-commanded device (a TCS II, a MeCom controller in temperature mode), whose own controller sets
+    /// the current: thermode's current and its model's finger estimate built on it do not reach the plate.
+    pub drive_current: bool,
+    /// The device reports its hot side (a TCS II reports none).
+    pub hot_side: bool,
+}
+
+impl Measures {
+    /// A current-driven display that reports its current and hot side (the simulated display, thermode's own
+    /// protocol, MeCom in current mode).
+    pub const ALL: Measures = Measures {
+        drive_current: true,
+        hot_side: true,
+    };
+}
+
 /// A thermal display: channels that take gated drive commands and give sensor readings.
 pub trait Device {
     /// Number of channels.
@@ -86,6 +107,11 @@ pub trait Device {
     /// `None` for a device without a link (the default).
     fn link_health(&self) -> Option<std::sync::Arc<crate::LinkHealth>> {
         None
+    }
+
+    /// What the device measures or drives itself (default: everything, [`Measures::ALL`]).
+    fn measures(&self) -> Measures {
+        Measures::ALL
     }
 }
 
@@ -311,5 +337,9 @@ impl<D: Device> Device for RecordingDevice<D> {
 
     fn link_health(&self) -> Option<std::sync::Arc<crate::LinkHealth>> {
         self.inner.link_health()
+    }
+
+    fn measures(&self) -> Measures {
+        self.inner.measures()
     }
 }

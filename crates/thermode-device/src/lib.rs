@@ -50,7 +50,7 @@ pub mod sensor;
 
 pub use channel::{ChannelState, Fault, HeatFlows, Polarity, SimulatedChannel, MAX_SUBSTEP_S};
 pub use config::DeviceConfig;
-pub use device::{Device, Reading, RecordedCommand, RecordingDevice, SimulatedDisplay, MAX_CHANNELS};
+pub use device::{Device, Measures, Reading, RecordedCommand, RecordingDevice, SimulatedDisplay, MAX_CHANNELS};
 pub use error::{DeviceCut, DeviceError};
 pub use finger::{default_finger, DefaultFinger, NoFinger, PlateFinger};
 pub use link::LinkHealth;

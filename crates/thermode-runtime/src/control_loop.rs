@@ -25,14 +25,14 @@ use std::sync::mpsc::{sync_channel, SyncSender, TryRecvError, TrySendError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
-use thermode_device::{Device, DeviceError, Reading, MAX_CHANNELS};
+use thermode_device::{Device, DeviceError, Measures, Reading, MAX_CHANNELS};
 use thermode_model::params::Rule;
 use thermode_safety::{DoseLedger, DriveCommand, FaultCode};
 
 use crate::command::{
     Applied, Command, CommandError, CommandReceiver, CommandSender, Owner, Queued, Reply, URGENT_QUEUE_LEN,
 };
-use crate::engine::{ChannelEngine, EngineError, EngineFactory, Stimulus};
+use crate::engine::{ChannelEngine, EngineError, EngineFactory, Stimulus, Telemetry};
 use crate::error::RuntimeError;
 use crate::interlock::Interlock;
 use crate::limits::StimulusLimits;
@@ -310,6 +310,8 @@ struct Counters {
 
 struct ControlLoop {
     device: Box<dyn Device + Send>,
+    /// What the device measures or drives itself (read once: it does not change).
+    measures: Measures,
     slots: Vec<Slot>,
     status: Vec<ChannelStatus>,
     commands: CommandReceiver,
@@ -397,6 +399,7 @@ impl ControlLoop {
         }));
         let window = config.stats_window_ticks();
         Ok(ControlLoop {
+            measures: device.measures(),
             device,
             slots,
             status,
@@ -507,7 +510,7 @@ impl ControlLoop {
         }
         status.link_ok = link_ok;
         status.engine_failed = slot.failed;
-        status.telemetry = telemetry;
+        status.telemetry = unknown_unmeasured(telemetry, self.measures);
     }
 
     /// The urgent lane first (all of it), then at most `commands_per_tick` ordinary commands.
@@ -832,6 +835,21 @@ fn air_status(channel: usize, air: &Arc<str>, dose: DoseLedger, dose_budget_spen
         dose,
         dose_budget_spent,
     }
+}
+
+/// `telemetry` with what the device does not measure or drive itself as unknown (NaN, `null` on the wire): the hot
+/// side of a device without one, and, on a temperature-commanded device, the current and the finger estimate built
+/// on it (thermode's current does not reach its plate).
+fn unknown_unmeasured(mut telemetry: Telemetry, measures: Measures) -> Telemetry {
+    if !measures.drive_current {
+        telemetry.requested_current_a = f64::NAN;
+        telemetry.current_a = f64::NAN;
+        telemetry.finger_c = f64::NAN;
+    }
+    if !measures.hot_side {
+        telemetry.hot_side_c = f64::NAN;
+    }
+    telemetry
 }
 
 /// A new stimulus on a channel: it belongs to `owner`, any pending release and the stop-all hold end.

@@ -53,8 +53,8 @@ pub use crate::host::Port;
 use crate::host::{self, read_step, start_thread, ReadStep, Reconnector, Recovering};
 use crate::own::guard::{sensor_lag_cooling_margin_c, sensor_lag_margin_c};
 use thermode_device::{
-    Device, DeviceConfig, DeviceCut, DeviceError, DownReason, LinkError, LinkFault, LinkHealth, MecomSetup, OsError,
-    Reading, RequestFault, MAX_CHANNELS,
+    Device, DeviceConfig, DeviceCut, DeviceError, DownReason, LinkError, LinkFault, LinkHealth, Measures, MecomSetup,
+    OsError, Reading, RequestFault, MAX_CHANNELS,
 };
 
 /// Default baud rate of a MeCom serial port \[bit/s\]: 57600 (the TEC family's default and the rate its service
@@ -1178,6 +1178,15 @@ impl Device for MecomDevice {
 
     fn link_health(&self) -> Option<Arc<LinkHealth>> {
         Some(Arc::clone(&self.health))
+    }
+
+    /// In temperature mode the controller sets the current itself (thermode's current does not reach the plate);
+    /// the object and sink temperatures are measured in both modes.
+    fn measures(&self) -> Measures {
+        Measures {
+            drive_current: self.config.mode == MecomMode::Current,
+            hot_side: true,
+        }
     }
 
     /// The worker runs in real time: nothing to do.

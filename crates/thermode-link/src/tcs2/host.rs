@@ -33,7 +33,7 @@ use super::codec::{
     tenths, Command, Line as TextLine, LineDecoder, TCS2_BAUD_RATE, TCS2_MAX_C, TCS2_MIN_C, TCS2_ZONES,
 };
 use crate::host::{self, Line, LineState, OnLine, ReaderSpec};
-use thermode_device::{Awaited, Device, DeviceError, LinkFault, Reading, Silence};
+use thermode_device::{Awaited, Device, DeviceError, LinkFault, Measures, Reading, Silence};
 
 /// The warmest set-point thermode streams to a TCS II in follow mode by default \[°C\]: 43 (the temperature a
 /// finger can rest on indefinitely: IEC 60601-1 allows 43 °C for long skin contact, and 43 °C is CEM43's reference,
@@ -516,6 +516,15 @@ impl Device for Tcs2Device {
 
     /// A real stimulator runs in real time: nothing to do.
     fn poll(&mut self, _now_s: f64) {}
+
+    /// The stimulator regulates its zones itself and reports no current and no hot side (the reading's hot side is
+    /// its neutral temperature, a stand-in for the envelope's checks).
+    fn measures(&self) -> Measures {
+        Measures {
+            drive_current: false,
+            hot_side: false,
+        }
+    }
 
     /// `A`: leave follow mode, every zone back to neutral.
     fn all_off(&mut self) -> Result<(), DeviceError> {

@@ -12,7 +12,9 @@ use std::time::{Duration, Instant};
 
 use futures_util::{SinkExt, StreamExt};
 use serde_json::Value;
-use thermode_device::{DefaultFinger, Device, DeviceConfig, DeviceCut, DeviceError, Fault, Reading, SimulatedDisplay};
+use thermode_device::{
+    DefaultFinger, Device, DeviceConfig, DeviceCut, DeviceError, Fault, Measures, Reading, SimulatedDisplay,
+};
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::engine::{pipeline_engines, tracking_engines};
@@ -71,6 +73,8 @@ pub struct SpyControl {
 pub struct SpyDevice {
     inner: SimulatedDisplay<DefaultFinger>,
     time_s: f64,
+    /// What the spy says it measures (default: everything).
+    pub measures: Measures,
     pub log: Arc<Mutex<SpyLog>>,
     pub control: Arc<Mutex<SpyControl>>,
 }
@@ -86,6 +90,7 @@ impl SpyDevice {
         SpyDevice {
             inner,
             time_s: 0.0,
+            measures: Measures::ALL,
             log: Arc::new(Mutex::new(log)),
             control: Arc::new(Mutex::new(SpyControl::default())),
         }
@@ -95,6 +100,10 @@ impl SpyDevice {
 impl Device for SpyDevice {
     fn channel_count(&self) -> usize {
         self.inner.channel_count()
+    }
+
+    fn measures(&self) -> Measures {
+        self.measures
     }
 
     fn apply(&mut self, channel: usize, command: &DriveCommand) -> Result<(), DeviceError> {

@@ -600,3 +600,39 @@ fn a_marker_without_lsl_is_acknowledged_with_the_loop_time_between_two_ticks() {
     let status = get_json(addr, "/api/status");
     assert!(status["lsl"].is_null(), "no LSL without --lsl: {}", status["lsl"]);
 }
+
+/// A temperature-commanded device without a hot-side sensor (as a TCS II): its status and telemetry give the current,
+/// the model's finger estimate and the hot side as null, never the controller's or the model's numbers; the plate
+/// reading and the set-point stay numbers. The same daemon on a device that measures everything gives numbers.
+#[test]
+fn numbers_a_device_does_not_measure_are_null() {
+    let fields = ["current_a", "finger_c", "hot_side_c"];
+    for (measures, null) in [
+        (
+            thermode_device::Measures {
+                drive_current: false,
+                hot_side: false,
+            },
+            true,
+        ),
+        (thermode_device::Measures::ALL, false),
+    ] {
+        let mut device = SpyDevice::new(2);
+        device.measures = measures;
+        let daemon = start(test_config(), device, pipelines());
+        let addr = daemon.http_addr();
+        client_runtime().block_on(async {
+            let mut ws = ws_connect(addr, "").await;
+            let r = ask(&mut ws, r#"{"type":"touch","id":1,"channel":0,"material":"aluminium"}"#).await;
+            assert_eq!(r["type"], "ok", "{r}");
+            tokio::time::sleep(Duration::from_millis(300)).await;
+        });
+        let status = status_of(addr);
+        let c = channel(&status, 0);
+        for field in fields {
+            assert_eq!(c[field].is_null(), null, "{field} with {measures:?}: {c}");
+        }
+        assert!(c["sensor_c"].is_f64() && c["display_setpoint_c"].is_f64(), "{c}");
+        daemon.shutdown().expect("shutdown");
+    }
+}

@@ -74,7 +74,12 @@ pub struct ServeArgs {
     #[arg(long = "record-max-bytes", value_name = "BYTES")]
     pub record_max_bytes: Option<u64>,
     /// Release a disconnected client's contacts after this grace period [s].
-    #[arg(long = "release-after", value_name = "S", default_value_t = 2.0, allow_negative_numbers = true)]
+    #[arg(
+        long = "release-after",
+        value_name = "S",
+        default_value_t = 2.0,
+        allow_negative_numbers = true
+    )]
     pub release_after: f64,
     /// Stop after this many seconds (default: run until interrupted).
     #[arg(long, value_name = "S", allow_negative_numbers = true)]
