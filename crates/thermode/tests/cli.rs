@@ -923,6 +923,8 @@ fn serve_checks_its_options_before_opening_ports_and_says_who_holds_a_port() {
     );
     let taken = std::net::TcpListener::bind("127.0.0.1:0").expect("a port");
     let port = taken.local_addr().expect("address").port().to_string();
+    // A state directory and a recording folder not made yet: a start that fails on its port leaves neither.
+    let (fresh_state, fresh_record) = (state.path().join("fresh-state"), state.path().join("fresh-record"));
     let out = thermode(&[
         "serve",
         "--port",
@@ -931,10 +933,18 @@ fn serve_checks_its_options_before_opening_ports_and_says_who_holds_a_port() {
         "--duration",
         "0",
         "--state-dir",
-        state_arg,
+        fresh_state.to_str().expect("utf-8"),
+        "--record",
+        fresh_record.to_str().expect("utf-8"),
     ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        !fresh_state.exists() && !fresh_record.exists(),
+        "a failed start left files: state {}, record {}",
+        fresh_state.exists(),
+        fresh_record.exists()
+    );
     assert!(
         stderr.contains("another `thermode serve` or `thermode demo`"),
         "{stderr}"
