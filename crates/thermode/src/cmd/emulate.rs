@@ -121,6 +121,7 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
     if let Some(link) = &args.link {
         eprintln!("thermode emulate: published as {}", link.display());
     }
+    emulate_hw::stop_on_signal(pty.control())?;
     let ended = pty.wait();
     if let Some(link) = &args.link {
         // Removed only while it still points at this emulator's pseudo-terminal.

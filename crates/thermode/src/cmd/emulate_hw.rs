@@ -139,6 +139,26 @@ fn firmware<F: PlateFinger + Send + 'static>(
 }
 
 /// Serves `firmware` on TCP or a pseudo-terminal until it ends.
+/// Stops the emulator whose runner `control` drives when SIGINT or SIGTERM arrives: the usual end of an emulator
+/// started by hand, which then ends as after a stop (its `--link` removed, exit 0, as `serve`).
+pub fn stop_on_signal<S: Copy + Send + Sync + 'static, C: Send + Sync + 'static>(
+    control: &Arc<thermode_link::runner::Control<S, C>>,
+) -> Result<()> {
+    let signals = crate::signals::StopSignals::install()?;
+    let control = Arc::clone(control);
+    std::thread::Builder::new()
+        .name("thermode-emulate-signals".into())
+        .spawn(move || loop {
+            if let Some(signal) = signals.wait(std::time::Duration::from_secs(3600)) {
+                eprintln!("thermode emulate: {}: stopping", signal.as_str());
+                control.stop();
+                return;
+            }
+        })
+        .context("cannot start the signal thread")?;
+    Ok(())
+}
+
 fn serve_firmware(args: &HardwareArgs, firmware: Box<dyn Firmware>, what: &str, spelling: &str) -> Result<()> {
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
     let mut stdout = std::io::stdout().lock();
@@ -150,6 +170,7 @@ fn serve_firmware(args: &HardwareArgs, firmware: Box<dyn Firmware>, what: &str, 
             "thermode emulate: {what}; connect with --device {spelling}{}",
             tcp.address()
         );
+        stop_on_signal(tcp.control())?;
         tcp.wait()?
     } else {
         let pty = PtyFirmware::spawn(firmware, clock)?;
@@ -159,6 +180,7 @@ fn serve_firmware(args: &HardwareArgs, firmware: Box<dyn Firmware>, what: &str, 
             "thermode emulate: {what}; connect with --device {spelling}{}",
             pty.path()
         );
+        stop_on_signal(pty.control())?;
         pty.wait()?
     };
     match end {
