@@ -73,8 +73,9 @@ pub struct LabRunArgs {
     /// Experiment file (TOML), as for `thermode lab plan`.
     #[arg(long)]
     experiment: PathBuf,
-    /// Participant identifier from the design (default P01, P02, …); letters, digits, `_` and `-` only. Repeat it
-    /// (with `--simulated-participant`) to run several as one batch.
+    /// Participant identifier from the design (a design names them P01, P02, … unless it lists its own); letters,
+    /// digits, `_` and `-` only. Required unless `--all-participants`. Repeat it (with `--simulated-participant`) to
+    /// run several as one batch.
     #[arg(long, required_unless_present = "all_participants")]
     participant: Vec<String>,
     /// Every participant of the design, as one batch (needs `--simulated-participant`).
