@@ -148,7 +148,7 @@ pub fn open_files_limit() -> Option<u64> {
 #[cfg(target_os = "linux")]
 fn set_fifo(priority: i32) -> Result<(), String> {
     if !(1..=99).contains(&priority) {
-        return Err(format!("priority {priority} outside 1..=99"));
+        return Err(format!("priority {priority} outside 1 to 99"));
     }
     let param = libc::sched_param {
         sched_priority: priority,
@@ -223,7 +223,7 @@ mod tests {
         assert_eq!(rt.fifo_priority, None);
         assert!(rt
             .scheduling_error
-            .is_some_and(|e| e.contains("1..=99") || e.contains("platform")));
+            .is_some_and(|e| e.contains("1 to 99") || e.contains("platform")));
         assert!(!rt.memory_locked);
         assert!(Realtime::not_requested("off")
             .describe()

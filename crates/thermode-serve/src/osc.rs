@@ -388,7 +388,12 @@ fn reply_address(port: Option<&OscArg>, from: SocketAddr) -> Result<SocketAddr, 
     port.as_f64()
         .filter(|p| p.fract() == 0.0 && (1.0..=65535.0).contains(p))
         .map(|p| SocketAddr::new(from.ip(), p as u16))
-        .ok_or_else(|| ApiError::new(ErrorCode::BadValue, "argument 1 (port) must be an integer in 1..=65535"))
+        .ok_or_else(|| {
+            ApiError::new(
+                ErrorCode::BadValue,
+                "argument 1 (port) must be an integer from 1 to 65535",
+            )
+        })
 }
 
 fn unsubscribe(message: &OscMessage, from: SocketAddr, app: &App, subscribers: &Subscribers) -> Result<(), ApiError> {
