@@ -7,7 +7,6 @@
 //! cargo test -p thermode-protocol` rewrites it).
 
 use schemars::generate::SchemaSettings;
-use schemars::JsonSchema;
 use serde_json::{json, Map, Value};
 
 use crate::materials::MaterialInfo;
@@ -75,12 +74,4 @@ fn plain_descriptions(value: &mut Value) {
 /// The schema as the checked-in file holds it: pretty JSON and a final newline.
 pub fn protocol_schema_text() -> String {
     format!("{:#}\n", protocol_schema())
-}
-
-/// The schema of one type, for tests that check a type's shape.
-pub fn schema_of<T: JsonSchema>() -> Value {
-    SchemaSettings::draft2020_12()
-        .into_generator()
-        .into_root_schema_for::<T>()
-        .to_value()
 }

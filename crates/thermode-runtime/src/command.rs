@@ -91,32 +91,9 @@ impl Command {
         Command::stimulate(channel, Stimulus::Touch { material, object_c }, owner)
     }
 
-    /// Direct mode: the display set-point of `channel` goes to `temp_c` \[°C\] at `rate_c_s` \[°C/s\].
+    /// Direct mode: the display set-point of `channel` goes to `temp_c` \[°C\] at `rate_c_per_s` \[°C/s\].
     pub fn direct(channel: usize, temp_c: f64, rate_c_per_s: f64, owner: Owner) -> Command {
         Command::stimulate(channel, Stimulus::Direct { temp_c, rate_c_per_s }, owner)
-    }
-
-    /// The request's name on the wire: `touch`, `setpoint`, `release`, `clear_fault`, `stop_all` (and
-    /// `client_gone`, which no client sends).
-    pub fn name(&self) -> &'static str {
-        match self {
-            Command::Stimulate {
-                stimulus: Stimulus::Touch { .. },
-                ..
-            } => "touch",
-            Command::Stimulate {
-                stimulus: Stimulus::Direct { .. },
-                ..
-            } => "setpoint",
-            Command::Stimulate {
-                stimulus: Stimulus::Air,
-                ..
-            }
-            | Command::Release { .. } => "release",
-            Command::ClearFault { .. } => "clear_fault",
-            Command::StopAll => "stop_all",
-            Command::ClientGone { .. } => "client_gone",
-        }
     }
 }
 

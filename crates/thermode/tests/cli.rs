@@ -80,6 +80,22 @@ fn column(header: &[String], rows: &[Vec<String>], name: &str) -> Vec<f64> {
     rows.iter().map(|r| r[index].parse().expect("number")).collect()
 }
 
+/// `serve` on a one-channel simulated display with the state directory `dir`, stopping at once (free port, no OSC).
+fn serve_once_on(dir: &str) -> [&str; 10] {
+    [
+        "serve",
+        "--state-dir",
+        dir,
+        "--port",
+        "0",
+        "--no-osc",
+        "--channels",
+        "1",
+        "--duration",
+        "0",
+    ]
+}
+
 #[test]
 fn materials_json_lists_the_paper_materials_with_si_values_and_sources() {
     let text = expect_success(&["materials", "--format", "json"]);
@@ -623,18 +639,7 @@ fn dose_show_and_reset_and_a_corrupt_ledger_is_refused_never_reset() {
     // Corrupt: serve, show and a channel reset refuse (exit 2) and leave the file as it is; reset --all sets it aside.
     let corrupt = "{\"format\": \"thermode-dose-ledger\", \"version\": 1, \"channels\": [{\"channel\": 0,";
     std::fs::write(tmp.path().join("dose-ledger.json"), corrupt).expect("write");
-    let serve = [
-        "serve",
-        "--state-dir",
-        dir,
-        "--port",
-        "0",
-        "--no-osc",
-        "--channels",
-        "1",
-        "--duration",
-        "0",
-    ];
+    let serve = serve_once_on(dir);
     expect_error(&serve, "corrupt");
     expect_error(&["dose", "show", "--state-dir", dir], "corrupt");
     expect_error(
@@ -708,18 +713,7 @@ fn hostile_ledgers_are_refused_at_once_naming_what_is_wrong() {
             }
             (None, _) => std::os::unix::fs::symlink("/dev/zero", &path).expect("symlink"),
         }
-        let serve = [
-            "serve",
-            "--state-dir",
-            dir,
-            "--port",
-            "0",
-            "--no-osc",
-            "--channels",
-            "1",
-            "--duration",
-            "0",
-        ];
+        let serve = serve_once_on(dir);
         for args in [&serve[..], &["dose", "show", "--state-dir", dir][..]] {
             let out = thermode_within_60_s(args);
             let stderr = String::from_utf8_lossy(&out.stderr);

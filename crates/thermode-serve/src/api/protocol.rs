@@ -8,7 +8,7 @@
 use thermode_model::materials::{self, Material};
 use thermode_model::params::Range;
 use thermode_protocol::request::{Marker, Setpoint, Touch};
-pub use thermode_protocol::request::{MAX_ID_CHARS, MAX_MARKER_CHARS, MAX_NAME_CHARS, MIN_SUBSCRIBE_HZ};
+pub use thermode_protocol::request::{MAX_MARKER_CHARS, MAX_NAME_CHARS, MIN_SUBSCRIBE_HZ};
 use thermode_protocol::status::Limits;
 use thermode_protocol::{
     finite, AppliedAt, ChannelState, ChannelTelemetry, Done, OffReason, Request, RequestId, Telemetry,

@@ -280,8 +280,9 @@ fn serve_with_a_token_ignores_an_osc_setpoint() {
     assert_eq!(body["channels"][2]["mode"], "air", "{}", body["channels"][2]);
 }
 
-#[test]
-fn a_recording_on_a_full_tmpfs_fails_loudly_with_whole_rows_and_stops_every_stimulus() {
+/// A temporary folder and the mount point in it where a test's own mount namespace can mount a 64 KiB tmpfs, or
+/// `None` (with a SKIPPED line) where `unshare -m` is not allowed.
+fn small_tmpfs_mount_point() -> Option<(tempfile::TempDir, std::path::PathBuf)> {
     let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
     let mount = dir.path().join("small");
     std::fs::create_dir_all(&mount).unwrap_or_else(|e| panic!("{e}"));
@@ -291,8 +292,16 @@ fn a_recording_on_a_full_tmpfs_fails_loudly_with_whole_rows_and_stops_every_stim
         .output();
     if !probe.is_ok_and(|o| o.status.success()) {
         eprintln!("SKIPPED: cannot mount a tmpfs in a mount namespace here (unshare -m needs privileges)");
-        return;
+        return None;
     }
+    Some((dir, mount))
+}
+
+#[test]
+fn a_recording_on_a_full_tmpfs_fails_loudly_with_whole_rows_and_stops_every_stimulus() {
+    let Some((_dir, mount)) = small_tmpfs_mount_point() else {
+        return;
+    };
     let script = format!(
         "mount -t tmpfs -o size=64k tmpfs {m} && exec {bin} serve --port 0 --no-osc --channels 5 --record {m}",
         m = mount.display(),
@@ -370,17 +379,9 @@ fn a_recording_on_a_full_tmpfs_fails_loudly_with_whole_rows_and_stops_every_stim
 /// while it could not be written. Before, the session went on and a restart forgot the dose.
 #[test]
 fn a_state_directory_that_fills_up_stops_heating_until_the_ledger_is_written_again() {
-    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("{e}"));
-    let mount = dir.path().join("small");
-    std::fs::create_dir_all(&mount).unwrap_or_else(|e| panic!("{e}"));
-    let probe = Command::new("unshare")
-        .args(["-m", "sh", "-c"])
-        .arg(format!("mount -t tmpfs -o size=64k tmpfs {}", mount.display()))
-        .output();
-    if !probe.is_ok_and(|o| o.status.success()) {
-        eprintln!("SKIPPED: cannot mount a tmpfs in a mount namespace here (unshare -m needs privileges)");
+    let Some((_dir, mount)) = small_tmpfs_mount_point() else {
         return;
-    }
+    };
     let free = UdpSocket::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
     let osc_port = free.local_addr().unwrap_or_else(|e| panic!("{e}")).port();
     drop(free);
