@@ -320,6 +320,22 @@ pub struct PlateObserver {
     x: Vector,
     p: Matrix,
     started: bool,
+    /// Multi-rate use ([`PlateObserver::coast`]): the ticks coasted since the last correction.
+    coasted: Coasted,
+}
+
+/// The ticks an observer coasted through since its last correction ([`PlateObserver::coast`]).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+struct Coasted {
+    /// Their total length, s.
+    duration_s: f64,
+    /// The charge they applied, A·s (their mean current is `charge_a_s / duration_s`).
+    charge_a_s: f64,
+    /// The state at the last correction (where the interval's Jacobian is taken).
+    from_x: Vector,
+    /// The sensor's decay over the last coasted tick's length: (length \[s\], e^(−dt/τ), β) — renewed only when the
+    /// length changes (a loop's ticks are mostly equal).
+    decay: (f64, f64, f64),
 }
 
 impl PlateObserver {
@@ -339,6 +355,7 @@ impl PlateObserver {
             x: [0.0; OBSERVER_STATES],
             p: [[0.0; OBSERVER_STATES]; OBSERVER_STATES],
             started: false,
+            coasted: Coasted::default(),
         })
     }
 
@@ -362,6 +379,7 @@ impl PlateObserver {
         self.x = [0.0; OBSERVER_STATES];
         self.p = [[0.0; OBSERVER_STATES]; OBSERVER_STATES];
         self.started = false;
+        self.coasted = Coasted::default();
     }
 
     /// The estimate (`None` before the first update).
@@ -395,6 +413,74 @@ impl PlateObserver {
         )))
     }
 
+    /// Multi-rate use, for a loop that ticks faster than its PT-100 samples (the plate guard): advances the estimate
+    /// over one tick of `dt_s` \[s\] at `current_a` \[A\] with `finger` without a fresh reading — the mean only, with
+    /// the sensor's own time constant (a held sample is not seen again) — and keeps the interval for the next
+    /// [`PlateObserver::update_fresh`], which propagates the covariance over it at once. Does nothing before the
+    /// first update or for a `dt_s` that is not positive and finite, or non-finite inputs.
+    pub fn coast(&mut self, dt_s: f64, current_a: f64, finger: Finger) {
+        let inputs_ok = current_a.is_finite() && finger.receptor_c.is_finite() && finger.conductance_w_k >= 0.0;
+        if !(self.started && dt_s.is_finite() && dt_s > 0.0 && inputs_ok) {
+            return;
+        }
+        let step = self
+            .plant
+            .plate_hot_step(dt_s, current_a, [self.x[TP], self.x[TH]], finger, self.x[DIST]);
+        let plate_c = step.end[0] + self.x[SCALE] * (step.end[0] - self.x[TP]);
+        let (decay, w1, w0) = self.coasted_sensor_weights(dt_s);
+        self.x[TS] = decay * self.x[TS] + w1 * plate_c + w0 * self.x[TP];
+        self.x[TP] = plate_c;
+        self.x[TH] = step.end[1];
+        self.coasted.duration_s += dt_s;
+        self.coasted.charge_a_s += current_a * dt_s;
+    }
+
+    /// Multi-rate use: the tick of a fresh PT-100 sample. Coasts over `tick` ([`PlateObserver::coast`]), then
+    /// propagates the covariance over every tick coasted since the last correction at once (the Jacobian taken at
+    /// that correction's state with the interval's mean current, the process noise of the whole interval) and
+    /// corrects with both readings, each counted as one sample (or as the part of one that the interval is, when
+    /// samples come faster than the file's rate). The first call initialises the estimate from the
+    /// readings. Invalid input is an error and changes nothing.
+    pub fn update_fresh(&mut self, tick: &ObserverTick) -> Result<PlateEstimate, ControlError> {
+        tick.validate()?;
+        if self.started {
+            self.coast(tick.dt_s, tick.applied_current_a, tick.finger);
+            let duration_s = self.coasted.duration_s;
+            let interval = ObserverTick {
+                dt_s: duration_s,
+                applied_current_a: self.coasted.charge_a_s / duration_s,
+                ..*tick
+            };
+            let lag_s = self.plant.sensor_time_constant_s;
+            let (f, _) = self.transition_from(&self.coasted.from_x, &interval, lag_s);
+            self.propagate_covariance(&f, duration_s);
+            self.correct(TS, tick.sensor_c, self.plant.sensor_variance_c2(), duration_s);
+            self.correct(TH, tick.hot_side_c, self.plant.hot_side_variance_c2(), duration_s);
+        } else {
+            self.start(tick.sensor_c, tick.hot_side_c);
+        }
+        self.coasted = Coasted {
+            from_x: self.x,
+            ..Coasted::default()
+        };
+        self.estimate().ok_or(ControlError::BadValue(BadValue::custom(
+            "observer state",
+            f64::NAN,
+            "must stay finite",
+        )))
+    }
+
+    /// The sensor's first-order weights over a coasted tick of `dt_s`: (e^(−dt/τ), 1 − β, β − e^(−dt/τ)) with
+    /// τ the sensor's own time constant (see [`PlateObserver::transition_from`]), kept while the length is the same.
+    fn coasted_sensor_weights(&mut self, dt_s: f64) -> (f64, f64, f64) {
+        if self.coasted.decay.0 != dt_s {
+            let (decay, beta) = sensor_decay(dt_s, self.plant.sensor_time_constant_s);
+            self.coasted.decay = (dt_s, decay, beta);
+        }
+        let (_, decay, beta) = self.coasted.decay;
+        (decay, 1.0 - beta, beta - decay)
+    }
+
     /// The plate temperature one step of `dt_s` ahead at `current_a` with `finger`, from the current estimate, °C
     /// (`None` before the first update). Does not change the state.
     pub fn predict_plate_c(&self, dt_s: f64, current_a: f64, finger: Finger) -> Option<f64> {
@@ -418,20 +504,15 @@ impl PlateObserver {
         self.started = true;
     }
 
-    /// The linear one-step map `x₁ = F x₀ + c` (returned as F and x₁) at the tick's current and finger.
-    fn transition(&self, tick: &ObserverTick) -> (Matrix, Vector) {
+    /// The linear one-step map `x₁ = F x₀ + c` from `x` over the tick (returned as F and x₁) at the tick's current
+    /// and finger, the sensor lagging by `lag_s` \[s\].
+    fn transition_from(&self, x: &Vector, tick: &ObserverTick, lag_s: f64) -> (Matrix, Vector) {
         let dt = tick.dt_s;
-        let step = self.plant.plate_hot_step(
-            dt,
-            tick.applied_current_a,
-            [self.x[TP], self.x[TH]],
-            tick.finger,
-            self.x[DIST],
-        );
+        let step = self
+            .plant
+            .plate_hot_step(dt, tick.applied_current_a, [x[TP], x[TH]], tick.finger, x[DIST]);
         // Exact lag for an input linear over the step: T_s1 = e T_s0 + (1 − β) T_p1 + (β − e) T_p0.
-        let tau = self.plant.effective_sensor_lag_s(dt);
-        let decay = (-dt / tau).exp();
-        let beta = tau / dt * (1.0 - decay);
+        let (decay, beta) = sensor_decay(dt, lag_s);
         let (w1, w0) = (1.0 - beta, beta - decay);
         let mut f = [[0.0; OBSERVER_STATES]; OBSERVER_STATES];
         for (row, node) in [(TP, 0), (TH, 1)] {
@@ -440,8 +521,8 @@ impl PlateObserver {
             f[row][DIST] = step.heat_map[node];
         }
         // The plate's change scaled by 1 + θ: T_p1 = end + θ (end − T_p0).
-        let scale = self.x[SCALE];
-        let change_c = step.end[0] - self.x[TP];
+        let scale = x[SCALE];
+        let change_c = step.end[0] - x[TP];
         let plate_c = step.end[0] + scale * change_c;
         for col in [TP, TH, DIST] {
             f[TP][col] *= 1.0 + scale;
@@ -455,18 +536,24 @@ impl PlateObserver {
         f[TS][TS] = decay;
         f[DIST][DIST] = 1.0;
         f[SCALE][SCALE] = 1.0;
-        let sensor = decay * self.x[TS] + w1 * plate_c + w0 * self.x[TP];
-        (f, [plate_c, step.end[1], sensor, self.x[DIST], scale])
+        let sensor = decay * x[TS] + w1 * plate_c + w0 * x[TP];
+        (f, [plate_c, step.end[1], sensor, x[DIST], scale])
     }
 
     fn predict(&mut self, tick: &ObserverTick) {
-        let (f, x1) = self.transition(tick);
-        self.p = times_transposed(&times(&f, &self.p), &f);
-        let q = self.process_noise(tick.dt_s);
+        let lag_s = self.plant.effective_sensor_lag_s(tick.dt_s);
+        let (f, x1) = self.transition_from(&self.x, tick, lag_s);
+        self.propagate_covariance(&f, tick.dt_s);
+        self.x = x1;
+    }
+
+    /// `P ← F P Fᵀ + Q` over `dt_s` \[s\].
+    fn propagate_covariance(&mut self, f: &Matrix, dt_s: f64) {
+        self.p = times_transposed(&times(f, &self.p), f);
+        let q = self.process_noise(dt_s);
         for (i, qi) in q.iter().enumerate() {
             self.p[i][i] += qi;
         }
-        self.x = x1;
     }
 
     /// Diagonal process noise over a step of `dt_s`: heat noise on plate and hot side, random walk of d (the
@@ -512,6 +599,12 @@ impl PlateObserver {
             }
         }
     }
+}
+
+/// A first-order sensor of time constant `lag_s` \[s\] over `dt_s` \[s\]: (e^(−dt/τ), β = τ/dt (1 − e^(−dt/τ))).
+fn sensor_decay(dt_s: f64, lag_s: f64) -> (f64, f64) {
+    let decay = (-dt_s / lag_s).exp();
+    (decay, lag_s / dt_s * (1.0 - decay))
 }
 
 /// `F·P` for the covariance's prediction, skipping the terms where `F` is zero (most of its entries: the unknown heat

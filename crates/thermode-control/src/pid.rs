@@ -111,6 +111,9 @@ pub struct Pid {
     integral_a: f64,
     prev_measured_c: Option<f64>,
     derivative_a: f64,
+    /// The derivative filter's weight for the last tick length: (dt \[s\], 1 − e^(−dt/T_f)), renewed only when the
+    /// length changes (a loop's ticks are mostly equal; (0, 0) before the first filtered tick).
+    filter_weight: (f64, f64),
     terms: PidTerms,
 }
 
@@ -126,6 +129,7 @@ impl Pid {
             integral_a: 0.0,
             prev_measured_c: None,
             derivative_a: 0.0,
+            filter_weight: (0.0, 0.0),
             terms: PidTerms::default(),
         })
     }
@@ -145,6 +149,7 @@ impl Pid {
     pub fn set_gains(&mut self, gains: PidGains) -> Result<(), ControlError> {
         gains.validate()?;
         self.gains = gains;
+        self.filter_weight = (0.0, 0.0);
         Ok(())
     }
 
@@ -201,8 +206,10 @@ impl Pid {
         };
         self.derivative_a = match self.gains.derivative_filter_s {
             Some(tf) if tf > 0.0 && self.prev_measured_c.is_some() => {
-                let beta = -(-dt_s / tf).exp_m1();
-                self.derivative_a + beta * (raw_a - self.derivative_a)
+                if self.filter_weight.0 != dt_s {
+                    self.filter_weight = (dt_s, -(-dt_s / tf).exp_m1());
+                }
+                self.derivative_a + self.filter_weight.1 * (raw_a - self.derivative_a)
             }
             _ => raw_a,
         };

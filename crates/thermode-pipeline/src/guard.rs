@@ -110,6 +110,8 @@ pub struct PlateGuard {
     observer: PlateObserver,
     /// Time of the previous update \[s\] (`None` before the first).
     last_time_s: Option<f64>,
+    /// The sample number of the last PT-100 sample the observer corrected with (`None` before the first).
+    last_sample_seq: Option<u64>,
     trend: SensorTrend,
     /// The sensor lag of the bound, `(1 + u) τ` \[s\]; `None` for a file exact for its display (u = 0).
     bound_lag_s: Option<f64>,
@@ -138,25 +140,38 @@ impl PlateGuard {
         Ok(PlateGuard {
             observer: PlateObserver::new(plant)?,
             last_time_s: None,
+            last_sample_seq: None,
             trend: SensorTrend::new(),
             bound_lag_s,
         })
     }
 
     /// Updates the estimate at `now_s` \[s\] with `reading`, after `applied_current_a` \[A\] was applied since the
-    /// previous update and with `finger` on the plate. A reading the observer refuses (non-finite numbers, time
-    /// not moving forward) leaves the estimate as it was: the envelope latches its own fault on such a reading.
+    /// previous update and with `finger` on the plate. The observer corrects on a fresh PT-100 sample only and
+    /// coasts through the ticks that see a held one ([`PlateObserver::update_fresh`]: the filter's covariance costs a
+    /// few hundred flops, once per sample instead of once per tick). A reading the observer refuses (non-finite
+    /// numbers, time not moving forward) leaves the estimate as it was: the envelope latches its own fault on such a
+    /// reading.
     pub fn update(&mut self, now_s: f64, reading: &Reading, applied_current_a: f64, finger: Finger) {
+        let dt_s = self.last_time_s.map_or(1.0, |t| now_s - t);
+        if self.last_sample_seq == Some(reading.sample_seq) {
+            self.observer.coast(dt_s, applied_current_a, finger);
+            if dt_s > 0.0 {
+                self.last_time_s = Some(now_s);
+            }
+            return;
+        }
         let tick = ObserverTick {
             // The first update only initialises the estimate from the readings; its dt is not used.
-            dt_s: self.last_time_s.map_or(1.0, |t| now_s - t),
+            dt_s,
             applied_current_a,
             finger,
             sensor_c: reading.sensor_c,
             hot_side_c: reading.hot_side_c,
         };
-        if self.observer.update(&tick).is_ok() {
+        if self.observer.update_fresh(&tick).is_ok() {
             self.last_time_s = Some(now_s);
+            self.last_sample_seq = Some(reading.sample_seq);
             self.trend.record(now_s, reading.sensor_c);
         }
     }

@@ -253,6 +253,9 @@ pub struct SafetyEnvelope {
     /// (+∞ before the first sample): the ceiling's formula steps up by its look ahead as the lockout engages, and
     /// the maximum must not.
     lowest_dose_ceiling_c: f64,
+    /// The dose cap's formula ceiling for the dose as it stands, °C ([`DoseCap::ceiling_c`]): renewed whenever the
+    /// dose changes (a sample, unseen time, the lockout, a restore), read several times a tick.
+    dose_formula_ceiling_c: f64,
     lockout_at_s: Option<f64>,
     at_48_since_s: Option<f64>,
     at_limit: Option<AtLimit>,
@@ -269,7 +272,7 @@ impl SafetyEnvelope {
     pub fn new(config: EnvelopeConfig, current_limit_a: f64) -> Result<Self, EnvelopeError> {
         config.validate()?;
         Rule::Positive.check("current_limit_a", current_limit_a)?;
-        Ok(Self {
+        let mut envelope = Self {
             config,
             current_limit_a,
             latch: None,
@@ -286,12 +289,20 @@ impl SafetyEnvelope {
             )
             .with_longest_interval_s(config.stale_timeout_s),
             lowest_dose_ceiling_c: f64::INFINITY,
+            dose_formula_ceiling_c: f64::NAN,
             lockout_at_s: None,
             at_48_since_s: None,
             at_limit: None,
             drive_a: 0.0,
             heating_since_sample_a: 0.0,
-        })
+        };
+        envelope.dose_changed();
+        Ok(envelope)
+    }
+
+    /// Renews the dose cap's formula ceiling after the dose changed.
+    fn dose_changed(&mut self) {
+        self.dose_formula_ceiling_c = self.dose_cap().ceiling_c(&self.dose);
     }
 
     /// The configuration in force.
@@ -355,6 +366,7 @@ impl SafetyEnvelope {
         if self.dose_lockout_active() {
             self.dose.lock();
         }
+        self.dose_changed();
         Ok(())
     }
 
@@ -380,7 +392,7 @@ impl SafetyEnvelope {
 
     /// The dose cap's ceiling, °C: the formula's, from the lockout on never raised again (NaN passes through).
     fn dose_ceiling_c(&self) -> f64 {
-        let formula_c = self.dose_cap().ceiling_c(&self.dose);
+        let formula_c = self.dose_formula_ceiling_c;
         if formula_c.is_nan() {
             formula_c
         } else {
@@ -433,6 +445,7 @@ impl SafetyEnvelope {
             self.dose.lock();
             self.lockout_at_s.get_or_insert(now_s);
         }
+        self.dose_changed();
         self.lower_dose_ceiling();
     }
 
@@ -577,6 +590,7 @@ impl SafetyEnvelope {
         }
         self.check_rate(m);
         self.dose.add_sample(m.time_s, m.sensor_c);
+        self.dose_changed();
         self.heating_since_sample_a = self.drive_a.max(0.0);
         if let Some(code) = self.display_limit_fault(m) {
             self.latch(code, m.time_s);
@@ -590,7 +604,7 @@ impl SafetyEnvelope {
     /// ([`SafetyEnvelope::effective_max_c`]). Before the lockout the ceiling may rise (its look ahead shrinks once
     /// the interval between samples is known); from the lockout on it only falls.
     fn lower_dose_ceiling(&mut self) {
-        let ceiling_c = self.dose_cap().ceiling_c(&self.dose);
+        let ceiling_c = self.dose_formula_ceiling_c;
         if !self.dose_lockout_active() || ceiling_c < self.lowest_dose_ceiling_c {
             self.lowest_dose_ceiling_c = ceiling_c;
         }
@@ -668,6 +682,7 @@ impl SafetyEnvelope {
             return;
         }
         self.dose.lock();
+        self.dose_changed();
         let since = *self.lockout_at_s.get_or_insert(m.time_s);
         if m.sensor_c >= CEM43_REFERENCE_C && m.time_s - since > self.config.dose_lockout_grace_s {
             self.latch(FaultCode::DoseLockoutViolated, m.time_s);
