@@ -3,7 +3,7 @@
 //! step is halved whenever the answer changes (a reversal), down to `min_step_c`. The participant's reaction time
 //! does not enter (the answer comes after the stimulus), which removes the method of limits' rate artefact.
 //!
-//! The estimate is the mean amplitude of the last `average_last` trials (the bisection has by then narrowed to the
+//! The estimate is the mean amplitude of the last `average_last` trials (default 20; the bisection has by then narrowed to the
 //! threshold and oscillates around it at the smallest step).
 
 use serde::{Deserialize, Serialize};
@@ -25,7 +25,7 @@ pub struct LevelsConfig {
     pub min_step_c: f64,
     /// Trials in the session. Default 30.
     pub trials: usize,
-    /// The estimate averages this many last amplitudes. Default 10.
+    /// The estimate averages this many last amplitudes. Default 20.
     pub average_last: usize,
 }
 
@@ -36,7 +36,7 @@ impl Default for LevelsConfig {
             step_c: 1.0,
             min_step_c: 0.05,
             trials: 30,
-            average_last: 10,
+            average_last: 20,
         }
     }
 }
