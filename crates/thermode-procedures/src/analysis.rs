@@ -69,7 +69,9 @@ fn threshold_of(test: LimitsTest, runs: &[&LimitsRun]) -> Option<TestThreshold> 
                 .iter()
                 .filter(|r| r.direction == Direction::Warm)
                 .filter_map(|warm| {
-                    let cold = runs.iter().find(|r| r.run == warm.run && r.direction == Direction::Cold)?;
+                    let cold = runs
+                        .iter()
+                        .find(|r| r.run == warm.run && r.direction == Direction::Cold)?;
                     Some(warm.delivered_c - cold.delivered_c)
                 })
                 .collect();
@@ -85,7 +87,11 @@ fn threshold_of(test: LimitsTest, runs: &[&LimitsRun]) -> Option<TestThreshold> 
     Some(TestThreshold {
         test,
         value_c,
-        compared: if log_transformed { value_c.abs().log10() } else { value_c },
+        compared: if log_transformed {
+            value_c.abs().log10()
+        } else {
+            value_c
+        },
         log_transformed,
         runs: values.len(),
         cutoffs,
@@ -114,22 +120,40 @@ pub struct ReferenceRow {
 /// Parses a reference table: a CSV with the header `test,site,sex,age_band,mean,sd` (any column order; further
 /// columns are ignored).
 pub fn parse_reference(text: &str) -> Result<Vec<ReferenceRow>, ProcedureError> {
-    let mut reader = csv::ReaderBuilder::new().trim(csv::Trim::All).from_reader(text.as_bytes());
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_reader(text.as_bytes());
     let header = reader
         .headers()
-        .map_err(|e| ProcedureError::Reference { line: 1, message: e.to_string() })?
+        .map_err(|e| ProcedureError::Reference {
+            line: 1,
+            message: e.to_string(),
+        })?
         .clone();
     let column = |name: &str| {
-        header.iter().position(|h| h == name).ok_or_else(|| ProcedureError::Reference {
-            line: 1,
-            message: format!("missing column `{name}` (needs test, site, sex, age_band, mean, sd)"),
-        })
+        header
+            .iter()
+            .position(|h| h == name)
+            .ok_or_else(|| ProcedureError::Reference {
+                line: 1,
+                message: format!("missing column `{name}` (needs test, site, sex, age_band, mean, sd)"),
+            })
     };
-    let cols = [column("test")?, column("site")?, column("sex")?, column("age_band")?, column("mean")?, column("sd")?];
+    let cols = [
+        column("test")?,
+        column("site")?,
+        column("sex")?,
+        column("age_band")?,
+        column("mean")?,
+        column("sd")?,
+    ];
     let mut rows = Vec::new();
     for (i, record) in reader.records().enumerate() {
         let line = i as u64 + 2;
-        let record = record.map_err(|e| ProcedureError::Reference { line, message: e.to_string() })?;
+        let record = record.map_err(|e| ProcedureError::Reference {
+            line,
+            message: e.to_string(),
+        })?;
         let field = |k: usize| record.get(cols[k]).unwrap_or("");
         let bad = |message: String| ProcedureError::Reference { line, message };
         let test = LimitsTest::from_name(field(0))

@@ -58,7 +58,11 @@ pub fn check_range(key: &str, value: f64, min: f64, max: f64) -> Result<f64, Pro
     if value.is_finite() && value >= min && value <= max {
         Ok(value)
     } else {
-        Err(ProcedureError::bad(key, value, &format!("a number from {min} to {max}")))
+        Err(ProcedureError::bad(
+            key,
+            value,
+            &format!("a number from {min} to {max}"),
+        ))
     }
 }
 
@@ -67,6 +71,10 @@ pub fn check_positive(key: &str, value: f64, max: f64) -> Result<f64, ProcedureE
     if value.is_finite() && value > 0.0 && value <= max {
         Ok(value)
     } else {
-        Err(ProcedureError::bad(key, value, &format!("a number above 0, at most {max}")))
+        Err(ProcedureError::bad(
+            key,
+            value,
+            &format!("a number above 0, at most {max}"),
+        ))
     }
 }

@@ -82,13 +82,21 @@ impl ExperimentFile {
     /// Checks that the procedure's table is present and every table valid (building the procedure once).
     pub fn validate(&self) -> Result<(), ProcedureError> {
         if self.participants == 0 || self.participants > 10_000 {
-            return Err(ProcedureError::bad("participants", self.participants, "an integer from 1 to 10000"));
+            return Err(ProcedureError::bad(
+                "participants",
+                self.participants,
+                "an integer from 1 to 10000",
+            ));
         }
         if let Some(p) = &self.simulated_participant {
             p.validate()?;
         }
         match self.procedure {
-            ProcedureKind::Program => self.program.as_ref().ok_or_else(|| missing("program", "program"))?.validate(),
+            ProcedureKind::Program => self
+                .program
+                .as_ref()
+                .ok_or_else(|| missing("program", "program"))?
+                .validate(),
             _ => self.build().map(drop),
         }
     }
@@ -115,19 +123,23 @@ impl ExperimentFile {
     fn build(&self) -> Result<Box<dyn Procedure + Send>, ProcedureError> {
         let stimulus = self.stimulus();
         Ok(match self.procedure {
-            ProcedureKind::Limits => {
-                Box::new(LimitsProcedure::new(self.limits.clone().ok_or_else(|| missing("limits", "limits"))?)?)
-            }
+            ProcedureKind::Limits => Box::new(LimitsProcedure::new(
+                self.limits.clone().ok_or_else(|| missing("limits", "limits"))?,
+            )?),
             ProcedureKind::Levels => Box::new(Levels::new(
                 self.levels.ok_or_else(|| missing("levels", "levels"))?,
                 stimulus,
             )?),
             ProcedureKind::Staircase => Box::new(Staircase::new(
-                self.staircase.clone().ok_or_else(|| missing("staircase", "staircase"))?,
+                self.staircase
+                    .clone()
+                    .ok_or_else(|| missing("staircase", "staircase"))?,
                 stimulus,
             )?),
             ProcedureKind::Questplus => Box::new(QuestPlusProcedure::new(
-                self.questplus.as_ref().ok_or_else(|| missing("questplus", "questplus"))?,
+                self.questplus
+                    .as_ref()
+                    .ok_or_else(|| missing("questplus", "questplus"))?,
                 stimulus,
             )?),
             ProcedureKind::Program => return Err(missing("program", "a single-channel procedure")),

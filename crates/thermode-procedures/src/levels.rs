@@ -48,7 +48,11 @@ impl LevelsConfig {
         check_positive("levels.step_c", self.step_c, 30.0)?;
         check_range("levels.min_step_c", self.min_step_c, 1e-4, self.step_c)?;
         if self.trials == 0 || self.trials > 10_000 {
-            return Err(ProcedureError::bad("levels.trials", self.trials, "an integer from 1 to 10000"));
+            return Err(ProcedureError::bad(
+                "levels.trials",
+                self.trials,
+                "an integer from 1 to 10000",
+            ));
         }
         if self.average_last == 0 || self.average_last > self.trials {
             return Err(ProcedureError::bad(

@@ -113,17 +113,29 @@ impl LimitsConfig {
     /// Checks every value (key names as in the experiment file).
     pub fn validate(&self) -> Result<(), ProcedureError> {
         if self.tests.is_empty() {
-            return Err(ProcedureError::bad("limits.tests", "[]", "at least one of CDT, WDT, TSL, CPT, HPT"));
+            return Err(ProcedureError::bad(
+                "limits.tests",
+                "[]",
+                "at least one of CDT, WDT, TSL, CPT, HPT",
+            ));
         }
         check_range("limits.baseline_c", self.baseline_c, 20.0, 40.0)?;
         check_positive("limits.rate_c_s", self.rate_c_s, 300.0)?;
-        check_positive("limits.detection_return_rate_c_s", self.detection_return_rate_c_s, 300.0)?;
+        check_positive(
+            "limits.detection_return_rate_c_s",
+            self.detection_return_rate_c_s,
+            300.0,
+        )?;
         check_positive("limits.pain_return_rate_c_s", self.pain_return_rate_c_s, 300.0)?;
         check_range("limits.cold_cutoff_c", self.cold_cutoff_c, -10.0, self.baseline_c - 0.1)?;
         check_range("limits.heat_cutoff_c", self.heat_cutoff_c, self.baseline_c + 0.1, 60.0)?;
         check_range("limits.isi_s", self.isi_s, 0.0, 3600.0)?;
         if self.runs == 0 || self.runs > 100 {
-            return Err(ProcedureError::bad("limits.runs", self.runs, "an integer from 1 to 100"));
+            return Err(ProcedureError::bad(
+                "limits.runs",
+                self.runs,
+                "an integer from 1 to 100",
+            ));
         }
         Ok(())
     }
@@ -182,7 +194,12 @@ impl LimitsProcedure {
                         let first = config.tsl_first;
                         for (k, direction) in [first, first.opposite()].into_iter().enumerate() {
                             let tsl_last = run == config.runs && k == 1;
-                            steps.push(Step { test, run, direction, tsl_last });
+                            steps.push(Step {
+                                test,
+                                run,
+                                direction,
+                                tsl_last,
+                            });
                         }
                     }
                     LimitsTest::Cdt | LimitsTest::Cpt => steps.push(Step {
@@ -276,7 +293,11 @@ impl Procedure for LimitsProcedure {
             direction: step.direction,
             start_c: plan.baseline_c,
             baseline_c: self.config.baseline_c,
-            delivered_c: if response.detected { response.delivered_c } else { plan.target_c() },
+            delivered_c: if response.detected {
+                response.delivered_c
+            } else {
+                plan.target_c()
+            },
             cutoff_reached: !response.detected,
             paradoxical_heat: response.paradoxical_heat,
         });

@@ -188,7 +188,9 @@ impl SimulatedParticipant {
     fn felt(&self) -> bool {
         let receptor = self.receptor_c();
         match self.trial.criterion {
-            Some(Criterion::Change { sign }) => sign * (receptor - self.trial.start_receptor_c) >= self.trial.criterion_c,
+            Some(Criterion::Change { sign }) => {
+                sign * (receptor - self.trial.start_receptor_c) >= self.trial.criterion_c
+            }
             Some(Criterion::Pain { sign }) if sign < 0.0 => receptor <= self.config.cold_pain_c,
             Some(Criterion::Pain { .. }) => receptor >= self.config.heat_pain_c,
             None => false,

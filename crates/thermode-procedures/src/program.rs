@@ -87,10 +87,18 @@ impl ProgramConfig {
     /// baseline (so that every channel's first set-point change is on the program's first tick).
     pub fn validate(&self) -> Result<(), ProcedureError> {
         if self.channels == 0 || self.channels > 64 {
-            return Err(ProcedureError::bad("program.channels", self.channels, "an integer from 1 to 64"));
+            return Err(ProcedureError::bad(
+                "program.channels",
+                self.channels,
+                "an integer from 1 to 64",
+            ));
         }
         if self.repetitions == 0 || self.repetitions > 1000 {
-            return Err(ProcedureError::bad("program.repetitions", self.repetitions, "an integer from 1 to 1000"));
+            return Err(ProcedureError::bad(
+                "program.repetitions",
+                self.repetitions,
+                "an integer from 1 to 1000",
+            ));
         }
         check_range("program.isi_s", self.isi_s, 0.0, 3600.0)?;
         if self.stimuli.is_empty() {
@@ -125,7 +133,11 @@ impl ZoneStimulus {
             .iter()
             .map(|(key, segments)| {
                 let channel = key.trim().parse::<usize>().map_err(|_| {
-                    ProcedureError::bad(&format!("program.stimuli.{}.channels", self.name), key, "a channel number")
+                    ProcedureError::bad(
+                        &format!("program.stimuli.{}.channels", self.name),
+                        key,
+                        "a channel number",
+                    )
                 })?;
                 Ok((channel, segments.clone()))
             })
@@ -137,12 +149,20 @@ impl ZoneStimulus {
         check_range(&format!("{key}.baseline_c"), self.baseline_c, 0.0, 50.0)?;
         let map = self.channel_segments()?;
         if map.is_empty() {
-            return Err(ProcedureError::bad(&format!("{key}.channels"), "{}", "at least one channel"));
+            return Err(ProcedureError::bad(
+                &format!("{key}.channels"),
+                "{}",
+                "at least one channel",
+            ));
         }
         for (channel, segments) in &map {
             let at = format!("{key}.channels.{channel}");
             if *channel >= channels {
-                return Err(ProcedureError::bad(&at, channel, &format!("a channel below {channels}")));
+                return Err(ProcedureError::bad(
+                    &at,
+                    channel,
+                    &format!("a channel below {channels}"),
+                ));
             }
             if segments.is_empty() || segments.len() > MAX_SEGMENTS {
                 return Err(ProcedureError::bad(&at, segments.len(), "1 to 999 segments"));
@@ -153,7 +173,11 @@ impl ZoneStimulus {
                 Segment::Hold { .. } => false,
             };
             if !starts {
-                return Err(ProcedureError::bad(&at, "its first segment", "a ramp or step away from the baseline"));
+                return Err(ProcedureError::bad(
+                    &at,
+                    "its first segment",
+                    "a ramp or step away from the baseline",
+                ));
             }
         }
         Ok(())
@@ -169,4 +193,25 @@ fn check_segment(at: &str, segment: &Segment) -> Result<(), ProcedureError> {
         Segment::Step { to_c } => check_range(&format!("{at}.to_c"), to_c, 0.0, 50.0).map(drop),
         Segment::Hold { hold_s, .. } => check_positive(&format!("{at}.hold_s"), hold_s, 3600.0).map(drop),
     }
+}
+
+/// The nominal start time of every segment from the program's first tick \[s\], and the end of the last one as a final
+/// element: ramps take `|to_c − from| / rate_c_s` from the set-point the previous segment left (`baseline_c` first),
+/// holds their `hold_s` (a segment ended early by a response is counted whole), steps no time (the envelope's rate
+/// limit is the display's, not the program's).
+pub fn segment_times_s(baseline_c: f64, segments: &[Segment]) -> Vec<f64> {
+    let mut times = vec![0.0];
+    let (mut t, mut setpoint_c) = (0.0, baseline_c);
+    for segment in segments {
+        match *segment {
+            Segment::Ramp { to_c, rate_c_s, .. } => {
+                t += (to_c - setpoint_c).abs() / rate_c_s;
+                setpoint_c = to_c;
+            }
+            Segment::Step { to_c } => setpoint_c = to_c,
+            Segment::Hold { hold_s, .. } => t += hold_s,
+        }
+        times.push(t);
+    }
+    times
 }

@@ -51,14 +51,22 @@ impl Grid {
             Grid::Values(ref v) => v.clone(),
             Grid::Range { start, stop, step } => {
                 if !(step > 0.0 && start.is_finite() && stop.is_finite()) || (stop - start) / step > 1e5 {
-                    return Err(ProcedureError::bad(key, format!("{self:?}"), "a range with a positive step"));
+                    return Err(ProcedureError::bad(
+                        key,
+                        format!("{self:?}"),
+                        "a range with a positive step",
+                    ));
                 }
                 let n = ((stop - start) / step).ceil().max(0.0) as usize;
                 (0..n).map(|i| start + i as f64 * step).collect()
             }
         };
         if values.is_empty() || values.len() > 100_000 || values.iter().any(|v| !v.is_finite()) {
-            return Err(ProcedureError::bad(key, format!("{values:?}"), "1 to 100000 finite values"));
+            return Err(ProcedureError::bad(
+                key,
+                format!("{values:?}"),
+                "1 to 100000 finite values",
+            ));
         }
         Ok(values)
     }
@@ -232,7 +240,11 @@ impl QuestPlus {
         }
         let cells: usize = params.iter().map(Vec::len).product();
         if cells.saturating_mul(stim.len()) > 50_000_000 {
-            return Err(ProcedureError::bad("questplus", cells * stim.len(), "at most 5e7 grid cells"));
+            return Err(ProcedureError::bad(
+                "questplus",
+                cells * stim.len(),
+                "at most 5e7 grid cells",
+            ));
         }
         let mut qp = QuestPlus {
             func: config.func,
@@ -243,9 +255,18 @@ impl QuestPlus {
             posterior: vec![1.0 / cells as f64; cells],
             estimation: config.param_estimation_method,
         };
-        qp.likelihood = qp.stim.iter().flat_map(|&x| qp.cells().map(move |c| (x, c))).map(|(x, c)| qp.p(x, c)).collect();
+        qp.likelihood = qp
+            .stim
+            .iter()
+            .flat_map(|&x| qp.cells().map(move |c| (x, c)))
+            .map(|(x, c)| qp.p(x, c))
+            .collect();
         if qp.likelihood.iter().any(|p| !p.is_finite()) {
-            return Err(ProcedureError::bad("questplus.param_domain", "the grid", "parameters giving finite probabilities"));
+            return Err(ProcedureError::bad(
+                "questplus.param_domain",
+                "the grid",
+                "parameters giving finite probabilities",
+            ));
         }
         Ok(qp)
     }
@@ -419,7 +440,11 @@ impl QuestPlusProcedure {
     pub fn new(config: &QuestPlusConfig, stimulus: StimulusConfig) -> Result<Self, ProcedureError> {
         stimulus.validate()?;
         if config.trials == 0 || config.trials > 10_000 {
-            return Err(ProcedureError::bad("questplus.trials", config.trials, "an integer from 1 to 10000"));
+            return Err(ProcedureError::bad(
+                "questplus.trials",
+                config.trials,
+                "an integer from 1 to 10000",
+            ));
         }
         Ok(QuestPlusProcedure {
             engine: QuestPlus::new(config)?,

@@ -90,7 +90,11 @@ impl StaircaseConfig {
     /// Checks every value (key names as in the experiment file).
     pub fn validate(&self) -> Result<(), ProcedureError> {
         if !(self.start_val.is_finite()) {
-            return Err(ProcedureError::bad("staircase.start_val", self.start_val, "a finite number"));
+            return Err(ProcedureError::bad(
+                "staircase.start_val",
+                self.start_val,
+                "a finite number",
+            ));
         }
         if self.step_sizes.is_empty() || self.step_sizes.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
             return Err(ProcedureError::bad(
@@ -103,7 +107,11 @@ impl StaircaseConfig {
             return Err(ProcedureError::bad("staircase.n_up/n_down", 0, "at least 1"));
         }
         if self.max_trials == 0 || self.estimate_reversals == 0 {
-            return Err(ProcedureError::bad("staircase.max_trials/estimate_reversals", 0, "at least 1"));
+            return Err(ProcedureError::bad(
+                "staircase.max_trials/estimate_reversals",
+                0,
+                "at least 1",
+            ));
         }
         Ok(())
     }

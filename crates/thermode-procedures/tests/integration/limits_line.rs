@@ -41,7 +41,9 @@ fn the_method_of_limits_follows_the_analytic_line_at_1_2_and_4_c_per_s() {
     let skin = SkinResponse::new(&Skin::fingertip(), p.contact_conductance_w_m2k).expect("skin");
     let mut worst: f64 = 0.0;
     for rate in [1.0, 2.0, 4.0] {
-        let expected = skin.limits_estimate_c(p.threshold_c, rate, p.reaction_time_s).expect("detected");
+        let expected = skin
+            .limits_estimate_c(p.threshold_c, rate, p.reaction_time_s)
+            .expect("detected");
         let lag = skin.lag_s(p.threshold_c, rate).expect("detected");
         let (cdt, wdt) = limits_session(rate);
         println!("rate {rate} °C/s: lag {lag:.4} s, analytic {expected:.4} °C, CDT {cdt:.4}, WDT {wdt:.4}");
@@ -59,7 +61,10 @@ fn the_method_of_limits_follows_the_analytic_line_at_1_2_and_4_c_per_s() {
 #[test]
 fn the_skin_lag_grows_with_the_ramp_duration() {
     let skin = SkinResponse::new(&Skin::fingertip(), DEFAULT_DISPLAY_CONDUCTANCE_W_M2K).expect("skin");
-    let lags: Vec<f64> = [4.0, 2.0, 1.0].iter().map(|r| skin.lag_s(0.5, *r).expect("detected")).collect();
+    let lags: Vec<f64> = [4.0, 2.0, 1.0]
+        .iter()
+        .map(|r| skin.lag_s(0.5, *r).expect("detected"))
+        .collect();
     assert!(
         lags[0] < lags[1] && lags[1] < lags[2],
         "slower ramps (longer to the threshold) should lag more: {lags:?} s at 4, 2, 1 °C/s"
@@ -72,14 +77,23 @@ fn the_analytic_response_has_the_skin_models_steady_gain_and_initial_slope() {
     let g = DEFAULT_DISPLAY_CONDUCTANCE_W_M2K;
     let skin = Skin::fingertip();
     let model = KronModel::new(&skin).expect("kron");
-    let plate = |t: f64| KronEnvironment::Plate { conductance_w_m2k: g, temperature_c: t };
+    let plate = |t: f64| KronEnvironment::Plate {
+        conductance_w_m2k: g,
+        temperature_c: t,
+    };
     let kron_gain = model.steady_state_c(&plate(33.0))[0] - model.steady_state_c(&plate(32.0))[0];
     let response = SkinResponse::new(&skin, g).expect("skin");
     let gain = response.steady_gain();
-    assert!((gain - kron_gain).abs() < 1e-9, "steady gain: modal {gain}, Kron {kron_gain}");
+    assert!(
+        (gain - kron_gain).abs() < 1e-9,
+        "steady gain: modal {gain}, Kron {kron_gain}"
+    );
     // A ramp's first instants: y ≈ r (G_d / C₁) t² / 2.
     let c1 = model.capacities_j_m2k()[0];
     let t = 1e-4;
     let (got, expected) = (response.unit_ramp_c(t), g / c1 * t * t / 2.0);
-    assert!((got / expected - 1.0).abs() < 1e-3, "initial ramp response {got} against {expected}");
+    assert!(
+        (got / expected - 1.0).abs() < 1e-3,
+        "initial ramp response {got} against {expected}"
+    );
 }

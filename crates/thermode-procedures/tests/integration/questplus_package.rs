@@ -47,7 +47,10 @@ fn python_ready() -> bool {
         .output()
         .is_ok_and(|o| o.status.success());
     if !ready {
-        assert!(!required, "THERMODE_REQUIRE_PYTHON_TESTS=1 but python3 lacks questplus 2023.1");
+        assert!(
+            !required,
+            "THERMODE_REQUIRE_PYTHON_TESTS=1 but python3 lacks questplus 2023.1"
+        );
         println!("skipped: `python3 -m pip install questplus==2023.1` to compare QUEST+ with the package");
     }
     ready
@@ -65,8 +68,13 @@ fn replay(spec: &Value) -> Value {
     stdin.write_all(spec.to_string().as_bytes()).expect("write the session");
     drop(stdin);
     let out = child.wait_with_output().expect("python3 output");
-    assert!(out.status.success(), "the replay failed:\n{}", String::from_utf8_lossy(&out.stderr));
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("replay output {e}: {}", String::from_utf8_lossy(&out.stdout)))
+    assert!(
+        out.status.success(),
+        "the replay failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("replay output {e}: {}", String::from_utf8_lossy(&out.stdout)))
 }
 
 fn values(config: &QuestPlusConfig) -> (Vec<&'static str>, Value) {
@@ -77,7 +85,11 @@ fn values(config: &QuestPlusConfig) -> (Vec<&'static str>, Value) {
     };
     let (names, first, second) = match config.func {
         Func::NormCdf => (vec!["mean", "sd", "lower_asymptote", "lapse_rate"], &d.mean, &d.sd),
-        Func::Weibull => (vec!["threshold", "slope", "lower_asymptote", "lapse_rate"], &d.threshold, &d.slope),
+        Func::Weibull => (
+            vec!["threshold", "slope", "lower_asymptote", "lapse_rate"],
+            &d.threshold,
+            &d.slope,
+        ),
     };
     let params = json!({
         names[0]: grid(first, names[0]),
@@ -91,7 +103,11 @@ fn values(config: &QuestPlusConfig) -> (Vec<&'static str>, Value) {
 /// Runs a 30-trial session of `config` with a simulated participant, replays it through the package and compares.
 fn compare_with_the_package(config: &QuestPlusConfig, stimulus: StimulusConfig, seed: u64) {
     let mut procedure = QuestPlusProcedure::new(config, stimulus).expect("valid QUEST+");
-    let participant = ParticipantConfig { noise_c: 0.1, lapse: 0.02, ..ParticipantConfig::default() };
+    let participant = ParticipantConfig {
+        noise_c: 0.1,
+        lapse: 0.02,
+        ..ParticipantConfig::default()
+    };
     let mut someone = SimulatedParticipant::new(participant, seed).expect("participant");
     let mut ours = Vec::new();
     let mut trials = Vec::new();
@@ -131,15 +147,25 @@ fn compare_with_the_package(config: &QuestPlusConfig, stimulus: StimulusConfig, 
         }
         let relative = (a - b).abs() / a.abs().max(b.abs());
         worst = worst.max(relative);
-        assert!(relative <= 1e-9, "posterior cell {cell}: thermode {a:e}, the package {b:e} (relative {relative:e})");
+        assert!(
+            relative <= 1e-9,
+            "posterior cell {cell}: thermode {a:e}, the package {b:e} (relative {relative:e})"
+        );
     }
     let estimate: Vec<f64> = serde_json::from_value(theirs["estimate"].clone()).expect("estimate");
     let my_estimate = procedure.engine().param_estimate();
     for (k, (a, b)) in my_estimate.iter().zip(&estimate).enumerate() {
         let relative = (a - b).abs() / a.abs().max(b.abs()).max(1e-300);
-        assert!(relative <= 1e-9, "estimate of {}: thermode {a}, the package {b}", names[k]);
+        assert!(
+            relative <= 1e-9,
+            "estimate of {}: thermode {a}, the package {b}",
+            names[k]
+        );
     }
-    println!("{} trials: same intensities; posterior worst relative difference {worst:e}; estimate {estimate:?}", ours.len());
+    println!(
+        "{} trials: same intensities; posterior worst relative difference {worst:e}; estimate {estimate:?}",
+        ours.len()
+    );
 }
 
 #[test]
@@ -147,7 +173,10 @@ fn the_shipped_questplus_session_replays_through_the_package() {
     if !python_ready() {
         return;
     }
-    let path = format!("{}/../thermode-lab/experiments/questplus.toml", env!("CARGO_MANIFEST_DIR"));
+    let path = format!(
+        "{}/../thermode-lab/experiments/questplus.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
     let file = ExperimentFile::from_toml_str(&std::fs::read_to_string(&path).expect("questplus.toml")).expect("valid");
     let config = file.questplus.clone().expect("a [questplus] table");
     for seed in [1, 2, 3] {

@@ -10,11 +10,16 @@ fn run(config: StaircaseConfig, responses: &[u8]) -> (Staircase, Vec<f64>) {
     let mut stairs = Staircase::new(config, StimulusConfig::default()).expect("valid staircase");
     let mut presented = Vec::new();
     for &r in responses {
-        let Some(intensity) = stairs.next_intensity() else { break };
+        let Some(intensity) = stairs.next_intensity() else {
+            break;
+        };
         presented.push(intensity);
         stairs.add_response(r == 1);
     }
-    assert!(stairs.next_intensity().is_none(), "the staircase should have finished after {presented:?}");
+    assert!(
+        stairs.next_intensity().is_none(),
+        "the staircase should have finished after {presented:?}"
+    );
     (stairs, presented)
 }
 
@@ -53,7 +58,11 @@ fn three_down_one_up_with_the_initial_rule_and_two_step_sizes() {
         &[10.0, 8.0, 6.0, 7.0, 7.0, 7.0, 6.0, 6.0, 6.0, 5.0, 6.0, 7.0, 7.0, 7.0],
     );
     assert_eq!(stairs.reversal_points(), &[2, 5, 9, 13], "reversal points");
-    assert_close("reversal intensities", stairs.reversal_intensities(), &[6.0, 7.0, 5.0, 7.0]);
+    assert_close(
+        "reversal intensities",
+        stairs.reversal_intensities(),
+        &[6.0, 7.0, 5.0, 7.0],
+    );
 }
 
 #[test]
@@ -78,7 +87,11 @@ fn decibel_steps_without_the_initial_rule_clip_at_max_val() {
     };
     let (stairs, presented) = run(config, &[0, 1, 1, 1, 0, 1, 1, 1, 1]);
     let back = 1.0 / f * f;
-    assert_close("intensities", &presented, &[1.0, 1.0, 1.0, 1.0 / f, 1.0 / f, back, back]);
+    assert_close(
+        "intensities",
+        &presented,
+        &[1.0, 1.0, 1.0, 1.0 / f, 1.0 / f, back, back],
+    );
     assert_eq!(stairs.reversal_points(), &[2, 4, 6], "reversal points");
 }
 
