@@ -37,9 +37,9 @@ pub struct ParticipantConfig {
     pub noise_c: f64,
     /// Probability that a trial is a lapse (a random yes/no answer, or a missed ramp), 0–1. Default 0.
     pub lapse: f64,
-    /// Receptor temperature felt as cold pain \[°C\]. Default 15.
+    /// Receptor (epidermis) temperature felt as cold pain \[°C\]. Default 18 (a CPT near 12 °C at 1 °C/s).
     pub cold_pain_c: f64,
-    /// Receptor temperature felt as heat pain \[°C\]. Default 43.
+    /// Receptor (epidermis) temperature felt as heat pain \[°C\]. Default 41 (an HPT near 46 °C at 1 °C/s).
     pub heat_pain_c: f64,
     /// Finger–plate contact conductance [W/(m²·K)]. Default 800 (`thermode_model`'s display default).
     pub contact_conductance_w_m2k: f64,
@@ -52,8 +52,8 @@ impl Default for ParticipantConfig {
             reaction_time_s: 0.4,
             noise_c: 0.05,
             lapse: 0.0,
-            cold_pain_c: 15.0,
-            heat_pain_c: 43.0,
+            cold_pain_c: 18.0,
+            heat_pain_c: 41.0,
             contact_conductance_w_m2k: DEFAULT_DISPLAY_CONDUCTANCE_W_M2K,
         }
     }

@@ -72,16 +72,14 @@ fn rotate(m: &mut [[f64; 3]; 3], v: &mut [[f64; 3]; 3], p: usize, q: usize) {
     let t = if theta == 0.0 { 1.0 } else { t };
     let c = 1.0 / (t * t + 1.0).sqrt();
     let s = t * c;
-    for k in 0..3 {
-        let (mkp, mkq) = (m[k][p], m[k][q]);
-        m[k][p] = c * mkp - s * mkq;
-        m[k][q] = s * mkp + c * mkq;
+    for row in m.iter_mut() {
+        let (mkp, mkq) = (row[p], row[q]);
+        row[p] = c * mkp - s * mkq;
+        row[q] = s * mkp + c * mkq;
     }
-    for k in 0..3 {
-        let (mpk, mqk) = (m[p][k], m[q][k]);
-        m[p][k] = c * mpk - s * mqk;
-        m[q][k] = s * mpk + c * mqk;
-    }
+    let (row_p, row_q) = (m[p], m[q]);
+    m[p] = std::array::from_fn(|k| c * row_p[k] - s * row_q[k]);
+    m[q] = std::array::from_fn(|k| s * row_p[k] + c * row_q[k]);
     for row in v.iter_mut() {
         let (vp, vq) = (row[p], row[q]);
         row[p] = c * vp - s * vq;

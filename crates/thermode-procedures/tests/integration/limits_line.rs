@@ -97,3 +97,43 @@ fn the_analytic_response_has_the_skin_models_steady_gain_and_initial_slope() {
         "initial ramp response {got} against {expected}"
     );
 }
+
+#[test]
+fn a_simulated_dfns_session_runs_every_test() {
+    let file_text = std::fs::read_to_string(format!(
+        "{}/../thermode-lab/experiments/dfns-thermal.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .expect("dfns-thermal.toml");
+    let file = thermode_procedures::ExperimentFile::from_toml_str(&file_text).expect("valid");
+    let mut procedure = LimitsProcedure::new(file.limits.clone().expect("[limits]")).expect("valid");
+    let mut someone = SimulatedParticipant::new(file.participant(), file.seed).expect("valid");
+    while let Some(plan) = procedure.next_trial() {
+        let response = someone.run_trial(&plan, 1e-2);
+        procedure.record(response).expect("pending");
+    }
+    let p = file.participant();
+    let skin = SkinResponse::new(&Skin::fingertip(), p.contact_conductance_w_m2k).expect("skin");
+    let line = skin
+        .limits_estimate_c(p.threshold_c, 1.0, p.reaction_time_s)
+        .expect("detected");
+    for t in analysis::thresholds(procedure.runs()) {
+        println!("{:?}", t);
+        assert_eq!(t.cutoffs, 0, "{}: no ramp should reach its cut-off", t.test.name());
+        match t.test {
+            LimitsTest::Cdt | LimitsTest::Wdt => assert!(
+                (t.value_c.abs() - line).abs() < 0.2,
+                "{}: {} °C, the analytic line {line} °C (noise 0.05 °C)",
+                t.test.name(),
+                t.value_c
+            ),
+            LimitsTest::Tsl => assert!(
+                t.value_c > line,
+                "TSL {} °C should exceed one detection ({line} °C)",
+                t.value_c
+            ),
+            LimitsTest::Cpt => assert!(t.value_c > 0.0 && t.value_c < 32.0 - line, "CPT {} °C", t.value_c),
+            LimitsTest::Hpt => assert!(t.value_c < 50.0 && t.value_c > 32.0 + line, "HPT {} °C", t.value_c),
+        }
+    }
+}
