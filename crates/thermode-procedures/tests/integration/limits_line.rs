@@ -84,6 +84,7 @@ fn the_analytic_response_has_the_skin_models_steady_gain_and_initial_slope() {
     let kron_gain = model.steady_state_c(&plate(33.0))[0] - model.steady_state_c(&plate(32.0))[0];
     let response = SkinResponse::new(&skin, g).expect("skin");
     let gain = response.steady_gain();
+    println!("steady gain of the receptor: {gain:.4} (Kron steady states: {kron_gain:.4})");
     assert!(
         (gain - kron_gain).abs() < 1e-9,
         "steady gain: modal {gain}, Kron {kron_gain}"
