@@ -178,9 +178,7 @@ impl SimulatedParticipant {
             self.trial.detected_at_s = Some(self.trial.elapsed_s);
         }
         match self.trial.detected_at_s {
-            Some(at) if !self.trial.lapsed => {
-                self.trial.elapsed_s - at >= self.config.reaction_time_s - 1e-9 * dt_s.max(1.0)
-            }
+            Some(at) if !self.trial.lapsed => self.trial.elapsed_s - at >= self.config.reaction_time_s - 1e-9,
             _ => false,
         }
     }

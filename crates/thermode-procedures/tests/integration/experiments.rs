@@ -166,6 +166,16 @@ fn bad_files_are_refused_with_the_key_named() {
              [program.stimuli.channels]\n\"0\" = [{ hold_s = 1.0 }]\n",
             "a ramp or step away from the baseline",
         ),
+        (
+            "name = \"x\"\nprocedure = \"program\"\n[program]\n[[program.stimuli]]\nname = \"a\"\n\
+             [program.stimuli.channels]\n\"0\" = [{ to_c = 20.0, rate_c_s = 1.0 }, { hold_s = 1.0, to_c = 3.0 }]\n",
+            "did not match any variant",
+        ),
+        (
+            "name = \"x\"\nprocedure = \"program\"\n[program]\n[[program.stimuli]]\nname = \"a\"\n\
+             [program.stimuli.channels]\n\"0\" = [{ to_c = 20.0, rate_c_s = 1.0, until = \"button\" }]\n",
+            "did not match any variant",
+        ),
     ];
     for (text, expected) in cases {
         let error = ExperimentFile::from_toml_str(text).expect_err(text).to_string();
