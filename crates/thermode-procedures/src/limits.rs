@@ -154,7 +154,8 @@ pub struct LimitsRun {
     pub start_c: f64,
     /// The session's baseline \[°C\].
     pub baseline_c: f64,
-    /// The plate at the response \[°C\], or the cut-off when nobody responded.
+    /// The plate at the response \[°C\], or where the ramp ended without one (its cut-off, or the display's limit
+    /// when that is narrower).
     pub delivered_c: f64,
     /// The ramp reached its cut-off without a response.
     pub cutoff_reached: bool,
@@ -293,7 +294,7 @@ impl Procedure for LimitsProcedure {
             direction: step.direction,
             start_c: plan.baseline_c,
             baseline_c: self.config.baseline_c,
-            delivered_c: if response.detected {
+            delivered_c: if response.delivered_c.is_finite() {
                 response.delivered_c
             } else {
                 plan.target_c()

@@ -20,7 +20,7 @@ use thermode_model::inverse::DEFAULT_DISPLAY_CONDUCTANCE_W_M2K;
 use thermode_model::{KronEnvironment, KronModel, Skin};
 
 use crate::error::{check_positive, check_range};
-use crate::plan::{Response, TrialPlan};
+use crate::plan::{Procedure, Response, TrialPlan};
 use crate::skin_response::ANSWER_WINDOW_S;
 use crate::ProcedureError;
 
@@ -264,4 +264,29 @@ impl SimulatedParticipant {
         let yes = self.answer();
         Response::yes_no(yes, plan.target_c())
     }
+}
+
+/// One trial of a simulated session: what was asked and what was answered.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TrialRecord {
+    /// The trial's plan.
+    pub plan: TrialPlan,
+    /// The participant's response.
+    pub response: Response,
+}
+
+/// Runs `procedure` to its end with `participant` answering every trial ([`SimulatedParticipant::run_trial`], its
+/// skin stepped every `dt_s` \[s\]) and returns the trials in order.
+pub fn run_simulated(
+    procedure: &mut dyn Procedure,
+    participant: &mut SimulatedParticipant,
+    dt_s: f64,
+) -> Result<Vec<TrialRecord>, ProcedureError> {
+    let mut records = Vec::new();
+    while let Some(plan) = procedure.next_trial() {
+        let response = participant.run_trial(&plan, dt_s);
+        procedure.record(response)?;
+        records.push(TrialRecord { plan, response });
+    }
+    Ok(records)
 }

@@ -107,6 +107,18 @@ impl TrialPlan {
         self.baseline_c + self.intensity_c
     }
 
+    /// Clips the target to a display's range `[min_c, max_c]` \[°C\] (thermode's own display: 15–48 °C against the
+    /// DFNS cut-offs 0 and 50 °C) and returns the display's cut-off when it applied, for the session to report.
+    pub fn clip_to_range(&mut self, min_c: f64, max_c: f64) -> Option<f64> {
+        let target = self.target_c();
+        let clipped = target.clamp(min_c, max_c);
+        if clipped == target {
+            return None;
+        }
+        self.intensity_c = clipped - self.baseline_c;
+        Some(clipped)
+    }
+
     /// The plan as program segments: the ramp (ended by a response when `until_response`), the plateau, the return
     /// ramp, the inter-stimulus hold.
     pub fn segments(&self) -> Vec<Segment> {
@@ -144,8 +156,8 @@ impl TrialPlan {
 pub struct Response {
     /// Method of limits: the participant pressed before the cut-off. Yes/no procedures: the answer was "yes".
     pub detected: bool,
-    /// The delivered intensity's plate temperature \[°C\]: the plate at the response tick (limits), the cut-off
-    /// reached without a response, or the plate at the plateau (yes/no procedures).
+    /// The delivered intensity's plate temperature \[°C\]: the plate at the response tick (limits), where the ramp
+    /// ended without a response (NaN: the plan's target), or the plate at the plateau (yes/no procedures).
     pub delivered_c: f64,
     /// Thermal sensory limen: a cold ramp felt as warm or hot (a paradoxical heat sensation).
     pub paradoxical_heat: bool,

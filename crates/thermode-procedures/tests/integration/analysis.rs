@@ -180,3 +180,24 @@ fn the_limits_plans_are_the_dfns_ramps() {
         "HPT: cut-off, fast return, pain"
     );
 }
+
+#[test]
+fn a_display_narrower_than_the_protocol_cuts_off_at_its_limit() {
+    let mut procedure = LimitsProcedure::new(LimitsConfig::default()).expect("DFNS defaults");
+    let mut cdt = procedure.next_trial().expect("CDT");
+    assert_eq!(
+        cdt.clip_to_range(15.0, 48.0),
+        Some(15.0),
+        "the display's cut-off is reported"
+    );
+    assert_eq!(cdt.target_c(), 15.0, "the ramp ends at the display's limit");
+    assert_eq!(
+        cdt.clone().clip_to_range(15.0, 48.0),
+        None,
+        "a target within the range is left alone"
+    );
+    // Nobody responds: the ramp ends at the display's 15 °C, which the run records (not the protocol's 0 °C).
+    procedure.record(Response::yes_no(false, 15.0)).expect("pending");
+    let run = procedure.runs()[0];
+    assert_eq!((run.delivered_c, run.cutoff_reached), (15.0, true), "{run:?}");
+}

@@ -3,10 +3,10 @@
 
 use thermode_model::inverse::DEFAULT_DISPLAY_CONDUCTANCE_W_M2K;
 use thermode_model::{KronEnvironment, KronModel, Skin};
+use thermode_procedures::analysis;
 use thermode_procedures::limits::{LimitsConfig, LimitsProcedure, LimitsTest};
-use thermode_procedures::participant::{ParticipantConfig, SimulatedParticipant};
+use thermode_procedures::participant::{run_simulated, ParticipantConfig, SimulatedParticipant};
 use thermode_procedures::skin_response::SkinResponse;
-use thermode_procedures::{analysis, Procedure};
 
 fn participant() -> ParticipantConfig {
     ParticipantConfig {
@@ -27,10 +27,7 @@ fn limits_session(rate_c_s: f64) -> (f64, f64) {
     };
     let mut procedure = LimitsProcedure::new(config).expect("valid limits");
     let mut someone = SimulatedParticipant::new(participant(), 1).expect("valid participant");
-    while let Some(plan) = procedure.next_trial() {
-        let response = someone.run_trial(&plan, 1e-3);
-        procedure.record(response).expect("pending trial");
-    }
+    run_simulated(&mut procedure, &mut someone, 1e-3).expect("a session");
     let thresholds = analysis::thresholds(procedure.runs());
     (thresholds[0].value_c.abs(), thresholds[1].value_c.abs())
 }
@@ -109,10 +106,7 @@ fn a_simulated_dfns_session_runs_every_test() {
     let file = thermode_procedures::ExperimentFile::from_toml_str(&file_text).expect("valid");
     let mut procedure = LimitsProcedure::new(file.limits.clone().expect("[limits]")).expect("valid");
     let mut someone = SimulatedParticipant::new(file.participant(), file.seed).expect("valid");
-    while let Some(plan) = procedure.next_trial() {
-        let response = someone.run_trial(&plan, 1e-2);
-        procedure.record(response).expect("pending");
-    }
+    run_simulated(&mut procedure, &mut someone, 1e-2).expect("a session");
     let p = file.participant();
     let skin = SkinResponse::new(&Skin::fingertip(), p.contact_conductance_w_m2k).expect("skin");
     let line = skin

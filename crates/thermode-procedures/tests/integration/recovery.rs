@@ -6,7 +6,7 @@
 //! the skin's analytic response (`SkinResponse::trapezoid_threshold_c`), not from the simulation.
 
 use thermode_model::Skin;
-use thermode_procedures::participant::SimulatedParticipant;
+use thermode_procedures::participant::{run_simulated, SimulatedParticipant};
 use thermode_procedures::skin_response::{SkinResponse, Trapezoid};
 use thermode_procedures::ExperimentFile;
 
@@ -43,13 +43,8 @@ fn recovery(name: &str) -> (u64, f64, f64, f64) {
     for session in 0..SESSIONS {
         let mut procedure = file.procedure().expect("valid").expect("single-channel");
         let mut someone = SimulatedParticipant::new(file.participant(), file.seed + session).expect("valid");
-        let mut trials = 0;
-        while let Some(plan) = procedure.next_trial() {
-            let response = someone.run_trial(&plan, DT_S);
-            procedure.record(response).expect("pending trial");
-            trials += 1;
-        }
-        assert_eq!(trials, 30, "{name}: a session has 30 trials");
+        let trials = run_simulated(procedure.as_mut(), &mut someone, DT_S).expect("a session");
+        assert_eq!(trials.len(), 30, "{name}: a session has 30 trials");
         let signed = procedure.estimate_c().expect("an estimate") - expected;
         bias += signed / SESSIONS as f64;
         let error = signed.abs();

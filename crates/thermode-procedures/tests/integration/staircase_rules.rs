@@ -116,3 +116,27 @@ fn fewer_reversals_than_step_sizes_are_raised_to_their_number() {
     assert_close("intensities", &presented, &[1.0, 0.6, 0.8, 0.7]);
     assert_close("reversal intensities", stairs.reversal_intensities(), &[0.6, 0.8, 0.7]);
 }
+
+#[test]
+fn log_steps_clip_at_min_val_and_keep_the_clipped_value() {
+    // f = 10^0.5. T0 1 yes: initial rule, start→down; 1/f. T1 1/f yes: down; 1/f² = 0.1, clipped to min_val 0.2.
+    // T2 0.2 no: down→up, the first reversal (at 0.2); the initial rule's last step: 0.2·f.
+    // T3 0.2·f yes: counter 1 = n_down, up→down, reversal; 2 reversals ≥ 1 and 4 trials ≥ 4: finished.
+    let f = 10f64.powf(0.5);
+    let config = StaircaseConfig {
+        start_val: 1.0,
+        step_sizes: vec![0.5],
+        step_type: StepType::Log,
+        n_up: 1,
+        n_down: 1,
+        n_reversals: None,
+        n_trials: 4,
+        apply_initial_rule: true,
+        min_val: Some(0.2),
+        max_val: None,
+        ..StaircaseConfig::default()
+    };
+    let (stairs, presented) = run(config, &[1, 1, 0, 1, 1]);
+    assert_close("intensities", &presented, &[1.0, 1.0 / f, 0.2, 0.2 * f]);
+    assert_close("reversal intensities", stairs.reversal_intensities(), &[0.2, 0.2 * f]);
+}
