@@ -8,6 +8,9 @@
 //! - CDT and WDT are differences from the baseline (CDT negative), TSL the mean difference between each run's warm
 //!   and cold ramp (positive); these are log-normally distributed and are compared as `log10` of their magnitude.
 //!   CPT and HPT are temperatures \[°C\], normally distributed, compared untransformed. PHS is a count (0–3).
+//!   (Rolke et al. 2006, abstract: most QST parameters are normally distributed only after a logarithmic
+//!   transformation, except the frequency of paradoxical heat sensations, the cold and heat pain thresholds and the
+//!   vibration detection threshold.)
 //! - `z = (x − mean) / sd` with x, mean and sd in the compared space; DFNS then signs z so that a positive z is a gain
 //!   of function (more sensitive than the reference): CPT keeps its sign (a warmer cold-pain threshold is more
 //!   sensitive), CDT, WDT, TSL and HPT are inverted (a larger threshold is less sensitive).
