@@ -33,7 +33,7 @@ pub enum ProcedureKind {
 /// An experiment file.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct ExperimentFile {
+pub struct ProcedureFile {
     /// The experiment's name.
     pub name: String,
     /// The procedure.
@@ -71,10 +71,10 @@ fn missing(procedure: &str, table: &str) -> ProcedureError {
     }
 }
 
-impl ExperimentFile {
+impl ProcedureFile {
     /// Parses and validates an experiment file's text.
     pub fn from_toml_str(text: &str) -> Result<Self, ProcedureError> {
-        let file: ExperimentFile = toml::from_str(text).map_err(|e| ProcedureError::Parse(e.to_string()))?;
+        let file: ProcedureFile = toml::from_str(text).map_err(|e| ProcedureError::Parse(e.to_string()))?;
         file.validate()?;
         Ok(file)
     }

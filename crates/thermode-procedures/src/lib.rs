@@ -29,5 +29,5 @@ pub mod staircase;
 pub mod stimulus;
 
 pub use error::ProcedureError;
-pub use experiment::{ExperimentFile, ProcedureKind};
+pub use experiment::{ProcedureFile, ProcedureKind};
 pub use plan::{Direction, Procedure, Response, Segment, TrialPlan, Until};

@@ -2,16 +2,16 @@
 //! programs are what their comments say (checked against the segments' nominal timing).
 
 use thermode_procedures::program::{segment_times_s, ZoneTrial};
-use thermode_procedures::{ExperimentFile, ProcedureKind, Segment};
+use thermode_procedures::{ProcedureFile, ProcedureKind, Segment};
 
 fn experiments_dir() -> std::path::PathBuf {
     std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../thermode-lab/experiments")
 }
 
-fn load(name: &str) -> ExperimentFile {
+fn load(name: &str) -> ProcedureFile {
     let path = experiments_dir().join(name);
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    ExperimentFile::from_toml_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+    ProcedureFile::from_toml_str(&text).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
 
 const SHIPPED: [(&str, ProcedureKind); 7] = [
@@ -178,7 +178,7 @@ fn bad_files_are_refused_with_the_key_named() {
         ),
     ];
     for (text, expected) in cases {
-        let error = ExperimentFile::from_toml_str(text).expect_err(text).to_string();
+        let error = ProcedureFile::from_toml_str(text).expect_err(text).to_string();
         assert!(error.contains(expected), "error `{error}` should mention `{expected}`");
     }
 }
@@ -190,10 +190,10 @@ fn a_program_of_1000_segments_is_refused() {
         "name = \"x\"\nprocedure = \"program\"\n[program]\n[[program.stimuli]]\nname = \"a\"\n\
          [program.stimuli.channels]\n\"0\" = [{segments}]\n"
     );
-    let error = ExperimentFile::from_toml_str(&text)
+    let error = ProcedureFile::from_toml_str(&text)
         .expect_err("1000 segments")
         .to_string();
     assert!(error.contains("1 to 999 segments"), "{error}");
     let accepted = text.replacen("{ hold_s = 1.0 }, ", "", 1);
-    ExperimentFile::from_toml_str(&accepted).expect("999 segments");
+    ProcedureFile::from_toml_str(&accepted).expect("999 segments");
 }

@@ -103,7 +103,7 @@ fn a_simulated_dfns_session_runs_every_test() {
         env!("CARGO_MANIFEST_DIR")
     ))
     .expect("dfns-thermal.toml");
-    let file = thermode_procedures::ExperimentFile::from_toml_str(&file_text).expect("valid");
+    let file = thermode_procedures::ProcedureFile::from_toml_str(&file_text).expect("valid");
     let mut procedure = LimitsProcedure::new(file.limits.clone().expect("[limits]")).expect("valid");
     let mut someone = SimulatedParticipant::new(file.participant(), file.seed).expect("valid");
     run_simulated(&mut procedure, &mut someone, 1e-2).expect("a session");

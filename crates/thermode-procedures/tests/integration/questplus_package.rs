@@ -11,7 +11,7 @@ use serde_json::{json, Value};
 use thermode_procedures::participant::{ParticipantConfig, SimulatedParticipant};
 use thermode_procedures::questplus::{Func, QuestPlusConfig, QuestPlusProcedure};
 use thermode_procedures::stimulus::StimulusConfig;
-use thermode_procedures::{ExperimentFile, Procedure};
+use thermode_procedures::{Procedure, ProcedureFile};
 
 /// Replays `{config, trials: [[stim, outcome]]}` through the package; prints the next intensity before each trial,
 /// the final posterior (C order over the parameters as listed) and the parameter estimate.
@@ -177,7 +177,7 @@ fn the_shipped_questplus_session_replays_through_the_package() {
         "{}/../thermode-lab/experiments/questplus.toml",
         env!("CARGO_MANIFEST_DIR")
     );
-    let file = ExperimentFile::from_toml_str(&std::fs::read_to_string(&path).expect("questplus.toml")).expect("valid");
+    let file = ProcedureFile::from_toml_str(&std::fs::read_to_string(&path).expect("questplus.toml")).expect("valid");
     let config = file.questplus.clone().expect("a [questplus] table");
     for seed in [1, 2, 3] {
         compare_with_the_package(&config, file.stimulus(), seed);

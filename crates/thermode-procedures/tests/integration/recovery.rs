@@ -8,20 +8,20 @@
 use thermode_model::Skin;
 use thermode_procedures::participant::{run_simulated, SimulatedParticipant};
 use thermode_procedures::skin_response::{SkinResponse, Trapezoid};
-use thermode_procedures::ExperimentFile;
+use thermode_procedures::ProcedureFile;
 
 /// The participant's skin is stepped at 200 Hz in these sessions.
 const DT_S: f64 = 5e-3;
 const SESSIONS: u64 = 1000;
 
-fn experiment(name: &str) -> ExperimentFile {
+fn experiment(name: &str) -> ProcedureFile {
     let path = format!("{}/../thermode-lab/experiments/{name}", env!("CARGO_MANIFEST_DIR"));
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
-    ExperimentFile::from_toml_str(&text).unwrap_or_else(|e| panic!("{path}: {e}"))
+    ProcedureFile::from_toml_str(&text).unwrap_or_else(|e| panic!("{path}: {e}"))
 }
 
 /// The threshold in plate units for `file`'s stimulus and participant.
-fn plate_threshold_c(file: &ExperimentFile) -> f64 {
+fn plate_threshold_c(file: &ProcedureFile) -> f64 {
     let (s, p) = (file.stimulus(), file.participant());
     let skin = SkinResponse::new(&Skin::fingertip(), p.contact_conductance_w_m2k).expect("skin");
     let timing = Trapezoid {
