@@ -30,7 +30,8 @@ pub enum ProcedureKind {
     Program,
 }
 
-/// An experiment file.
+/// An experiment file of a procedure: one with a `procedure` key (the identification design of `thermode-lab` has
+/// none; [`ProcedureFile::declares_procedure`] tells them apart).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ProcedureFile {
@@ -72,6 +73,12 @@ fn missing(procedure: &str, table: &str) -> ProcedureError {
 }
 
 impl ProcedureFile {
+    /// Whether a TOML text has a top-level `procedure` key (so it is a procedure file, not an identification
+    /// design). A text that is not TOML has none.
+    pub fn declares_procedure(text: &str) -> bool {
+        toml::from_str::<toml::Table>(text).is_ok_and(|t| t.contains_key("procedure"))
+    }
+
     /// Parses and validates an experiment file's text.
     pub fn from_toml_str(text: &str) -> Result<Self, ProcedureError> {
         let file: ProcedureFile = toml::from_str(text).map_err(|e| ProcedureError::Parse(e.to_string()))?;

@@ -40,6 +40,12 @@ fn every_shipped_procedure_file_parses_and_validates() {
         let name = entry.expect("entry").file_name().to_string_lossy().into_owned();
         let known = SHIPPED.iter().any(|(n, _)| *n == name) || name == "paper.toml";
         assert!(known, "{name}: a file in experiments/ that this test does not parse");
+        let text = std::fs::read_to_string(experiments_dir().join(&name)).expect("readable");
+        assert_eq!(
+            ProcedureFile::declares_procedure(&text),
+            name != "paper.toml",
+            "{name}: procedure key"
+        );
     }
 }
 
