@@ -26,4 +26,10 @@ pub enum PipelineError {
     /// A number (stimulus, pipeline or run setting) that must be finite and in a range is not.
     #[error(transparent)]
     BadValue(#[from] BadValue),
+    /// A stimulus other than air during the display's start-up self-test (see
+    /// [`crate::PipelineConfig::self_test_at_start`]).
+    #[error(
+        "the display's start-up self-test is under way (2.5 s with no finger on the display): only air until it ends"
+    )]
+    SelfTestRunning,
 }

@@ -28,6 +28,6 @@ pub mod stimulus;
 
 pub use controllers::{build_controller, gains_for_device, ControllerKind, GainsSource, ShippedDisplay};
 pub use error::PipelineError;
-pub use pipeline::{ChannelPipeline, PipelineConfig, Telemetry};
+pub use pipeline::{ChannelPipeline, PipelineConfig, SelfTestState, Telemetry};
 pub use renderer::{RendererKind, LIGHT_TOUCH_RESISTANCE_M2K_W};
 pub use stimulus::Stimulus;

@@ -50,6 +50,7 @@ use crate::display::DisplayFinger;
 use crate::error::PipelineError;
 use crate::guard::PlateGuard;
 use crate::renderer::{fv_config, Renderer, RendererKind, LIGHT_TOUCH_RESISTANCE_M2K_W};
+use crate::self_test::{SelfTest, SelfTestReport, SelfTestRun};
 use crate::stimulus::Stimulus;
 
 /// The ambient temperature a pipeline accepts: the one physical range of air temperatures,
@@ -130,6 +131,12 @@ pub struct PipelineConfig {
     /// rounding), or `None`: the full model, one TR-BDF2 step per tick, as before the fast path (for comparisons
     /// and benchmarks).
     pub fv_fast_path: Option<ModalStepping>,
+    /// Whether the channel tests its display against the device file before its first stimulus
+    /// ([`crate::self_test`]): for its first [`SelfTest::record_s`] the drive is the self-test's pulse through the
+    /// envelope and every stimulus but air is refused; a display off its file is then refused (fault E106). Default
+    /// false (a simulated display built from its own file is that file); a daemon on real hardware driven by
+    /// current sets it.
+    pub self_test_at_start: bool,
 }
 
 impl PipelineConfig {
@@ -145,6 +152,7 @@ impl PipelineConfig {
             contact_resistance_m2k_w: LIGHT_TOUCH_RESISTANCE_M2K_W,
             calibrate_finger_at_touch: true,
             fv_fast_path: Some(ModalStepping::Exact),
+            self_test_at_start: false,
         }
     }
 
@@ -271,6 +279,23 @@ pub struct ChannelPipeline {
     receptor_offset_c: f64,
     /// Held off (stop all) until the next stimulus.
     held: bool,
+    /// The start-up self-test under way (`None`: none, or done).
+    self_test: Option<Box<SelfTestRun>>,
+    /// Where the start-up self-test stands.
+    self_test_state: SelfTestState,
+}
+
+/// Where a channel's start-up self-test of its display stands ([`PipelineConfig::self_test_at_start`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SelfTestState {
+    /// None was asked for.
+    NotRun,
+    /// Under way: the pulse is driven and every stimulus but air is refused.
+    Running,
+    /// Done: what it measured (a display off its file is refused, fault E106).
+    Done(SelfTestReport),
+    /// Stopped before its end (stop all): the display is refused, as untested.
+    Interrupted,
 }
 
 /// Time the finger must rest on the display before the controller's unknown heat is averaged \[s\]: 1, longer than
@@ -525,6 +550,16 @@ impl DriveStage {
         self.envelope.hold(now_s)
     }
 
+    /// A tick of the start-up self-test at `now_s` \[s\], `dt_s` \[s\] long: `pulse_a` \[A\] gated by the envelope
+    /// with the plate guard's forecast (no finger on the display); the controller is not asked.
+    pub fn pulse(&mut self, now_s: f64, dt_s: f64, reading: &Reading, pulse_a: f64) -> DriveCommand {
+        self.guard.update(now_s, reading, self.applied_current_a, Finger::NONE);
+        let forecast = self.guard.forecast(dt_s, Finger::NONE);
+        let drive = self.envelope.gate_drive(now_s, pulse_a, &forecast);
+        self.applied_current_a = drive.current_a();
+        drive
+    }
+
     /// Ends a hold: the controller restarts from the present readings, as on a fresh channel.
     pub fn end_hold(&mut self) {
         self.controller.reset();
@@ -605,6 +640,24 @@ impl ChannelPipeline {
             peltier: (config.device.module()?, config.device.render.peltier_uncertainty),
             receptor_offset_c: 0.0,
             held: false,
+            self_test: config
+                .self_test_at_start
+                .then(|| {
+                    let plant = plant_model(&config.device);
+                    plant.map(|plant| {
+                        Box::new(SelfTestRun::new(
+                            SelfTest::default(),
+                            plant,
+                            config.device.render.sensor_lag_uncertainty,
+                        ))
+                    })
+                })
+                .transpose()?,
+            self_test_state: if config.self_test_at_start {
+                SelfTestState::Running
+            } else {
+                SelfTestState::NotRun
+            },
         })
     }
 
@@ -613,6 +666,9 @@ impl ChannelPipeline {
     /// leaves the pipeline unchanged. Not a per-tick operation: a new material may allocate its grid.
     pub fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), PipelineError> {
         stimulus.validate()?;
+        if self.self_test.is_some() && stimulus != Stimulus::Air {
+            return Err(PipelineError::SelfTestRunning);
+        }
         if self.held {
             self.held = false;
             self.drive.end_hold();
@@ -637,6 +693,11 @@ impl ChannelPipeline {
         self.setpoint.release();
         self.last_setpoint_c = None;
         self.held = true;
+        if self.self_test.take().is_some() {
+            self.self_test_state = SelfTestState::Interrupted;
+            let now_s = self.drive.envelope.last_measurement().map_or(0.0, |m| m.time_s);
+            self.drive.envelope.refuse_display(now_s);
+        }
     }
 
     fn touch(&mut self, material: &Material, object_c: f64) -> Result<(), PipelineError> {
@@ -690,6 +751,15 @@ impl ChannelPipeline {
         if self.held {
             return self.held_tick(now_s, dt_s, reading, finger, (target_c, requested_c));
         }
+        if let Some(mut run) = self.self_test.take() {
+            let ticked = self.self_test_tick(&mut run, now_s, dt_s, reading, (target_c, requested_c));
+            if run.finished(now_s) {
+                self.finish_self_test(&run, now_s);
+            } else {
+                self.self_test = Some(run);
+            }
+            return ticked;
+        }
         let outcome = self.drive.drive(now_s, dt_s, reading, requested_c, finger);
         self.last_setpoint_c = Some(outcome.decision.setpoint_c);
         if self.calibration.is_some() && self.setpoint.mode == Mode::Render && !self.setpoint.renderer.in_contact() {
@@ -727,6 +797,44 @@ impl ChannelPipeline {
     }
 
     /// A tick while held off: 0 A; the finger model on the display follows the estimated plate.
+    /// A tick of the start-up self-test: the pulse's current through the envelope (no finger on the display), the
+    /// reading taken into the record.
+    fn self_test_tick(
+        &mut self,
+        run: &mut SelfTestRun,
+        now_s: f64,
+        dt_s: f64,
+        reading: &Reading,
+        (target_c, requested_c): (f64, f64),
+    ) -> (DriveCommand, Telemetry) {
+        run.take(dt_s, self.drive.applied_current_a, reading);
+        let pulse_a = run.current_a(now_s);
+        let drive = self.drive.pulse(now_s, dt_s, reading, pulse_a);
+        let plate_c = self.drive.plate_estimate_c();
+        self.setpoint
+            .follow(dt_s, if plate_c.is_finite() { plate_c } else { reading.sensor_c });
+        let telemetry = Telemetry {
+            requested_current_a: pulse_a,
+            current_a: drive.current_a(),
+            ..self.unrendered_telemetry(now_s, reading, (target_c, requested_c), &drive)
+        };
+        (drive, telemetry)
+    }
+
+    /// Ends the start-up self-test at `now_s` \[s\]: its report taken ([`ChannelPipeline::take_self_test`]) and
+    /// kept, the controller restarted from the present readings.
+    fn finish_self_test(&mut self, run: &SelfTestRun, now_s: f64) {
+        let report = run.report();
+        self.take_self_test(&report, now_s);
+        self.self_test_state = SelfTestState::Done(report);
+        self.drive.controller.reset();
+    }
+
+    /// Where the start-up self-test stands.
+    pub fn self_test_state(&self) -> SelfTestState {
+        self.self_test_state
+    }
+
     fn held_tick(
         &mut self,
         now_s: f64,
@@ -739,7 +847,20 @@ impl ChannelPipeline {
         let plate_c = self.drive.plate_estimate_c();
         self.setpoint
             .follow(dt_s, if plate_c.is_finite() { plate_c } else { reading.sensor_c });
-        let telemetry = Telemetry {
+        let telemetry = self.unrendered_telemetry(now_s, reading, (target_c, requested_c), &drive);
+        (drive, telemetry)
+    }
+
+    /// The telemetry of a tick whose drive is not the controller's (held off, or the self-test's pulse): no
+    /// contact, no set-point, no current asked for.
+    fn unrendered_telemetry(
+        &self,
+        now_s: f64,
+        reading: &Reading,
+        (target_c, requested_c): (f64, f64),
+        drive: &DriveCommand,
+    ) -> Telemetry {
+        Telemetry {
             time_s: now_s,
             contact: false,
             target_skin_c: target_c,
@@ -750,11 +871,10 @@ impl ChannelPipeline {
             hot_side_c: reading.hot_side_c,
             requested_current_a: 0.0,
             current_a: 0.0,
-            plate_estimate_c: plate_c,
+            plate_estimate_c: self.drive.plate_estimate_c(),
             finger_c: f64::NAN,
             fault: drive.fault(),
-        };
-        (drive, telemetry)
+        }
     }
 
     /// The horizon over which the display inverse computes the request for a tick of `dt_s` \[s\] (see

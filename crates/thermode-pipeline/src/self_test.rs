@@ -22,6 +22,7 @@
 use std::fmt;
 
 use thermode_control::{Finger, PlantModel};
+use thermode_device::Reading;
 
 /// The pulse of the self-test.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -66,6 +67,84 @@ pub struct SelfTestSample {
     pub sensor_c: f64,
     /// The hot-side reading at its end \[°C\].
     pub hot_side_c: f64,
+}
+
+/// A self-test under way in a channel's own loop (a daemon's display at start, [`crate::ChannelPipeline`]): the
+/// pulse's current tick by tick, and the record, kept once per fresh PT-100 sample (the fit's steps), whatever the
+/// loop's rate. Its memory is taken when it is made: a tick never allocates.
+#[derive(Debug, Clone)]
+pub struct SelfTestRun {
+    test: SelfTest,
+    /// The file's model of the display, and its sensor's stated uncertainty (`render.sensor_lag_uncertainty`).
+    plant: PlantModel,
+    sensor_lag_uncertainty: f64,
+    /// Loop time of the first tick \[s\] (`None` before it).
+    start_s: Option<f64>,
+    /// The sample number of the last reading recorded (`None` before the first).
+    last_seq: Option<u64>,
+    /// Time \[s\] and charge \[A·s\] since the last recorded reading.
+    pending: (f64, f64),
+    record: Vec<SelfTestSample>,
+}
+
+impl SelfTestRun {
+    /// A run of `test` on a display described by `plant` whose sensor may lag `1 + sensor_lag_uncertainty` times
+    /// its time constant. The record holds up to twice the samples the file's sample rate gives over the test.
+    pub fn new(test: SelfTest, plant: PlantModel, sensor_lag_uncertainty: f64) -> Self {
+        let samples = (2.0 * test.record_s * plant.sensor_sample_rate_hz)
+            .ceil()
+            .clamp(16.0, 100_000.0) as usize;
+        SelfTestRun {
+            test,
+            plant,
+            sensor_lag_uncertainty,
+            start_s: None,
+            last_seq: None,
+            pending: (0.0, 0.0),
+            record: Vec::with_capacity(samples),
+        }
+    }
+
+    /// The current to request at loop time `now_s` \[A\]: the pulse, from the first tick on.
+    pub fn current_a(&mut self, now_s: f64) -> f64 {
+        let start_s = *self.start_s.get_or_insert(now_s);
+        self.test.current_at_a(now_s - start_s)
+    }
+
+    /// Takes the tick's `reading`, which ends an interval of `dt_s` \[s\] over which `current_a` \[A\] was applied
+    /// (the first reading, before the pulse, is the display at rest and ends no interval). A fresh PT-100 sample
+    /// closes a step of the record with the interval's mean current.
+    pub fn take(&mut self, dt_s: f64, current_a: f64, reading: &Reading) {
+        if self.last_seq.is_none() {
+            self.last_seq = Some(reading.sample_seq);
+            return;
+        }
+        if dt_s.is_finite() && dt_s > 0.0 {
+            self.pending = (self.pending.0 + dt_s, self.pending.1 + current_a * dt_s);
+        }
+        let fresh = self.last_seq != Some(reading.sample_seq);
+        if fresh && self.pending.0 > 0.0 && self.record.len() < self.record.capacity() {
+            self.record.push(SelfTestSample {
+                dt_s: self.pending.0,
+                current_a: self.pending.1 / self.pending.0,
+                sensor_c: reading.sensor_c,
+                hot_side_c: reading.hot_side_c,
+            });
+            self.pending = (0.0, 0.0);
+            self.last_seq = Some(reading.sample_seq);
+        }
+    }
+
+    /// Whether the record is complete at loop time `now_s` \[s\].
+    pub fn finished(&self, now_s: f64) -> bool {
+        self.start_s
+            .is_some_and(|start_s| now_s - start_s >= self.test.record_s)
+    }
+
+    /// The record measured against the file ([`assess`]).
+    pub fn report(&self) -> SelfTestReport {
+        assess(&self.plant, self.sensor_lag_uncertainty, &self.record)
+    }
 }
 
 /// What the self-test measured, against the file.
@@ -259,6 +338,7 @@ impl<'a> Fit<'a> {
 mod tests {
     use super::*;
     use crate::controllers::plant_model;
+    use crate::ChannelPipeline;
     use thermode_device::DeviceConfig;
 
     /// The record of the pulse on a model display whose sensor lags `lag` times and whose plate answers heat
@@ -291,6 +371,84 @@ mod tests {
                 }
             })
             .collect()
+    }
+
+    /// A pipeline built to test its display at start, on a simulated display (no finger) whose sensor lags `lag`
+    /// times the file's, ticked at 1 ms for 3 s: the pipeline and the largest drive current during the test.
+    fn start_up(lag: f64) -> (ChannelPipeline, f64) {
+        use thermode_device::{Device, NoFinger, SimulatedDisplay};
+        let file = DeviceConfig::default();
+        let mut hardware = file;
+        hardware.sensor.time_constant_s *= lag;
+        let mut plant = SimulatedDisplay::new(&hardware, vec![NoFinger], 3).expect("plant");
+        plant
+            .channel_mut(0)
+            .and_then(|c| c.set_temperatures(23.0, 23.0))
+            .expect("rest");
+        let mut config = crate::PipelineConfig::new(file, crate::ControllerKind::Model);
+        config.self_test_at_start = true;
+        let mut pipeline = ChannelPipeline::new(&config).expect("pipeline");
+        let touch = crate::Stimulus::Touch {
+            material: thermode_model::materials::find("aluminium").expect("aluminium"),
+            object_c: 23.0,
+        };
+        assert!(
+            matches!(pipeline.set_stimulus(touch), Err(crate::PipelineError::SelfTestRunning)),
+            "a touch during the self-test must be refused"
+        );
+        let (dt_s, mut largest_a) = (0.001, 0.0_f64);
+        for _ in 0..3000 {
+            let reading = plant.read(0).expect("reading");
+            let testing = pipeline.self_test_state() == crate::SelfTestState::Running;
+            let (drive, _) = pipeline.tick(plant.time_s(), dt_s, &reading);
+            if testing {
+                largest_a = largest_a.max(drive.current_a().abs());
+            }
+            plant.apply(0, &drive).expect("apply");
+            plant.advance(dt_s);
+        }
+        (pipeline, largest_a)
+    }
+
+    /// The daemon's start-up self-test inside the pipeline: at a 1 ms tick (ten ticks per PT-100 sample) it measures
+    /// the sensor as the render's does at 10 ms, drives only its pulse meanwhile, and refuses a display whose sensor
+    /// lags five times its file (0 A, fault E106) while one as filed takes touches afterwards.
+    #[test]
+    fn a_pipeline_tests_its_display_at_start_and_refuses_one_off_its_file() {
+        for (lag, refused) in [(1.0, false), (5.0, true)] {
+            let (mut pipeline, largest_a) = start_up(lag);
+            let crate::SelfTestState::Done(report) = pipeline.self_test_state() else {
+                panic!(
+                    "lag × {lag}: the self-test did not end: {:?}",
+                    pipeline.self_test_state()
+                );
+            };
+            let measured = report.sensor_lag_s / report.filed_sensor_lag_s;
+            println!("lag × {lag}: {report}");
+            assert!(
+                (measured / lag - 1.0).abs() < 0.05,
+                "lag × {lag}: measured × {measured}"
+            );
+            assert!(
+                largest_a <= SelfTest::default().current_a + 1e-9,
+                "lag × {lag}: {largest_a} A"
+            );
+            assert_eq!(report.off_file().is_some(), refused, "lag × {lag}: {report}");
+            let fault = pipeline.envelope().fault();
+            assert_eq!(
+                fault == Some(thermode_safety::FaultCode::DisplayNotAsFiled),
+                refused,
+                "lag × {lag}: {fault:?}"
+            );
+            let touch = crate::Stimulus::Touch {
+                material: thermode_model::materials::find("aluminium").expect("aluminium"),
+                object_c: 23.0,
+            };
+            assert!(
+                pipeline.set_stimulus(touch).is_ok(),
+                "lag × {lag}: a touch after the test"
+            );
+        }
     }
 
     #[test]

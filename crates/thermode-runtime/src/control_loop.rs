@@ -32,7 +32,7 @@ use thermode_safety::{DoseLedger, DriveCommand, FaultCode};
 use crate::command::{
     Applied, Command, CommandError, CommandReceiver, CommandSender, Owner, Queued, Reply, URGENT_QUEUE_LEN,
 };
-use crate::engine::{ChannelEngine, EngineError, EngineFactory, Stimulus, Telemetry};
+use crate::engine::{ChannelEngine, EngineError, EngineFactory, SelfTestState, Stimulus, Telemetry};
 use crate::error::RuntimeError;
 use crate::interlock::Interlock;
 use crate::limits::StimulusLimits;
@@ -134,17 +134,23 @@ pub struct LoopHandle {
     config: LoopConfig,
     link: Option<Arc<thermode_device::LinkHealth>>,
     realtime: Realtime,
+    self_tests: Vec<SelfTestState>,
 }
 
-/// What the loop thread reports once its engines are built: the published state, each channel's limits, and what
-/// real-time treatment it obtained.
-type Started = Result<(Arc<Shared>, Vec<StimulusLimits>, Realtime), RuntimeError>;
+/// The longest the loop ticks for its channels' start-up self-tests before it takes commands \[s\]: 10 (a test
+/// records 2.5 s; the channels still testing then are held off).
+pub const SELF_TEST_LIMIT_S: f64 = 10.0;
+
+/// What the loop thread reports once its engines are built and their start-up self-tests are done: the published
+/// state, each channel's limits, what real-time treatment it obtained, and the self-tests.
+type Started = Result<(Arc<Shared>, Vec<StimulusLimits>, Realtime, Vec<SelfTestState>), RuntimeError>;
 
 impl LoopHandle {
     /// Starts the loop on its own thread. `engines` builds one engine per device channel on that thread. Each of
     /// `feeds` receives a [`TickRecord`] per tick (the recorder, the bench); the loop never waits for them. The loop
     /// obeys `interlock` (the recorder trips it; `Arc::default()` for one nobody trips). Returns once the engines
-    /// are built (their error, if any, is returned).
+    /// are built (their error, if any, is returned) and their start-up self-tests are done
+    /// ([`LoopHandle::self_tests`]).
     pub fn spawn(
         config: LoopConfig,
         device: Box<dyn Device + Send>,
@@ -177,14 +183,14 @@ impl LoopHandle {
                     let built = engines(count)
                         .map_err(RuntimeError::Engine)
                         .and_then(|engines| ControlLoop::new(&config, device, engines, receiver, feeds, interlock));
-                    let control = match built {
+                    let mut control = match built {
                         Ok(control) => control,
                         Err(e) => {
                             let _ = ready.send(Err(e));
                             return None;
                         }
                     };
-                    let ticker = match Ticker::new(config.period_s(), clock.now_s()) {
+                    let mut ticker = match Ticker::new(config.period_s(), clock.now_s()) {
                         Ok(ticker) => ticker,
                         Err(e) => {
                             let _ = ready.send(Err(RuntimeError::Config(e.to_string())));
@@ -198,7 +204,9 @@ impl LoopHandle {
                     } else {
                         Realtime::not_requested("not requested")
                     };
-                    let _ = ready.send(Ok((control.shared.clone(), limits, realtime)));
+                    // Before anyone holds the handle, so no command can reach a display under test.
+                    let self_tests = control.self_tests(clock.as_ref(), &mut ticker, &stop);
+                    let _ = ready.send(Ok((control.shared.clone(), limits, realtime, self_tests)));
                     Some(control.run(clock.as_ref(), ticker, &stop))
                 })
                 .map_err(|source| RuntimeError::Io {
@@ -206,7 +214,7 @@ impl LoopHandle {
                     source,
                 })?
         };
-        let (shared, limits, realtime) = match started.recv() {
+        let (shared, limits, realtime, self_tests) = match started.recv() {
             Ok(result) => result?,
             Err(_) => {
                 return Err(RuntimeError::Config(
@@ -224,7 +232,13 @@ impl LoopHandle {
             config,
             link,
             realtime,
+            self_tests,
         })
+    }
+
+    /// Each channel's start-up self-test of its display, as it ended before the loop took its first command.
+    pub fn self_tests(&self) -> &[SelfTestState] {
+        &self.self_tests
     }
 
     /// What real-time treatment the loop thread obtained (scheduling, locked memory).
@@ -427,15 +441,44 @@ impl ControlLoop {
     /// Ticks until `stop`; then every drive to 0 A (the device's answer is returned).
     fn run(mut self, clock: &dyn Clock, mut ticker: Ticker, stop: &AtomicBool) -> Result<(), DeviceError> {
         while let Some(tick) = ticker.wait(clock, stop) {
-            self.step(&tick, tick.scheduled_s);
-            let done_s = clock.now_s();
-            self.account(&tick, done_s, ticker.missed_total());
-            self.publish(tick.index);
-            for (reply, answer) in self.answers.drain(..) {
-                reply.send(answer);
-            }
+            self.tick_once(clock, &tick, ticker.missed_total());
         }
         self.shutdown()
+    }
+
+    /// One tick of the loop: the step, its accounting, the snapshot and the answers.
+    fn tick_once(&mut self, clock: &dyn Clock, tick: &Tick, missed_total: u64) {
+        self.step(tick, tick.scheduled_s);
+        let done_s = clock.now_s();
+        self.account(tick, done_s, missed_total);
+        self.publish(tick.index);
+        for (reply, answer) in self.answers.drain(..) {
+            reply.send(answer);
+        }
+    }
+
+    /// Ticks while any channel's start-up self-test is under way (at most [`SELF_TEST_LIMIT_S`] of loop time), then
+    /// returns where each stands. Called before the loop's handle exists: no command can arrive meanwhile.
+    fn self_tests(&mut self, clock: &dyn Clock, ticker: &mut Ticker, stop: &AtomicBool) -> Vec<SelfTestState> {
+        let running = |control: &Self| {
+            control
+                .slots
+                .iter()
+                .any(|slot| !slot.failed && slot.engine.self_test_state() == SelfTestState::Running)
+        };
+        let limit_ticks = (SELF_TEST_LIMIT_S / ticker.period_s()).ceil() as u64;
+        for _ in 0..limit_ticks {
+            if !running(self) {
+                break;
+            }
+            let Some(tick) = ticker.wait(clock, stop) else { break };
+            self.tick_once(clock, &tick, ticker.missed_total());
+        }
+        if running(self) {
+            // Never past the limit on a display under test: the channels still testing are held off.
+            self.stop_all();
+        }
+        self.slots.iter().map(|slot| slot.engine.self_test_state()).collect()
     }
 
     /// One tick at loop time `time_s`.

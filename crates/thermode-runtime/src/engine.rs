@@ -15,7 +15,7 @@ use thermode_safety::{DoseLedger, DriveCommand, EnvelopeConfig, FaultCode, Measu
 use crate::limits::StimulusLimits;
 
 pub use crate::limits::EngineError;
-pub use thermode_pipeline::{Stimulus, Telemetry};
+pub use thermode_pipeline::{SelfTestState, Stimulus, Telemetry};
 
 /// One channel's renderer + controller + safety envelope, as the loop sees it.
 pub trait ChannelEngine {
@@ -49,6 +49,12 @@ pub trait ChannelEngine {
     /// Restores a saved thermal dose into the channel's safety envelope (`SafetyEnvelope::restore_dose`: never
     /// lowers the dose). The daemon calls it before the first tick.
     fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), EngineError>;
+
+    /// Where the channel's start-up self-test of its display stands (`ChannelPipeline::self_test_state`); the loop
+    /// ticks before it answers any command while one is [`SelfTestState::Running`]. Default: none is run.
+    fn self_test_state(&self) -> SelfTestState {
+        SelfTestState::NotRun
+    }
 }
 
 /// Builds a channel's engines on the loop thread (engines need not be `Send`): called once with the device's
@@ -86,6 +92,10 @@ impl ChannelEngine for ChannelPipeline {
 
     fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), EngineError> {
         Ok(ChannelPipeline::restore_dose(self, saved)?)
+    }
+
+    fn self_test_state(&self) -> SelfTestState {
+        ChannelPipeline::self_test_state(self)
     }
 }
 

@@ -309,6 +309,11 @@ impl Daemon {
         self.core.control().map(|c| c.realtime().clone())
     }
 
+    /// Each channel's start-up self-test of its display (empty once stopped).
+    pub fn self_tests(&self) -> &[thermode_runtime::engine::SelfTestState] {
+        self.core.control().map_or(&[], |c| c.self_tests())
+    }
+
     /// A copy of the loop's newest snapshot.
     pub fn snapshot(&self) -> Option<Snapshot> {
         self.core.snapshot()

@@ -9,7 +9,7 @@ use anyhow::{bail, Context, Result};
 use clap::Args;
 use thermode_device::{DefaultFinger, Device, SimulatedDisplay, MAX_CHANNELS};
 use thermode_link::spec::{is_hardware, open_hardware, HardwareContext};
-use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
+use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, SelfTestState};
 use thermode_platform::Clock;
 use thermode_runtime::engine::pipeline_engines;
 use thermode_runtime::EngineFactory;
@@ -70,6 +70,26 @@ fn finger_names(count: usize) -> Vec<String> {
     }
 }
 
+/// What each channel's start-up self-test found (one line per channel that ran one; nothing for a simulated
+/// display or a temperature-commanded device).
+pub fn describe_self_tests(tests: &[SelfTestState]) -> Vec<String> {
+    tests
+        .iter()
+        .enumerate()
+        .filter_map(|(channel, test)| match test {
+            SelfTestState::NotRun | SelfTestState::Running => None,
+            SelfTestState::Done(report) if report.off_file().is_some() => Some(format!(
+                "channel {channel}: {report}; the channel stays off (fault E106). A finger on the display during the \
+                 test slows its answer: restart with the display bare, or give the display its own device file"
+            )),
+            SelfTestState::Done(report) => Some(format!("channel {channel}: {report}")),
+            SelfTestState::Interrupted => Some(format!(
+                "channel {channel}: the self-test was stopped before its end; the display stays off (restart to test it)"
+            )),
+        })
+        .collect()
+}
+
 /// Builds the device and the pipelines from the arguments; `clock` stamps a serial device's readings.
 pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Display> {
     let device_config = resolve::device_config(args.device_file.as_deref())?;
@@ -96,6 +116,9 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Displ
         };
         let device = open_hardware(&args.device, &context, clock.clone())
             .with_context(|| format!("cannot open {}", args.device))?;
+        // A real display is tested against its file before a finger can be on it; a temperature-commanded device
+        // (its own controller sets the current) cannot take the test's current pulse.
+        pipeline.self_test_at_start = device.measures().drive_current;
         if let Some(n) = args.channels.filter(|&n| n != device.channel_count()) {
             bail!(
                 "--channels {n}, but {} has {} channels",

@@ -15,9 +15,9 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Args;
-use thermode_device::{DefaultFinger, SimulatedDisplay};
+use thermode_device::{DefaultFinger, NoFinger, PlateFinger, SimulatedDisplay};
 use thermode_link::own::emulator::{Emulator, EmulatorConfig, LinkFaults, PtyEmulator};
 use thermode_link::runner::RunEnd;
 use thermode_platform::MonotonicClock;
@@ -83,11 +83,21 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
         };
         return emulate_hw::run(&args.hardware, &display);
     }
-    if args.hardware.no_finger {
-        bail!("--no-finger is for --protocol mecom and tcs2 (thermode's own protocol reports no Peltier voltage, so identify does not run on it)");
-    }
     let device = resolve::device_config(args.device_file.as_deref())?;
-    let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device, args.channels, args.seed)?;
+    match args.hardware.no_finger {
+        true => run_own(
+            args,
+            SimulatedDisplay::<NoFinger>::fingertips(&device, args.channels, args.seed)?,
+        ),
+        false => run_own(
+            args,
+            SimulatedDisplay::<DefaultFinger>::fingertips(&device, args.channels, args.seed)?,
+        ),
+    }
+}
+
+/// Runs thermode's own protocol over `display` until a signal or the host ends it.
+fn run_own<F: PlateFinger + Send + 'static>(args: &EmulateArgs, display: SimulatedDisplay<F>) -> Result<()> {
     let config = EmulatorConfig {
         watchdog_ms: args.watchdog_ms,
         report_interval_ms: args.report_ms,

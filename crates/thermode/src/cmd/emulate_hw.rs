@@ -47,7 +47,7 @@ pub struct HardwareArgs {
     /// TCS II only: stream temperature lines at this rate [Hz] even when muted (a test of the host).
     #[arg(long = "stream-hz", value_name = "HZ")]
     pub stream_hz: Option<f64>,
-    /// MeCom and TCS II: no finger on the simulated plates (the bare display `thermode identify` measures).
+    /// No finger on the simulated plates (the bare display `thermode identify` and the start-up self-test measure).
     #[arg(long = "no-finger")]
     pub no_finger: bool,
 }

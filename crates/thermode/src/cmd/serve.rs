@@ -20,7 +20,7 @@ use thermode_runtime::{CoreConfig, LoopConfig};
 use thermode_serve::lsl::LslConfig;
 use thermode_serve::{Daemon, DaemonConfig, ServerConfig};
 
-use crate::display::{build_display, DisplayArgs};
+use crate::display::{build_display, describe_self_tests, DisplayArgs};
 use crate::signals::StopSignals;
 
 /// What a failed recording does (`--on-record-error`).
@@ -221,6 +221,9 @@ fn print_banner(daemon: &Daemon, description: &str, args: &ServeArgs) {
     }
     if let Some(path) = daemon.ledger_path() {
         println!("  dose       {}", path.display());
+    }
+    for line in describe_self_tests(daemon.self_tests()) {
+        println!("  self-test  {line}");
     }
     if args.token.is_some() {
         println!("  clients must present the token (Authorization: Bearer … or ?token=…)");

@@ -88,6 +88,8 @@ struct Serve {
     process: Process,
     http_port: u16,
     osc_port: u16,
+    /// The banner's lines.
+    banner: Vec<String>,
     /// Its own state directory (dose ledger): tests run in parallel, and one directory takes one daemon.
     _state: tempfile::TempDir,
 }
@@ -116,10 +118,11 @@ fn serve_device(device: &str, device_file: Option<&Path>, record: Option<&Path>)
         .unwrap_or_else(|e| panic!("spawn serve: {e}"));
     let stdout = child.stdout.take().unwrap_or_else(|| panic!("serve stdout"));
     let process = Process(child);
-    let (mut http_port, mut osc_port) = (None, None);
+    let (mut http_port, mut osc_port, mut banner) = (None, None, Vec::new());
     let mut lines = BufReader::new(stdout).lines();
     for line in lines.by_ref() {
         let line = line.unwrap_or_else(|e| panic!("serve stdout: {e}"));
+        banner.push(line.clone());
         let port = |prefix: &str| {
             line.split(prefix)
                 .nth(1)
@@ -142,6 +145,7 @@ fn serve_device(device: &str, device_file: Option<&Path>, record: Option<&Path>)
         process,
         http_port: http_port.unwrap_or_else(|| panic!("no dashboard port in the banner")),
         osc_port: osc_port.unwrap_or_else(|| panic!("no OSC port in the banner")),
+        banner,
         _state: state,
     }
 }
@@ -373,6 +377,59 @@ fn a_host_killed_while_heating_never_lets_the_true_plate_pass_48_5() {
         }
     }
     println!("highest true plate over all runs: {worst:.3} °C");
+}
+
+/// A display whose plate sensor lags five times its file (a PT-100 glued without paste): `serve` tests it with a
+/// current pulse before any client can reach it and refuses it. The banner names what is off, the status shows the
+/// refusal (fault E106) on a channel driven at 0 A, and a 40 °C set-point asked over OSC leaves the true plate where
+/// the pulse left it. The same emulator as filed passes and follows the set-point.
+#[test]
+fn serve_refuses_a_display_whose_sensor_is_slower_than_its_file_before_any_touch() {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
+    for (name, plant, refused) in [
+        ("lagging sensor", Some(device_file("lagging-sensor.toml")), true),
+        ("as filed", None, false),
+    ] {
+        let trace = dir.path().join(format!("{name}.csv"));
+        let (emulator, pty) = emulate_with(1, plant.as_deref(), &trace, &["--no-finger"]);
+        let host = serve(&pty, None, None);
+        let test_line = host
+            .banner
+            .iter()
+            .find(|line| line.contains("self-test"))
+            .unwrap_or_else(|| panic!("{name}: no self-test in the banner {:?}", host.banner));
+        println!("{name}: {test_line}");
+        assert_eq!(
+            test_line.contains("not its device file"),
+            refused,
+            "{name}: {test_line}"
+        );
+        let channel = &status(host.http_port)["channels"][0];
+        assert_eq!(
+            channel.to_string().contains("E106"),
+            refused,
+            "{name}: status {channel}"
+        );
+        setpoint(host.osc_port, 0, 40.0, 10.0);
+        std::thread::sleep(Duration::from_secs(3));
+        drop(host);
+        drop(emulator);
+        let rows = read_trace(&trace);
+        let last_c = rows.last().map_or(f64::NAN, |r| r.plate_c);
+        let peak_c = rows.iter().map(|r| r.plate_c).fold(f64::NEG_INFINITY, f64::max);
+        println!("{name}: true plate at the end {last_c:.2} °C, peak {peak_c:.2} °C");
+        if refused {
+            assert!(
+                peak_c < 30.0,
+                "{name}: a refused display heated its plate to {peak_c} °C"
+            );
+        } else {
+            assert!(
+                last_c > 35.0,
+                "{name}: the display as filed did not follow 40 °C ({last_c} °C)"
+            );
+        }
+    }
 }
 
 /// Another MeCom client on the controller's TCP port at `address`: asks for the object temperature every 20 ms for
