@@ -29,7 +29,7 @@ pub enum PipelineError {
     /// A stimulus other than air during the display's start-up self-test (see
     /// [`crate::PipelineConfig::self_test_at_start`]).
     #[error(
-        "the display's start-up self-test is under way (2.5 s with no finger on the display): only air until it ends"
+        "the display's start-up self-test is under way (seconds, with no finger on the display): only air until it ends"
     )]
     SelfTestRunning,
 }

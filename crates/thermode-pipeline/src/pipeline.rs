@@ -607,6 +607,15 @@ impl DriveStage {
     }
 }
 
+/// The start-up self-test of `config`'s display ([`PipelineConfig::self_test_at_start`]): the default pulse,
+/// recorded for as long as the file's sensor needs ([`SelfTest::for_sensor`]).
+fn self_test_run(config: &PipelineConfig) -> Result<Box<SelfTestRun>, PipelineError> {
+    let plant = plant_model(&config.device)?;
+    let test = SelfTest::for_sensor(plant.sensor_time_constant_s);
+    let uncertainty = config.device.render.sensor_lag_uncertainty;
+    Ok(Box::new(SelfTestRun::new(test, plant, uncertainty)))
+}
+
 impl ChannelPipeline {
     /// Builds the pipeline of `config`: the controller it names, everything at rest (the finger in air, the display
     /// rendering air).
@@ -640,19 +649,7 @@ impl ChannelPipeline {
             peltier: (config.device.module()?, config.device.render.peltier_uncertainty),
             receptor_offset_c: 0.0,
             held: false,
-            self_test: config
-                .self_test_at_start
-                .then(|| {
-                    let plant = plant_model(&config.device);
-                    plant.map(|plant| {
-                        Box::new(SelfTestRun::new(
-                            SelfTest::default(),
-                            plant,
-                            config.device.render.sensor_lag_uncertainty,
-                        ))
-                    })
-                })
-                .transpose()?,
+            self_test: config.self_test_at_start.then(|| self_test_run(config)).transpose()?,
             self_test_state: if config.self_test_at_start {
                 SelfTestState::Running
             } else {
@@ -752,13 +749,15 @@ impl ChannelPipeline {
             return self.held_tick(now_s, dt_s, reading, finger, (target_c, requested_c));
         }
         if let Some(mut run) = self.self_test.take() {
-            let ticked = self.self_test_tick(&mut run, now_s, dt_s, reading, (target_c, requested_c));
+            let (drive, mut telemetry) = self.self_test_tick(&mut run, now_s, dt_s, reading, (target_c, requested_c));
             if run.finished(now_s) {
                 self.finish_self_test(&run, now_s);
+                // A refusal shows from this tick on.
+                telemetry.fault = self.drive.envelope.fault();
             } else {
                 self.self_test = Some(run);
             }
-            return ticked;
+            return (drive, telemetry);
         }
         let outcome = self.drive.drive(now_s, dt_s, reading, requested_c, finger);
         self.last_setpoint_c = Some(outcome.decision.setpoint_c);
@@ -807,8 +806,7 @@ impl ChannelPipeline {
         reading: &Reading,
         (target_c, requested_c): (f64, f64),
     ) -> (DriveCommand, Telemetry) {
-        run.take(dt_s, self.drive.applied_current_a, reading);
-        let pulse_a = run.current_a(now_s);
+        let pulse_a = run.tick(now_s, dt_s, self.drive.applied_current_a, reading);
         let drive = self.drive.pulse(now_s, dt_s, reading, pulse_a);
         let plate_c = self.drive.plate_estimate_c();
         self.setpoint

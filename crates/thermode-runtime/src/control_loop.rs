@@ -137,9 +137,10 @@ pub struct LoopHandle {
     self_tests: Vec<SelfTestState>,
 }
 
-/// The longest the loop ticks for its channels' start-up self-tests before it takes commands \[s\]: 10 (a test
-/// records 2.5 s; the channels still testing then are held off).
-pub const SELF_TEST_LIMIT_S: f64 = 10.0;
+/// The longest the loop ticks for its channels' start-up self-tests before it takes commands \[s\]: 120 (a test
+/// waits up to 20 s for its display to rest and records 2.5 s, or five of a slow sensor's time constants; the
+/// channels still testing then are held off, their displays refused as untested).
+pub const SELF_TEST_LIMIT_S: f64 = 120.0;
 
 /// What the loop thread reports once its engines are built and their start-up self-tests are done: the published
 /// state, each channel's limits, what real-time treatment it obtained, and the self-tests.

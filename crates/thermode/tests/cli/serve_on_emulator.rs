@@ -139,6 +139,11 @@ fn serve_device(device: &str, device_file: Option<&Path>, record: Option<&Path>)
             break;
         }
     }
+    // The start-up self-test's verdicts, for the record of a failing test.
+    banner
+        .iter()
+        .filter(|line| line.contains("self-test"))
+        .for_each(|line| println!("{line}"));
     // Keep reading, so a later line on standard output never meets a closed pipe.
     std::thread::spawn(move || lines.for_each(drop));
     Serve {
@@ -290,7 +295,10 @@ enum KillAt {
 /// true plate over the whole trace, the plate at the kill, and the time from the set-point to the kill.
 fn kill_while_heating(dir: &Path, device_file: Option<&Path>, rate_c_per_s: f32, at: KillAt) -> (f64, f64, f64) {
     let trace = dir.join("trace.csv");
-    let (emulator, pty) = emulate(1, device_file, &trace);
+    // The lagging display starts bare: its 1.5 s sensor is measured within 4 % with no finger on it, while a
+    // finger resting on it through the 2.5 s start-up self-test made it read 1.9–2.9 s and refused it.
+    let bare: &[&str] = if device_file.is_some() { &["--no-finger"] } else { &[] };
+    let (emulator, pty) = emulate_with(1, device_file, &trace, bare);
     let mut host = serve(&pty, device_file, None);
     let mut tail = Tail::open(&trace);
     setpoint(host.osc_port, 0, 48.0, rate_c_per_s);
@@ -406,7 +414,7 @@ fn serve_refuses_a_display_whose_sensor_is_slower_than_its_file_before_any_touch
         );
         let channel = &status(host.http_port)["channels"][0];
         assert_eq!(
-            channel.to_string().contains("E106"),
+            channel["fault"].as_u64() == Some(106),
             refused,
             "{name}: status {channel}"
         );
