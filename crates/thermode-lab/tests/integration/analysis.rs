@@ -880,3 +880,56 @@ fn render_csvs_and_serve_recordings_are_read_as_thermode_writes_them() {
     );
     assert!(curves.temperature_columns[0].starts_with("target_skin_c"));
 }
+
+#[test]
+fn figures_3_and_4_read_as_a_paper_needs_them() {
+    use thermode_plot::svg_text::{badly_written_numbers, canvas_width_px, number_texts, svg_texts, texts_outside};
+    let dir = tempfile::tempdir().expect("tempdir");
+    // Wood and rubber run close together, as in the paper's Figure 3.
+    let mut text = "time_s,skin_surface_c,material,condition,repetition\n".to_string();
+    for (material, start) in [("wood", 32.0), ("rubber", 32.05)] {
+        for condition in ["real", "simulated"] {
+            text.push_str(&curve_rows(condition, material, 1, &line(start, -0.05, 10, 30)));
+        }
+    }
+    let curves = write(dir.path(), "curves.csv", &text);
+    let mut result =
+        analysis::analyze(&[table3_data_set(dir.path(), &[15; 5], &[13, 14, 14, 14, 13])]).expect("analysis");
+    result.curves = Some(analysis::analyze_curves(&[curves]).expect("curves"));
+    let out = dir.path().join("out");
+    analysis::write_outputs(&result, &out, &[ReportFormat::Markdown]).expect("outputs");
+    for (stem, title, legend) in [
+        ("figure3", "Figure 3: mean finger temperature", "wood real"),
+        ("figure4", "Figure 4: classification probability", "simulated"),
+    ] {
+        let svg = std::fs::read_to_string(out.join(format!("{stem}.svg"))).expect("svg");
+        let width_px = canvas_width_px(&svg).expect("canvas width");
+        let outside = texts_outside(&svg, width_px);
+        assert!(
+            outside.is_empty(),
+            "{stem}: texts beyond the {width_px} px canvas: {outside:?}"
+        );
+        let texts = svg_texts(&svg);
+        assert!(
+            texts.iter().any(|t| t.content.starts_with(title)),
+            "{stem} has no title `{title}…`"
+        );
+        let entries = texts.iter().filter(|t| t.content == legend).count();
+        assert_eq!(
+            entries, 1,
+            "{stem}: the legend entry `{legend}` appears {entries} times"
+        );
+        let numbers = number_texts(&svg);
+        assert!(numbers.len() >= 8, "{stem}: too few tick labels: {numbers:?}");
+        let bad = badly_written_numbers(&svg);
+        assert!(bad.is_empty(), "{stem}: ticks {bad:?} among {numbers:?}");
+        assert!(out.join(format!("{stem}.png")).is_file(), "{stem}.png missing");
+    }
+    let figure4 = std::fs::read_to_string(out.join("figure4.svg")).expect("svg");
+    for letter in ["a", "b"] {
+        assert!(
+            svg_texts(&figure4).iter().any(|t| t.content == letter),
+            "figure 4 has no panel {letter}"
+        );
+    }
+}
