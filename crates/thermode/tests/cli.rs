@@ -356,15 +356,15 @@ fn unphysical_input_is_refused_with_its_range_and_writes_nothing() {
     // An oven for air, colder than absolute zero, an unheard-of skin: each named with its range.
     expect_error(
         &simulate(&["--material", "wood", "--ambient", "1000"]),
-        "`ambient_c` = 1000 is invalid: must be a finite number in [-30, 50]",
+        "`ambient_c` = 1000 is invalid: must be a finite number from -30 to 50",
     );
     expect_error(
         &simulate(&["--material", "wood", "--object-temp", "-300"]),
-        "`object_c` = -300 is invalid: must be a finite number in [-50, 150]",
+        "`object_c` = -300 is invalid: must be a finite number from -50 to 150",
     );
     expect_error(
         &simulate(&["--material", "wood", "--initial", "uniform:80"]),
-        "must be a finite number in [0, 50]",
+        "must be a finite number from 0 to 50",
     );
     // A material with k = 1e300 (fv gave NaN curves, kron a table of nonsense, both with exit 0).
     let material = dir.path().join("hyper.toml");
@@ -379,7 +379,7 @@ fn unphysical_input_is_refused_with_its_range_and_writes_nothing() {
         args.extend(["--material-file", path]);
         expect_error(
             &args,
-            "`conductivity_w_mk` = 1e300 is invalid: must be a finite number in [0.01, 2500]",
+            "`conductivity_w_mk` = 1e300 is invalid: must be a finite number from 0.01 to 2500",
         );
     }
     let mut args = simulate(&[]);

@@ -180,6 +180,24 @@ fn a_material_dependent_simulation_rejects_h0() {
 }
 
 #[test]
+fn a_tiny_p_value_is_written_as_a_paper_writes_it() {
+    // 27 of 28 versus 3 of 28 correct: p far below 0.001, written "p < 0.001" (was "p = 0.000").
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (trials, truths) = ([28u64; 5], [27u64, 3, 14, 14, 14]);
+    let result = analysis::analyze(&[table3_data_set(dir.path(), &trials, &truths)]).expect("analysis");
+    let p = result.chi_square.p_value.expect("p");
+    let df = ChiSquared::new(4.0).expect("χ²(4)");
+    let p_want = 1.0 - df.cdf(result.chi_square.statistic.expect("χ²"));
+    assert!(p < 0.001 && (p - p_want).abs() < 1e-12, "p {p}, statrs {p_want}");
+    let out = dir.path().join("report");
+    analysis::write_outputs(&result, &out, &[ReportFormat::Markdown]).expect("outputs");
+    let md = std::fs::read_to_string(out.join("report.md")).expect("md");
+    // Markdown escapes `<`: the rendered text reads "p < 0.001".
+    assert!(md.contains(", p \\< 0.001. H0 rejected"), "{md}");
+    assert!(!md.contains("p = 0.000"), "{md}");
+}
+
+#[test]
 fn paper_table_2_ratios_give_mean_0_78_and_1_78() {
     // P_real: any distribution; P_sim = ratio × P_real where Table 2 has a value and 0 elsewhere, P_real = 0 where
     // Table 2 is missing. Table 2 is printed identified (rows) × presented (columns); here t2[identified][presented].
