@@ -20,8 +20,9 @@ use thiserror::Error;
 /// Longest a [`ManualClock`] sleeper waits in real time before it returns, so a stopping caller is not stuck \[s\].
 const MANUAL_POLL_S: f64 = 0.02;
 
-/// Resolution of thermode's clocks \[s\]: 1 ns, that of `std::time::Instant`. Times a clock or a [`Ticker`] hands out
-/// are whole nanoseconds, so they print as the decimals they are (`16.686951061`, not `16.686951061000002`).
+/// Resolution of thermode's clocks \[s\]: 1 ns, that of `std::time::Instant`. [`MonotonicClock`] reads whole
+/// nanoseconds, and times that leave thermode in replies and messages are rounded to them
+/// ([`to_clock_resolution`]), so they print as the decimals they are (`16.686951061`, not `16.686951061000002`).
 pub const CLOCK_RESOLUTION_S: f64 = 1e-9;
 
 /// `time_s` rounded to the clock's resolution (whole nanoseconds; the nearest `f64` to that decimal); times beyond
@@ -328,9 +329,8 @@ impl Ticker {
         self.missed_total
     }
 
-    /// Deadline `index`, in whole nanoseconds (the clock's resolution).
     fn deadline_s(&self, index: u64) -> f64 {
-        to_clock_resolution(self.start_s + index as f64 * self.period_s)
+        self.start_s + index as f64 * self.period_s
     }
 
     /// Sleeps until the next deadline and returns its tick, or `None` as soon as `stop` is set.
@@ -456,17 +456,14 @@ mod tests {
     }
 
     #[test]
-    fn deadlines_are_whole_nanoseconds_and_print_as_such() {
-        let mut ticker = Ticker::new(0.001, 0.686951061).expect("ticker");
-        ticker.next_index = 30;
-        // Without rounding: 0.686951061 + 30 · 0.001 = 0.7169510610000001.
+    fn times_rounded_to_the_clock_print_as_whole_nanoseconds() {
+        // 0.686951061 + 30 · 0.001 = 0.7169510610000001 in f64 (a loop time on the ticker's grid).
         let (start, step) = (std::hint::black_box(0.686951061), std::hint::black_box(0.001));
-        assert_eq!((start + 30.0 * step).to_string(), "0.7169510610000001");
-        let clock = ManualClock::new();
-        clock.set(0.7170);
-        let tick = ticker.wait(&clock, &AtomicBool::new(false)).expect("tick");
-        assert_eq!(tick.scheduled_s.to_string(), "0.716951061", "{tick:?}");
+        let on_grid = start + 30.0 * step;
+        assert_eq!(on_grid.to_string(), "0.7169510610000001");
+        assert_eq!(to_clock_resolution(on_grid).to_string(), "0.716951061");
         assert_eq!(to_clock_resolution(0.1 + 0.2).to_string(), "0.3");
+        assert_eq!(to_clock_resolution(1e300), 1e300);
         let now = MonotonicClock::new().now_s();
         assert_eq!(
             to_clock_resolution(now),

@@ -951,3 +951,43 @@ fn figures_3_and_4_read_as_a_paper_needs_them() {
         );
     }
 }
+
+#[test]
+fn a_recording_names_its_custom_material_and_reads_back() {
+    // A `serve --record` file in which a client touched a material no library knows (`properties` of a touch): the
+    // recording names its properties, and `--curves` reads it by them.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut record = "time_s,channel,contact,material,mode,target_skin_c,skin_c,display_setpoint_c,sensor_c,current_a,\
+                      hot_side_c,fault,conductivity_w_mk,density_kg_m3,specific_heat_j_kgk,thickness_m\n"
+        .to_string();
+    for k in 0..=300i32 {
+        let t = f64::from(k) * 0.01;
+        if (0.5..2.5).contains(&t) {
+            let target = 32.0 - (t - 0.5);
+            record.push_str(&format!(
+                "{t:.6},0,1,ice-cold-glass,touch,{target},{},30,30,0,25,,1.05,2500,840,0.004\n",
+                target + 0.1
+            ));
+        } else {
+            record.push_str(&format!("{t:.6},0,0,,air,32,32,32,32,0,25,,,,,\n"));
+        }
+    }
+    let path = write(dir.path(), "session_20261127-120000.csv", &record);
+    let curves = analysis::analyze_curves(std::slice::from_ref(&path)).expect("a custom material reads back");
+    let glass = &curves.materials[0];
+    assert_eq!(glass.material, "ice-cold-glass");
+    close(
+        glass.rms_difference_c.expect("rms"),
+        0.1,
+        1e-9,
+        "RMS of the custom material",
+    );
+    // Without its properties the name alone is unknown, as before: the message says which.
+    let bare: String = record
+        .lines()
+        .map(|l| l.rsplitn(5, ',').last().unwrap_or_default().to_string() + "\n")
+        .collect();
+    let bare = write(dir.path(), "bare.csv", &bare);
+    let err = analysis::analyze_curves(&[bare]).expect_err("unknown without properties");
+    assert!(err.to_string().contains("unknown material `ice-cold-glass`"), "{err}");
+}

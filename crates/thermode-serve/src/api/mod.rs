@@ -19,6 +19,7 @@ use axum::middleware::{self, Next};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
 use axum::{Json, Router};
+use thermode_platform::to_clock_resolution;
 use thermode_protocol::finite;
 use thermode_protocol::status::{
     Auth, Commands, Contact, DeviceCutEntry, DoseLedgerStatus, EarlierFile, FaultEntry, HttpStatus, InterlockStatus,
@@ -347,7 +348,7 @@ pub fn status(app: &App) -> Status {
         version: env!("CARGO_PKG_VERSION").to_string(),
         device: app.info.device.clone(),
         running: snapshot.running,
-        time_s: snapshot.time_s,
+        time_s: to_clock_resolution(snapshot.time_s),
         tick: snapshot.tick,
         channel_count: snapshot.channels.len(),
         channels: snapshot

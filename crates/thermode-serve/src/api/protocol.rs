@@ -7,6 +7,7 @@
 
 use thermode_model::materials::{self, Material};
 use thermode_model::params::Range;
+use thermode_platform::to_clock_resolution;
 use thermode_protocol::request::{Marker, Setpoint, Touch};
 pub use thermode_protocol::request::{MAX_MARKER_CHARS, MAX_NAME_CHARS, MIN_SUBSCRIBE_HZ};
 use thermode_protocol::status::Limits;
@@ -264,7 +265,7 @@ pub fn channel_telemetry(status: &ChannelStatus) -> ChannelTelemetry {
 /// A telemetry message.
 pub fn telemetry_message(snapshot: &Snapshot) -> Telemetry {
     Telemetry {
-        time_s: snapshot.time_s,
+        time_s: to_clock_resolution(snapshot.time_s),
         tick: snapshot.tick,
         channels: snapshot.channels.iter().map(channel_telemetry).collect(),
     }
