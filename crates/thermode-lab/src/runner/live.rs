@@ -86,7 +86,13 @@ pub struct LiveStimulus<L: DisplayLink> {
     real_contact: Option<super::stimulus::FvContact>,
     /// Rests that had not settled, as notes for the operator.
     pub notes: Vec<String>,
+    /// Told of a rest measurement as it goes (see [`LiveStimulus::with_rest_progress`]).
+    rest_progress: Option<Box<RestProgress>>,
 }
+
+/// A listener to rest measurements: `Some(rest_s)` (seconds rested so far, at most
+/// [`LiveSettings::max_rest_s`]) after every window, `None` when the measurement is done.
+pub type RestProgress = dyn FnMut(Option<f64>);
 
 impl<L: DisplayLink> LiveStimulus<L> {
     /// A live stimulus over `link`.
@@ -107,7 +113,21 @@ impl<L: DisplayLink> LiveStimulus<L> {
             settings,
             real_contact: None,
             notes: Vec::new(),
+            rest_progress: None,
         })
+    }
+
+    /// Tells `listener` how each rest measurement goes (a progress bar on the operator's terminal: a rest can take
+    /// up to [`LiveSettings::max_rest_s`] twice per trial).
+    pub fn with_rest_progress(mut self, listener: impl FnMut(Option<f64>) + 'static) -> Self {
+        self.rest_progress = Some(Box::new(listener));
+        self
+    }
+
+    fn tell_rest(&mut self, rest_s: Option<f64>) {
+        if let Some(listener) = &mut self.rest_progress {
+            listener(rest_s);
+        }
     }
 
     /// For a simulated participant: real trials get the skin curve of `contact` (real contact under the fv model,
@@ -182,7 +202,9 @@ impl<L: DisplayLink> LiveStimulus<L> {
             let mean_c = window.iter().sum::<f64>() / window.len() as f64;
             let rest_s = now_s - start_s;
             let settled = previous.is_some_and(|p| (p - mean_c).abs() <= self.settings.settled_c);
+            self.tell_rest(Some(rest_s.min(self.settings.max_rest_s)));
             if (settled && rest_s >= self.settings.min_rest_s) || rest_s >= self.settings.max_rest_s {
+                self.tell_rest(None);
                 return Ok(RestMeasurement {
                     finger_c: mean_c,
                     settled,
@@ -402,6 +424,31 @@ mod tests {
         let mut live = LiveStimulus::new(slow, settings).expect("settings");
         let rest = live.measure_at_rest().expect("measured");
         assert!(!rest.settled && rest.rest_s >= 4.0, "{rest:?}");
+    }
+
+    #[test]
+    fn a_rest_measurement_reports_its_progress_and_its_end() {
+        let told = std::rc::Rc::new(std::cell::RefCell::new(Vec::new()));
+        let sink = std::rc::Rc::clone(&told);
+        let mut live = LiveStimulus::new(fake(30.0), LiveSettings::default())
+            .expect("settings")
+            .with_rest_progress(move |rest_s| sink.borrow_mut().push(rest_s));
+        let rest = live.measure_at_rest().expect("measured");
+        let told = told.borrow();
+        let (last, rests) = told.split_last().expect("told at least once");
+        assert_eq!(*last, None, "the end is told: {told:?}");
+        let rests: Vec<f64> = rests.iter().map(|r| r.expect("a rest before the end")).collect();
+        assert!(rests.len() >= 2 && rests.windows(2).all(|w| w[0] < w[1]), "{rests:?}");
+        assert!(
+            (rests[rests.len() - 1] - rest.rest_s).abs() < 1e-12,
+            "{rests:?} vs {rest:?}"
+        );
+        assert!(
+            rests
+                .iter()
+                .all(|&r| r > 0.0 && r <= LiveSettings::default().max_rest_s),
+            "{rests:?}"
+        );
     }
 
     #[test]

@@ -19,6 +19,7 @@ use thermode_render::RenderSpec;
 
 use crate::controller::{ControllerArg, RENDER_CONTROLLERS};
 use crate::output::{check_outputs, csv_precision, is_stdout, print_stdout, write_atomically};
+use crate::progress::Progress;
 use crate::resolve;
 
 /// The renderer (and display-inverse finger model).
@@ -126,7 +127,9 @@ pub struct RenderArgs {
 pub fn run(args: &RenderArgs) -> Result<()> {
     let specs = specs(args)?;
     check_outputs(&[("--out", args.out.as_deref()), ("--plot", args.plot.as_deref())])?;
+    let progress = Progress::spinner(&format!("render: {} run(s)", specs.len()));
     let runs = render_all(&specs).context("rendering")?;
+    progress.finish();
     for run in &runs {
         if let Some(report) = run.self_test.filter(|r| r.off_file().is_some()) {
             eprintln!(
