@@ -18,7 +18,7 @@ use thermode_render::summary::{summary_table, RenderSummary};
 use thermode_render::RenderSpec;
 
 use crate::controller::{ControllerArg, RENDER_CONTROLLERS};
-use crate::output::{check_outputs, csv_precision, is_stdout, print_stdout, write_atomically};
+use crate::output::{check_outputs, create_folder_of, csv_precision, is_stdout, print_stdout, write_atomically};
 use crate::progress::Progress;
 use crate::resolve;
 
@@ -152,6 +152,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         })?;
     }
     if let Some(path) = &args.plot {
+        create_folder_of(path)?;
         write_figure(&figure3(&runs), path).with_context(|| format!("cannot write {}", path.display()))?;
     }
     if args.summary || (args.out.is_none() && args.plot.is_none()) {

@@ -13,7 +13,7 @@ use thermode_platform::csv_text::{self, CsvText, Precision};
 use thermode_plot::{write_figure, Figure, Marker, Panel, Series, SeriesStyle};
 use thermode_render::figure::EARLY_WINDOW_S;
 
-use crate::output::{check_outputs, csv_precision, is_stdout, print_stdout, write_atomically};
+use crate::output::{check_outputs, create_folder_of, csv_precision, is_stdout, print_stdout, write_atomically};
 use crate::resolve;
 
 /// The skin model to run.
@@ -243,6 +243,7 @@ fn write_plot(path: &Path, traces: &[(Material, Trace)], model: ModelArg) -> Res
         ..Panel::default()
     };
     let early = panel.window(0.0, EARLY_WINDOW_S, format!("The first {EARLY_WINDOW_S} s"));
+    create_folder_of(path)?;
     Ok(write_figure(&Figure::grid(vec![panel, early], 2), path)?)
 }
 
