@@ -1288,3 +1288,29 @@ fn every_output_folder_is_created_and_a_refused_command_leaves_none() {
         );
     }
 }
+
+/// `serve` (and `demo`, through the same stop) ended by `--duration` says how it stopped, as after a signal.
+#[test]
+fn serve_ended_by_its_duration_prints_a_summary() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let state = dir.path().join("state").to_string_lossy().into_owned();
+    let args = [
+        "serve",
+        "--port",
+        "0",
+        "--no-osc",
+        "--no-realtime",
+        "--duration",
+        "0.3",
+        "--state-dir",
+        &state,
+    ];
+    let out = thermode(&args);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let summary = stderr
+        .lines()
+        .find(|l| l.starts_with("thermode: --duration passed: stopped at loop time "))
+        .unwrap_or_else(|| panic!("no summary line: {stderr}"));
+    assert!(summary.ends_with(" s, every drive set to 0 A"), "{summary}");
+}
