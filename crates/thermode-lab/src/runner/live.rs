@@ -321,6 +321,10 @@ impl<L: DisplayLink> Stimulus for LiveStimulus<L> {
         })
     }
 
+    fn finger_at_rest(&mut self) -> Option<Result<(f64, f64), StimulusError>> {
+        Some(self.measure_at_rest().map(|rest| (rest.finger_c, rest.rest_s)))
+    }
+
     fn take_notes(&mut self) -> Vec<String> {
         std::mem::take(&mut self.notes)
     }
