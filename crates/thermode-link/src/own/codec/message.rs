@@ -12,7 +12,7 @@ use thermode_device::MAX_CHANNELS;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
 pub enum MessageError {
     /// A channel range outside `0..MAX_CHANNELS`, or an empty one.
-    #[error("channels {first}..{first}+{count} are not within 1 to {max} channels")]
+    #[error("{count} channel(s) from channel {first} on: a message carries 1 to {max} channels, numbered from 0")]
     Channels {
         /// First channel of the range.
         first: usize,
