@@ -282,7 +282,7 @@ pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> ChannelStat
         direct_rate_c_per_s: status.direct.map(|d| d.1),
         held_off: status.held_off,
         owner: status.owner,
-        release_at_s: status.release_at_s,
+        release_at_s: status.release_at_s.map(to_clock_resolution),
         link_ok: status.link_ok,
         device_cut: status.device_cut.map(|c| c.name().to_string()),
         device_cut_description: status.device_cut.map(|c| c.to_string()),

@@ -630,7 +630,19 @@ fn times_in_replies_and_status_are_whole_nanoseconds() {
             tokio::time::sleep(Duration::from_millis(7)).await;
         }
     });
-    times.push(status_of(addr)["time_s"].clone());
+    let status = status_of(addr);
+    times.push(status["time_s"].clone());
+    for key in [
+        "period_p50_s",
+        "period_p99_s",
+        "period_max_s",
+        "work_p50_s",
+        "work_p99_s",
+        "work_max_s",
+    ] {
+        // Null until the loop has its statistics window.
+        times.extend(Some(status["loop_stats"][key].clone()).filter(|v| !v.is_null()));
+    }
     for time in &times {
         assert!(
             time.is_f64() && decimals(time) <= 9,
