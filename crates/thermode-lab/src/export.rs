@@ -19,10 +19,15 @@
 //! Labels: BIDS labels are letters and digits only, so `P-01` becomes `P01`; two participants (or experiments)
 //! whose labels collide are refused. The session label is the session date without dashes (`20261123`).
 //!
-//! Onsets: a session CSV holds no clock of its own today, so a trial's `onset` is the sum of the previous trials'
-//! presentation and response times (the time on task, without the breaks between trials); when the CSV has a clock
-//! column ([`ONSET_COLUMNS`], e.g. monotonic seconds at each trial's start), the onset is that clock relative to
-//! the first trial instead.
+//! One clock: a session that ran on a display (its trial curves carry the daemon's `loop_time_s`) puts its events
+//! and signals on that loop clock, onset 0 at the first trial's start: a trial's `onset` is its curve's first
+//! sample, a trial curve's `StartTime` its first `loop_time_s`, and a `serve --record` file's `StartTime` its first
+//! `time_s` (the loop time of the daemon that wrote it; a recording of another daemon is shifted by the difference
+//! of the wall-clock zeros in its `.clock.json` and the session sidecar), all relative to that start. A session
+//! without such curves (a simulation) has no clock: a trial's `onset` is then the sum of the previous trials'
+//! presentation and response times (the time on task, without the breaks between trials), or the CSV's own clock
+//! column ([`ONSET_COLUMNS`], e.g. monotonic seconds at each trial's start) relative to the first trial, and each
+//! signal keeps its own time base.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
@@ -34,6 +39,10 @@ use flate2::Compression;
 use serde_json::{json, Map, Value};
 use thermode_platform::fs::{open_at_most, read_text_at_most, MAX_DATA_BYTES, MAX_SETTINGS_BYTES};
 use thiserror::Error;
+
+mod clock;
+
+use clock::{SessionClock, LOOP_TIME_COLUMN};
 
 /// The BIDS version the export follows.
 pub const BIDS_VERSION: &str = "1.9.0";
@@ -200,24 +209,29 @@ pub fn export_bids(options: &BidsOptions) -> Result<BidsSummary, ExportError> {
             .len(),
         ..BidsSummary::default()
     };
+    let mut clocks = Vec::with_capacity(sessions.len());
     for session in &sessions {
-        summary.trials += write_events(root, session)?;
+        let (header, rows) = read_csv(&session.csv)?;
+        let clock = SessionClock::of(&session.csv, &session.meta, &header, &rows)?;
+        summary.trials += write_events(root, session, clock.as_ref())?;
         summary.sessions += 1;
         for curve in session_curves(session)? {
-            summary.signals += write_signals(root, session, &curve)?;
+            let placement = clock.as_ref().map_or(Placement::Own, Placement::Trial);
+            summary.signals += write_signals(root, session, &curve, placement)?;
         }
         copy_source(root, session)?;
+        clocks.push(clock);
     }
     for (participant, path) in &options.recordings {
-        let session =
-            sessions
-                .iter()
-                .find(|s| s.participant == *participant)
-                .ok_or_else(|| ExportError::UnknownParticipant {
-                    path: path.clone(),
-                    participant: participant.clone(),
-                })?;
-        summary.signals += write_signals(root, session, path)?;
+        let index = sessions
+            .iter()
+            .position(|s| s.participant == *participant)
+            .ok_or_else(|| ExportError::UnknownParticipant {
+                path: path.clone(),
+                participant: participant.clone(),
+            })?;
+        let placement = clocks[index].as_ref().map_or(Placement::Own, Placement::Recording);
+        summary.signals += write_signals(root, &sessions[index], path, placement)?;
     }
     Ok(summary)
 }
@@ -397,7 +411,7 @@ fn read_csv(path: &Path) -> Result<(Vec<String>, Vec<Vec<String>>), ExportError>
 }
 
 /// Writes a session's `_events.tsv` and `.json`; returns its trials.
-fn write_events(root: &Path, session: &Session) -> Result<usize, ExportError> {
+fn write_events(root: &Path, session: &Session, clock: Option<&SessionClock>) -> Result<usize, ExportError> {
     let (header, rows) = read_csv(&session.csv)?;
     let column = |name: &str| header.iter().position(|h| h == name);
     let number = |row: &[String], name: &str| {
@@ -423,13 +437,13 @@ fn write_events(root: &Path, session: &Session) -> Result<usize, ExportError> {
     let onset_column = ONSET_COLUMNS.iter().find(|c| column(c).is_some());
     let first_onset_s = onset_column.and_then(|c| rows.first().and_then(|r| number(r, c)));
     let mut elapsed_s = 0.0;
-    for row in &rows {
+    for (index, row) in rows.iter().enumerate() {
         let duration = number(row, "presentation_s").or(presentation_s);
         let clocked = onset_column
             .and_then(|c| number(row, c))
             .zip(first_onset_s)
             .map(|(t, t0)| t - t0);
-        let onset = clocked.unwrap_or(elapsed_s);
+        let onset = clock.and_then(|c| c.onset_s(index)).or(clocked).unwrap_or(elapsed_s);
         let response_s = RESPONSE_TIME_COLUMNS.iter().find_map(|c| number(row, c)).unwrap_or(0.0);
         elapsed_s = onset + duration.unwrap_or(0.0) + response_s;
         let kind = column("condition")
@@ -447,7 +461,10 @@ fn write_events(root: &Path, session: &Session) -> Result<usize, ExportError> {
     let dir = session.beh_dir(root)?;
     let prefix = session.prefix()?;
     write_text(&dir.join(format!("{prefix}_events.tsv")), &tsv)?;
-    write_json(&dir.join(format!("{prefix}_events.json")), &events_sidecar(&kept))?;
+    write_json(
+        &dir.join(format!("{prefix}_events.json")),
+        &events_sidecar(&kept, clock.is_some()),
+    )?;
     Ok(rows.len())
 }
 
@@ -457,15 +474,17 @@ fn presentation_of(toml_text: &str) -> Option<f64> {
     value.get("presentation_s")?.as_float()
 }
 
-fn events_sidecar(columns: &[&String]) -> Value {
+fn events_sidecar(columns: &[&String], on_loop_clock: bool) -> Value {
     let mut map = Map::new();
-    map.insert(
-        "onset".into(),
-        json!({"Description": "Start of the presentation: seconds of time on task from the session start (the \
-                               previous trials' presentation and response times; breaks not counted), or the \
-                               session CSV's own trial clock relative to the first trial where it has one",
-                "Units": "s"}),
-    );
+    let onset = if on_loop_clock {
+        "Start of the presentation on the display's loop clock (the first sample of the trial's curve), seconds \
+         since the first trial's start; the session's signals share this time axis (their StartTime)"
+    } else {
+        "Start of the presentation: seconds of time on task from the session start (the previous trials' \
+         presentation and response times; breaks not counted), or the session CSV's own trial clock relative to \
+         the first trial where it has one"
+    };
+    map.insert("onset".into(), json!({"Description": onset, "Units": "s"}));
     map.insert(
         "duration".into(),
         json!({"Description": "Duration of the presentation", "Units": "s"}),
@@ -560,16 +579,20 @@ struct Curve {
     rows: Vec<Vec<Option<f64>>>,
 }
 
-/// Reads a curve CSV: its time column, every numeric column; long form (`channel`) made wide.
-fn read_curve(path: &Path) -> Result<Curve, ExportError> {
+/// Reads a curve CSV: its time column (`loop_time` if given and present, else the first of [`TIME_COLUMNS`]),
+/// every numeric column but the time columns; long form (`channel`) made wide.
+fn read_curve(path: &Path, loop_time: Option<&str>) -> Result<Curve, ExportError> {
     let (header, rows) = read_csv(path)?;
-    let time = TIME_COLUMNS
-        .iter()
-        .find_map(|t| header.iter().position(|h| h == t))
+    let position = |name: &str| header.iter().position(|h| h == name);
+    let time = loop_time
+        .and_then(position)
+        .or_else(|| TIME_COLUMNS.iter().find_map(|t| position(t)))
         .ok_or_else(|| invalid(path, format!("no time column ({})", TIME_COLUMNS.join(", "))))?;
-    let channel = header.iter().position(|h| h == "channel");
+    let on_loop_clock = loop_time.is_some_and(|name| header[time] == name);
+    let is_time = |i: usize| i == time || (on_loop_clock && TIME_COLUMNS.contains(&header[i].as_str()));
+    let channel = position("channel");
     let numeric: Vec<usize> = (0..header.len())
-        .filter(|&i| i != time && Some(i) != channel)
+        .filter(|&i| !is_time(i) && Some(i) != channel)
         .filter(|&i| rows.iter().any(|r| r.get(i).is_some_and(|v| v.parse::<f64>().is_ok())))
         .filter(|&i| {
             rows.iter()
@@ -616,9 +639,45 @@ fn sampling_hz(times_s: &[f64]) -> Option<f64> {
     Some((1e6 / steps[steps.len() / 2]).round() / 1e6)
 }
 
+/// Where a signal's time axis goes.
+#[derive(Debug, Clone, Copy)]
+enum Placement<'a> {
+    /// Its own time base (a session without a loop clock).
+    Own,
+    /// A trial curve of a session with a loop clock: its `loop_time_s` on the session's axis.
+    Trial(&'a SessionClock),
+    /// A `serve --record` file given for a session with a loop clock: its `time_s` on the session's axis.
+    Recording(&'a SessionClock),
+}
+
+impl Placement<'_> {
+    /// The signal's first sample on its export axis \[s\]: `first_s` of its own time base moved to the session's.
+    fn start_s(self, path: &Path, first_s: f64) -> f64 {
+        match self {
+            Placement::Own => first_s,
+            Placement::Trial(clock) => clock.session_time_s(first_s),
+            Placement::Recording(clock) => clock.session_time_s(first_s + clock.recording_offset_s(path)),
+        }
+    }
+
+    fn description(self) -> &'static str {
+        match self {
+            Placement::Own => {
+                "thermode curve; StartTime is the source's own time base (loop time of the daemon for a serve \
+                 recording, time from the touch for a trial curve), not the events' onsets"
+            }
+            Placement::Trial(_) | Placement::Recording(_) => {
+                "thermode curve on the session's one clock: StartTime is its first sample on the display's loop \
+                 clock, seconds since the first trial's start, the time axis of the events' onsets"
+            }
+        }
+    }
+}
+
 /// Writes a curve as `_stim` and `_physio` files of `session`; returns the files written.
-fn write_signals(root: &Path, session: &Session, path: &Path) -> Result<usize, ExportError> {
-    let curve = read_curve(path)?;
+fn write_signals(root: &Path, session: &Session, path: &Path, placement: Placement) -> Result<usize, ExportError> {
+    let loop_time = matches!(placement, Placement::Trial(_)).then_some(LOOP_TIME_COLUMN);
+    let curve = read_curve(path, loop_time)?;
     let rate_hz = sampling_hz(&curve.times_s).ok_or_else(|| invalid(path, "fewer than two time points"))?;
     let name = path
         .file_stem()
@@ -641,11 +700,10 @@ fn write_signals(root: &Path, session: &Session, path: &Path) -> Result<usize, E
         let columns: Vec<&str> = chosen.iter().map(|&i| curve.columns[i].as_str()).collect();
         let sidecar = json!({
             "SamplingFrequency": rate_hz,
-            "StartTime": curve.times_s[0],
+            "StartTime": placement.start_s(path, curve.times_s[0]),
             "Columns": columns,
             "Source": path.file_name().map(|n| n.to_string_lossy().into_owned()),
-            "Description": "thermode curve; StartTime is the source's own time base (loop time of the daemon \
-                            for a serve recording, time from the touch for a trial curve), not the events' onsets",
+            "Description": placement.description(),
         });
         write_json(&dir.join(format!("{prefix}_{suffix}.json")), &sidecar)?;
         written += 1;
@@ -776,6 +834,115 @@ mod tests {
             serde_json::from_str::<Value>(&fs::read_to_string(physio).unwrap()).unwrap()["Columns"],
             json!(["sensor_c"])
         );
+    }
+
+    /// Trial starts on the daemon's loop clock in the clocked data folder \[s\].
+    const TRIAL_STARTS_S: [f64; 3] = [100.0, 140.5, 181.25];
+
+    /// A display session: three trials whose curves carry the daemon's loop time (100 Hz, 30 s from each start),
+    /// and a `serve --record` file of the same daemon from loop time 90 s to 215 s whose `contact` turns 1 at each
+    /// trial's start (the marker).
+    fn clocked_data_folder(dir: &Path) -> PathBuf {
+        let sidecar = json!({"format": "thermode-lab session 2", "participant": "P-01", "experiment": "paper",
+                             "session_date": "2026-11-23", "csv_file": "P-01_paper_2026-11-23.csv",
+                             "device": {"loop_time_zero_unix_s": 1.8e9}});
+        fs::write(dir.join("P-01_paper_2026-11-23.json"), sidecar.to_string()).unwrap();
+        let mut csv = String::from("participant,trial,condition,presented,response_time_s,presentation_s,curve_file\n");
+        let curves = dir.join("P-01_paper_2026-11-23_curves");
+        fs::create_dir(&curves).unwrap();
+        for (index, start_s) in TRIAL_STARTS_S.iter().enumerate() {
+            let trial = index + 1;
+            let name = format!("trial-{trial:03}.csv");
+            csv.push_str(&format!(
+                "P-01,{trial},simulated,wood,2.5,30.0,P-01_paper_2026-11-23_curves/{name}\n"
+            ));
+            let mut curve = String::from("trial,time_s,loop_time_s,target_skin_c,finger_c\n");
+            for i in 0..3000 {
+                let t = f64::from(i) * 0.01;
+                curve.push_str(&format!("{trial},{t},{:.6},{},30\n", start_s + t, 32.0 - t / 30.0));
+            }
+            fs::write(curves.join(name), curve).unwrap();
+        }
+        fs::write(dir.join("P-01_paper_2026-11-23.csv"), csv).unwrap();
+        let mut record = String::from("time_s,channel,contact,material,target_skin_c,sensor_c\n");
+        for i in 0..12_500u32 {
+            let t = 90.0 + f64::from(i) * 0.01;
+            let touching = TRIAL_STARTS_S.iter().any(|s| t >= s - 1e-9 && t < s + 30.0 - 1e-9);
+            let (contact, material) = if touching { (1, "wood") } else { (0, "") };
+            record.push_str(&format!("{t:.6},0,{contact},{material},32,30\n"));
+        }
+        let recording = dir.join("session_20261123-101500.csv");
+        fs::write(&recording, record).unwrap();
+        // The same daemon: its zero as the recorder wrote it, within a round trip of the session's estimate.
+        let clock = json!({"loop_time_zero_unix_s": 1.8e9 + 0.0004});
+        fs::write(dir.join("session_20261123-101500.clock.json"), clock.to_string()).unwrap();
+        recording
+    }
+
+    fn gunzip_rows(path: &Path) -> Vec<Vec<String>> {
+        let mut text = String::new();
+        std::io::Read::read_to_string(
+            &mut flate2::read::GzDecoder::new(fs::File::open(path).unwrap()),
+            &mut text,
+        )
+        .unwrap();
+        text.lines()
+            .map(|l| l.split('\t').map(str::to_string).collect())
+            .collect()
+    }
+
+    #[test]
+    fn a_markers_event_onset_lands_on_the_signal_sample_where_it_was_recorded() {
+        let root = tempfile::tempdir().unwrap();
+        let recording = clocked_data_folder(root.path());
+        let out = root.path().join("bids");
+        export_bids(&BidsOptions {
+            data_dir: root.path().to_path_buf(),
+            out_dir: out.clone(),
+            recordings: vec![("P-01".into(), recording)],
+        })
+        .unwrap();
+        let beh = out.join("sub-P01/ses-20261123/beh");
+        let prefix = "sub-P01_ses-20261123_task-paper";
+        let events = fs::read_to_string(beh.join(format!("{prefix}_events.tsv"))).unwrap();
+        let onsets: Vec<f64> = events
+            .lines()
+            .skip(1)
+            .map(|l| l.split('\t').next().unwrap().parse().unwrap())
+            .collect();
+        // On the loop clock from the first trial's start (time on task would say 0, 32.5, 65).
+        assert_eq!(onsets, [0.0, 40.5, 81.25], "{events}");
+        let sidecar = |name: &str| -> Value {
+            serde_json::from_str(&fs::read_to_string(beh.join(format!("{prefix}_recording-{name}.json"))).unwrap())
+                .unwrap()
+        };
+        let physio = sidecar("session20261123101500_physio");
+        let (start_s, rate_hz) = (
+            physio["StartTime"].as_f64().unwrap(),
+            physio["SamplingFrequency"].as_f64().unwrap(),
+        );
+        assert_eq!((start_s, rate_hz), (-10.0, 100.0), "{physio}");
+        let columns: Vec<&str> = physio["Columns"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|c| c.as_str().unwrap())
+            .collect();
+        let contact = columns.iter().position(|c| *c == "ch0_contact").expect("ch0_contact");
+        let rows = gunzip_rows(&beh.join(format!("{prefix}_recording-session20261123101500_physio.tsv.gz")));
+        for onset in onsets {
+            let sample = ((onset - start_s) * rate_hz).round() as usize;
+            assert_eq!(
+                (rows[sample - 1][contact].as_str(), rows[sample][contact].as_str()),
+                ("0", "1"),
+                "event at {onset} s: sample {sample} is not where the touch was recorded"
+            );
+        }
+        // Each trial's own curve starts at its event's onset.
+        for (trial, onset) in [(1, 0.0), (2, 40.5), (3, 81.25)] {
+            let stim = sidecar(&format!("trial{trial:03}_stim"));
+            assert_eq!(stim["StartTime"].as_f64(), Some(onset), "trial {trial}: {stim}");
+        }
     }
 
     #[test]

@@ -24,6 +24,7 @@ pub mod inverse;
 pub mod kron;
 pub mod limits;
 pub mod materials;
+pub mod numbers;
 pub mod params;
 pub mod peltier;
 pub mod semi_infinite;

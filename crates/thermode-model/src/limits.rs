@@ -345,7 +345,7 @@ mod tests {
         let message = CONDUCTIVITY.check(1e300).map(drop).unwrap_err().to_string();
         assert_eq!(
             message,
-            "`thermal conductivity [W/(m·K)]` = 1e300 is invalid: must be a finite number in [0.01, 2500]"
+            "`thermal conductivity [W/(m·K)]` = 1e300 is invalid: must be a finite number from 0.01 to 2500"
         );
     }
 

@@ -20,6 +20,23 @@ use thiserror::Error;
 /// Longest a [`ManualClock`] sleeper waits in real time before it returns, so a stopping caller is not stuck \[s\].
 const MANUAL_POLL_S: f64 = 0.02;
 
+/// Resolution of thermode's clocks \[s\]: 1 ns, that of `std::time::Instant`. [`MonotonicClock`] reads whole
+/// nanoseconds, and times that leave thermode in replies and messages are rounded to them
+/// ([`to_clock_resolution`]), so they print as the decimals they are (`16.686951061`, not `16.686951061000002`).
+pub const CLOCK_RESOLUTION_S: f64 = 1e-9;
+
+/// `time_s` rounded to the clock's resolution (whole nanoseconds; the nearest `f64` to that decimal); times beyond
+/// 2^53 ns (104 days) pass unchanged.
+pub fn to_clock_resolution(time_s: f64) -> f64 {
+    let ns = time_s * 1e9;
+    if ns.is_finite() && ns.abs() < 9.007_199_254_740_992e15 {
+        // An exact integer divided by an exact power of ten: correctly rounded.
+        ns.round() / 1e9
+    } else {
+        time_s
+    }
+}
+
 /// A monotonic clock in seconds, with a wall clock for dates.
 pub trait Clock: Send + Sync + Debug {
     /// Seconds since the clock's origin; never decreases.
@@ -62,7 +79,7 @@ impl Default for MonotonicClock {
 
 impl Clock for MonotonicClock {
     fn now_s(&self) -> f64 {
-        self.origin.elapsed().as_secs_f64()
+        to_clock_resolution(self.origin.elapsed().as_secs_f64())
     }
 
     fn sleep_until(&self, deadline_s: f64) {
@@ -436,6 +453,23 @@ mod tests {
         for bad in ["2001-02-29", "2024-13-01", "2024-5-01", "2024-05-00", "not a date"] {
             assert_eq!(parse_iso_date(bad), None, "{bad}");
         }
+    }
+
+    #[test]
+    fn times_rounded_to_the_clock_print_as_whole_nanoseconds() {
+        // 0.686951061 + 30 · 0.001 = 0.7169510610000001 in f64 (a loop time on the ticker's grid).
+        let (start, step) = (std::hint::black_box(0.686951061), std::hint::black_box(0.001));
+        let on_grid = start + 30.0 * step;
+        assert_eq!(on_grid.to_string(), "0.7169510610000001");
+        assert_eq!(to_clock_resolution(on_grid).to_string(), "0.716951061");
+        assert_eq!(to_clock_resolution(0.1 + 0.2).to_string(), "0.3");
+        assert_eq!(to_clock_resolution(1e300), 1e300);
+        let now = MonotonicClock::new().now_s();
+        assert_eq!(
+            to_clock_resolution(now),
+            now,
+            "the monotonic clock reads whole nanoseconds"
+        );
     }
 
     #[test]

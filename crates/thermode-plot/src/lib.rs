@@ -1,20 +1,30 @@
-//! thermode-plot: figures for thermode written as SVG or PNG files.
+//! thermode-plot: figures for thermode written as SVG or PNG files, laid out for a paper.
 //!
-//! A [`Figure`] is a grid of [`Panel`]s; each panel has axes, labels and [`Series`] drawn as lines, dashed lines,
-//! points or bars. The legend stands in a column to the right of the axes, never over the data, and its swatches
-//! are drawn in each series' own style (a dashed series has a dashed swatch), so series of one colour that differ
-//! only in style stay apart. [`write_figure`] picks the format from the file extension (`.svg` or `.png`) and writes
-//! atomically (a temporary file in the same folder, then a rename), so a failed plot never leaves half a file.
-//! The PNG text uses DejaVu Sans, embedded in the binary (licence in `assets/DejaVuSans-LICENSE.txt`), so no system
-//! font is needed at run time.
+//! A [`Figure`] is an optional title over a grid of [`Panel`]s; each panel has a letter (`a`, `b`, … when there is
+//! more than one), a title, axes and [`Series`] drawn as lines, dashed lines, points or bars, optionally with
+//! [`Marker`]s that keep overlapping curves apart. Titles are sized to fit inside the canvas; tick labels carry only
+//! the decimals their step needs (never `1.0` or `-0`); the grid is one light grey line per labelled tick. The
+//! figure has one legend, a column to the right of all panels, never over the data: one entry per distinct series,
+//! its swatch in the series' own style and marker. [`write_figure`] picks the format from the file extension
+//! (`.svg` or `.png`; plotters offers no PDF backend) and writes atomically (a temporary file in the same folder,
+//! then a rename), so a failed plot never leaves half a file. The PNG text uses DejaVu Sans, embedded in the binary
+//! (licence in `assets/DejaVuSans-LICENSE.txt`), so no system font is needed at run time.
+
+mod marks;
+pub mod svg_text;
+mod ticks;
 
 use std::path::{Path, PathBuf};
 use std::sync::Once;
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 use thermode_platform::WriteError;
 use thiserror::Error;
+
+pub use marks::Marker;
+pub use ticks::{tick_decimals, tick_label, tick_values, TICKS_PER_AXIS};
 
 /// The embedded font (DejaVu Sans, Bitstream Vera licence).
 static FONT_BYTES: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
@@ -72,6 +82,8 @@ pub struct Series {
     pub style: SeriesStyle,
     /// Index into the palette; series with the same index share a colour (e.g. real and simulated aluminium).
     pub color: usize,
+    /// Marker drawn at a few points along the series (`None`: none).
+    pub marker: Option<Marker>,
 }
 
 impl Series {
@@ -82,6 +94,15 @@ impl Series {
             points,
             style,
             color,
+            marker: None,
+        }
+    }
+
+    /// This series with `marker` drawn at a few points along it.
+    pub fn with_marker(self, marker: Marker) -> Self {
+        Series {
+            marker: Some(marker),
+            ..self
         }
     }
 }
@@ -131,6 +152,8 @@ impl Panel {
 /// A grid of panels written to one file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Figure {
+    /// Title above all panels (`None`: none).
+    pub title: Option<String>,
     /// Panels, filled row by row.
     pub panels: Vec<Panel>,
     /// Panels per row (at least 1).
@@ -142,14 +165,15 @@ pub struct Figure {
 }
 
 impl Figure {
-    /// A figure of one panel, 800 × 500 px.
+    /// A figure of one panel, 800 × 500 px (and the legend column).
     pub fn single(panel: Panel) -> Self {
         Figure::grid(vec![panel], 1)
     }
 
-    /// A figure of several panels, `columns` per row, each 800 × 500 px.
+    /// A figure of several panels, `columns` per row, each 800 × 500 px (and the legend column).
     pub fn grid(panels: Vec<Panel>, columns: usize) -> Self {
         Figure {
+            title: None,
             panels,
             columns: columns.max(1),
             panel_width_px: 800,
@@ -157,10 +181,26 @@ impl Figure {
         }
     }
 
-    fn size_px(&self) -> (u32, u32) {
+    /// This figure with `title` above its panels.
+    pub fn with_title(self, title: impl Into<String>) -> Self {
+        Figure {
+            title: Some(title.into()),
+            ..self
+        }
+    }
+
+    /// Width and height of the canvas (px): the panels, the legend column if any series is labelled, the title
+    /// band if there is a title.
+    pub fn size_px(&self) -> (u32, u32) {
         let columns = self.columns.max(1);
         let rows = self.panels.len().div_ceil(columns).max(1);
-        (self.panel_width_px * columns as u32, self.panel_height_px * rows as u32)
+        let labelled = self.panels.iter().flat_map(|p| &p.series).any(|s| !s.label.is_empty());
+        let legend_px = if labelled { LEGEND_WIDTH_PX } else { 0 };
+        let title_px = if self.title.is_some() { TITLE_BAND_PX } else { 0 };
+        (
+            self.panel_width_px * columns as u32 + legend_px,
+            self.panel_height_px * rows as u32 + title_px,
+        )
     }
 }
 
@@ -233,22 +273,86 @@ fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<(), PlotErr
     })
 }
 
+/// Height of the band that holds a figure's title (px): 44.
+pub const TITLE_BAND_PX: u32 = 44;
+/// Height of the band above each panel's axes that holds its letter and title (px): 36; none for a lone panel
+/// without a title.
+pub const PANEL_HEAD_PX: u32 = 36;
+/// Width of the legend column to the right of a figure's panels (px): 240, room for about 28 characters.
+pub const LEGEND_WIDTH_PX: u32 = 240;
+/// Largest figure title (px): 22.
+const TITLE_FONT_PX: u32 = 22;
+/// Largest panel title (px): 18.
+const PANEL_TITLE_FONT_PX: u32 = 18;
+/// Room kept left of a panel title for the panel letter (px): 48.
+const LETTER_ROOM_PX: u32 = 48;
+
 fn draw_figure<DB: DrawingBackend>(figure: &Figure, root: &DrawingArea<DB, Shift>) -> Result<(), PlotError> {
     REGISTER_FONT.call_once(|| {
         // The bytes are the embedded DejaVu Sans; registration cannot fail for a valid TrueType file.
         let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT_BYTES);
+        let _ = plotters::style::register_font("sans-serif", FontStyle::Bold, FONT_BYTES);
     });
     if figure.panels.is_empty() {
         return Err(PlotError::Empty("the figure has no panel".into()));
     }
     root.fill(&WHITE).map_err(drawing)?;
+    let main = match &figure.title {
+        Some(title) => {
+            let (band, rest) = root.split_vertically(TITLE_BAND_PX);
+            draw_centred_title(&band, title, TITLE_FONT_PX, 16)?;
+            rest
+        }
+        None => root.clone(),
+    };
+    let entries = marks::legend_entries(figure.panels.iter().flat_map(|p| &p.series));
+    let body = if entries.is_empty() {
+        main
+    } else {
+        let width_px = main.dim_in_pixel().0;
+        let (body, legend) = main.split_horizontally(width_px.saturating_sub(LEGEND_WIDTH_PX));
+        let first = &figure.panels[0];
+        let head_px = if figure.panels.len() > 1 || !first.title.is_empty() {
+            PANEL_HEAD_PX
+        } else {
+            0
+        };
+        marks::draw_legend(&legend, &entries, head_px as i32 + 16)?;
+        body
+    };
     let columns = figure.columns.max(1);
     let rows = figure.panels.len().div_ceil(columns);
-    let areas = root.split_evenly((rows, columns));
-    for (panel, area) in figure.panels.iter().zip(areas.iter()) {
-        draw_panel(panel, area)?;
+    let areas = body.split_evenly((rows, columns));
+    let lettered = figure.panels.len() > 1;
+    for (index, (panel, area)) in figure.panels.iter().zip(areas.iter()).enumerate() {
+        let letter = lettered.then(|| panel_letter(index));
+        draw_panel(panel, area, letter.as_deref(), root)?;
     }
     Ok(())
+}
+
+/// The letter of the `index`-th panel: `a`, `b`, … `z`, then `aa`, `ab`, ….
+pub fn panel_letter(index: usize) -> String {
+    let letter = |i: usize| char::from(b'a' + (i % 26) as u8);
+    match index / 26 {
+        0 => letter(index).to_string(),
+        n => format!("{}{}", letter(n - 1), letter(index)),
+    }
+}
+
+/// `text` centred in `area` (horizontally, `top_px` from its top), as large as fits up to `max_px`, with 8 px
+/// to spare on each side.
+fn draw_centred_title<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    text: &str,
+    max_px: u32,
+    top_px: i32,
+) -> Result<(), PlotError> {
+    let width_px = area.dim_in_pixel().0;
+    let size = marks::fitted_font_px(area, text, max_px, width_px.saturating_sub(16))?;
+    let style = TextStyle::from(("sans-serif", size)).pos(Pos::new(HPos::Center, VPos::Center));
+    area.draw(&Text::new(text, (width_px as i32 / 2, top_px), style))
+        .map_err(drawing)
 }
 
 fn drawing<E: std::fmt::Debug>(error: E) -> PlotError {
@@ -299,87 +403,92 @@ fn panel_ranges(panel: &Panel) -> Result<(AxisRange, AxisRange), PlotError> {
     Ok((x, y))
 }
 
-/// Width of the legend column to the right of a panel's axes (px): 230, room for about 28 characters.
-pub const LEGEND_WIDTH_PX: u32 = 230;
+/// Light grey of the grid lines (one grid, at the labelled ticks).
+const GRID_COLOR: RGBColor = RGBColor(228, 228, 228);
+/// Colour of the axes and their labels.
+const AXIS_COLOR: RGBColor = RGBColor(60, 60, 60);
 
-fn draw_panel<DB: DrawingBackend>(panel: &Panel, area: &DrawingArea<DB, Shift>) -> Result<(), PlotError> {
+/// One panel in `area`: its letter (if any) and title in a band above the axes, then the axes, grid and series.
+/// `root` is the figure's whole canvas (markers are drawn there, in pixels).
+fn draw_panel<DB: DrawingBackend>(
+    panel: &Panel,
+    area: &DrawingArea<DB, Shift>,
+    letter: Option<&str>,
+    root: &DrawingArea<DB, Shift>,
+) -> Result<(), PlotError> {
     let ((x0, x1), (y0, y1)) = panel_ranges(panel)?;
-    let labelled: Vec<&Series> = panel.series.iter().filter(|s| !s.label.is_empty()).collect();
-    let width_px = area.dim_in_pixel().0;
-    let (plot_area, legend_area) = if labelled.is_empty() || width_px < 2 * LEGEND_WIDTH_PX {
-        (area.clone(), None)
+    let plot_area = if letter.is_none() && panel.title.is_empty() {
+        area.clone()
     } else {
-        let (left, right) = area.split_horizontally(width_px - LEGEND_WIDTH_PX);
-        (left, Some(right))
+        let (head, plot_area) = area.split_vertically(PANEL_HEAD_PX);
+        draw_panel_head(&head, panel, letter)?;
+        plot_area
     };
     let mut chart = ChartBuilder::on(&plot_area)
-        .caption(&panel.title, ("sans-serif", 22))
-        .margin(12)
-        .x_label_area_size(45)
-        .y_label_area_size(60)
+        .margin_top(4)
+        .margin_bottom(6)
+        .margin_left(8)
+        .margin_right(20)
+        .x_label_area_size(48)
+        .y_label_area_size(64)
         .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(drawing)?;
+    let (x_decimals, y_decimals) = (ticks::tick_decimals(x0, x1), ticks::tick_decimals(y0, y1));
+    let x_format = move |v: &f64| ticks::tick_label(*v, x_decimals);
+    let y_format = move |v: &f64| ticks::tick_label(*v, y_decimals);
     chart
         .configure_mesh()
+        .x_labels(ticks::TICKS_PER_AXIS)
+        .y_labels(ticks::TICKS_PER_AXIS)
+        .x_label_formatter(&x_format)
+        .y_label_formatter(&y_format)
+        .max_light_lines(0)
+        .bold_line_style(GRID_COLOR)
+        .axis_style(AXIS_COLOR)
         .x_desc(panel.x_label.as_str())
         .y_desc(panel.y_label.as_str())
         .label_style(("sans-serif", 14))
         .axis_desc_style(("sans-serif", 16))
-        .light_line_style(RGBColor(235, 235, 235))
         .draw()
         .map_err(drawing)?;
     for series in &panel.series {
         draw_series(&mut chart, series)?;
     }
-    match legend_area {
-        Some(legend) => draw_legend(&legend, &labelled),
-        None if labelled.is_empty() => Ok(()),
-        // Too narrow for a column: the legend goes inside the axes.
-        None => chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(180, 180, 180))
-            .label_font(("sans-serif", 14))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(drawing),
-    }
-}
-
-/// Vertical distance between legend entries (px).
-const LEGEND_ROW_PX: i32 = 22;
-
-/// The legend column: one row per labelled series, a swatch in the series' style and its label.
-fn draw_legend<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, series: &[&Series]) -> Result<(), PlotError> {
-    let top_px = 50;
-    for (row, s) in series.iter().enumerate() {
-        let y = top_px + row as i32 * LEGEND_ROW_PX;
-        draw_swatch(area, s, (8, y))?;
-        area.draw(&Text::new(s.label.as_str(), (48, y - 8), ("sans-serif", 14)))
-            .map_err(drawing)?;
+    for series in panel.series.iter().filter(|s| s.marker.is_some()) {
+        let points: Vec<(f64, f64)> = finite_points(series).collect();
+        for point in marks::marker_points(&points, series.color) {
+            let pixel = chart.backend_coord(&point);
+            if let Some(marker) = series.marker {
+                marks::draw_marker(root, marker, pixel, palette(series.color))?;
+            }
+        }
     }
     Ok(())
 }
 
-/// A 32 px swatch of `series`' style whose left end is at `(x, y)` (px, y at the middle).
-fn draw_swatch<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
-    series: &Series,
-    (x, y): (i32, i32),
+/// The band above a panel's axes: its letter in bold at the left, its title centred in the room left.
+fn draw_panel_head<DB: DrawingBackend>(
+    head: &DrawingArea<DB, Shift>,
+    panel: &Panel,
+    letter: Option<&str>,
 ) -> Result<(), PlotError> {
-    let color = palette(series.color);
-    let stroke = ShapeStyle::from(color).stroke_width(3);
-    match series.style {
-        SeriesStyle::Line => area.draw(&PathElement::new(vec![(x, y), (x + 32, y)], stroke)),
-        SeriesStyle::Dashed => [(0, 8), (12, 20), (24, 32)]
-            .into_iter()
-            .try_for_each(|(a, b)| area.draw(&PathElement::new(vec![(x + a, y), (x + b, y)], stroke))),
-        SeriesStyle::Points => area.draw(&Circle::new((x + 16, y), 4, color.filled())),
-        SeriesStyle::Bars { .. } => area.draw(&Rectangle::new(
-            [(x + 8, y - 6), (x + 24, y + 6)],
-            color.mix(0.75).filled(),
-        )),
+    let middle_px = PANEL_HEAD_PX as i32 / 2 + 4;
+    if let Some(letter) = letter {
+        let style = TextStyle::from(("sans-serif", 20, FontStyle::Bold)).pos(Pos::new(HPos::Left, VPos::Center));
+        head.draw(&Text::new(letter, (12, middle_px), style)).map_err(drawing)?;
     }
+    if panel.title.is_empty() {
+        return Ok(());
+    }
+    let width_px = head.dim_in_pixel().0;
+    let room_px = width_px.saturating_sub(2 * LETTER_ROOM_PX);
+    let size = marks::fitted_font_px(head, &panel.title, PANEL_TITLE_FONT_PX, room_px)?;
+    let style = TextStyle::from(("sans-serif", size)).pos(Pos::new(HPos::Center, VPos::Center));
+    head.draw(&Text::new(
+        panel.title.as_str(),
+        (width_px as i32 / 2, middle_px),
+        style,
+    ))
     .map_err(drawing)
 }
 
@@ -390,34 +499,24 @@ fn draw_series<DB: DrawingBackend>(chart: &mut Chart<'_, DB>, series: &Series) -
     let color = palette(series.color);
     let points: Vec<(f64, f64)> = finite_points(series).collect();
     let style = ShapeStyle::from(color).stroke_width(2);
-    let annotation = match series.style {
-        SeriesStyle::Line => chart.draw_series(LineSeries::new(points, style)).map_err(drawing)?,
-        SeriesStyle::Dashed => chart
-            .draw_series(DashedLineSeries::new(points, 8, 5, style))
-            .map_err(drawing)?,
+    match series.style {
+        SeriesStyle::Line => chart.draw_series(LineSeries::new(points, style)).map(drop),
+        SeriesStyle::Dashed => chart.draw_series(DashedLineSeries::new(points, 9, 6, style)).map(drop),
         SeriesStyle::Points => chart
             .draw_series(points.into_iter().map(|p| Circle::new(p, 4, color.filled())))
-            .map_err(drawing)?,
+            .map(drop),
         SeriesStyle::Bars { width } => {
             let half = width.abs() / 2.0;
             chart
                 .draw_series(
                     points
                         .into_iter()
-                        .map(|(x, y)| Rectangle::new([(x - half, 0.0), (x + half, y)], color.mix(0.75).filled())),
+                        .map(|(x, y)| Rectangle::new([(x - half, 0.0), (x + half, y)], color.mix(0.8).filled())),
                 )
-                .map_err(drawing)?
+                .map(drop)
         }
-    };
-    if !series.label.is_empty() {
-        // Used only when the panel is too narrow for the legend column.
-        let dashed = series.style == SeriesStyle::Dashed;
-        annotation.label(series.label.as_str()).legend(move |(x, y)| {
-            let end = if dashed { x + 8 } else { x + 18 };
-            PathElement::new(vec![(x, y), (end, y)], color.stroke_width(3))
-        });
     }
-    Ok(())
+    .map_err(drawing)
 }
 
 #[cfg(test)]
@@ -466,6 +565,49 @@ mod tests {
         }
         assert!(svg.contains("<polyline") || svg.contains("<path"), "SVG has no line");
         assert!(svg.contains("<rect"), "SVG has no bar");
+    }
+
+    use crate::svg_text::{badly_written_numbers, canvas_width_px, number_texts, svg_texts, texts_outside};
+
+    #[test]
+    fn titles_fit_the_canvas_ticks_are_plain_and_the_legend_is_listed_once() {
+        let long = "Figure 3: mean finger temperature, real (solid) and simulated (dashed) of every material";
+        let mut figure = sample().with_title(long);
+        figure.panels[0].title = "a panel title long enough to be clipped if it kept its largest size".into();
+        let shared = figure.panels[0].series[0].clone();
+        figure.panels[1].series.push(shared);
+        let svg = svg_string(&figure).expect("svg");
+        let (width_px, _) = figure.size_px();
+        let outside = texts_outside(&svg, width_px as f64);
+        assert!(
+            outside.is_empty(),
+            "texts outside the {width_px} px canvas: {outside:?}"
+        );
+        let texts = svg_texts(&svg);
+        for title in [long, "Bars", "a", "b"] {
+            assert!(texts.iter().any(|t| t.content == title), "SVG lacks the text `{title}`");
+        }
+        let numbers = number_texts(&svg);
+        assert!(numbers.len() >= 10, "too few tick labels: {numbers:?}");
+        let bad = badly_written_numbers(&svg);
+        assert!(
+            bad.is_empty(),
+            "tick labels with a needless decimal or a negative zero: {bad:?} of {numbers:?}"
+        );
+        assert_eq!(canvas_width_px(&svg), Some(width_px as f64));
+        let legend_rows = texts.iter().filter(|t| t.content == "cooling").count();
+        assert_eq!(
+            legend_rows, 1,
+            "the series drawn in both panels is listed {legend_rows} times"
+        );
+    }
+
+    #[test]
+    fn the_old_layout_would_have_been_caught() {
+        // The check itself: a title centred at x = 285 px in 22 px type (plotters' caption of a 570 px wide axes area)
+        // sticks out on the left, as the lab's Figure 3 title did.
+        let svg = r#"<svg width="800" height="500"><text x="285" y="20" dy="0.76em" text-anchor="middle" font-family="sans-serif" font-size="17.741936">Figure 3: mean finger temperature, real (solid) and simulated (dashed)</text></svg>"#;
+        assert_eq!(texts_outside(svg, 800.0).len(), 1, "{:?}", texts_outside(svg, 800.0));
     }
 
     #[test]

@@ -1,9 +1,10 @@
 //! The paper's Figure 3 for the simulated system: the real contact (the ground truth: the simulated finger touching
 //! the real material) against the displayed contact (the simulated finger on the display), per material, one panel
 //! per controller, and beside it the first [`EARLY_WINDOW_S`] seconds of contact, where nearly all of the rendering
-//! error lives. A single material also shows the renderer's target and the plate temperature.
+//! error lives. A single material also shows the renderer's target and the plate temperature; several materials
+//! each carry a marker, so that curves that run together (wood and rubber) stay apart.
 
-use thermode_plot::{Figure, Panel, Series, SeriesStyle};
+use thermode_plot::{Figure, Marker, Panel, Series, SeriesStyle};
 
 use crate::run::RenderRun;
 
@@ -72,18 +73,19 @@ fn panel(runs: &[RenderRun], controller: &str, window: Option<(f64, f64)>) -> Pa
                 2,
             ));
         }
-        series.push(Series::new(
+        let marked = |s: Series| if single { s } else { s.with_marker(Marker::nth(colour)) };
+        series.push(marked(Series::new(
             format!("{name} real (truth)"),
             curve(&t.time_s, &t.truth_skin_c, window),
             SeriesStyle::Line,
             colour,
-        ));
-        series.push(Series::new(
+        )));
+        series.push(marked(Series::new(
             format!("{name} displayed (skin)"),
             curve(&t.time_s, &t.skin_c, window),
             SeriesStyle::Dashed,
             colour,
-        ));
+        )));
     }
     let renderer = runs.first().map_or("", |r| r.spec.pipeline.renderer.name());
     let title = match window {

@@ -116,9 +116,26 @@ pub fn render(spec: &RenderSpec) -> Result<RenderRun, RenderError> {
 /// returned. Work whose results would not fit in memory together ([`check_result_bytes`]) is refused before any
 /// run starts.
 pub fn render_all(specs: &[RenderSpec]) -> Result<Vec<RenderRun>, RenderError> {
+    render_all_with_progress(specs, &|| {})
+}
+
+/// As [`render_all`], calling `run_done` as each run ends (a progress bar: runs done of `specs.len()`).
+pub fn render_all_with_progress(
+    specs: &[RenderSpec],
+    run_done: &(dyn Fn() + Sync),
+) -> Result<Vec<RenderRun>, RenderError> {
     check_result_bytes(specs)?;
     std::thread::scope(|scope| {
-        let handles: Vec<_> = specs.iter().map(|spec| scope.spawn(move || render(spec))).collect();
+        let handles: Vec<_> = specs
+            .iter()
+            .map(|spec| {
+                scope.spawn(move || {
+                    let run = render(spec);
+                    run_done();
+                    run
+                })
+            })
+            .collect();
         handles
             .into_iter()
             .map(|h| {

@@ -36,7 +36,7 @@ use crate::engine::{ChannelEngine, EngineError, EngineFactory, SelfTestState, St
 use crate::error::RuntimeError;
 use crate::interlock::Interlock;
 use crate::limits::StimulusLimits;
-use crate::snapshot::{ChannelStatus, LoopStats, Mode, RecordRow, Shared, Snapshot, TickRecord};
+use crate::snapshot::{ChannelStatus, LoopStats, MaterialProperties, Mode, RecordRow, Shared, Snapshot, TickRecord};
 use crate::stats::Window;
 use thermode_platform::rt::Realtime;
 use thermode_platform::Clock;
@@ -617,6 +617,10 @@ impl ControlLoop {
                 label,
                 owner,
             } => {
+                let material = match &stimulus {
+                    Stimulus::Touch { material, .. } => Some(MaterialProperties::of(material)),
+                    _ => None,
+                };
                 let (mode, object_c, direct) = match &stimulus {
                     Stimulus::Touch { object_c, .. } => (Mode::Touch, Some(*object_c), None),
                     Stimulus::Direct { temp_c, rate_c_per_s } => (Mode::Direct, None, Some((*temp_c, *rate_c_per_s))),
@@ -637,6 +641,7 @@ impl ControlLoop {
                 self.set(channel, stimulus)?;
                 let status = &mut self.status[channel];
                 (status.label, status.mode, status.object_c, status.direct) = (label, mode, object_c, direct);
+                status.material = material;
                 claim(status, owner);
             }
             Command::Release { channel } => {
@@ -750,6 +755,7 @@ impl ControlLoop {
         let status = &mut self.status[channel];
         let label = self.air.clone();
         (status.label, status.mode, status.object_c, status.direct) = (label, Mode::Air, None, None);
+        status.material = None;
         (status.owner, status.release_at_s, status.held_off) = (Owner::Nobody, None, !accepted);
     }
 
@@ -778,6 +784,7 @@ impl ControlLoop {
                     label: s.label.clone(),
                     mode: s.mode,
                     object_c: s.object_c,
+                    material: s.material,
                     direct: s.direct,
                     held_off: s.held_off,
                     telemetry: s.telemetry,
@@ -786,6 +793,7 @@ impl ControlLoop {
                     label: self.air.clone(),
                     mode: Mode::Air,
                     object_c: None,
+                    material: None,
                     direct: None,
                     held_off: false,
                     telemetry: crate::snapshot::EMPTY_TELEMETRY,
@@ -868,6 +876,7 @@ fn air_status(channel: usize, air: &Arc<str>, dose: DoseLedger, dose_budget_spen
         label: air.clone(),
         mode: Mode::Air,
         object_c: None,
+        material: None,
         direct: None,
         held_off: false,
         owner: Owner::Nobody,

@@ -63,4 +63,4 @@ pub use error::RuntimeError;
 pub use interlock::Interlock;
 pub use limits::StimulusLimits;
 pub use loop_core::{CoreConfig, CoreStop, LoopCore, PreparedCore};
-pub use snapshot::{ChannelStatus, LoopStats, Mode, Snapshot, TickRecord};
+pub use snapshot::{ChannelStatus, LoopStats, MaterialProperties, Mode, Snapshot, TickRecord};

@@ -23,7 +23,9 @@
 //! Columns (the `render` CSV names and conventions): `time_s, channel, contact, material, mode, target_skin_c,
 //! skin_c, display_setpoint_c, sensor_c, current_a, hot_side_c, fault` — `time_s` is loop time (the daemon clock's
 //! seconds, about 0 at the start), `contact` 1 while a material is touched and 0 otherwise, `material` its name
-//! (empty otherwise), `mode` `air`, `touch` or `direct`, `fault` the numeric fault code (empty without fault).
+//! (empty otherwise), `mode` `air`, `touch` or `direct`, `fault` the numeric fault code (empty without fault), then
+//! the touched material's properties, `conductivity_w_mk, density_kg_m3, specific_heat_j_kgk, thickness_m` (empty
+//! outside a touch), so that a recording of a custom material, which no library knows, reads back.
 
 use std::borrow::Cow;
 use std::fs::{File, OpenOptions};
@@ -48,8 +50,8 @@ pub const FLUSH_INTERVAL_S: f64 = 0.5;
 /// The buffer is written once it holds this much \[bytes\] (64 KiB), even before [`FLUSH_INTERVAL_S`].
 pub const WRITE_CHUNK_BYTES: usize = 64 * 1024;
 /// The CSV header.
-pub const CSV_HEADER: &str =
-    "time_s,channel,contact,material,mode,target_skin_c,skin_c,display_setpoint_c,sensor_c,current_a,hot_side_c,fault";
+pub const CSV_HEADER: &str = "time_s,channel,contact,material,mode,target_skin_c,skin_c,display_setpoint_c,sensor_c,\
+                              current_a,hot_side_c,fault,conductivity_w_mk,density_kg_m3,specific_heat_j_kgk,thickness_m";
 
 /// How the error of a failed resumption (a new file that cannot be written either) begins.
 pub const RESUME_FAILED: &str = "cannot go on in a new file";
@@ -757,7 +759,7 @@ fn write_record(out: &mut impl Write, record: &TickRecord) -> std::io::Result<()
         } else {
             Cow::Borrowed("")
         };
-        writeln!(
+        write!(
             out,
             "{:.6},{channel},{},{material},{},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{fault}",
             record.time_s,
@@ -770,6 +772,14 @@ fn write_record(out: &mut impl Write, record: &TickRecord) -> std::io::Result<()
             t.current_a,
             t.hot_side_c,
         )?;
+        match row.material.filter(|_| touching) {
+            Some(m) => writeln!(
+                out,
+                ",{},{},{},{}",
+                m.conductivity_w_mk, m.density_kg_m3, m.specific_heat_j_kgk, m.thickness_m
+            )?,
+            None => writeln!(out, ",,,,")?,
+        }
     }
     Ok(())
 }

@@ -33,6 +33,32 @@ pub const EMPTY_TELEMETRY: Telemetry = Telemetry {
 /// What a channel renders: the wire's vocabulary (`thermode_protocol::Mode`).
 pub use thermode_protocol::Mode;
 
+/// The properties of a touched material, as the recording names them (so that a custom material, which no library
+/// knows, can be read back).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MaterialProperties {
+    /// Thermal conductivity k \[W/(m·K)\].
+    pub conductivity_w_mk: f64,
+    /// Density ρ \[kg/m³\].
+    pub density_kg_m3: f64,
+    /// Specific heat capacity c \[J/(kg·K)\].
+    pub specific_heat_j_kgk: f64,
+    /// Thickness of the touched object \[m\].
+    pub thickness_m: f64,
+}
+
+impl MaterialProperties {
+    /// The properties of `material`.
+    pub fn of(material: &thermode_model::Material) -> Self {
+        MaterialProperties {
+            conductivity_w_mk: material.conductivity_w_mk,
+            density_kg_m3: material.density_kg_m3,
+            specific_heat_j_kgk: material.specific_heat_j_kgk,
+            thickness_m: material.thickness_m,
+        }
+    }
+}
+
 /// One channel as the loop last saw it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ChannelStatus {
@@ -45,6 +71,8 @@ pub struct ChannelStatus {
     pub mode: Mode,
     /// Object temperature of the contact \[°C\] (touch only).
     pub object_c: Option<f64>,
+    /// The touched material's properties (touch only).
+    pub material: Option<MaterialProperties>,
     /// Direct-mode target \[°C\] and rate \[°C/s\] (direct only).
     pub direct: Option<(f64, f64)>,
     /// After stop-all: the drive is held at 0 A until the channel's next command.
@@ -119,6 +147,8 @@ pub struct RecordRow {
     pub mode: Mode,
     /// Object temperature of the contact \[°C\] (touch only).
     pub object_c: Option<f64>,
+    /// The touched material's properties (touch only).
+    pub material: Option<MaterialProperties>,
     /// Direct-mode target \[°C\] and rate \[°C/s\] (direct only).
     pub direct: Option<(f64, f64)>,
     /// After stop-all: the drive is held at 0 A until the channel's next command.

@@ -9,6 +9,7 @@ mod cmd;
 mod controller;
 mod display;
 mod output;
+mod progress;
 mod resolve;
 mod signals;
 

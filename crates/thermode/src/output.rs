@@ -5,6 +5,11 @@
 //! One convention for every command: `-` as an output file means standard output; a device or FIFO is written in
 //! place, never replaced; and every output of a command is checked ([`check_outputs`]) before the command does its
 //! work, so that a bad second path (an unwritable plot) cannot leave the first output (the CSV) behind.
+//!
+//! One path policy: **every output folder is created** (with its parents) when the command writes into it, never
+//! before its checks pass — so a command that fails before its work leaves no folder behind — and a folder that
+//! cannot be created (a file in the way, no permission) is refused by [`check_outputs`] before any work. The lab's
+//! `--data-dir`, `lab analyze --out`, `lab export --bids` and `serve --record`/`--state-dir` follow the same rule.
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -20,9 +25,9 @@ pub fn is_stdout(path: &Path) -> bool {
 }
 
 /// Checks, before any work is done, that every output in `outputs` (option name, path) can be written: `-`
-/// (standard output) always can; otherwise the folder must exist and take a new file (probed by creating and
-/// removing one), a path that exists must not be a folder, and a `--plot` must end in `.svg` or `.png`. Errors name
-/// the option and the path.
+/// (standard output) always can; otherwise its folder must exist or be creatable (its nearest existing ancestor a
+/// folder that takes a new file, probed by creating and removing one; nothing is created), a path that exists must
+/// not be a folder, and a `--plot` must end in `.svg` or `.png`. Errors name the option and the path.
 pub fn check_outputs(outputs: &[(&str, Option<&Path>)]) -> Result<()> {
     for (option, path) in outputs {
         let Some(path) = path.filter(|p| !is_stdout(p)) else {
@@ -34,11 +39,9 @@ pub fn check_outputs(outputs: &[(&str, Option<&Path>)]) -> Result<()> {
         if *option == "--plot" && !thermode_plot::is_figure_path(path) {
             bail!("--plot {}: plots are written as .svg or .png", path.display());
         }
-        let folder = match path.parent() {
-            Some(p) if !p.as_os_str().is_empty() => p,
-            _ => Path::new("."),
-        };
-        let probe = folder.join(format!(".thermode-probe-{}", std::process::id()));
+        let folder = folder_of(path);
+        let existing = folder.ancestors().find(|a| a.exists()).unwrap_or(Path::new("."));
+        let probe = existing.join(format!(".thermode-probe-{}", std::process::id()));
         File::options()
             .write(true)
             .create_new(true)
@@ -49,13 +52,30 @@ pub fn check_outputs(outputs: &[(&str, Option<&Path>)]) -> Result<()> {
     Ok(())
 }
 
-/// Writes the bytes produced by `fill` to `path` atomically (to standard output for `-`); errors name `path`.
+/// The folder of the output file `path` (`.` for a bare file name).
+fn folder_of(path: &Path) -> &Path {
+    match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    }
+}
+
+/// Creates the folder of the output file `path` (with its parents) if it is missing: the path policy (module
+/// documentation), called when the command writes, after its checks and its work.
+pub fn create_folder_of(path: &Path) -> Result<()> {
+    let folder = folder_of(path);
+    std::fs::create_dir_all(folder).with_context(|| format!("cannot create the folder {}", folder.display()))
+}
+
+/// Writes the bytes produced by `fill` to `path` atomically (to standard output for `-`), its folder created if
+/// missing; errors name `path`.
 pub fn write_atomically(path: &Path, fill: impl FnOnce(&mut dyn Write) -> Result<()>) -> Result<()> {
     if is_stdout(path) {
         let mut bytes = Vec::new();
         fill(&mut bytes)?;
         return print_stdout(&String::from_utf8_lossy(&bytes));
     }
+    create_folder_of(path)?;
     let fill_file = |tmp: &Path| -> Result<()> {
         let file = File::options().write(true).create(true).truncate(true).open(tmp)?;
         let mut writer = BufWriter::new(file);

@@ -292,7 +292,7 @@ fn bad_input_gets_a_clear_message_and_exit_code_2() {
         "contact resistance",
     );
     expect_error(
-        &["simulate", "--material", "wood", "--out", "/nonexistent-dir/x.csv"],
+        &["simulate", "--material", "wood", "--out", "/dev/null/x.csv"],
         "cannot write",
     );
     expect_error(&["simulate", "--material", "wood", "--plot", "x.jpg"], ".svg or .png");
@@ -356,15 +356,15 @@ fn unphysical_input_is_refused_with_its_range_and_writes_nothing() {
     // An oven for air, colder than absolute zero, an unheard-of skin: each named with its range.
     expect_error(
         &simulate(&["--material", "wood", "--ambient", "1000"]),
-        "`ambient_c` = 1000 is invalid: must be a finite number in [-30, 50]",
+        "`ambient_c` = 1000 is invalid: must be a finite number from -30 to 50",
     );
     expect_error(
         &simulate(&["--material", "wood", "--object-temp", "-300"]),
-        "`object_c` = -300 is invalid: must be a finite number in [-50, 150]",
+        "`object_c` = -300 is invalid: must be a finite number from -50 to 150",
     );
     expect_error(
         &simulate(&["--material", "wood", "--initial", "uniform:80"]),
-        "must be a finite number in [0, 50]",
+        "must be a finite number from 0 to 50",
     );
     // A material with k = 1e300 (fv gave NaN curves, kron a table of nonsense, both with exit 0).
     let material = dir.path().join("hyper.toml");
@@ -379,7 +379,7 @@ fn unphysical_input_is_refused_with_its_range_and_writes_nothing() {
         args.extend(["--material-file", path]);
         expect_error(
             &args,
-            "`conductivity_w_mk` = 1e300 is invalid: must be a finite number in [0.01, 2500]",
+            "`conductivity_w_mk` = 1e300 is invalid: must be a finite number from 0.01 to 2500",
         );
     }
     let mut args = simulate(&[]);
@@ -877,15 +877,15 @@ fn dash_is_standard_output_and_a_bad_second_output_leaves_nothing_behind() {
             "--out",
             csv_arg,
             "--plot",
-            "/nonexistent-dir/p.png",
+            "/dev/null/p.png",
         ],
-        "--plot /nonexistent-dir/p.png: cannot write in /nonexistent-dir",
+        "--plot /dev/null/p.png: cannot write in /dev/null",
     );
     assert!(!csv_path.exists(), "the CSV was left behind");
     // Commands that work for minutes before they write check their output first.
     expect_error(
-        &["tune", "--out", "/nonexistent-dir/gains.toml"],
-        "--out /nonexistent-dir/gains.toml: cannot write in /nonexistent-dir",
+        &["tune", "--out", "/dev/null/gains.toml"],
+        "--out /dev/null/gains.toml: cannot write in /dev/null",
     );
     let refused = thermode(&["render", "--material", "wood", "--plot", "figure.jpg"]);
     let stderr = String::from_utf8_lossy(&refused.stderr);
@@ -1202,9 +1202,115 @@ fn identify_writes_a_device_file_render_reads_and_refuses_a_display_without_volt
     assert!(summary.contains("wood"), "{summary}");
     expect_error(&["identify", "--device", "serial:/dev/null"], "Peltier voltage");
     // A folder that cannot take the file is refused before the excitation, not after it.
-    let refused = thermode(&["identify", "--out", "/nonexistent-dir/identified.toml"]);
+    let refused = thermode(&["identify", "--out", "/dev/null/identified.toml"]);
     let stderr = String::from_utf8_lossy(&refused.stderr);
     assert_eq!(refused.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("cannot write in /nonexistent-dir"), "{stderr}");
+    assert!(stderr.contains("cannot write in /dev/null"), "{stderr}");
     assert!(!stderr.contains("excitation"), "started the excitation first: {stderr}");
+}
+
+/// The path policy (README): every output folder is created, with its parents, by the command that writes into it;
+/// a command refused before its work leaves no folder; a folder that cannot be created is refused first.
+#[test]
+fn every_output_folder_is_created_and_a_refused_command_leaves_none() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = |rel: &str| dir.path().join(rel).to_string_lossy().into_owned();
+    let experiment = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../thermode-lab/experiments/paper.toml")
+        .to_string_lossy()
+        .into_owned();
+    for args in [
+        vec![
+            "simulate",
+            "--material",
+            "wood",
+            "--duration",
+            "1",
+            "--out",
+            &path("a/b/sim.csv"),
+        ],
+        vec![
+            "simulate",
+            "--material",
+            "wood",
+            "--duration",
+            "1",
+            "--plot",
+            &path("c/d/sim.svg"),
+        ],
+        vec![
+            "lab",
+            "plan",
+            "--experiment",
+            &experiment,
+            "--out",
+            &path("e/f/plan.csv"),
+        ],
+    ] {
+        let out = thermode(&args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    for file in ["a/b/sim.csv", "c/d/sim.svg", "e/f/plan.csv"] {
+        assert!(dir.path().join(file).is_file(), "{file} not written");
+    }
+    // Refused before the work: nothing created.
+    expect_error(
+        &[
+            "simulate",
+            "--material",
+            "wood",
+            "--ambient",
+            "1000",
+            "--out",
+            &path("g/sim.csv"),
+        ],
+        "ambient_c",
+    );
+    expect_error(
+        &[
+            "lab",
+            "plan",
+            "--experiment",
+            &path("missing.toml"),
+            "--out",
+            &path("h/plan.csv"),
+        ],
+        "missing.toml",
+    );
+    for folder in ["g", "h"] {
+        assert!(
+            !dir.path().join(folder).exists(),
+            "a refused command left {folder}/ behind"
+        );
+    }
+}
+
+/// `serve` (and `demo`, through the same stop) ended by `--duration` says how it stopped, as after a signal.
+#[test]
+fn serve_ended_by_its_duration_prints_a_summary() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let state = dir.path().join("state").to_string_lossy().into_owned();
+    let args = [
+        "serve",
+        "--port",
+        "0",
+        "--no-osc",
+        "--no-realtime",
+        "--duration",
+        "0.3",
+        "--state-dir",
+        &state,
+    ];
+    let out = thermode(&args);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let summary = stderr
+        .lines()
+        .find(|l| l.starts_with("thermode: --duration passed: stopped at loop time "))
+        .unwrap_or_else(|| panic!("no summary line: {stderr}"));
+    assert!(summary.ends_with(" s, every drive set to 0 A"), "{summary}");
 }

@@ -5,7 +5,9 @@
 //! - `time_s` — time since contact \[s\], strictly increasing within a curve;
 //! - a temperature \[°C\], the first present of [`TEMPERATURE_COLUMNS`]: `finger_c` (a `lab run` trial curve on a
 //!   display: the finger measured on the plate), `skin_c`, `skin_surface_c`, `truth_skin_c`, `target_skin_c`;
-//! - `material` — a library material name; `condition` — `real` or `simulated`;
+//! - `material` — a library material name, or any name where the file also has `conductivity_w_mk` and
+//!   `specific_heat_j_kgk` (SI) filled on the row (a custom material named by its properties); `condition` — `real`
+//!   or `simulated`;
 //! - optional `repetition` — rows with the same (file, condition, material, repetition) form one curve; without the
 //!   column, one file holds one curve per (condition, material).
 //!
@@ -20,7 +22,7 @@
 //! - a `serve --record` file (`channel`, `contact`, `target_skin_c` and `skin_c`): every touch of every channel
 //!   (consecutive rows in contact with one material) is one repetition, its time counted from the touch; the real
 //!   curve is `target_skin_c` (the renderer's finger on the real material), the simulated one `skin_c` (the finger
-//!   model on the display).
+//!   model on the display); its property columns name each touched material, so a custom material reads back.
 //!
 //! Per material, all curves of both conditions are resampled by linear interpolation onto one uniform grid over the
 //! time span they share (from the latest start to the earliest end), with a step no finer than the coarsest curve's
@@ -34,7 +36,7 @@ use std::path::PathBuf;
 
 use serde::Serialize;
 
-use super::data::{CsvTable, MaterialInfo, MaterialResolver};
+use super::data::{CsvTable, MaterialInfo, MaterialResolver, PropertyColumns};
 use super::stats;
 use crate::design::Condition;
 use crate::error::LabError;
@@ -179,6 +181,7 @@ fn read_curve_file(
         }
     }
     let cols = CurveColumns::of(table)?;
+    let properties = PropertyColumns::of(table)?;
     let temperature_name = table.header[cols.temperature].clone();
     let mut curves: BTreeMap<CurveKey, (MaterialInfo, Vec<(f64, f64)>)> = BTreeMap::new();
     for (line, fields) in &table.rows {
@@ -194,7 +197,7 @@ fn read_curve_file(
             line,
             value: fields[cols.condition].clone(),
         })?;
-        let material = resolver.resolve_at(table, line, "material", &fields[cols.material])?;
+        let material = resolver.resolve_row(table, line, ("material", cols.material), fields, properties)?;
         let repetition = cols
             .repetition
             .map(|i| fields[i].trim().to_string())
@@ -231,6 +234,8 @@ struct PairedColumns {
     channel: Option<usize>,
     /// `render`: the columns naming a repetition (controller, renderer).
     repetition: Vec<usize>,
+    /// `serve --record`: the touched material's properties.
+    properties: Option<PropertyColumns>,
 }
 
 impl PairedColumns {
@@ -257,6 +262,7 @@ impl PairedColumns {
             contact: table.optional_column("contact")?,
             channel,
             repetition,
+            properties: PropertyColumns::of(table)?,
         }))
     }
 }
@@ -304,7 +310,7 @@ fn read_paired_file(
         let real_c = finite(table, line, &table.header[cols.real], &fields[cols.real])?;
         let simulated_c = finite(table, line, &table.header[cols.simulated], &fields[cols.simulated])?;
         if !open.contains_key(&key) {
-            let material = resolver.resolve_at(table, line, "material", &fields[cols.material])?;
+            let material = resolver.resolve_row(table, line, ("material", cols.material), fields, cols.properties)?;
             open.insert(
                 key.clone(),
                 PairedCurve {

@@ -27,7 +27,7 @@ use crate::error::LabError;
 /// A response option: a library material with the two properties of the paper's Figure 4 in the paper's units.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MaterialInfo {
-    /// Library name.
+    /// Library name, or the name of a custom material whose properties its file names.
     pub name: String,
     /// Thermal conductivity k [cal/(cm·s·°C)] (the library's SI value converted).
     pub conductivity_cal_cm_s_c: f64,
@@ -200,6 +200,78 @@ impl MaterialResolver {
             value: value.to_string(),
             close,
         })
+    }
+}
+
+/// The columns of a curve file that name the touched material's properties (a `serve --record` file since issue 25:
+/// `conductivity_w_mk` and `specific_heat_j_kgk`, SI, empty outside a touch). A row that fills them needs no library:
+/// a custom material reads back by the properties its recording names.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PropertyColumns {
+    conductivity: usize,
+    specific_heat: usize,
+}
+
+impl PropertyColumns {
+    /// The property columns of `table`, if it has both.
+    pub fn of(table: &CsvTable) -> Result<Option<PropertyColumns>, LabError> {
+        Ok(
+            match (
+                table.optional_column("conductivity_w_mk")?,
+                table.optional_column("specific_heat_j_kgk")?,
+            ) {
+                (Some(conductivity), Some(specific_heat)) => Some(PropertyColumns {
+                    conductivity,
+                    specific_heat,
+                }),
+                _ => None,
+            },
+        )
+    }
+
+    /// The material `name` with the properties of the row at `line`, or `None` if the row leaves them empty.
+    fn info(
+        &self,
+        table: &CsvTable,
+        line: u64,
+        name: &str,
+        fields: &[String],
+    ) -> Result<Option<MaterialInfo>, LabError> {
+        let (k, c) = (fields[self.conductivity].trim(), fields[self.specific_heat].trim());
+        if k.is_empty() && c.is_empty() {
+            return Ok(None);
+        }
+        let positive = |column: &str, text: &str| match text.parse::<f64>() {
+            Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+            _ => Err(table.bad_value(line, column, text, "a positive number (SI)")),
+        };
+        Ok(Some(MaterialInfo {
+            name: name.trim().to_string(),
+            conductivity_cal_cm_s_c: conductivity_to_cgs(positive("conductivity_w_mk", k)?),
+            specific_heat_cal_g_c: specific_heat_to_cgs(positive("specific_heat_j_kgk", c)?),
+        }))
+    }
+}
+
+impl MaterialResolver {
+    /// The material of the row at `line`: by the properties the row names (`properties`), else from the library by
+    /// the name in `column`.
+    pub fn resolve_row(
+        &mut self,
+        table: &CsvTable,
+        line: u64,
+        (column, index): (&str, usize),
+        fields: &[String],
+        properties: Option<PropertyColumns>,
+    ) -> Result<MaterialInfo, LabError> {
+        let named = match properties {
+            Some(p) if !fields[index].trim().is_empty() => p.info(table, line, &fields[index], fields)?,
+            _ => None,
+        };
+        match named {
+            Some(info) => Ok(info),
+            None => self.resolve_at(table, line, column, &fields[index]),
+        }
     }
 }
 

@@ -5,9 +5,11 @@
 //! the plate while the display renders air, and the runner averages the telemetry's `finger_c` — the plate's heat
 //! balance: the controller's finger model plus the heat the real finger gives the plate beyond the model's (the
 //! observer's unknown heat) over the receptor-to-plate conductance (`thermode_pipeline::Telemetry::finger_c`) —
-//! over a window of [`LiveSettings::window_s`]. The measurement is taken once two consecutive windows agree within
-//! [`LiveSettings::settled_c`] (after at least [`LiveSettings::min_rest_s`]), or at [`LiveSettings::max_rest_s`]
-//! with a note that it had not settled. A display whose controller has no observer (pid) or that does not publish
+//! over a window of [`LiveSettings::window_s`]. The measurement is taken once [`SETTLE_WINDOWS`] consecutive windows
+//! agree within [`LiveSettings::settled_c`] (after at least [`LiveSettings::min_rest_s`]), or at
+//! [`LiveSettings::max_rest_s`] with a note that it had not settled. Four windows, not two: a finger still
+//! recovering from a cold touch at 0.01 °C/s changes by only 0.01 °C between two 1 s windows, which two windows
+//! would call settled; over four (3 s apart) it changes by 0.03 °C. A display whose controller has no observer (pid) or that does not publish
 //! `finger_c` cannot measure the finger: the run stops with an error that says so.
 //!
 //! **A simulated trial** is a `touch` of the material on the channel for the presentation time, every telemetry
@@ -46,8 +48,8 @@ pub trait DisplayLink {
 pub struct LiveSettings {
     /// Averaging window of one measurement \[s\]. Default 1.
     pub window_s: f64,
-    /// Two consecutive windows within this of each other count as settled \[°C\]. Default 0.02 (a finger
-    /// recovering from a cold touch changes by more).
+    /// [`SETTLE_WINDOWS`] consecutive windows within this of each other count as settled \[°C\]. Default 0.02 (a
+    /// finger recovering from a cold touch changes by more).
     pub settled_c: f64,
     /// Shortest rest before a measurement \[s\] (the plate and the finger come to terms). Default 3.
     pub min_rest_s: f64,
@@ -65,6 +67,10 @@ impl Default for LiveSettings {
         }
     }
 }
+
+/// Consecutive windows whose means must agree within [`LiveSettings::settled_c`] for a rest to count as settled: 4
+/// (the first and the last 3 windows apart).
+pub const SETTLE_WINDOWS: usize = 4;
 
 /// A finger temperature measured at rest.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -86,7 +92,13 @@ pub struct LiveStimulus<L: DisplayLink> {
     real_contact: Option<super::stimulus::FvContact>,
     /// Rests that had not settled, as notes for the operator.
     pub notes: Vec<String>,
+    /// Told of a rest measurement as it goes (see [`LiveStimulus::with_rest_progress`]).
+    rest_progress: Option<Box<RestProgress>>,
 }
+
+/// A listener to rest measurements: `Some(rest_s)` (seconds rested so far, at most
+/// [`LiveSettings::max_rest_s`]) after every window, `None` when the measurement is done.
+pub type RestProgress = dyn FnMut(Option<f64>);
 
 impl<L: DisplayLink> LiveStimulus<L> {
     /// A live stimulus over `link`.
@@ -107,7 +119,21 @@ impl<L: DisplayLink> LiveStimulus<L> {
             settings,
             real_contact: None,
             notes: Vec::new(),
+            rest_progress: None,
         })
+    }
+
+    /// Tells `listener` how each rest measurement goes (a progress bar on the operator's terminal: a rest can take
+    /// up to [`LiveSettings::max_rest_s`] twice per trial).
+    pub fn with_rest_progress(mut self, listener: impl FnMut(Option<f64>) + 'static) -> Self {
+        self.rest_progress = Some(Box::new(listener));
+        self
+    }
+
+    fn tell_rest(&mut self, rest_s: Option<f64>) {
+        if let Some(listener) = &mut self.rest_progress {
+            listener(rest_s);
+        }
     }
 
     /// For a simulated participant: real trials get the skin curve of `contact` (real contact under the fv model,
@@ -152,7 +178,7 @@ impl<L: DisplayLink> LiveStimulus<L> {
             first = self.sample()?;
         }
         let start_s = first.loop_time_s;
-        let (mut previous, mut window): (Option<f64>, Vec<f64>) = (None, Vec::new());
+        let (mut recent, mut window): (Vec<f64>, Vec<f64>) = (Vec::with_capacity(SETTLE_WINDOWS), Vec::new());
         let (mut window_start_s, mut last_finite_s) = (start_s, start_s);
         loop {
             let sample = self.sample()?;
@@ -181,15 +207,22 @@ impl<L: DisplayLink> LiveStimulus<L> {
             }
             let mean_c = window.iter().sum::<f64>() / window.len() as f64;
             let rest_s = now_s - start_s;
-            let settled = previous.is_some_and(|p| (p - mean_c).abs() <= self.settings.settled_c);
+            if recent.len() == SETTLE_WINDOWS {
+                recent.remove(0);
+            }
+            recent.push(mean_c);
+            let spread_c = recent.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b))
+                - recent.iter().fold(f64::INFINITY, |a, &b| a.min(b));
+            let settled = recent.len() == SETTLE_WINDOWS && spread_c <= self.settings.settled_c;
+            self.tell_rest(Some(rest_s.min(self.settings.max_rest_s)));
             if (settled && rest_s >= self.settings.min_rest_s) || rest_s >= self.settings.max_rest_s {
+                self.tell_rest(None);
                 return Ok(RestMeasurement {
                     finger_c: mean_c,
                     settled,
                     rest_s,
                 });
             }
-            previous = Some(mean_c);
             window.clear();
             window_start_s = now_s;
         }
@@ -299,6 +332,10 @@ impl<L: DisplayLink> Stimulus for LiveStimulus<L> {
         })
     }
 
+    fn finger_at_rest(&mut self) -> Option<Result<(f64, f64), StimulusError>> {
+        Some(self.measure_at_rest().map(|rest| (rest.finger_c, rest.rest_s)))
+    }
+
     fn take_notes(&mut self) -> Vec<String> {
         std::mem::take(&mut self.notes)
     }
@@ -404,6 +441,86 @@ mod tests {
         assert!(!rest.settled && rest.rest_s >= 4.0, "{rest:?}");
     }
 
+    /// A finger at rest that still recovers at a steady `rate_c_per_s` (a slow finger after a cold touch).
+    struct RecoveringFinger {
+        time_s: f64,
+        finger_c: f64,
+        rate_c_per_s: f64,
+    }
+
+    impl DisplayLink for RecoveringFinger {
+        fn touch(&mut self, _material: &Material) -> Result<f64, StimulusError> {
+            Ok(self.time_s)
+        }
+        fn release(&mut self) -> Result<f64, StimulusError> {
+            Ok(self.time_s)
+        }
+        fn marker(&mut self, _text: &str) -> Result<Option<f64>, StimulusError> {
+            Ok(None)
+        }
+        fn next_sample(&mut self) -> Result<DisplaySample, StimulusError> {
+            self.time_s += 0.01;
+            self.finger_c += self.rate_c_per_s * 0.01;
+            let mut sample = fake(self.finger_c).next_sample()?;
+            (sample.loop_time_s, sample.finger_c) = (self.time_s, self.finger_c);
+            Ok(sample)
+        }
+        fn describe(&self) -> serde_json::Value {
+            json!("recovering")
+        }
+    }
+
+    #[test]
+    fn a_finger_still_recovering_at_a_hundredth_of_a_degree_per_second_has_not_settled() {
+        // Two 1 s windows differ by 0.01 °C (within 0.02: "settled" by a two-window rule, 30.72 against 32.13 °C);
+        // four windows 3 s apart differ by 0.03 °C.
+        let finger = RecoveringFinger {
+            time_s: 0.0,
+            finger_c: 30.72,
+            rate_c_per_s: 0.01,
+        };
+        let mut live = LiveStimulus::new(finger, LiveSettings::default()).expect("settings");
+        let rest = live.measure_at_rest().expect("measured");
+        assert!(!rest.settled, "a recovering finger called settled: {rest:?}");
+        assert!(rest.rest_s >= LiveSettings::default().max_rest_s, "{rest:?}");
+        // At 0.005 °C/s the four windows agree within 0.015 °C: settled after the shortest rest.
+        let slow = RecoveringFinger {
+            time_s: 0.0,
+            finger_c: 31.9,
+            rate_c_per_s: 0.005,
+        };
+        let rest = LiveStimulus::new(slow, LiveSettings::default())
+            .expect("settings")
+            .measure_at_rest()
+            .expect("measured");
+        assert!(rest.settled && rest.rest_s < 5.0, "{rest:?}");
+    }
+
+    #[test]
+    fn a_rest_measurement_reports_its_progress_and_its_end() {
+        let told = std::rc::Rc::new(std::cell::RefCell::new(Vec::new()));
+        let sink = std::rc::Rc::clone(&told);
+        let mut live = LiveStimulus::new(fake(30.0), LiveSettings::default())
+            .expect("settings")
+            .with_rest_progress(move |rest_s| sink.borrow_mut().push(rest_s));
+        let rest = live.measure_at_rest().expect("measured");
+        let told = told.borrow();
+        let (last, rests) = told.split_last().expect("told at least once");
+        assert_eq!(*last, None, "the end is told: {told:?}");
+        let rests: Vec<f64> = rests.iter().map(|r| r.expect("a rest before the end")).collect();
+        assert!(rests.len() >= 2 && rests.windows(2).all(|w| w[0] < w[1]), "{rests:?}");
+        assert!(
+            (rests[rests.len() - 1] - rest.rest_s).abs() < 1e-12,
+            "{rests:?} vs {rest:?}"
+        );
+        assert!(
+            rests
+                .iter()
+                .all(|&r| r > 0.0 && r <= LiveSettings::default().max_rest_s),
+            "{rests:?}"
+        );
+    }
+
     #[test]
     fn a_simulated_trial_is_traced_from_the_touch_and_marked() {
         let aluminium = find("aluminium").expect("library");
@@ -433,7 +550,9 @@ mod tests {
         assert!(
             csv.lines()
                 .nth(1)
-                .is_some_and(|l| l.starts_with("3,simulated,aluminium,0.01,3.0299999999999794,1003.03,")),
+                // The first sample after the rest: four 1 s windows of the fake's 0.01 s steps (SETTLE_WINDOWS; two
+                // windows put it at 3.03 s).
+                .is_some_and(|l| l.starts_with("3,simulated,aluminium,0.01,4.039999999999958,1004.04,")),
             "{csv}"
         );
         assert_eq!(csv.lines().count(), trace.time_s.len() + 1);

@@ -12,7 +12,10 @@
 //! reason. Excluded trials are not repeated.
 //!
 //! **Resume**: the same call after a crash or Ctrl-C continues at the first missing trial (see [`crate::session`]);
-//! nothing needs to be caught, since every completed trial is already on disk.
+//! nothing needs to be caught, since every completed trial is already on disk. On a display, a resumed session
+//! first measures the finger at rest against the session's baseline (its first trial's) and waits, measurement
+//! after measurement, until it is back within the exclusion limit — at most [`RECOVERY_WAIT_S`] — or says plainly
+//! that it is not (its next trials would then be excluded) before any trial is run.
 
 pub mod console;
 pub mod live;
@@ -188,6 +191,9 @@ impl Runner<'_> {
         })?;
         let recorded_before = session.records().len();
         self.announce(&session, &plan)?;
+        if let (true, Some(baseline_c)) = (session.resumed() && !session.is_complete(), session.baseline_c()) {
+            self.wait_for_baseline(baseline_c)?;
+        }
         let materials: Vec<Material> = self
             .experiment
             .experiment
@@ -242,6 +248,38 @@ impl Runner<'_> {
             summary.csv_path.display()
         ))?;
         Ok(summary)
+    }
+
+    /// Measures the finger at rest until it is within the exclusion limit of `baseline_c` \[°C\] or
+    /// [`RECOVERY_WAIT_S`] of measuring have passed, saying each measurement; a stimulus without a finger returns at
+    /// once.
+    fn wait_for_baseline(&mut self, baseline_c: f64) -> Result<(), RunError> {
+        let limit_c = self.experiment.experiment.exclusion_max_drift_c;
+        let mut waited_s = 0.0;
+        loop {
+            let Some(measured) = self.stimulus.finger_at_rest() else {
+                return Ok(());
+            };
+            let (finger_c, rest_s) = measured?;
+            waited_s += rest_s;
+            let drift_c = (finger_c - baseline_c).abs();
+            let state = format!(
+                "finger at rest {finger_c:.2} °C, {drift_c:.2} °C from the session's baseline {baseline_c:.2} °C \
+                 (limit {limit_c} °C)"
+            );
+            if drift_c <= limit_c {
+                return self.say(&format!("resume: {state}: the trials go on"));
+            }
+            if waited_s >= RECOVERY_WAIT_S {
+                return self.say(&format!(
+                    "resume: WARNING: {state} after {waited_s:.0} s of rest: the finger has not recovered; trials \
+                     that start this far from the baseline will be excluded"
+                ));
+            }
+            self.say(&format!(
+                "resume: {state}: waiting for the finger to recover ({waited_s:.0} s so far)"
+            ))?;
+        }
     }
 
     fn say(&mut self, line: &str) -> Result<(), RunError> {
@@ -375,6 +413,10 @@ impl Runner<'_> {
         ))
     }
 }
+
+/// Longest a resumed session waits, measuring the finger at rest, for it to come back within the exclusion limit of
+/// the session's baseline \[s\]: 300 (a finger recovers from a cold touch within minutes).
+pub const RECOVERY_WAIT_S: f64 = 300.0;
 
 /// The exclusion rule: `Some(reason)` when the start temperature differs from the baseline by more than the limit.
 pub fn exclusion_reason(start_c: f64, baseline_c: f64, max_drift_c: f64) -> Option<String> {

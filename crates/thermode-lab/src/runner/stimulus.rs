@@ -162,6 +162,12 @@ pub trait Stimulus {
     fn take_notes(&mut self) -> Vec<String> {
         Vec::new()
     }
+
+    /// Measures the finger at rest now \[°C\] with how long the measurement took \[s\], where the stimulus measures
+    /// a finger (a display); `None` by default (a simulation has no finger to wait for).
+    fn finger_at_rest(&mut self) -> Option<Result<(f64, f64), StimulusError>> {
+        None
+    }
 }
 
 /// Real contact of the finger with a material under the finite-volume model (`thermode_model::fv`).

@@ -1,12 +1,15 @@
 //! [`WsLink`]: one channel of a running `thermode serve`, over its WebSocket API (`docs/api.md`), for
 //! [`super::live::LiveStimulus`]. Blocking (the runner is sequential): requests are answered in order, telemetry
 //! that arrives while a reply is awaited is kept for [`DisplayLink::next_sample`]. A daemon that sends nothing for
-//! [`SILENT_LINK_S`] is a lost link: an error, never a hang; the daemon then releases this client's contacts
-//! itself (its grace period, `serve --release-after`).
+//! longer than the link's [`SilenceLimit`] is a lost link: an error, never a hang; the daemon then releases this
+//! client's contacts itself (its grace period, `serve --release-after`). The limit is sized from the silences
+//! measured on the link (a loaded machine pauses; a 3 s limit once lost a session to a pause of about 3 s): four
+//! times the longest so far, at least [`MIN_SILENT_LINK_S`] (beyond the daemon's own keep-alive window: a ping every
+//! second, a client closed after 5 s without an answer) and at most [`MAX_SILENT_LINK_S`].
 
 use std::collections::VecDeque;
 use std::net::{TcpStream, ToSocketAddrs};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use serde_json::{json, Value};
 use thermode_model::materials::Material;
@@ -19,8 +22,39 @@ use tungstenite::{Message, WebSocket};
 use super::live::{DisplayLink, DisplaySample};
 use super::stimulus::StimulusError;
 
-/// Seconds without any message from the daemon after which the link counts as lost \[s\].
-pub const SILENT_LINK_S: f64 = 3.0;
+/// Shortest silence of the daemon that counts as a lost link \[s\]: 10 (its keep-alive window is 1 s of ping
+/// interval plus 5 s of send timeout; a two-core machine under load was seen to pause for about 3 s).
+pub const MIN_SILENT_LINK_S: f64 = 10.0;
+/// Longest silence limit \[s\]: 60 (a link that was once that silent still counts as lost after a minute).
+pub const MAX_SILENT_LINK_S: f64 = 60.0;
+/// The silence limit is this many times the longest silence measured on the link: 4.
+pub const SILENCE_FACTOR: f64 = 4.0;
+
+/// How long the daemon may stay silent before the link counts as lost, sized from the silences measured on the
+/// link: [`SILENCE_FACTOR`] times the longest so far, within [`MIN_SILENT_LINK_S`] and [`MAX_SILENT_LINK_S`].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SilenceLimit {
+    longest_s: f64,
+}
+
+impl SilenceLimit {
+    /// The limit now \[s\].
+    pub fn limit_s(&self) -> f64 {
+        (SILENCE_FACTOR * self.longest_s).clamp(MIN_SILENT_LINK_S, MAX_SILENT_LINK_S)
+    }
+
+    /// The longest silence measured so far \[s\].
+    pub fn longest_s(&self) -> f64 {
+        self.longest_s
+    }
+
+    /// Records a wait of `silent_s` \[s\] for the daemon's next message (a non-finite or negative wait is ignored).
+    pub fn measured(&mut self, silent_s: f64) {
+        if silent_s.is_finite() && silent_s > self.longest_s {
+            self.longest_s = silent_s;
+        }
+    }
+}
 
 /// Telemetry rate asked of the daemon \[Hz\] (at most its loop rate).
 pub const TELEMETRY_HZ: f64 = 100.0;
@@ -37,6 +71,8 @@ pub struct WsLink {
     loop_time_zero_unix_s: f64,
     /// Half the status request's round trip: the uncertainty of that zero \[s\].
     loop_time_zero_uncertainty_s: f64,
+    /// The silences measured on the link and the limit they give.
+    silence: SilenceLimit,
 }
 
 /// The system's wall clock \[s since 1970, UTC\].
@@ -77,7 +113,7 @@ impl WsLink {
             .ok_or_else(|| device(format!("{url}: no address")))?;
         let stream = TcpStream::connect_timeout(&address, Duration::from_secs(5))
             .map_err(|e| device(format!("cannot reach the display at {url}: {e}")))?;
-        let silence = Some(Duration::from_secs_f64(SILENT_LINK_S));
+        let silence = Some(Duration::from_secs_f64(SilenceLimit::default().limit_s()));
         stream
             .set_read_timeout(silence)
             .and_then(|()| stream.set_write_timeout(silence))
@@ -96,6 +132,7 @@ impl WsLink {
             status: None,
             loop_time_zero_unix_s: f64::NAN,
             loop_time_zero_uncertainty_s: f64::NAN,
+            silence: SilenceLimit::default(),
         };
         let sent_unix_s = unix_now_s();
         let Response::Status(reply) = link.request(Request::Status(NoFields {}))? else {
@@ -126,19 +163,29 @@ impl WsLink {
     /// silent or closed link is an error.
     fn read(&mut self) -> Result<Response, StimulusError> {
         loop {
+            let limit_s = self.silence.limit_s();
+            // The timeout of the stream under the WebSocket: the current limit (it only grows).
+            let _ = self
+                .socket
+                .get_ref()
+                .set_read_timeout(Some(Duration::from_secs_f64(limit_s)));
+            let waited = Instant::now();
             let message = self.socket.read().map_err(|e| {
                 device(match e {
                     tungstenite::Error::Io(io)
                         if matches!(io.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) =>
                     {
                         format!(
-                            "the display at {} sent nothing for {SILENT_LINK_S} s: the link is lost",
-                            self.url
+                            "the display at {} sent nothing for {limit_s:.0} s (the longest silence before: {:.2} s): \
+                             the link is lost",
+                            self.url,
+                            self.silence.longest_s()
                         )
                     }
                     other => format!("the link to the display at {} failed: {other}", self.url),
                 })
             })?;
+            self.silence.measured(waited.elapsed().as_secs_f64());
             let Message::Text(text) = message else { continue };
             let value: Value = serde_json::from_str(text.as_str())
                 .map_err(|e| device(format!("the display sent a malformed message: {e}")))?;
@@ -287,5 +334,29 @@ impl Drop for WsLink {
         let _ = self.socket.send(Message::text(release.with_id(0).to_text()));
         let _ = self.socket.close(None);
         let _ = self.socket.flush();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_silence_limit_grows_with_the_silences_measured_within_its_bounds() {
+        let mut silence = SilenceLimit::default();
+        assert_eq!(silence.limit_s(), MIN_SILENT_LINK_S, "before any measurement");
+        // Telemetry every 10 ms, then a loaded machine's pause of 3.2 s (which a 3 s limit called a lost link).
+        for waited_s in [0.01, 0.012, 3.2, 0.01] {
+            silence.measured(waited_s);
+        }
+        assert_eq!(silence.longest_s(), 3.2);
+        assert!(
+            (silence.limit_s() - 4.0 * 3.2).abs() < 1e-12,
+            "limit {}",
+            silence.limit_s()
+        );
+        silence.measured(f64::NAN);
+        silence.measured(40.0);
+        assert_eq!(silence.limit_s(), MAX_SILENT_LINK_S, "bounded above");
     }
 }

@@ -180,6 +180,24 @@ fn a_material_dependent_simulation_rejects_h0() {
 }
 
 #[test]
+fn a_tiny_p_value_is_written_as_a_paper_writes_it() {
+    // 27 of 28 versus 3 of 28 correct: p far below 0.001, written "p < 0.001" (was "p = 0.000").
+    let dir = tempfile::tempdir().expect("tempdir");
+    let (trials, truths) = ([28u64; 5], [27u64, 3, 14, 14, 14]);
+    let result = analysis::analyze(&[table3_data_set(dir.path(), &trials, &truths)]).expect("analysis");
+    let p = result.chi_square.p_value.expect("p");
+    let df = ChiSquared::new(4.0).expect("χ²(4)");
+    let p_want = 1.0 - df.cdf(result.chi_square.statistic.expect("χ²"));
+    assert!(p < 0.001 && (p - p_want).abs() < 1e-12, "p {p}, statrs {p_want}");
+    let out = dir.path().join("report");
+    analysis::write_outputs(&result, &out, &[ReportFormat::Markdown]).expect("outputs");
+    let md = std::fs::read_to_string(out.join("report.md")).expect("md");
+    // Markdown escapes `<`: the rendered text reads "p < 0.001".
+    assert!(md.contains(", p \\< 0.001. H0 rejected"), "{md}");
+    assert!(!md.contains("p = 0.000"), "{md}");
+}
+
+#[test]
 fn paper_table_2_ratios_give_mean_0_78_and_1_78() {
     // P_real: any distribution; P_sim = ratio × P_real where Table 2 has a value and 0 elsewhere, P_real = 0 where
     // Table 2 is missing. Table 2 is printed identified (rows) × presented (columns); here t2[identified][presented].
@@ -879,4 +897,97 @@ fn render_csvs_and_serve_recordings_are_read_as_thermode_writes_them() {
         "target slope",
     );
     assert!(curves.temperature_columns[0].starts_with("target_skin_c"));
+}
+
+#[test]
+fn figures_3_and_4_read_as_a_paper_needs_them() {
+    use thermode_plot::svg_text::{badly_written_numbers, canvas_width_px, number_texts, svg_texts, texts_outside};
+    let dir = tempfile::tempdir().expect("tempdir");
+    // Wood and rubber run close together, as in the paper's Figure 3.
+    let mut text = "time_s,skin_surface_c,material,condition,repetition\n".to_string();
+    for (material, start) in [("wood", 32.0), ("rubber", 32.05)] {
+        for condition in ["real", "simulated"] {
+            text.push_str(&curve_rows(condition, material, 1, &line(start, -0.05, 10, 30)));
+        }
+    }
+    let curves = write(dir.path(), "curves.csv", &text);
+    let mut result =
+        analysis::analyze(&[table3_data_set(dir.path(), &[15; 5], &[13, 14, 14, 14, 13])]).expect("analysis");
+    result.curves = Some(analysis::analyze_curves(&[curves]).expect("curves"));
+    let out = dir.path().join("out");
+    analysis::write_outputs(&result, &out, &[ReportFormat::Markdown]).expect("outputs");
+    for (stem, title, legend) in [
+        ("figure3", "Figure 3: mean finger temperature", "wood real"),
+        ("figure4", "Figure 4: classification probability", "simulated"),
+    ] {
+        let svg = std::fs::read_to_string(out.join(format!("{stem}.svg"))).expect("svg");
+        let width_px = canvas_width_px(&svg).expect("canvas width");
+        let outside = texts_outside(&svg, width_px);
+        assert!(
+            outside.is_empty(),
+            "{stem}: texts beyond the {width_px} px canvas: {outside:?}"
+        );
+        let texts = svg_texts(&svg);
+        assert!(
+            texts.iter().any(|t| t.content.starts_with(title)),
+            "{stem} has no title `{title}…`"
+        );
+        let entries = texts.iter().filter(|t| t.content == legend).count();
+        assert_eq!(
+            entries, 1,
+            "{stem}: the legend entry `{legend}` appears {entries} times"
+        );
+        let numbers = number_texts(&svg);
+        assert!(numbers.len() >= 8, "{stem}: too few tick labels: {numbers:?}");
+        let bad = badly_written_numbers(&svg);
+        assert!(bad.is_empty(), "{stem}: ticks {bad:?} among {numbers:?}");
+        assert!(out.join(format!("{stem}.png")).is_file(), "{stem}.png missing");
+    }
+    let figure4 = std::fs::read_to_string(out.join("figure4.svg")).expect("svg");
+    for letter in ["a", "b"] {
+        assert!(
+            svg_texts(&figure4).iter().any(|t| t.content == letter),
+            "figure 4 has no panel {letter}"
+        );
+    }
+}
+
+#[test]
+fn a_recording_names_its_custom_material_and_reads_back() {
+    // A `serve --record` file in which a client touched a material no library knows (`properties` of a touch): the
+    // recording names its properties, and `--curves` reads it by them.
+    let dir = tempfile::tempdir().expect("tempdir");
+    let mut record = "time_s,channel,contact,material,mode,target_skin_c,skin_c,display_setpoint_c,sensor_c,current_a,\
+                      hot_side_c,fault,conductivity_w_mk,density_kg_m3,specific_heat_j_kgk,thickness_m\n"
+        .to_string();
+    for k in 0..=300i32 {
+        let t = f64::from(k) * 0.01;
+        if (0.5..2.5).contains(&t) {
+            let target = 32.0 - (t - 0.5);
+            record.push_str(&format!(
+                "{t:.6},0,1,ice-cold-glass,touch,{target},{},30,30,0,25,,1.05,2500,840,0.004\n",
+                target + 0.1
+            ));
+        } else {
+            record.push_str(&format!("{t:.6},0,0,,air,32,32,32,32,0,25,,,,,\n"));
+        }
+    }
+    let path = write(dir.path(), "session_20261127-120000.csv", &record);
+    let curves = analysis::analyze_curves(std::slice::from_ref(&path)).expect("a custom material reads back");
+    let glass = &curves.materials[0];
+    assert_eq!(glass.material, "ice-cold-glass");
+    close(
+        glass.rms_difference_c.expect("rms"),
+        0.1,
+        1e-9,
+        "RMS of the custom material",
+    );
+    // Without its properties the name alone is unknown, as before: the message says which.
+    let bare: String = record
+        .lines()
+        .map(|l| l.rsplitn(5, ',').last().unwrap_or_default().to_string() + "\n")
+        .collect();
+    let bare = write(dir.path(), "bare.csv", &bare);
+    let err = analysis::analyze_curves(&[bare]).expect_err("unknown without properties");
+    assert!(err.to_string().contains("unknown material `ice-cold-glass`"), "{err}");
 }

@@ -14,8 +14,8 @@ use thermode_lab::participant::{
 };
 use thermode_lab::plan::make_plan;
 use thermode_lab::runner::{
-    FvContact, InteractiveResponder, ModelStimulus, QuietConsole, RunError, Runner, ScriptedResponses, SessionSummary,
-    Stimulus, StimulusError, StimulusRequest, TerminalConsole, TrialMeasurement,
+    Console, FvContact, InteractiveResponder, ModelStimulus, QuietConsole, RunError, Runner, ScriptedResponses,
+    SessionSummary, Stimulus, StimulusError, StimulusRequest, TerminalConsole, TrialMeasurement,
 };
 use thermode_lab::session::{SessionError, SESSION_COLUMNS, SESSION_COLUMNS_V1, SOFTWARE_VERSION, TIMING_COLUMNS};
 use thermode_model::materials::find;
@@ -714,4 +714,124 @@ fn a_format_1_session_resumes_in_its_own_columns() {
     assert!(rows
         .iter()
         .all(|r| r.len() == SESSION_COLUMNS_V1.len() && &r[1] == "small" && &r[16] == "32.0000"));
+}
+
+/// A display whose finger, at rest, reads each of `rests_c` in turn (10 s per measurement), then its last.
+struct RecoveringFinger {
+    trials: TableStimulus,
+    rests_c: Vec<f64>,
+    measured: usize,
+}
+
+impl Stimulus for RecoveringFinger {
+    fn present(&mut self, request: &StimulusRequest) -> Result<TrialMeasurement, StimulusError> {
+        self.trials.present(request)
+    }
+
+    fn finger_at_rest(&mut self) -> Option<Result<(f64, f64), StimulusError>> {
+        let index = self.measured.min(self.rests_c.len() - 1);
+        self.measured += 1;
+        Some(Ok((self.rests_c[index], 10.0)))
+    }
+}
+
+/// Lines the runner says.
+#[derive(Default)]
+struct Said(Vec<String>);
+
+impl Console for Said {
+    fn say(&mut self, line: &str) -> std::io::Result<()> {
+        self.0.push(line.to_string());
+        Ok(())
+    }
+
+    fn ask(&mut self, _prompt: &str) -> std::io::Result<Option<String>> {
+        Ok(None)
+    }
+}
+
+/// Resumes P01's session of `exp` in `dir` on `finger`; what the runner said.
+fn resume_on(exp: &ExperimentFile, dir: &Path, finger: &mut RecoveringFinger) -> Vec<String> {
+    let options = &exp.experiment.response_options;
+    let trials = exp.experiment.trials_per_participant();
+    let mut responder =
+        ScriptedResponses::from_text(SIX_ANSWERS, Path::new("answers.txt"), options, trials).expect("answers");
+    let mut said = Said::default();
+    Runner {
+        experiment: exp,
+        participant: "P01",
+        data_dir: dir,
+        device: serde_json::json!({"device": "test"}),
+        stimulus: finger,
+        responder: &mut responder,
+        clock: &dated_clock(DATE),
+        time_scale: 0.0,
+        console: &mut said,
+        interactive: false,
+    }
+    .run()
+    .expect("resumes");
+    said.0
+}
+
+#[test]
+fn a_resumed_session_waits_for_the_finger_to_come_back_to_its_baseline() {
+    // The session's baseline is 32 °C (its first trial); the interrupted trial left the finger at 30.72 °C.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let exp = small(dir.path(), 5);
+    interrupted_at(&exp, dir.path(), 4);
+    let mut finger = RecoveringFinger {
+        trials: steady(),
+        rests_c: vec![30.72, 30.9, 31.4],
+        measured: 0,
+    };
+    let said = resume_on(&exp, dir.path(), &mut finger);
+    let resume: Vec<&String> = said.iter().filter(|l| l.starts_with("resume: ")).collect();
+    assert_eq!(finger.measured, 3, "measured until within 1 °C: {resume:?}");
+    assert_eq!(resume.len(), 3, "{said:?}");
+    assert!(
+        resume[0].contains("finger at rest 30.72 °C, 1.28 °C from the session's baseline 32.00 °C"),
+        "{resume:?}"
+    );
+    assert!(
+        resume[0].ends_with("waiting for the finger to recover (10 s so far)"),
+        "{resume:?}"
+    );
+    assert!(
+        resume[2].contains("0.60 °C from") && resume[2].ends_with("the trials go on"),
+        "{resume:?}"
+    );
+    let first_trial = said
+        .iter()
+        .position(|l| l.starts_with("trial 4/"))
+        .expect("trial 4 runs");
+    let last_resume = said
+        .iter()
+        .rposition(|l| l.starts_with("resume: "))
+        .expect("resume lines");
+    assert!(last_resume < first_trial, "the wait comes before any trial: {said:?}");
+}
+
+#[test]
+fn a_resumed_session_says_plainly_when_the_finger_does_not_recover() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let exp = small(dir.path(), 5);
+    interrupted_at(&exp, dir.path(), 4);
+    let mut finger = RecoveringFinger {
+        trials: steady(),
+        rests_c: vec![30.5],
+        measured: 0,
+    };
+    let said = resume_on(&exp, dir.path(), &mut finger);
+    let warning = said
+        .iter()
+        .find(|l| l.contains("WARNING"))
+        .unwrap_or_else(|| panic!("no warning: {said:?}"));
+    let rests = (thermode_lab::runner::RECOVERY_WAIT_S / 10.0).ceil() as usize;
+    assert_eq!(finger.measured, rests, "{said:?}");
+    assert!(
+        warning.contains("1.50 °C from the session's baseline 32.00 °C")
+            && warning.contains("the finger has not recovered"),
+        "{warning}"
+    );
 }

@@ -180,7 +180,7 @@ impl<F: PlateFinger> MecomEmulator<F> {
             requirement,
         };
         if !(1e-4..=0.01).contains(&config.tick_s) {
-            return Err(bad("tick_s", config.tick_s, "must lie in [1e-4, 0.01]"));
+            return Err(bad("tick_s", config.tick_s, "must be from 1e-4 to 0.01"));
         }
         if !(config.kp_a_per_k.is_finite() && config.kp_a_per_k > 0.0) {
             return Err(bad("kp_a_per_k", config.kp_a_per_k, "must be positive"));
@@ -189,7 +189,7 @@ impl<F: PlateFinger> MecomEmulator<F> {
             return Err(bad("ti_s", config.ti_s, "must be positive"));
         }
         if config.address == 0 || config.address == 255 {
-            return Err(bad("address", f64::from(config.address), "must lie in [1, 254]"));
+            return Err(bad("address", f64::from(config.address), "must be from 1 to 254"));
         }
         let mut instances = Vec::with_capacity(display.channel_count());
         for i in 0..display.channel_count() {

@@ -412,8 +412,10 @@ impl Link {
         Ok(self.read_bits(channel, id)? as i32)
     }
 
+    /// A float parameter, as the decimal the controller's `f32` stands for (23.28, not 23.280000686645508).
     fn read_f32(&mut self, channel: MecomChannel, id: u16) -> Result<f64, RequestFault> {
-        Ok(f64::from(f32::from_bits(self.read_bits(channel, id)?)))
+        let value = f32::from_bits(self.read_bits(channel, id)?);
+        Ok(thermode_model::numbers::f32_as_decimal(value))
     }
 
     fn set(&mut self, channel: MecomChannel, request: Request) -> Result<(), RequestFault> {

@@ -93,16 +93,16 @@ impl EmulatorConfig {
                 f64::from(self.watchdog_ms),
                 10.0,
                 60_000.0,
-                "must lie in [10, 60000]",
+                "must be from 10 to 60000",
             ),
             (
                 "report_interval_ms",
                 f64::from(self.report_interval_ms),
                 1.0,
                 1000.0,
-                "must lie in [1, 1000]",
+                "must be from 1 to 1000",
             ),
-            ("tick_s", self.tick_s, 1e-4, 0.01, "must lie in [1e-4, 0.01]"),
+            ("tick_s", self.tick_s, 1e-4, 0.01, "must be from 1e-4 to 0.01"),
         ];
         for (what, value, min, max, requirement) in checks {
             if !(value >= min && value <= max) {
@@ -148,7 +148,7 @@ impl LinkFaults {
                 return Err(EmulatorError::BadSetting {
                     what,
                     value,
-                    requirement: "must lie in [0, 1]",
+                    requirement: "must be from 0 to 1",
                 });
             }
         }
@@ -295,7 +295,7 @@ impl<F: PlateFinger> Emulator<F> {
             return Err(EmulatorError::BadSetting {
                 what: "drive current_limit_a",
                 value: limit_a,
-                requirement: "must lie in [0.001, 32.767] A for the protocol's mA fields",
+                requirement: "must be from 0.001 to 32.767 A for the protocol's mA fields",
             });
         }
         let identify = Identify {

@@ -95,7 +95,7 @@ impl<F: PlateFinger> Tcs2Emulator<F> {
             ));
         }
         if !(1e-4..=0.01).contains(&config.tick_s) {
-            return Err(bad("tick_s", config.tick_s, "must lie in [1e-4, 0.01]"));
+            return Err(bad("tick_s", config.tick_s, "must be from 1e-4 to 0.01"));
         }
         if let Some(hz) = config.forced_stream_hz {
             if !(hz.is_finite() && hz > 0.0 && hz <= 1000.0) {

@@ -446,7 +446,7 @@ impl Device for Tcs2Device {
         }
         let streamed_c = self.config.streamed_c(command);
         let t = tenths(streamed_c)
-            .ok_or_else(|| BadValue::custom("TCS II set-point [°C]", streamed_c, "must lie in [10, 60]"))?;
+            .ok_or_else(|| BadValue::custom("TCS II set-point [°C]", streamed_c, "must be from 10 to 60"))?;
         if !self.following {
             if command.setpoint_c().is_none() {
                 // Out of follow mode the probe already rests at neutral.

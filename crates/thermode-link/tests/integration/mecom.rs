@@ -258,6 +258,14 @@ fn temperature_mode_follows_the_shaped_setpoint_and_off_disables_the_output() {
         reading.sensor_c
     );
     assert!((reading.sensor_c - 36.0).abs() < 1.0, "sensor {} °C", reading.sensor_c);
+    // The controller sends an f32: the reading is the decimal it stands for (23.28, not 23.280000686645508).
+    let sent = reading.sensor_c as f32;
+    assert_eq!(
+        reading.sensor_c.to_string(),
+        sent.to_string(),
+        "the f32 {sent} read as {}",
+        reading.sensor_c
+    );
     assert!(status(&pty).output_on[0]);
     control
         .device

@@ -176,6 +176,30 @@ fn fixed_point_conversions() {
 }
 
 #[test]
+fn readings_print_at_the_sensors_resolution() {
+    // Every reading the protocol can carry prints with no more digits than its resolution (m°C, c°C, mA):
+    // -39989 × 1e-3 would be -39.989000000000004.
+    let decimals = |v: f64| v.to_string().split_once('.').map_or(0, |(_, f)| f.len());
+    for raw in (-50_000..150_000).step_by(7) {
+        let report = ChannelReport {
+            sensor_milli_c: raw,
+            hot_side_centi_c: (raw / 10) as i16,
+            applied_ma: (raw.rem_euclid(32_768)) as i16,
+            ..ChannelReport::default()
+        };
+        let (sensor, hot, current) = (report.sensor_c(), report.hot_side_c(), report.applied_a());
+        assert!(decimals(sensor) <= 3, "{raw} m°C read as {sensor}");
+        assert!(decimals(hot) <= 2, "{} c°C read as {hot}", raw / 10);
+        assert!(
+            decimals(current) <= 3,
+            "{} mA read as {current}",
+            raw.rem_euclid(32_768)
+        );
+        assert_eq!(to_milli_c(sensor), raw, "{sensor} does not write back as {raw}");
+    }
+}
+
+#[test]
 fn messages_refuse_bad_channel_ranges() {
     assert!(DriveFrame::new(0, &[]).is_err(), "no channels");
     assert!(DriveFrame::new(0, &[0; 11]).is_err(), "11 channels");

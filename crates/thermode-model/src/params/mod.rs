@@ -11,6 +11,8 @@ use std::fmt;
 
 use thiserror::Error;
 
+use crate::numbers::Significant;
+
 mod table;
 
 pub use table::{parse, Spellings, Table, CONDUCTIVITY, DENSITY, SPECIFIC_HEAT};
@@ -107,12 +109,22 @@ impl fmt::Display for Rule {
             Rule::Finite => f.write_str("must be a finite number"),
             Rule::Positive => f.write_str("must be a finite number greater than zero"),
             Rule::NonNegative => f.write_str("must be a finite number not below zero"),
-            Rule::AtLeast { min } => write!(f, "must be a finite number not below {min}"),
-            Rule::Within { min, max } => write!(f, "must be a finite number in [{min}, {max}]"),
+            Rule::AtLeast { min } => write!(f, "must be a finite number not below {}", Significant(*min)),
+            Rule::Within { min, max } => write!(
+                f,
+                "must be a finite number from {} to {}",
+                Significant(*min),
+                Significant(*max)
+            ),
             Rule::Custom(text) => f.write_str(text),
-            Rule::Between { min, max } => write!(f, "must be a finite number strictly between {min} and {max}"),
-            Rule::AtMost { max, what } => write!(f, "must be a finite number not above {what} = {max}"),
-            Rule::Below { max, what } => write!(f, "must be a finite number below {what} = {max}"),
+            Rule::Between { min, max } => write!(
+                f,
+                "must be a finite number strictly between {} and {}",
+                Significant(*min),
+                Significant(*max)
+            ),
+            Rule::AtMost { max, what } => write!(f, "must be a finite number not above {what} = {}", Significant(*max)),
+            Rule::Below { max, what } => write!(f, "must be a finite number below {what} = {}", Significant(*max)),
             Rule::Near { target, relative, what } => write!(
                 f,
                 "must be a finite number within {:.0} % of {what} = {target:.4}",
@@ -246,7 +258,7 @@ mod tests {
         let error = range.check(70.5).expect_err("above the range");
         assert_eq!(
             error.to_string(),
-            "`object temperature [°C]` = 70.5 is invalid: must be a finite number in [0, 70]"
+            "`object temperature [°C]` = 70.5 is invalid: must be a finite number from 0 to 70"
         );
     }
 }

@@ -347,8 +347,9 @@ mod tests {
             .required_either(CONDUCTIVITY, within)
             .expect_err("4187 W/(m·K)");
         assert_eq!(error.bad_key(), Some("conductivity_cal_cm_s_c"));
-        let bound = 2500.0 / 418.68;
-        assert!(error.to_string().contains(&format!("{bound}")), "{error}");
+        // The bounds 0.01 / 418.68 = 2.388458…e-5 and 2500 / 418.68 = 5.971147… to six significant digits (issue 25:
+        // bounds as people write them, not 0.000023884589662749594 and 5.9711474156873985).
+        assert!(error.to_string().contains("from 2.38846e-5 to 5.97115"), "{error}");
         assert_eq!(CONDUCTIVITY.cgs_rule(Rule::Positive), Rule::Positive);
     }
 

@@ -19,6 +19,7 @@ use axum::middleware::{self, Next};
 use axum::response::{Html, IntoResponse, Response};
 use axum::routing::get;
 use axum::{Json, Router};
+use thermode_platform::to_clock_resolution;
 use thermode_protocol::finite;
 use thermode_protocol::status::{
     Auth, Commands, Contact, DeviceCutEntry, DoseLedgerStatus, EarlierFile, FaultEntry, HttpStatus, InterlockStatus,
@@ -347,7 +348,7 @@ pub fn status(app: &App) -> Status {
         version: env!("CARGO_PKG_VERSION").to_string(),
         device: app.info.device.clone(),
         running: snapshot.running,
-        time_s: snapshot.time_s,
+        time_s: to_clock_resolution(snapshot.time_s),
         tick: snapshot.tick,
         channel_count: snapshot.channels.len(),
         channels: snapshot
@@ -385,8 +386,8 @@ pub fn status(app: &App) -> Status {
         recording: app.recording.as_ref().map(|r| recording_status(app, r)),
         lsl: app.lsl.as_ref().map(|l| LslStatus {
             library: l.library.clone(),
-            lsl_offset_s: l.clock.offset_s,
-            lsl_clock_at_start_s: l.clock.lsl_at_start_s,
+            lsl_offset_s: to_clock_resolution(l.clock.offset_s),
+            lsl_clock_at_start_s: to_clock_resolution(l.clock.lsl_at_start_s),
             samples: count(&l.counters.samples),
             markers: count(&l.counters.markers),
             failed: count(&l.counters.failed),
@@ -457,12 +458,12 @@ fn loop_status(app: &App, snapshot: &Snapshot) -> LoopStatus {
     LoopStatus {
         rate_hz: s.rate_hz,
         period_s: s.period_s,
-        period_p50_s: finite(s.period.p50_s),
-        period_p99_s: finite(s.period.p99_s),
-        period_max_s: finite(s.period.max_s),
-        work_p50_s: finite(s.work.p50_s),
-        work_p99_s: finite(s.work.p99_s),
-        work_max_s: finite(s.work.max_s),
+        period_p50_s: finite(s.period.p50_s).map(to_clock_resolution),
+        period_p99_s: finite(s.period.p99_s).map(to_clock_resolution),
+        period_max_s: finite(s.period.max_s).map(to_clock_resolution),
+        work_p50_s: finite(s.work.p50_s).map(to_clock_resolution),
+        work_p99_s: finite(s.work.p99_s).map(to_clock_resolution),
+        work_max_s: finite(s.work.max_s).map(to_clock_resolution),
         window_ticks: s.period.count,
         missed_deadlines: s.missed_deadlines,
         ticks: s.ticks,

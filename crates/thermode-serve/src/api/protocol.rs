@@ -7,6 +7,7 @@
 
 use thermode_model::materials::{self, Material};
 use thermode_model::params::Range;
+use thermode_platform::to_clock_resolution;
 use thermode_protocol::request::{Marker, Setpoint, Touch};
 pub use thermode_protocol::request::{MAX_MARKER_CHARS, MAX_NAME_CHARS, MIN_SUBSCRIBE_HZ};
 use thermode_protocol::status::Limits;
@@ -264,7 +265,7 @@ pub fn channel_telemetry(status: &ChannelStatus) -> ChannelTelemetry {
 /// A telemetry message.
 pub fn telemetry_message(snapshot: &Snapshot) -> Telemetry {
     Telemetry {
-        time_s: snapshot.time_s,
+        time_s: to_clock_resolution(snapshot.time_s),
         tick: snapshot.tick,
         channels: snapshot.channels.iter().map(channel_telemetry).collect(),
     }
@@ -281,7 +282,7 @@ pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> ChannelStat
         direct_rate_c_per_s: status.direct.map(|d| d.1),
         held_off: status.held_off,
         owner: status.owner,
-        release_at_s: status.release_at_s,
+        release_at_s: status.release_at_s.map(to_clock_resolution),
         link_ok: status.link_ok,
         device_cut: status.device_cut.map(|c| c.name().to_string()),
         device_cut_description: status.device_cut.map(|c| c.to_string()),

@@ -18,6 +18,7 @@ use axum::extract::State;
 use axum::http::{HeaderMap, StatusCode};
 use axum::response::Response;
 use axum::Extension;
+use thermode_platform::to_clock_resolution;
 use thermode_protocol::{AppliedAt, Done, Event, OkReply, RecordingEvent, RequestId, Response as Reply, StatusReply};
 use tokio::sync::watch;
 use tokio::time::{interval, timeout, Instant, Interval, MissedTickBehavior};
@@ -304,7 +305,7 @@ fn marker(app: &App, text: String, channel: Option<usize>) -> Result<Done, ApiEr
     let time_s = app.clock.now_s();
     let lsl_time_s = match &app.markers {
         Some(markers) => {
-            let lsl_time_s = markers.clock().lsl_time_s(time_s);
+            let lsl_time_s = to_clock_resolution(markers.clock().lsl_time_s(time_s));
             if !markers.send(crate::lsl::ClientMarker { time_s, text, channel }) {
                 return Err(ApiError::new(
                     ErrorCode::Busy,
@@ -317,7 +318,7 @@ fn marker(app: &App, text: String, channel: Option<usize>) -> Result<Done, ApiEr
     };
     Ok(Done::Marker {
         channel,
-        time_s,
+        time_s: to_clock_resolution(time_s),
         lsl_time_s,
         lsl: lsl_time_s.is_some(),
     })
@@ -329,7 +330,7 @@ async fn to_loop(app: &App, command: Command) -> Result<Done, ApiError> {
     let applied = super::answer_within(answer, app.reply_wait).await.map_err(loop_error)?;
     let at = AppliedAt {
         tick: applied.tick,
-        time_s: applied.time_s,
+        time_s: to_clock_resolution(applied.time_s),
     };
     Ok(protocol::done(&command, at))
 }

@@ -407,6 +407,7 @@ mod tests {
             label: Arc::from(label),
             mode,
             object_c: (mode == Mode::Touch).then_some(23.0),
+            material: None,
             direct: (mode == Mode::Direct).then_some((36.0, 2.0)),
             held_off: false,
             telemetry: EMPTY_TELEMETRY,

@@ -604,6 +604,54 @@ fn a_marker_without_lsl_is_acknowledged_with_the_loop_time_between_two_ticks() {
 /// A temperature-commanded device without a hot-side sensor (as a TCS II): its status and telemetry give the current,
 /// the model's finger estimate and the hot side as null, never the controller's or the model's numbers; the plate
 /// reading and the set-point stay numbers. The same daemon on a device that measures everything gives numbers.
+/// Decimals of `value` as JSON writes it (0 for an integer).
+fn decimals(value: &Value) -> usize {
+    let text = value.to_string();
+    text.split_once('.').map_or(0, |(_, fraction)| {
+        fraction.trim_end_matches(|c: char| !c.is_ascii_digit()).len()
+    })
+}
+
+#[test]
+fn times_in_replies_and_status_are_whole_nanoseconds() {
+    let daemon = start(test_config(), SpyDevice::new(2), pipelines());
+    let addr = daemon.http_addr();
+    let mut times = Vec::new();
+    client_runtime().block_on(async {
+        let mut ws = ws_connect(addr, "").await;
+        for id in 1..=20 {
+            let r = ask(
+                &mut ws,
+                &format!(r#"{{"type":"touch","id":{id},"channel":0,"material":"wood"}}"#),
+            )
+            .await;
+            assert_eq!(r["type"], "ok", "{r}");
+            times.push(r["time_s"].clone());
+            tokio::time::sleep(Duration::from_millis(7)).await;
+        }
+    });
+    let status = status_of(addr);
+    times.push(status["time_s"].clone());
+    for key in [
+        "period_p50_s",
+        "period_p99_s",
+        "period_max_s",
+        "work_p50_s",
+        "work_p99_s",
+        "work_max_s",
+    ] {
+        // Null until the loop has its statistics window.
+        times.extend(Some(status["loop_stats"][key].clone()).filter(|v| !v.is_null()));
+    }
+    for time in &times {
+        assert!(
+            time.is_f64() && decimals(time) <= 9,
+            "time {time}: more decimals than the clock's nanosecond"
+        );
+    }
+    daemon.shutdown().expect("shutdown");
+}
+
 #[test]
 fn numbers_a_device_does_not_measure_are_null() {
     let fields = ["current_a", "finger_c", "hot_side_c"];

@@ -67,7 +67,8 @@ fn every_tick_of_every_channel_is_recorded_in_order() {
     assert_eq!(rows.len() as u64, 3 * ticks, "rows: 3 channels × {ticks} ticks");
     assert_eq!(rows_written, 3 * ticks);
     for (i, row) in rows.iter().enumerate() {
-        assert_eq!(row.len(), 12, "row {i}: {row:?}");
+        // 12 columns, then the touched material's properties (issue 25: the recording names them).
+        assert_eq!(row.len(), 16, "row {i}: {row:?}");
         let tick = (i / 3) as f64;
         let time_s: f64 = row[0].parse().expect("time_s");
         assert!(
@@ -88,6 +89,75 @@ fn every_tick_of_every_channel_is_recorded_in_order() {
         assert_eq!([row[2], row[3], row[4]], want, "row {i}: contact, material, mode");
         assert_eq!(row[11], "", "row {i}: fault (empty: none)");
     }
+}
+
+#[test]
+fn a_custom_material_is_recorded_with_its_properties() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let (recorder, feed) = Recorder::start(dir.path()).expect("recorder");
+    let clock = Arc::new(ManualClock::new());
+    let mut handle = LoopHandle::spawn(
+        LoopConfig::default(),
+        Box::new(SpyDevice::new(2)),
+        trackers(),
+        clock.clone(),
+        vec![feed],
+        Arc::default(),
+    )
+    .expect("loop");
+    assert!(
+        common::wait_until(10.0, || handle.snapshot().stats.ticks >= 1),
+        "first tick"
+    );
+    // A material no library knows, as a client's `properties` make it.
+    let glass = materials::Material {
+        name: "ice-cold-glass".into(),
+        conductivity_w_mk: 1.05,
+        density_kg_m3: 2500.0,
+        specific_heat_j_kgk: 840.0,
+        thickness_m: 0.004,
+        source: "client".into(),
+    };
+    for k in 1..40u64 {
+        if k == 10 {
+            let command = Command::touch(0, glass.clone(), 5.0, Owner::Script);
+            handle.commands().send(command).expect("queued");
+        }
+        clock.set(k as f64 * PERIOD_S);
+        let want = clock.now_s();
+        assert!(
+            common::wait_until(10.0, || handle.snapshot().time_s >= want),
+            "tick {k}"
+        );
+    }
+    handle.stop();
+    drop(handle);
+    let path = recorder.path().to_path_buf();
+    recorder.finish().expect("recorder finishes");
+    let text = std::fs::read_to_string(&path).expect("read CSV");
+    let header: Vec<&str> = text.lines().next().unwrap_or_default().split(',').collect();
+    let column = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .unwrap_or_else(|| panic!("no {name}: {header:?}"))
+    };
+    let properties = [
+        "conductivity_w_mk",
+        "density_kg_m3",
+        "specific_heat_j_kgk",
+        "thickness_m",
+    ]
+    .map(column);
+    let rows: Vec<Vec<&str>> = text.lines().skip(1).map(|l| l.split(',').collect()).collect();
+    let touched: Vec<&Vec<&str>> = rows.iter().filter(|r| r[3] == "ice-cold-glass").collect();
+    assert!(touched.len() >= 20, "{} rows of the touch", touched.len());
+    for row in &touched {
+        let values = properties.map(|i| row[i].parse::<f64>().unwrap_or(f64::NAN));
+        assert_eq!(values, [1.05, 2500.0, 840.0, 0.004], "{row:?}");
+    }
+    let air = rows.iter().filter(|r| r[4] == "air");
+    assert!(air.clone().count() > 0 && air.into_iter().all(|r| properties.iter().all(|&i| r[i].is_empty())));
 }
 
 #[test]

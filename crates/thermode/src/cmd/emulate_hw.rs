@@ -65,8 +65,10 @@ pub struct DisplayArgs<'a> {
     pub trace: Option<&'a Path>,
 }
 
-/// Creates (replaces) the trace file `path`, unbuffered so each step's rows reach it whole.
+/// Creates (replaces) the trace file `path`, unbuffered so each step's rows reach it whole; its folder is created
+/// if missing (the path policy, `crate::output`).
 pub fn trace_file(path: &Path) -> Result<Box<dyn std::io::Write + Send>> {
+    crate::output::create_folder_of(path)?;
     let file = std::fs::File::create(path).with_context(|| format!("cannot create the trace {}", path.display()))?;
     Ok(Box::new(file))
 }

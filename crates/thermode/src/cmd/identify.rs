@@ -22,6 +22,7 @@ use crate::controller::ControllerArg;
 use crate::display::{build_display, DisplayArgs};
 
 use crate::output::{check_outputs, print_stdout, write_atomically};
+use crate::progress::Progress;
 use crate::resolve;
 
 /// A fit whose sensor residual exceeds this many times the sensor's noise is refused: 10 (the fits of a bare
@@ -83,11 +84,14 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
         args.duration, args.device
     );
     let samples = if sim {
+        let _simulating = Progress::spinner("identify: simulating the excitation");
         record(&believed, &plant, args.seed, args.duration)?
     } else {
         record_in_real_time(args, &believed)?
     };
+    let progress = Progress::spinner("identify: fitting the model");
     let (fit, device) = fit(&believed, &samples)?;
+    progress.finish();
     let origin = resolve::device_origin(args.device_file.as_deref());
     let mut lines = vec![
         format!(
@@ -144,8 +148,10 @@ fn record_in_real_time(args: &IdentifyArgs, believed: &DeviceConfig) -> Result<V
     let ticks = (args.duration * RATE_HZ).round() as usize;
     let mut samples = Vec::with_capacity(ticks + 1);
     let start_s = clock.now_s();
+    let progress = Progress::seconds(args.duration, "identify: excitation");
     let run = (|| -> Result<()> {
         for tick in 0..=ticks {
+            progress.at_s(tick as f64 * dt_s);
             let deadline_s = start_s + tick as f64 * dt_s;
             while clock.now_s() < deadline_s {
                 clock.sleep_until(deadline_s);
@@ -161,6 +167,7 @@ fn record_in_real_time(args: &IdentifyArgs, believed: &DeviceConfig) -> Result<V
         }
         Ok(())
     })();
+    progress.finish();
     let off = device.all_off().context("switching the drive off after the excitation");
     run?;
     off?;

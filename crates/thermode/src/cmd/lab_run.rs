@@ -49,6 +49,7 @@ use thermode_serve::Daemon;
 use super::serve;
 use crate::controller::{ControllerArg, LAB_CONTROLLERS};
 use crate::display::DisplayArgs;
+use crate::progress::Progress;
 use crate::resolve;
 use crate::signals::{StopSignals, SECOND_SIGNAL_EXIT_CODE};
 
@@ -290,7 +291,15 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
                  (docs/lab.md): run the lab on a current-commanded display"
             );
         }
-        let mut stimulus = LiveStimulus::new(link, LiveSettings::default())?;
+        let settings = LiveSettings::default();
+        let mut resting: Option<Progress> = None;
+        let mut stimulus = LiveStimulus::new(link, settings)?.with_rest_progress(move |rest_s| match rest_s {
+            // A bar per rest: the finger can take up to max_rest_s to settle, twice per trial.
+            Some(rest_s) => resting
+                .get_or_insert_with(|| Progress::seconds(settings.max_rest_s, "finger at rest"))
+                .at_s(rest_s),
+            None => drop(resting.take()),
+        });
         if args.simulated_participant {
             stimulus = stimulus.with_modelled_real_contact(FvContact::default());
         }
@@ -384,6 +393,7 @@ fn run_batch(args: &LabRunArgs, experiment: &ExperimentFile, participants: &[Str
     let prepared = prepare(args, &experiment.experiment, &mut std::io::stdout())?;
     let next = AtomicUsize::new(0);
     let results: Vec<Mutex<Option<SessionOutput>>> = participants.iter().map(|_| Mutex::new(None)).collect();
+    let progress = Progress::bar(participants.len() as u64, "sessions", "lab run");
     std::thread::scope(|scope| {
         for _ in 0..jobs {
             scope.spawn(|| loop {
@@ -399,9 +409,11 @@ fn run_batch(args: &LabRunArgs, experiment: &ExperimentFile, participants: &[Str
                 if let Ok(mut slot) = results[index].lock() {
                     *slot = Some((out, result));
                 }
+                progress.step();
             });
         }
     });
+    progress.finish();
     let mut stdout = std::io::stdout().lock();
     let mut failed = Vec::new();
     for (participant, slot) in participants.iter().zip(results) {

@@ -13,12 +13,15 @@ use thermode_pipeline::pipeline::render_envelope_with_rate;
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, RendererKind};
 use thermode_plot::write_figure;
 use thermode_render::figure::figure3;
-use thermode_render::run::{render_all, write_csv, DEFAULT_DURATION_S, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ};
+use thermode_render::run::{
+    render_all_with_progress, write_csv, DEFAULT_DURATION_S, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ,
+};
 use thermode_render::summary::{summary_table, RenderSummary};
 use thermode_render::RenderSpec;
 
 use crate::controller::{ControllerArg, RENDER_CONTROLLERS};
-use crate::output::{check_outputs, csv_precision, is_stdout, print_stdout, write_atomically};
+use crate::output::{check_outputs, create_folder_of, csv_precision, is_stdout, print_stdout, write_atomically};
+use crate::progress::Progress;
 use crate::resolve;
 
 /// The renderer (and display-inverse finger model).
@@ -126,7 +129,9 @@ pub struct RenderArgs {
 pub fn run(args: &RenderArgs) -> Result<()> {
     let specs = specs(args)?;
     check_outputs(&[("--out", args.out.as_deref()), ("--plot", args.plot.as_deref())])?;
-    let runs = render_all(&specs).context("rendering")?;
+    let progress = Progress::bar(specs.len() as u64, "runs", "render");
+    let runs = render_all_with_progress(&specs, &|| progress.step()).context("rendering")?;
+    progress.finish();
     for run in &runs {
         if let Some(report) = run.self_test.filter(|r| r.off_file().is_some()) {
             eprintln!(
@@ -149,6 +154,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         })?;
     }
     if let Some(path) = &args.plot {
+        create_folder_of(path)?;
         write_figure(&figure3(&runs), path).with_context(|| format!("cannot write {}", path.display()))?;
     }
     if args.summary || (args.out.is_none() && args.plot.is_none()) {

@@ -272,8 +272,8 @@ pub fn run_for(duration_s: Option<f64>, signals: &StopSignals, mut every_100ms: 
 }
 
 /// Stops the daemon (every drive to 0 A at once, then the network, then the recording, flushed and synced) and
-/// reports: after `--duration` the recording on standard output as before; after a signal one summary line on
-/// standard error. A device that did not take the all-off command is an error (exit 2), and so is a recording that
+/// reports one summary line on standard error (the loop time it stopped at, the drives, the recording), after a
+/// signal as after `--duration` (which also prints the recording's line on standard output, as before). A device that did not take the all-off command is an error (exit 2), and so is a recording that
 /// failed at any time during the run, even one that went on in a new file after an acknowledgement (exit 2; the
 /// summary line says `the recording FAILED`).
 pub fn finish(daemon: Daemon, ended: Ended) -> Result<()> {
@@ -296,19 +296,17 @@ pub fn finish(daemon: Daemon, ended: Ended) -> Result<()> {
         (Some(path), Some(rows), None) => format!("; {rows} rows recorded to {} (flushed and synced)", path.display()),
         _ => String::new(),
     };
+    let drives = match &report.all_off {
+        Some(Ok(())) => "every drive set to 0 A",
+        Some(Err(_)) => "the device did not take the all-off command",
+        None => "the control loop had already stopped",
+    };
+    let stopped_at = format!("stopped at loop time {:.3} s, {drives}", report.last_tick_s);
     match ended {
-        Ended::Signal(name) => {
-            let drives = match &report.all_off {
-                Some(Ok(())) => "every drive set to 0 A",
-                Some(Err(_)) => "the device did not take the all-off command",
-                None => "the control loop had already stopped",
-            };
-            eprintln!(
-                "thermode: {name}: stopped at loop time {:.3} s, {drives}{recorded}",
-                report.last_tick_s
-            );
-        }
+        Ended::Signal(name) => eprintln!("thermode: {name}: {stopped_at}{recorded}"),
         Ended::Duration => {
+            // The same summary as after a signal, on standard error; the recording's line stays on standard output.
+            eprintln!("thermode: --duration passed: {stopped_at}{recorded}");
             if let (Some(path), Some(rows)) = (path, report.rows) {
                 println!("recorded {rows} rows to {}", path.display());
             }

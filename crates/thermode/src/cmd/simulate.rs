@@ -10,10 +10,10 @@ use thermode_model::limits;
 use thermode_model::materials::Material;
 use thermode_model::simulate::{simulate, Initial, ModelKind, SimulationSpec, Trace};
 use thermode_platform::csv_text::{self, CsvText, Precision};
-use thermode_plot::{write_figure, Figure, Panel, Series, SeriesStyle};
+use thermode_plot::{write_figure, Figure, Marker, Panel, Series, SeriesStyle};
 use thermode_render::figure::EARLY_WINDOW_S;
 
-use crate::output::{check_outputs, csv_precision, is_stdout, print_stdout, write_atomically};
+use crate::output::{check_outputs, create_folder_of, csv_precision, is_stdout, print_stdout, write_atomically};
 use crate::resolve;
 
 /// The skin model to run.
@@ -210,12 +210,18 @@ fn write_plot(path: &Path, traces: &[(Material, Trace)], model: ModelArg) -> Res
                 .zip(values.iter().copied())
                 .collect::<Vec<_>>()
         };
-        series.push(Series::new(
+        let skin = Series::new(
             material.name.as_str(),
             curve("skin_surface_c"),
             SeriesStyle::Line,
             index,
-        ));
+        );
+        // Several materials each carry a marker: curves that run together (wood and rubber) stay apart.
+        series.push(if traces.len() > 1 {
+            skin.with_marker(Marker::nth(index))
+        } else {
+            skin
+        });
         if traces.len() == 1 && trace.column("display_setpoint_c").is_some() {
             series.push(Series::new(
                 "display set-point",
@@ -237,6 +243,7 @@ fn write_plot(path: &Path, traces: &[(Material, Trace)], model: ModelArg) -> Res
         ..Panel::default()
     };
     let early = panel.window(0.0, EARLY_WINDOW_S, format!("The first {EARLY_WINDOW_S} s"));
+    create_folder_of(path)?;
     Ok(write_figure(&Figure::grid(vec![panel, early], 2), path)?)
 }
 

@@ -11,6 +11,7 @@ use thermode_render::tune::{tune_with_progress, TuneResult, TuneSpec};
 
 use crate::cmd::render::RendererArg;
 use crate::output::{check_outputs, print_stdout, write_atomically};
+use crate::progress::Progress;
 use crate::resolve;
 
 /// Arguments of `thermode tune`.
@@ -43,10 +44,13 @@ pub fn run(args: &TuneArgs) -> Result<()> {
     spec.seed = args.seed;
     spec.max_evaluations = args.max_evaluations;
     let started = Instant::now();
+    let progress = Progress::bar(spec.max_evaluations as u64, "evaluations (at most)", "tune");
     let result = tune_with_progress(&spec, &mut |n, value, _| {
-        eprintln!("evaluation {n:4}: mean RMS skin error {value:.5} °C");
+        progress.line(&format!("evaluation {n:4}: mean RMS skin error {value:.5} °C"));
+        progress.at(n as u64);
     })
     .context("tuning")?;
+    progress.finish();
     eprintln!("{}", report(&result, started.elapsed().as_secs_f64()));
     let text = gains_to_toml_string(&result.gains, &header(&result, &origin, &spec));
     match &args.out {

@@ -261,3 +261,74 @@ fn validate(bids: &Path) {
         out.status.code()
     );
 }
+
+/// A display session by hand (two trials whose curves carry the daemon's loop time, 0.1 s and 0.25 s) and a real
+/// `serve --record` recording of that daemon: the export puts events and signals on one clock (onset 0 at the first
+/// trial's start, the recording's StartTime its first loop time minus that start) and the validator accepts it.
+#[test]
+fn a_display_session_exports_on_one_clock_as_a_valid_bids_data_set() {
+    let root = tempfile::tempdir().expect("temp dir");
+    let (_, recording) = lab_folder(root.path());
+    let data = root.path().join("display");
+    let curves = data.join("P-01_paper_2026-11-23_curves");
+    std::fs::create_dir_all(&curves).expect("curves folder");
+    let sidecar = serde_json::json!({"format": "thermode-lab session 2", "participant": "P-01",
+        "experiment": "paper", "session_date": "2026-11-23", "csv_file": "P-01_paper_2026-11-23.csv"});
+    std::fs::write(data.join("P-01_paper_2026-11-23.json"), sidecar.to_string()).expect("sidecar");
+    let mut csv = "participant,trial,condition,presented,response_time_s,presentation_s,curve_file\n".to_string();
+    for (trial, start_s) in [(1, 0.1), (2, 0.25)] {
+        let name = format!("trial-{trial:03}.csv");
+        csv.push_str(&format!(
+            "P-01,{trial},simulated,wood,1,0.1,P-01_paper_2026-11-23_curves/{name}\n"
+        ));
+        let mut curve = "trial,time_s,loop_time_s,target_skin_c,finger_c\n".to_string();
+        for i in 0..10 {
+            let t = f64::from(i) * 0.01;
+            curve.push_str(&format!("{trial},{t},{:.6},31,30\n", start_s + t));
+        }
+        std::fs::write(curves.join(name), curve).expect("curve");
+    }
+    std::fs::write(data.join("P-01_paper_2026-11-23.csv"), csv).expect("csv");
+    let bids = root.path().join("bids");
+    let given = format!("P-01={}", recording.display());
+    let data_s = data.to_str().expect("utf-8");
+    thermode(&[
+        "lab",
+        "export",
+        "--bids",
+        bids.to_str().expect("utf-8"),
+        "--data-dir",
+        data_s,
+        "--recording",
+        &given,
+    ]);
+    let dir = beh(&bids, "P01");
+    let events = std::fs::read_to_string(dir.join(first_with(&dir, "_events.tsv"))).expect("events");
+    let onsets: Vec<&str> = events
+        .lines()
+        .skip(1)
+        .map(|l| l.split('\t').next().unwrap_or_default())
+        .collect();
+    assert_eq!(onsets, ["0", "0.15"], "onsets on the loop clock: {events}");
+    let first_s: f64 = std::fs::read_to_string(&recording)
+        .expect("recording")
+        .lines()
+        .nth(1)
+        .and_then(|l| l.split(',').next())
+        .and_then(|t| t.parse().ok())
+        .expect("first time_s");
+    let stim_json = std::fs::read_dir(&dir)
+        .expect("list")
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .find(|p| p.to_string_lossy().contains("_recording-session") && p.to_string_lossy().ends_with("_stim.json"))
+        .unwrap_or_else(|| panic!("no recording stim sidecar in {}", dir.display()));
+    let sidecar: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(stim_json).expect("stim json")).expect("json");
+    let start_s = sidecar["StartTime"].as_f64().expect("StartTime");
+    assert!(
+        (start_s - (first_s - 0.1)).abs() < 1e-9,
+        "StartTime {start_s}, recording from {first_s} s, first trial at 0.1 s"
+    );
+    validate(&bids);
+}

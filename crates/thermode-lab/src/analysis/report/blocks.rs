@@ -2,6 +2,8 @@
 //! Table 2 ratio table with correct cells bold and false cells italic, Table 3, the Figure 4 shares, the Figure 3
 //! curve comparison) and the sentences that state the χ² test and the confusion correlation.
 
+use thermode_model::numbers::p_value_text;
+
 use crate::analysis::curves::CurveAnalysis;
 use crate::analysis::tables::{ConditionRates, Confusion};
 use crate::analysis::Analysis;
@@ -310,7 +312,8 @@ fn chi_square_sentence(analysis: &Analysis) -> String {
     let mut text = match (chi.statistic, chi.df, chi.critical_95, chi.p_value) {
         (Some(s), Some(df), Some(c), Some(p)) => format!(
             "H0: correct classification is independent of the simulated material. χ²({df}) = {s:.2}, 95 % quantile \
-             χ²(0.95; {df}) = {c:.2}, p = {p:.3}. {}.",
+             χ²(0.95; {df}) = {c:.2}, {}. {}.",
+            p_value_text(p),
             chi.decision
         ),
         _ => format!("χ² test {}.", chi.decision),

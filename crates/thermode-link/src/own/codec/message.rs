@@ -12,7 +12,7 @@ use thermode_device::MAX_CHANNELS;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
 pub enum MessageError {
     /// A channel range outside `0..MAX_CHANNELS`, or an empty one.
-    #[error("channels {first}..{first}+{count} are not within 1 to {max} channels")]
+    #[error("{count} channel(s) from channel {first} on: a message carries 1 to {max} channels, numbered from 0")]
     Channels {
         /// First channel of the range.
         first: usize,
@@ -181,12 +181,14 @@ pub struct ChannelReport {
     pub faults: ChannelFaults,
 }
 
+/// Readings are divided by their power of ten, not multiplied by its inverse: the division is correctly rounded, so
+/// 23281 m°C reads as 23.281 °C (times 1e-3 gives 23.281000000000002): the sensor's resolution, no more digits.
 impl ChannelReport {
     /// The display reading \[°C\] (NaN for the "no valid number" code).
     pub fn sensor_c(&self) -> f64 {
         match self.sensor_milli_c {
             i32::MIN => f64::NAN,
-            v => f64::from(v) * 1e-3,
+            v => f64::from(v) / 1000.0,
         }
     }
 
@@ -194,13 +196,13 @@ impl ChannelReport {
     pub fn hot_side_c(&self) -> f64 {
         match self.hot_side_centi_c {
             i16::MIN => f64::NAN,
-            v => f64::from(v) * 1e-2,
+            v => f64::from(v) / 100.0,
         }
     }
 
     /// The delivered current \[A\].
     pub fn applied_a(&self) -> f64 {
-        f64::from(self.applied_ma) * 1e-3
+        f64::from(self.applied_ma) / 1000.0
     }
 }
 
