@@ -110,7 +110,7 @@ fn pipeline_only(c: &mut Criterion, name: &str, renderer: RendererKind, controll
     group.bench_function(name, |b| {
         b.iter(|| {
             for _ in 0..STEPS {
-                if tick % sample_every == 0 {
+                if tick.is_multiple_of(sample_every) {
                     reading.time_s = now_s;
                     reading.sample_seq += 1;
                 }

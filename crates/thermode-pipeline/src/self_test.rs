@@ -159,7 +159,8 @@ impl SelfTestRun {
         }
         let (window_s, window_c) = *self.window.get_or_insert((reading.time_s, reading.sensor_c));
         let span_s = reading.time_s - window_s;
-        if !(span_s >= REST_WINDOW_S) {
+        // A NaN span (a reading without a time) is no window.
+        if span_s.is_nan() || span_s < REST_WINDOW_S {
             return false;
         }
         self.window = Some((reading.time_s, reading.sensor_c));
