@@ -43,6 +43,9 @@ pub struct ControlInput {
     pub measured_current_a: f64,
     /// See `measured_current_a`.
     pub voltage_v: f64,
+    /// Whether `sensor_c` is a fresh PT-100 sample (false: the sample of an earlier tick, held). The model
+    /// controller's observer corrects on fresh samples and coasts between them; true when the caller cannot tell.
+    pub fresh_sample: bool,
 }
 
 /// A display temperature controller: one requested current per tick.

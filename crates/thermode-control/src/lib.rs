@@ -33,7 +33,7 @@
 //! let input = ControlInput { time_s: 0.0, dt_s: 1e-3, setpoint_c: sp.setpoint_c,
 //!     setpoint_rate_c_per_s: sp.rate_c_per_s, sensor_c: m.sensor_c, hot_side_c: m.hot_side_c,
 //!     applied_current_a: 0.0, finger_receptor_c: None, finger_conductance_w_k: 0.0,
-//!     measured_current_a: f64::NAN, voltage_v: f64::NAN };
+//!     measured_current_a: f64::NAN, voltage_v: f64::NAN, fresh_sample: true };
 //! let request_a = controller.update(&input).unwrap_or(f64::NAN);
 //! let drive = envelope.gate_drive(0.0, request_a, &MeasuredOnly);
 //! assert!(drive.current_a().abs() <= 2.8);

@@ -68,7 +68,7 @@
 //! // A plate resting at 32 °C asked to be at 20 °C: far out of reach in one tick, so full cooling.
 //! let input = ControlInput { time_s: 0.0, dt_s: 0.01, setpoint_c: 20.0, setpoint_rate_c_per_s: 0.0,
 //!     sensor_c: 32.0, hot_side_c: 23.0, applied_current_a: 0.0, finger_receptor_c: Some(32.1),
-//!     finger_conductance_w_k: 0.064, measured_current_a: f64::NAN, voltage_v: f64::NAN };
+//!     finger_conductance_w_k: 0.064, measured_current_a: f64::NAN, voltage_v: f64::NAN, fresh_sample: true };
 //! assert_eq!(controller.update(&input)?, -2.8);
 //! assert!(controller.plate_estimate_c().is_some_and(|p| p < 32.0));
 //! # Ok::<(), Box<dyn std::error::Error>>(())
@@ -253,13 +253,21 @@ impl Controller for ModelController {
     fn update(&mut self, input: &ControlInput) -> Result<f64, ControlError> {
         let finger = Self::validate(input)?;
         let mut observer = self.observer.clone();
-        let estimate = observer.update(&ObserverTick {
+        let tick = ObserverTick {
             dt_s: input.dt_s,
             applied_current_a: input.applied_current_a,
             finger,
             sensor_c: input.sensor_c,
             hot_side_c: input.hot_side_c,
-        })?;
+        };
+        // Corrected on a fresh PT-100 sample, coasting through the ticks that see a held one (a started observer).
+        let estimate = match observer.estimate() {
+            Some(before) if !input.fresh_sample => {
+                observer.coast(tick.dt_s, tick.applied_current_a, tick.finger);
+                observer.estimate().unwrap_or(before)
+            }
+            _ => observer.update_fresh(&tick)?,
+        };
         let mut module_fit = self.module_fit;
         if let Some(fit) = &mut module_fit {
             let (current_a, voltage_v) = (input.measured_current_a, input.voltage_v);

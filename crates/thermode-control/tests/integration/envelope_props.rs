@@ -166,7 +166,7 @@ proptest! {
                 let input = ControlInput { time_s: now_s, dt_s, setpoint_c: sp.setpoint_c,
                     setpoint_rate_c_per_s: sp.rate_c_per_s, sensor_c: temp_c, hot_side_c: 25.0,
                     applied_current_a: applied_a, finger_receptor_c: None, finger_conductance_w_k: 0.0,
-                    measured_current_a: f64::NAN, voltage_v: f64::NAN };
+                    measured_current_a: f64::NAN, voltage_v: f64::NAN, fresh_sample: true };
                 let request_a = controller.update(&input).unwrap_or(f64::NAN);
                 let d = env.gate_drive(now_s, request_a, &MeasuredOnly);
                 applied_a = d.current_a();

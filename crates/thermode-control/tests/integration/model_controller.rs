@@ -279,6 +279,7 @@ fn closed_loop(
     let mut rows = Vec::with_capacity(ticks);
     let mut applied_a = 0.0;
     let mut previous_c = profile(0.0);
+    let mut seen_sample = u64::MAX;
     for k in 0..ticks {
         let t = k as f64 * dt_s;
         let setpoint_c = profile(t + dt_s);
@@ -294,7 +295,9 @@ fn closed_loop(
             finger_conductance_w_k: finger.plate_w_k,
             measured_current_a: f64::NAN,
             voltage_v: f64::NAN,
+            fresh_sample: display.next_sample != seen_sample,
         };
+        seen_sample = display.next_sample;
         previous_c = setpoint_c;
         let current_a = controller.update(&input).unwrap_or_else(|e| panic!("tick {k}: {e}"));
         applied_a = current_a.clamp(-display.spec.limit_a, display.spec.limit_a);
@@ -897,6 +900,7 @@ fn good_input() -> ControlInput {
         finger_conductance_w_k: 0.064,
         measured_current_a: f64::NAN,
         voltage_v: f64::NAN,
+        fresh_sample: true,
     }
 }
 

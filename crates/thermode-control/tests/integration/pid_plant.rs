@@ -70,6 +70,7 @@ fn input(setpoint_c: f64, sensor_c: f64) -> ControlInput {
         finger_conductance_w_k: 0.0,
         measured_current_a: f64::NAN,
         voltage_v: f64::NAN,
+        fresh_sample: true,
     }
 }
 
