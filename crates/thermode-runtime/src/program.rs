@@ -177,6 +177,30 @@ impl Program {
         })
     }
 
+    /// Checks again, without allocating, that the program fits `limits` (those of the channel the loop runs it
+    /// on): every number in range and every target within the display's range already.
+    pub fn fits(&self, channel: usize, limits: &StimulusLimits) -> Result<(), ProgramError> {
+        for (index, segment) in self.segments.iter().enumerate() {
+            let bad = |source| ProgramError::BadValue {
+                channel,
+                segment: index,
+                source,
+            };
+            let (_, cutoff) = check_segment(*segment, limits).map_err(bad)?;
+            if let Some((requested_c, _)) = cutoff {
+                return Err(bad(BadValue {
+                    name: limits.display_c.name.into(),
+                    value: requested_c,
+                    rule: Rule::Within {
+                        min: limits.display_c.min,
+                        max: limits.display_c.max,
+                    },
+                }));
+            }
+        }
+        Ok(())
+    }
+
     /// The segments, targets clipped.
     pub fn segments(&self) -> &[Segment] {
         &self.segments

@@ -209,6 +209,11 @@ impl Daemon {
             }
             None => (None, None),
         };
+        let (events_feed, program_events) = crate::program_events::start().map_err(|source| ServeError::Io {
+            context: "cannot start the program-event thread".into(),
+            source,
+        })?;
+        taps.push(events_feed);
         let core = prepared.start(device, engines, clock.clone(), taps)?;
         let control = core.control().expect("a core just started has its loop");
         let realtime_loop = control.realtime().cpu.is_some();
@@ -248,6 +253,7 @@ impl Daemon {
             realtime: control.realtime().clone(),
             history: Arc::new(crate::api::history::History::default()),
             markers,
+            program_events,
             lsl: lsl.as_ref().map(|s| crate::lsl::LslInfo {
                 library: s.library().to_string(),
                 clock: s.clock(),
@@ -429,6 +435,7 @@ fn request_limits(config: &DaemonConfig, control: &LoopHandle) -> RequestLimits 
     RequestLimits {
         channel_count: control.channel_count(),
         max_message_bytes: server.max_message_bytes,
+        max_program_bytes: server.net.hard_message_bytes,
         stimulus: control.stimulus_limits(),
         max_subscribe_hz: server.max_subscribe_hz.min(config.core.loop_config.rate_hz),
         default_object_c: server.default_object_c,
