@@ -142,6 +142,9 @@ fn request_of(mut map: Map<String, Value>) -> Result<Request, ApiError> {
         "status" => Request::Status(fields_of(fields)?),
         "ack_recording" => Request::AckRecording(fields_of(fields)?),
         "marker" => Request::Marker(fields_of(fields)?),
+        "program" => Request::Program(fields_of(fields)?),
+        "program_stop" => Request::ProgramStop(fields_of(fields)?),
+        "response" => Request::Response(fields_of(fields)?),
         other => {
             return Err(ApiError::new(
                 ErrorCode::UnknownType,

@@ -676,7 +676,13 @@ impl ControlLoop {
         for (index, (channel, program)) in programs.into_iter().enumerate() {
             let rate_c_per_s = self.slots[channel].limits.max_rate_c_per_s;
             let from_c = starts_c[index];
-            self.set(channel, Stimulus::Direct { temp_c: from_c, rate_c_per_s })?;
+            self.set(
+                channel,
+                Stimulus::Direct {
+                    temp_c: from_c,
+                    rate_c_per_s,
+                },
+            )?;
             self.slots[channel].program = Some(Executor::new(program, from_c));
             let status = &mut self.status[channel];
             let label = self.program_label.clone();
@@ -723,7 +729,8 @@ impl ControlLoop {
             }) = answer
             {
                 let t = &self.status[at.channel].telemetry;
-                (at.sensor_c, at.plate_estimate_c, at.setpoint_c) = (t.sensor_c, t.plate_estimate_c, t.display_setpoint_c);
+                (at.sensor_c, at.plate_estimate_c, at.setpoint_c) =
+                    (t.sensor_c, t.plate_estimate_c, t.display_setpoint_c);
             }
         }
     }

@@ -462,7 +462,11 @@ mod tests {
                 "tick {k}: set-point {setpoint_c} °C, arithmetic {expected_c} °C"
             );
         }
-        assert!((setpoints[998] - 31.001).abs() < 1e-12, "one tick before the target: {} °C", setpoints[998]);
+        assert!(
+            (setpoints[998] - 31.001).abs() < 1e-12,
+            "one tick before the target: {} °C",
+            setpoints[998]
+        );
         assert_eq!(setpoints[999], 31.0, "the 1000th tick is on the target");
         assert!(setpoints[1000..].iter().all(|&c| c == 31.0), "the hold holds 31 °C");
         assert!(executor.finished());
@@ -471,14 +475,30 @@ mod tests {
     #[test]
     fn a_ramp_that_does_not_divide_evenly_arrives_on_the_ceiling_tick() {
         // 32 → 30 °C at 3 °C/s at 100 Hz: 0.03 °C a tick, 2/0.03 = 66.7 → the 67th tick (index 66) is 30 °C.
-        let mut executor = Executor::new(program(vec![ramp(30.0, 3.0, false), Segment::Step { to_c: 32.0 }]), 32.0);
+        let mut executor = Executor::new(
+            program(vec![ramp(30.0, 3.0, false), Segment::Step { to_c: 32.0 }]),
+            32.0,
+        );
         let (setpoints, starts) = run(&mut executor, 0.01, 1000);
-        assert_eq!(starts[1], (67, 1), "the step starts on the tick after the ramp's arrival");
-        assert!((setpoints[65] - (32.0 - 0.03 * 66.0)).abs() < 1e-12, "{}", setpoints[65]);
+        assert_eq!(
+            starts[1],
+            (67, 1),
+            "the step starts on the tick after the ramp's arrival"
+        );
+        assert!(
+            (setpoints[65] - (32.0 - 0.03 * 66.0)).abs() < 1e-12,
+            "{}",
+            setpoints[65]
+        );
         assert_eq!(setpoints[66], 30.0);
         // The step runs at the envelope's 10 °C/s: 0.1 °C a tick, 20 ticks back to 32 °C.
         assert!((setpoints[67] - 30.1).abs() < 1e-12, "{}", setpoints[67]);
-        assert_eq!(setpoints.len(), 67 + 20, "the step arrives on its 20th tick: {:?}", &setpoints[80..]);
+        assert_eq!(
+            setpoints.len(),
+            67 + 20,
+            "the step arrives on its 20th tick: {:?}",
+            &setpoints[80..]
+        );
         assert_eq!(*setpoints.last().expect("ticks"), 32.0);
     }
 
@@ -487,7 +507,11 @@ mod tests {
         // Method of limits: 32 → 0 °C at 1 °C/s until the response, back to 32 °C at 1 °C/s. 0 °C is clipped to the
         // display's 15 °C. The response after 2.5 s (tick index 2499, set-point 29.5 °C) ends the ramp there.
         let limits_run = program(vec![ramp(0.0, 1.0, true), ramp(32.0, 1.0, false)]);
-        assert_eq!(limits_run.cutoff_c(0), Some(15.0), "0 °C is clipped to the display's 15 °C");
+        assert_eq!(
+            limits_run.cutoff_c(0),
+            Some(15.0),
+            "0 °C is clipped to the display's 15 °C"
+        );
         let cut: Vec<Cutoff> = limits_run.cutoffs().collect();
         assert_eq!(
             cut,
@@ -505,7 +529,11 @@ mod tests {
         }
         assert!((last_c - 29.5).abs() < 1e-9, "{last_c}");
         assert_eq!(executor.respond(), Some(0), "the response ends the ramp");
-        assert_eq!(executor.respond(), None, "a second response in the same tick ends nothing more");
+        assert_eq!(
+            executor.respond(),
+            None,
+            "a second response in the same tick ends nothing more"
+        );
         let next = executor.step(0.001);
         assert_eq!(next.started, Some(1), "the return starts on the next tick");
         assert!((next.setpoint_c - 29.501).abs() < 1e-9, "{}", next.setpoint_c);
@@ -532,7 +560,11 @@ mod tests {
         assert_eq!(executor.step(0.01).started, Some(1));
         let mut timed_out = Executor::new(program(vec![hold(0.05), hold(0.0)]), 32.0);
         let (setpoints, starts) = run(&mut timed_out, 0.01, 100);
-        assert_eq!(starts, vec![(0, 0), (5, 1)], "0.05 s of 10 ms ticks, then a zero hold lasting one tick");
+        assert_eq!(
+            starts,
+            vec![(0, 0), (5, 1)],
+            "0.05 s of 10 ms ticks, then a zero hold lasting one tick"
+        );
         assert_eq!(setpoints.len(), 6);
     }
 
@@ -546,7 +578,10 @@ mod tests {
         let refused = Program::new(3, vec![hold; MAX_SEGMENTS + 1], &limits());
         let message = refused.expect_err("1000 segments").to_string();
         assert!(message.contains("999") && message.contains("1000"), "{message}");
-        assert_eq!(Program::new(0, vec![], &limits()), Err(ProgramError::Empty { channel: 0 }));
+        assert_eq!(
+            Program::new(0, vec![], &limits()),
+            Err(ProgramError::Empty { channel: 0 })
+        );
     }
 
     #[test]

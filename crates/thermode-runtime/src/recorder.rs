@@ -40,9 +40,9 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use thermode_platform::utc_stamp;
 
+use crate::command::ResponseKind;
 use crate::error::RuntimeError;
 use crate::interlock::Interlock;
-use crate::command::ResponseKind;
 use crate::snapshot::{Mode, ProgramMark, TickRecord};
 
 /// Capacity of the recorder queue \[ticks\].

@@ -100,8 +100,10 @@ struct Connection {
     next_ping: u64,
     /// The recording's event counts as last told to this client.
     recording: Option<watch::Receiver<RecordEvents>>,
-    /// Program events, sent while the client subscribes to telemetry.
+    /// Program events, sent while the client subscribes to telemetry or once it sent a program or response.
     program_events: Option<broadcast::Receiver<Arc<str>>>,
+    /// The client sent a program or a response: it gets program events even without a subscription.
+    follows_programs: bool,
 }
 
 impl Connection {
@@ -122,6 +124,7 @@ impl Connection {
             next_ping: 0,
             recording,
             program_events,
+            follows_programs: false,
         }
     }
 
@@ -209,6 +212,9 @@ impl Connection {
     }
 
     async fn execute(&mut self, request: ApiRequest, id: RequestId) -> Result<Reply, ApiError> {
+        if let ApiRequest::Command(Command::Program { .. } | Command::Response { .. }) = &request {
+            self.follows_programs = true;
+        }
         let done = match request {
             ApiRequest::Command(command) => to_loop(&self.app, command).await?,
             ApiRequest::Subscribe { rate_hz } => {
@@ -282,11 +288,11 @@ impl Connection {
         self.send(&Reply::Event(Event { event, recording })).await
     }
 
-    /// Sends a program event to a telemetry subscriber (others do not get them); a client too slow for the events
-    /// misses the oldest ones.
+    /// Sends a program event to a telemetry subscriber or a client that sent a program or response (others do not
+    /// get them); a client too slow for the events misses the oldest ones.
     async fn send_program_event(&mut self, event: Result<Arc<str>, broadcast::error::RecvError>) -> bool {
         match event {
-            Ok(text) if self.subscription.is_some() => {
+            Ok(text) if self.subscription.is_some() || self.follows_programs => {
                 self.send_message(Message::Text(text.as_ref().into())).await
             }
             Ok(_) | Err(broadcast::error::RecvError::Lagged(_)) => true,
