@@ -443,6 +443,7 @@ pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> ChannelStat
     ChannelState {
         telemetry: channel_telemetry(status),
         name: name.map(str::to_string),
+        program_segment: status.program.segment,
         fault_description: status.telemetry.fault.map(|f| f.description().to_string()),
         object_temp_c: status.object_c,
         direct_temp_c: status.direct.map(|d| d.0),

@@ -635,3 +635,151 @@ fn sigterm_stops_serve_cleanly() {
 fn sigint_stops_serve_cleanly() {
     stop_with(Signal::SIGINT);
 }
+
+/// An OSC message of one string argument.
+fn osc_text(address: &str, text: &str) -> Vec<u8> {
+    let padded = |mut bytes: Vec<u8>| {
+        bytes.push(0);
+        while !bytes.len().is_multiple_of(4) {
+            bytes.push(0);
+        }
+        bytes
+    };
+    let mut packet = padded(address.as_bytes().to_vec());
+    packet.extend(padded(b",s".to_vec()));
+    packet.extend(padded(text.as_bytes().to_vec()));
+    packet
+}
+
+/// A program's recorded rows of one channel: (time \[s\], display set-point \[°C\], segment, event).
+fn program_rows(csv: &Path, channel: usize) -> Vec<(f64, f64, String, String)> {
+    let text = std::fs::read_to_string(csv).unwrap_or_else(|e| panic!("{e}"));
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    let column = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .unwrap_or_else(|| panic!("no {name}"))
+    };
+    let (time, ch, setpoint, segment, event) = (
+        column("time_s"),
+        column("channel"),
+        column("display_setpoint_c"),
+        column("segment"),
+        column("event"),
+    );
+    lines
+        .map(|l| l.split(',').collect::<Vec<_>>())
+        .filter(|f| f[ch].parse::<usize>().ok() == Some(channel))
+        .map(|f| {
+            let number = |i: usize| f[i].parse::<f64>().unwrap_or(f64::NAN);
+            (
+                number(time),
+                number(setpoint),
+                f[segment].to_string(),
+                f[event].to_string(),
+            )
+        })
+        .collect()
+}
+
+/// A two-channel program (over OSC) on the TCS II and the MeCom emulators (temperature-commanded: no finger
+/// observer): both channels start on one tick, each ramp reaches its target when its rate says, the hold follows,
+/// and the true plate (the emulator's trace) is at the set-point during the hold.
+#[test]
+fn a_program_runs_on_the_tcs2_and_mecom_emulators() {
+    for (protocol, query) in [("tcs2", "?zones=2"), ("mecom", "?mode=temperature")] {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
+        let (trace, record) = (dir.path().join("trace.csv"), dir.path().join("sessions"));
+        let (emulator, pty) = emulate_with(2, None, &trace, &["--protocol", protocol]);
+        let mut host = serve_device(&format!("{protocol}:{pty}{query}"), None, Some(&record));
+        let mut tail = Tail::open(&trace);
+        let channels =
+            |s: &serde_json::Value, what: &dyn Fn(&serde_json::Value) -> bool| (0..2).all(|i| what(&s["channels"][i]));
+        wait_for(protocol, "readings", || {
+            channels(&status(host.http_port), &|c| c["sensor_c"].is_number())
+        });
+        // The emulated plates rest near the room's temperature: ramps of a few seconds, holds long enough to overlap.
+        let program = r#"{"0": [{"to_c": 30, "rate_c_s": 2}, {"hold_s": 8}], "1": [{"to_c": 33, "rate_c_s": 1.5}, {"hold_s": 8}]}"#;
+        let socket = UdpSocket::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("udp: {e}"));
+        socket
+            .send_to(&osc_text("/thermode/program", program), ("127.0.0.1", host.osc_port))
+            .unwrap_or_else(|e| panic!("send: {e}"));
+        wait_for(protocol, "both holds", || {
+            channels(&status(host.http_port), &|c| c["program_segment"] == 1)
+        });
+        std::thread::sleep(Duration::from_millis(700));
+        let mut plate_c = [f64::NAN; 2];
+        for r in tail.rows() {
+            plate_c[r.channel] = r.plate_c;
+        }
+        wait_for(protocol, "the end", || {
+            channels(&status(host.http_port), &|c| c["program_segment"].is_null())
+        });
+        signal(&host.process.0, Signal::SIGTERM);
+        wait_for(protocol, "serve's exit", || {
+            host.process.0.try_wait().ok().flatten().is_some()
+        });
+        drop(emulator);
+        let csv = session_csv(&record);
+        let start_of = |rows: &[(f64, f64, String, String)], segment: &str| {
+            rows.iter()
+                .position(|r| r.2 == segment && r.3.contains("segment_start"))
+                .unwrap_or_else(|| panic!("{protocol}: segment {segment} never started: {csv:?}"))
+        };
+        let rows = [program_rows(&csv, 0), program_rows(&csv, 1)];
+        let (first0, first1) = (start_of(&rows[0], "0"), start_of(&rows[1], "0"));
+        assert_eq!(
+            rows[0][first0].0, rows[1][first1].0,
+            "{protocol}: both channels start on one tick"
+        );
+        for (channel, to_c, rate) in [(0, 30.0, 2.0), (1, 33.0, 1.5)] {
+            let rows = &rows[channel];
+            let (first, hold) = (start_of(rows, "0"), start_of(rows, "1"));
+            let ramp_s = rows[hold].0 - rows[first].0;
+            // The ramp starts from the display's newest set-point (the row before) and lasts whole ticks.
+            let from_c = rows[first - 1].1;
+            let expected_s = ((to_c - from_c).abs() / (rate * LOOP_TICK_S)).ceil() * LOOP_TICK_S;
+            assert!(
+                (ramp_s - expected_s).abs() <= LOOP_TICK_S + 1e-6,
+                "{protocol}: channel {channel}'s ramp {from_c} → {to_c} °C at {rate} °C/s took {ramp_s} s, the \
+                 arithmetic says {expected_s} s"
+            );
+            let held = rows
+                .iter()
+                .filter(|r| r.2 == "1")
+                .map(|r| (r.1 - to_c).abs())
+                .fold(0.0, f64::max);
+            println!(
+                "{protocol}: channel {channel}: ramp {ramp_s:.2} s (arithmetic {expected_s:.2} s), the command \
+                 within {held:.4} °C of {to_c} °C during the hold"
+            );
+            assert!(
+                rows.iter().any(|r| r.3.contains("program_end")),
+                "{protocol}: the end is recorded"
+            );
+            println!(
+                "{protocol}: channel {channel}: true plate {:.3} °C 0.7 s into its hold at {to_c} °C",
+                plate_c[channel]
+            );
+            assert!(
+                (plate_c[channel] - to_c).abs() < 0.5,
+                "{protocol}: channel {channel}'s true plate {} °C during the hold at {to_c} °C",
+                plate_c[channel]
+            );
+        }
+    }
+}
+
+/// Polls `condition` every 50 ms until it holds; fails after [`LIVENESS_S`] naming `what`.
+fn wait_for(protocol: &str, what: &str, mut condition: impl FnMut() -> bool) {
+    let started = Instant::now();
+    while !condition() {
+        assert!(
+            started.elapsed().as_secs_f64() < LIVENESS_S,
+            "{protocol}: no {what} within {LIVENESS_S} s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
