@@ -93,8 +93,9 @@ pub enum ProgramEventKind {
     ProgramEnd,
 }
 
-/// A program's event, sent to every telemetry subscriber, written in the recording (`event` column) and pushed
-/// to the LSL marker stream under `serve --lsl`.
+/// A program's event, sent to the WebSocket clients that follow programs (telemetry subscribers and clients that
+/// sent a program or response), written beside a `--record` session (`<session>.events.csv`) and pushed to the LSL
+/// marker stream under `serve --lsl`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 pub struct ProgramEvent {
     /// What happened.

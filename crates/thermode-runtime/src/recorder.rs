@@ -21,12 +21,11 @@
 //! the loop stops, the writer syncs the file and its directory ([`Recorder::finish`]).
 //!
 //! Columns (the `render` CSV names and conventions): `time_s, channel, contact, material, mode, target_skin_c,
-//! skin_c, display_setpoint_c, sensor_c, current_a, hot_side_c, fault, segment, event` — `time_s` is loop time (the
-//! daemon clock's seconds, about 0 at the start), `contact` 1 while a material is touched and 0 otherwise,
-//! `material` its name (empty otherwise), `mode` `air`, `touch` or `direct`, `fault` the numeric fault code (empty
-//! without fault), `segment` the running program segment (from 0; empty without a program), `event` what happened
-//! to the program on that tick ([`program_event_text`]: `segment_start`, `response:button`,
-//! `response:rating=55`, `program_end`; empty otherwise).
+//! skin_c, display_setpoint_c, sensor_c, current_a, hot_side_c, fault` — `time_s` is loop time (the daemon clock's
+//! seconds, about 0 at the start), `contact` 1 while a material is touched and 0 otherwise, `material` its name
+//! (empty otherwise), `mode` `air`, `touch` or `direct`, `fault` the numeric fault code (empty without fault).
+//! A stimulus program's events (segment starts, responses, ends) go beside it, in `<session>.events.csv`, written
+//! by the daemon (`thermode_serve::program_events`).
 
 use std::borrow::Cow;
 use std::fs::{File, OpenOptions};
@@ -40,10 +39,9 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use thermode_platform::utc_stamp;
 
-use crate::command::ResponseKind;
 use crate::error::RuntimeError;
 use crate::interlock::Interlock;
-use crate::snapshot::{Mode, ProgramMark, TickRecord};
+use crate::snapshot::{Mode, TickRecord};
 
 /// Capacity of the recorder queue \[ticks\].
 pub const RECORD_QUEUE_TICKS: usize = 8192;
@@ -53,7 +51,7 @@ pub const FLUSH_INTERVAL_S: f64 = 0.5;
 pub const WRITE_CHUNK_BYTES: usize = 64 * 1024;
 /// The CSV header.
 pub const CSV_HEADER: &str =
-    "time_s,channel,contact,material,mode,target_skin_c,skin_c,display_setpoint_c,sensor_c,current_a,hot_side_c,fault,segment,event";
+    "time_s,channel,contact,material,mode,target_skin_c,skin_c,display_setpoint_c,sensor_c,current_a,hot_side_c,fault";
 
 /// How the error of a failed resumption (a new file that cannot be written either) begins.
 pub const RESUME_FAILED: &str = "cannot go on in a new file";
@@ -761,11 +759,9 @@ fn write_record(out: &mut impl Write, record: &TickRecord) -> std::io::Result<()
         } else {
             Cow::Borrowed("")
         };
-        let segment = row.program.segment.map_or(String::new(), |s| s.to_string());
-        let event = program_event_text(&row.program);
         writeln!(
             out,
-            "{:.6},{channel},{},{material},{},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{fault},{segment},{event}",
+            "{:.6},{channel},{},{material},{},{:.4},{:.4},{:.4},{:.4},{:.5},{:.4},{fault}",
             record.time_s,
             u8::from(touching),
             mode_name(row.mode),
@@ -778,26 +774,6 @@ fn write_record(out: &mut impl Write, record: &TickRecord) -> std::io::Result<()
         )?;
     }
     Ok(())
-}
-
-/// A row's program events as the `event` column writes them, `;`-separated: `response:button` or
-/// `response:rating=55`, `segment_start`, `program_end` (empty when nothing happened).
-pub fn program_event_text(mark: &ProgramMark) -> String {
-    let mut events: Vec<String> = Vec::new();
-    if let Some((kind, value, _)) = mark.response {
-        events.push(match (kind, value) {
-            (ResponseKind::Rating, Some(value)) => format!("response:rating={value}"),
-            (ResponseKind::Rating, None) => "response:rating".into(),
-            (ResponseKind::Button, _) => "response:button".into(),
-        });
-    }
-    if mark.started.is_some() {
-        events.push("segment_start".into());
-    }
-    if mark.ended {
-        events.push("program_end".into());
-    }
-    events.join(";")
 }
 
 /// The mode as written in the CSV and the API.

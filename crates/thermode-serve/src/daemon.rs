@@ -209,10 +209,14 @@ impl Daemon {
             }
             None => (None, None),
         };
-        let (events_feed, program_events) = crate::program_events::start().map_err(|source| ServeError::Io {
-            context: "cannot start the program-event thread".into(),
-            source,
-        })?;
+        let events_csv = prepared
+            .recording_path()
+            .map(|p| crate::program_events::events_csv_path(&p));
+        let (events_feed, program_events) =
+            crate::program_events::start(events_csv).map_err(|source| ServeError::Io {
+                context: "cannot start the program-event thread".into(),
+                source,
+            })?;
         taps.push(events_feed);
         let core = prepared.start(device, engines, clock.clone(), taps)?;
         let control = core.control().expect("a core just started has its loop");

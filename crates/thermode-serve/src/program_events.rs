@@ -1,10 +1,15 @@
 //! A program's events (a segment's start, a response, the program's end) as the wire tells them
-//! ([`ProgramEvent`]), read from the loop's tick records: sent to every WebSocket telemetry subscriber by the
-//! thread [`start`] runs, and pushed to the LSL marker stream under `serve --lsl` (`crate::lsl`).
+//! ([`ProgramEvent`]), read from the loop's tick records by the thread [`start`] runs: sent to the WebSocket clients
+//! that follow programs, and written beside a `--record` session as `<session>.events.csv` ([`EVENTS_CSV_HEADER`],
+//! one row per event, flushed at once); pushed to the LSL marker stream under `serve --lsl` (`crate::lsl`).
 
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
 use std::sync::mpsc::{sync_channel, SyncSender};
 use std::sync::Arc;
 
+use serde::Serialize;
 use thermode_protocol::{finite, ProgramEvent, ProgramEventKind, Response};
 use thermode_runtime::snapshot::{RecordRow, TickRecord};
 use tokio::sync::broadcast;
@@ -66,21 +71,115 @@ fn of_row(channel: usize, row: &RecordRow, tick: u64, time_s: f64) -> Vec<Progra
     events
 }
 
-/// Starts the thread that reads tick records and broadcasts their program events as WebSocket messages: the feed
-/// to give the loop, and the sender every connection subscribes to. The thread ends when the loop drops the feed.
-pub fn start() -> Result<(SyncSender<TickRecord>, broadcast::Sender<Arc<str>>), std::io::Error> {
+/// The header of `<session>.events.csv`: loop time and tick, the channel, the event (`segment_start`, `response`,
+/// `program_end`), the segment (started, or ended by the response), the started segment's target and cut-off
+/// \[°C\], the response's kind and rating, the display set-point and the plate sensor of that tick \[°C\] (empty
+/// where unknown).
+pub const EVENTS_CSV_HEADER: &str = "time_s,tick,channel,event,segment,to_c,cutoff_c,kind,value,setpoint_c,sensor_c";
+
+/// The events file of the session recorded in `csv`: `<session>.events.csv` beside it.
+pub fn events_csv_path(csv: &Path) -> PathBuf {
+    csv.with_extension("events.csv")
+}
+
+/// Starts the thread that reads tick records, broadcasts their program events as WebSocket messages and, with a
+/// recording, writes them to `events_csv` (created at the first event): the feed to give the loop, and the sender
+/// every connection subscribes to. The thread ends when the loop drops the feed. A write that fails is said once on
+/// standard error and the file is not written again (the events still reach the clients).
+pub fn start(
+    events_csv: Option<PathBuf>,
+) -> Result<(SyncSender<TickRecord>, broadcast::Sender<Arc<str>>), std::io::Error> {
     let (feed, records) = sync_channel::<TickRecord>(EVENT_QUEUE_TICKS);
     let (sender, _) = broadcast::channel::<Arc<str>>(EVENT_BACKLOG);
     let broadcaster = sender.clone();
     std::thread::Builder::new()
         .name("thermode-events".into())
         .spawn(move || {
+            let mut file = events_csv.map(EventsFile::new);
             while let Ok(record) = records.recv() {
-                for event in of_record(&record) {
+                let events = of_record(&record);
+                if let (Some(writer), false) = (&mut file, events.is_empty()) {
+                    writer.write(&events);
+                }
+                for event in events {
                     // No receiver (nobody connected) is not an error.
                     let _ = broadcaster.send(Arc::from(Response::ProgramEvent(event).to_text()));
                 }
             }
         })?;
     Ok((feed, sender))
+}
+
+/// `<session>.events.csv`, opened at the first event.
+struct EventsFile {
+    path: PathBuf,
+    out: Option<BufWriter<File>>,
+    failed: bool,
+}
+
+impl EventsFile {
+    fn new(path: PathBuf) -> Self {
+        EventsFile {
+            path,
+            out: None,
+            failed: false,
+        }
+    }
+
+    /// Appends `events` and flushes; a failure is told once and ends the file's writing.
+    fn write(&mut self, events: &[ProgramEvent]) {
+        if self.failed {
+            return;
+        }
+        if let Err(e) = self.try_write(events) {
+            self.failed = true;
+            eprintln!(
+                "thermode serve: the program events file {} cannot be written ({e}); the events still reach the \
+                 WebSocket clients and the LSL stream",
+                self.path.display()
+            );
+        }
+    }
+
+    fn try_write(&mut self, events: &[ProgramEvent]) -> std::io::Result<()> {
+        if self.out.is_none() {
+            let mut out = BufWriter::new(File::create(&self.path)?);
+            writeln!(out, "{EVENTS_CSV_HEADER}")?;
+            self.out = Some(out);
+        }
+        let Some(out) = self.out.as_mut() else {
+            return Ok(());
+        };
+        for event in events {
+            writeln!(out, "{}", csv_row(event))?;
+        }
+        out.flush()
+    }
+}
+
+/// A unit variant's name on the wire (`segment_start`, `button`).
+fn wire_name(value: &impl Serialize) -> String {
+    serde_json::to_value(value)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_default()
+}
+
+/// One event as a row of [`EVENTS_CSV_HEADER`].
+fn csv_row(event: &ProgramEvent) -> String {
+    let number = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
+    format!(
+        "{:.6},{},{},{},{},{},{},{},{},{},{}",
+        event.time_s,
+        event.tick,
+        event.channel,
+        wire_name(&event.event),
+        event.segment.map_or(String::new(), |s| s.to_string()),
+        number(event.to_c),
+        number(event.cutoff_c),
+        event.kind.as_ref().map_or(String::new(), wire_name),
+        number(event.value),
+        number(event.setpoint_c),
+        number(event.sensor_c),
+    )
 }

@@ -15,30 +15,54 @@ fn daemon(channels: usize, rate_hz: f64, dir: &std::path::Path) -> Daemon {
     common::start(config, SpyDevice::new(channels), common::pipelines())
 }
 
-/// The recording's rows as (time \[s\], channel, display set-point \[°C\], segment, event).
-fn recorded(path: &std::path::Path) -> Vec<(f64, usize, f64, String, String)> {
-    let text = std::fs::read_to_string(path).expect("recording");
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
-    let column = |name: &str| {
-        header
-            .iter()
-            .position(|h| *h == name)
-            .unwrap_or_else(|| panic!("no {name}"))
-    };
-    let (time, channel, setpoint) = (column("time_s"), column("channel"), column("display_setpoint_c"));
-    let (segment, event) = (column("segment"), column("event"));
-    lines
-        .map(|line| {
-            let f: Vec<&str> = line.split(',').collect();
-            let number = |i: usize| f[i].parse::<f64>().unwrap_or(f64::NAN);
-            let channel = f[channel].parse().expect("channel");
+/// A CSV file as its header's columns and rows of fields.
+fn csv(path: &std::path::Path) -> (Vec<String>, Vec<Vec<String>>) {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text
+        .lines()
+        .map(|l| l.split(',').map(str::to_string).collect::<Vec<_>>());
+    (lines.next().expect("header"), lines.collect())
+}
+
+/// The field `name` of `row` under `header`.
+fn field<'a>(header: &[String], row: &'a [String], name: &str) -> &'a str {
+    let i = header
+        .iter()
+        .position(|h| h == name)
+        .unwrap_or_else(|| panic!("no {name}"));
+    &row[i]
+}
+
+/// The recording's rows as (time \[s\], channel, display set-point \[°C\]).
+fn recorded(path: &std::path::Path) -> Vec<(f64, usize, f64)> {
+    let (header, rows) = csv(path);
+    let number = |row: &[String], name: &str| field(&header, row, name).parse::<f64>().unwrap_or(f64::NAN);
+    rows.iter()
+        .map(|r| {
             (
-                number(time),
-                channel,
-                number(setpoint),
-                f[segment].to_string(),
-                f[event].to_string(),
+                number(r, "time_s"),
+                number(r, "channel") as usize,
+                number(r, "display_setpoint_c"),
+            )
+        })
+        .collect()
+}
+
+/// The session's program events (`<session>.events.csv`) as (tick, time \[s\], channel, event, segment).
+fn recorded_events(session: &std::path::Path) -> Vec<(u64, f64, usize, String, String)> {
+    let (header, rows) = csv(&thermode_serve::program_events::events_csv_path(session));
+    assert_eq!(header.join(","), thermode_serve::program_events::EVENTS_CSV_HEADER);
+    rows.iter()
+        .map(|r| {
+            let text = |name: &str| field(&header, r, name).to_string();
+            let tick = text("tick").parse().expect("tick");
+            let time_s = text("time_s").parse().expect("time_s");
+            (
+                tick,
+                time_s,
+                text("channel").parse().expect("channel"),
+                text("event"),
+                text("segment"),
             )
         })
         .collect()
@@ -124,10 +148,21 @@ fn a_five_channel_program_changes_every_channel_s_set_point_first_on_one_tick_of
             "channel {channel}: first set-point change at {} s, the program's start tick at {start_s} s",
             first.0
         );
+    }
+    let start_tick = reply["start_tick"].as_u64().expect("start_tick");
+    let starts: Vec<_> = recorded_events(&path)
+        .into_iter()
+        .filter(|e| e.3 == "segment_start" && e.4 == "0")
+        .collect();
+    assert_eq!(starts.len(), 5, "one start of segment 0 per channel: {starts:?}");
+    for (tick, time_s, channel, _, _) in starts {
         assert_eq!(
-            (first.3.as_str(), first.4.as_str()),
-            ("0", "segment_start"),
-            "channel {channel}'s row at the start tick"
+            tick, start_tick,
+            "channel {channel}'s first segment starts on the reply's tick"
+        );
+        assert!(
+            (time_s - start_s).abs() < 5e-7,
+            "channel {channel}: {time_s} s against {start_s} s"
         );
     }
 }
@@ -206,10 +241,13 @@ fn a_response_ends_an_until_response_ramp_within_a_tick_of_its_reply_and_the_ret
     let (from, to) = (&rows[at], &rows[at + 300]);
     let rate = (to.2 - from.2) / (to.0 - from.0);
     assert!((rate - 1.0).abs() < 0.01, "return at {rate} °C/s, asked 1 °C/s");
-    assert_eq!(
-        (rows[at].3.as_str(), rows[at].4.as_str()),
-        ("1", "response:button;segment_start")
-    );
+    let at_reply: Vec<(String, String)> = recorded_events(&path)
+        .into_iter()
+        .filter(|e| e.0 == tick)
+        .map(|e| (e.3, e.4))
+        .collect();
+    let want = [("response", "0"), ("segment_start", "1")].map(|(e, s)| (e.to_string(), s.to_string()));
+    assert_eq!(at_reply, want, "the events file at the reply's tick");
 }
 
 #[test]

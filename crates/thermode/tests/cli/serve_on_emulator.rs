@@ -506,12 +506,12 @@ fn serve_refuses_a_device_whose_watchdog_is_too_long() {
     );
 }
 
-/// The newest session CSV in `dir`.
+/// The newest session CSV in `dir` (not a session's program events, `<session>.events.csv`).
 fn session_csv(dir: &Path) -> PathBuf {
     std::fs::read_dir(dir)
         .unwrap_or_else(|e| panic!("{e}"))
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .find(|p| p.extension().is_some_and(|x| x == "csv"))
+        .find(|p| p.extension().is_some_and(|x| x == "csv") && !p.to_string_lossy().ends_with(".events.csv"))
         .unwrap_or_else(|| panic!("no session CSV in {}", dir.display()))
 }
 
@@ -651,42 +651,48 @@ fn osc_text(address: &str, text: &str) -> Vec<u8> {
     packet
 }
 
-/// A program's recorded rows of one channel: (time \[s\], display set-point \[°C\], segment, event).
-fn program_rows(csv: &Path, channel: usize) -> Vec<(f64, f64, String, String)> {
-    let text = std::fs::read_to_string(csv).unwrap_or_else(|e| panic!("{e}"));
+/// A CSV file's rows as maps from its header's names to the fields.
+fn csv_records(path: &Path) -> Vec<std::collections::HashMap<String, String>> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
-    let column = |name: &str| {
-        header
-            .iter()
-            .position(|h| *h == name)
-            .unwrap_or_else(|| panic!("no {name}"))
-    };
-    let (time, ch, setpoint, segment, event) = (
-        column("time_s"),
-        column("channel"),
-        column("display_setpoint_c"),
-        column("segment"),
-        column("event"),
-    );
     lines
-        .map(|l| l.split(',').collect::<Vec<_>>())
-        .filter(|f| f[ch].parse::<usize>().ok() == Some(channel))
-        .map(|f| {
-            let number = |i: usize| f[i].parse::<f64>().unwrap_or(f64::NAN);
-            (
-                number(time),
-                number(setpoint),
-                f[segment].to_string(),
-                f[event].to_string(),
-            )
+        .map(|l| {
+            header
+                .iter()
+                .map(|h| h.to_string())
+                .zip(l.split(',').map(str::to_string))
+                .collect()
         })
         .collect()
 }
 
+/// One channel's recorded (time \[s\], display set-point \[°C\]).
+fn setpoint_rows(csv: &Path, channel: usize) -> Vec<(f64, f64)> {
+    let number = |r: &std::collections::HashMap<String, String>, k: &str| r[k].parse::<f64>().unwrap_or(f64::NAN);
+    csv_records(csv)
+        .iter()
+        .filter(|r| r["channel"] == channel.to_string())
+        .map(|r| (number(r, "time_s"), number(r, "display_setpoint_c")))
+        .collect()
+}
+
+/// The loop time \[s\] of `channel`'s program event `event` (of `segment`, if given) in `<session>.events.csv`.
+fn event_time_s(csv: &Path, channel: usize, event: &str, segment: Option<usize>) -> f64 {
+    csv_records(&csv.with_extension("events.csv"))
+        .iter()
+        .find(|r| {
+            r["channel"] == channel.to_string()
+                && r["event"] == event
+                && segment.is_none_or(|s| r["segment"] == s.to_string())
+        })
+        .and_then(|r| r["time_s"].parse().ok())
+        .unwrap_or_else(|| panic!("no {event} {segment:?} of channel {channel} beside {}", csv.display()))
+}
+
 /// A two-channel program (over OSC) on the TCS II and the MeCom emulators (temperature-commanded: no finger
-/// observer): both channels start on one tick, each ramp reaches its target when its rate says, the hold follows,
-/// and the true plate (the emulator's trace) is at the set-point during the hold.
+/// observer): both channels start on one tick, each ramp ends when its rate says, the hold lasts its time, and the
+/// program's last set-point holds: the command is the target and the true plate (the emulator's trace) gets there.
 #[test]
 fn a_program_runs_on_the_tcs2_and_mecom_emulators() {
     for (protocol, query) in [("tcs2", "?zones=2"), ("mecom", "?mode=temperature")] {
@@ -706,66 +712,69 @@ fn a_program_runs_on_the_tcs2_and_mecom_emulators() {
         socket
             .send_to(&osc_text("/thermode/program", program), ("127.0.0.1", host.osc_port))
             .unwrap_or_else(|e| panic!("send: {e}"));
-        wait_for(protocol, "both holds", || {
-            channels(&status(host.http_port), &|c| c["program_segment"] == 1)
+        wait_for(protocol, "the start", || {
+            channels(&status(host.http_port), &|c| c["program_segment"].is_number())
         });
-        std::thread::sleep(Duration::from_millis(700));
+        wait_for(protocol, "the end", || {
+            channels(&status(host.http_port), &|c| c["program_segment"].is_null())
+        });
+        // The program's last set-point holds: the command is the target, and the plate gets there (how fast depends
+        // on the emulator's share of a loaded machine, so only the arrival is judged).
+        let at = |c: &serde_json::Value, key: &str, to_c: f64, within_c: f64| {
+            c[key].as_f64().is_some_and(|v| (v - to_c).abs() < within_c)
+        };
+        wait_for(protocol, "the targets held", || {
+            let s = status(host.http_port);
+            [(0, 30.0), (1, 33.0)].iter().all(|&(i, to_c)| {
+                let c = &s["channels"][i];
+                at(c, "display_setpoint_c", to_c, 1e-3) && at(c, "sensor_c", to_c, 0.3)
+            })
+        });
         let mut plate_c = [f64::NAN; 2];
         for r in tail.rows() {
             plate_c[r.channel] = r.plate_c;
         }
-        wait_for(protocol, "the end", || {
-            channels(&status(host.http_port), &|c| c["program_segment"].is_null())
-        });
         signal(&host.process.0, Signal::SIGTERM);
         wait_for(protocol, "serve's exit", || {
             host.process.0.try_wait().ok().flatten().is_some()
         });
         drop(emulator);
         let csv = session_csv(&record);
-        let start_of = |rows: &[(f64, f64, String, String)], segment: &str| {
-            rows.iter()
-                .position(|r| r.2 == segment && r.3.contains("segment_start"))
-                .unwrap_or_else(|| panic!("{protocol}: segment {segment} never started: {csv:?}"))
-        };
-        let rows = [program_rows(&csv, 0), program_rows(&csv, 1)];
-        let (first0, first1) = (start_of(&rows[0], "0"), start_of(&rows[1], "0"));
+        let start_s = |channel, segment| event_time_s(&csv, channel, "segment_start", Some(segment));
         assert_eq!(
-            rows[0][first0].0, rows[1][first1].0,
+            start_s(0, 0),
+            start_s(1, 0),
             "{protocol}: both channels start on one tick"
         );
         for (channel, to_c, rate) in [(0, 30.0, 2.0), (1, 33.0, 1.5)] {
-            let rows = &rows[channel];
-            let (first, hold) = (start_of(rows, "0"), start_of(rows, "1"));
-            let ramp_s = rows[hold].0 - rows[first].0;
-            // The ramp starts from the display's newest set-point (the row before) and lasts whole ticks.
-            let from_c = rows[first - 1].1;
+            let (first_s, hold_s) = (start_s(channel, 0), start_s(channel, 1));
+            let end_s = event_time_s(&csv, channel, "program_end", None);
+            let rows = setpoint_rows(&csv, channel);
+            let ramp_s = hold_s - first_s;
+            // The ramp starts from the display's newest set-point (the tick before) and lasts whole ticks.
+            let from_c = rows.iter().rev().find(|r| r.0 < first_s).map_or(f64::NAN, |r| r.1);
             let expected_s = ((to_c - from_c).abs() / (rate * LOOP_TICK_S)).ceil() * LOOP_TICK_S;
             assert!(
                 (ramp_s - expected_s).abs() <= LOOP_TICK_S + 1e-6,
                 "{protocol}: channel {channel}'s ramp {from_c} → {to_c} °C at {rate} °C/s took {ramp_s} s, the \
                  arithmetic says {expected_s} s"
             );
-            let held = rows
-                .iter()
-                .filter(|r| r.2 == "1")
-                .map(|r| (r.1 - to_c).abs())
-                .fold(0.0, f64::max);
             println!(
-                "{protocol}: channel {channel}: ramp {ramp_s:.2} s (arithmetic {expected_s:.2} s), the command \
-                 within {held:.4} °C of {to_c} °C during the hold"
+                "{protocol}: channel {channel}: ramp {ramp_s:.2} s (arithmetic {expected_s:.2} s), hold {:.2} s",
+                end_s - hold_s
             );
             assert!(
-                rows.iter().any(|r| r.3.contains("program_end")),
-                "{protocol}: the end is recorded"
+                (end_s - hold_s - 8.0).abs() <= LOOP_TICK_S + 1e-6,
+                "{protocol}: the 8 s hold lasted {} s",
+                end_s - hold_s
             );
             println!(
-                "{protocol}: channel {channel}: true plate {:.3} °C 0.7 s into its hold at {to_c} °C",
+                "{protocol}: channel {channel}: true plate {:.3} °C held at {to_c} °C",
                 plate_c[channel]
             );
             assert!(
                 (plate_c[channel] - to_c).abs() < 0.5,
-                "{protocol}: channel {channel}'s true plate {} °C during the hold at {to_c} °C",
+                "{protocol}: channel {channel}'s true plate {} °C, held at {to_c} °C",
                 plate_c[channel]
             );
         }
