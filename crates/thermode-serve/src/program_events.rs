@@ -83,16 +83,15 @@ pub fn events_csv_path(csv: &Path) -> PathBuf {
 }
 
 /// Starts the thread that reads tick records, broadcasts their program events as WebSocket messages and, with a
-/// recording, writes them to `events_csv` (created at the first event): the feed to give the loop, and the sender
-/// every connection subscribes to. The thread ends when the loop drops the feed. A write that fails is said once on
+/// recording, writes them to `events_csv` (created at the first event): the feed to give the loop, the sender every
+/// connection subscribes to, and the thread (it ends once the loop has dropped the feed and its last events are
+/// written: join it after stopping the loop). A write that fails is said once on
 /// standard error and the file is not written again (the events still reach the clients).
-pub fn start(
-    events_csv: Option<PathBuf>,
-) -> Result<(SyncSender<TickRecord>, broadcast::Sender<Arc<str>>), std::io::Error> {
+pub fn start(events_csv: Option<PathBuf>) -> Result<EventThread, std::io::Error> {
     let (feed, records) = sync_channel::<TickRecord>(EVENT_QUEUE_TICKS);
     let (sender, _) = broadcast::channel::<Arc<str>>(EVENT_BACKLOG);
     let broadcaster = sender.clone();
-    std::thread::Builder::new()
+    let thread = std::thread::Builder::new()
         .name("thermode-events".into())
         .spawn(move || {
             let mut file = events_csv.map(EventsFile::new);
@@ -107,7 +106,18 @@ pub fn start(
                 }
             }
         })?;
-    Ok((feed, sender))
+    Ok(EventThread { feed, sender, thread })
+}
+
+/// The running event thread: what [`start`] gives.
+#[derive(Debug)]
+pub struct EventThread {
+    /// The loop's feed of tick records (give it to the loop among its feeds).
+    pub feed: SyncSender<TickRecord>,
+    /// The broadcast every WebSocket connection subscribes to.
+    pub sender: broadcast::Sender<Arc<str>>,
+    /// The thread, to join once the loop has stopped.
+    pub thread: std::thread::JoinHandle<()>,
 }
 
 /// `<session>.events.csv`, opened at the first event.
