@@ -193,3 +193,58 @@ fn csv_row(event: &ProgramEvent) -> String {
         number(event.sensor_c),
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use thermode_protocol::ResponseKind;
+    use thermode_runtime::snapshot::{Mode, ProgramMark, EMPTY_TELEMETRY};
+
+    fn row(program: ProgramMark) -> RecordRow {
+        RecordRow {
+            label: Arc::from("program"),
+            mode: Mode::Direct,
+            object_c: None,
+            direct: None,
+            held_off: false,
+            telemetry: thermode_runtime::Telemetry {
+                display_setpoint_c: 29.5,
+                sensor_c: 29.75,
+                ..EMPTY_TELEMETRY
+            },
+            program,
+        }
+    }
+
+    #[test]
+    fn a_response_and_the_next_segment_on_one_tick_are_two_events_in_that_order() {
+        let mark = ProgramMark {
+            segment: Some(1),
+            started: Some((1, Some(32.0), None)),
+            ended: false,
+            response: Some((ResponseKind::Rating, Some(55.0), Some(0))),
+        };
+        let events = of_row(3, &row(mark), 1200, 1.2);
+        let kinds: Vec<ProgramEventKind> = events.iter().map(|e| e.event).collect();
+        assert_eq!(kinds, [ProgramEventKind::Response, ProgramEventKind::SegmentStart]);
+        assert_eq!(
+            (events[0].segment, events[0].value),
+            (Some(0), Some(55.0)),
+            "the response ended segment 0"
+        );
+        assert_eq!((events[1].segment, events[1].to_c), (Some(1), Some(32.0)));
+        assert!(events
+            .iter()
+            .all(|e| (e.channel, e.tick, e.sensor_c) == (3, 1200, Some(29.75))));
+        assert_eq!(csv_row(&events[0]), "1.200000,1200,3,response,0,,,rating,55,29.5,29.75");
+        assert_eq!(csv_row(&events[1]), "1.200000,1200,3,segment_start,1,32,,,,29.5,29.75");
+        assert_eq!(
+            EVENTS_CSV_HEADER.split(',').count(),
+            csv_row(&events[0]).split(',').count()
+        );
+        assert!(
+            of_row(0, &row(ProgramMark::default()), 1, 0.01).is_empty(),
+            "no event, no row"
+        );
+    }
+}

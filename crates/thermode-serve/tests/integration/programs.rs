@@ -362,3 +362,63 @@ fn program_stop_holds_the_set_point_where_the_program_left_it() {
         );
     });
 }
+
+#[test]
+fn osc_runs_a_program_and_its_responses_reach_the_events_file() {
+    use thermode_serve::osc::{encode, OscArg};
+    let dir = tempfile::tempdir().expect("temp dir");
+    let daemon = daemon(2, 100.0, dir.path());
+    let (addr, osc) = (daemon.http_addr(), daemon.osc_addr().expect("OSC"));
+    let path = daemon.recording_path().expect("recording");
+    let socket = std::net::UdpSocket::bind("127.0.0.1:0").expect("udp");
+    let send = |address: &str, args: &[OscArg]| {
+        socket.send_to(&encode(address, args), osc).expect("send");
+    };
+    let program = r#"{"1": [{"hold_s": 30, "until": "response"}, {"hold_s": 30, "until": "response"}, {"to_c": 31}]}"#;
+    send("/thermode/program", &[OscArg::Str(program.into())]);
+    let segment = || common::get_json(addr, "/api/status")["channels"][1]["program_segment"].as_u64();
+    assert!(common::wait_until(5.0, || segment() == Some(0)), "the program started");
+    send("/thermode/channel/1/response", &[OscArg::Float(1.0)]);
+    assert!(
+        common::wait_until(5.0, || segment() == Some(1)),
+        "the button ended the first hold"
+    );
+    send("/thermode/channel/1/rating", &[OscArg::Float(40.0)]);
+    assert!(
+        common::wait_until(5.0, || segment().is_none()),
+        "the rating ended the second hold, the step ran"
+    );
+    send("/thermode/channel/1/rating", &[OscArg::Float(140.0)]);
+    send("/thermode/channel/0/program_stop", &[]);
+    let osc_status = || common::get_json(addr, "/api/status")["osc"].clone();
+    assert!(
+        common::wait_until(5.0, || osc_status()["refused"] == 1),
+        "{}",
+        osc_status()
+    );
+    assert!(
+        osc_status()["last_error"]
+            .as_str()
+            .is_some_and(|e| e.contains("rating") && e.contains("100")),
+        "{}",
+        osc_status()
+    );
+    daemon.shutdown().expect("shutdown");
+    let (header, rows) = csv(&thermode_serve::program_events::events_csv_path(&path));
+    let summary: Vec<String> = rows
+        .iter()
+        .map(|r| {
+            let f = |name| field(&header, r, name);
+            format!("{} {} {} {}", f("event"), f("segment"), f("kind"), f("value"))
+        })
+        .collect();
+    let want = [
+        "segment_start 0  ",
+        "response 0 button ",
+        "segment_start 1  ",
+        "response 1 rating 40",
+        "segment_start 2  ",
+        "program_end   ",
+    ];
+    assert_eq!(summary, want, "the events file");
+}
