@@ -7,12 +7,20 @@ use thermode_serve::Daemon;
 
 use crate::common::{self, ask, client_runtime, next_json, ws_connect, SpyDevice};
 
-/// A daemon of `channels` simulated channels with the render pipelines at `rate_hz`, recording into `dir`.
+/// A daemon of `channels` simulated channels with the render pipelines at `rate_hz`, recording into `dir`, once
+/// every channel has a first reading (a program starts from the display's temperature).
 fn daemon(channels: usize, rate_hz: f64, dir: &std::path::Path) -> Daemon {
     let mut config = common::test_config();
     config.core.loop_config.rate_hz = rate_hz;
     config.core.record_dir = Some(dir.to_path_buf());
-    common::start(config, SpyDevice::new(channels), common::pipelines())
+    let daemon = common::start(config, SpyDevice::new(channels), common::pipelines());
+    let addr = daemon.http_addr();
+    let measured = || {
+        let status = common::get_json(addr, "/api/status");
+        (0..channels).all(|i| status["channels"][i]["sensor_c"].is_number())
+    };
+    assert!(common::wait_until(10.0, measured), "no first reading within 10 s");
+    daemon
 }
 
 /// A CSV file as its header's columns and rows of fields.
