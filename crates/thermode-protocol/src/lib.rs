@@ -7,12 +7,14 @@
 //! - [`parse`]: reading a request message, with the stable error codes ([`ApiError`]);
 //! - [`reply`]: what the daemon sends ([`Response`]: replies, errors, the status, telemetry, events);
 //! - [`telemetry`], [`status`]: the numbers and states those carry;
+//! - [`program`]: stimulus programs and participants' responses (requests, cut-offs, events);
 //! - [`materials`]: a material given by its properties, and the library as listed.
 //!
 //! The prose of the protocol (what each request does, the limits, the security rules) is `docs/api.md`.
 
 pub mod materials;
 pub mod parse;
+pub mod program;
 pub mod reply;
 pub mod request;
 pub mod schema;
@@ -20,7 +22,8 @@ pub mod status;
 pub mod telemetry;
 
 pub use materials::{MaterialInfo, MaterialProperties};
-pub use parse::{parse_request, ApiError};
+pub use parse::{parse_request, parse_request_sized, ApiError};
+pub use program::{ProgramCutoff, ProgramEvent, ProgramEventKind, ResponseKind};
 pub use reply::{AppliedAt, Done, ErrorCode, ErrorReply, Event, OkReply, RecordingEvent, Response, StatusReply};
 pub use request::{Envelope, Request, RequestId};
 pub use telemetry::{finite, ChannelState, ChannelTelemetry, Mode, OffReason, Owner, Telemetry};

@@ -55,10 +55,37 @@ impl ApiError {
     }
 }
 
+/// Whether `text` is a JSON object whose `type` is `program`.
+fn is_program(text: &str) -> bool {
+    #[derive(serde::Deserialize)]
+    struct Kind {
+        #[serde(rename = "type")]
+        kind: Option<String>,
+    }
+    serde_json::from_str::<Kind>(text).is_ok_and(|k| k.kind.as_deref() == Some("program"))
+}
+
 /// Reads one text message of at most `max_message_bytes`: the `id` to answer with (`None` when there is none or it
 /// is invalid) and the request or the error.
 pub fn parse_request(text: &str, max_message_bytes: usize) -> (Option<RequestId>, Result<Request, ApiError>) {
-    if text.len() > max_message_bytes {
+    parse_request_sized(text, max_message_bytes, max_message_bytes)
+}
+
+/// [`parse_request`] with a larger limit for `program` requests, `max_program_bytes` (a long program needs more
+/// room than any other request): a message above `max_message_bytes` is read only if it is at most
+/// `max_program_bytes` and a `program`.
+pub fn parse_request_sized(
+    text: &str,
+    max_message_bytes: usize,
+    max_program_bytes: usize,
+) -> (Option<RequestId>, Result<Request, ApiError>) {
+    let limit = if text.len() > max_message_bytes && text.len() <= max_program_bytes && is_program(text) {
+        max_program_bytes
+    } else {
+        max_message_bytes
+    };
+    if text.len() > limit {
+        let max_message_bytes = limit;
         let message = format!(
             "message of {} bytes exceeds the limit of {max_message_bytes} bytes",
             text.len()
@@ -115,6 +142,9 @@ fn request_of(mut map: Map<String, Value>) -> Result<Request, ApiError> {
         "status" => Request::Status(fields_of(fields)?),
         "ack_recording" => Request::AckRecording(fields_of(fields)?),
         "marker" => Request::Marker(fields_of(fields)?),
+        "program" => Request::Program(fields_of(fields)?),
+        "program_stop" => Request::ProgramStop(fields_of(fields)?),
+        "response" => Request::Response(fields_of(fields)?),
         other => {
             return Err(ApiError::new(
                 ErrorCode::UnknownType,

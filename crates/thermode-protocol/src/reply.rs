@@ -5,6 +5,7 @@
 use schemars::JsonSchema;
 use serde::{Deserialize, Serialize};
 
+use crate::program::{ProgramCutoff, ProgramEvent, ResponseKind};
 use crate::request::RequestId;
 use crate::status::{Recording, Status};
 use crate::telemetry::Telemetry;
@@ -175,6 +176,51 @@ pub enum Done {
         /// The marker went to the LSL marker stream.
         lsl: bool,
     },
+    /// The program runs: every channel's first set-point is that of `start_tick`.
+    Program {
+        /// The channels, in order.
+        channels: Vec<usize>,
+        /// The tick whose set-point is every channel's first of the program.
+        start_tick: u64,
+        /// Loop time of that tick \[s\].
+        start_time_s: f64,
+        /// The display's limit a target was clipped to \[°C\] (the first clipped one's), if any was: the
+        /// display's cut-off, never applied silently.
+        cutoff_c: Option<f64>,
+        /// Every clipped target.
+        cutoffs: Vec<ProgramCutoff>,
+        /// When (the same tick).
+        #[serde(flatten)]
+        applied: AppliedAt,
+    },
+    /// The channel's program ended; its set-point holds.
+    ProgramStop {
+        /// The channel.
+        channel: usize,
+        /// When.
+        #[serde(flatten)]
+        applied: AppliedAt,
+    },
+    /// The response took effect on `tick`: the plate and set-point at that tick.
+    Response {
+        /// The channel.
+        channel: usize,
+        /// `button` or `rating`.
+        kind: ResponseKind,
+        /// The rating (ratings only).
+        value: Option<f64>,
+        /// The plate sensor at the response's tick \[°C\] (null where the device cannot measure).
+        sensor_c: Option<f64>,
+        /// The plate estimate at that tick \[°C\] (null where the device cannot measure).
+        plate_estimate_c: Option<f64>,
+        /// The display set-point of that tick \[°C\].
+        setpoint_c: Option<f64>,
+        /// The `until: response` segment the response ended, if it ended one.
+        ended_segment: Option<usize>,
+        /// When: the tick the response took effect on.
+        #[serde(flatten)]
+        applied: AppliedAt,
+    },
 }
 
 /// A successful reply.
@@ -233,6 +279,8 @@ pub enum Response {
     Telemetry(Telemetry),
     /// An event.
     Event(Event),
+    /// A program's event (a segment's start, a response, the program's end), to telemetry subscribers.
+    ProgramEvent(ProgramEvent),
 }
 
 impl Response {

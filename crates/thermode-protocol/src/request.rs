@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::materials::MaterialProperties;
 pub use crate::materials::MAX_NAME_CHARS;
+use crate::program::{ProgramRequest, ResponseInput};
 
 /// A request's `id`: a number or a string of at most [`MAX_ID_CHARS`] characters, echoed unchanged in the reply.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
@@ -76,6 +77,12 @@ pub enum Request {
     AckRecording(NoFields),
     /// A client's event marker, stamped with the loop clock (and sent to the LSL marker stream under `--lsl`).
     Marker(Marker),
+    /// A stimulus program: each of a set of channels gets a list of segments; all start on the same tick.
+    Program(ProgramRequest),
+    /// End a channel's program; its set-point holds where it is.
+    ProgramStop(OnChannel),
+    /// A participant's response on a channel (a button press or a rating), effective on the next tick.
+    Response(ResponseInput),
 }
 
 /// `touch`: a library material by name, or one given by its properties.
@@ -95,7 +102,7 @@ pub struct Touch {
     pub object_temp_c: Option<f64>,
 }
 
-/// A request about one channel (`release`, `clear_fault`).
+/// A request about one channel (`release`, `clear_fault`, `program_stop`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct OnChannel {
@@ -142,7 +149,7 @@ pub struct NoFields {}
 
 impl Request {
     /// Every request `type`, in the order of the protocol's documentation.
-    pub const TYPES: [&'static str; 10] = [
+    pub const TYPES: [&'static str; 13] = [
         "touch",
         "release",
         "setpoint",
@@ -153,6 +160,9 @@ impl Request {
         "status",
         "ack_recording",
         "marker",
+        "program",
+        "program_stop",
+        "response",
     ];
 
     /// The request's `type`.
@@ -168,6 +178,9 @@ impl Request {
             Request::Status(_) => "status",
             Request::AckRecording(_) => "ack_recording",
             Request::Marker(_) => "marker",
+            Request::Program(_) => "program",
+            Request::ProgramStop(_) => "program_stop",
+            Request::Response(_) => "response",
         }
     }
 
@@ -213,6 +226,15 @@ mod tests {
             Request::Marker(Marker {
                 text: "t".into(),
                 channel: None,
+            }),
+            Request::Program(ProgramRequest {
+                channels: [("0".to_string(), vec![crate::program::SegmentSpec::default()])].into(),
+            }),
+            Request::ProgramStop(OnChannel { channel: 0 }),
+            Request::Response(ResponseInput {
+                channel: 0,
+                kind: crate::program::ResponseKind::Button,
+                value: None,
             }),
         ];
         let kinds: Vec<&str> = examples.iter().map(Request::kind).collect();

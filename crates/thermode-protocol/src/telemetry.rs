@@ -104,6 +104,8 @@ pub struct ChannelState {
     pub telemetry: ChannelTelemetry,
     /// The channel's name (e.g. the finger), if the display names its channels.
     pub name: Option<String>,
+    /// The running segment of the channel's stimulus program (from 0); null without a running program.
+    pub program_segment: Option<usize>,
     /// The latched fault, in words.
     pub fault_description: Option<String>,
     /// The contact's object temperature \[°C\] (touch only).

@@ -24,10 +24,13 @@ use thermode_safety::FaultCode;
 use thiserror::Error;
 
 use crate::engine::{EngineError, Stimulus};
+use crate::program::Program;
 use crate::reply::{self, Closed, ReplyReceiver, ReplySender};
 
 /// Who set a channel's stimulus: the wire's vocabulary (`thermode_protocol::Owner`).
 pub use thermode_protocol::Owner;
+/// The kind of a participant's response: the wire's vocabulary (`thermode_protocol::ResponseKind`).
+pub use thermode_protocol::ResponseKind;
 
 /// A command for the control loop: the one vocabulary of the WebSocket API, OSC, the demo script and tests. What
 /// a channel should show travels as the pipeline's [`Stimulus`], so nothing between the wire and the engine spells
@@ -60,6 +63,30 @@ pub enum Command {
     },
     /// Release every channel and drive 0 A on each until its next command.
     StopAll,
+    /// Run a stimulus program on each of `programs`' channels, all starting on the tick that applies it (each
+    /// checked again against its channel's limits by the loop). A channel's program ends at its channel's next
+    /// command (or a `ProgramStop`).
+    Program {
+        /// (channel, its program), channels distinct.
+        programs: Vec<(usize, Program)>,
+        /// Who asked.
+        owner: Owner,
+    },
+    /// End `channel`'s program; its set-point holds where it is.
+    ProgramStop {
+        /// Channel (from 0).
+        channel: usize,
+    },
+    /// A participant's response on `channel`: it ends a running `until: response` segment, and the answer carries
+    /// the plate and set-point of the tick that applied it.
+    Response {
+        /// Channel (from 0).
+        channel: usize,
+        /// Button or rating.
+        kind: ResponseKind,
+        /// The rating, 0 to 100 (ratings only).
+        value: Option<f64>,
+    },
     /// A WebSocket client disconnected: release its contacts after the grace period unless retouched.
     ClientGone {
         /// The connection number.
@@ -104,6 +131,23 @@ pub struct Applied {
     pub tick: u64,
     /// Loop time of that tick \[s\].
     pub time_s: f64,
+    /// A response's channel as that tick left it (responses only).
+    pub at_response: Option<AtResponse>,
+}
+
+/// A channel at the tick that applied a response: the temperature at the response, not after it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct AtResponse {
+    /// The channel.
+    pub channel: usize,
+    /// The plate sensor's reading of that tick \[°C\] (NaN where the device cannot measure it).
+    pub sensor_c: f64,
+    /// The engine's plate estimate of that tick \[°C\] (NaN where there is none).
+    pub plate_estimate_c: f64,
+    /// The display set-point of that tick \[°C\].
+    pub setpoint_c: f64,
+    /// The `until: response` segment the response ended, if it ended one.
+    pub ended_segment: Option<usize>,
 }
 
 /// Why the loop refused a command (nothing changed).
@@ -163,6 +207,15 @@ pub enum CommandError {
     /// The control loop has stopped.
     #[error("the control loop has stopped")]
     Stopped,
+    /// A program's channel refused it (a segment out of the channel's limits).
+    #[error(transparent)]
+    Program(#[from] crate::program::ProgramError),
+    /// The channel has no temperature to start a program from yet (no reading so far).
+    #[error("channel {channel} has no temperature reading yet to start a program from; try again")]
+    NoStartTemperature {
+        /// The channel.
+        channel: usize,
+    },
     /// The channel's thermal-dose budget is spent: its drive is off (0 A) and it renders nothing but air until the
     /// dose ledger is reset (`thermode dose reset`, after checking the skin).
     #[error(

@@ -30,12 +30,14 @@ use thermode_model::params::Rule;
 use thermode_safety::{DoseLedger, DriveCommand, FaultCode};
 
 use crate::command::{
-    Applied, Command, CommandError, CommandReceiver, CommandSender, Owner, Queued, Reply, URGENT_QUEUE_LEN,
+    Applied, AtResponse, Command, CommandError, CommandReceiver, CommandSender, Owner, Queued, Reply, ResponseKind,
+    URGENT_QUEUE_LEN,
 };
 use crate::engine::{ChannelEngine, EngineError, EngineFactory, SelfTestState, Stimulus, Telemetry};
 use crate::error::RuntimeError;
 use crate::interlock::Interlock;
 use crate::limits::StimulusLimits;
+use crate::program::{Executor, Program};
 use crate::snapshot::{ChannelStatus, LoopStats, MaterialProperties, Mode, RecordRow, Shared, Snapshot, TickRecord};
 use crate::stats::Window;
 use thermode_platform::rt::Realtime;
@@ -312,6 +314,9 @@ struct Slot {
     reading: Reading,
     /// The engine panicked once: it is never called again and the channel's drive stays at 0 A.
     failed: bool,
+    /// The channel's stimulus program, while one is set (kept after its end until the channel's next command, so
+    /// that no tick frees it).
+    program: Option<Executor>,
 }
 
 /// Counters published with the snapshot.
@@ -347,6 +352,8 @@ struct ControlLoop {
     /// The interlock's trips already acted on.
     interlock_trips: u64,
     air: Arc<str>,
+    /// The label of a channel running a program.
+    program_label: Arc<str>,
     last_woke_s: Option<f64>,
     next_stats_s: f64,
     time_s: f64,
@@ -386,6 +393,7 @@ impl ControlLoop {
                 engine,
                 reading: NO_READING,
                 failed: false,
+                program: None,
             });
         }
         let status: Vec<ChannelStatus> = slots
@@ -433,6 +441,7 @@ impl ControlLoop {
             interlock_trips: interlock.stops(),
             interlock,
             air,
+            program_label: Arc::from("program"),
             last_woke_s: None,
             next_stats_s: STATS_REFRESH_S,
             time_s: 0.0,
@@ -493,11 +502,15 @@ impl ControlLoop {
             self.interlock_trips = trips;
             self.stop_all();
         }
+        for status in &mut self.status {
+            status.program.next_tick();
+        }
         self.drain_commands(tick.index);
         self.expire_leases();
         for channel in 0..self.slots.len() {
             self.tick_channel(channel, tick.dt_s);
         }
+        self.complete_response_answers();
         self.feed_record(tick);
     }
 
@@ -519,11 +532,17 @@ impl ControlLoop {
         };
         let slot = &mut self.slots[channel];
         let status = &mut self.status[channel];
+        let programmed = program_setpoint(slot, status, dt_s);
         let ticked = if slot.failed {
             None
         } else {
             let (engine, reading) = (&mut slot.engine, &slot.reading);
             catch_unwind(AssertUnwindSafe(|| {
+                if let Some(stimulus) = programmed {
+                    // Checked when the program was built (its set-points stay within the channel's range and
+                    // rate): a refusal cannot happen, and would leave the previous set-point in force.
+                    let _ = engine.set_stimulus(stimulus);
+                }
                 let ticked = engine.tick(time_s, dt_s, reading);
                 (ticked, (engine.dose(), engine.dose_budget_spent()))
             }))
@@ -609,6 +628,7 @@ impl ControlLoop {
         let applied = Applied {
             tick,
             time_s: self.time_s,
+            at_response: None,
         };
         match command {
             Command::Stimulate {
@@ -639,11 +659,21 @@ impl ControlLoop {
                     return Err(CommandError::DoseNotRecorded);
                 }
                 self.set(channel, stimulus)?;
+                self.slots[channel].program = None;
                 let status = &mut self.status[channel];
                 (status.label, status.mode, status.object_c, status.direct) = (label, mode, object_c, direct);
                 status.material = material;
+                status.program.segment = None;
                 claim(status, owner);
             }
+            Command::Program { programs, owner } => self.start_programs(programs, owner)?,
+            Command::ProgramStop { channel } => {
+                self.exists(channel)?;
+                // The engine stays in direct mode at the program's last set-point: it holds there.
+                self.slots[channel].program = None;
+                self.status[channel].program.segment = None;
+            }
+            Command::Response { channel, kind, value } => return self.respond(channel, kind, value, applied),
             Command::Release { channel } => {
                 self.exists(channel)?;
                 self.release(channel);
@@ -672,6 +702,86 @@ impl ControlLoop {
             }
         }
         Ok(applied)
+    }
+
+    /// Starts every program of `programs` on this tick, or none: each channel must be usable, have dose budget
+    /// left and a temperature to start from, and its program must fit the channel's own limits.
+    fn start_programs(&mut self, programs: Vec<(usize, Program)>, owner: Owner) -> Result<(), CommandError> {
+        let mut starts_c = [f64::NAN; MAX_CHANNELS];
+        for (index, (channel, program)) in programs.iter().enumerate() {
+            self.usable(*channel)?;
+            self.budget_left(*channel)?;
+            program.fits(*channel, &self.slots[*channel].limits)?;
+            starts_c[index] = self
+                .start_c(*channel)
+                .ok_or(CommandError::NoStartTemperature { channel: *channel })?;
+        }
+        if self.interlock.engaged() {
+            return Err(CommandError::RecordingFailed);
+        }
+        if self.interlock.dose_held() {
+            return Err(CommandError::DoseNotRecorded);
+        }
+        for (index, (channel, program)) in programs.into_iter().enumerate() {
+            let rate_c_per_s = self.slots[channel].limits.max_rate_c_per_s;
+            let from_c = starts_c[index];
+            self.set(
+                channel,
+                Stimulus::Direct {
+                    temp_c: from_c,
+                    rate_c_per_s,
+                },
+            )?;
+            self.slots[channel].program = Some(Executor::new(program, from_c));
+            let status = &mut self.status[channel];
+            let label = self.program_label.clone();
+            (status.label, status.mode, status.object_c, status.direct) = (label, Mode::Direct, None, None);
+            claim(status, owner);
+        }
+        Ok(())
+    }
+
+    /// Where a program on `channel` starts \[°C\]: the display's newest set-point, else the plate estimate, else
+    /// the sensor, within the channel's display range; `None` before any of them is known.
+    fn start_c(&self, channel: usize) -> Option<f64> {
+        let t = &self.status[channel].telemetry;
+        let range = self.slots[channel].limits.display_c;
+        [t.display_setpoint_c, t.plate_estimate_c, t.sensor_c]
+            .into_iter()
+            .find(|c| c.is_finite())
+            .map(|c| c.clamp(range.min, range.max))
+    }
+
+    /// A response on `channel`: ends a running `until: response` segment (the next segment starts on this tick);
+    /// the answer's plate and set-point are filled in once this tick's channels have ticked.
+    fn respond(&mut self, channel: usize, kind: ResponseKind, value: Option<f64>, applied: Applied) -> Reply {
+        self.exists(channel)?;
+        let ended_segment = self.slots[channel].program.as_mut().and_then(Executor::respond);
+        self.status[channel].program.response = Some((kind, value, ended_segment));
+        Ok(Applied {
+            at_response: Some(AtResponse {
+                channel,
+                sensor_c: f64::NAN,
+                plate_estimate_c: f64::NAN,
+                setpoint_c: f64::NAN,
+                ended_segment,
+            }),
+            ..applied
+        })
+    }
+
+    /// Fills each response's answer with its channel as this tick left it.
+    fn complete_response_answers(&mut self) {
+        for (_, answer) in &mut self.answers {
+            if let Ok(Applied {
+                at_response: Some(at), ..
+            }) = answer
+            {
+                let t = &self.status[at.channel].telemetry;
+                (at.sensor_c, at.plate_estimate_c, at.setpoint_c) =
+                    (t.sensor_c, t.plate_estimate_c, t.display_setpoint_c);
+            }
+        }
     }
 
     /// Releases every channel and holds its drive at 0 A until its next command.
@@ -746,6 +856,7 @@ impl ControlLoop {
     fn release(&mut self, channel: usize) {
         // An engine must always accept air; if one ever refused, the drive below is still held at 0 A.
         let slot = &mut self.slots[channel];
+        slot.program = None;
         let engine = &mut slot.engine;
         let accepted = !slot.failed
             && matches!(
@@ -757,6 +868,7 @@ impl ControlLoop {
         (status.label, status.mode, status.object_c, status.direct) = (label, Mode::Air, None, None);
         status.material = None;
         (status.owner, status.release_at_s, status.held_off) = (Owner::Nobody, None, !accepted);
+        status.program.segment = None;
     }
 
     /// Releases the contacts whose release time comes before the next tick (so a release is never later than its
@@ -788,6 +900,7 @@ impl ControlLoop {
                     direct: s.direct,
                     held_off: s.held_off,
                     telemetry: s.telemetry,
+                    program: s.program,
                 },
                 None => RecordRow {
                     label: self.air.clone(),
@@ -797,6 +910,7 @@ impl ControlLoop {
                     direct: None,
                     held_off: false,
                     telemetry: crate::snapshot::EMPTY_TELEMETRY,
+                    program: crate::snapshot::ProgramMark::default(),
                 },
             }),
         };
@@ -887,7 +1001,26 @@ fn air_status(channel: usize, air: &Arc<str>, dose: DoseLedger, dose_budget_spen
         telemetry: crate::snapshot::EMPTY_TELEMETRY,
         dose,
         dose_budget_spent,
+        program: crate::snapshot::ProgramMark::default(),
     }
+}
+
+/// The program's set-point of this tick as the engine's direct stimulus (`None` without a running program), its
+/// events noted in `status`.
+fn program_setpoint(slot: &mut Slot, status: &mut ChannelStatus, dt_s: f64) -> Option<Stimulus> {
+    let executor = slot.program.as_mut().filter(|e| !e.finished())?;
+    let step = executor.step(dt_s);
+    let mark = &mut status.program;
+    mark.segment = executor.segment();
+    mark.ended = step.ended;
+    mark.started = step.started.map(|segment| {
+        let program = executor.program();
+        (segment, program.segments()[segment].to_c(), program.cutoff_c(segment))
+    });
+    Some(Stimulus::Direct {
+        temp_c: step.setpoint_c,
+        rate_c_per_s: slot.limits.max_rate_c_per_s,
+    })
 }
 
 /// `telemetry` with what the device does not measure or drive itself as unknown (NaN, `null` on the wire): the hot

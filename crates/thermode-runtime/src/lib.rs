@@ -51,6 +51,7 @@ pub mod interlock;
 pub mod ledger;
 pub mod limits;
 pub mod loop_core;
+pub mod program;
 pub mod recorder;
 pub mod reply;
 pub mod snapshot;

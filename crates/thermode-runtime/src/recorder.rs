@@ -26,6 +26,8 @@
 //! (empty otherwise), `mode` `air`, `touch` or `direct`, `fault` the numeric fault code (empty without fault), then
 //! the touched material's properties, `conductivity_w_mk, density_kg_m3, specific_heat_j_kgk, thickness_m` (empty
 //! outside a touch), so that a recording of a custom material, which no library knows, reads back.
+//! A stimulus program's events (segment starts, responses, ends) go beside it, in `<session>.events.csv`, written
+//! by the daemon (`thermode_serve::program_events`).
 
 use std::borrow::Cow;
 use std::fs::{File, OpenOptions};

@@ -9,7 +9,7 @@ use serde::Serialize;
 use thermode_device::{DeviceCut, MAX_CHANNELS};
 use thermode_safety::DoseLedger;
 
-use crate::command::Owner;
+use crate::command::{Owner, ResponseKind};
 use crate::engine::Telemetry;
 use crate::stats::Summary;
 
@@ -59,6 +59,34 @@ impl MaterialProperties {
     }
 }
 
+/// A channel's program as the loop last saw it, and what happened to it on the newest tick (the per-tick fields are
+/// cleared at the start of every tick).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ProgramMark {
+    /// The running segment (`None`: no program runs, or it has ended).
+    pub segment: Option<usize>,
+    /// The segment that started on this tick: (segment, target \[°C\] of a ramp or step, cut-off \[°C\] if its
+    /// target was clipped).
+    pub started: Option<(usize, Option<f64>, Option<f64>)>,
+    /// The program's last segment ended on this tick.
+    pub ended: bool,
+    /// The (last) response applied on this tick: its kind, its rating, and the `until: response` segment it
+    /// ended (if it ended one).
+    pub response: Option<(ResponseKind, Option<f64>, Option<usize>)>,
+}
+
+impl ProgramMark {
+    /// Whether something happened on this tick (a segment's start, the end, a response).
+    pub fn has_event(&self) -> bool {
+        self.started.is_some() || self.ended || self.response.is_some()
+    }
+
+    /// This tick's events cleared (the running segment kept).
+    pub fn next_tick(&mut self) {
+        (self.started, self.ended, self.response) = (None, false, None);
+    }
+}
+
 /// One channel as the loop last saw it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ChannelStatus {
@@ -96,6 +124,8 @@ pub struct ChannelStatus {
     /// The channel's dose budget is spent (`SafetyEnvelope::dose_budget_spent`): its drive is off (0 A) and every
     /// stimulus but air is refused ([`crate::CommandError::DoseBudgetSpent`]) until the ledger is reset.
     pub dose_budget_spent: bool,
+    /// The channel's program, and its events of this tick.
+    pub program: ProgramMark,
 }
 
 /// Loop timing: the measured periods (wake to wake) and tick durations over the window, and missed deadlines.
@@ -155,6 +185,8 @@ pub struct RecordRow {
     pub held_off: bool,
     /// The numbers.
     pub telemetry: Telemetry,
+    /// The channel's program and its events of this tick.
+    pub program: ProgramMark,
 }
 
 /// One tick of every channel, for the recorder.

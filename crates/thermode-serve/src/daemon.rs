@@ -166,6 +166,8 @@ pub struct Daemon {
     runtime: Option<tokio::runtime::Runtime>,
     core: LoopCore,
     lsl: Option<LslStreams>,
+    /// The program-event thread (`crate::program_events`), joined once the loop has stopped.
+    events: Option<std::thread::JoinHandle<()>>,
     http_addr: SocketAddr,
     osc_addr: Option<SocketAddr>,
     token: Option<String>,
@@ -209,6 +211,14 @@ impl Daemon {
             }
             None => (None, None),
         };
+        let events_csv = prepared
+            .recording_path()
+            .map(|p| crate::program_events::events_csv_path(&p));
+        let events = crate::program_events::start(events_csv).map_err(|source| ServeError::Io {
+            context: "cannot start the program-event thread".into(),
+            source,
+        })?;
+        taps.push(events.feed);
         let core = prepared.start(device, engines, clock.clone(), taps)?;
         let control = core.control().expect("a core just started has its loop");
         let realtime_loop = control.realtime().cpu.is_some();
@@ -248,6 +258,7 @@ impl Daemon {
             realtime: control.realtime().clone(),
             history: Arc::new(crate::api::history::History::default()),
             markers,
+            program_events: events.sender,
             lsl: lsl.as_ref().map(|s| crate::lsl::LslInfo {
                 library: s.library().to_string(),
                 clock: s.clock(),
@@ -259,6 +270,7 @@ impl Daemon {
             runtime: Some(runtime),
             core,
             lsl,
+            events: Some(events.thread),
             http_addr,
             osc_addr,
             token: server.token.clone(),
@@ -368,6 +380,10 @@ impl Daemon {
 
     fn stop_parts(&mut self) -> Result<StopReport, ServeError> {
         self.core.stop_loop();
+        if let Some(events) = self.events.take() {
+            // It ends once the stopped loop's feed is gone and the last events are written.
+            let _ = events.join();
+        }
         if let Some(runtime) = self.runtime.take() {
             runtime.shutdown_timeout(Duration::from_millis(500));
         }
@@ -434,6 +450,7 @@ fn request_limits(config: &DaemonConfig, control: &LoopHandle) -> RequestLimits 
     RequestLimits {
         channel_count: control.channel_count(),
         max_message_bytes: server.max_message_bytes,
+        max_program_bytes: server.net.hard_message_bytes,
         stimulus: control.stimulus_limits(),
         max_subscribe_hz: server.max_subscribe_hz.min(config.core.loop_config.rate_hz),
         default_object_c: server.default_object_c,

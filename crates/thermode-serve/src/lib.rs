@@ -5,6 +5,8 @@
 //!   (`/api/ws`), with access control (token, Host and Origin checks) and limits, served by an own accept loop that
 //!   slow clients cannot starve ([`api::server`]); the status is a set of serde types ([`api::status`]).
 //! - [`osc`]: the same commands over OSC/UDP.
+//! - [`program_events`]: a stimulus program's events (segment starts, responses, its end), read from the loop's
+//!   tick records, for WebSocket subscribers and LSL markers.
 //! - [`lsl`]: `serve --lsl`, Lab Streaming Layer outlets (telemetry and markers) through liblsl loaded at run
 //!   time, fed off the loop thread.
 //! - [`daemon`]: starts and stops the loop core and all of the above ([`Daemon`]); [`mod@bench`]: loop jitter and
@@ -19,6 +21,7 @@ pub mod daemon;
 pub mod error;
 pub mod lsl;
 pub mod osc;
+pub mod program_events;
 
 pub use daemon::{Daemon, DaemonConfig, ServerConfig, StopReport, DEFAULT_OSC_PORT, DEFAULT_PORT};
 pub use error::ServeError;

@@ -5,6 +5,12 @@
 //! - `/thermode/channel/<i>/touch s [f]` — touch the named material, optionally at an object temperature \[°C\];
 //! - `/thermode/channel/<i>/setpoint f f` — direct mode: temperature \[°C\] and rate \[°C/s\];
 //! - `/thermode/channel/<i>/release` — release (arguments ignored, so a button's `1.0` works);
+//! - `/thermode/program s` — a stimulus program: the string is the `program` request's `channels` object as JSON
+//!   (`{"0": [{"to_c": 25, "rate_c_s": 1, "until": "response"}, {"to_c": 32, "rate_c_s": 1}]}`; the whole packet
+//!   at most [`MAX_PACKET_BYTES`], so longer programs go over the WebSocket);
+//! - `/thermode/channel/<i>/response` — a participant's button response (arguments ignored, so a button's `1.0`
+//!   works); `/thermode/channel/<i>/rating f` — a rating, 0 to 100;
+//! - `/thermode/channel/<i>/program_stop` — end the channel's program, holding its set-point;
 //! - `/thermode/stop` (or `/thermode/stop_all`) — stop all, on a path no budget can starve: it is queued on the loop's
 //!   urgent lane before the rate limit is consulted, so a flood of other datagrams (a thousand a second, a
 //!   subscription pointed at the daemon itself) cannot drop it;
@@ -41,7 +47,8 @@ use tokio::time::Instant;
 use crate::api::limit::TokenBucket;
 use crate::api::protocol::{self, ApiError, ErrorCode};
 use crate::api::{App, OscCounters};
-use thermode_runtime::command::{Command, Owner};
+use thermode_protocol::program::{ProgramRequest, ResponseInput};
+use thermode_runtime::command::{Command, Owner, ResponseKind};
 use thermode_runtime::engine::Stimulus;
 use thermode_runtime::snapshot::ChannelStatus;
 
@@ -197,6 +204,7 @@ fn to_commands(message: &OscMessage, app: &App) -> Result<Vec<Command>, ApiError
     };
     match parts.as_slice() {
         ["", "thermode", "stop" | "stop_all"] => Ok(vec![Command::StopAll]),
+        ["", "thermode", "program"] => Ok(vec![program_command(&message.args, app)?]),
         ["", "thermode", "all", action] | ["", "thermode", "channel", "*", action] => every_channel(action),
         ["", "thermode", "channel", index, action] => {
             let index: i64 = index
@@ -243,11 +251,37 @@ fn channel_command(channel: usize, action: &str, args: &[OscArg], app: &App) -> 
             )
         }
         "release" => Ok(Command::Release { channel }),
+        "program_stop" => Ok(Command::ProgramStop { channel }),
+        "response" | "rating" => {
+            let (kind, value) = match action {
+                "rating" => (ResponseKind::Rating, Some(number(0, "rating")?)),
+                _ => (ResponseKind::Button, None),
+            };
+            let response = ResponseInput {
+                channel: channel as i64,
+                kind,
+                value,
+            };
+            protocol::response_command(response, &app.limits)
+        }
         _ => Err(ApiError::new(
             ErrorCode::UnknownType,
             format!("unknown OSC action {action:?}"),
         )),
     }
+}
+
+/// `/thermode/program s`: the program whose `channels` object is the JSON string argument.
+fn program_command(args: &[OscArg], app: &App) -> Result<Command, ApiError> {
+    let Some(OscArg::Str(json)) = args.first() else {
+        return Err(ApiError::new(
+            ErrorCode::MissingField,
+            "program needs the `channels` object as a JSON string (s)",
+        ));
+    };
+    let channels = serde_json::from_str(json)
+        .map_err(|e| ApiError::new(ErrorCode::BadValue, format!("program `channels`: {e}")))?;
+    protocol::program_command(ProgramRequest { channels }, &app.limits, Owner::Osc)
 }
 
 /// How long a subscription lasts unless renewed \[s\] (the default of `NetLimits::osc_subscription_ttl_s`).

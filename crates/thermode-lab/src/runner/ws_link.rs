@@ -213,14 +213,14 @@ impl WsLink {
                     self.pending.extend(self.sample_of(&telemetry));
                     continue;
                 }
-                Response::Event(_) => continue,
+                Response::Event(_) | Response::ProgramEvent(_) => continue,
                 reply => reply,
             };
             let reply_id = match &reply {
                 Response::Ok(ok) => Some(&ok.id),
                 Response::Status(status) => Some(&status.id),
                 Response::Error(error) => error.id.as_ref(),
-                Response::Telemetry(_) | Response::Event(_) => None,
+                Response::Telemetry(_) | Response::Event(_) | Response::ProgramEvent(_) => None,
             };
             if reply_id != Some(&id) {
                 continue;

@@ -49,7 +49,8 @@ pub const SUBSCRIPTION_TTL_S: f64 = 10.0;
 #[derive(Debug, Clone, PartialEq)]
 pub struct NetLimits {
     /// Frames or messages larger than this close the connection (the protocol's hard limit) \[bytes\]. Default
-    /// 65536. Messages up to it but above [`RequestLimits::max_message_bytes`] get a `too_large` error.
+    /// 196608 (192 KiB: a `program` of 999 segments fits). Messages up to it but above
+    /// [`RequestLimits::max_message_bytes`] get a `too_large` error, unless they are a `program`.
     pub hard_message_bytes: usize,
     /// Sustained requests per second per WebSocket connection. Default 50.
     pub requests_per_s: f64,
@@ -92,7 +93,7 @@ pub struct NetLimits {
 impl Default for NetLimits {
     fn default() -> Self {
         NetLimits {
-            hard_message_bytes: 64 * 1024,
+            hard_message_bytes: 192 * 1024,
             requests_per_s: 50.0,
             burst: 100.0,
             max_connections: 32,
@@ -235,6 +236,8 @@ pub struct App {
     pub(crate) realtime: thermode_platform::rt::Realtime,
     /// The last seconds of telemetry (`/api/history`), filled off the loop thread.
     pub(crate) history: Arc<history::History>,
+    /// Program events (segment starts, responses, ends) as WebSocket messages, for telemetry subscribers.
+    pub(crate) program_events: tokio::sync::broadcast::Sender<Arc<str>>,
     /// Where client markers go (`serve --lsl`), or `None`.
     pub(crate) markers: Option<crate::lsl::MarkerSender>,
     /// The LSL streams, for `/api/status`.

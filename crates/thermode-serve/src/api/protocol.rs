@@ -8,16 +8,19 @@
 use thermode_model::materials::{self, Material};
 use thermode_model::params::Range;
 use thermode_platform::to_clock_resolution;
+use thermode_protocol::program::{ProgramRequest, ResponseInput, SegmentSpec, Until};
 use thermode_protocol::request::{Marker, Setpoint, Touch};
 pub use thermode_protocol::request::{MAX_MARKER_CHARS, MAX_NAME_CHARS, MIN_SUBSCRIBE_HZ};
 use thermode_protocol::status::Limits;
 use thermode_protocol::{
-    finite, AppliedAt, ChannelState, ChannelTelemetry, Done, OffReason, Request, RequestId, Telemetry,
+    finite, AppliedAt, ChannelState, ChannelTelemetry, Done, OffReason, ProgramCutoff, Request, RequestId,
+    ResponseKind, Telemetry,
 };
 pub use thermode_protocol::{ApiError, ErrorCode};
-use thermode_runtime::command::{Command, Owner};
+use thermode_runtime::command::{Applied, Command, Owner};
 use thermode_runtime::engine::Stimulus;
 use thermode_runtime::limits::StimulusLimits;
+use thermode_runtime::program::{Program, ProgramError, Segment, MAX_SEGMENTS};
 use thermode_runtime::snapshot::{ChannelStatus, Mode, Snapshot};
 
 /// Limits every request is checked against.
@@ -27,6 +30,9 @@ pub struct RequestLimits {
     pub channel_count: usize,
     /// Largest accepted message \[bytes\]. Default 16384.
     pub max_message_bytes: usize,
+    /// Largest accepted `program` message \[bytes\]: the network's hard limit (default 196608), so that 999
+    /// segments fit.
+    pub max_program_bytes: usize,
     /// What every channel accepts as a stimulus: the limits its engine enforces (object temperature, the
     /// envelope's display range and rate limit), as reported by the loop.
     pub stimulus: StimulusLimits,
@@ -64,7 +70,8 @@ pub enum ApiRequest {
 /// Reads and validates one text message from `owner`: the `id` to answer with (`None` when there is none or it is
 /// invalid) and the request or the error.
 pub fn parse(text: &str, limits: &RequestLimits, owner: Owner) -> (Option<RequestId>, Result<ApiRequest, ApiError>) {
-    let (id, request) = thermode_protocol::parse_request(text, limits.max_message_bytes);
+    let (id, request) =
+        thermode_protocol::parse_request_sized(text, limits.max_message_bytes, limits.max_program_bytes);
     (id, request.and_then(|request| validate(request, limits, owner)))
 }
 
@@ -93,6 +100,11 @@ fn validate(request: Request, limits: &RequestLimits, owner: Owner) -> Result<Ap
         Request::Status(_) => return Ok(ApiRequest::Status),
         Request::AckRecording(_) => return Ok(ApiRequest::AckRecording),
         Request::Marker(marker) => return marker_request(marker, limits),
+        Request::Program(program) => program_command(program, limits, owner)?,
+        Request::ProgramStop(on) => Command::ProgramStop {
+            channel: channel(on.channel)?,
+        },
+        Request::Response(response) => response_command(response, limits)?,
     };
     Ok(ApiRequest::Command(command))
 }
@@ -146,6 +158,106 @@ fn touch_command(touch: Touch, limits: &RequestLimits, owner: Owner) -> Result<C
     stimulus_command(channel, Stimulus::Touch { material, object_c }, owner, limits)
 }
 
+/// The command running `request`'s programs: every channel key a channel of this daemon (each once), every
+/// channel's segments a [`Program`] within the limits every channel enforces (targets clipped to the display's
+/// range, reported as cut-offs). WebSocket and OSC both build programs here.
+pub fn program_command(request: ProgramRequest, limits: &RequestLimits, owner: Owner) -> Result<Command, ApiError> {
+    if request.channels.is_empty() {
+        return Err(ApiError::new(
+            ErrorCode::BadValue,
+            "`channels` is empty: a program needs at least one channel",
+        ));
+    }
+    let mut programs: Vec<(usize, Program)> = Vec::with_capacity(request.channels.len());
+    for (key, specs) in request.channels {
+        let number = key.trim().parse::<i64>().map_err(|_| {
+            ApiError::new(
+                ErrorCode::UnknownChannel,
+                format!("channel key {key:?} is not a channel number"),
+            )
+        })?;
+        let channel = channel_index(number, limits.channel_count)?;
+        if programs.iter().any(|(c, _)| *c == channel) {
+            return Err(ApiError::new(
+                ErrorCode::BadValue,
+                format!("channel {channel} is given twice"),
+            ));
+        }
+        if specs.len() > MAX_SEGMENTS {
+            let e = ProgramError::TooManySegments {
+                channel,
+                count: specs.len(),
+                max: MAX_SEGMENTS,
+            };
+            return Err(ApiError::bad_value(&e));
+        }
+        let segments = specs
+            .iter()
+            .enumerate()
+            .map(|(index, spec)| segment(channel, index, spec))
+            .collect::<Result<Vec<_>, _>>()?;
+        let program = Program::new(channel, segments, &limits.stimulus).map_err(|e| ApiError::bad_value(&e))?;
+        programs.push((channel, program));
+    }
+    Ok(Command::Program { programs, owner })
+}
+
+/// Which segment `spec` is: `to_c` and `rate_c_s` a ramp, `to_c` alone a step, `hold_s` alone a hold.
+fn segment(channel: usize, index: usize, spec: &SegmentSpec) -> Result<Segment, ApiError> {
+    let until_response = spec.until == Some(Until::Response);
+    let refuse = |what: &str| {
+        ApiError::new(
+            ErrorCode::BadValue,
+            format!("channel {channel}, segment {index}: {what}"),
+        )
+    };
+    match (spec.to_c, spec.rate_c_per_s, spec.hold_s) {
+        (Some(to_c), Some(rate_c_per_s), None) => Ok(Segment::Ramp {
+            to_c,
+            rate_c_per_s,
+            until_response,
+        }),
+        (Some(_), None, None) if until_response => Err(refuse(
+            "a step cannot wait for a response (give `rate_c_s` to make it a ramp)",
+        )),
+        (Some(to_c), None, None) => Ok(Segment::Step { to_c }),
+        (None, None, Some(hold_s)) => Ok(Segment::Hold { hold_s, until_response }),
+        _ => Err(refuse(
+            "give `to_c` and `rate_c_s` (a ramp), `to_c` alone (a step) or `hold_s` alone (a hold)",
+        )),
+    }
+}
+
+/// The command of a participant's response: a button press has no `value`, a rating a `value` from 0 to 100.
+pub fn response_command(response: ResponseInput, limits: &RequestLimits) -> Result<Command, ApiError> {
+    let channel = channel_index(response.channel, limits.channel_count)?;
+    let value = match (response.kind, response.value) {
+        (ResponseKind::Button, None) => None,
+        (ResponseKind::Button, Some(_)) => {
+            return Err(ApiError::new(ErrorCode::BadValue, "a button response has no `value`"))
+        }
+        (ResponseKind::Rating, None) => {
+            return Err(ApiError::new(
+                ErrorCode::MissingField,
+                "a rating needs its `value` (0 to 100)",
+            ))
+        }
+        (ResponseKind::Rating, Some(value)) => Some(RATING.check(value)?),
+    };
+    Ok(Command::Response {
+        channel,
+        kind: response.kind,
+        value,
+    })
+}
+
+/// A rating's range: an electronic visual analogue scale.
+pub const RATING: Range = Range {
+    name: "value (rating)",
+    min: 0.0,
+    max: 100.0,
+};
+
 /// The command showing `stimulus` on `channel` (already a valid channel) for `owner`, once the stimulus passes the
 /// limits every channel enforces ([`StimulusLimits::check`], `bad_value` otherwise). The WebSocket API and OSC
 /// both build their touch and set-point commands here, so both refuse the same stimuli with the same message.
@@ -160,7 +272,59 @@ pub fn stimulus_command(
 }
 
 /// What the reply says of a command the loop applied at `applied`.
-pub fn done(command: &Command, applied: AppliedAt) -> Done {
+pub fn done(command: &Command, applied: &Applied) -> Done {
+    let at = AppliedAt {
+        tick: applied.tick,
+        time_s: to_clock_resolution(applied.time_s),
+    };
+    match command {
+        Command::Program { programs, .. } => program_done(programs, at),
+        Command::ProgramStop { channel } => Done::ProgramStop {
+            channel: *channel,
+            applied: at,
+        },
+        Command::Response { channel, kind, value } => {
+            let reading = applied.at_response;
+            Done::Response {
+                channel: *channel,
+                kind: *kind,
+                value: *value,
+                sensor_c: reading.and_then(|r| finite(r.sensor_c)),
+                plate_estimate_c: reading.and_then(|r| finite(r.plate_estimate_c)),
+                setpoint_c: reading.and_then(|r| finite(r.setpoint_c)),
+                ended_segment: reading.and_then(|r| r.ended_segment),
+                applied: at,
+            }
+        }
+        other => stimulus_done(other, at),
+    }
+}
+
+/// The reply to a program the loop started at `at`: its channels and every clipped target.
+fn program_done(programs: &[(usize, Program)], at: AppliedAt) -> Done {
+    let cutoffs: Vec<ProgramCutoff> = programs
+        .iter()
+        .flat_map(|(channel, program)| {
+            program.cutoffs().map(|c| ProgramCutoff {
+                channel: *channel,
+                segment: c.segment,
+                requested_c: c.requested_c,
+                cutoff_c: c.cutoff_c,
+            })
+        })
+        .collect();
+    Done::Program {
+        channels: programs.iter().map(|(channel, _)| *channel).collect(),
+        start_tick: at.tick,
+        start_time_s: at.time_s,
+        cutoff_c: cutoffs.first().map(|c| c.cutoff_c),
+        cutoffs,
+        applied: at,
+    }
+}
+
+/// What the reply says of a stimulus, release, fault clearing or stop.
+fn stimulus_done(command: &Command, applied: AppliedAt) -> Done {
     match command {
         Command::Stimulate {
             channel,
@@ -193,7 +357,11 @@ pub fn done(command: &Command, applied: AppliedAt) -> Done {
             channel: *channel,
             applied,
         },
-        Command::StopAll | Command::ClientGone { .. } => Done::StopAll { applied },
+        Command::StopAll
+        | Command::ClientGone { .. }
+        | Command::Program { .. }
+        | Command::ProgramStop { .. }
+        | Command::Response { .. } => Done::StopAll { applied },
     }
 }
 
@@ -276,6 +444,7 @@ pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> ChannelStat
     ChannelState {
         telemetry: channel_telemetry(status),
         name: name.map(str::to_string),
+        program_segment: status.program.segment,
         fault_description: status.telemetry.fault.map(|f| f.description().to_string()),
         object_temp_c: status.object_c,
         direct_temp_c: status.direct.map(|d| d.0),
@@ -349,6 +518,7 @@ mod tests {
         RequestLimits {
             channel_count: 5,
             max_message_bytes: 16 * 1024,
+            max_program_bytes: 192 * 1024,
             stimulus: StimulusLimits::of_envelope(&thermode_safety::EnvelopeConfig::default()),
             max_subscribe_hz: 100.0,
             default_object_c: 23.0,

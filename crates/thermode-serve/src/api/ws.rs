@@ -19,8 +19,8 @@ use axum::http::{HeaderMap, StatusCode};
 use axum::response::Response;
 use axum::Extension;
 use thermode_platform::to_clock_resolution;
-use thermode_protocol::{AppliedAt, Done, Event, OkReply, RecordingEvent, RequestId, Response as Reply, StatusReply};
-use tokio::sync::watch;
+use thermode_protocol::{Done, Event, OkReply, RecordingEvent, RequestId, Response as Reply, StatusReply};
+use tokio::sync::{broadcast, watch};
 use tokio::time::{interval, timeout, Instant, Interval, MissedTickBehavior};
 
 use super::protocol::{self, ApiError, ApiRequest, ErrorCode};
@@ -101,6 +101,10 @@ struct Connection {
     next_ping: u64,
     /// The recording's event counts as last told to this client.
     recording: Option<watch::Receiver<RecordEvents>>,
+    /// Program events, sent while the client subscribes to telemetry or once it sent a program or response.
+    program_events: Option<broadcast::Receiver<Arc<str>>>,
+    /// The client sent a program or a response: it gets program events even without a subscription.
+    follows_programs: bool,
 }
 
 impl Connection {
@@ -108,6 +112,7 @@ impl Connection {
         let bucket = super::limit::TokenBucket::new(app.net.requests_per_s, app.net.burst);
         let now = Instant::now();
         let recording = app.record_events.clone();
+        let program_events = Some(app.program_events.subscribe());
         Connection {
             app,
             socket,
@@ -119,6 +124,8 @@ impl Connection {
             pings: VecDeque::new(),
             next_ping: 0,
             recording,
+            program_events,
+            follows_programs: false,
         }
     }
 
@@ -131,6 +138,7 @@ impl Connection {
                 _ = tick(&mut self.subscription) => self.send_telemetry().await,
                 _ = ping.tick() => self.ping().await,
                 event = changed(&mut self.recording) => self.send_event(event).await,
+                event = next_program_event(&mut self.program_events) => self.send_program_event(event).await,
             };
             if !open {
                 break;
@@ -205,6 +213,9 @@ impl Connection {
     }
 
     async fn execute(&mut self, request: ApiRequest, id: RequestId) -> Result<Reply, ApiError> {
+        if let ApiRequest::Command(Command::Program { .. } | Command::Response { .. }) = &request {
+            self.follows_programs = true;
+        }
         let done = match request {
             ApiRequest::Command(command) => to_loop(&self.app, command).await?,
             ApiRequest::Subscribe { rate_hz } => {
@@ -278,6 +289,22 @@ impl Connection {
         self.send(&Reply::Event(Event { event, recording })).await
     }
 
+    /// Sends a program event to a telemetry subscriber or a client that sent a program or response (others do not
+    /// get them); a client too slow for the events misses the oldest ones.
+    async fn send_program_event(&mut self, event: Result<Arc<str>, broadcast::error::RecvError>) -> bool {
+        match event {
+            Ok(text) if self.subscription.is_some() || self.follows_programs => {
+                self.send_message(Message::Text(text.as_ref().into())).await
+            }
+            Ok(_) | Err(broadcast::error::RecvError::Lagged(_)) => true,
+            // The daemon is stopping: no more events, the connection stays until it closes.
+            Err(broadcast::error::RecvError::Closed) => {
+                self.program_events = None;
+                true
+            }
+        }
+    }
+
     async fn send(&mut self, reply: &Reply) -> bool {
         self.send_message(Message::Text(reply.to_text().into())).await
     }
@@ -328,11 +355,7 @@ fn marker(app: &App, text: String, channel: Option<usize>) -> Result<Done, ApiEr
 async fn to_loop(app: &App, command: Command) -> Result<Done, ApiError> {
     let answer = app.commands.request(command.clone()).map_err(loop_error)?;
     let applied = super::answer_within(answer, app.reply_wait).await.map_err(loop_error)?;
-    let at = AppliedAt {
-        tick: applied.tick,
-        time_s: to_clock_resolution(applied.time_s),
-    };
-    Ok(protocol::done(&command, at))
+    Ok(protocol::done(&command, &applied))
 }
 
 /// Waits for the subscription's next tick, or forever without one.
@@ -363,6 +386,16 @@ async fn changed(recording: &mut Option<watch::Receiver<RecordEvents>>) -> Optio
     })
 }
 
+/// The next program event; forever once there are none left to come.
+async fn next_program_event(
+    events: &mut Option<broadcast::Receiver<Arc<str>>>,
+) -> Result<Arc<str>, broadcast::error::RecvError> {
+    match events {
+        Some(receiver) => receiver.recv().await,
+        None => std::future::pending().await,
+    }
+}
+
 /// Whether a receive error is a text frame that is not UTF-8.
 fn is_invalid_utf8(e: axum::Error) -> bool {
     let inner = e.into_inner();
@@ -377,7 +410,8 @@ pub(crate) fn loop_error(e: CommandError) -> ApiError {
     let code = match &e {
         CommandError::UnknownChannel { .. } => ErrorCode::UnknownChannel,
         CommandError::Faulted { .. } | CommandError::FaultPersists { .. } => ErrorCode::DeviceFault,
-        CommandError::Rejected { .. } => ErrorCode::BadValue,
+        CommandError::Rejected { .. } | CommandError::Program(_) => ErrorCode::BadValue,
+        CommandError::NoStartTemperature { .. } => ErrorCode::Busy,
         CommandError::Busy | CommandError::Stopped => ErrorCode::Busy,
         CommandError::Cancelled => ErrorCode::Cancelled,
         CommandError::RecordingFailed => ErrorCode::RecordingFailed,

@@ -316,6 +316,9 @@ impl Pusher {
         for event in events(&self.previous, rows) {
             self.push_marker(&event, stamp);
         }
+        for event in crate::program_events::of_record(record) {
+            self.push_marker(&serde_json::to_string(&event).unwrap_or_default(), stamp);
+        }
         self.values.clear();
         for row in rows {
             let t = &row.telemetry;
@@ -374,8 +377,11 @@ pub fn events(previous: &[RecordRow], rows: &[RecordRow]) -> Vec<String> {
     out
 }
 
-/// A touch, set-point or release of `channel` between two rows.
+/// A touch, set-point or release of `channel` between two rows (a program's start is told by its own events).
 fn stimulus_event(channel: usize, before: &RecordRow, now: &RecordRow) -> Option<String> {
+    if now.program.started.is_some() {
+        return None;
+    }
     let changed = before.mode != now.mode
         || before.label != now.label
         || before.object_c != now.object_c
@@ -411,6 +417,7 @@ mod tests {
             direct: (mode == Mode::Direct).then_some((36.0, 2.0)),
             held_off: false,
             telemetry: EMPTY_TELEMETRY,
+            program: thermode_runtime::snapshot::ProgramMark::default(),
         }
     }
 

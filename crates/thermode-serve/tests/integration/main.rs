@@ -9,6 +9,7 @@ mod dose;
 mod example_client;
 mod loop_core;
 mod osc;
+mod programs;
 mod recording;
 mod security;
 mod serial;

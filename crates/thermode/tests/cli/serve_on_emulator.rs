@@ -571,12 +571,12 @@ fn serve_refuses_a_device_whose_watchdog_is_too_long() {
     );
 }
 
-/// The newest session CSV in `dir`.
+/// The newest session CSV in `dir` (not a session's program events, `<session>.events.csv`).
 fn session_csv(dir: &Path) -> PathBuf {
     std::fs::read_dir(dir)
         .unwrap_or_else(|e| panic!("{e}"))
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .find(|p| p.extension().is_some_and(|x| x == "csv"))
+        .find(|p| p.extension().is_some_and(|x| x == "csv") && !p.to_string_lossy().ends_with(".events.csv"))
         .unwrap_or_else(|| panic!("no session CSV in {}", dir.display()))
 }
 
@@ -699,4 +699,161 @@ fn sigterm_stops_serve_cleanly() {
 #[test]
 fn sigint_stops_serve_cleanly() {
     stop_with(Signal::SIGINT);
+}
+
+/// An OSC message of one string argument.
+fn osc_text(address: &str, text: &str) -> Vec<u8> {
+    let padded = |mut bytes: Vec<u8>| {
+        bytes.push(0);
+        while !bytes.len().is_multiple_of(4) {
+            bytes.push(0);
+        }
+        bytes
+    };
+    let mut packet = padded(address.as_bytes().to_vec());
+    packet.extend(padded(b",s".to_vec()));
+    packet.extend(padded(text.as_bytes().to_vec()));
+    packet
+}
+
+/// A CSV file's rows as maps from its header's names to the fields.
+fn csv_records(path: &Path) -> Vec<std::collections::HashMap<String, String>> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap_or_default().split(',').collect();
+    lines
+        .map(|l| {
+            header
+                .iter()
+                .map(|h| h.to_string())
+                .zip(l.split(',').map(str::to_string))
+                .collect()
+        })
+        .collect()
+}
+
+/// One channel's recorded (time \[s\], display set-point \[°C\]).
+fn setpoint_rows(csv: &Path, channel: usize) -> Vec<(f64, f64)> {
+    let number = |r: &std::collections::HashMap<String, String>, k: &str| r[k].parse::<f64>().unwrap_or(f64::NAN);
+    csv_records(csv)
+        .iter()
+        .filter(|r| r["channel"] == channel.to_string())
+        .map(|r| (number(r, "time_s"), number(r, "display_setpoint_c")))
+        .collect()
+}
+
+/// The loop time \[s\] of `channel`'s program event `event` (of `segment`, if given) in `<session>.events.csv`.
+fn event_time_s(csv: &Path, channel: usize, event: &str, segment: Option<usize>) -> f64 {
+    csv_records(&csv.with_extension("events.csv"))
+        .iter()
+        .find(|r| {
+            r["channel"] == channel.to_string()
+                && r["event"] == event
+                && segment.is_none_or(|s| r["segment"] == s.to_string())
+        })
+        .and_then(|r| r["time_s"].parse().ok())
+        .unwrap_or_else(|| panic!("no {event} {segment:?} of channel {channel} beside {}", csv.display()))
+}
+
+/// A two-channel program (over OSC) on the TCS II and the MeCom emulators (temperature-commanded: no finger
+/// observer): both channels start on one tick, each ramp ends when its rate says, the hold lasts its time, and the
+/// program's last set-point holds: the command is the target and the true plate (the emulator's trace) gets there.
+#[test]
+fn a_program_runs_on_the_tcs2_and_mecom_emulators() {
+    for (protocol, query) in [("tcs2", "?zones=2"), ("mecom", "?mode=temperature")] {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
+        let (trace, record) = (dir.path().join("trace.csv"), dir.path().join("sessions"));
+        let (emulator, pty) = emulate_with(2, None, &trace, &["--protocol", protocol]);
+        let mut host = serve_device(&format!("{protocol}:{pty}{query}"), None, Some(&record));
+        let mut tail = Tail::open(&trace);
+        let channels =
+            |s: &serde_json::Value, what: &dyn Fn(&serde_json::Value) -> bool| (0..2).all(|i| what(&s["channels"][i]));
+        wait_for(protocol, "readings", || {
+            channels(&status(host.http_port), &|c| c["sensor_c"].is_number())
+        });
+        // The emulated plates rest near the room's temperature: ramps of a few seconds, holds long enough to overlap.
+        let program = r#"{"0": [{"to_c": 30, "rate_c_s": 2}, {"hold_s": 8}], "1": [{"to_c": 33, "rate_c_s": 1.5}, {"hold_s": 8}]}"#;
+        let socket = UdpSocket::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("udp: {e}"));
+        socket
+            .send_to(&osc_text("/thermode/program", program), ("127.0.0.1", host.osc_port))
+            .unwrap_or_else(|e| panic!("send: {e}"));
+        wait_for(protocol, "the start", || {
+            channels(&status(host.http_port), &|c| c["program_segment"].is_number())
+        });
+        wait_for(protocol, "the end", || {
+            channels(&status(host.http_port), &|c| c["program_segment"].is_null())
+        });
+        // The program's last set-point holds: the command is the target, and the plate gets there (how fast depends
+        // on the emulator's share of a loaded machine, so only the arrival is judged).
+        let at = |c: &serde_json::Value, key: &str, to_c: f64, within_c: f64| {
+            c[key].as_f64().is_some_and(|v| (v - to_c).abs() < within_c)
+        };
+        wait_for(protocol, "the targets held", || {
+            let s = status(host.http_port);
+            [(0, 30.0), (1, 33.0)].iter().all(|&(i, to_c)| {
+                let c = &s["channels"][i];
+                at(c, "display_setpoint_c", to_c, 1e-3) && at(c, "sensor_c", to_c, 0.3)
+            })
+        });
+        let mut plate_c = [f64::NAN; 2];
+        for r in tail.rows() {
+            plate_c[r.channel] = r.plate_c;
+        }
+        signal(&host.process.0, Signal::SIGTERM);
+        wait_for(protocol, "serve's exit", || {
+            host.process.0.try_wait().ok().flatten().is_some()
+        });
+        drop(emulator);
+        let csv = session_csv(&record);
+        let start_s = |channel, segment| event_time_s(&csv, channel, "segment_start", Some(segment));
+        assert_eq!(
+            start_s(0, 0),
+            start_s(1, 0),
+            "{protocol}: both channels start on one tick"
+        );
+        for (channel, to_c, rate) in [(0, 30.0, 2.0), (1, 33.0, 1.5)] {
+            let (first_s, hold_s) = (start_s(channel, 0), start_s(channel, 1));
+            let end_s = event_time_s(&csv, channel, "program_end", None);
+            let rows = setpoint_rows(&csv, channel);
+            let ramp_s = hold_s - first_s;
+            // The ramp starts from the display's newest set-point (the tick before) and lasts whole ticks.
+            let from_c = rows.iter().rev().find(|r| r.0 < first_s).map_or(f64::NAN, |r| r.1);
+            let expected_s = ((to_c - from_c).abs() / (rate * LOOP_TICK_S)).ceil() * LOOP_TICK_S;
+            assert!(
+                (ramp_s - expected_s).abs() <= LOOP_TICK_S + 1e-6,
+                "{protocol}: channel {channel}'s ramp {from_c} → {to_c} °C at {rate} °C/s took {ramp_s} s, the \
+                 arithmetic says {expected_s} s"
+            );
+            println!(
+                "{protocol}: channel {channel}: ramp {ramp_s:.2} s (arithmetic {expected_s:.2} s), hold {:.2} s",
+                end_s - hold_s
+            );
+            assert!(
+                (end_s - hold_s - 8.0).abs() <= LOOP_TICK_S + 1e-6,
+                "{protocol}: the 8 s hold lasted {} s",
+                end_s - hold_s
+            );
+            println!(
+                "{protocol}: channel {channel}: true plate {:.3} °C held at {to_c} °C",
+                plate_c[channel]
+            );
+            assert!(
+                (plate_c[channel] - to_c).abs() < 0.5,
+                "{protocol}: channel {channel}'s true plate {} °C, held at {to_c} °C",
+                plate_c[channel]
+            );
+        }
+    }
+}
+
+/// Polls `condition` every 50 ms until it holds; fails after [`LIVENESS_S`] naming `what`.
+fn wait_for(protocol: &str, what: &str, mut condition: impl FnMut() -> bool) {
+    let started = Instant::now();
+    while !condition() {
+        assert!(
+            started.elapsed().as_secs_f64() < LIVENESS_S,
+            "{protocol}: no {what} within {LIVENESS_S} s"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
 }

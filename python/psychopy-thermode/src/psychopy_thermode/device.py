@@ -7,7 +7,7 @@ running `thermode serve`, whose safety envelope bounds every stimulus.
 
 from __future__ import annotations
 
-from typing import Any, Dict, List, Optional, Union
+from typing import Any, Dict, List, Optional, Sequence, Union
 
 from thermode_client import Client, Reply, ThermodeError
 
@@ -42,6 +42,31 @@ class ThermodeDevice(_Base):  # type: ignore[misc, valid-type]
     def setpoint(self, temp_c: float, rate_c_s: float = 2.0) -> Reply:
         """Ramp the display to `temp_c` [°C] at `rate_c_s` [°C/s] (the paper's display rate is 2 °C/s)."""
         return self.client.setpoint(self.channel, temp_c, rate_c_s)
+
+    def program(self, segments: Sequence[Dict[str, Any]]) -> Reply:
+        """Run a stimulus program on this channel: segments `{"to_c": T, "rate_c_s": R}` (a ramp), `{"to_c": T}` (a
+        step) or `{"hold_s": D}` (a hold), a ramp or hold optionally with `"until": "response"` (at most 999). A
+        method-of-limits run from 32 °C: `[{"to_c": 0, "rate_c_s": 1, "until": "response"}, {"to_c": 32,
+        "rate_c_s": 1}]` (0 °C is clipped to the display's range; the reply's `fields["cutoff_c"]` says where)."""
+        return self.client.program({self.channel: segments})
+
+    def program_stop(self) -> Reply:
+        """End this channel's program; its set-point holds where the program left it."""
+        return self.client.program_stop(self.channel)
+
+    def respond(self, kind: str = "button", value: Optional[float] = None) -> Reply:
+        """The participant responded (e.g. a key press in a PsychoPy routine): a "button", or a "rating" with
+        `value` 0–100. The reply's `fields` hold the plate's `sensor_c` and `setpoint_c` at the response's tick."""
+        return self.client.response(self.channel, kind, value)
+
+    def wait_for_response(self, timeout_s: Optional[float] = None) -> Dict[str, Any]:
+        """Wait for a response on this channel from any client (a button box, the dashboard, `respond`): the
+        `response` event with its `tick`, `time_s`, `sensor_c` and `setpoint_c`."""
+        return self.client.wait_for_response(self.channel, timeout_s=timeout_s)
+
+    def wait_for_program_end(self, timeout_s: Optional[float] = None) -> Dict[str, Any]:
+        """Wait until this channel's program has run its last segment."""
+        return self.client.wait_for_program_end(self.channel, timeout_s=timeout_s)
 
     def temperatures(self) -> Dict[str, Any]:
         """This channel's entry of the daemon's status: `sensor_c`, `plate_estimate_c`, `target_skin_c`, `fault`…"""

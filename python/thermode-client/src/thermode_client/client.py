@@ -1,8 +1,9 @@
 """The blocking client of the thermode contact API (`docs/api.md`): one WebSocket connection to `thermode serve`.
 
 A reader thread takes every message off the connection: replies go to the request that waits for them (matched by
-`id`), telemetry frames to a queue that `subscribe` reads. So requests may be made while another thread iterates
-over telemetry, and neither loses the other's messages.
+`id`), telemetry frames to a queue that `subscribe` reads, program events (a segment's start, a response, a
+program's end) to a queue that `wait_for_event`, `wait_for_response` and `wait_for_program_end` read. So requests
+may be made while another thread iterates over telemetry, and none loses another's messages.
 """
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ import threading
 import urllib.parse
 import urllib.request
 from dataclasses import dataclass, field
-from typing import Any, Dict, Iterator, List, Optional, Union
+import time
+from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Union
 
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
@@ -26,6 +28,12 @@ DEFAULT_TIMEOUT_S = 5.0
 
 #: Telemetry frames kept for `subscribe` before the oldest are dropped. Default 10 000 (100 s at 100 Hz).
 TELEMETRY_QUEUE_LEN = 10_000
+
+#: Program events kept for the `wait_for_*` helpers before the oldest are dropped. Default 10 000.
+EVENT_QUEUE_LEN = 10_000
+
+#: Most segments of one channel's program (the daemon refuses more, naming the limit).
+MAX_SEGMENTS = 999
 
 Json = Dict[str, Any]
 
@@ -85,6 +93,7 @@ class Client:
         self._lock = threading.Lock()
         self._waiting: Dict[int, "queue.Queue[Json]"] = {}
         self._telemetry: "queue.Queue[Json]" = queue.Queue(maxsize=TELEMETRY_QUEUE_LEN)
+        self._events: "queue.Queue[Json]" = queue.Queue(maxsize=EVENT_QUEUE_LEN)
         self._closed: Optional[str] = None
         self._reader = threading.Thread(target=self._read, name="thermode-client-reader", daemon=True)
         self._reader.start()
@@ -128,6 +137,72 @@ class Client:
         if channel is not None:
             message["channel"] = channel
         return self.request(message)
+
+    def program(self, channels: Mapping[int, Sequence[Json]]) -> Reply:
+        """Run a stimulus program: `channels` maps each channel to its segments (at most 999), all channels starting
+        on the same loop tick. A segment is `{"to_c": T, "rate_c_s": R}` (a ramp), `{"to_c": T}` (a step, as fast as
+        the envelope allows) or `{"hold_s": D}` (a hold); a ramp or hold may add `"until": "response"` (a response on
+        its channel ends it early and the program goes on). The reply's `fields` hold `start_tick`, `start_time_s`
+        and `cutoff_c` (the display's limit a target was clipped to, else None) with every clipping in `cutoffs`.
+        From now on this connection receives the program's events (see `wait_for_event`)."""
+        message = {"type": "program", "channels": {str(c): [dict(s) for s in segs] for c, segs in channels.items()}}
+        return self.request(message)
+
+    def program_stop(self, channel: int) -> Reply:
+        """End `channel`'s program; its set-point holds where the program left it."""
+        return self.request({"type": "program_stop", "channel": channel})
+
+    def response(self, channel: int, kind: str = "button", value: Optional[float] = None) -> Reply:
+        """A participant's response on `channel`: `kind` "button", or "rating" with `value` 0–100. It takes effect on
+        the loop's next tick: the reply's `tick`/`time_s` are that tick's, and its `fields` carry the plate's
+        `sensor_c`, `plate_estimate_c` and `setpoint_c` at that tick (None where the device cannot measure) and the
+        `until: response` segment it ended (`ended_segment`, else None)."""
+        message: Json = {"type": "response", "channel": channel, "kind": kind}
+        if value is not None:
+            message["value"] = value
+        return self.request(message)
+
+    def wait_for_event(
+        self,
+        event: str,
+        channel: Optional[int] = None,
+        after_tick: Optional[int] = None,
+        timeout_s: Optional[float] = None,
+    ) -> Json:
+        """Wait for the next program event named `event` ("segment_start", "response" or "program_end"), on
+        `channel` if given, on a tick at or after `after_tick` if given; earlier events that do not match are
+        skipped. Returns the event (with `tick`, `time_s`, `setpoint_c`, `sensor_c`, …). Raises
+        `ThermodeError("timeout")` after `timeout_s` (default: the client's timeout). Events reach a connection that
+        sent a program or a response, or that subscribes to telemetry."""
+        wait_s = self.timeout_s if timeout_s is None else timeout_s
+        deadline = time.monotonic() + wait_s
+        while True:
+            left_s = deadline - time.monotonic()
+            try:
+                message = self._events.get(timeout=max(0.0, left_s))
+            except queue.Empty:
+                raise ThermodeError("timeout", f"no `{event}` event within {wait_s} s") from None
+            if "closed" in message:
+                raise ThermodeError("connection_closed", message["closed"])
+            if message.get("event") != event:
+                continue
+            if channel is not None and message.get("channel") != channel:
+                continue
+            if after_tick is not None and message.get("tick", -1) < after_tick:
+                continue
+            return message
+
+    def wait_for_response(self, channel: Optional[int] = None, after_tick: Optional[int] = None,
+                          timeout_s: Optional[float] = None) -> Json:
+        """Wait for a participant's response (from any client: a button box, the dashboard, a script) on `channel`:
+        the `response` event, with its `tick`, `time_s`, `kind`, `value`, and the plate's `sensor_c` and
+        `setpoint_c` at that tick."""
+        return self.wait_for_event("response", channel, after_tick, timeout_s)
+
+    def wait_for_program_end(self, channel: Optional[int] = None, after_tick: Optional[int] = None,
+                             timeout_s: Optional[float] = None) -> Json:
+        """Wait until `channel`'s program has run its last segment (the `program_end` event)."""
+        return self.wait_for_event("program_end", channel, after_tick, timeout_s)
 
     def subscribe(self, rate_hz: float, count: Optional[int] = None, timeout_s: Optional[float] = None) -> Iterator[Telemetry]:
         """Telemetry at `rate_hz` (0.01–100, at most the loop rate): yields frames until `count` have arrived (or
@@ -207,6 +282,9 @@ class Client:
                 if message.get("type") == "telemetry":
                     self._queue_telemetry(message)
                     continue
+                if message.get("type") == "program_event":
+                    _put_dropping_oldest(self._events, message)
+                    continue
                 with self._lock:
                     slot = self._waiting.get(message.get("id"))
                 if slot is not None:
@@ -219,18 +297,11 @@ class Client:
                 for slot in self._waiting.values():
                     slot.put({"closed": self._closed})
             self._queue_telemetry({"closed": self._closed})
+            _put_dropping_oldest(self._events, {"closed": self._closed})
 
     def _queue_telemetry(self, message: Json) -> None:
         """Queues a frame; when the queue is full the oldest frame goes."""
-        while True:
-            try:
-                self._telemetry.put_nowait(message)
-                return
-            except queue.Full:
-                try:
-                    self._telemetry.get_nowait()
-                except queue.Empty:
-                    pass
+        _put_dropping_oldest(self._telemetry, message)
 
     def _drain_telemetry(self) -> None:
         while True:
@@ -238,3 +309,16 @@ class Client:
                 self._telemetry.get_nowait()
             except queue.Empty:
                 return
+
+
+def _put_dropping_oldest(into: "queue.Queue[Json]", message: Json) -> None:
+    """Puts `message` in `into`; when it is full the oldest message goes."""
+    while True:
+        try:
+            into.put_nowait(message)
+            return
+        except queue.Full:
+            try:
+                into.get_nowait()
+            except queue.Empty:
+                pass
