@@ -109,6 +109,8 @@ pub struct SelfTestRun {
     /// Loop time \[s\] and charge \[A·s\] since the last recorded reading.
     pending: (f64, f64),
     record: Vec<SelfTestSample>,
+    /// The plate's reading above its hot side's when the pulse began \[°C\].
+    rest_excess_c: f64,
 }
 
 impl SelfTestRun {
@@ -128,6 +130,7 @@ impl SelfTestRun {
             last_sample: (0, f64::NAN),
             pending: (0.0, 0.0),
             record: Vec::with_capacity(samples),
+            rest_excess_c: f64::NAN,
         }
     }
 
@@ -142,6 +145,7 @@ impl SelfTestRun {
                 // The pulse starts from this reading: the record's rest.
                 self.start_s = Some(now_s);
                 self.last_sample = (reading.sample_seq, reading.time_s);
+                self.rest_excess_c = reading.sensor_c - reading.hot_side_c;
                 return self.test.current_at_a(0.0);
             }
             return 0.0;
@@ -196,9 +200,19 @@ impl SelfTestRun {
             .is_some_and(|start_s| now_s - start_s >= self.test.record_s)
     }
 
-    /// The record measured against the file ([`assess`]).
+    /// The record measured against the file ([`assess`]); with heat resting on the display, the lag taken
+    /// [`FINGER_LAG_FACTOR`] times the fit's.
     pub fn report(&self) -> SelfTestReport {
-        assess(&self.plant, self.sensor_lag_uncertainty, &self.record)
+        let report = assess(&self.plant, self.sensor_lag_uncertainty, &self.record);
+        if self.rest_excess_c > HEAT_AT_REST_C {
+            SelfTestReport {
+                sensor_lag_s: report.sensor_lag_s * FINGER_LAG_FACTOR,
+                heat_at_rest_c: Some(self.rest_excess_c),
+                ..report
+            }
+        } else {
+            report
+        }
     }
 }
 
@@ -217,7 +231,22 @@ pub struct SelfTestReport {
     pub response_scale: f64,
     /// The fastest the envelope allows for \[-\]: [`MAX_RESPONSE_SCALE`].
     pub allowed_response_scale: f64,
+    /// How much warmer than its hot side the plate rested before the pulse \[°C\], when more than
+    /// [`HEAT_AT_REST_C`]: heat resting on the display (a finger), for which `sensor_lag_s` is the fit's times
+    /// [`FINGER_LAG_FACTOR`]. `None`: a bare display, or not known.
+    pub heat_at_rest_c: Option<f64>,
 }
+
+/// A plate resting more than this above its hot side at 0 A has heat on it \[°C\]: 0.5 (a bare plate at rest sits at
+/// its hot side's temperature, the module being its only path; the own-protocol emulator's finger held its plate
+/// 1.7 °C above).
+pub const HEAT_AT_REST_C: f64 = 0.5;
+
+/// A finger resting on the display makes its sensor seem faster (its sink takes the end of the pulse's answer): the
+/// own-protocol emulator's finger read the default 0.30 s sensor as 0.25–0.29 s and a 1.5 s one as 1.21 s (0.81 times
+/// at worst). With heat at rest the measured lag is taken this many times longer \[-\]: 1.3, so a finger cannot pass
+/// a sensor the envelope does not allow for (the safe side: a refusal the banner explains).
+pub const FINGER_LAG_FACTOR: f64 = 1.3;
 
 /// The plate's answer to heat may be up to this many times the file's: the guard's observer estimates a response
 /// up to twice the file's, and a display half the file's heat capacity kept the plate within 14.5–48.5 °C (0.45
@@ -275,6 +304,14 @@ impl fmt::Display for SelfTestReport {
             Some(OffFile::SensorSlower) => write!(f, "the display is not its device file: {lag}; {response}"),
             Some(OffFile::PlateFaster) => write!(f, "the display is not its device file: {response}; {lag}"),
             None => write!(f, "the display matches its device file: {lag}; {response}"),
+        }?;
+        match self.heat_at_rest_c {
+            Some(excess_c) => write!(
+                f,
+                " (the plate rested {excess_c:.1} °C above its hot side: heat on the display, a finger?, the lag taken \
+                 {FINGER_LAG_FACTOR} times the fit's)"
+            ),
+            None => Ok(()),
         }
     }
 }
@@ -304,6 +341,7 @@ pub fn assess(plant: &PlantModel, sensor_lag_uncertainty: f64, record: &[SelfTes
         allowed_sensor_lag_s: (1.0 + sensor_lag_uncertainty) * filed_s.max(MIN_LAG_S),
         response_scale,
         allowed_response_scale: MAX_RESPONSE_SCALE,
+        heat_at_rest_c: None,
     }
 }
 
