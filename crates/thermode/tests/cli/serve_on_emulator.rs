@@ -295,10 +295,7 @@ enum KillAt {
 /// true plate over the whole trace, the plate at the kill, and the time from the set-point to the kill.
 fn kill_while_heating(dir: &Path, device_file: Option<&Path>, rate_c_per_s: f32, at: KillAt) -> (f64, f64, f64) {
     let trace = dir.join("trace.csv");
-    // The lagging display starts bare: its 1.5 s sensor is measured within 4 % with no finger on it, while a
-    // finger resting on it through the 2.5 s start-up self-test made it read 1.9–2.9 s and refused it.
-    let bare: &[&str] = if device_file.is_some() { &["--no-finger"] } else { &[] };
-    let (emulator, pty) = emulate_with(1, device_file, &trace, bare);
+    let (emulator, pty) = emulate(1, device_file, &trace);
     let mut host = serve(&pty, device_file, None);
     let mut tail = Tail::open(&trace);
     setpoint(host.osc_port, 0, 48.0, rate_c_per_s);
