@@ -145,7 +145,12 @@ fn a_five_channel_program_changes_every_channel_s_set_point_first_on_one_tick_of
     let start_s = reply["start_time_s"].as_f64().expect("start_time_s");
     let rows = recorded(&path);
     for channel in 0..5 {
-        let mine: Vec<_> = rows.iter().filter(|r| r.1 == channel).collect();
+        // From the tick before the program on (in air before it, the set-point follows the plate's estimate as
+        // the daemon starts).
+        let mine: Vec<_> = rows
+            .iter()
+            .filter(|r| r.1 == channel && r.0 > start_s - 0.0015)
+            .collect();
         let first = mine
             .windows(2)
             .find(|w| (w[1].2 - w[0].2).abs() > 1e-6)

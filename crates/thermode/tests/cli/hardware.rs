@@ -259,3 +259,48 @@ fn identify_refuses_a_record_its_model_cannot_explain() {
         "{stderr}"
     );
 }
+
+/// No fabricated numbers, on every backend (issue 25): `serve` on each emulator drives channel 0 to 30 °C, and the
+/// status reports `null` for what the device cannot measure — a temperature-commanded device (MeCom in temperature
+/// mode, a TCS II) sets its own current, so thermode's current and the finger estimated from it are unknown, and a
+/// TCS II reports no hot side — and numbers for what it does (thermode's own protocol and MeCom in current mode
+/// report all three).
+#[test]
+fn status_fields_a_backend_cannot_measure_are_null_and_the_others_numbers() {
+    use super::serve_on_emulator::{serve_device, setpoint, status};
+    let cases: [(&[&str], &dyn Fn(&str) -> String, [bool; 3]); 4] = [
+        (
+            &["--channels", "2"],
+            &|pty| format!("serial:{pty}"),
+            [false, false, false],
+        ),
+        (
+            &["--protocol", "mecom", "--channels", "2"],
+            &|pty| format!("mecom:{pty}"),
+            [false, false, false],
+        ),
+        (
+            &["--protocol", "mecom", "--channels", "2"],
+            &|pty| format!("mecom:{pty}?mode=temperature"),
+            [true, true, false],
+        ),
+        (
+            &["--protocol", "tcs2", "--channels", "2", "--stream-hz", "50"],
+            &|pty| format!("tcs2:{pty}?zones=2"),
+            [true, true, true],
+        ),
+    ];
+    for (args, device, nulls) in cases {
+        let (_emulator, pty) = emulate(args);
+        let device = device(&pty);
+        let host = serve_device(&device, None, None);
+        setpoint(host.osc_port, 0, 30.0, 5.0);
+        std::thread::sleep(std::time::Duration::from_millis(800));
+        let channel = &status(host.http_port)["channels"][0];
+        for (field, null) in ["current_a", "finger_c", "hot_side_c"].into_iter().zip(nulls) {
+            assert_eq!(channel[field].is_null(), null, "{device}: {field} in {channel}");
+            assert!(null || channel[field].is_f64(), "{device}: {field} in {channel}");
+        }
+        assert!(channel["sensor_c"].is_f64(), "{device}: sensor_c in {channel}");
+    }
+}

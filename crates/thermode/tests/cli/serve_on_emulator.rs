@@ -84,10 +84,10 @@ fn emulate_with(channels: usize, device_file: Option<&Path>, trace: &Path, extra
 }
 
 /// Where a started `serve` listens.
-struct Serve {
+pub(crate) struct Serve {
     process: Process,
-    http_port: u16,
-    osc_port: u16,
+    pub(crate) http_port: u16,
+    pub(crate) osc_port: u16,
     /// The banner's lines.
     banner: Vec<String>,
     /// Its own state directory (dose ledger): tests run in parallel, and one directory takes one daemon.
@@ -100,7 +100,7 @@ fn serve(pty: &str, device_file: Option<&Path>, record: Option<&Path>) -> Serve 
 }
 
 /// `thermode serve --device DEVICE`, with free ports; waits for its banner.
-fn serve_device(device: &str, device_file: Option<&Path>, record: Option<&Path>) -> Serve {
+pub(crate) fn serve_device(device: &str, device_file: Option<&Path>, record: Option<&Path>) -> Serve {
     let state = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
     let mut command = Command::new(binary());
     command.args(["serve", "--device", device, "--port", "0", "--osc-port", "0"]);
@@ -173,7 +173,7 @@ pub(crate) fn osc(address: &str, args: &[f32]) -> Vec<u8> {
 }
 
 /// Direct mode on `channel`: `temp_c` at `rate_c_s`.
-fn setpoint(osc_port: u16, channel: usize, temp_c: f32, rate_c_per_s: f32) {
+pub(crate) fn setpoint(osc_port: u16, channel: usize, temp_c: f32, rate_c_per_s: f32) {
     let socket = UdpSocket::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("udp: {e}"));
     let message = osc(
         &format!("/thermode/channel/{channel}/setpoint"),
