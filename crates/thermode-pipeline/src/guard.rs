@@ -3,9 +3,11 @@
 //! ([`PlateForecast`]). It is the envelope's own model, separate from any controller's, so a controller that
 //! misjudges the plate (the paper's PID on a lagging sensor) cannot take the envelope's view with it.
 //!
-//! Per tick, before the drive is gated: the observer is updated over the interval since the previous tick with the
-//! current the envelope let through then, the display's finger model, and both readings; the forecast then predicts
-//! the plate at the end of the coming tick for any current ([`PlateObserver::predict_plate_c`]).
+//! Per tick, before the drive is gated: the observer is advanced over the interval since the previous tick with the
+//! current the envelope let through then and the display's finger model, and corrected with both readings when the
+//! PT-100 gave a fresh sample (between samples it coasts: [`PlateObserver::coast`], [`PlateObserver::update_fresh`]);
+//! the forecast then predicts the plate at the end of the coming tick for any current
+//! ([`PlateObserver::predict_plate_c`]).
 //!
 //! **A model that is not its display.** The observer is only as good as the device file: on a display whose sensor
 //! lags 30 % more, or whose module heats 30 % harder, than its file says, the estimate ran up to 2.4 °C behind a
