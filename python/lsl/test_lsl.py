@@ -1,5 +1,6 @@
 """`thermode serve --lsl` judged by a pylsl inlet: the telemetry stream's description, its samples at the loop rate
-(at least 99.9 % received), and marker timestamps against the telemetry samples (within one loop period).
+(at least 99.9 % received), marker timestamps against the telemetry samples (within one loop period), and a
+program's segment starts and responses as markers on the ticks the daemon's replies name.
 
 liblsl is kept on this machine: `LSLAPICFG` points both the daemon and this inlet at a configuration with the
 machine resolve scope, IPv6 off, loopback as the only known peer and a session id of its own, so nothing leaves the
@@ -156,3 +157,34 @@ def test_markers_carry_the_timestamp_of_their_telemetry_sample(lsl_daemon) -> No
     current = FIELDS.index("current_a") + len(FIELDS) * 1
     after_stop = [s[current] for s, t in zip(samples, stamps) if t >= stop_s]
     assert after_stop and all(a == 0.0 for a in after_stop), after_stop[:5]
+
+
+def test_program_events_are_markers_on_the_tick_that_applied_them(lsl_daemon) -> None:
+    """A program's segment starts and a response join the marker stream, stamped with the tick the daemon's replies
+    name (the program's `start_time_s`, the response's `time_s`), each on a telemetry sample."""
+    telemetry = inlet(f"{NAME} telemetry")
+    markers = inlet(f"{NAME} markers")
+    time.sleep(0.3)
+    with Client(lsl_daemon.url) as display:
+        offset_s = display.status()["lsl"]["lsl_offset_s"]
+        started = display.program({2: [{"to_c": 25.0, "rate_c_s": 1.0, "until": "response"}, {"to_c": 32.0, "rate_c_s": 5.0}]})
+        time.sleep(0.8)
+        answered = display.response(2)
+        time.sleep(0.3)
+        display.stop_all()
+        time.sleep(0.3)
+    samples, stamps = pull(telemetry, 1.0)
+    texts, times = pull(markers, 1.0)
+    events = [(json.loads(t[0]), s) for t, s in zip(texts, times)]
+    program = [(e, s) for e, s in events if e["event"] in ("segment_start", "response") and e.get("channel") == 2]
+    kinds = [(e["event"], e.get("segment")) for e, _ in program]
+    assert kinds == [("segment_start", 0), ("response", 0), ("segment_start", 1)], kinds
+    start_s = started.fields["start_time_s"] + offset_s
+    (first, first_s), (response, response_s), (second, second_s) = program
+    assert first["tick"] == started.fields["start_tick"], (first, started.fields)
+    assert abs(first_s - start_s) < 1e-6, (first_s, start_s)
+    assert response["tick"] == answered.tick and second["tick"] == answered.tick, (response, second, answered)
+    assert abs(response_s - (answered.time_s + offset_s)) < 1e-6, (response_s, answered.time_s + offset_s)
+    assert abs(second_s - response_s) < 1e-9, (second_s, response_s)
+    for stamp in (first_s, response_s):
+        assert abs(nearest(stamps, stamp) - stamp) < 1e-6, "no telemetry sample at a program marker's tick"
