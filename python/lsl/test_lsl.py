@@ -112,6 +112,15 @@ def test_at_least_999_per_mille_of_the_samples_arrive_at_the_loop_rate(lsl_daemo
     assert min(steps) > 0.5 * PERIOD_S, f"timestamps not increasing by a period: smallest step {min(steps)}"
 
 
+def pull_with_events(
+    telemetry: "pylsl.StreamInlet", markers: "pylsl.StreamInlet"
+) -> Tuple[List[List[float]], List[float], List[Tuple[dict, float]]]:
+    """A second of telemetry (samples, stamps), then a second of markers, each parsed with its stamp."""
+    samples, stamps = pull(telemetry, 1.0)
+    texts, times = pull(markers, 1.0)
+    return samples, stamps, [(json.loads(t[0]), s) for t, s in zip(texts, times)]
+
+
 def nearest(stamps: List[float], t: float) -> float:
     return min(stamps, key=lambda s: abs(s - t))
 
@@ -128,9 +137,7 @@ def test_markers_carry_the_timestamp_of_their_telemetry_sample(lsl_daemon) -> No
         time.sleep(0.2)
         display.stop_all()
         time.sleep(0.5)
-    samples, stamps = pull(telemetry, 1.0)
-    texts, times = pull(markers, 1.0)
-    events = [(json.loads(t[0]), s) for t, s in zip(texts, times)]
+    samples, stamps, events = pull_with_events(telemetry, markers)
     kinds = [e["event"] for e, _ in events]
     assert ["touch", "marker", "stop"] == [k for k in kinds if k in ("touch", "marker", "stop")], kinds
 
@@ -173,9 +180,7 @@ def test_program_events_are_markers_on_the_tick_that_applied_them(lsl_daemon) ->
         time.sleep(0.3)
         display.stop_all()
         time.sleep(0.3)
-    samples, stamps = pull(telemetry, 1.0)
-    texts, times = pull(markers, 1.0)
-    events = [(json.loads(t[0]), s) for t, s in zip(texts, times)]
+    _, stamps, events = pull_with_events(telemetry, markers)
     program = [(e, s) for e, s in events if e["event"] in ("segment_start", "response") and e.get("channel") == 2]
     kinds = [(e["event"], e.get("segment")) for e, _ in program]
     assert kinds == [("segment_start", 0), ("response", 0), ("segment_start", 1)], kinds

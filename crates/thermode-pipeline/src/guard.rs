@@ -153,15 +153,15 @@ impl PlateGuard {
     /// coasts through the ticks that see a held one ([`PlateObserver::update_fresh`]: the filter's covariance costs a
     /// few hundred flops, once per sample instead of once per tick). A reading the observer refuses (non-finite
     /// numbers, time not moving forward) leaves the estimate as it was: the envelope latches its own fault on such a
-    /// reading.
-    pub fn update(&mut self, now_s: f64, reading: &Reading, applied_current_a: f64, finger: Finger) {
+    /// reading. Returns whether `reading` is a fresh PT-100 sample (the controller's observer corrects on the same).
+    pub fn update(&mut self, now_s: f64, reading: &Reading, applied_current_a: f64, finger: Finger) -> bool {
         let dt_s = self.last_time_s.map_or(1.0, |t| now_s - t);
         if self.last_sample_seq == Some(reading.sample_seq) {
             self.observer.coast(dt_s, applied_current_a, finger);
             if dt_s > 0.0 {
                 self.last_time_s = Some(now_s);
             }
-            return;
+            return false;
         }
         let tick = ObserverTick {
             // The first update only initialises the estimate from the readings; its dt is not used.
@@ -176,6 +176,7 @@ impl PlateGuard {
             self.last_sample_seq = Some(reading.sample_seq);
             self.trend.record(now_s, reading.sensor_c);
         }
+        true
     }
 
     /// Bounds the plate from here on with a sensor lag of at least `lag_s` \[s\] (a self-test measured the sensor

@@ -245,8 +245,6 @@ pub struct DriveStage {
     guard: PlateGuard,
     /// The current the envelope let through on the previous tick \[A\].
     applied_current_a: f64,
-    /// The sample number of the PT-100 reading the controller last saw (`None` before the first).
-    last_sample_seq: Option<u64>,
 }
 
 /// What the drive stage did in one tick.
@@ -491,7 +489,6 @@ impl DriveStage {
                 config.device.render.sensor_lag_uncertainty,
             )?,
             applied_current_a: 0.0,
-            last_sample_seq: None,
         })
     }
 
@@ -510,9 +507,7 @@ impl DriveStage {
         requested_c: f64,
         finger: Finger,
     ) -> DriveOutcome {
-        let fresh_sample = self.last_sample_seq != Some(reading.sample_seq);
-        self.last_sample_seq = Some(reading.sample_seq);
-        self.guard.update(now_s, reading, self.applied_current_a, finger);
+        let fresh_sample = self.guard.update(now_s, reading, self.applied_current_a, finger);
         let decision = self.envelope.shape_setpoint(now_s, self.feasible(requested_c, dt_s));
         let input = ControlInput {
             time_s: now_s,

@@ -254,8 +254,8 @@ pub const FINGER_LAG_FACTOR: f64 = 1.3;
 pub const MAX_RESPONSE_SCALE: f64 = 2.1;
 
 /// The plate guard bounds the plate with a sensor this much slower than the measured one \[-\]: 1.15 (the
-/// measurement was within 3 % on plants 0.1–10 times the file's lag; a sensor 1.6 times the file's, measured and not
-/// refused, let the plate reach 48.7 °C behind a bound of 1.5 times).
+/// measurement is within 5 % near the verdict's thresholds, the unit tests below; a sensor 1.6 times the file's,
+/// measured and not refused, let the plate reach 48.7 °C behind a bound of 1.5 times).
 pub const LAG_MARGIN: f64 = 1.15;
 
 /// What is off when the display is not its file.

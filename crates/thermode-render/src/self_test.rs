@@ -1,11 +1,12 @@
-//! The start-up self-test of a rendered display ([`thermode_pipeline::self_test`]): run on the plant's hardware with
-//! no finger on it, at rest at the water's temperature, as a display is tested at power-on before a finger rests on
-//! it. The run's timeline then starts from its own resting plant with the finger (the display had long settled
-//! again). A plant built from the pipeline's own device file is that file exactly and is not tested.
+//! The start-up self-test of a rendered display ([`thermode_pipeline::self_test`]), the daemon's own
+//! ([`SelfTestRun`]): run on the plant's hardware with no finger on it, at rest at the water's temperature, as a
+//! display is tested at power-on before a finger rests on it. The run's timeline then starts from its own resting
+//! plant with the finger (the display had long settled again). A plant built from the pipeline's own device file is
+//! that file exactly and is not tested.
 
 use thermode_device::{Device, NoFinger, SimulatedDisplay};
 use thermode_pipeline::controllers::plant_model;
-use thermode_pipeline::self_test::{assess, SelfTest, SelfTestReport, SelfTestSample};
+use thermode_pipeline::self_test::{SelfTest, SelfTestReport, SelfTestRun, REST_LIMIT_S};
 use thermode_pipeline::ChannelPipeline;
 use thermode_safety::{MeasuredOnly, SafetyEnvelope};
 
@@ -19,7 +20,10 @@ pub fn self_test(spec: &RenderSpec, pipeline: &ChannelPipeline) -> Result<Option
         return Ok(None);
     }
     let believed = spec.believed_pipeline().device;
-    let test = SelfTest::default();
+    let model = plant_model(&believed)?;
+    let test = SelfTest::for_sensor(model.sensor_time_constant_s);
+    let longest_s = REST_LIMIT_S + test.record_s;
+    let mut run = SelfTestRun::new(test, model, believed.render.sensor_lag_uncertainty);
     let hardware = spec.plant_device();
     let mut plant = SimulatedDisplay::new(
         &hardware,
@@ -32,25 +36,21 @@ pub fn self_test(spec: &RenderSpec, pipeline: &ChannelPipeline) -> Result<Option
     let mut envelope = SafetyEnvelope::new(*envelope.config(), envelope.current_limit_a())?;
     let (dt_s, substeps) = (spec.tick_s(), spec.substeps());
     let start_s = plant.time_s();
-    let ticks = (test.record_s / dt_s).round() as usize;
-    let mut record = Vec::with_capacity(ticks);
-    for k in 0..ticks {
-        let t_s = k as f64 * dt_s;
-        envelope.observe(&plant.read(0)?.measurement());
-        let drive = envelope.gate_drive(start_s + t_s, test.current_at_a(t_s), &MeasuredOnly);
+    let mut applied_a = 0.0;
+    for k in 0..(longest_s / dt_s).ceil() as usize {
+        let now_s = start_s + k as f64 * dt_s;
+        if run.finished(now_s) {
+            break;
+        }
+        let reading = plant.read(0)?;
+        envelope.observe(&reading.measurement());
+        let requested_a = run.tick(now_s, dt_s, applied_a, &reading);
+        let drive = envelope.gate_drive(now_s, requested_a, &MeasuredOnly);
+        applied_a = drive.current_a();
         plant.apply(0, &drive)?;
         for _ in 0..substeps {
             plant.advance(dt_s / substeps as f64);
         }
-        let reading = plant.read(0)?;
-        record.push(SelfTestSample {
-            dt_s,
-            current_a: drive.current_a(),
-            sensor_c: reading.sensor_c,
-            hot_side_c: reading.hot_side_c,
-        });
     }
-    let model = plant_model(&believed)?;
-    let uncertainty = believed.render.sensor_lag_uncertainty;
-    Ok(Some(assess(&model, uncertainty, &record)))
+    Ok(Some(run.report()))
 }

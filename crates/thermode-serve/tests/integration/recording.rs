@@ -14,14 +14,19 @@ use thermode_runtime::{Command, LoopConfig, LoopHandle, Owner};
 
 const PERIOD_S: f64 = 0.01;
 
-#[test]
-fn every_tick_of_every_channel_is_recorded_in_order() {
-    let dir = tempfile::tempdir().expect("temp dir");
-    let (recorder, feed) = Recorder::start(dir.path()).expect("recorder");
+/// A recorded session on a manual clock: `channels` tracking channels ticked `ticks` times, 10 ms apart, with
+/// `command` sent at tick `at`. The session file and the rows the recorder wrote.
+fn record_session(
+    dir: &std::path::Path,
+    channels: usize,
+    ticks: u64,
+    (at, command): (u64, Command),
+) -> (std::path::PathBuf, u64) {
+    let (recorder, feed) = Recorder::start(dir).expect("recorder");
     let clock = Arc::new(ManualClock::new());
     let mut handle = LoopHandle::spawn(
         LoopConfig::default(),
-        Box::new(SpyDevice::new(3)),
+        Box::new(SpyDevice::new(channels)),
         trackers(),
         clock.clone(),
         vec![feed],
@@ -33,11 +38,10 @@ fn every_tick_of_every_channel_is_recorded_in_order() {
         common::wait_until(10.0, || handle.snapshot().stats.ticks >= 1),
         "first tick"
     );
-    let wood = materials::find("wood").expect("wood");
-    let ticks = 200u64;
+    let mut command = Some(command);
     for k in 1..ticks {
-        if k == 100 {
-            let command = Command::touch(1, wood.clone(), 23.0, Owner::Script);
+        if k == at {
+            let command = command.take().expect("sent once");
             handle.commands().send(command).expect("queued");
         }
         clock.set(k as f64 * PERIOD_S);
@@ -50,7 +54,17 @@ fn every_tick_of_every_channel_is_recorded_in_order() {
     handle.stop();
     drop(handle);
     let path = recorder.path().to_path_buf();
-    let rows_written = recorder.finish().expect("recorder finishes");
+    let rows = recorder.finish().expect("recorder finishes");
+    (path, rows)
+}
+
+#[test]
+fn every_tick_of_every_channel_is_recorded_in_order() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let wood = materials::find("wood").expect("wood");
+    let ticks = 200u64;
+    let touch = Command::touch(1, wood, 23.0, Owner::Script);
+    let (path, rows_written) = record_session(dir.path(), 3, ticks, (100, touch));
     let name = path
         .file_name()
         .and_then(|n| n.to_str())
@@ -94,21 +108,6 @@ fn every_tick_of_every_channel_is_recorded_in_order() {
 #[test]
 fn a_custom_material_is_recorded_with_its_properties() {
     let dir = tempfile::tempdir().expect("temp dir");
-    let (recorder, feed) = Recorder::start(dir.path()).expect("recorder");
-    let clock = Arc::new(ManualClock::new());
-    let mut handle = LoopHandle::spawn(
-        LoopConfig::default(),
-        Box::new(SpyDevice::new(2)),
-        trackers(),
-        clock.clone(),
-        vec![feed],
-        Arc::default(),
-    )
-    .expect("loop");
-    assert!(
-        common::wait_until(10.0, || handle.snapshot().stats.ticks >= 1),
-        "first tick"
-    );
     // A material no library knows, as a client's `properties` make it.
     let glass = materials::Material {
         name: "ice-cold-glass".into(),
@@ -118,22 +117,8 @@ fn a_custom_material_is_recorded_with_its_properties() {
         thickness_m: 0.004,
         source: "client".into(),
     };
-    for k in 1..40u64 {
-        if k == 10 {
-            let command = Command::touch(0, glass.clone(), 5.0, Owner::Script);
-            handle.commands().send(command).expect("queued");
-        }
-        clock.set(k as f64 * PERIOD_S);
-        let want = clock.now_s();
-        assert!(
-            common::wait_until(10.0, || handle.snapshot().time_s >= want),
-            "tick {k}"
-        );
-    }
-    handle.stop();
-    drop(handle);
-    let path = recorder.path().to_path_buf();
-    recorder.finish().expect("recorder finishes");
+    let touch = Command::touch(0, glass, 5.0, Owner::Script);
+    let (path, _) = record_session(dir.path(), 2, 40, (10, touch));
     let text = std::fs::read_to_string(&path).expect("read CSV");
     let header: Vec<&str> = text.lines().next().unwrap_or_default().split(',').collect();
     let column = |name: &str| {

@@ -308,13 +308,14 @@ fn small_tmpfs_mount_point() -> Option<(tempfile::TempDir, std::path::PathBuf)> 
     Some((dir, mount))
 }
 
-#[test]
-fn a_recording_on_a_full_tmpfs_fails_loudly_with_whole_rows_and_stops_every_stimulus() {
-    let Some((_dir, mount)) = small_tmpfs_mount_point() else {
-        return;
-    };
+/// `serve ARGUMENTS` in a mount namespace of its own with a 64 KiB tmpfs mounted at `mount`: its pid, the process,
+/// its HTTP port and its standard error lines.
+fn serve_on_small_tmpfs(
+    mount: &std::path::Path,
+    arguments: &str,
+) -> (u32, Process, u16, std::sync::mpsc::Receiver<String>) {
     let script = format!(
-        "mount -t tmpfs -o size=64k tmpfs {m} && exec {bin} serve --port 0 --no-osc --channels 5 --record {m}",
+        "mount -t tmpfs -o size=64k tmpfs {m} && exec {bin} serve {arguments}",
         m = mount.display(),
         bin = binary()
     );
@@ -325,7 +326,18 @@ fn a_recording_on_a_full_tmpfs_fails_loudly_with_whole_rows_and_stops_every_stim
         .spawn()
         .unwrap_or_else(|e| panic!("spawn: {e}"));
     let pid = child.id();
-    let (mut serve, port, stderr) = banner(child);
+    let (serve, port, stderr) = banner(child);
+    (pid, serve, port, stderr)
+}
+
+#[test]
+fn a_recording_on_a_full_tmpfs_fails_loudly_with_whole_rows_and_stops_every_stimulus() {
+    let Some((_dir, mount)) = small_tmpfs_mount_point() else {
+        return;
+    };
+    let m = mount.display();
+    let (pid, mut serve, port, stderr) =
+        serve_on_small_tmpfs(&mount, &format!("--port 0 --no-osc --channels 5 --record {m}"));
     let r = ws_ask(
         port,
         &[serde_json::json!({"type": "setpoint", "id": 1, "channel": 0, "temp_c": 36, "rate_c_s": 2})],
@@ -396,20 +408,9 @@ fn a_state_directory_that_fills_up_stops_heating_until_the_ledger_is_written_aga
     let free = UdpSocket::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
     let osc_port = free.local_addr().unwrap_or_else(|e| panic!("{e}")).port();
     drop(free);
-    let script = format!(
-        "mount -t tmpfs -o size=64k tmpfs {m} && exec {bin} serve --port 0 --osc-port {osc_port} --channels 1 \
-         --state-dir {m}/state",
-        m = mount.display(),
-        bin = binary()
-    );
-    let child = Command::new("unshare")
-        .args(["-m", "sh", "-c", &script])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap_or_else(|e| panic!("spawn: {e}"));
-    let pid = child.id();
-    let (mut serve, port, stderr) = banner(child);
+    let m = mount.display();
+    let arguments = format!("--port 0 --osc-port {osc_port} --channels 1 --state-dir {m}/state");
+    let (pid, mut serve, port, stderr) = serve_on_small_tmpfs(&mount, &arguments);
     let sender = UdpSocket::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("{e}"));
     let heat = super::serve_on_emulator::osc("/thermode/channel/0/setpoint", &[42.0, 5.0]);
     sender
