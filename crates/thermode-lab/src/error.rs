@@ -117,6 +117,14 @@ pub enum LabError {
     /// The data as a whole cannot be analysed (no input files, every trial excluded, a curve without samples, …).
     #[error("{0}")]
     NoData(String),
+    /// A procedure session's file is unusable (its sidecar, rows or trace).
+    #[error("{}: {message}", file.display())]
+    Procedure {
+        /// The file.
+        file: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
     /// A figure could not be drawn or written.
     #[error("figure: {0}")]
     Plot(#[from] thermode_plot::PlotError),

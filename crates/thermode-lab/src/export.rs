@@ -213,7 +213,10 @@ pub fn export_bids(options: &BidsOptions) -> Result<BidsSummary, ExportError> {
     for session in &sessions {
         let (header, rows) = read_csv(&session.csv)?;
         let clock = SessionClock::of(&session.csv, &session.meta, &header, &rows)?;
-        summary.trials += write_events(root, session, clock.as_ref())?;
+        summary.trials += match session.meta.get("events_file").and_then(Value::as_str) {
+            Some(events) => write_procedure_events(root, session, &session.csv.with_file_name(events), clock.as_ref())?,
+            None => write_events(root, session, clock.as_ref())?,
+        };
         summary.sessions += 1;
         for curve in session_curves(session)? {
             let placement = clock.as_ref().map_or(Placement::Own, Placement::Trial);
@@ -468,6 +471,81 @@ fn write_events(root: &Path, session: &Session, clock: Option<&SessionClock>) ->
     Ok(rows.len())
 }
 
+/// The columns of a procedure session's events file that the export keeps (after `onset`, `duration`,
+/// `trial_type`), and the session CSV's columns it adds to each event of a trial.
+const PROCEDURE_EVENT_COLUMNS: [&str; 9] = [
+    "trial", "channel", "segment", "tick", "to_c", "cutoff_c", "kind", "value", "time_s",
+];
+const PROCEDURE_TRIAL_COLUMNS: [&str; 6] = ["label", "run", "intensity_c", "delivered_c", "response", "rating"];
+
+/// Writes a procedure session's `_events.tsv` and `.json` from its events file: one row per program event
+/// (`segment_start`, `response`, `program_end` as `trial_type`), onset on the session's clock (the display's loop
+/// clock, 0 at the first trial's start), with the trial's label, run, intensity, delivered temperature and response
+/// from the session CSV; returns the session's trials.
+fn write_procedure_events(
+    root: &Path,
+    session: &Session,
+    events: &Path,
+    clock: Option<&SessionClock>,
+) -> Result<usize, ExportError> {
+    let (header, rows) = read_csv(&session.csv)?;
+    let (event_header, event_rows) = read_csv(events)?;
+    let column = |names: &[String], name: &str| names.iter().position(|h| h == name);
+    let field =
+        |row: &[String], index: Option<usize>| index.and_then(|i| row.get(i)).map_or(String::new(), |v| v.clone());
+    let time_of = |row: &[String]| field(row, column(&event_header, "time_s")).parse::<f64>().ok();
+    let first_s = event_rows.iter().find_map(|r| time_of(r)).unwrap_or(0.0);
+    let mut tsv = String::from("onset\tduration\ttrial_type");
+    for name in PROCEDURE_EVENT_COLUMNS.iter().chain(&PROCEDURE_TRIAL_COLUMNS) {
+        tsv.push('\t');
+        tsv.push_str(name);
+    }
+    tsv.push('\n');
+    for event in &event_rows {
+        let Some(time_s) = time_of(event) else { continue };
+        let onset = clock.map_or(time_s - first_s, |c| c.session_time_s(time_s));
+        let kind = field(event, column(&event_header, "event"));
+        tsv.push_str(&format!("{onset}\t0\t{}", tsv_field(&kind)));
+        for name in PROCEDURE_EVENT_COLUMNS {
+            tsv.push('\t');
+            tsv.push_str(&tsv_field(&field(event, column(&event_header, name))));
+        }
+        let trial = field(event, column(&event_header, "trial"));
+        let row = rows.iter().find(|r| field(r, column(&header, "trial")) == trial);
+        for name in PROCEDURE_TRIAL_COLUMNS {
+            tsv.push('\t');
+            tsv.push_str(&tsv_field(
+                &row.map(|r| field(r, column(&header, name))).unwrap_or_default(),
+            ));
+        }
+        tsv.push('\n');
+    }
+    let dir = session.beh_dir(root)?;
+    let prefix = session.prefix()?;
+    write_text(&dir.join(format!("{prefix}_events.tsv")), &tsv)?;
+    let mut sidecar = Map::new();
+    sidecar.insert(
+        "onset".into(),
+        json!({"Description": "The event's tick on the display's loop clock, seconds since the first trial's start", "Units": "s"}),
+    );
+    sidecar.insert(
+        "duration".into(),
+        json!({"Description": "Events are instants", "Units": "s"}),
+    );
+    sidecar.insert(
+        "trial_type".into(),
+        json!({"Description": "What happened", "Levels": {
+            "segment_start": "A program segment started (its first set-point is this tick's)",
+            "response": "A participant's response took effect on this tick",
+            "program_end": "The channel's program ended; its set-point holds"}}),
+    );
+    for name in PROCEDURE_EVENT_COLUMNS.iter().chain(&PROCEDURE_TRIAL_COLUMNS) {
+        sidecar.insert((*name).to_string(), column_description(name));
+    }
+    write_json(&dir.join(format!("{prefix}_events.json")), &Value::Object(sidecar))?;
+    Ok(rows.len())
+}
+
 /// The experiment file's `presentation_s`, if it has one.
 fn presentation_of(toml_text: &str) -> Option<f64> {
     let value: toml::Value = toml::from_str(toml_text).ok()?;
@@ -533,6 +611,20 @@ fn column_description(name: &str) -> Value {
         "finger_end_c" => "Finger temperature measured on the display at rest after the trial",
         "excluded" => "Whether the exclusion rule discarded the trial",
         "exclusion_reason" => "Why the trial was excluded",
+        "label" => "What the trial measures (a DFNS test, the procedure, or a multi-zone stimulus)",
+        "run" => "Run (repetition) of the test or stimulus",
+        "channel" => "Display channel",
+        "segment" => "Program segment (from 0)",
+        "tick" => "The display loop's tick",
+        "time_s" => "The display loop's time of the tick",
+        "to_c" => "A started segment's target temperature (after the display's cut-off)",
+        "cutoff_c" => "The display's limit a target was clipped to",
+        "kind" => "A response's kind: button or rating",
+        "value" => "A rating, 0 to 100",
+        "intensity_c" => "Requested change of the plate from the baseline",
+        "delivered_c" => "The plate at the response's tick, at the plateau, or where the ramp ended",
+        "response" => "press, none (method of limits); yes, no; rating",
+        "rating" => "The participant's rating, 0 to 100",
         _ => "Column of thermode's session CSV (see thermode's documentation)",
     };
     let units = if name.ends_with("_s") || name == "key_resp.rt" {

@@ -12,6 +12,8 @@
 //! - [`design`]: experiment files (TOML); [`plan`]: the counterbalanced trial plan (Williams designs);
 //!   [`session`]: durable session CSVs and sidecars; [`runner`]: the trial runner and its stimulus, clock, console
 //!   and responder seams; [`participant`]: the simulated participant; [`random`]: the per-trial random streams.
+//! - [`procedure`]: psychophysical procedures (method of limits, levels, staircases, QUEST+, multi-zone programs)
+//!   run as programs on a display, their session files and their analysis.
 
 pub mod analysis;
 pub mod design;
@@ -19,6 +21,7 @@ pub mod error;
 pub mod export;
 pub mod participant;
 pub mod plan;
+pub mod procedure;
 pub mod random;
 pub mod runner;
 pub mod session;

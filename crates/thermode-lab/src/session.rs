@@ -184,7 +184,7 @@ fn list(files: &[PathBuf]) -> String {
         .join(", ")
 }
 
-fn io(path: &Path) -> impl FnOnce(std::io::Error) -> SessionError + '_ {
+pub(crate) fn io(path: &Path) -> impl FnOnce(std::io::Error) -> SessionError + '_ {
     move |error| SessionError::Io {
         path: path.to_path_buf(),
         error,

@@ -45,6 +45,10 @@ pub struct ProcedureFile {
     /// The seed of the simulated participants' random streams. Default 0.
     #[serde(default)]
     pub seed: u64,
+    /// The pause at the baseline before the first trial (and before a trial whose baseline the plate is not at),
+    /// while the finger adapts \[s\]. Default 10.
+    #[serde(default = "default_adaptation_s")]
+    pub adaptation_s: f64,
     /// The method of limits' table.
     pub limits: Option<LimitsConfig>,
     /// The method of levels' table.
@@ -63,6 +67,10 @@ pub struct ProcedureFile {
 
 fn default_participants() -> usize {
     1
+}
+
+fn default_adaptation_s() -> f64 {
+    10.0
 }
 
 fn missing(procedure: &str, table: &str) -> ProcedureError {
@@ -95,6 +103,7 @@ impl ProcedureFile {
                 "an integer from 1 to 10000",
             ));
         }
+        crate::error::check_range("adaptation_s", self.adaptation_s, 0.0, 600.0)?;
         if let Some(p) = &self.simulated_participant {
             p.validate()?;
         }

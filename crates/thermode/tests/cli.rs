@@ -23,6 +23,11 @@ mod serve_on_emulator;
 #[path = "cli/service.rs"]
 mod service;
 
+// Procedure files run by `lab run`, analysed and exported.
+#[cfg(unix)]
+#[path = "cli/procedures.rs"]
+mod procedures;
+
 // MeCom and TCS II emulators with `bench` on them.
 #[cfg(unix)]
 #[path = "cli/hardware.rs"]

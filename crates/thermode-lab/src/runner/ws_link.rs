@@ -66,6 +66,9 @@ pub struct WsLink {
     channel: usize,
     next_id: u64,
     pending: VecDeque<DisplaySample>,
+    /// Telemetry and program events that arrived while a reply was awaited, kept for a procedure's
+    /// [`WsLink::next_message`] once [`WsLink::keep_messages`] was called.
+    messages: Option<VecDeque<Response>>,
     status: Option<Status>,
     /// The wall-clock time of the daemon's loop time zero \[s since 1970, UTC\], from the status at connect.
     loop_time_zero_unix_s: f64,
@@ -129,6 +132,7 @@ impl WsLink {
             channel,
             next_id: 0,
             pending: VecDeque::new(),
+            messages: None,
             status: None,
             loop_time_zero_unix_s: f64::NAN,
             loop_time_zero_uncertainty_s: f64::NAN,
@@ -211,9 +215,18 @@ impl WsLink {
             let reply = match self.read()? {
                 Response::Telemetry(telemetry) => {
                     self.pending.extend(self.sample_of(&telemetry));
+                    if let Some(messages) = self.messages.as_mut() {
+                        messages.push_back(Response::Telemetry(telemetry));
+                    }
                     continue;
                 }
-                Response::Event(_) | Response::ProgramEvent(_) => continue,
+                Response::ProgramEvent(event) => {
+                    if let Some(messages) = self.messages.as_mut() {
+                        messages.push_back(Response::ProgramEvent(event));
+                    }
+                    continue;
+                }
+                Response::Event(_) => continue,
                 reply => reply,
             };
             let reply_id = match &reply {
@@ -236,8 +249,34 @@ impl WsLink {
         }
     }
 
+    /// From now on, telemetry and program events are kept for [`WsLink::next_message`] (a procedure's program
+    /// display), and the single-channel samples are no longer queued.
+    pub(crate) fn keep_messages(&mut self) {
+        self.messages.get_or_insert_with(VecDeque::new);
+        self.pending.clear();
+    }
+
+    /// The next telemetry or program event (kept ones first; see [`WsLink::keep_messages`]).
+    pub(crate) fn next_message(&mut self) -> Result<Response, StimulusError> {
+        loop {
+            if let Some(message) = self.messages.as_mut().and_then(VecDeque::pop_front) {
+                self.pending.clear();
+                return Ok(message);
+            }
+            match self.read()? {
+                message @ (Response::Telemetry(_) | Response::ProgramEvent(_)) => return Ok(message),
+                _ => continue,
+            }
+        }
+    }
+
+    /// The daemon's channel count (from its status at connect).
+    pub(crate) fn channel_count(&self) -> usize {
+        self.status.as_ref().map_or(0, |s| s.channel_count)
+    }
+
     /// What a request did (an `ok` reply), or an error for any other answer.
-    fn done(&mut self, request: Request) -> Result<Done, StimulusError> {
+    pub(crate) fn done(&mut self, request: Request) -> Result<Done, StimulusError> {
         match self.request(request)? {
             Response::Ok(ok) => Ok(ok.done),
             _ => Err(device("the display answered with a message that is not an `ok`")),

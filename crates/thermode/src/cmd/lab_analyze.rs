@@ -12,6 +12,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
 use thermode_lab::analysis::{self, ReportFormat as LabFormat};
+use thermode_lab::procedure::analysis as procedure;
+use thermode_procedures::analysis::parse_reference;
 
 use crate::output::print_stdout;
 
@@ -46,6 +48,19 @@ pub struct LabAnalyzeArgs {
     /// and an optional repetition; repeat for several files.
     #[arg(long)]
     curves: Vec<PathBuf>,
+    /// Procedure sessions: the DFNS reference table (CSV: test, site, sex, age_band, mean, sd; mean and sd in the
+    /// compared space, log10 for CDT, WDT and TSL) for z-scores. Needs --site, --sex and --age-band.
+    #[arg(long, value_name = "FILE.csv", requires_all = ["site", "sex", "age_band"])]
+    reference: Option<PathBuf>,
+    /// The participants' body site in the reference table (e.g. hand).
+    #[arg(long, requires = "reference")]
+    site: Option<String>,
+    /// The participants' sex in the reference table (e.g. female).
+    #[arg(long, requires = "reference")]
+    sex: Option<String>,
+    /// The participants' age band in the reference table (e.g. 20-40).
+    #[arg(long, requires = "reference")]
+    age_band: Option<String>,
 }
 
 /// Where `md` and `html` reports go without `--out`: `lab-report` in the current folder.
@@ -53,6 +68,9 @@ pub const DEFAULT_REPORT_DIR: &str = "lab-report";
 
 /// Runs `thermode lab analyze`.
 pub fn run(args: &LabAnalyzeArgs) -> Result<()> {
+    if args.files.iter().any(|f| procedure::is_procedure_csv(f)) {
+        return run_procedures(args);
+    }
     let mut result = analysis::analyze(&args.files)?;
     if !args.curves.is_empty() {
         result.curves = Some(analysis::analyze_curves(&args.curves)?);
@@ -73,6 +91,49 @@ pub fn run(args: &LabAnalyzeArgs) -> Result<()> {
             let out = out.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_REPORT_DIR));
             let written = analysis::write_outputs(&result, &out, &formats)?;
             let report = written.first().context("no report was written")?;
+            print_stdout(&format!("{}\n", report.display()))
+        }
+    }
+}
+
+/// `lab analyze` of procedure sessions: thresholds, z-scores, estimates, ratings, a trace figure per trial.
+fn run_procedures(args: &LabAnalyzeArgs) -> Result<()> {
+    if let Some(other) = args.files.iter().find(|f| !procedure::is_procedure_csv(f)) {
+        anyhow::bail!(
+            "{}: not a procedure session; analyse identification sessions and procedure sessions separately",
+            other.display()
+        );
+    }
+    let reference = match (&args.reference, &args.site, &args.sex, &args.age_band) {
+        (Some(path), Some(site), Some(sex), Some(age_band)) => {
+            let text = std::fs::read_to_string(path).with_context(|| path.display().to_string())?;
+            Some(procedure::ReferenceChoice {
+                rows: parse_reference(&text).with_context(|| path.display().to_string())?,
+                site: site.clone(),
+                sex: sex.clone(),
+                age_band: age_band.clone(),
+            })
+        }
+        _ => None,
+    };
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(DEFAULT_REPORT_DIR));
+    let figures = (args.format != ReportFormat::Json || args.out.is_some()).then_some(out.as_path());
+    if args.format == ReportFormat::Html {
+        anyhow::bail!("--format html: a procedure session's report is Markdown (md) or JSON");
+    }
+    let sessions = procedure::analyze_sessions(&args.files, reference.as_ref(), figures)?;
+    if figures.is_some() {
+        std::fs::create_dir_all(&out).with_context(|| out.display().to_string())?;
+    }
+    let json = serde_json::to_string_pretty(&sessions)? + "\n";
+    if figures.is_some() {
+        std::fs::write(out.join("analysis.json"), &json)?;
+    }
+    match args.format {
+        ReportFormat::Json => print_stdout(&json),
+        ReportFormat::Md | ReportFormat::Html => {
+            let report = out.join("report.md");
+            std::fs::write(&report, procedure::markdown(&sessions))?;
             print_stdout(&format!("{}\n", report.display()))
         }
     }

@@ -73,71 +73,74 @@ const CALIBRATION_SEED: u64 = 1;
 pub struct LabRunArgs {
     /// Experiment file (TOML), as for `thermode lab plan`.
     #[arg(long)]
-    experiment: PathBuf,
+    pub(crate) experiment: PathBuf,
     /// Participant identifier from the design (a design names them P01, P02, … unless it lists its own); letters,
     /// digits, `_` and `-` only. Required unless `--all-participants`. Repeat it (with `--simulated-participant`) to
     /// run several as one batch.
     #[arg(long, required_unless_present = "all_participants")]
-    participant: Vec<String>,
+    pub(crate) participant: Vec<String>,
     /// Every participant of the design, as one batch (needs `--simulated-participant`).
     #[arg(long, conflicts_with = "participant")]
-    all_participants: bool,
+    pub(crate) all_participants: bool,
     /// Threads of a batch of participants (default: the available parallelism); the output does not depend on it.
     #[arg(long, value_name = "N")]
-    jobs: Option<usize>,
+    pub(crate) jobs: Option<usize>,
     /// Folder of the session files `<participant>_<experiment>_<date>.csv` and `.json` (created if missing).
     #[arg(long, default_value = "data")]
-    data_dir: PathBuf,
+    pub(crate) data_dir: PathBuf,
     /// Scripted answers: one per trial in order (an option number or name per line, or a CSV with an `identified`
     /// column).
     #[arg(long, conflicts_with = "simulated_participant")]
-    responses: Option<PathBuf>,
+    pub(crate) responses: Option<PathBuf>,
     /// Let the simulated participant answer (calibrated to the paper's 66 % real identification rate).
     #[arg(long, alias = "observer")]
-    simulated_participant: bool,
+    pub(crate) simulated_participant: bool,
     /// Multiplies every wait of a simulated session (1 = real time, e.g. to pace a demo; default 0: a simulation
     /// does not wait). A display presents in real time (1).
     #[arg(long, allow_negative_numbers = true)]
-    time_scale: Option<f64>,
+    pub(crate) time_scale: Option<f64>,
     /// Standard deviation of the model finger's start temperature from trial to trial [°C] (0 = always at rest).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    finger_drift_sd_c: f64,
+    pub(crate) finger_drift_sd_c: f64,
     /// What presents the materials.
     #[arg(long, value_enum, default_value = "display")]
-    stimulus: StimulusArg,
+    pub(crate) stimulus: StimulusArg,
     /// The display's controller (with `--stimulus display`; default model).
     #[arg(long, value_parser = ControllerArg::parser(&LAB_CONTROLLERS))]
-    controller: Option<ControllerArg>,
+    pub(crate) controller: Option<ControllerArg>,
     /// The display's device file (TOML; with `--device` or `--stimulus display`); default: the built-in default
     /// display.
     #[arg(long, value_name = "FILE")]
-    device_file: Option<PathBuf>,
+    pub(crate) device_file: Option<PathBuf>,
     /// Present on a running display: the `ws://HOST:PORT` of a `thermode serve` (with `--token` if it has one).
     /// The finger is measured on it (docs/lab.md).
     #[arg(long, value_name = "ws://HOST:PORT", conflicts_with_all = ["device", "simulate"])]
-    display: Option<String>,
+    pub(crate) display: Option<String>,
     /// The token of the daemon of `--display`.
     #[arg(long, value_name = "T", requires = "display")]
-    token: Option<String>,
+    pub(crate) token: Option<String>,
     /// Present on a display connected to this machine: the values `thermode serve --device` takes (`sim` is the
     /// simulated display in real time, `serial:PATH`, `mecom:PATH`, …); thermode runs it as `serve` would, on
     /// loopback only, for this session.
     #[arg(long, value_name = "DEVICE", conflicts_with = "simulate")]
-    device: Option<String>,
+    pub(crate) device: Option<String>,
     /// The display channel (finger) the trials are presented on, with `--display` or `--device`.
     #[arg(long, value_name = "N", default_value_t = 0)]
-    channel: usize,
+    pub(crate) channel: usize,
     /// Directory of the dose ledger of `--device` (as `serve --state-dir`).
     #[arg(long = "state-dir", value_name = "DIR", requires = "device")]
-    state_dir: Option<PathBuf>,
+    pub(crate) state_dir: Option<PathBuf>,
     /// Simulate instead: no display; the materials are rendered offline (`--stimulus`) and every finger
     /// temperature is the simulation's (kept in the `model_finger_*` columns).
     #[arg(long)]
-    simulate: bool,
+    pub(crate) simulate: bool,
 }
 
 /// Runs `thermode lab run`.
 pub fn run(args: &LabRunArgs) -> Result<()> {
+    if let Some(text) = super::lab_procedure::is_procedure(&args.experiment)? {
+        return super::lab_procedure::run(args, &text);
+    }
     let experiment = ExperimentFile::load(&args.experiment)?;
     if let Some(scale) = args.time_scale {
         thermode_model::params::Rule::NonNegative.check("--time-scale", scale)?;
@@ -257,33 +260,8 @@ fn answers(
 /// (`--device`), the finger measured on it.
 fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, out: &mut dyn Write) -> Result<()> {
     let design = &experiment.experiment;
-    // With --device this process runs the display: a stop signal must stop it cleanly (every drive to 0 A, the
-    // dose ledger written) before the process ends. Installed before the daemon starts.
-    let signals = args.device.is_some().then(StopSignals::install).transpose()?;
-    let (daemon, url, token) = match (&args.display, &args.device) {
-        (Some(url), _) => (None, url.clone(), args.token.clone()),
-        (None, Some(device)) => {
-            let display = DisplayArgs {
-                device: device.clone(),
-                device_file: args.device_file.clone(),
-                channels: None,
-                controller: args.controller.unwrap_or(ControllerArg::Model),
-                seed: 1, // the simulated display's sensor noise, as `serve`'s default
-            };
-            let (daemon, token) = serve::start_private(&display, args.state_dir.clone())?;
-            let url = format!("ws://{}", daemon.http_addr());
-            (Some(daemon), url, Some(token))
-        }
-        (None, None) => bail!("--display or --device"),
-    };
-    let daemon = Arc::new(Mutex::new(daemon));
-    let (done, interrupted) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
-    if let Some(signals) = signals {
-        let (daemon, done, interrupted) = (daemon.clone(), done.clone(), interrupted.clone());
-        std::thread::spawn(move || stop_on_signal(&signals, &daemon, &done, &interrupted));
-    }
-    let result = (|| {
-        let link = WsLink::connect(&url, token.as_deref(), args.channel)?;
+    on_display(args, |url, token| {
+        let link = WsLink::connect(url, token, args.channel)?;
         let device = link.status().map(|s| s.device.clone()).unwrap_or_default();
         if device.starts_with("tcs2:") || device.contains("mode=temperature") {
             bail!(
@@ -306,7 +284,7 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
         writeln!(
             out,
             "presenting on {} channel {}",
-            args.device.as_deref().unwrap_or(&url),
+            args.device.as_deref().unwrap_or(url),
             args.channel
         )?;
         // The simulated participant compares what it feels with real contact under the fv model.
@@ -334,7 +312,39 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
             input,
             out,
         )
-    })();
+    })
+}
+
+/// Runs `body` with the `ws://` address and token of the display of `--display` or `--device`: with `--device`
+/// this process runs the display for the session (loopback, its own token), stops it at the end (every drive at
+/// 0 A, the dose ledger written) and on SIGINT or SIGTERM.
+pub(crate) fn on_display(args: &LabRunArgs, body: impl FnOnce(&str, Option<&str>) -> Result<()>) -> Result<()> {
+    // With --device this process runs the display: a stop signal must stop it cleanly (every drive to 0 A, the
+    // dose ledger written) before the process ends. Installed before the daemon starts.
+    let signals = args.device.is_some().then(StopSignals::install).transpose()?;
+    let (daemon, url, token) = match (&args.display, &args.device) {
+        (Some(url), _) => (None, url.clone(), args.token.clone()),
+        (None, Some(device)) => {
+            let display = DisplayArgs {
+                device: device.clone(),
+                device_file: args.device_file.clone(),
+                channels: None,
+                controller: args.controller.unwrap_or(ControllerArg::Model),
+                seed: 1, // the simulated display's sensor noise, as `serve`'s default
+            };
+            let (daemon, token) = serve::start_private(&display, args.state_dir.clone())?;
+            let url = format!("ws://{}", daemon.http_addr());
+            (Some(daemon), url, Some(token))
+        }
+        (None, None) => bail!("--display or --device"),
+    };
+    let daemon = Arc::new(Mutex::new(daemon));
+    let (done, interrupted) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
+    if let Some(signals) = signals {
+        let (daemon, done, interrupted) = (daemon.clone(), done.clone(), interrupted.clone());
+        std::thread::spawn(move || stop_on_signal(&signals, &daemon, &done, &interrupted));
+    }
+    let result = body(&url, token.as_deref());
     if interrupted.load(Ordering::SeqCst) {
         // The session ended because the signal thread is stopping the display; it ends the process when done.
         loop {

@@ -9,6 +9,7 @@ pub mod identify;
 pub mod lab_analyze;
 pub mod lab_export;
 pub mod lab_plan;
+pub mod lab_procedure;
 pub mod lab_run;
 pub mod materials;
 pub mod render;

@@ -230,7 +230,7 @@ fn first_with(dir: &Path, suffix: &str) -> PathBuf {
 }
 
 /// Runs the reference validator (JSON output) and asserts it reports no error.
-fn validate(bids: &Path) {
+pub(super) fn validate(bids: &Path) {
     let required = std::env::var("THERMODE_REQUIRE_BIDS_VALIDATOR").is_ok_and(|v| v == "1");
     let program = std::env::var("THERMODE_BIDS_VALIDATOR").unwrap_or_else(|_| "bids-validator".into());
     let out = match Command::new(&program).arg(bids).arg("--json").output() {
