@@ -193,7 +193,7 @@ impl WsLink {
             let Message::Text(text) = message else { continue };
             let value: Value = serde_json::from_str(text.as_str())
                 .map_err(|e| device(format!("the display sent a malformed message: {e}")))?;
-            let known = ["ok", "error", "status", "telemetry", "event"];
+            let known = ["ok", "error", "status", "telemetry", "event", "program_event"];
             if !known.iter().any(|kind| value["type"] == *kind) {
                 continue;
             }

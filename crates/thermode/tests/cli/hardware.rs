@@ -302,3 +302,89 @@ fn status_fields_a_backend_cannot_measure_are_null_and_the_others_numbers() {
         assert!(channel["sensor_c"].is_f64(), "{device}: sensor_c in {channel}");
     }
 }
+
+/// `lab run` of a scripted method-of-limits run on `device` (one CDT ramp at 4 °C/s, a press 1 s in): the session
+/// row's response, the plate at the press and the events.
+fn limits_run_on(device: &str) -> (String, f64, String) {
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
+    let file = dir.path().join("cdt.toml");
+    std::fs::write(
+        &file,
+        "name = \"cdt\"\nprocedure = \"limits\"\nadaptation_s = 0.5\n[limits]\ntests = [\"CDT\"]\nrate_c_s = 4.0\n\
+         runs = 1\nisi_s = 0.5\n",
+    )
+    .unwrap_or_else(|e| panic!("write: {e}"));
+    let answers = dir.path().join("answers.txt");
+    std::fs::write(&answers, "press 1.0\n").unwrap_or_else(|e| panic!("write: {e}"));
+    let data = dir.path().join("data");
+    let path = |p: &std::path::Path| p.to_string_lossy().into_owned();
+    let out = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args([
+            "lab",
+            "run",
+            "--experiment",
+            &path(&file),
+            "--participant",
+            "P01",
+            "--device",
+            device,
+        ])
+        .args(["--responses", &path(&answers), "--data-dir", &path(&data)])
+        .args(["--state-dir", &path(&dir.path().join("state"))])
+        .output()
+        .unwrap_or_else(|e| panic!("run lab: {e}"));
+    assert!(
+        out.status.success(),
+        "lab run on {device} failed: {}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let date_csv = std::fs::read_dir(&data)
+        .unwrap_or_else(|e| panic!("data: {e}"))
+        .map(|e| e.map(|e| e.path()).unwrap_or_default())
+        .find(|p| p.extension().is_some_and(|e| e == "csv") && !p.to_string_lossy().ends_with("_events.csv"))
+        .unwrap_or_else(|| panic!("no session CSV"));
+    let mut reader = csv::Reader::from_path(&date_csv).unwrap_or_else(|e| panic!("csv: {e}"));
+    let header = reader.headers().unwrap_or_else(|e| panic!("header: {e}")).clone();
+    let row = reader
+        .records()
+        .next()
+        .and_then(Result::ok)
+        .unwrap_or_else(|| panic!("no row in {}", date_csv.display()));
+    let field = |name: &str| {
+        row.get(header.iter().position(|h| h == name).unwrap_or(usize::MAX))
+            .unwrap_or("")
+    };
+    let delivered_c = field("delivered_c").parse::<f64>().unwrap_or(f64::NAN);
+    let events = std::fs::read_to_string(
+        date_csv.with_file_name(
+            date_csv
+                .file_name()
+                .map(|n| n.to_string_lossy().replace(".csv", "_events.csv"))
+                .unwrap_or_default(),
+        ),
+    )
+    .unwrap_or_default();
+    (field("response").to_string(), delivered_c, events)
+}
+
+#[test]
+fn a_procedure_runs_on_the_temperature_commanded_tcs2_and_mecom_emulators() {
+    let (_tcs2, tcs2_pty) = emulate(&["--protocol", "tcs2", "--channels", "1", "--stream-hz", "50"]);
+    let (_mecom, mecom_pty) = emulate(&["--protocol", "mecom", "--channels", "1"]);
+    for device in [
+        format!("tcs2:{tcs2_pty}?zones=1"),
+        format!("mecom:{mecom_pty}?mode=temperature"),
+    ] {
+        let (response, delivered_c, events) = limits_run_on(&device);
+        assert_eq!(response, "press", "{device}");
+        // A press 1 s into a 4 °C/s cold ramp from 32 °C: the plate near 28 °C (it lags the set-point).
+        assert!(
+            (26.5..=31.5).contains(&delivered_c),
+            "{device}: the plate at the press {delivered_c} °C, expected about 28"
+        );
+        for kind in ["segment_start", "response", "program_end"] {
+            assert!(events.contains(kind), "{device}: no {kind} event in\n{events}");
+        }
+    }
+}
