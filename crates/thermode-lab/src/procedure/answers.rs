@@ -14,8 +14,9 @@ use crate::runner::StimulusError;
 
 /// What answers a procedure's trials.
 pub trait ProcedureResponder {
-    /// A trial starts: `plan` is what it presents (for a multi-zone program, a plan of its first channel).
-    fn begin(&mut self, plan: &TrialPlan);
+    /// A trial starts: `plan` is what it presents (for a multi-zone program, a plan of its first channel). An error
+    /// when the responder has no answer for it (a script that ended).
+    fn begin(&mut self, plan: &TrialPlan) -> Result<(), StimulusError>;
     /// A plate sample of the trial's channel, `dt_s` \[s\] after the previous one, the plate at `plate_c` \[°C\];
     /// `true` asks the runner to send a button press now (it sends one only while an `until: response` ramp runs).
     fn watch(&mut self, dt_s: f64, plate_c: f64) -> Result<bool, StimulusError>;
@@ -54,7 +55,7 @@ impl SimulatedResponder {
 }
 
 impl ProcedureResponder for SimulatedResponder {
-    fn begin(&mut self, plan: &TrialPlan) {
+    fn begin(&mut self, plan: &TrialPlan) -> Result<(), StimulusError> {
         if !plan.continues_previous {
             self.participant.adapt(plan.baseline_c);
         }
@@ -67,6 +68,7 @@ impl ProcedureResponder for SimulatedResponder {
         self.participant.begin_trial(criterion);
         self.start_receptor_c = self.participant.receptor_c();
         self.largest_change_c = 0.0;
+        Ok(())
     }
 
     fn watch(&mut self, dt_s: f64, plate_c: f64) -> Result<bool, StimulusError> {
@@ -192,7 +194,7 @@ impl ScriptedAnswers {
             StimulusError::BadMeasurement(format!(
                 "{}: no answer for trial {} ({plan_label}): it has {} line(s)",
                 self.source,
-                self.next,
+                self.next + 1,
                 self.answers.len()
             ))
         })
@@ -201,16 +203,22 @@ impl ScriptedAnswers {
     fn mismatch(&self, wanted: &str, got: Scripted) -> StimulusError {
         StimulusError::BadMeasurement(format!(
             "{}: trial {} asks for {wanted}, the script says {got:?}",
-            self.source, self.next
+            self.source,
+            self.next + 1
         ))
     }
 }
 
 impl ProcedureResponder for ScriptedAnswers {
-    fn begin(&mut self, _plan: &TrialPlan) {
+    fn begin(&mut self, plan: &TrialPlan) -> Result<(), StimulusError> {
         self.current = self.answers.get(self.next).copied();
+        let answer = self.answer_of(&plan.label)?;
+        if plan.until_response && matches!(answer, Scripted::YesNo(_) | Scripted::Rating(_)) {
+            return Err(self.mismatch("`press SECONDS` or `none`", answer));
+        }
         self.next += 1;
         self.elapsed_s = 0.0;
+        Ok(())
     }
 
     fn watch(&mut self, dt_s: f64, _plate_c: f64) -> Result<bool, StimulusError> {
@@ -281,8 +289,9 @@ mod tests {
     fn a_scripted_press_comes_at_its_time_after_the_trial_start() {
         let mut script = ScriptedAnswers::from_text("press 0.045\n", "s").unwrap_or_else(|e| panic!("{e}"));
         let plan = thermode_procedures::stimulus::StimulusConfig::default().trial(0, "x", 1.0);
-        script.begin(&plan);
+        script.begin(&plan).unwrap_or_else(|e| panic!("{e}"));
         let presses: Vec<bool> = (0..10).map(|_| script.watch(0.01, 32.0).unwrap_or(false)).collect();
         assert_eq!(presses.iter().position(|&p| p), Some(4), "{presses:?}");
+        assert!(script.begin(&plan).is_err(), "the script has one line");
     }
 }

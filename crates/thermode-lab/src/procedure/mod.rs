@@ -4,12 +4,13 @@
 //! - [`display`]: the port ([`ProgramDisplay`]) — programs, plate samples, segment events, responses;
 //!   [`simulated`]: the simulated display in virtual time; [`ws`]: a running daemon over its WebSocket.
 //! - [`answers`]: who answers ([`ProcedureResponder`]): the simulated participant, a script, the CLI's keyboard.
-//! - [`run`]: the session runner; [`session`]: its durable files (CSV, events, traces, sidecar).
+//! - [`plan`]: `lab plan` of a procedure file; [`run`]: the session runner; [`session`]: its durable files (CSV, events, traces, sidecar).
 //! - [`analysis`]: thresholds, z-scores and trace figures of procedure sessions (`lab analyze`).
 
 pub mod analysis;
 pub mod answers;
 pub mod display;
+pub mod plan;
 pub mod run;
 pub mod session;
 pub mod simulated;

@@ -150,7 +150,7 @@ impl ProcedureRunner<'_> {
                 let to_baseline = BTreeMap::from([(self.channel, adaptation(plan.baseline_c, self.file.adaptation_s))]);
                 self.present(&to_baseline, Watch::silent(trial, self.channel))?;
             }
-            self.responder.begin(&plan);
+            self.responder.begin(&plan)?;
             let watch = Watch {
                 trial,
                 channel: self.channel,
@@ -193,7 +193,7 @@ impl ProcedureRunner<'_> {
                 .collect();
             self.present(&to_baseline, Watch::silent(number, first))?;
             let plan = zone_plan(trial);
-            self.responder.begin(&plan);
+            self.responder.begin(&plan)?;
             let mut program = trial.channels.clone();
             if trial.isi_s > 0.0 {
                 for segments in program

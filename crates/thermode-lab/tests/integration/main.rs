@@ -4,4 +4,5 @@ mod analysis;
 mod display_stimulus;
 mod kill;
 mod plan;
+mod procedures;
 mod runner;

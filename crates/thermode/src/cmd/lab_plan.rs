@@ -26,6 +26,9 @@ pub struct LabPlanArgs {
 
 /// Runs `thermode lab plan`.
 pub fn run(args: &LabPlanArgs) -> Result<()> {
+    if let Some(text) = super::lab_procedure::is_procedure(&args.experiment)? {
+        return procedure(args, &text);
+    }
     let file = ExperimentFile::load(&args.experiment)?;
     let plan = make_plan(&file.experiment);
     let csv = plan.to_csv_string();
@@ -46,4 +49,34 @@ pub fn run(args: &LabPlanArgs) -> Result<()> {
         plan.seed,
         orders.join(", ")
     ))
+}
+
+/// `lab plan` of a procedure file: its trials as far as they are known before anyone answers.
+fn procedure(args: &LabPlanArgs, text: &str) -> Result<()> {
+    let file = thermode_procedures::ProcedureFile::from_toml_str(text)?;
+    let plan = thermode_lab::procedure::plan::procedure_plan(&file, 0)?;
+    let Some(out) = &args.out else {
+        return print_stdout(&plan.csv);
+    };
+    write_atomically(out, |w: &mut dyn Write| Ok(w.write_all(plan.csv.as_bytes())?))?;
+    let what = match plan.adaptive {
+        true => "the first trial (later intensities depend on the answers)".to_string(),
+        false => format!(
+            "{} trials, about {:.0} s with every ramp to its cut-off",
+            plan.listed, plan.duration_s
+        ),
+    };
+    print_stdout(&format!(
+        "{}: {} ({}): {what}\n",
+        out.display(),
+        file.name,
+        text_procedure(&file)
+    ))
+}
+
+fn text_procedure(file: &thermode_procedures::ProcedureFile) -> String {
+    serde_json::to_value(file.procedure)
+        .ok()
+        .and_then(|v| v.as_str().map(str::to_string))
+        .unwrap_or_default()
 }
