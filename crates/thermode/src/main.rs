@@ -85,7 +85,7 @@ fn main() -> ExitCode {
         Command::Lab(LabCommand::Analyze(args)) => cmd::lab_analyze::run(args),
         Command::Lab(LabCommand::Export(args)) => cmd::lab_export::run(args),
         Command::Lab(LabCommand::Plan(args)) => cmd::lab_plan::run(args),
-        Command::Lab(LabCommand::Run(args)) => cmd::lab_run::run(args),
+        Command::Lab(LabCommand::Run(args)) => cmd::lab_procedure::dispatch(args),
         Command::Render(args) => cmd::render::run(args),
         Command::Tune(args) => cmd::tune::run(args),
         Command::Identify(args) => cmd::identify::run(args),

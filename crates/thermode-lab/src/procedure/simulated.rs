@@ -2,16 +2,18 @@
 //! (`thermode_runtime::program`), each channel's render pipeline and safety envelope in direct mode, and the
 //! simulated Peltier display with a finger resting on every plate, stepped tick by tick as fast as the machine goes.
 //! What the daemon does each tick for a program, done here without threads or a clock: a session is bit-identical
-//! run after run.
+//! run after run. With a person answering at the keyboard it is paced to real time ([`SimulatedProgramDisplay::paced`]).
 //!
 //! A response takes effect on the next tick, as on the daemon: [`ProgramDisplay::respond`] runs that tick and gives
 //! its plate and set-point. The plate a participant feels is the simulated plate itself (`plate_c`).
 
 use std::collections::{BTreeMap, VecDeque};
+use std::sync::Arc;
 
 use serde_json::json;
 use thermode_device::{DefaultFinger, Device, SimulatedDisplay};
 use thermode_pipeline::{ChannelPipeline, PipelineConfig, Stimulus};
+use thermode_platform::Clock;
 use thermode_procedures::Segment;
 use thermode_runtime::program::{Executor, Program, Segment as LoopSegment};
 use thermode_runtime::StimulusLimits;
@@ -21,6 +23,8 @@ use crate::runner::StimulusError;
 
 /// The loop rate of the simulated display \[Hz\]: the daemon's default.
 pub const SIMULATED_RATE_HZ: f64 = 1000.0;
+/// How far a paced display's virtual time may run ahead of its clock before it sleeps \[s\].
+pub const PACE_SLACK_S: f64 = 0.005;
 
 /// One channel: its pipeline, limits and running program.
 struct Channel {
@@ -40,6 +44,8 @@ pub struct SimulatedProgramDisplay {
     tick: u64,
     queue: VecDeque<DisplayEvent>,
     description: serde_json::Value,
+    /// Real-time pacing (a person answers): the clock and its time at virtual time 0 \[s\].
+    pace: Option<(Arc<dyn Clock>, f64)>,
 }
 
 fn device_error(e: impl std::fmt::Display) -> StimulusError {
@@ -70,6 +76,7 @@ impl SimulatedProgramDisplay {
             dt_s: 1.0 / SIMULATED_RATE_HZ,
             tick: 0,
             queue: VecDeque::new(),
+            pace: None,
             description: json!({
                 "display": "simulated (virtual time)",
                 "rate_hz": SIMULATED_RATE_HZ,
@@ -85,10 +92,25 @@ impl SimulatedProgramDisplay {
         Ok(display)
     }
 
+    /// Paces the display to `clock` from now on: virtual time never runs ahead of it by more than
+    /// [`PACE_SLACK_S`] (a person at the keyboard answers in real time).
+    pub fn paced(mut self, clock: Arc<dyn Clock>) -> Self {
+        let origin_s = clock.now_s() - self.tick as f64 * self.dt_s;
+        self.pace = Some((clock, origin_s));
+        self.description["paced"] = json!("real time");
+        self
+    }
+
     /// One tick of every channel: the programs' set-points through the envelopes, the drives applied, the plant
     /// advanced; queues the tick's events and its sample.
     fn step(&mut self) -> Result<(), StimulusError> {
         let (tick, time_s, dt_s) = (self.tick, self.tick as f64 * self.dt_s, self.dt_s);
+        if let Some((clock, origin_s)) = &self.pace {
+            let deadline_s = origin_s + time_s;
+            if deadline_s - clock.now_s() > PACE_SLACK_S {
+                clock.sleep_until(deadline_s);
+            }
+        }
         let mut plates = Vec::with_capacity(self.channels.len());
         for (index, channel) in self.channels.iter_mut().enumerate() {
             let reading = self.device.read(index).map_err(device_error)?;

@@ -31,11 +31,22 @@ use crate::resolve;
 /// How long the simulated display settles in air before a session \[s\].
 const SIMULATED_SETTLE_S: f64 = 2.0;
 
+/// Runs `thermode lab run`: a procedure file here, an identification design by `lab_run`.
+pub fn dispatch(args: &LabRunArgs) -> Result<()> {
+    match is_procedure(&args.experiment)? {
+        Some(text) => run(args, &text),
+        None => super::lab_run::run(args),
+    }
+}
+
 /// Runs `thermode lab run` for the procedure file `text` (read from `args.experiment`).
-pub fn run(args: &LabRunArgs, text: &str) -> Result<()> {
+fn run(args: &LabRunArgs, text: &str) -> Result<()> {
     let file = ProcedureFile::from_toml_str(text).with_context(|| args.experiment.display().to_string())?;
-    if args.time_scale.is_some_and(|s| s != 0.0) && args.simulate {
-        bail!("--time-scale: a procedure on the simulated display runs in virtual time, without waiting");
+    if args.time_scale.is_some() && args.simulate {
+        bail!(
+            "--time-scale: a procedure on the simulated display runs in virtual time (in real time when a person \
+             answers at the keyboard)"
+        );
     }
     let participants: Vec<String> = match args.all_participants {
         true => (1..=file.participants).map(|i| format!("P{i:02}")).collect(),
@@ -54,6 +65,10 @@ pub fn run(args: &LabRunArgs, text: &str) -> Result<()> {
                 writeln!(out, "== {participant}")?;
             }
             let mut display = simulated_display(args, &file)?;
+            if !args.simulated_participant && args.responses.is_none() {
+                // A person at the keyboard answers in real time.
+                display = display.paced(std::sync::Arc::new(thermode_platform::MonotonicClock::new()));
+            }
             session(args, &file, text, participant, &mut display, &mut out)?;
         }
         return Ok(());
@@ -225,7 +240,7 @@ impl Keyboard {
 }
 
 impl ProcedureResponder for Keyboard {
-    fn begin(&mut self, plan: &TrialPlan) {
+    fn begin(&mut self, plan: &TrialPlan) -> Result<(), StimulusError> {
         while self.keys.try_recv().is_ok() {}
         let what = if plan.until_response {
             "press SPACE when you feel it"
@@ -233,6 +248,7 @@ impl ProcedureResponder for Keyboard {
             "feel"
         };
         println!("{} run {}: {what}", plan.label, plan.run);
+        Ok(())
     }
 
     fn watch(&mut self, _dt_s: f64, _plate_c: f64) -> Result<bool, StimulusError> {

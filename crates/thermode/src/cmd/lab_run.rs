@@ -138,9 +138,6 @@ pub struct LabRunArgs {
 
 /// Runs `thermode lab run`.
 pub fn run(args: &LabRunArgs) -> Result<()> {
-    if let Some(text) = super::lab_procedure::is_procedure(&args.experiment)? {
-        return super::lab_procedure::run(args, &text);
-    }
     let experiment = ExperimentFile::load(&args.experiment)?;
     if let Some(scale) = args.time_scale {
         thermode_model::params::Rule::NonNegative.check("--time-scale", scale)?;

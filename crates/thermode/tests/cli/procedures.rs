@@ -284,3 +284,59 @@ fn a_procedure_session_is_analysed_with_z_scores_and_exported_with_its_events() 
     assert_eq!(first_onset, 0.0, "onset 0 at the first trial's start on the loop clock");
     super::bids::validate(&bids);
 }
+
+#[test]
+fn the_space_bar_stops_a_ramp_on_the_simulated_display_in_real_time() {
+    use std::io::{BufRead, BufReader, Write};
+    use std::process::Stdio;
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("cdt.toml");
+    std::fs::write(
+        &file,
+        "name = \"cdt\"\nprocedure = \"limits\"\nadaptation_s = 0.5\n[limits]\ntests = [\"CDT\"]\nruns = 1\nisi_s = 0.5\n",
+    )
+    .expect("write");
+    let data = dir.path().join("data");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args([
+            "lab",
+            "run",
+            "--experiment",
+            file.to_str().expect("utf-8"),
+            "--participant",
+            "P01",
+        ])
+        .args(["--simulate", "--data-dir", data.to_str().expect("utf-8")])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn lab run");
+    let mut stdin = child.stdin.take().expect("stdin");
+    let mut lines = BufReader::new(child.stdout.take().expect("stdout")).lines();
+    let mut printed = Vec::new();
+    for line in lines.by_ref() {
+        let line = line.expect("line");
+        let asked = line.contains("press SPACE");
+        printed.push(line);
+        if asked {
+            break;
+        }
+    }
+    // The participant feels the ramp a second in and presses the space bar (a USB button types one too).
+    std::thread::sleep(std::time::Duration::from_secs(1));
+    stdin.write_all(b" ").expect("press");
+    stdin.flush().expect("flush");
+    printed.extend(lines.map_while(Result::ok));
+    let status = child.wait().expect("wait");
+    assert!(status.success(), "lab run failed: {printed:?}");
+    let (header, rows) = read_csv(&session_csv(&data));
+    let row = &rows[0];
+    assert_eq!(row[column(&header, "response")], "press", "{printed:?}");
+    let delivered_c: f64 = row[column(&header, "delivered_c")].parse().expect("delivered");
+    // A press about 1 s into a 1 °C/s ramp from 32 °C (the plate lags its set-point a little).
+    assert!(
+        (29.8..=31.7).contains(&delivered_c),
+        "plate at the press {delivered_c} °C; {printed:?}"
+    );
+}
