@@ -146,7 +146,8 @@ impl ProcedureRunner<'_> {
         let mut setpoint_c = f64::NAN;
         while let Some(plan) = procedure.next_trial() {
             let trial = self.session.rows().len() + 1;
-            if !plan.continues_previous && !((setpoint_c - plan.baseline_c).abs() <= AT_BASELINE_C) {
+            let at_baseline = (setpoint_c - plan.baseline_c).abs() <= AT_BASELINE_C;
+            if !plan.continues_previous && !at_baseline {
                 let to_baseline = BTreeMap::from([(self.channel, adaptation(plan.baseline_c, self.file.adaptation_s))]);
                 self.present(&to_baseline, Watch::silent(trial, self.channel))?;
             }
@@ -254,11 +255,8 @@ impl ProcedureRunner<'_> {
             let delivered_c = match presented.response {
                 Some(at) => at.plate_c,
                 // No press: the ramp ended at its target, or at the display's cut-off.
-                None => presented
-                    .cutoff_c
-                    .is_finite()
-                    .then_some(presented.cutoff_c)
-                    .unwrap_or(plan.target_c()),
+                None if presented.cutoff_c.is_finite() => presented.cutoff_c,
+                None => plan.target_c(),
             };
             let cold_tsl = plan.label == "TSL" && plan.intensity_c < 0.0;
             let paradoxical_heat = cold_tsl && presented.response.is_some() && self.responder.paradoxical_heat(plan)?;

@@ -210,7 +210,7 @@ impl Keyboard {
                 }
             } else {
                 use std::io::Read;
-                for byte in std::io::stdin().bytes() {
+                for byte in std::io::stdin().lock().bytes() {
                     let Ok(byte) = byte else { break };
                     if send.send(char::from(byte)).is_err() {
                         break;

@@ -213,10 +213,10 @@ fn a_procedure_session_is_analysed_with_z_scores_and_exported_with_its_events() 
     let data = dir.path().join("data");
     run_simulated(&file, &data);
     let reference = dir.path().join("reference.csv");
-    // CDT on the hand, log10 of the magnitude: a mean of log10(2.0) with sd 0.2.
+    // CDT on the hand, log10 of the magnitude: a mean of 0.25 (1.78 °C) with sd 0.2.
     std::fs::write(
         &reference,
-        "test,site,sex,age_band,mean,sd\nCDT,hand,female,20-40,0.30103,0.2\n",
+        "test,site,sex,age_band,mean,sd\nCDT,hand,female,20-40,0.25,0.2\n",
     )
     .expect("write");
     let out = dir.path().join("report");
@@ -247,7 +247,7 @@ fn a_procedure_session_is_analysed_with_z_scores_and_exported_with_its_events() 
         .expect("a CDT threshold");
     let value_c = cdt["value_c"].as_f64().expect("CDT value");
     let z = session["z_scores"][0]["z"].as_f64().expect("a CDT z-score");
-    let expected_z = -(value_c.abs().log10() - 0.30103) / 0.2;
+    let expected_z = -(value_c.abs().log10() - 0.25) / 0.2;
     assert!(
         (z - expected_z).abs() < 1e-9,
         "z {z}, expected {expected_z} from CDT {value_c} °C"
