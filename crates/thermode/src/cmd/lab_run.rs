@@ -1,4 +1,5 @@
-//! `thermode lab run`: walks one participant through the planned trials (experimenter-facing, line-based prompts on
+//! `thermode lab run` of an identification design (a procedure file goes to `lab_procedure`): walks one participant
+//! through the planned trials (experimenter-facing, line-based prompts on
 //! standard input and output), writes the session CSV and its sidecar in the data folder, and resumes an interrupted
 //! session where it stopped. Answers come from the keyboard, from `--responses FILE` or from the
 //! simulated participant (`--simulated-participant`).
@@ -71,7 +72,8 @@ const CALIBRATION_SEED: u64 = 1;
 /// Arguments of `thermode lab run`.
 #[derive(Args, Debug)]
 pub struct LabRunArgs {
-    /// Experiment file (TOML), as for `thermode lab plan`.
+    /// Experiment file (TOML), as for `thermode lab plan`: an identification design, or a procedure file
+    /// (`procedure = "limits" | "levels" | "staircase" | "questplus" | "program"`, docs/procedures.md).
     #[arg(long)]
     pub(crate) experiment: PathBuf,
     /// Participant identifier from the design (a design names them P01, P02, … unless it lists its own); letters,
@@ -89,10 +91,11 @@ pub struct LabRunArgs {
     #[arg(long, default_value = "data")]
     pub(crate) data_dir: PathBuf,
     /// Scripted answers: one per trial in order (an option number or name per line, or a CSV with an `identified`
-    /// column).
+    /// column; for a procedure file `press SECONDS [phs]`, `none`, `yes`, `no` or `rating VALUE` per line).
     #[arg(long, conflicts_with = "simulated_participant")]
     pub(crate) responses: Option<PathBuf>,
-    /// Let the simulated participant answer (calibrated to the paper's 66 % real identification rate).
+    /// Let the simulated participant answer (calibrated to the paper's 66 % real identification rate; for a
+    /// procedure file, the file's `[simulated_participant]`).
     #[arg(long, alias = "observer")]
     pub(crate) simulated_participant: bool,
     /// Multiplies every wait of a simulated session (1 = real time, e.g. to pace a demo; default 0: a simulation
