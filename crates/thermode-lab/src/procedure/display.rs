@@ -47,6 +47,8 @@ pub struct ChannelPlate {
     /// The best temperature of the plate the display has \[°C\]: the true plate on the simulated display, the
     /// envelope's plate estimate on a real one (its sensor where it has no estimate).
     pub plate_c: f64,
+    /// The channel's latched safety fault code (0: none).
+    pub fault: u16,
 }
 
 /// What a display reports while a program runs.

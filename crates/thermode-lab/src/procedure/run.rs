@@ -12,7 +12,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Write;
 
-use thermode_procedures::program::ZoneTrial;
+use thermode_procedures::program::{segment_times_s, ZoneTrial};
 use thermode_procedures::{Procedure, ProcedureFile, Response, Segment, TrialPlan};
 
 use super::answers::ProcedureResponder;
@@ -353,9 +353,11 @@ impl ProcedureRunner<'_> {
         let mut segment = None;
         let mut last_time_s = start.start_time_s;
         let mut plateau = (0.0, 0usize);
+        let due_s = start.start_time_s + nominal_duration_s(program) + PROGRAM_END_SLACK_S;
         while ended.len() < program.len() {
             match self.display.next_event()? {
                 DisplayEvent::Sample { time_s, channels } if time_s >= start.start_time_s => {
+                    check_channels(program, &channels, time_s, due_s)?;
                     presented.trace.push(time_s, &channels);
                     let Some(plate) = channels.iter().find(|c| c.channel == watch.channel) else {
                         continue;
@@ -441,6 +443,63 @@ impl Watch {
             responding: false,
         }
     }
+}
+
+/// How long past its nominal end a program may run before the runner calls it lost \[s\] (steps at the envelope's
+/// rate and the loop's rounding take a little longer than the nominal times).
+pub const PROGRAM_END_SLACK_S: f64 = 30.0;
+
+/// A program's nominal duration: its longest channel's segments, ramps at their rates, holds whole \[s\].
+fn nominal_duration_s(program: &BTreeMap<usize, Vec<Segment>>) -> f64 {
+    program
+        .values()
+        .map(|segments| {
+            // The start is unknown here (the plate's set-point): count each ramp from the previous target, the first
+            // one from its own target's distance to 0 °C at worst.
+            let from_c = segments.iter().find_map(|s| match s {
+                Segment::Ramp { to_c, .. } | Segment::Step { to_c } => Some(*to_c),
+                Segment::Hold { .. } => None,
+            });
+            segment_times_s(from_c.unwrap_or(0.0), segments)
+                .last()
+                .copied()
+                .unwrap_or(0.0)
+                + FIRST_RAMP_ALLOWANCE_S
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Time allowed for a program's first ramp from wherever the plate stands (50 °C at the slowest 1 °C/s would take
+/// 50 s) \[s\].
+const FIRST_RAMP_ALLOWANCE_S: f64 = 60.0;
+
+/// Refuses a sample in which a program channel has faulted, or that comes after the program was due to end.
+fn check_channels(
+    program: &BTreeMap<usize, Vec<Segment>>,
+    channels: &[ChannelPlate],
+    time_s: f64,
+    due_s: f64,
+) -> Result<(), ProcedureRunError> {
+    if let Some(faulted) = channels
+        .iter()
+        .find(|c| c.fault != 0 && program.contains_key(&c.channel))
+    {
+        return Err(ProcedureRunError::Display(crate::runner::StimulusError::Device(
+            format!(
+                "channel {} faulted (code {}) during the trial; its drive is off; the completed trials are saved",
+                faulted.channel, faulted.fault
+            ),
+        )));
+    }
+    if time_s > due_s {
+        return Err(ProcedureRunError::Display(crate::runner::StimulusError::Device(
+            format!(
+                "the program was due to end by loop time {due_s:.1} s and has not (no program_end event); the \
+             completed trials are saved"
+            ),
+        )));
+    }
+    Ok(())
 }
 
 /// The way to a baseline: a ramp at [`TO_BASELINE_RATE_C_S`], then `adaptation_s` \[s\] there.

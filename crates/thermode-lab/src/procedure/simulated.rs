@@ -153,6 +153,7 @@ impl SimulatedProgramDisplay {
                 setpoint_c: telemetry.display_setpoint_c,
                 sensor_c: reading.sensor_c,
                 plate_c: self.device.channel(index).map_err(device_error)?.state().plate_c,
+                fault: 0,
             });
         }
         self.device.advance(dt_s);

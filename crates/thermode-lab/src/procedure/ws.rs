@@ -95,6 +95,7 @@ impl ProgramDisplay for WsLink {
                             setpoint_c: number(c.display_setpoint_c),
                             sensor_c: number(c.sensor_c),
                             plate_c: plate_of(c.plate_estimate_c, c.sensor_c),
+                            fault: c.fault,
                         })
                         .collect();
                     return Ok(DisplayEvent::Sample {

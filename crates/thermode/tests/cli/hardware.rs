@@ -304,8 +304,21 @@ fn status_fields_a_backend_cannot_measure_are_null_and_the_others_numbers() {
 }
 
 /// `lab run` of a scripted method-of-limits run on `device` (one CDT ramp at 4 °C/s, a press 1 s in): the session
-/// row's response, the plate at the press and the events.
+/// row's response, the plate at the press and the events. A machine too loaded to feed the emulator's samples in
+/// time makes the envelope latch a stale sensor (fault 104) and the session stop, as it must; that outcome (and only
+/// that one) is printed and the run tried again, up to three times.
 fn limits_run_on(device: &str) -> (String, f64, String) {
+    for attempt in 1..=3 {
+        match try_limits_run_on(device) {
+            Ok(outcome) => return outcome,
+            Err(stale) if attempt < 3 => println!("{device}: attempt {attempt} stopped safely: {stale}"),
+            Err(stale) => panic!("{device}: three attempts stopped on a stale sensor: {stale}"),
+        }
+    }
+    unreachable!("the third attempt returns or panics")
+}
+
+fn try_limits_run_on(device: &str) -> Result<(String, f64, String), String> {
     let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
     let file = dir.path().join("cdt.toml");
     std::fs::write(
@@ -333,11 +346,14 @@ fn limits_run_on(device: &str) -> (String, f64, String) {
         .args(["--state-dir", &path(&dir.path().join("state"))])
         .output()
         .unwrap_or_else(|e| panic!("run lab: {e}"));
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    if !out.status.success() && stderr.contains("faulted (code 104)") {
+        return Err(stderr);
+    }
     assert!(
         out.status.success(),
-        "lab run on {device} failed: {}{}",
+        "lab run on {device} failed: {}{stderr}",
         String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
     );
     let date_csv = std::fs::read_dir(&data)
         .unwrap_or_else(|e| panic!("data: {e}"))
@@ -365,7 +381,7 @@ fn limits_run_on(device: &str) -> (String, f64, String) {
         ),
     )
     .unwrap_or_default();
-    (field("response").to_string(), delivered_c, events)
+    Ok((field("response").to_string(), delivered_c, events))
 }
 
 #[test]
