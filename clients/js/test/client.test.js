@@ -164,7 +164,7 @@ test("after the daemon goes away the client reconnects with exponential backoff,
   await first.stop();
   await sleep(1800);
   await refusedWhileAway(client);
-  const second = await startDaemon([], first.port);
+  const second = await startDaemon([], { port: first.port });
   try {
     const back = new Promise((resolve) => client.on("reconnected", resolve));
     const { attempts } = await back;

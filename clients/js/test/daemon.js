@@ -29,10 +29,10 @@ export function thermodeBinary() {
 }
 
 /** A running `thermode serve`: `url` (WebSocket), `httpBase`, `port`, `stop()`. `args`: extra serve options;
- * `port`: the HTTP port (default 0: a free one). */
-export async function startDaemon(args = [], port = 0) {
+ * `port`: the HTTP port (default 0: a free one); `rateHz`: the loop rate [Hz] (default 100, serve's). */
+export async function startDaemon(args = [], { port = 0, rateHz = 100 } = {}) {
   const state = mkdtempSync(join(tmpdir(), "thermode-state-"));
-  const all = ["serve", "--port", String(port), "--no-osc", "--no-realtime", "--rate", "100", "--state-dir", state, ...args];
+  const all = ["serve", "--port", String(port), "--no-osc", "--no-realtime", "--rate", String(rateHz), "--state-dir", state, ...args];
   const child = spawn(thermodeBinary(), all, { stdio: ["ignore", "pipe", "pipe"] });
   let banner = "";
   const url = await new Promise((resolveUrl, reject) => {
