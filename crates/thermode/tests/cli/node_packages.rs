@@ -52,7 +52,9 @@ fn the_javascript_client_and_the_webxr_example_pass_their_node_tests() {
     let chromium = Path::new("/usr/bin/chromium").exists();
     if !(runs("node") && runs("npm")) {
         assert!(!required, "THERMODE_REQUIRE_NODE_TESTS=1 but node or npm is missing");
-        println!("skipped: install node and npm (apt-get install nodejs npm) to run clients/js and examples/webxr tests");
+        println!(
+            "skipped: install node and npm (apt-get install nodejs npm) to run clients/js and examples/webxr tests"
+        );
         return;
     }
     assert!(
