@@ -14,7 +14,19 @@ import { startStaticServer } from "../serve.js";
 import { assertValid, httpJson, sleep, startDaemon } from "../../../clients/js/test/daemon.js";
 
 const CHROMIUM = "/usr/bin/chromium";
-const FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update", "--disable-sync", "--no-first-run"];
+// The dashboard test's flags, and no GPU watchdog: on a loaded 2-core machine the software GL may be starved long
+// enough for the watchdog to kill it, which loses the WebGL context and with it the XR session's frames.
+const FLAGS = [
+  "--headless",
+  "--no-sandbox",
+  "--disable-gpu",
+  "--disable-gpu-watchdog",
+  "--disable-quic",
+  "--disable-background-networking",
+  "--disable-component-update",
+  "--disable-sync",
+  "--no-first-run",
+];
 /** The daemon's grace period before a vanished client's contacts are released [s] (`serve --release-after`). */
 const GRACE_S = 2;
 /** The aluminium cube's centre and a point in the air beside it, in the scene (reference space) [m]. */
@@ -40,6 +52,10 @@ before(async () => {
   page = await browser.newPage();
   const errors = [];
   page.on("pageerror", (error) => errors.push(error.message));
+  page.on("console", (message) => {
+    if (message.type() === "error") console.log(`page console: ${message.text()}`);
+  });
+  page.on("crash", () => console.log("the page crashed"));
   await page.goto(`${web.base}/index.html?emulate=1&daemon=${encodeURIComponent(daemon.url)}`);
   await page.waitForFunction(() => window.thermalApp || window.thermalAppError, null, { timeout: 30000 });
   assert.equal(await page.evaluate(() => window.thermalAppError ?? null), null, errors.join("\n"));
@@ -63,6 +79,12 @@ function installTestHooks() {
     update(frame, space);
     for (const resolve of waiters.splice(0)) resolve(app.contacts.frame);
   };
+  // What could stop the frames, kept for the failure message of a frame wait.
+  const problems = [];
+  window.addEventListener("error", (e) => problems.push(`error: ${e.message}`));
+  window.addEventListener("unhandledrejection", (e) => problems.push(`rejection: ${e.reason}`));
+  app.renderer.domElement.addEventListener("webglcontextlost", () => problems.push("WebGL context lost"));
+  app.renderer.xr.addEventListener("sessionend", () => problems.push("XR session ended"));
   const messages = { sent: [], received: [] };
   app.client.on("sent", (m) => messages.sent.push(m));
   app.client.on("received", (m) => messages.received.push(m));
@@ -70,7 +92,19 @@ function installTestHooks() {
   window.testHooks = {
     messages,
     finger,
-    nextFrame: () => new Promise((resolve) => waiters.push(resolve)),
+    problems,
+    /** Resolves with the frame count after the next rendered frame; rejects after 10 s without one, saying why. */
+    nextFrame: () =>
+      new Promise((resolve, reject) => {
+        const timer = setTimeout(() => {
+          const state = { frame: app.contacts.frame, visibility: document.visibilityState, problems };
+          reject(new Error(`no rendered frame within 10 s: ${JSON.stringify(state)}`));
+        }, 10000);
+        waiters.push((frame) => {
+          clearTimeout(timer);
+          resolve(frame);
+        });
+      }),
     /** Moves the emulated right hand so that its index tip lands on `target` from the next frame on. */
     placeTip([x, y, z]) {
       const hand = app.device.hands.right.position;
@@ -95,7 +129,7 @@ async function channelState(channel) {
   return (await httpJson(daemon, "/api/status")).body.channels[channel];
 }
 
-test("the index tip entering the aluminium cube touches channel 1 within two rendered frames", { skip }, async () => {
+test("the index tip entering the aluminium cube touches channel 1 within two rendered frames", { skip, timeout: 60000 }, async () => {
   const trials = await page.evaluate(
     async ([inCube, inAir]) => {
       const h = window.testHooks;
@@ -140,7 +174,7 @@ test("the index tip entering the aluminium cube touches channel 1 within two ren
   assert.equal((await channelState(1)).contact, false, "leaving the cube released it");
 });
 
-test("1000 enter/exit cycles leave no stuck contact, and every message is valid against the schema", { skip }, async () => {
+test("1000 enter/exit cycles leave no stuck contact, and every message is valid against the schema", { skip, timeout: 240000 }, async () => {
   const outcome = await page.evaluate(
     async ([inCube, inAir]) => {
       const h = window.testHooks;
@@ -183,7 +217,7 @@ test("1000 enter/exit cycles leave no stuck contact, and every message is valid 
   assert.ok(messages.sent.length >= 2 * stats.touches, `${messages.sent.length} messages sent`);
 });
 
-test("closing the page releases its contact within the daemon's grace period", { skip }, async () => {
+test("closing the page releases its contact within the daemon's grace period", { skip, timeout: 60000 }, async () => {
   await page.evaluate((p) => window.testHooks.placeTip(p), IN_CUBE);
   await page.evaluate(() => window.testHooks.nextEvent("applied", 1));
   assert.equal((await channelState(1)).contact, true);
@@ -205,10 +239,13 @@ test("closing the page releases its contact within the daemon's grace period", {
   assert.notEqual(releasedAt, null, "the contact was never released");
   const releasedAfterMs = releasedAt - closedAt;
   console.log(
-    `closing the page (${(closeReturned - closedAt).toFixed(0)} ms): released ${releasedAfterMs.toFixed(0)} ms after the close began, grace period ${GRACE_S} s`,
+    `closing the page (${(closeReturned - closedAt).toFixed(0)} ms): released ${releasedAfterMs.toFixed(0)} ms after the close began, ${(releasedAt - closeReturned).toFixed(0)} ms after it ended, grace period ${GRACE_S} s`,
   );
   // Still touching when asked after the grace period had run from the socket's close would be a stuck contact.
-  assert.ok(lastSeenStart - closeReturned <= GRACE_S * 1000, `contact still seen ${lastSeenStart - closeReturned} ms after the close`);
+  // The browser's network process closes the socket at about the time page.close() resolves (up to ~15 ms after
+  // it here): 100 ms are allowed for that.
+  const lastSeenMs = lastSeenStart - closeReturned;
+  assert.ok(lastSeenMs <= GRACE_S * 1000 + 100, `contact still seen ${lastSeenMs} ms after the page had closed`);
   // And it was the daemon's grace release (at most a loop period early), not an earlier one.
   assert.ok(releasedAfterMs >= GRACE_S * 1000 - 20, `released ${releasedAfterMs} ms after the close, before the grace period`);
 });

@@ -64,7 +64,7 @@ fn the_javascript_client_and_the_webxr_example_pass_their_node_tests() {
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let client = install_and_test(
         &repo.join("clients/js"),
-        &["test/client.test.js", "test/install.test.js"],
+        &["test/client.test.js", "test/install.test.js", "test/types.test.js"],
     );
     println!("clients/js:\n{client}");
     // The example's test is skipped by itself (and says so) without Chromium, unless it is required.
