@@ -242,10 +242,10 @@ test("closing the page releases its contact within the daemon's grace period", {
     `closing the page (${(closeReturned - closedAt).toFixed(0)} ms): released ${releasedAfterMs.toFixed(0)} ms after the close began, ${(releasedAt - closeReturned).toFixed(0)} ms after it ended, grace period ${GRACE_S} s`,
   );
   // Still touching when asked after the grace period had run from the socket's close would be a stuck contact.
-  // The browser's network process closes the socket at about the time page.close() resolves (up to ~15 ms after
-  // it here): 100 ms are allowed for that.
+  // The browser's network process closes the socket at about the time page.close() resolves (the release came up to
+  // 47 ms after grace + close here, polls every 10 ms included): 250 ms are allowed for that on a loaded machine.
   const lastSeenMs = lastSeenStart - closeReturned;
-  assert.ok(lastSeenMs <= GRACE_S * 1000 + 100, `contact still seen ${lastSeenMs} ms after the page had closed`);
+  assert.ok(lastSeenMs <= GRACE_S * 1000 + 250, `contact still seen ${lastSeenMs} ms after the page had closed`);
   // And it was the daemon's grace release (at most a loop period early), not an earlier one.
   assert.ok(releasedAfterMs >= GRACE_S * 1000 - 20, `released ${releasedAfterMs} ms after the close, before the grace period`);
 });
