@@ -14,13 +14,11 @@ import { startStaticServer } from "../serve.js";
 import { assertValid, httpJson, sleep, startDaemon } from "../../../clients/js/test/daemon.js";
 
 const CHROMIUM = "/usr/bin/chromium";
-// The dashboard test's flags, and no GPU watchdog: on a loaded 2-core machine the software GL may be starved long
-// enough for the watchdog to kill it, which loses the WebGL context and with it the XR session's frames.
+// The dashboard test's flags (crates/thermode-serve/tests/integration/dashboard.rs).
 const FLAGS = [
   "--headless",
   "--no-sandbox",
   "--disable-gpu",
-  "--disable-gpu-watchdog",
   "--disable-quic",
   "--disable-background-networking",
   "--disable-component-update",
@@ -88,10 +86,10 @@ function installTestHooks() {
   const messages = { sent: [], received: [] };
   app.client.on("sent", (m) => messages.sent.push(m));
   app.client.on("received", (m) => messages.received.push(m));
-  const finger = app.contacts.fingers.find((f) => f.handedness === "right");
+  const fingers = Object.fromEntries(app.contacts.fingers.map((f) => [f.handedness, f]));
   window.testHooks = {
     messages,
-    finger,
+    fingers,
     problems,
     /** Resolves with the frame count after the next rendered frame; rejects after 10 s without one, saying why. */
     nextFrame: () =>
@@ -105,17 +103,32 @@ function installTestHooks() {
           resolve(frame);
         });
       }),
-    /** Moves the emulated right hand so that its index tip lands on `target` from the next frame on. */
-    placeTip([x, y, z]) {
-      const hand = app.device.hands.right.position;
-      hand.set(hand.x + x - finger.position.x, hand.y + y - finger.position.y, hand.z + z - finger.position.z);
+    /** Moves an emulated hand (default the right) so that its index tip lands on `target` from the next frame on. */
+    placeTip([x, y, z], handedness = "right") {
+      const hand = app.device.hands[handedness].position;
+      const tip = fingers[handedness].position;
+      hand.set(hand.x + x - tip.x, hand.y + y - tip.y, hand.z + z - tip.z);
     },
-    /** Resolves with the first contact event of `kind` on `channel` from now on. */
+    /** Moves the right index tip to `target` and resolves once the daemon applied what it touches there. */
+    placeTipAndWait(target) {
+      const applied = window.testHooks.nextEvent("applied", 1);
+      window.testHooks.placeTip(target);
+      return applied;
+    },
+    /** Resolves with the first contact event of `kind` on `channel` from now on; rejects after 10 s, saying what
+     * the contacts' state was. */
     nextEvent(kind, channel) {
-      return new Promise((resolve) => {
+      return new Promise((resolve, reject) => {
+        const timer = setTimeout(() => {
+          stop();
+          const channels = [...app.contacts._channels].map(([c, st]) => [c, st.inFlight, st.applied?.name ?? null, st.desired?.name ?? null]);
+          const state = { frame: app.contacts.frame, connected: app.client.connected, channels, tips: Object.values(fingers).map((f) => f.position.toArray()), problems };
+          reject(new Error(`no ${kind} on channel ${channel} within 10 s: ${JSON.stringify(state)}`));
+        }, 10000);
         const stop = app.contacts.on((e) => {
           if (e.kind === kind && e.channel === channel) {
             stop();
+            clearTimeout(timer);
             resolve({ frame: e.frame, mesh: e.mesh?.name ?? null, reply: e.reply ?? null, atMs: performance.now() });
           }
         });
@@ -163,15 +176,40 @@ test("the index tip entering the aluminium cube touches channel 1 within two ren
   const frames = trials.map((t) => t.touchFrame - t.movedFrame);
   const ms = trials.map((t) => t.ms);
   console.log(`enter -> touch applied: frames ${Math.min(...frames)}..${Math.max(...frames)}, ms ${Math.min(...ms).toFixed(1)}..${Math.max(...ms).toFixed(1)} over ${trials.length} trials`);
-  await page.evaluate((p) => window.testHooks.placeTip(p), IN_CUBE);
-  await page.evaluate(() => window.testHooks.nextEvent("applied", 1));
+  await page.evaluate((p) => window.testHooks.placeTipAndWait(p), IN_CUBE);
   const state = await channelState(1);
   assert.equal(state.contact, true, JSON.stringify(state));
   assert.equal(state.material, "aluminium");
   assert.equal((await channelState(0)).contact, false, "the left hand touches nothing");
-  await page.evaluate((p) => window.testHooks.placeTip(p), IN_AIR);
-  await page.evaluate(() => window.testHooks.nextEvent("applied", 1));
+  await page.evaluate((p) => window.testHooks.placeTipAndWait(p), IN_AIR);
   assert.equal((await channelState(1)).contact, false, "leaving the cube released it");
+});
+
+test("a material given by its properties, and the left index tip on channel 0", { skip, timeout: 60000 }, async () => {
+  const [pine, wood] = await page.evaluate(async () => {
+    const h = window.testHooks;
+    const right = h.nextEvent("applied", 1);
+    h.placeTip([-0.25, 1.0, -0.4]);
+    const left = h.nextEvent("applied", 0);
+    h.placeTip([0.25, 1.0, -0.4], "left");
+    return Promise.all([right, left]);
+  });
+  // The pine board: k 0.12 W/(m·K), ρ 500 kg/m³, c 1600 J/(kg·K), 2 cm at 30 °C (src/main.js).
+  assert.equal(pine.reply.material, "pine");
+  assert.equal(pine.reply.object_temp_c, 30);
+  assert.equal(wood.reply.material, "wood");
+  const [right, left] = [await channelState(1), await channelState(0)];
+  assert.equal(right.material, "pine");
+  assert.equal(right.object_temp_c, 30);
+  assert.equal(left.material, "wood");
+  await page.evaluate(async ([inAir]) => {
+    const h = window.testHooks;
+    const released = [h.nextEvent("applied", 1), h.nextEvent("applied", 0)];
+    h.placeTip(inAir);
+    h.placeTip([0.25, 1.3, -0.4], "left");
+    await Promise.all(released);
+  }, [IN_AIR]);
+  assert.deepEqual((await httpJson(daemon, "/api/status")).body.contacts, []);
 });
 
 test("1000 enter/exit cycles leave no stuck contact, and every message is valid against the schema", { skip, timeout: 240000 }, async () => {
@@ -218,8 +256,7 @@ test("1000 enter/exit cycles leave no stuck contact, and every message is valid 
 });
 
 test("closing the page releases its contact within the daemon's grace period", { skip, timeout: 60000 }, async () => {
-  await page.evaluate((p) => window.testHooks.placeTip(p), IN_CUBE);
-  await page.evaluate(() => window.testHooks.nextEvent("applied", 1));
+  await page.evaluate((p) => window.testHooks.placeTipAndWait(p), IN_CUBE);
   assert.equal((await channelState(1)).contact, true);
   const closedAt = performance.now();
   await page.close();
