@@ -181,8 +181,14 @@ export class Client {
     return this.request({ type: "unsubscribe" });
   }
 
-  /** `GET /api/status` of the same daemon (channels, contacts, limits, loop statistics, …). */
+  /** `GET /api/status` of the same daemon (channels, contacts, limits, loop statistics, …). A browser page of
+   * another origin than the daemon's cannot read it (the daemon sends no CORS headers): there the same body comes
+   * over the WebSocket (the `status` request). */
   async status() {
+    if (crossOriginPage(this.url)) {
+      const { type, id, ...body } = await this.request({ type: "status" });
+      return body;
+    }
     const headers = this.token ? { Authorization: `Bearer ${this.token}` } : {};
     const response = await fetchWithTimeout(httpUrl(this.url, "/api/status"), { headers }, this.timeoutMs);
     const body = await response.json();
@@ -387,6 +393,13 @@ export class Client {
       }
     }
   }
+}
+
+/** Whether this runs in a browser page whose origin is not the daemon's (of the WebSocket address `wsUrl`). */
+function crossOriginPage(wsUrl) {
+  const origin = globalThis.location?.origin;
+  if (typeof origin !== "string" || (typeof process !== "undefined" && process.versions?.node != null)) return false;
+  return new URL(httpUrl(wsUrl, "/")).origin !== origin;
 }
 
 /** `fetch` that gives up after `timeoutMs` with a `timeout` error. */

@@ -199,6 +199,10 @@ test("a material given by its properties, and the left index tip on channel 0", 
   assert.equal(pine.reply.object_temp_c, 30);
   assert.equal(wood.reply.material, "wood");
   const [right, left] = [await channelState(1), await channelState(0)];
+  // The page's client reads the same status over its WebSocket (the page's origin is not the daemon's).
+  const seenByPage = await page.evaluate(() => window.thermalApp.client.status());
+  assertValid("Status", seenByPage);
+  assert.equal(seenByPage.channels[1].material, "pine");
   assert.equal(right.material, "pine");
   assert.equal(right.object_temp_c, 30);
   assert.equal(left.material, "wood");
