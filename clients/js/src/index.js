@@ -377,6 +377,7 @@ export class Client {
       } catch {
         return this._scheduleReconnect(attempt + 1);
       }
+      if (this._closedByUser) return this._socket?.close();
       if (this._subscribedHz !== null) await this.subscribe(this._subscribedHz).catch(() => {});
       this._emit("reconnected", { attempts: attempt });
     }, delayMs);
