@@ -9,6 +9,10 @@ use std::process::{Command, Output};
 #[cfg(unix)]
 #[path = "cli/python_packages.rs"]
 mod python_packages;
+// clients/js and examples/webxr with Node's test runner (and headless Chromium).
+#[cfg(unix)]
+#[path = "cli/node_packages.rs"]
+mod node_packages;
 // `lab export --bids`, checked by the reference validator.
 #[cfg(unix)]
 #[path = "cli/bids.rs"]
