@@ -176,11 +176,7 @@ pub fn fit_cumulative_gaussian(values: &[f64], resamples: usize, seed: u64) -> G
     }
     let estimate = |value: f64, draws: &mut Vec<f64>| {
         let (ci_low, ci_high) = percentile_interval(draws, CONFIDENCE);
-        Some(Estimate {
-            value,
-            ci_low,
-            ci_high,
-        })
+        Some(Estimate { value, ci_low, ci_high })
     };
     GaussianFit {
         mistakes: values.len(),
@@ -223,7 +219,12 @@ mod tests {
         let jnd = mu + 0.674_489_75 * sigma;
         assert!((j.value - jnd).abs() < 0.002, "75 % point {} vs {jnd}", j.value);
         // The intervals hold the truth and have the normal theory's width 2 · 1.96 · SE (within 20 %).
-        assert!(m.ci_low < mu && mu < m.ci_high, "μ {mu} outside [{}, {}]", m.ci_low, m.ci_high);
+        assert!(
+            m.ci_low < mu && mu < m.ci_high,
+            "μ {mu} outside [{}, {}]",
+            m.ci_low,
+            m.ci_high
+        );
         assert!(
             s.ci_low < sigma && sigma < s.ci_high,
             "σ {sigma} outside [{}, {}]",
@@ -232,7 +233,10 @@ mod tests {
         );
         let width_mu = m.ci_high - m.ci_low;
         let want_mu = 2.0 * 1.959_964 * sigma / (n as f64).sqrt();
-        assert!((width_mu / want_mu - 1.0).abs() < 0.2, "μ CI width {width_mu} vs {want_mu}");
+        assert!(
+            (width_mu / want_mu - 1.0).abs() < 0.2,
+            "μ CI width {width_mu} vs {want_mu}"
+        );
         let width_sigma = s.ci_high - s.ci_low;
         let want_sigma = 2.0 * 1.959_964 * sigma / (2.0 * n as f64).sqrt();
         assert!(
@@ -254,14 +258,23 @@ mod tests {
         // 0..=100: the 2.5 % quantile at position 2.5 → 2.5, the 97.5 % at 97.5.
         let mut draws: Vec<f64> = (0..=100).rev().map(f64::from).collect();
         let (low, high) = percentile_interval(&mut draws, 0.95);
-        assert!((low - 2.5).abs() < 1e-12 && (high - 97.5).abs() < 1e-12, "[{low}, {high}]");
+        assert!(
+            (low - 2.5).abs() < 1e-12 && (high - 97.5).abs() < 1e-12,
+            "[{low}, {high}]"
+        );
     }
 
     #[test]
     fn too_few_or_identical_mistakes_are_undefined() {
         let few = fit_cumulative_gaussian(&[0.1, 0.2], 10, 1);
-        assert!(few.mu.is_none() && few.note.as_deref().is_some_and(|n| n.contains("at least")), "{few:?}");
+        assert!(
+            few.mu.is_none() && few.note.as_deref().is_some_and(|n| n.contains("at least")),
+            "{few:?}"
+        );
         let same = fit_cumulative_gaussian(&[0.1; 8], 10, 1);
-        assert!(same.mu.is_none() && same.note.as_deref().is_some_and(|n| n.contains("zero")), "{same:?}");
+        assert!(
+            same.mu.is_none() && same.note.as_deref().is_some_and(|n| n.contains("zero")),
+            "{same:?}"
+        );
     }
 }

@@ -31,9 +31,9 @@ use std::path::PathBuf;
 
 use serde::Serialize;
 
+pub use comparison::ConfusionComparison;
 pub use curves::{analyze_curves, CurveAnalysis};
 pub use data::{read_sessions, MaterialInfo, Sessions, Trial};
-pub use comparison::ConfusionComparison;
 pub use figure4::Figure4;
 pub use jnd::Jnd;
 pub use report::{write_outputs, ReportFormat};

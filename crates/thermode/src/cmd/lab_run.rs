@@ -52,8 +52,8 @@ use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::MonotonicClock;
 use thermode_serve::Daemon;
 
-use super::serve;
 use super::render::RendererArg;
+use super::serve;
 use crate::controller::{ControllerArg, LAB_CONTROLLERS};
 use crate::display::DisplayArgs;
 use crate::progress::Progress;
@@ -181,7 +181,9 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
             bail!("--time-scale {scale}: a display presents in real time (1)");
         }
         if args.renderer.is_some() {
-            bail!("--renderer chooses the simulated display's renderer (with --simulate); a display renders with its own");
+            bail!(
+                "--renderer chooses the simulated display's renderer (with --simulate); a display renders with its own"
+            );
         }
         return run_live(args, &experiment, participant, &mut stdout);
     }
@@ -254,8 +256,11 @@ fn answers(
     out: &mut dyn Write,
 ) -> Result<(Option<SimulatedParticipant>, String)> {
     Ok(if args.simulated_participant {
-        let mut simulated =
-            SimulatedParticipant::new(design.response_options.clone(), references, participant_seed(args, design));
+        let mut simulated = SimulatedParticipant::new(
+            design.response_options.clone(),
+            references,
+            participant_seed(args, design),
+        );
         let calibration = simulated.calibrate(PAPER_REAL_IDENTIFICATION_RATE, CALIBRATION_SAMPLES, CALIBRATION_SEED)?;
         writeln!(
             out,

@@ -112,7 +112,10 @@ pub fn report_blocks(analysis: &Analysis) -> Vec<Block> {
                   classifications at zero (dashed line)."
             .to_string(),
     });
-    blocks.push(Block::Heading(2, "Just-noticeable differences (beyond the paper)".to_string()));
+    blocks.push(Block::Heading(
+        2,
+        "Just-noticeable differences (beyond the paper)".to_string(),
+    ));
     blocks.push(Block::Table(jnd_table(analysis)));
     if let Some(curves) = &analysis.curves {
         blocks.push(Block::Heading(2, "Objective assessment (Figure 3)".to_string()));
@@ -290,7 +293,11 @@ fn comparison_sentence(analysis: &Analysis) -> String {
             "r = {r:.2}, one-sided permutation p = {p:.4} ({} over {} permutations{})",
             c.p_method,
             c.permutations,
-            if c.p_method == "exact" { String::new() } else { format!(", seed {}", c.seed) }
+            if c.p_method == "exact" {
+                String::new()
+            } else {
+                format!(", seed {}", c.seed)
+            }
         ),
         _ => format!("r {}", c.note.as_deref().unwrap_or("undefined")),
     };
@@ -329,13 +336,20 @@ fn jnd_table(analysis: &Analysis) -> Table {
     }
     Table {
         caption: format!(
-            "Just-noticeable differences: cumulative-Gaussian fit to |Δ| of the mistakes ({}; {} resamples, seed \
-             {}); estimate [95 % interval].",
+            "Just-noticeable differences of k and c: {}; {} resamples, seed {}. Estimate [95 % interval]; the \
+             JND is the 75 % point μ + 0.674 σ.",
             j.method, j.bootstrap_resamples, j.bootstrap_seed
         ),
-        header: ["condition", "quantity", "mistakes", "μ (50 % point)", "σ", "JND (75 % point)"]
-            .map(String::from)
-            .to_vec(),
+        header: [
+            "condition",
+            "quantity",
+            "mistakes",
+            "μ (50 % point)",
+            "σ",
+            "JND (75 % point)",
+        ]
+        .map(String::from)
+        .to_vec(),
         rows,
     }
 }
