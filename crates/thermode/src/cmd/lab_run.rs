@@ -11,7 +11,7 @@
 //! - `--simulate`: no display. `--stimulus display` (default) renders every material offline on the simulated
 //!   display (`thermode_render`) with `--controller model|pid`, `--renderer fv|kron` and `--device-file FILE` — a
 //!   real trial is the simulated finger touching the real material, a simulated trial the same finger on the
-//!   display (the paper's own display: `--renderer kron --controller pid` on a weak module's device file);
+//!   display (the paper's own display: `--renderer kron --controller pid` on the default device file, docs/lab.md);
 //!   `--stimulus model` has both conditions as real contact under the fv model. The finger temperatures are the simulation's
 //!   (`model_finger_*` columns). `--time-scale` scales the waits (0 skips them, for demos).
 //!
