@@ -11,9 +11,10 @@
 //! - `--simulate`: no display. `--stimulus display` (default) renders every material offline on the simulated
 //!   display (`thermode_render`) with `--controller model|pid`, `--renderer fv|kron` and `--device-file FILE` — a
 //!   real trial is the simulated finger touching the real material, a simulated trial the same finger on the
-//!   display (the paper's own display: `--renderer kron --controller pid` on the default device file, docs/lab.md);
-//!   `--stimulus model` has both conditions as real contact under the fv model. The finger temperatures are the simulation's
-//!   (`model_finger_*` columns). `--time-scale` scales the waits (0 skips them, for demos).
+//!   display (the paper's own display: `--renderer kron --controller pid` on the default device file,
+//!   docs/lab.md); `--stimulus model` has both conditions as real contact under the fv model. The finger
+//!   temperatures are the simulation's (`model_finger_*` columns). `--time-scale` scales the waits (0 skips them,
+//!   for demos).
 //!
 //! The simulated participant's references are real contact under the same stimulus (its `real` curves), so that its
 //! calibration to the paper's 66 % holds for the real trials it will see.
