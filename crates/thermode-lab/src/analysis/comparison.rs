@@ -20,7 +20,7 @@ use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
 use super::stats::pearson;
-use super::tables::{ConditionPair, Confusion};
+use super::tables::{probability_cells, ConditionPair, Confusion};
 
 /// Random permutations of the Monte Carlo test: 9999.
 pub const PERMUTATIONS: usize = 9999;
@@ -59,22 +59,12 @@ impl ConfusionComparison {
     /// The comparison of the two conditions' row probabilities.
     pub fn new(confusion: &ConditionPair<Confusion>) -> ConfusionComparison {
         let (mut real, mut simulated, mut zero_in_both) = (Vec::new(), Vec::new(), 0);
-        for (p, (real_row, sim_row)) in confusion
-            .real
-            .probabilities
-            .iter()
-            .zip(&confusion.simulated.probabilities)
-            .enumerate()
-        {
-            for (i, (r, s)) in real_row.iter().zip(sim_row).enumerate() {
-                match (r, s) {
-                    (Some(r), Some(s)) if p != i && *r == 0.0 && *s == 0.0 => zero_in_both += 1,
-                    (Some(r), Some(s)) if p != i => {
-                        real.push(*r);
-                        simulated.push(*s);
-                    }
-                    _ => {}
-                }
+        for cell in probability_cells(confusion).filter(|c| !c.is_diagonal()) {
+            if cell.real == 0.0 && cell.simulated == 0.0 {
+                zero_in_both += 1;
+            } else {
+                real.push(cell.real);
+                simulated.push(cell.simulated);
             }
         }
         let mut comparison = compare(&real, &simulated, PERMUTATIONS, PERMUTATION_SEED);
@@ -202,6 +192,32 @@ mod tests {
         let mean = ps.iter().sum::<f64>() / ps.len() as f64;
         assert!((below - 0.05).abs() < 0.052, "share of p ≤ 0.05: {below} vs 0.05");
         assert!((mean - 0.5).abs() < 0.07, "mean p {mean} vs 0.5");
+    }
+
+    #[test]
+    fn cells_zero_in_both_conditions_are_left_out() {
+        use crate::analysis::MaterialInfo;
+        let materials: Vec<MaterialInfo> = ["a", "b", "c"]
+            .map(|name| MaterialInfo {
+                name: name.to_string(),
+                conductivity_cal_cm_s_c: 0.1,
+                specific_heat_cal_g_c: 0.2,
+            })
+            .to_vec();
+        let pair = ConditionPair {
+            real: Confusion::from_counts(&materials, vec![vec![8, 2, 0], vec![1, 9, 0], vec![0, 0, 10]]),
+            simulated: Confusion::from_counts(&materials, vec![vec![6, 4, 0], vec![3, 7, 0], vec![0, 1, 9]]),
+        };
+        // Off-diagonal (real, simulated): (0.2, 0.4), (0, 0), (0.1, 0.3), (0, 0), (0, 0), (0, 0.1): three cells kept.
+        // Hand: dx = 0.1, 0, −0.1; dy = 2/15, 1/30, −1/6; Sxy = 0.03, Sxx = 0.02, Syy = 42/900 → r = 0.98198.
+        let c = ConfusionComparison::new(&pair);
+        assert_eq!((c.pairs, c.zero_in_both), (3, 3), "{c:?}");
+        let want = 0.03 / (0.02f64 * 7.0 / 150.0).sqrt();
+        let r = c.r.expect("defined");
+        assert!((r - want).abs() < 1e-9, "r {r} vs hand {want}");
+        // Of the 3! pairings only the observed one reaches r ≥ 0.98 (the next best gives 0.65): p = 1/6.
+        let p = c.p_value.expect("defined");
+        assert!((p - 1.0 / 6.0).abs() < 1e-12, "p {p} vs 1/6");
     }
 
     #[test]
