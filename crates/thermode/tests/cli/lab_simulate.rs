@@ -62,6 +62,17 @@ fn columns(csv: &str, columns: &[&str]) -> Vec<Vec<String>> {
         .collect()
 }
 
+/// The name of the first sidecar (JSON) in `dir`.
+fn first_sidecar_name(dir: &Path) -> String {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .expect("read dir")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().to_string())
+        .filter(|n| n.ends_with(".json"))
+        .collect();
+    names.sort();
+    names.into_iter().next().expect("a sidecar")
+}
+
 /// The plan's columns of a session: what was presented when.
 const PLAN: [&str; 8] = [
     "participant",
@@ -80,6 +91,14 @@ fn the_participant_seed_changes_the_answers_only() {
     let default = run_sessions(&tmp.path().join("default"), &[]);
     let design_seed = run_sessions(&tmp.path().join("2008"), &["--seed", "2008"]);
     let seven = run_sessions(&tmp.path().join("7"), &["--seed", "7"]);
+    let sidecar = tmp.path().join("7").join(first_sidecar_name(&tmp.path().join("7")));
+    let sidecar: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(sidecar).expect("read sidecar")).expect("JSON sidecar");
+    let answers = sidecar["device"]["answers"].as_str().unwrap_or_default();
+    assert!(
+        answers.ends_with(", seed 7"),
+        "the sidecar names the participants' seed: {answers}"
+    );
     let eight = run_sessions(&tmp.path().join("8"), &["--seed", "8"]);
     assert_eq!(
         default.len(),
@@ -143,11 +162,7 @@ fn the_kron_renderer_with_pid_presents_the_papers_display() {
         simulated_differ > 20,
         "the kron renderer with PID rendered {simulated_differ} of 40 simulated trials differently from fv with the model"
     );
-    let sidecar = std::fs::read_dir(&kron_dir)
-        .expect("read dir")
-        .map(|e| e.expect("entry").path())
-        .find(|p| p.extension().is_some_and(|e| e == "json"))
-        .expect("a sidecar");
+    let sidecar = kron_dir.join(first_sidecar_name(&kron_dir));
     let sidecar: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(sidecar).expect("read sidecar")).expect("JSON sidecar");
     let stimulus = &sidecar["device"]["stimulus"];
@@ -168,6 +183,19 @@ fn the_kron_renderer_with_pid_presents_the_papers_display() {
         "kron",
     ];
     expect_error(&model, "--stimulus display");
+    let display = [
+        "lab",
+        "run",
+        "--experiment",
+        EXPERIMENT,
+        "--participant",
+        "P01",
+        "--display",
+        "ws://127.0.0.1:9",
+        "--renderer",
+        "kron",
+    ];
+    expect_error(&display, "renders with its own");
 }
 
 #[test]
