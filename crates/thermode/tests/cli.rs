@@ -27,6 +27,10 @@ mod serve_on_emulator;
 #[path = "cli/service.rs"]
 mod service;
 
+// `lab run --simulate --seed/--renderer` and the new `lab analyze` outputs.
+#[path = "cli/lab_simulate.rs"]
+mod lab_simulate;
+
 // Procedure files run by `lab run`, analysed and exported.
 #[cfg(unix)]
 #[path = "cli/procedures.rs"]

@@ -9,15 +9,20 @@
 //! - Pearson's r between the real and simulated row-probability matrices over the off-diagonal cells (the kind of
 //!   mistakes; the paper's r = 0.90), and over all cells;
 //! - Figure 4: the distribution of Δc and Δk (identified − presented) and the share of mistakes within
-//!   ±0.05 cal/(g·°C) and ±0.005 cal/(cm·s·°C).
+//!   ±0.05 cal/(g·°C) and ±0.005 cal/(cm·s·°C);
+//! - beyond the paper, the just-noticeable differences it left open ([`jnd`]: a cumulative-Gaussian fit to |Δk| and
+//!   |Δc| of the mistakes, with bootstrap intervals) and an honest comparison of the real and simulated confusions
+//!   ([`comparison`]: r over the off-diagonal cells not zero in both conditions, with a permutation p-value).
 //!
 //! [`analyze_curves`] compares recorded or rendered temperature curves (Figure 3). [`write_outputs`] writes the JSON,
 //! the figures and the Markdown/HTML reports without ever leaving half of them behind.
 
+pub mod comparison;
 pub mod curves;
 pub mod data;
 pub mod figure4;
 pub mod figures;
+pub mod jnd;
 pub mod report;
 pub mod stats;
 pub mod tables;
@@ -26,9 +31,11 @@ use std::path::PathBuf;
 
 use serde::Serialize;
 
+pub use comparison::ConfusionComparison;
 pub use curves::{analyze_curves, CurveAnalysis};
 pub use data::{read_sessions, MaterialInfo, Sessions, Trial};
 pub use figure4::Figure4;
+pub use jnd::Jnd;
 pub use report::{write_outputs, ReportFormat};
 pub use tables::{ChiSquareReport, ConditionPair, ConditionRates, Confusion, Correlation, RatioTable};
 
@@ -73,8 +80,14 @@ pub struct Analysis {
     pub confusion_correlation_note: Option<String>,
     /// The same correlation over all cells (diagonal included).
     pub confusion_correlation_all_cells: Correlation,
+    /// Beyond the paper: the real and simulated confusions compared over the off-diagonal cells that are not zero in
+    /// both conditions (the paper's r counts those as agreement), with a permutation p-value ([`comparison`]).
+    pub confusion_comparison: ConfusionComparison,
     /// Figure 4: Δc and Δk of the classifications and the share of mistakes within the paper's intervals.
     pub figure4: Figure4,
+    /// Beyond the paper: the just-noticeable differences of k and c, cumulative-Gaussian fits to |Δk| and |Δc| of
+    /// the mistakes of Figure 4 with bootstrap intervals ([`jnd`]).
+    pub jnd: Jnd,
     /// Figure 3: the objective curve comparison, when curve files were analysed (see [`analyze_curves`]).
     pub curves: Option<CurveAnalysis>,
     /// The included trials with all their columns, written as `trials.csv`; not part of the JSON.
@@ -98,6 +111,7 @@ pub fn analyze_sessions(sessions: Sessions) -> Analysis {
     let ratio_table = RatioTable::new(&sessions.materials, &confusion.simulated, &confusion.real);
     let means = stats::mean_ratios(&ratio_table.ratios);
     let off_diagonal = tables::confusion_correlation(&confusion, false);
+    let figure4 = Figure4::new(&sessions.materials, &counts);
     let mut participants: Vec<&str> = sessions.trials.iter().map(|t| t.participant.as_str()).collect();
     participants.sort_unstable();
     participants.dedup();
@@ -114,7 +128,9 @@ pub fn analyze_sessions(sessions: Sessions) -> Analysis {
         confusion_correlation_pairs: off_diagonal.pairs,
         confusion_correlation_note: off_diagonal.note,
         confusion_correlation_all_cells: tables::confusion_correlation(&confusion, true),
-        figure4: Figure4::new(&sessions.materials, &counts),
+        confusion_comparison: ConfusionComparison::new(&confusion),
+        jnd: Jnd::new(&figure4),
+        figure4,
         mean_ratio_correct: means.correct,
         mean_ratio_false: means.false_,
         confusion,

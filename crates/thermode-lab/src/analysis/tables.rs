@@ -307,19 +307,9 @@ pub struct Correlation {
 /// Cells of a presented material without trials in either condition are skipped.
 pub fn confusion_correlation(confusion: &ConditionPair<Confusion>, include_diagonal: bool) -> Correlation {
     let (mut real, mut simulated) = (Vec::new(), Vec::new());
-    for (p, (real_row, sim_row)) in confusion
-        .real
-        .probabilities
-        .iter()
-        .zip(&confusion.simulated.probabilities)
-        .enumerate()
-    {
-        for (i, (r, s)) in real_row.iter().zip(sim_row).enumerate() {
-            if let (Some(r), Some(s), true) = (r, s, include_diagonal || p != i) {
-                real.push(*r);
-                simulated.push(*s);
-            }
-        }
+    for cell in probability_cells(confusion).filter(|c| include_diagonal || !c.is_diagonal()) {
+        real.push(cell.real);
+        simulated.push(cell.simulated);
     }
     let (r, note) = match stats::pearson(&real, &simulated) {
         Ok(r) => (Some(r), None),
@@ -334,4 +324,48 @@ pub fn confusion_correlation(confusion: &ConditionPair<Confusion>, include_diago
         pairs: real.len(),
         note,
     }
+}
+
+/// One cell of the confusion matrices with a probability in both conditions.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ProbabilityCell {
+    /// Index of the presented material.
+    pub presented: usize,
+    /// Index of the identified material.
+    pub identified: usize,
+    /// P_real(identified | presented).
+    pub real: f64,
+    /// P_sim(identified | presented).
+    pub simulated: f64,
+}
+
+impl ProbabilityCell {
+    /// Whether the cell is a correct identification.
+    pub fn is_diagonal(&self) -> bool {
+        self.presented == self.identified
+    }
+}
+
+/// The cells whose presented material has trials in both conditions, row by row.
+pub fn probability_cells(confusion: &ConditionPair<Confusion>) -> impl Iterator<Item = ProbabilityCell> + '_ {
+    let rows = confusion
+        .real
+        .probabilities
+        .iter()
+        .zip(&confusion.simulated.probabilities);
+    rows.enumerate().flat_map(|(presented, (real_row, sim_row))| {
+        real_row
+            .iter()
+            .zip(sim_row)
+            .enumerate()
+            .filter_map(move |(identified, pair)| match pair {
+                (Some(real), Some(simulated)) => Some(ProbabilityCell {
+                    presented,
+                    identified,
+                    real: *real,
+                    simulated: *simulated,
+                }),
+                _ => None,
+            })
+    })
 }

@@ -449,6 +449,7 @@ pub struct DisplayStimulus {
     setup: DisplaySetup,
     finger_drift_sd_c: f64,
     seed: u64,
+    drift_seed: u64,
     cache: HashMap<(String, u64), DisplayCurves>,
 }
 
@@ -462,8 +463,17 @@ impl DisplayStimulus {
             setup,
             finger_drift_sd_c,
             seed,
+            drift_seed: seed,
             cache: HashMap::new(),
         })
+    }
+
+    /// The same stimulus with the finger drift drawn from the streams of `drift_seed` instead of the seed given to
+    /// [`new`](Self::new), which keeps seeding the sensor noise (`lab run --seed`: the participants' noise apart
+    /// from the design's seed).
+    pub fn with_drift_seed(mut self, drift_seed: u64) -> DisplayStimulus {
+        self.drift_seed = drift_seed;
+        self
     }
 
     /// The setup.
@@ -536,7 +546,7 @@ impl DisplayStimulus {
         }
         trial_drift_c(
             self.finger_drift_sd_c,
-            self.seed ^ DISPLAY_DRIFT_SALT,
+            self.drift_seed ^ DISPLAY_DRIFT_SALT,
             participant_index,
             trial,
         )

@@ -10,13 +10,20 @@
 //!   0 A). Each trial is presented on `--channel N` and the finger is measured on the plate at rest before and after
 //!   it ([`LiveStimulus`]); each trial's curve is kept beside the session CSV. One participant, in real time.
 //! - `--simulate`: no display. `--stimulus display` (default) renders every material offline on the simulated
-//!   display (`thermode_render`) with `--controller model|pid` and `--device-file FILE` — a real trial is the
-//!   simulated finger touching the real material, a simulated trial the same finger on the display; `--stimulus
-//!   model` has both conditions as real contact under the fv model. The finger temperatures are the simulation's
-//!   (`model_finger_*` columns). `--time-scale` scales the waits (0 skips them, for demos).
+//!   display (`thermode_render`) with `--controller model|pid`, `--renderer fv|kron` and `--device-file FILE` — a
+//!   real trial is the simulated finger touching the real material, a simulated trial the same finger on the
+//!   display (the paper's own display: `--renderer kron --controller pid` on the default device file,
+//!   docs/lab.md); `--stimulus model` has both conditions as real contact under the fv model. The finger
+//!   temperatures are the simulation's (`model_finger_*` columns). `--time-scale` scales the waits (0 skips them,
+//!   for demos).
 //!
 //! The simulated participant's references are real contact under the same stimulus (its `real` curves), so that its
 //! calibration to the paper's 66 % holds for the real trials it will see.
+//!
+//! Seeds: the design's `seed` decides the plan (which material stands for which symbol of the Williams squares, the
+//! order of the rows) and the simulated display's sensor noise; `--seed N` decides only the participants' noise
+//! (the simulated participant's perceptual noise and the finger drift), so that the same design can be run with
+//! other participants. Without `--seed` the participants' noise is seeded by the design's seed, as before.
 //!
 //! With the simulated participant, several participants (`--participant` repeated, or `--all-participants`) run as
 //! one batch on `--jobs` threads: each participant's files are exactly those of a run of its own, and the printed
@@ -47,6 +54,7 @@ use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig};
 use thermode_platform::MonotonicClock;
 use thermode_serve::Daemon;
 
+use super::render::RendererArg;
 use super::serve;
 use crate::controller::{ControllerArg, LAB_CONTROLLERS};
 use crate::display::DisplayArgs;
@@ -111,6 +119,14 @@ pub struct LabRunArgs {
     /// The display's controller (with `--stimulus display`; default model).
     #[arg(long, value_parser = ControllerArg::parser(&LAB_CONTROLLERS))]
     pub(crate) controller: Option<ControllerArg>,
+    /// The simulated display's renderer (with `--simulate --stimulus display`; default fv): `kron` is the paper's
+    /// three-layer model, as on the paper's own display.
+    #[arg(long, value_enum, value_name = "RENDERER")]
+    pub(crate) renderer: Option<RendererArg>,
+    /// Seed of the simulated participants' noise (perceptual noise and finger drift) [-]; default: the design's
+    /// seed. The plan (order of the materials) stays the design's whatever this seed.
+    #[arg(long, value_name = "N")]
+    pub(crate) seed: Option<u64>,
     /// The display's device file (TOML; with `--device` or `--stimulus display`); default: the built-in default
     /// display.
     #[arg(long, value_name = "FILE")]
@@ -167,6 +183,11 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
         };
         if let Some(scale) = args.time_scale.filter(|&s| s != 1.0) {
             bail!("--time-scale {scale}: a display presents in real time (1)");
+        }
+        if args.renderer.is_some() {
+            bail!(
+                "--renderer chooses the simulated display's renderer (with --simulate); a display renders with its own"
+            );
         }
         return run_live(args, &experiment, participant, &mut stdout);
     }
@@ -239,7 +260,11 @@ fn answers(
     out: &mut dyn Write,
 ) -> Result<(Option<SimulatedParticipant>, String)> {
     Ok(if args.simulated_participant {
-        let mut simulated = SimulatedParticipant::new(design.response_options.clone(), references, design.seed);
+        let mut simulated = SimulatedParticipant::new(
+            design.response_options.clone(),
+            references,
+            participant_seed(args, design),
+        );
         let calibration = simulated.calibrate(PAPER_REAL_IDENTIFICATION_RATE, CALIBRATION_SAMPLES, CALIBRATION_SEED)?;
         writeln!(
             out,
@@ -247,7 +272,10 @@ fn answers(
             calibration.noise_sd,
             100.0 * calibration.rate
         )?;
-        let answers = format!("simulated participant, noise {:.4}", calibration.noise_sd);
+        let mut answers = format!("simulated participant, noise {:.4}", calibration.noise_sd);
+        if let Some(seed) = args.seed {
+            answers.push_str(&format!(", seed {seed}"));
+        }
         (Some(simulated), answers)
     } else if let Some(path) = &args.responses {
         (None, format!("responses file {}", path.display()))
@@ -509,24 +537,33 @@ fn stimulus(
         .collect::<Result<_, _>>()?;
     match args.stimulus {
         StimulusArg::Model => {
-            if args.controller.is_some() || args.device_file.is_some() {
-                bail!("--controller and --device-file choose the display; they need --stimulus display");
+            if args.controller.is_some() || args.device_file.is_some() || args.renderer.is_some() {
+                bail!("--controller, --renderer and --device-file choose the display; they need --stimulus display");
             }
             let contact = FvContact::default();
-            let stimulus = ModelStimulus::new(contact.clone(), args.finger_drift_sd_c, design.seed)?;
+            // The model stimulus has no display: its only randomness is the finger drift, the participants'.
+            let stimulus = ModelStimulus::new(contact.clone(), args.finger_drift_sd_c, participant_seed(args, design))?;
             let references = contact_references(&contact, &options, design.presentation_s)?;
             let description = stimulus.describe();
             Ok((PreparedStimulus::Model(Box::new(stimulus)), references, description))
         }
         StimulusArg::Display => {
             let device = resolve::device_config(args.device_file.as_deref())?;
-            let setup = DisplaySetup::new(PipelineConfig::new(device, controller(args, &device)?));
-            let mut stimulus = DisplayStimulus::new(setup, args.finger_drift_sd_c, design.seed)?;
+            let mut pipeline = PipelineConfig::new(device, controller(args, &device)?);
+            if let Some(renderer) = args.renderer {
+                pipeline.renderer = renderer.into();
+            }
+            let mut stimulus = DisplayStimulus::new(DisplaySetup::new(pipeline), args.finger_drift_sd_c, design.seed)?
+                .with_drift_seed(participant_seed(args, design));
             let mut materials: Vec<Material> = design.materials.iter().map(|n| find(n)).collect::<Result<_, _>>()?;
             materials.extend(options.iter().cloned());
+            let renderer = match args.renderer {
+                Some(_) => format!(", {} renderer", stimulus.setup().pipeline.renderer.name()),
+                None => String::new(),
+            };
             writeln!(
                 out,
-                "rendering {} material(s) on the simulated display ({} controller)…",
+                "rendering {} material(s) on the simulated display ({} controller{renderer})…",
                 design.materials.len(),
                 stimulus.setup().pipeline.controller.name()
             )?;
@@ -572,6 +609,11 @@ fn controller(args: &LabRunArgs, device: &DeviceConfig) -> Result<ControllerKind
             Ok(ControllerKind::Pid(gains))
         }
     }
+}
+
+/// The seed of the simulated participants' noise: `--seed`, else the design's seed (the behaviour before `--seed`).
+fn participant_seed(args: &LabRunArgs, design: &Experiment) -> u64 {
+    args.seed.unwrap_or(design.seed)
 }
 
 /// How a simulated session paces its waits: `--time-scale`, else 0 (a simulation does not wait).

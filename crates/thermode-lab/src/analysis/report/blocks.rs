@@ -1,6 +1,7 @@
 //! The content of the reports, independent of the output format: the paper's tables (rates, confusion matrices, the
 //! Table 2 ratio table with correct cells bold and false cells italic, Table 3, the Figure 4 shares, the Figure 3
-//! curve comparison) and the sentences that state the χ² test and the confusion correlation.
+//! curve comparison) and the sentences that state the χ² test and the confusion correlation; beyond the paper, the
+//! comparison of the confusions over the cells not zero in both conditions and the just-noticeable differences.
 
 use thermode_model::numbers::p_value_text;
 
@@ -99,6 +100,7 @@ pub fn report_blocks(analysis: &Analysis) -> Vec<Block> {
     blocks.push(Block::Table(ratio_table(analysis)));
     blocks.push(Block::Paragraph(ratio_sentence(analysis)));
     blocks.push(Block::Paragraph(correlation_sentence(analysis)));
+    blocks.push(Block::Paragraph(comparison_sentence(analysis)));
     blocks.push(Block::Heading(2, "Homogeneity: χ² test (Table 3)".to_string()));
     blocks.push(Block::Table(table3(analysis)));
     blocks.push(Block::Paragraph(chi_square_sentence(analysis)));
@@ -110,6 +112,11 @@ pub fn report_blocks(analysis: &Analysis) -> Vec<Block> {
                   classifications at zero (dashed line)."
             .to_string(),
     });
+    blocks.push(Block::Heading(
+        2,
+        "Just-noticeable differences (beyond the paper)".to_string(),
+    ));
+    blocks.push(Block::Table(jnd_table(analysis)));
     if let Some(curves) = &analysis.curves {
         blocks.push(Block::Heading(2, "Objective assessment (Figure 3)".to_string()));
         blocks.push(Block::Table(curves_table(curves)));
@@ -271,10 +278,81 @@ fn correlation_sentence(analysis: &Analysis) -> String {
         None => format!("r {}", all.note.as_deref().unwrap_or("undefined")),
     };
     format!(
-        "Kind of mistakes: Pearson correlation between the real and simulated probabilities of identification over \
-         the {} off-diagonal cells (false classifications): {main}. Over all {} cells: {over_all}.",
+        "Kind of mistakes, as the paper computed it (its r = 0.90): Pearson correlation between the real and \
+         simulated probabilities of identification over the {} off-diagonal cells (false classifications): {main}. \
+         Over all {} cells: {over_all}.",
         analysis.confusion_correlation_pairs, all.pairs
     )
+}
+
+/// The honest comparison of the confusions: r over the cells not zero in both conditions, with its permutation
+/// p-value, beside the paper's r (which counts the pairs neither condition confused as agreement).
+fn comparison_sentence(analysis: &Analysis) -> String {
+    let c = &analysis.confusion_comparison;
+    let r = match (c.r, c.p_value) {
+        (Some(r), Some(p)) => format!(
+            "r = {r:.2}, one-sided permutation p = {p:.4} ({} over {} permutations{})",
+            c.p_method,
+            c.permutations,
+            if c.p_method == "exact" {
+                String::new()
+            } else {
+                format!(", seed {}", c.seed)
+            }
+        ),
+        _ => format!("r {}", c.note.as_deref().unwrap_or("undefined")),
+    };
+    format!(
+        "Real against simulated confusions, over the {} off-diagonal cells not zero in both conditions ({} cells \
+         where neither condition confused the pair are left out): {r}. The r above, like the paper's, counts those \
+         empty cells as agreement.",
+        c.pairs, c.zero_in_both
+    )
+}
+
+/// The just-noticeable differences: one row per (condition, quantity).
+fn jnd_table(analysis: &Analysis) -> Table {
+    let j = &analysis.jnd;
+    let estimate = |e: Option<crate::analysis::jnd::Estimate>| {
+        e.map_or_else(
+            || "--".to_string(),
+            |e| format!("{:.4} [{:.4}, {:.4}]", e.value, e.ci_low, e.ci_high),
+        )
+    };
+    let mut rows = Vec::new();
+    for (condition, group) in [("real", &j.real), ("simulated", &j.simulated), ("overall", &j.overall)] {
+        for (quantity, unit, fit) in [("|Δk|", j.k_unit, &group.k), ("|Δc|", j.c_unit, &group.c)] {
+            rows.push(vec![
+                Cell::plain(condition),
+                Cell::plain(format!("{quantity} [{unit}]")),
+                Cell::plain(fit.mistakes.to_string()),
+                Cell::plain(estimate(fit.mu)),
+                Cell::plain(estimate(fit.sigma)),
+                Cell::plain(match fit.note.as_deref() {
+                    Some(note) => note.to_string(),
+                    None => estimate(fit.jnd_75),
+                }),
+            ]);
+        }
+    }
+    Table {
+        caption: format!(
+            "Just-noticeable differences of k and c: {}; {} resamples, seed {}. Estimate [95 % interval]; the \
+             JND is the 75 % point μ + 0.674 σ.",
+            j.method, j.bootstrap_resamples, j.bootstrap_seed
+        ),
+        header: [
+            "condition",
+            "quantity",
+            "mistakes",
+            "μ (50 % point)",
+            "σ",
+            "JND (75 % point)",
+        ]
+        .map(String::from)
+        .to_vec(),
+        rows,
+    }
 }
 
 fn table3(analysis: &Analysis) -> Table {
