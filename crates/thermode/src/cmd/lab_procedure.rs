@@ -48,6 +48,9 @@ fn run(args: &LabRunArgs, text: &str) -> Result<()> {
              answers at the keyboard)"
         );
     }
+    if args.renderer.is_some() {
+        bail!("--renderer: a procedure drives the plate's set-point directly; nothing is rendered");
+    }
     let participants: Vec<String> = match args.all_participants {
         true => (1..=file.participants).map(|i| format!("P{i:02}")).collect(),
         false => args.participant.clone(),
@@ -113,7 +116,9 @@ fn session(
     out: &mut dyn Write,
 ) -> Result<()> {
     let mut responder: Box<dyn ProcedureResponder> = if args.simulated_participant {
-        let simulated = SimulatedParticipant::new(file.participant(), participant_seed(file.seed, participant))?;
+        // --seed sets the simulated participants' noise only (the file's seed by default).
+        let seed = args.seed.unwrap_or(file.seed);
+        let simulated = SimulatedParticipant::new(file.participant(), participant_seed(seed, participant))?;
         Box::new(SimulatedResponder::new(simulated))
     } else if let Some(path) = &args.responses {
         Box::new(ScriptedAnswers::load(path)?)
