@@ -53,8 +53,8 @@ pub use crate::host::Port;
 use crate::host::{self, read_step, start_thread, ReadStep, Reconnector, Recovering};
 use crate::own::guard::{sensor_lag_cooling_margin_c, sensor_lag_margin_c};
 use thermode_device::{
-    Device, DeviceConfig, DeviceCut, DeviceError, DownReason, LinkError, LinkFault, LinkHealth, Measures, MecomSetup,
-    OsError, Reading, RequestFault, MAX_CHANNELS,
+    Device, DeviceConfig, DeviceCut, DeviceError, DevicePart, DownReason, LinkError, LinkFault, LinkHealth, Measures,
+    MecomSetup, OsError, Reading, RequestFault, MAX_CHANNELS,
 };
 
 /// Default baud rate of a MeCom serial port \[bit/s\]: 57600 (the TEC family's default and the rate its service
@@ -104,6 +104,9 @@ pub struct MecomConfig {
     pub channels: Vec<MecomChannel>,
     /// Address whose instances become the channels when none are listed. Default 0 (the one device on the line).
     pub discover_address: u8,
+    /// Further addresses on the same port (an RS-485 bus, `mecom:PATH@ADDR` given several times) whose instances
+    /// follow those of [`MecomConfig::discover_address`] when no channels are listed, in this order. Default empty.
+    pub bus_addresses: Vec<u8>,
     /// Serial baud rate \[bit/s\]. Default [`DEFAULT_MECOM_BAUD_RATE`].
     pub baud_rate: u32,
     /// Longest wait for an answer before the request is sent once more \[s\], in (0, 1]. Default 0.05 (a request and
@@ -150,6 +153,7 @@ impl Default for MecomConfig {
             mode: MecomMode::Current,
             channels: Vec::new(),
             discover_address: 0,
+            bus_addresses: Vec::new(),
             baud_rate: DEFAULT_MECOM_BAUD_RATE,
             answer_timeout_s: 0.05,
             handshake_timeout_s: 3.0,
@@ -232,6 +236,14 @@ impl MecomConfig {
                 count: self.channels.len(),
                 max: MAX_CHANNELS,
             });
+        }
+        let mut bus = vec![self.discover_address];
+        for &address in &self.bus_addresses {
+            if address == 0 || address == 255 || bus.contains(&address) {
+                let why = "must be 1 to 254, each address once";
+                return Err(BadValue::custom("mecom bus address", f64::from(address), why).into());
+            }
+            bus.push(address);
         }
         if let Some(c) = self.channels.iter().find(|c| c.instance == 0 || c.address == 255) {
             return Err(LinkError::BadChannel {
@@ -576,6 +588,8 @@ impl MecomDevice {
             shared,
             clock,
             enabled: vec![false; device.channels.len()],
+            set_up: vec![true; device.channels.len()],
+            silent_since: vec![None; device.channels.len()],
         };
         worker.cycle();
         let stop = Arc::clone(&device.stop);
@@ -641,6 +655,7 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline_s: f64) -> Result<Con
     let mut addresses: Vec<u8> = config.channels.iter().map(|c| c.address).collect();
     if addresses.is_empty() {
         addresses.push(config.discover_address);
+        addresses.extend(&config.bus_addresses);
     }
     addresses.dedup();
     let mut identity = Vec::new();
@@ -648,7 +663,17 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline_s: f64) -> Result<Con
         identity.push((address, identify(link, address, deadline_s)?));
     }
     let channels = if config.channels.is_empty() {
-        discover(link, config.discover_address)?
+        let mut all = Vec::new();
+        for &address in &addresses {
+            all.extend(discover(link, address)?);
+        }
+        if all.len() > MAX_CHANNELS {
+            return Err(LinkFault::Setup(MecomSetup::InstanceCount {
+                count: all.len(),
+                max: MAX_CHANNELS,
+            }));
+        }
+        all
     } else {
         config.channels.clone()
     };
@@ -863,6 +888,10 @@ struct Worker {
     clock: Arc<dyn Clock>,
     /// Whether live enable is set on each channel, as last acknowledged.
     enabled: Vec<bool>,
+    /// Whether each channel is configured (false once its address was silent for longer than the link timeout).
+    set_up: Vec<bool>,
+    /// Per channel: since when \[s\] its address has not answered, if it has not.
+    silent_since: Vec<Option<f64>>,
 }
 
 impl Worker {
@@ -898,12 +927,30 @@ impl Worker {
                 }
             }
         }
+        // An address that did not answer is asked nothing more this cycle, so one silent device on a bus costs the
+        // others one answer timeout per cycle, not one per request.
+        let mut silent: Vec<u8> = Vec::new();
         for (index, command) in commands.into_iter().enumerate().take(self.channels.len()) {
-            if let Err(port @ RequestFault::Port { .. }) = self.drive(index, command) {
-                return self.port_failed(port);
+            let address = self.channels[index].channel.address;
+            if silent.contains(&address) {
+                continue;
             }
-            if let Err(port @ RequestFault::Port { .. }) = self.sample(index) {
-                return self.port_failed(port);
+            let now_s = self.clock.now_s();
+            if self.silent_since[index].is_some_and(|t| now_s - t > self.config.link_timeout_s) {
+                self.set_up[index] = false;
+            }
+            let result = self
+                .set_up_again(index)
+                .and_then(|()| self.drive(index, command))
+                .and_then(|()| self.sample(index));
+            match result {
+                Err(port @ RequestFault::Port { .. }) => return self.port_failed(port),
+                Err(RequestFault::NoAnswer) => {
+                    silent.push(address);
+                    self.mark_silent(address, now_s);
+                }
+                Ok(()) => self.silent_since[index] = None,
+                Err(_) => {}
             }
         }
         let elapsed_s = self.clock.now_s() - start_s;
@@ -914,6 +961,44 @@ impl Worker {
             state.stats = self.link.stats;
         }
         true
+    }
+
+    /// The channels of `address` did not answer at `now_s` \[s\]: silent since then, unless already.
+    fn mark_silent(&mut self, address: u8, now_s: f64) {
+        for (index, setup) in self.channels.iter().enumerate() {
+            if setup.channel.address == address {
+                self.silent_since[index].get_or_insert(now_s);
+            }
+        }
+    }
+
+    /// Sets channel `index` up again (output off first, then its limits, mode and the watchdog of its address) when
+    /// its address answers after a silence longer than [`MecomConfig::link_timeout_s`] (its readings failed
+    /// meanwhile): a device that restarted lost its live settings. A device found in its error state (its
+    /// watchdog tripped while the host could not reach it) is reset first, and set up at a later cycle, once it
+    /// answers again.
+    fn set_up_again(&mut self, index: usize) -> Result<(), RequestFault> {
+        if self.set_up[index] {
+            return Ok(());
+        }
+        self.enabled[index] = false;
+        let channel = self.channels[index].channel;
+        let probe = MecomChannel {
+            address: channel.address,
+            instance: 1,
+        };
+        if self.link.read_i32(probe, param::DEVICE_STATUS)? == status::ERROR {
+            self.link.set(probe, Request::Reset)?;
+            return Err(RequestFault::NoAnswer);
+        }
+        configure(&mut self.link, &self.config, channel).map_err(|setup| match setup {
+            MecomSetup::Refused { why, .. } | MecomSetup::ReadObject(why) => why,
+            _ => RequestFault::NoAnswer,
+        })?;
+        let watchdog = Request::set_f32(param::WATCHDOG_TIMEOUT, 1, self.config.watchdog_s as f32);
+        self.link.set(probe, watchdog)?;
+        self.set_up[index] = true;
+        Ok(())
     }
 
     fn port_failed(&mut self, fault: RequestFault) -> bool {
@@ -1193,6 +1278,36 @@ impl Device for MecomDevice {
 
     /// The worker runs in real time: nothing to do.
     fn poll(&mut self, _now_s: f64) {}
+
+    /// One part per address on a bus (`mecom:PATH@ADDR` given several times: each address's channels, named
+    /// `mecom:PATH@ADDR`, all on the port's link); one unnamed part otherwise.
+    fn parts(&self) -> Vec<DevicePart> {
+        let mut parts: Vec<DevicePart> = Vec::new();
+        for (index, setup) in self.channels.iter().enumerate() {
+            let label = format!("{}@{}", self.name.display(), setup.channel.address);
+            match parts.last_mut() {
+                Some(last) if last.label == label => last.channel_count += 1,
+                _ => parts.push(DevicePart {
+                    label,
+                    first_channel: index,
+                    channel_count: 1,
+                    health: Some(Arc::clone(&self.health)),
+                }),
+            }
+        }
+        let mut labels: Vec<&str> = parts.iter().map(|p| p.label.as_str()).collect();
+        labels.sort_unstable();
+        labels.dedup();
+        if self.config.bus_addresses.is_empty() || labels.len() != parts.len() {
+            return vec![DevicePart {
+                label: String::new(),
+                first_channel: 0,
+                channel_count: self.channels.len(),
+                health: Some(Arc::clone(&self.health)),
+            }];
+        }
+        parts
+    }
 
     /// Every output disabled (live enable 0, and 0 A in current mode); waits for the acknowledges (at most two
     /// answer timeouts per write and channel, plus a cycle).

@@ -6,7 +6,7 @@
 //! the port picked), flushed at once; the emulator then runs in real time until the process is ended.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
@@ -63,6 +63,8 @@ pub struct DisplayArgs<'a> {
     pub seed: u64,
     /// Where the trace of the true plate goes (None: no trace).
     pub trace: Option<&'a Path>,
+    /// A symbolic link published to the pseudo-terminal (None: none), so a restarted emulator is found there.
+    pub link: Option<&'a Path>,
 }
 
 /// Creates (replaces) the trace file `path`, unbuffered so each step's rows reach it whole; its folder is created
@@ -71,6 +73,23 @@ pub fn trace_file(path: &Path) -> Result<Box<dyn std::io::Write + Send>> {
     crate::output::create_folder_of(path)?;
     let file = std::fs::File::create(path).with_context(|| format!("cannot create the trace {}", path.display()))?;
     Ok(Box::new(file))
+}
+
+/// Points the symbolic link `link` at `target`, replacing whatever is there in one step (rename).
+pub fn publish_link(link: &std::path::Path, target: &str) -> Result<()> {
+    let mut tmp = link.as_os_str().to_owned();
+    tmp.push(format!(".{}.tmp", std::process::id()));
+    let tmp = PathBuf::from(tmp);
+    let _ = std::fs::remove_file(&tmp);
+    std::os::unix::fs::symlink(target, &tmp).with_context(|| format!("cannot create the link {}", tmp.display()))?;
+    std::fs::rename(&tmp, link).with_context(|| format!("cannot publish the link {}", link.display()))
+}
+
+/// Removes the symbolic link `link` if it still points at `path` (this emulator's pseudo-terminal).
+pub fn remove_link(link: &Path, path: &str) {
+    if std::fs::read_link(link).is_ok_and(|target| target.as_os_str() == path) {
+        let _ = std::fs::remove_file(link);
+    }
 }
 
 /// Runs the MeCom or TCS II emulator of `args` over the display of `display`.
@@ -90,7 +109,7 @@ pub fn run(args: &HardwareArgs, display: &DisplayArgs<'_>) -> Result<()> {
             trace,
         )?,
     };
-    serve_firmware(args, firmware, &what, spelling)
+    serve_firmware(args, firmware, &what, spelling, display.link)
 }
 
 /// The emulator of `args.protocol` over `display` (tracing its plant into `trace`), what it is, and the `--device`
@@ -161,7 +180,13 @@ pub fn stop_on_signal<S: Copy + Send + Sync + 'static, C: Send + Sync + 'static>
     Ok(())
 }
 
-fn serve_firmware(args: &HardwareArgs, firmware: Box<dyn Firmware>, what: &str, spelling: &str) -> Result<()> {
+fn serve_firmware(
+    args: &HardwareArgs,
+    firmware: Box<dyn Firmware>,
+    what: &str,
+    spelling: &str,
+    link: Option<&Path>,
+) -> Result<()> {
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
     let mut stdout = std::io::stdout().lock();
     let end = if let Some(bind) = &args.tcp {
@@ -176,6 +201,9 @@ fn serve_firmware(args: &HardwareArgs, firmware: Box<dyn Firmware>, what: &str, 
         tcp.wait()?
     } else {
         let pty = PtyFirmware::spawn(firmware, clock)?;
+        if let Some(link) = link {
+            publish_link(link, pty.path())?;
+        }
         writeln!(stdout, "{}", pty.path()).and_then(|()| stdout.flush())?;
         drop(stdout);
         eprintln!(
@@ -183,7 +211,12 @@ fn serve_firmware(args: &HardwareArgs, firmware: Box<dyn Firmware>, what: &str, 
             pty.path()
         );
         stop_on_signal(pty.control())?;
-        pty.wait()?
+        let path = pty.path().to_string();
+        let end = pty.wait();
+        if let Some(link) = link {
+            remove_link(link, &path);
+        }
+        end?
     };
     match end {
         RunEnd::Stopped | RunEnd::PortClosed | RunEnd::HostClosed => Ok(()),

@@ -123,7 +123,7 @@ pub struct LabRunArgs {
     /// simulated display in real time, `serial:PATH`, `mecom:PATH`, …); thermode runs it as `serve` would, on
     /// loopback only, for this session.
     #[arg(long, value_name = "DEVICE", conflicts_with = "simulate")]
-    device: Option<String>,
+    device: Vec<String>,
     /// The display channel (finger) the trials are presented on, with `--display` or `--device`.
     #[arg(long, value_name = "N", default_value_t = 0)]
     channel: usize,
@@ -150,7 +150,7 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
     for participant in &participants {
         participant_plan(&experiment, participant)?;
     }
-    let live = args.display.is_some() || args.device.is_some();
+    let live = args.display.is_some() || !args.device.is_empty();
     if !live && !args.simulate {
         bail!(
             "choose where the materials are presented: --display ws://HOST:PORT (a running `thermode serve`), \
@@ -259,12 +259,12 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
     let design = &experiment.experiment;
     // With --device this process runs the display: a stop signal must stop it cleanly (every drive to 0 A, the
     // dose ledger written) before the process ends. Installed before the daemon starts.
-    let signals = args.device.is_some().then(StopSignals::install).transpose()?;
-    let (daemon, url, token) = match (&args.display, &args.device) {
+    let signals = (!args.device.is_empty()).then(StopSignals::install).transpose()?;
+    let (daemon, url, token) = match (&args.display, args.device.is_empty()) {
         (Some(url), _) => (None, url.clone(), args.token.clone()),
-        (None, Some(device)) => {
+        (None, false) => {
             let display = DisplayArgs {
-                device: device.clone(),
+                device: args.device.clone(),
                 device_file: args.device_file.clone(),
                 channels: None,
                 controller: args.controller.unwrap_or(ControllerArg::Model),
@@ -274,7 +274,7 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
             let url = format!("ws://{}", daemon.http_addr());
             (Some(daemon), url, Some(token))
         }
-        (None, None) => bail!("--display or --device"),
+        (None, true) => bail!("--display or --device"),
     };
     let daemon = Arc::new(Mutex::new(daemon));
     let (done, interrupted) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
@@ -306,7 +306,11 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
         writeln!(
             out,
             "presenting on {} channel {}",
-            args.device.as_deref().unwrap_or(&url),
+            if args.device.is_empty() {
+                url.clone()
+            } else {
+                args.device.join(" + ")
+            },
             args.channel
         )?;
         // The simulated participant compares what it feels with real contact under the fv model.

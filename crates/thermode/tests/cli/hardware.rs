@@ -302,3 +302,100 @@ fn status_fields_a_backend_cannot_measure_are_null_and_the_others_numbers() {
         assert!(channel["sensor_c"].is_f64(), "{device}: sensor_c in {channel}");
     }
 }
+
+/// The display channels with a latched fault, from `/api/status`.
+fn faulted(status: &serde_json::Value) -> Vec<u64> {
+    let faults = status["faults"].as_array().cloned().unwrap_or_default();
+    faults.iter().filter_map(|f| f["channel"].as_u64()).collect()
+}
+
+/// Polls `/api/status` of `http_port` every 50 ms until `done` holds, or panics after `limit_s` \[s\] naming `what`
+/// with the last status.
+fn status_until(
+    http_port: u16,
+    limit_s: f64,
+    what: &str,
+    done: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let start = std::time::Instant::now();
+    loop {
+        let status = super::serve_on_emulator::status(http_port);
+        if done(&status) {
+            return status;
+        }
+        assert!(
+            start.elapsed().as_secs_f64() < limit_s,
+            "{what} not within {limit_s} s; status: devices {} faults {} channels {}",
+            status["devices"],
+            status["faults"],
+            status["channels"]
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
+/// The plate reading of `channel` \[°C\].
+fn sensor_c(status: &serde_json::Value, channel: usize) -> f64 {
+    status["channels"][channel]["sensor_c"].as_f64().unwrap_or(f64::NAN)
+}
+
+/// A display of two MeCom controllers (two instances each) on two pseudo-terminals, `--device` given twice, for
+/// every firmware the emulator speaks: both driven; one killed, and only its channels fault (its link down) while
+/// the other's channel keeps following its set-point; the killed one back on the same path, its link up again.
+#[test]
+fn a_display_of_two_mecom_devices_faults_only_the_killed_ones_channels_and_takes_it_back() {
+    use super::serve_on_emulator::{serve_devices, setpoint};
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
+    let links = [dir.path().join("tec-a"), dir.path().join("tec-b")];
+    let emulator = |link: &std::path::Path| {
+        let link = link.to_string_lossy().to_string();
+        emulate(&["--protocol", "mecom", "--channels", "2", "--no-finger", "--link", &link])
+    };
+    let _a = emulator(&links[0]);
+    let b = emulator(&links[1]);
+    let devices: Vec<String> = links.iter().map(|l| format!("mecom:{}", l.display())).collect();
+    let host = serve_devices(&[&devices[0], &devices[1]], None, None);
+    let started = super::serve_on_emulator::status(host.http_port);
+    assert_eq!(started["channel_count"], 4, "{}", started["devices"]);
+    assert_eq!(started["channel_devices"], serde_json::json!([0, 0, 1, 1]));
+    for (index, device) in devices.iter().enumerate() {
+        let entry = &started["devices"][index];
+        assert_eq!(entry["device"], device.as_str(), "{entry}");
+        assert_eq!(
+            entry["channels"],
+            serde_json::json!([2 * index, 2 * index + 1]),
+            "{entry}"
+        );
+        assert_eq!(entry["link"]["state"], "up", "{entry}");
+    }
+    let (start_0, start_2) = (sensor_c(&started, 0), sensor_c(&started, 2));
+    setpoint(host.osc_port, 0, 34.0, 4.0);
+    setpoint(host.osc_port, 2, 34.0, 4.0);
+    let driven = status_until(host.http_port, 15.0, "both devices driven 1 °C up", |s| {
+        sensor_c(s, 0) > start_0 + 1.0 && sensor_c(s, 2) > start_2 + 1.0
+    });
+    drop(b);
+    let down = status_until(host.http_port, 5.0, "device b down, its channels faulted", |s| {
+        s["devices"][1]["link"]["state"] == "down" && faulted(s).contains(&2) && faulted(s).contains(&3)
+    });
+    assert!(
+        !faulted(&down).contains(&0) && !faulted(&down).contains(&1),
+        "faults {}",
+        down["faults"]
+    );
+    assert_eq!(down["devices"][0]["link"]["state"], "up", "{}", down["devices"]);
+    let before_c = sensor_c(&down, 0);
+    let after = status_until(host.http_port, 8.0, "device a's channel still heating", |s| {
+        sensor_c(s, 0) > before_c + 0.5
+    });
+    assert!(
+        after["channels"][0]["link_ok"].as_bool() == Some(true),
+        "{}",
+        after["channels"][0]
+    );
+    assert!(sensor_c(&driven, 0) < sensor_c(&after, 0), "channel 0 stopped with b");
+    let _b = emulator(&links[1]);
+    status_until(host.http_port, 15.0, "device b back up", |s| {
+        s["devices"][1]["link"]["state"] == "up" && s["devices"][1]["link"]["reconnects"].as_u64() >= Some(1)
+    });
+}
