@@ -145,6 +145,12 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Displ
         };
         let device =
             open_display(&args.device, &context, clock.clone()).with_context(|| format!("cannot open {label}"))?;
+        for part in device.parts() {
+            if let Some(commands) = part.health.as_ref().and_then(|h| h.command_set()) {
+                let name = if part.label.is_empty() { &label } else { &part.label };
+                eprintln!("thermode: {name}: {commands}");
+            }
+        }
         // A real display is tested against its file before a finger can be on it; a temperature-commanded device
         // (its own controller sets the current) cannot take the test's current pulse.
         pipeline.self_test_at_start = device.measures().drive_current;

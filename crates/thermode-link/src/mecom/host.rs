@@ -283,6 +283,59 @@ pub struct MecomStats {
     pub reset_at_connect: Option<i32>,
 }
 
+/// Which MeCom commands a device is driven with: every firmware has `?IF`, `?VR`, `VS` and `RS` and the
+/// parameters thermode's safety rests on; older firmware answers the metadata request `?VM` and some newer
+/// parameters with a server error "command not available" (1) or "parameter not available" (5). Such a device is
+/// driven without them: its instances counted by probing (or taken from `channels=`), the optional settings left
+/// as they are, the voltage it does not report unknown.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct MecomCommandSet {
+    /// The instances were counted by reading the object temperature of instance 1, 2, … until one is refused
+    /// (`?VM` not available).
+    pub probed_instances: bool,
+    /// The optional commands the device refused as not available, in words.
+    pub missing: Vec<&'static str>,
+}
+
+impl MecomCommandSet {
+    /// The command set in one line, as `/api/status` and the start-up log show it.
+    pub fn describe(&self) -> String {
+        if self.missing.is_empty() && !self.probed_instances {
+            return "MeCom: the full command set".to_string();
+        }
+        let counted = match self.probed_instances {
+            true => "instances counted by probing the object temperature (1000); ",
+            false => "",
+        };
+        format!(
+            "MeCom: the commands every firmware has; {counted}not available: {}",
+            self.missing.join(", ")
+        )
+    }
+
+    fn lacks(&mut self, what: &'static str) {
+        if !self.missing.contains(&what) {
+            self.missing.push(what);
+        }
+    }
+}
+
+/// Whether `fault` is the device saying it lacks the command or parameter (server error 1 "command not available"
+/// or 5 "parameter not available").
+fn not_available(fault: &RequestFault) -> bool {
+    matches!(fault, RequestFault::Server { code: 1 | 5, .. })
+}
+
+/// What the metadata request `?VM` stands for, when the device lacks it.
+const MISSING_META: &str = "metadata (?VM)";
+/// The optional settings: (what, the parameter).
+const OPTIONAL_SETTINGS: [(&str, u16); 2] = [
+    ("max object temperature change (4012)", param::MAX_TEMP_CHANGE),
+    ("live set voltage (50002)", param::LIVE_SET_VOLTAGE),
+];
+/// The actual output voltage, when the device lacks it (its readings then carry NaN).
+const MISSING_VOLTAGE: &str = "actual output voltage (1021)";
+
 /// The newest values of one channel.
 #[derive(Debug, Clone, Default)]
 struct Track {
@@ -449,6 +502,8 @@ pub struct MecomDevice {
     config: MecomConfig,
     channels: Vec<ChannelSetup>,
     identity: Vec<(u8, String)>,
+    /// The commands it is driven with, found at connect.
+    commands: MecomCommandSet,
     shared: Arc<Mutex<Shared>>,
     stop: Arc<AtomicBool>,
     worker: Option<JoinHandle<()>>,
@@ -561,7 +616,9 @@ impl MecomDevice {
             round_trip_total_s: 0.0,
         };
         let deadline_s = clock.now_s() + config.handshake_timeout_s;
-        let (channels, identity) = connect(&mut link, config, deadline_s).map_err(|e| link.error(e))?;
+        let (channels, identity, commands) = connect(&mut link, config, deadline_s).map_err(|e| link.error(e))?;
+        let health = Arc::new(LinkHealth::new());
+        health.set_command_set(commands.describe());
         let shared = Arc::new(Mutex::new(Shared {
             tracks: vec![Track::default(); MAX_CHANNELS],
             ..Shared::default()
@@ -571,6 +628,7 @@ impl MecomDevice {
             config: config.clone(),
             channels,
             identity,
+            commands: commands.clone(),
             shared: Arc::clone(&shared),
             stop: Arc::new(AtomicBool::new(false)),
             worker: None,
@@ -578,7 +636,7 @@ impl MecomDevice {
             recovery: None,
             seq_base: [0; MAX_CHANNELS],
             seq_seen: [0; MAX_CHANNELS],
-            health: Arc::new(LinkHealth::new()),
+            health,
         };
         // One cycle here, so the first read after open has values.
         let mut worker = Worker {
@@ -588,6 +646,7 @@ impl MecomDevice {
             shared,
             clock,
             enabled: vec![false; device.channels.len()],
+            voltage: vec![true; device.channels.len()],
             set_up: vec![true; device.channels.len()],
             silent_since: vec![None; device.channels.len()],
         };
@@ -606,6 +665,11 @@ impl MecomDevice {
     /// The channels (address, instance) in order.
     pub fn channels(&self) -> Vec<MecomChannel> {
         self.channels.iter().map(|c| c.channel).collect()
+    }
+
+    /// Which commands the device is driven with (found at connect; older firmware lacks some).
+    pub fn command_set(&self) -> &MecomCommandSet {
+        &self.commands
     }
 
     /// Each address's answer to `?IF`.
@@ -646,7 +710,7 @@ impl MecomDevice {
 }
 
 /// The configured channels and each address's identity.
-type Connected = (Vec<ChannelSetup>, Vec<(u8, String)>);
+type Connected = (Vec<ChannelSetup>, Vec<(u8, String)>, MecomCommandSet);
 
 /// Identifies the device(s), finds the channels and configures them, before `deadline_s` on the link's clock.
 /// Returns the channels and identities.
@@ -662,10 +726,11 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline_s: f64) -> Result<Con
     for &address in &addresses {
         identity.push((address, identify(link, address, deadline_s)?));
     }
+    let mut commands = MecomCommandSet::default();
     let channels = if config.channels.is_empty() {
         let mut all = Vec::new();
         for &address in &addresses {
-            all.extend(discover(link, address)?);
+            all.extend(discover(link, address, &mut commands)?);
         }
         if all.len() > MAX_CHANNELS {
             return Err(LinkFault::Setup(MecomSetup::InstanceCount {
@@ -702,7 +767,7 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline_s: f64) -> Result<Con
     }
     let mut setups = Vec::with_capacity(channels.len());
     for &channel in &channels {
-        configure(link, config, channel).map_err(fail)?;
+        configure(link, config, channel, &mut commands).map_err(fail)?;
         let sign = match link.read_i32(channel, param::POSITIVE_CURRENT_IS) {
             Ok(0) => -1.0,
             Ok(_) => 1.0,
@@ -737,21 +802,38 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline_s: f64) -> Result<Con
             }));
         }
     }
-    Ok((setups, identity))
+    for &address in &addresses {
+        let probe = MecomChannel { address, instance: 1 };
+        // Any other failure is the link's, and the worker's cycle meets it.
+        if link
+            .read_f32(probe, param::ACTUAL_OUTPUT_VOLTAGE)
+            .is_err_and(|why| not_available(&why))
+        {
+            commands.lacks(MISSING_VOLTAGE);
+        }
+    }
+    Ok((setups, identity, commands))
 }
 
-/// Every instance of `address` (counted with `?VM` on its object temperature).
-fn discover(link: &mut Link, address: u8) -> Result<Vec<MecomChannel>, LinkFault> {
-    let count = link
-        .transact(
-            address,
-            &Request::Meta {
-                id: param::OBJECT_TEMPERATURE,
-                instance: 1,
-            },
-        )
-        .map_err(|why| LinkFault::Setup(MecomSetup::CountInstances(why)))?
-        .unwrap_or(0) as usize;
+/// Every instance of `address`: counted with `?VM` on its object temperature, or, on a firmware without `?VM`,
+/// by reading the object temperature of instance 1, 2, … until one is refused.
+fn discover(link: &mut Link, address: u8, commands: &mut MecomCommandSet) -> Result<Vec<MecomChannel>, LinkFault> {
+    let meta = link.transact(
+        address,
+        &Request::Meta {
+            id: param::OBJECT_TEMPERATURE,
+            instance: 1,
+        },
+    );
+    let count = match meta {
+        Ok(count) => count.unwrap_or(0) as usize,
+        Err(why) if not_available(&why) => {
+            commands.lacks(MISSING_META);
+            commands.probed_instances = true;
+            probe_instances(link, address)?
+        }
+        Err(why) => return Err(LinkFault::Setup(MecomSetup::CountInstances(why))),
+    };
     if count == 0 || count > MAX_CHANNELS {
         return Err(LinkFault::Setup(MecomSetup::InstanceCount {
             count,
@@ -761,6 +843,19 @@ fn discover(link: &mut Link, address: u8) -> Result<Vec<MecomChannel>, LinkFault
     Ok((1..=count as u8)
         .map(|instance| MecomChannel { address, instance })
         .collect())
+}
+
+/// The number of instances of `address`, found by reading the object temperature of instance 1, 2, … up to
+/// [`MAX_CHANNELS`] + 1 until the device refuses one with a server error.
+fn probe_instances(link: &mut Link, address: u8) -> Result<usize, LinkFault> {
+    for instance in 1..=(MAX_CHANNELS as u8 + 1) {
+        match link.read_f32(MecomChannel { address, instance }, param::OBJECT_TEMPERATURE) {
+            Ok(_) => {}
+            Err(RequestFault::Server { .. }) => return Ok(usize::from(instance) - 1),
+            Err(why) => return Err(LinkFault::Setup(MecomSetup::CountInstances(why))),
+        }
+    }
+    Ok(MAX_CHANNELS + 1)
 }
 
 /// `?IF` to `address` until it answers or `deadline_s` on the link's clock.
@@ -795,7 +890,12 @@ fn identity_text(link: &mut Link, address: u8) -> Option<String> {
 }
 
 /// The per-channel configuration: output off first, then the device's own limits, then the mode.
-fn configure(link: &mut Link, config: &MecomConfig, channel: MecomChannel) -> Result<(), MecomSetup> {
+fn configure(
+    link: &mut Link,
+    config: &MecomConfig,
+    channel: MecomChannel,
+    commands: &mut MecomCommandSet,
+) -> Result<(), MecomSetup> {
     let i = channel.instance;
     let mut steps: Vec<(&'static str, Request)> = vec![
         (
@@ -869,12 +969,23 @@ fn configure(link: &mut Link, config: &MecomConfig, channel: MecomChannel) -> Re
         Request::set_i32(param::OUTPUT_STAGE_ENABLE, i, 2),
     ));
     for (step, request) in steps {
-        link.set(channel, request).map_err(|why| MecomSetup::Refused {
-            address: channel.address,
-            instance: i,
-            step,
-            why,
-        })?;
+        let optional = match request {
+            Request::Set { id, .. } => OPTIONAL_SETTINGS.iter().find(|(_, p)| *p == id).map(|(what, _)| *what),
+            _ => None,
+        };
+        match (link.set(channel, request), optional) {
+            (Ok(()), _) => {}
+            // A firmware without this setting: the device's own default stays.
+            (Err(why), Some(what)) if not_available(&why) => commands.lacks(what),
+            (Err(why), _) => {
+                return Err(MecomSetup::Refused {
+                    address: channel.address,
+                    instance: i,
+                    step,
+                    why,
+                })
+            }
+        }
     }
     Ok(())
 }
@@ -888,6 +999,8 @@ struct Worker {
     clock: Arc<dyn Clock>,
     /// Whether live enable is set on each channel, as last acknowledged.
     enabled: Vec<bool>,
+    /// Per channel: whether its device reports the actual output voltage (1021; an older firmware may not).
+    voltage: Vec<bool>,
     /// Whether each channel is configured (false once its address was silent for longer than the link timeout).
     set_up: Vec<bool>,
     /// Per channel: since when \[s\] its address has not answered, if it has not.
@@ -991,7 +1104,8 @@ impl Worker {
             self.link.set(probe, Request::Reset)?;
             return Err(RequestFault::NoAnswer);
         }
-        configure(&mut self.link, &self.config, channel).map_err(|setup| match setup {
+        let mut commands = MecomCommandSet::default();
+        configure(&mut self.link, &self.config, channel, &mut commands).map_err(|setup| match setup {
             MecomSetup::Refused { why, .. } | MecomSetup::ReadObject(why) => why,
             _ => RequestFault::NoAnswer,
         })?;
@@ -1063,7 +1177,7 @@ impl Worker {
                 object_c,
                 sink_c: self.link.read_f32(channel, param::SINK_TEMPERATURE)?,
                 current_a: self.link.read_f32(channel, param::ACTUAL_OUTPUT_CURRENT)? * sign,
-                voltage_v: self.link.read_f32(channel, param::ACTUAL_OUTPUT_VOLTAGE)? * sign,
+                voltage_v: self.voltage(index)? * sign,
                 device_status: self.link.read_i32(channel, param::DEVICE_STATUS)?,
                 error_number: self.link.read_i32(channel, param::ERROR_NUMBER)?,
                 ..Track::default()
@@ -1090,6 +1204,24 @@ impl Worker {
                 self.note_failure(index, &e);
                 Err(e)
             }
+        }
+    }
+
+    /// Channel `index`'s actual output voltage \[V\] (1021, the device's sign), or NaN once its device answered that
+    /// it lacks it (an older firmware).
+    fn voltage(&mut self, index: usize) -> Result<f64, RequestFault> {
+        if !self.voltage[index] {
+            return Ok(f64::NAN);
+        }
+        match self
+            .link
+            .read_f32(self.channels[index].channel, param::ACTUAL_OUTPUT_VOLTAGE)
+        {
+            Err(why) if not_available(&why) => {
+                self.voltage[index] = false;
+                Ok(f64::NAN)
+            }
+            read => read,
         }
     }
 
@@ -1170,6 +1302,8 @@ impl Recovering for MecomDevice {
         std::mem::swap(&mut self.worker, &mut fresh.worker);
         self.channels = fresh.channels.clone();
         self.identity = fresh.identity.clone();
+        self.commands = fresh.commands.clone();
+        self.health.set_command_set(self.commands.describe());
         for (base, seen) in self.seq_base.iter_mut().zip(self.seq_seen) {
             *base = seen + 1;
         }

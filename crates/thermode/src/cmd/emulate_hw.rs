@@ -44,6 +44,10 @@ pub struct HardwareArgs {
     /// MeCom only: the device address, 1 to 254 (frames to address 0 are answered too).
     #[arg(long, value_name = "N", default_value_t = 1)]
     pub address: u8,
+    /// MeCom only: answer as an older firmware without the newer commands (`?VM` metadata "command not available";
+    /// max temperature change 4012, live set voltage 50002 and actual voltage 1021 "parameter not available").
+    #[arg(long = "old-firmware")]
+    pub old_firmware: bool,
     /// TCS II only: stream temperature lines at this rate [Hz] even when muted (a test of the host).
     #[arg(long = "stream-hz", value_name = "HZ")]
     pub stream_hz: Option<f64>,
@@ -124,14 +128,16 @@ fn firmware<F: PlateFinger + Send + 'static>(
         Protocol::Mecom => {
             let config = MecomEmulatorConfig {
                 address: args.address,
+                old_firmware: args.old_firmware,
                 ..MecomEmulatorConfig::default()
             };
             let mut emulator = MecomEmulator::new(display, config)?;
             if let Some(trace) = trace {
                 emulator.trace_to(trace);
             }
+            let firmware = if args.old_firmware { " (older firmware)" } else { "" };
             let what = format!(
-                "a MeCom TEC controller at address {}, {channels} instances",
+                "a MeCom TEC controller{firmware} at address {}, {channels} instances",
                 args.address
             );
             let spelling = if args.tcp.is_some() { "mecom-tcp:" } else { "mecom:" };

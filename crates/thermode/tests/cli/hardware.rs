@@ -344,12 +344,21 @@ fn sensor_c(status: &serde_json::Value, channel: usize) -> f64 {
 /// the other's channel keeps following its set-point; the killed one back on the same path, its link up again.
 #[test]
 fn a_display_of_two_mecom_devices_faults_only_the_killed_ones_channels_and_takes_it_back() {
+    for firmware in [None, Some("--old-firmware")] {
+        two_mecom_devices_one_killed(firmware);
+    }
+}
+
+/// The test above with the emulators' `firmware` switch (None: the full command set).
+fn two_mecom_devices_one_killed(firmware: Option<&str>) {
     use super::serve_on_emulator::{serve_devices, setpoint};
     let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
     let links = [dir.path().join("tec-a"), dir.path().join("tec-b")];
     let emulator = |link: &std::path::Path| {
         let link = link.to_string_lossy().to_string();
-        emulate(&["--protocol", "mecom", "--channels", "2", "--no-finger", "--link", &link])
+        let mut args = vec!["--protocol", "mecom", "--channels", "2", "--no-finger", "--link", &link];
+        args.extend(firmware);
+        emulate(&args)
     };
     let _a = emulator(&links[0]);
     let b = emulator(&links[1]);
@@ -367,6 +376,8 @@ fn a_display_of_two_mecom_devices_faults_only_the_killed_ones_channels_and_takes
             "{entry}"
         );
         assert_eq!(entry["link"]["state"], "up", "{entry}");
+        let commands = entry["command_set"].as_str().unwrap_or_default();
+        assert_eq!(commands.contains("every firmware"), firmware.is_some(), "{entry}");
     }
     let (start_0, start_2) = (sensor_c(&started, 0), sensor_c(&started, 2));
     setpoint(host.osc_port, 0, 34.0, 4.0);
