@@ -1040,8 +1040,10 @@ impl Worker {
                 }
             }
         }
-        // An address that did not answer is asked nothing more this cycle, so one silent device on a bus costs the
+        // On a bus, an address that did not answer is asked nothing more this cycle, so one silent device costs the
         // others one answer timeout per cycle, not one per request.
+        let first_address = self.channels.first().map(|c| c.channel.address);
+        let bus = self.channels.iter().any(|c| Some(c.channel.address) != first_address);
         let mut silent: Vec<u8> = Vec::new();
         for (index, command) in commands.into_iter().enumerate().take(self.channels.len()) {
             let address = self.channels[index].channel.address;
@@ -1052,14 +1054,19 @@ impl Worker {
             if self.silent_since[index].is_some_and(|t| now_s - t > self.config.link_timeout_s) {
                 self.set_up[index] = false;
             }
-            let result = self
-                .set_up_again(index)
-                .and_then(|()| self.drive(index, command))
-                .and_then(|()| self.sample(index));
+            let driven = self.set_up_again(index).and_then(|()| self.drive(index, command));
+            let result = match driven {
+                Err(fault @ RequestFault::Port { .. }) => Err(fault),
+                Err(RequestFault::NoAnswer) if bus => Err(RequestFault::NoAnswer),
+                // One device: read it all the same (a lost answer to the drive must not cost a sample).
+                driven => self.sample(index).and(driven),
+            };
             match result {
                 Err(port @ RequestFault::Port { .. }) => return self.port_failed(port),
                 Err(RequestFault::NoAnswer) => {
-                    silent.push(address);
+                    if bus {
+                        silent.push(address);
+                    }
                     self.mark_silent(address, now_s);
                 }
                 Ok(()) => self.silent_since[index] = None,
