@@ -12,7 +12,7 @@ use std::sync::Arc;
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use thermode_device::{DefaultFinger, Device, NoFinger, PlateFinger, SimulatedDisplay};
-use thermode_link::mecom::emulator::{MecomEmulator, MecomEmulatorConfig};
+use thermode_link::mecom::emulator::{MecomBus, MecomEmulator, MecomEmulatorConfig};
 use thermode_link::runner::{Firmware, PtyFirmware, RunEnd, TcpFirmware};
 use thermode_link::tcs2::emulator::{Tcs2Emulator, Tcs2EmulatorConfig};
 use thermode_platform::{Clock, MonotonicClock};
@@ -41,9 +41,10 @@ pub struct HardwareArgs {
     /// of a pseudo-terminal.
     #[arg(long, value_name = "ADDR")]
     pub tcp: Option<String>,
-    /// MeCom only: the device address, 1 to 254 (frames to address 0 are answered too).
-    #[arg(long, value_name = "N", default_value_t = 1)]
-    pub address: u8,
+    /// MeCom only: the device address, 1 to 254 (frames to address 0 are answered too). Given several times, one
+    /// controller of `--channels` instances at each address, all on one port (an RS-485 bus; no `--trace`).
+    #[arg(long, value_name = "N", default_value = "1")]
+    pub address: Vec<u8>,
     /// MeCom only: answer as an older firmware without the newer commands (`?VM` metadata "command not available";
     /// max temperature change 4012, live set voltage 50002 and actual voltage 1021 "parameter not available").
     #[arg(long = "old-firmware")]
@@ -101,6 +102,9 @@ pub fn run(args: &HardwareArgs, display: &DisplayArgs<'_>) -> Result<()> {
     let device = resolve::device_config(display.device_file)?;
     let (channels, seed) = (display.channels, display.seed);
     let trace = display.trace.map(trace_file).transpose()?;
+    if args.address.len() > 1 {
+        return serve_bus(args, display);
+    }
     let (firmware, what, spelling) = match args.no_finger {
         true => firmware(
             args,
@@ -116,6 +120,46 @@ pub fn run(args: &HardwareArgs, display: &DisplayArgs<'_>) -> Result<()> {
     serve_firmware(args, firmware, &what, spelling, display.link)
 }
 
+/// Serves one MeCom controller of `display.channels` instances at each of `args.address` on one port (a bus), each
+/// over its own simulated display (seeds `display.seed`, `display.seed + 1`, …).
+fn serve_bus(args: &HardwareArgs, display: &DisplayArgs<'_>) -> Result<()> {
+    if args.protocol != Protocol::Mecom || display.trace.is_some() {
+        bail!("several --address are for --protocol mecom, without --trace");
+    }
+    let device = resolve::device_config(display.device_file)?;
+    let mut controllers: Vec<Box<dyn Firmware>> = Vec::new();
+    for (index, &address) in args.address.iter().enumerate() {
+        let seed = display.seed + index as u64;
+        let one = HardwareArgs {
+            address: vec![address],
+            tcp: None,
+            ..*args
+        };
+        let controller = match args.no_finger {
+            true => firmware(
+                &one,
+                SimulatedDisplay::<NoFinger>::fingertips(&device, display.channels, seed)?,
+                None,
+            )?,
+            false => firmware(
+                &one,
+                SimulatedDisplay::<DefaultFinger>::fingertips(&device, display.channels, seed)?,
+                None,
+            )?,
+        };
+        controllers.push(controller.0);
+    }
+    let addresses: Vec<String> = args.address.iter().map(u8::to_string).collect();
+    let what = format!(
+        "a MeCom bus of {} controllers at addresses {}, {} instances each",
+        addresses.len(),
+        addresses.join(", "),
+        display.channels
+    );
+    let bus: Box<dyn Firmware> = Box::new(MecomBus::new(controllers));
+    serve_firmware(args, bus, &what, "mecom:", display.link)
+}
+
 /// The emulator of `args.protocol` over `display` (tracing its plant into `trace`), what it is, and the `--device`
 /// spelling that connects to it.
 fn firmware<F: PlateFinger + Send + 'static>(
@@ -126,8 +170,9 @@ fn firmware<F: PlateFinger + Send + 'static>(
     let channels = display.channel_count();
     Ok(match args.protocol {
         Protocol::Mecom => {
+            let address = args.address.first().copied().unwrap_or(1);
             let config = MecomEmulatorConfig {
-                address: args.address,
+                address,
                 old_firmware: args.old_firmware,
                 ..MecomEmulatorConfig::default()
             };
@@ -136,10 +181,7 @@ fn firmware<F: PlateFinger + Send + 'static>(
                 emulator.trace_to(trace);
             }
             let firmware = if args.old_firmware { " (older firmware)" } else { "" };
-            let what = format!(
-                "a MeCom TEC controller{firmware} at address {}, {channels} instances",
-                args.address
-            );
+            let what = format!("a MeCom TEC controller{firmware} at address {address}, {channels} instances");
             let spelling = if args.tcp.is_some() { "mecom-tcp:" } else { "mecom:" };
             (Box::new(emulator), what, spelling)
         }

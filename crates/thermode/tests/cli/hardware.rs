@@ -410,3 +410,42 @@ fn two_mecom_devices_one_killed(firmware: Option<&str>) {
         s["devices"][1]["link"]["state"] == "up" && s["devices"][1]["link"]["reconnects"].as_u64() >= Some(1)
     });
 }
+
+/// Two controllers at addresses 1 and 2 on one emulated bus (one pseudo-terminal, `thermode emulate --address 1
+/// --address 2`) under `serve --device mecom:PTY@1 --device mecom:PTY@2`: four channels in address order, each
+/// address a device of its own in `/api/status`, both driven.
+#[test]
+fn two_addresses_on_one_emulated_bus_make_one_display() {
+    use super::serve_on_emulator::{serve_devices, setpoint};
+    let (_bus, pty) = emulate(&[
+        "--protocol",
+        "mecom",
+        "--channels",
+        "2",
+        "--no-finger",
+        "--address",
+        "1",
+        "--address",
+        "2",
+    ]);
+    let devices = [format!("mecom:{pty}@1"), format!("mecom:{pty}@2")];
+    let host = serve_devices(&[&devices[0], &devices[1]], None, None);
+    let started = super::serve_on_emulator::status(host.http_port);
+    assert_eq!(started["channel_count"], 4, "{}", started["devices"]);
+    assert_eq!(started["channel_devices"], serde_json::json!([0, 0, 1, 1]));
+    for (index, device) in devices.iter().enumerate() {
+        let entry = &started["devices"][index];
+        assert_eq!(entry["device"], device.as_str(), "{entry}");
+        assert_eq!(
+            entry["channels"],
+            serde_json::json!([2 * index, 2 * index + 1]),
+            "{entry}"
+        );
+    }
+    let (start_0, start_2) = (sensor_c(&started, 0), sensor_c(&started, 2));
+    setpoint(host.osc_port, 0, 34.0, 4.0);
+    setpoint(host.osc_port, 2, 34.0, 4.0);
+    status_until(host.http_port, 15.0, "both addresses driven 1 °C up", |s| {
+        sensor_c(s, 0) > start_0 + 1.0 && sensor_c(s, 2) > start_2 + 1.0
+    });
+}
