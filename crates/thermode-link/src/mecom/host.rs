@@ -515,6 +515,9 @@ pub struct MecomDevice {
     /// The last sample number handed out per channel.
     seq_seen: [u64; MAX_CHANNELS],
     health: Arc<LinkHealth>,
+    /// On a bus ([`MecomConfig::bus_addresses`]): each address's own link state, down while none of its channels
+    /// answered within [`MecomConfig::link_timeout_s`] (empty otherwise).
+    address_health: Vec<(u8, Arc<LinkHealth>)>,
 }
 
 impl std::fmt::Debug for MecomDevice {
@@ -637,7 +640,16 @@ impl MecomDevice {
             seq_base: [0; MAX_CHANNELS],
             seq_seen: [0; MAX_CHANNELS],
             health,
+            address_health: Vec::new(),
         };
+        if !config.bus_addresses.is_empty() {
+            for setup in &device.channels {
+                let address = setup.channel.address;
+                if !device.address_health.iter().any(|(a, _)| *a == address) {
+                    device.address_health.push((address, Arc::new(LinkHealth::new())));
+                }
+            }
+        }
         // One cycle here, so the first read after open has values.
         let mut worker = Worker {
             link,
@@ -697,6 +709,38 @@ impl MecomDevice {
     /// The link error `fault` of this device.
     fn error(&self, fault: LinkFault) -> DeviceError {
         LinkError::device(&self.name, fault).into()
+    }
+
+    /// The link state of `address`: its own on a bus, the port's otherwise.
+    fn link_of(&self, address: u8) -> Arc<LinkHealth> {
+        let own = self.address_health.iter().find(|(a, _)| *a == address);
+        Arc::clone(own.map_or(&self.health, |(_, health)| health))
+    }
+
+    /// On a bus: takes an address's link state down when none of its channels answered within the link timeout,
+    /// and up again (a reconnection) when one does.
+    fn watch_addresses(&mut self) {
+        let now_s = self.clock.now_s();
+        let Ok(state) = self.shared.lock() else {
+            return;
+        };
+        for (address, health) in &self.address_health {
+            let last_s = self
+                .channels
+                .iter()
+                .zip(&state.tracks)
+                .filter(|(setup, _)| setup.channel.address == *address)
+                .filter_map(|(_, track)| track.last_answer_s)
+                .fold(f64::NEG_INFINITY, f64::max);
+            let silent_s = now_s - last_s;
+            let answering = silent_s <= self.config.link_timeout_s;
+            if health.is_up() && !answering {
+                let name = self.name.display();
+                health.down(format!("{name}@{address}: no answer for {silent_s:.2} s"));
+            } else if !health.is_up() && answering {
+                health.reconnected();
+            }
+        }
     }
 
     fn check_channel(&self, channel: usize) -> Result<(), DeviceError> {
@@ -1350,6 +1394,7 @@ impl Device for MecomDevice {
 
     fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
         self.supervise();
+        self.watch_addresses();
         self.check_channel(channel)?;
         let now_s = self.clock.now_s();
         let seq_base = self.seq_base[channel];
@@ -1421,7 +1466,7 @@ impl Device for MecomDevice {
     fn poll(&mut self, _now_s: f64) {}
 
     /// One part per address on a bus (`mecom:PATH@ADDR` given several times: each address's channels, named
-    /// `mecom:PATH@ADDR`, all on the port's link); one unnamed part otherwise.
+    /// `mecom:PATH@ADDR`, with the address's own link state); one unnamed part otherwise.
     fn parts(&self) -> Vec<DevicePart> {
         let mut parts: Vec<DevicePart> = Vec::new();
         for (index, setup) in self.channels.iter().enumerate() {
@@ -1432,7 +1477,7 @@ impl Device for MecomDevice {
                     label,
                     first_channel: index,
                     channel_count: 1,
-                    health: Some(Arc::clone(&self.health)),
+                    health: Some(self.link_of(setup.channel.address)),
                 }),
             }
         }

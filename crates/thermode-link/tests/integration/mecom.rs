@@ -782,9 +782,27 @@ fn two_addresses_on_one_bus_an_unplugged_one_faults_only_its_channels_and_comes_
         apart.plate_c[0]
     );
     assert!(!apart.output_on[2], "address 2's watchdog left its output on");
+    let links: Vec<bool> = parts
+        .iter()
+        .filter_map(|p| p.health.as_ref().map(|h| h.is_up()))
+        .collect();
+    assert_eq!(
+        links,
+        [true, false],
+        "the link states of addresses 1 and 2 while 2 is unplugged"
+    );
     unplugged.store(false, std::sync::atomic::Ordering::SeqCst);
     let back = wait_for(5.0, || control.tick(&targets)[2].is_ok());
     println!("address 2 read again {back:?} s after it was plugged back");
     assert!(back.is_some(), "address 2 never read again");
     assert_eq!(status(&pty).error, None, "address 2 not reset");
+    let address_2 = parts[1]
+        .health
+        .as_ref()
+        .map(|h| (h.is_up(), h.reconnects(), h.failures()));
+    assert_eq!(
+        address_2,
+        Some((true, 1, 1)),
+        "address 2's link (up, reconnects, failures)"
+    );
 }
