@@ -237,6 +237,10 @@ impl MecomConfig {
                 max: MAX_CHANNELS,
             });
         }
+        if !self.bus_addresses.is_empty() && self.discover_address == 0 {
+            let why = "must be 1 to 254 on a bus (address 0 is answered by every device on it)";
+            return Err(BadValue::custom("mecom bus address", 0.0, why).into());
+        }
         let mut bus = vec![self.discover_address];
         for &address in &self.bus_addresses {
             if address == 0 || address == 255 || bus.contains(&address) {

@@ -120,8 +120,8 @@ pub struct LabRunArgs {
     #[arg(long, value_name = "T", requires = "display")]
     token: Option<String>,
     /// Present on a display connected to this machine: the values `thermode serve --device` takes (`sim` is the
-    /// simulated display in real time, `serial:PATH`, `mecom:PATH`, …); thermode runs it as `serve` would, on
-    /// loopback only, for this session.
+    /// simulated display in real time, `serial:PATH`, `mecom:PATH`, …; given several times, one display of their
+    /// channels in that order); thermode runs it as `serve` would, on loopback only, for this session.
     #[arg(long, value_name = "DEVICE", conflicts_with = "simulate")]
     device: Vec<String>,
     /// The display channel (finger) the trials are presented on, with `--display` or `--device`.

@@ -142,6 +142,39 @@ fn bad_hardware_spellings_are_refused_with_the_reason() {
     );
 }
 
+/// A display of several devices refuses the simulated display among real ones, an address out
+/// of 1 to 254, and address 0 on a bus (every device would answer it); a bus takes every instance of each address.
+#[test]
+fn bad_several_device_spellings_are_refused_with_the_reason() {
+    let bench = |devices: &[&str]| {
+        let mut args = vec!["bench", "--duration", "1"];
+        for device in devices {
+            args.extend(["--device", device]);
+        }
+        args.iter().map(|a| a.to_string()).collect::<Vec<_>>()
+    };
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &["sim", "mecom:/dev/null"],
+            "--device sim is the simulated display alone",
+        ),
+        (
+            &["mecom:/dev/null@300", "serial:/dev/null"],
+            "is not an address from 1 to 254",
+        ),
+        (&["mecom:/dev/null", "mecom:/dev/null@2"], "must be 1 to 254 on a bus"),
+        (
+            &["mecom:/dev/null@1?channels=1:1", "mecom:/dev/null@2"],
+            "no channels= list",
+        ),
+    ];
+    for (devices, reason) in cases {
+        let args = bench(devices);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        super::expect_error(&args, reason);
+    }
+}
+
 #[test]
 fn bench_floor_measures_an_empty_loop_and_refuses_impossible_rates() {
     let out = Command::new(env!("CARGO_BIN_EXE_thermode"))
