@@ -39,6 +39,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod calibrated;
 pub mod channel;
 pub mod composite;
 pub mod config;
@@ -49,6 +50,7 @@ pub mod link;
 pub mod link_error;
 pub mod sensor;
 
+pub use calibrated::CalibratedDevice;
 pub use channel::{ChannelState, Fault, HeatFlows, Polarity, SimulatedChannel, MAX_SUBSTEP_S};
 pub use composite::CompositeDevice;
 pub use config::DeviceConfig;

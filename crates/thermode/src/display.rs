@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use thermode_device::{DefaultFinger, Device, SimulatedDisplay, MAX_CHANNELS};
+use thermode_device::{CalibratedDevice, DefaultFinger, Device, SimulatedDisplay, MAX_CHANNELS};
 use thermode_link::spec::{is_hardware, open_display, HardwareContext};
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, SelfTestState};
 use thermode_platform::Clock;
@@ -151,6 +151,19 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Displ
                 eprintln!("thermode: {name}: {commands}");
             }
         }
+        let device: Box<dyn Device + Send> = match pipeline.device.calibration {
+            calibration if calibration.is_set() => {
+                if !device.measures().drive_current {
+                    bail!("{label} regulates its plate on its own sensor: a calibrated device file needs current mode");
+                }
+                eprintln!(
+                    "thermode: the plate sensor read through its calibration (gain {}, offset {} °C)",
+                    calibration.sensor_gain, calibration.sensor_offset_c
+                );
+                Box::new(CalibratedDevice::new(device, calibration))
+            }
+            _ => device,
+        };
         // A real display is tested against its file before a finger can be on it; a temperature-commanded device
         // (its own controller sets the current) cannot take the test's current pulse.
         pipeline.self_test_at_start = device.measures().drive_current;

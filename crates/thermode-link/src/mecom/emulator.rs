@@ -61,6 +61,11 @@ pub struct MecomEmulatorConfig {
     /// (server error 1); the max object temperature change (4012), the live set voltage (50002) and the actual
     /// output voltage (1021) answered "parameter not available" (5). Default false.
     pub old_firmware: bool,
+    /// The object temperature sensor's gain error \[-\]: it reports `sensor_gain · T + sensor_offset_c` for a
+    /// sensor at T (a mounted sensor off the truth, for `thermode calibrate`), positive. Default 1.
+    pub sensor_gain: f64,
+    /// The object temperature sensor's offset error \[°C\] (see `sensor_gain`). Default 0.
+    pub sensor_offset_c: f64,
 }
 
 impl Default for MecomEmulatorConfig {
@@ -72,6 +77,8 @@ impl Default for MecomEmulatorConfig {
             kp_a_per_k: 0.4,
             ti_s: 2.0,
             old_firmware: false,
+            sensor_gain: 1.0,
+            sensor_offset_c: 0.0,
         }
     }
 }
@@ -213,6 +220,13 @@ impl<F: PlateFinger> MecomEmulator<F> {
         if !(config.ti_s.is_finite() && config.ti_s > 0.0) {
             return Err(bad("ti_s", config.ti_s, "must be positive"));
         }
+        if !(config.sensor_gain.is_finite() && config.sensor_gain > 0.0 && config.sensor_offset_c.is_finite()) {
+            return Err(bad(
+                "sensor_gain",
+                config.sensor_gain,
+                "must be positive, the offset finite",
+            ));
+        }
         if config.address == 0 || config.address == 255 {
             return Err(bad("address", f64::from(config.address), "must be from 1 to 254"));
         }
@@ -285,11 +299,13 @@ impl<F: PlateFinger> MecomEmulator<F> {
 
     fn step_plant(&mut self, dt_s: f64) {
         let now_s = self.time_s();
+        // The device sees its sensor's reading, errors included.
+        let (gain, offset_c) = (self.config.sensor_gain, self.config.sensor_offset_c);
         for (i, inst) in self.instances.iter_mut().enumerate() {
             let Ok(channel) = self.display.channel_mut(i) else {
                 continue;
             };
-            let sensor_c = channel.state().sensor.value_c;
+            let sensor_c = gain * channel.state().sensor.value_c + offset_c;
             let limit_a = f64::from(inst.current_limit_a).min(inst.hardware_limit_a);
             let heat_a = if self.error.is_some() || !inst.enabled() {
                 inst.integral_a = 0.0;
@@ -319,7 +335,7 @@ impl<F: PlateFinger> MecomEmulator<F> {
             };
             let state = channel.step(dt_s, heat_a);
             inst.applied_a = state.applied_current_a;
-            let reading_c = state.sensor.value_c;
+            let reading_c = gain * state.sensor.value_c + offset_c;
             if self.error.is_none() {
                 if reading_c > f64::from(inst.upper_error_c) {
                     self.error = Some((error_number::OBJECT_TOO_HIGH, (i + 1) as u8, now_s));
@@ -430,7 +446,9 @@ impl<F: PlateFinger> MecomEmulator<F> {
             106 => i(self.error.map_or(0, |(_, inst, _)| i32::from(inst))),
             107 => i(0),
             108 => i(self.save_to_flash),
-            param::OBJECT_TEMPERATURE => f(state.sensor.value_c),
+            param::OBJECT_TEMPERATURE => {
+                f(self.config.sensor_gain * state.sensor.value_c + self.config.sensor_offset_c)
+            }
             param::SINK_TEMPERATURE => f(channel.hot_side_reading_c()),
             param::TARGET_OBJECT_TEMPERATURE => f(inst.active_target_c()),
             param::ACTUAL_OUTPUT_CURRENT => f(inst.applied_a * inst.sign()),

@@ -13,7 +13,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use thermode_device::{DefaultFinger, Device, NoFinger, PlateFinger, SimulatedDisplay};
 use thermode_link::mecom::emulator::{MecomBus, MecomEmulator, MecomEmulatorConfig};
-use thermode_link::runner::{Firmware, PtyFirmware, RunEnd, TcpFirmware};
+use thermode_link::runner::{spawn_reference_thermometer, Firmware, PtyFirmware, RunEnd, TcpFirmware};
 use thermode_link::tcs2::emulator::{Tcs2Emulator, Tcs2EmulatorConfig};
 use thermode_platform::{Clock, MonotonicClock};
 
@@ -49,6 +49,18 @@ pub struct HardwareArgs {
     /// max temperature change 4012, live set voltage 50002 and actual voltage 1021 "parameter not available").
     #[arg(long = "old-firmware")]
     pub old_firmware: bool,
+    /// MeCom only: the object temperature sensor's offset error [°C]: it reports gain · T + offset (see
+    /// `--sensor-gain`), a mounted sensor off the truth for `thermode calibrate`.
+    #[arg(long = "sensor-offset-c", value_name = "C", default_value_t = 0.0)]
+    pub sensor_offset_c: f64,
+    /// MeCom only: the object temperature sensor's gain error [-] (see `--sensor-offset-c`).
+    #[arg(long = "sensor-gain", value_name = "G", default_value_t = 1.0)]
+    pub sensor_gain: f64,
+    /// MeCom on a pseudo-terminal only: offer a reference thermometer of this channel's true plate on a second
+    /// pseudo-terminal (its path is the second line printed): one temperature in °C per line every 0.1 s, with
+    /// Gaussian noise of 0.01 °C.
+    #[arg(long = "reference-channel", value_name = "N")]
+    pub reference_channel: Option<usize>,
     /// TCS II only: stream temperature lines at this rate [Hz] even when muted (a test of the host).
     #[arg(long = "stream-hz", value_name = "HZ")]
     pub stream_hz: Option<f64>,
@@ -174,6 +186,8 @@ fn firmware<F: PlateFinger + Send + 'static>(
             let config = MecomEmulatorConfig {
                 address,
                 old_firmware: args.old_firmware,
+                sensor_gain: args.sensor_gain,
+                sensor_offset_c: args.sensor_offset_c,
                 ..MecomEmulatorConfig::default()
             };
             let mut emulator = MecomEmulator::new(display, config)?;
@@ -253,6 +267,11 @@ fn serve_firmware(
             publish_link(link, pty.path())?;
         }
         writeln!(stdout, "{}", pty.path()).and_then(|()| stdout.flush())?;
+        if let Some(channel) = args.reference_channel {
+            let reference = spawn_reference_thermometer(Arc::clone(pty.control()), channel, 0.01, 7, 0.1)?;
+            writeln!(stdout, "{reference}").and_then(|()| stdout.flush())?;
+            eprintln!("thermode emulate: a reference thermometer of channel {channel}'s plate on {reference}");
+        }
         drop(stdout);
         eprintln!(
             "thermode emulate: {what}; connect with --device {spelling}{}",

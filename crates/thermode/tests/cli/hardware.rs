@@ -482,3 +482,101 @@ fn two_addresses_on_one_emulated_bus_make_one_display() {
         sensor_c(s, 0) > start_0 + 1.0 && sensor_c(s, 2) > start_2 + 1.0
     });
 }
+
+/// `thermode emulate` with `args`; returns it and the first two lines it printed (the device's and the reference
+/// thermometer's pseudo-terminals).
+fn emulate_with_reference(args: &[&str]) -> (Process, String, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .arg("emulate")
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap_or_else(|e| panic!("spawn emulate: {e}"));
+    let stdout = child.stdout.take().unwrap_or_else(|| panic!("emulate stdout"));
+    let mut lines = BufReader::new(stdout).lines();
+    let mut line = || {
+        lines
+            .next()
+            .and_then(Result::ok)
+            .unwrap_or_else(|| panic!("emulate printed too few lines"))
+    };
+    let (device, reference) = (line(), line());
+    (Process(child), device, reference)
+}
+
+/// `thermode calibrate` against a MeCom emulator whose sensor reads 1.01 · T + 0.3 °C and its reference thermometer
+/// (the true plate, 0.01 °C noise): the fitted line is the injected one within 0.02 °C over 15–45 °C, the file
+/// holds it, and a display opened with that file reads through it.
+#[test]
+fn calibrate_recovers_an_injected_sensor_offset_and_gain() {
+    let (_emulator, pty, reference) = emulate_with_reference(&[
+        "--protocol",
+        "mecom",
+        "--channels",
+        "1",
+        "--no-finger",
+        "--sensor-offset-c",
+        "0.3",
+        "--sensor-gain",
+        "1.01",
+        "--reference-channel",
+        "0",
+    ]);
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
+    let out = dir.path().join("calibrated").join("display.toml");
+    let device = format!("mecom:{pty}");
+    let run = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args([
+            "calibrate",
+            "--device",
+            &device,
+            "--reference",
+            &format!("serial:{reference}"),
+        ])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap_or_else(|e| panic!("run calibrate: {e}"));
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr),
+    );
+    assert!(run.status.success(), "calibrate failed: {stdout}{stderr}");
+    println!("{stderr}{stdout}");
+    let text = std::fs::read_to_string(&out).unwrap_or_else(|e| panic!("read {}: {e}", out.display()));
+    let file = thermode_device::DeviceConfig::from_toml_str(&text, "calibrated")
+        .unwrap_or_else(|e| panic!("the calibrated file: {e}"));
+    let fitted = file.calibration;
+    for temp_c in (15..=45).map(f64::from) {
+        let (injected_c, found_c) = (
+            1.01 * temp_c + 0.3,
+            fitted.sensor_gain * temp_c + fitted.sensor_offset_c,
+        );
+        assert!(
+            (found_c - injected_c).abs() < 0.02,
+            "at {temp_c} °C the sensor reads {injected_c:.4} °C, the fit says {found_c:.4} °C ({fitted:?})"
+        );
+    }
+    assert!(
+        fitted.gain_uncertainty > 0.0 && fitted.offset_uncertainty_c > 0.0,
+        "{fitted:?}"
+    );
+    let bench = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args([
+            "bench",
+            "--device",
+            &device,
+            "--rate",
+            "100",
+            "--duration",
+            "1",
+            "--device-file",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap_or_else(|e| panic!("run bench: {e}"));
+    let stderr = String::from_utf8_lossy(&bench.stderr);
+    assert!(bench.status.success(), "bench with the calibrated file: {stderr}");
+    assert!(stderr.contains("read through its calibration"), "{stderr}");
+}
