@@ -255,6 +255,7 @@ impl Daemon {
                 thermode_platform::rt::open_files_limit(),
             ),
             link: control.link_health(),
+            parts: control.device_parts().to_vec(),
             realtime: control.realtime().clone(),
             history: Arc::new(crate::api::history::History::default()),
             markers,

@@ -22,8 +22,8 @@ use axum::{Json, Router};
 use thermode_platform::to_clock_resolution;
 use thermode_protocol::finite;
 use thermode_protocol::status::{
-    Auth, Commands, Contact, DeviceCutEntry, DoseLedgerStatus, EarlierFile, FaultEntry, HttpStatus, InterlockStatus,
-    LinkStatus, LoopStatus, LslStatus, OscStatus, RealtimeStatus, Recording, Status,
+    Auth, Commands, Contact, DeviceCutEntry, DeviceStatus, DoseLedgerStatus, EarlierFile, FaultEntry, HttpStatus,
+    InterlockStatus, LinkStatus, LoopStatus, LslStatus, OscStatus, RealtimeStatus, Recording, Status,
 };
 
 use access::Access;
@@ -232,6 +232,8 @@ pub struct App {
     pub(crate) http_cap: usize,
     /// The device's link, if it has one.
     pub(crate) link: Option<Arc<thermode_device::LinkHealth>>,
+    /// The devices the display is made of, each with its channels and link.
+    pub(crate) parts: Vec<thermode_device::DevicePart>,
     /// What real-time treatment the loop obtained.
     pub(crate) realtime: thermode_platform::rt::Realtime,
     /// The last seconds of telemetry (`/api/history`), filled off the loop thread.
@@ -395,13 +397,32 @@ pub fn status(app: &App) -> Status {
             markers: count(&l.counters.markers),
             failed: count(&l.counters.failed),
         }),
-        link: app.link.as_ref().map(|l| LinkStatus {
-            state: if l.is_up() { "up" } else { "down" }.to_string(),
-            reconnects: l.reconnects(),
-            failures: l.failures(),
-            attempts: l.attempts(),
-            error: l.error(),
-        }),
+        link: app
+            .link
+            .as_ref()
+            .map(|l| link_status(l))
+            .or_else(|| links_together(&app.parts)),
+        devices: app
+            .parts
+            .iter()
+            .map(|part| DeviceStatus {
+                device: match part.label.is_empty() {
+                    true => app.info.device.clone(),
+                    false => part.label.clone(),
+                },
+                channels: part.channels().collect(),
+                link: part.health.as_deref().map(link_status),
+                command_set: part.health.as_ref().and_then(|h| h.command_set()),
+            })
+            .collect(),
+        channel_devices: (0..snapshot.channels.len())
+            .map(|channel| {
+                app.parts
+                    .iter()
+                    .position(|p| p.channels().contains(&channel))
+                    .unwrap_or(0)
+            })
+            .collect(),
         dose_ledger: app.dose_ledger.as_ref().map(|w| DoseLedgerStatus {
             path: w.path.display().to_string(),
             writes: count(&w.writes),
@@ -415,6 +436,35 @@ pub fn status(app: &App) -> Status {
             reason: app.interlock.reason(),
         },
     }
+}
+
+/// The status of one link.
+fn link_status(l: &thermode_device::LinkHealth) -> LinkStatus {
+    LinkStatus {
+        state: if l.is_up() { "up" } else { "down" }.to_string(),
+        reconnects: l.reconnects(),
+        failures: l.failures(),
+        attempts: l.attempts(),
+        error: l.error(),
+    }
+}
+
+/// The links of a display of several devices together: `up` only when every one is up, the counts summed, the
+/// error of the first link that is down (else the last one's); None when no part has a link.
+fn links_together(parts: &[thermode_device::DevicePart]) -> Option<LinkStatus> {
+    let links: Vec<LinkStatus> = parts
+        .iter()
+        .filter_map(|p| p.health.as_deref().map(link_status))
+        .collect();
+    let down = links.iter().find(|l| l.state == "down");
+    let error = down.map_or_else(|| links.iter().rev().find_map(|l| l.error.clone()), |l| l.error.clone());
+    (!links.is_empty()).then(|| LinkStatus {
+        state: if down.is_some() { "down" } else { "up" }.to_string(),
+        reconnects: links.iter().map(|l| l.reconnects).sum(),
+        failures: links.iter().map(|l| l.failures).sum(),
+        attempts: links.iter().map(|l| l.attempts).sum(),
+        error,
+    })
 }
 
 fn contacts(snapshot: &Snapshot) -> Vec<Contact> {
