@@ -59,6 +59,10 @@ impl Device for CalibratedDevice {
         self.inner.measures()
     }
 
+    fn identity(&self) -> Option<String> {
+        self.inner.identity()
+    }
+
     fn parts(&self) -> Vec<DevicePart> {
         self.inner.parts()
     }

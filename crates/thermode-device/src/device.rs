@@ -84,6 +84,10 @@ pub struct DevicePart {
     pub channel_count: usize,
     /// The device's link (None: a device without one, the simulated display).
     pub health: Option<std::sync::Arc<crate::LinkHealth>>,
+    /// What tells this very device apart from others of its kind, as it reports it (a MeCom controller's serial
+    /// number, e.g. `SN4242`, else its `?IF` identity text); `None` when it reports nothing that does (the
+    /// simulated display, a TCS II, whose identity answer names only its type). See [`Device::identity`].
+    pub identity: Option<String>,
 }
 
 impl DevicePart {
@@ -135,14 +139,22 @@ pub trait Device {
         Measures::ALL
     }
 
+    /// What tells this very device apart from others of its kind (a MeCom controller's serial number), for
+    /// finding its identified device file; `None` (the default) for a device that reports nothing that does.
+    fn identity(&self) -> Option<String> {
+        None
+    }
+
     /// The devices the display is made of, each with its channels and link (default: one unnamed part holding
-    /// every channel, with [`Device::link_health`]; a [`crate::CompositeDevice`] lists its members).
+    /// every channel, with [`Device::link_health`] and [`Device::identity`]; a [`crate::CompositeDevice`] lists its
+    /// members).
     fn parts(&self) -> Vec<DevicePart> {
         vec![DevicePart {
             label: String::new(),
             first_channel: 0,
             channel_count: self.channel_count(),
             health: self.link_health(),
+            identity: self.identity(),
         }]
     }
 }

@@ -57,6 +57,8 @@ pub struct Status {
     pub devices: Vec<DeviceStatus>,
     /// Per channel: the index in `devices` of the device it is on.
     pub channel_devices: Vec<usize>,
+    /// Per channel: what its device file is (`datasheet`, `identified` or `calibrated`).
+    pub channel_device_files: Vec<DeviceFileKind>,
     /// The dose ledger of the state directory, if any.
     pub dose_ledger: Option<DoseLedgerStatus>,
     /// The interlock (tripped by a failed recording under the policy `stop`).
@@ -309,6 +311,20 @@ pub struct DeviceStatus {
     /// Which of its protocol's commands it is driven with, when the host records it (a MeCom controller: the full
     /// command set, or the commands every firmware has and how its instances were counted).
     pub command_set: Option<String>,
+}
+
+/// What a channel's device file is: how far it has been measured on this very display.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum DeviceFileKind {
+    /// The datasheet's values (the built-in default display, or a file neither identified nor calibrated). The
+    /// simulated display reports the kind of the file it is built from: `datasheet` by default.
+    #[default]
+    Datasheet,
+    /// Fitted to this display by `thermode identify`.
+    Identified,
+    /// With a sensor calibration (`thermode calibrate`; a `[calibration]` section), identified or not.
+    Calibrated,
 }
 
 /// The device link.

@@ -150,6 +150,8 @@ pub struct DaemonConfig {
     pub device_label: String,
     /// A name per channel (e.g. the fingers), or empty.
     pub channel_names: Vec<String>,
+    /// What the display's device file is, as `/api/status` reports it for every channel. Default `datasheet`.
+    pub device_file: thermode_protocol::status::DeviceFileKind,
     /// Lab Streaming Layer outlets (`serve --lsl`), or `None` (then liblsl is never loaded). The daemon fills in
     /// the rate, the channel count and the device label. Default `None`.
     pub lsl: Option<LslConfig>,
@@ -233,6 +235,7 @@ impl Daemon {
             info: Info {
                 device: config.device_label.clone(),
                 channel_names: config.channel_names.clone(),
+                device_file: config.device_file,
                 osc_port: osc_addr.map(|a| a.port()),
                 http_port: http_addr.port(),
                 recording: core.recording_path().map(|p| p.display().to_string()),

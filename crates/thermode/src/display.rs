@@ -2,20 +2,21 @@
 //! `identify`, `lab run --device`): the `--device`, `--device-file`, `--channels`, `--controller` and `--seed`
 //! arguments ([`DisplayArgs`]) and the device with its pipelines built from them ([`build_display`]).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use thermode_device::{CalibratedDevice, DefaultFinger, Device, SimulatedDisplay, MAX_CHANNELS};
+use thermode_device::{CalibratedDevice, DefaultFinger, Device, DeviceConfig, SimulatedDisplay, MAX_CHANNELS};
 use thermode_link::spec::{is_hardware, open_display, HardwareContext};
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, SelfTestState};
 use thermode_platform::Clock;
+use thermode_protocol::status::DeviceFileKind;
 use thermode_runtime::engine::pipeline_engines;
 use thermode_runtime::EngineFactory;
 
 use crate::controller::{ControllerArg, DISPLAY_CONTROLLERS};
-use crate::resolve;
+use crate::{identified, resolve};
 
 /// How the display is set up (shared by serve, demo and bench).
 #[derive(Args, Debug, Clone)]
@@ -83,6 +84,8 @@ pub struct Display {
     pub names: Vec<String>,
     /// Human description for the start-up banner.
     pub description: String,
+    /// What its device file is (`/api/status` reports it per channel).
+    pub file_kind: DeviceFileKind,
 }
 
 /// Finger names for five (one hand) or ten (two hands) channels.
@@ -118,16 +121,78 @@ pub fn describe_self_tests(tests: &[SelfTestState]) -> Vec<String> {
         .collect()
 }
 
-/// Builds the device and the pipelines from the arguments; `clock` stamps a serial device's readings.
-pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Display> {
-    let device_config = resolve::device_config(args.device_file.as_deref())?;
-    let controller = match args.controller {
+/// The pipeline of every channel of a display run on `device_config` with `controller`, checked.
+fn pipeline_of(device_config: DeviceConfig, controller: ControllerArg) -> Result<PipelineConfig> {
+    let controller = match controller {
         ControllerArg::Model => ControllerKind::Model,
         ControllerArg::Pid => ControllerKind::Pid(gains_for_device(&device_config)?.0),
         ControllerArg::Both => bail!("a display runs one controller: --controller model or pid"),
     };
-    let mut pipeline = PipelineConfig::new(device_config, controller);
+    let pipeline = PipelineConfig::new(device_config, controller);
     pipeline.validate()?;
+    Ok(pipeline)
+}
+
+/// Opens the real display of `args` for `pipeline` (its device file and envelope set the devices' own limits).
+fn open_hardware(args: &DisplayArgs, pipeline: &PipelineConfig, clock: &Arc<dyn Clock>) -> Result<Box<dyn Device + Send>> {
+    let context = HardwareContext {
+        device: pipeline.device,
+        envelope: pipeline.envelope,
+    };
+    let label = args.label();
+    open_display(&args.device, &context, clock.clone()).with_context(|| format!("cannot open {label}"))
+}
+
+/// The identified device file stored in `state_dir` for the one device of `device` (labelled `label`), if any. A
+/// display of several devices runs one device file for all of them: their stored files are not combined, and a
+/// warning says so when there are any.
+fn stored_file_for(state_dir: &Path, label: &str, device: &dyn Device) -> Result<Option<identified::Stored>> {
+    let parts = device.parts();
+    if let [part] = parts.as_slice() {
+        return identified::find(state_dir, &identified::device_of(part, label), part.identity.as_deref());
+    }
+    for part in &parts {
+        let name = identified::device_of(part, label);
+        if let Some(stored) = identified::find(state_dir, &name, part.identity.as_deref())? {
+            eprintln!(
+                "thermode: WARNING: {name} has an identified device file ({}), but a display of several devices runs \
+                 one device file for all of them: give it with --device-file if it fits every device",
+                stored.path.display()
+            );
+        }
+    }
+    Ok(None)
+}
+
+/// The warning for a real display run on a datasheet device file (`origin`).
+fn datasheet_warning(label: &str, origin: &str, state_dir: Option<&Path>, can_identify: bool) -> String {
+    let looked = state_dir.map_or_else(String::new, |dir| {
+        format!(
+            " (no identified file for it in {})",
+            dir.join(identified::DEVICES_DIR).display()
+        )
+    });
+    let remedy = if can_identify {
+        format!("identify the display once, bare: `thermode identify --device {label} --save`")
+    } else {
+        "identify cannot measure a temperature-commanded device yet".to_string()
+    };
+    format!(
+        "thermode: WARNING: {label} runs on a datasheet device file, {origin}{looked}: the model controller and the \
+         safety envelope's plate forecast use the datasheet's values, and the envelope's margins are the datasheet's \
+         (a plant off its file, e.g. a sensor 30 % slower, makes the model controller overshoot by about 0.65 °C); \
+         {remedy}"
+    )
+}
+
+/// Builds the device and the pipelines from the arguments; `clock` stamps a serial device's readings. A real
+/// display without `--device-file` runs the identified device file stored for it in `state_dir`
+/// ([`crate::identified`]) when there is one (None: look nowhere); which file runs is said on standard error.
+pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>, state_dir: Option<&Path>) -> Result<Display> {
+    let given_text = args.device_file.as_deref().map(resolve::read).transpose()?;
+    let device_config = resolve::device_config(args.device_file.as_deref())?;
+    let mut file_kind = identified::kind_of(&device_config, given_text.as_deref());
+    let mut pipeline = pipeline_of(device_config, args.controller)?;
     let label = args.label();
     let (device, label): (Box<dyn Device + Send>, String) = if args.is_sim() {
         // The simulated display is built from this very file, so the file is exact for it.
@@ -139,12 +204,36 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Displ
         let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device_config, count, args.seed)?;
         (Box::new(display), label)
     } else if args.device.iter().all(|d| is_hardware(d)) {
-        let context = HardwareContext {
-            device: pipeline.device,
-            envelope: pipeline.envelope,
+        let mut device = open_hardware(args, &pipeline, clock)?;
+        let stored = match (&args.device_file, state_dir) {
+            (None, Some(dir)) => stored_file_for(dir, &label, device.as_ref())?,
+            _ => None,
         };
-        let device =
-            open_display(&args.device, &context, clock.clone()).with_context(|| format!("cannot open {label}"))?;
+        if let Some(path) = &args.device_file {
+            eprintln!(
+                "thermode: using the device file {} given by --device-file for {label} ({})",
+                path.display(),
+                identified::kind_name(file_kind)
+            );
+        } else if let Some(stored) = stored {
+            let who = device.parts().first().and_then(|p| p.identity.clone());
+            eprintln!(
+                "thermode: using the identified device file {} for {label}{} (identified {})",
+                stored.path.display(),
+                who.map_or_else(String::new, |i| format!(" ({i})")),
+                stored.identified_at.as_deref().unwrap_or("at an unknown time")
+            );
+            file_kind = identified::kind_of(&stored.config, Some("# Identified by `thermode identify`"));
+            pipeline = pipeline_of(stored.config, args.controller)?;
+            // The devices' own limits follow the file they run: opened again with it.
+            drop(device);
+            device = open_hardware(args, &pipeline, clock)?;
+        }
+        if file_kind == DeviceFileKind::Datasheet {
+            let origin = resolve::device_origin(args.device_file.as_deref());
+            let can_identify = device.measures().drive_current && args.device.len() == 1;
+            eprintln!("{}", datasheet_warning(&label, &origin, state_dir, can_identify));
+        }
         for part in device.parts() {
             if let Some(commands) = part.health.as_ref().and_then(|h| h.command_set()) {
                 let name = if part.label.is_empty() { &label } else { &part.label };
@@ -202,5 +291,6 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Displ
         label,
         names,
         description,
+        file_kind,
     })
 }

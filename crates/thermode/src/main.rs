@@ -8,6 +8,7 @@
 mod cmd;
 mod controller;
 mod display;
+mod identified;
 mod output;
 mod progress;
 mod resolve;

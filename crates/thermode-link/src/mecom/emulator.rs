@@ -434,7 +434,7 @@ impl<F: PlateFinger> MecomEmulator<F> {
         match id {
             param::DEVICE_TYPE => i(self.config.device_type),
             101 | 103 => i(100),
-            102 => i(4242),
+            param::SERIAL_NUMBER => i(4242),
             param::DEVICE_STATUS => i(if self.error.is_some() {
                 status::ERROR
             } else if self.instances.iter().any(Instance::enabled) {

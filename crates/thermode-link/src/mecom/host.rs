@@ -506,6 +506,8 @@ pub struct MecomDevice {
     config: MecomConfig,
     channels: Vec<ChannelSetup>,
     identity: Vec<(u8, String)>,
+    /// Each address's serial number (parameter 102), where it answered it.
+    serials: Vec<(u8, i32)>,
     /// The commands it is driven with, found at connect.
     commands: MecomCommandSet,
     shared: Arc<Mutex<Shared>>,
@@ -623,7 +625,12 @@ impl MecomDevice {
             round_trip_total_s: 0.0,
         };
         let deadline_s = clock.now_s() + config.handshake_timeout_s;
-        let (channels, identity, commands) = connect(&mut link, config, deadline_s).map_err(|e| link.error(e))?;
+        let Connected {
+            channels,
+            identity,
+            serials,
+            commands,
+        } = connect(&mut link, config, deadline_s).map_err(|e| link.error(e))?;
         let health = Arc::new(LinkHealth::new());
         health.set_command_set(commands.describe());
         let shared = Arc::new(Mutex::new(Shared {
@@ -635,6 +642,7 @@ impl MecomDevice {
             config: config.clone(),
             channels,
             identity,
+            serials,
             commands: commands.clone(),
             shared: Arc::clone(&shared),
             stop: Arc::new(AtomicBool::new(false)),
@@ -691,6 +699,18 @@ impl MecomDevice {
     /// Each address's answer to `?IF`.
     pub fn identity(&self) -> &[(u8, String)] {
         &self.identity
+    }
+
+    /// What tells the controller at `address` apart: its serial number as `SN<number>` (parameter 102), else its
+    /// `?IF` identity text, else `None`.
+    pub fn identity_of(&self, address: u8) -> Option<String> {
+        if let Some((_, serial)) = self.serials.iter().find(|(a, _)| *a == address) {
+            return Some(format!("SN{serial}"));
+        }
+        self.identity
+            .iter()
+            .find(|(a, text)| *a == address && !text.trim().is_empty())
+            .map(|(_, text)| text.trim().to_string())
     }
 
     /// What has been seen and done on the link so far.
@@ -757,8 +777,17 @@ impl MecomDevice {
     }
 }
 
-/// The configured channels and each address's identity.
-type Connected = (Vec<ChannelSetup>, Vec<(u8, String)>, MecomCommandSet);
+/// What connecting found.
+struct Connected {
+    /// The configured channels.
+    channels: Vec<ChannelSetup>,
+    /// Each address's `?IF` identity text.
+    identity: Vec<(u8, String)>,
+    /// Each address's serial number (parameter 102), where it answered it.
+    serials: Vec<(u8, i32)>,
+    /// The commands the device is driven with.
+    commands: MecomCommandSet,
+}
 
 /// Identifies the device(s), finds the channels and configures them, before `deadline_s` on the link's clock.
 /// Returns the channels and identities.
@@ -771,8 +800,13 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline_s: f64) -> Result<Con
     }
     addresses.dedup();
     let mut identity = Vec::new();
+    let mut serials = Vec::new();
     for &address in &addresses {
         identity.push((address, identify(link, address, deadline_s)?));
+        // Optional: a device that does not answer it is told apart by its `?IF` text.
+        if let Ok(serial) = link.read_i32(MecomChannel { address, instance: 1 }, param::SERIAL_NUMBER) {
+            serials.push((address, serial));
+        }
     }
     let mut commands = MecomCommandSet::default();
     let channels = if config.channels.is_empty() {
@@ -860,7 +894,12 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline_s: f64) -> Result<Con
             commands.lacks(MISSING_VOLTAGE);
         }
     }
-    Ok((setups, identity, commands))
+    Ok(Connected {
+        channels: setups,
+        identity,
+        serials,
+        commands,
+    })
 }
 
 /// Every instance of `address`: counted with `?VM` on its object temperature, or, on a firmware without `?VM`,
@@ -1357,6 +1396,7 @@ impl Recovering for MecomDevice {
         std::mem::swap(&mut self.worker, &mut fresh.worker);
         self.channels = fresh.channels.clone();
         self.identity = fresh.identity.clone();
+        self.serials = fresh.serials.clone();
         self.commands = fresh.commands.clone();
         self.health.set_command_set(self.commands.describe());
         for (base, seen) in self.seq_base.iter_mut().zip(self.seq_seen) {
@@ -1457,6 +1497,12 @@ impl Device for MecomDevice {
         Some(Arc::clone(&self.health))
     }
 
+    /// The first address's serial number or `?IF` text ([`MecomDevice::identity_of`]); on a bus of several
+    /// addresses, each part has its own.
+    fn identity(&self) -> Option<String> {
+        self.identity_of(self.channels.first()?.channel.address)
+    }
+
     /// In temperature mode the controller sets the current itself (thermode's current does not reach the plate);
     /// the object and sink temperatures are measured in both modes.
     fn measures(&self) -> Measures {
@@ -1482,6 +1528,7 @@ impl Device for MecomDevice {
                     first_channel: index,
                     channel_count: 1,
                     health: Some(self.link_of(setup.channel.address)),
+                    identity: self.identity_of(setup.channel.address),
                 }),
             }
         }
@@ -1494,6 +1541,7 @@ impl Device for MecomDevice {
                 first_channel: 0,
                 channel_count: self.channels.len(),
                 health: Some(Arc::clone(&self.health)),
+                identity: Device::identity(self),
             }];
         }
         parts

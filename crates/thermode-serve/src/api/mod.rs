@@ -193,6 +193,8 @@ pub struct Info {
     pub device: String,
     /// A name per channel (e.g. the fingers), or empty.
     pub channel_names: Vec<String>,
+    /// What the display's device file is (every channel runs it).
+    pub device_file: thermode_protocol::status::DeviceFileKind,
     /// The OSC port, when OSC listens.
     pub osc_port: Option<u16>,
     /// The HTTP port (an OSC subscription to it is refused, as to the OSC port).
@@ -423,6 +425,7 @@ pub fn status(app: &App) -> Status {
                     .unwrap_or(0)
             })
             .collect(),
+        channel_device_files: vec![app.info.device_file; snapshot.channels.len()],
         dose_ledger: app.dose_ledger.as_ref().map(|w| DoseLedgerStatus {
             path: w.path.display().to_string(),
             writes: count(&w.writes),

@@ -60,7 +60,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         display_args.channels = Some(display_args.channels.unwrap_or(10));
     }
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
-    let display = build_display(&display_args, &clock)?;
+    // The identified device files are looked for where `serve` keeps them by default (no state directory: nowhere).
+    let state_dir = super::dose::state_dir(None).ok();
+    let display = build_display(&display_args, &clock, state_dir.as_deref())?;
     eprintln!(
         "bench: {} at {} Hz for {} s …",
         display.description, args.rate, args.duration

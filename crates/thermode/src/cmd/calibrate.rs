@@ -177,7 +177,7 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     let setpoints = held_setpoints(args, &device)?;
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
     let display = DisplayArgs::one(&args.device, args.device_file.clone(), ControllerArg::Model, 1);
-    let display = build_display(&display, &clock)?;
+    let display = build_display(&display, &clock, None)?;
     if args.channel >= display.device.channel_count() {
         bail!(
             "--channel {}: {} has {} channels",

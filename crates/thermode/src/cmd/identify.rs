@@ -6,8 +6,11 @@
 //! known), so only a display that reports it can be identified: the simulated display (`--device sim`, whose
 //! hidden hardware `--plant-device` sets; run in simulated time) and Meerstetter TEC controllers in current mode
 //! (`--device mecom:…`, in real time; thermode's own protocol and the TCS II carry no voltage).
+//!
+//! `--save` stores the identified file of a real device in the state directory under the device's identity
+//! ([`crate::identified`]), where `serve`, `lab run --device` and `bench` find it.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
@@ -15,11 +18,12 @@ use clap::Args;
 use thermode_control::identify::{IdSample, PARAMETERS};
 use thermode_device::DeviceConfig;
 use thermode_model::params::Rule;
-use thermode_platform::{Clock, MonotonicClock};
+use thermode_platform::{utc_iso8601, Clock, MonotonicClock};
 use thermode_render::identify::{fit, record, sample_of, Excitation, DURATION_S, RATE_HZ};
 
 use crate::controller::ControllerArg;
 use crate::display::{build_display, DisplayArgs};
+use crate::identified;
 
 use crate::output::{check_outputs, print_stdout, write_atomically};
 use crate::progress::Progress;
@@ -49,9 +53,25 @@ pub struct IdentifyArgs {
     /// Length of the excitation [s], 30 to 160 (the whole sequence; shorter runs stop it early).
     #[arg(long, value_name = "S", default_value_t = DURATION_S)]
     duration: f64,
-    /// Write the identified device file here; default: print it.
+    /// Write the identified device file here; default: print it (unless --save).
     #[arg(long, value_name = "FILE.toml")]
     out: Option<PathBuf>,
+    /// Store the identified device file in the state directory under the device's identity
+    /// (`STATE_DIR/devices/mecom-SN<serial>.toml`), where `serve`, `lab run --device` and `bench` find it for that
+    /// device when no --device-file is given. Real devices only.
+    #[arg(long)]
+    save: bool,
+    /// The state directory of --save (as `serve --state-dir`) [default: $XDG_STATE_HOME/thermode, else
+    /// ~/.local/state/thermode].
+    #[arg(long = "state-dir", value_name = "DIR", requires = "save")]
+    state_dir: Option<PathBuf>,
+}
+
+/// The device identify ran on, as its identified file is known: its `--device` spelling and what it reported that
+/// tells it apart (a MeCom controller's serial number), if anything.
+struct Identity {
+    device: String,
+    identity: Option<String>,
 }
 
 /// Runs `thermode identify`.
@@ -67,6 +87,13 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
     if args.plant_device.is_some() && !sim {
         bail!("--plant-device sets the simulated display's hardware; it needs --device sim");
     }
+    if args.save && sim {
+        bail!("--save stores a real device's identified file; the simulated display is built from its file exactly");
+    }
+    let state_dir = match args.save {
+        true => Some(super::dose::state_dir(args.state_dir.as_deref())?),
+        false => None,
+    };
     let duration = Rule::Within {
         min: 30.0,
         max: DURATION_S,
@@ -83,11 +110,12 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
         "identify: {} s of excitation on {}, no finger on the plate…",
         args.duration, args.device
     );
-    let samples = if sim {
+    let (samples, identity) = if sim {
         let _simulating = Progress::spinner("identify: simulating the excitation");
-        record(&believed, &plant, args.seed, args.duration)?
+        (record(&believed, &plant, args.seed, args.duration)?, None)
     } else {
-        record_in_real_time(args, &believed)?
+        let (samples, identity) = record_in_real_time(args, &believed)?;
+        (samples, Some(identity))
     };
     let progress = Progress::spinner("identify: fitting the model");
     let (fit, device) = fit(&believed, &samples)?;
@@ -125,18 +153,54 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
     }
     let header: String = lines.iter().map(|l| format!("# {l}\n")).collect();
     let text = format!("{header}{}", device.to_toml_string());
+    if let (Some(dir), Some(identity)) = (&state_dir, &identity) {
+        save(dir, identity, &text)?;
+    }
     match &args.out {
         Some(path) => write_atomically(path, |sink| Ok(sink.write_all(text.as_bytes())?)),
+        None if args.save => Ok(()),
         None => print_stdout(&text),
     }
 }
 
-/// Runs the excitation on the hardware of `args` in real time (channel 0) and returns the record; every drive is
-/// switched off at the end, also after an error.
-fn record_in_real_time(args: &IdentifyArgs, believed: &DeviceConfig) -> Result<Vec<IdSample>> {
+/// Stores `text` (the identified device file) in `state_dir` as the identified file of `identity`, atomically.
+fn save(state_dir: &Path, identity: &Identity, text: &str) -> Result<()> {
+    let path = identified::path_in(state_dir, &identity.device, identity.identity.as_deref());
+    let folder = path.parent().unwrap_or(state_dir);
+    std::fs::create_dir_all(folder).with_context(|| format!("cannot create {}", folder.display()))?;
+    let now_s = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs() as i64);
+    let stored = identified::stored_text(
+        &identity.device,
+        identity.identity.as_deref(),
+        &utc_iso8601(now_s),
+        text,
+    );
+    write_atomically(&path, |sink| Ok(sink.write_all(stored.as_bytes())?))?;
+    let who = identity
+        .identity
+        .as_deref()
+        .map_or_else(|| "known by its port: it reports no serial number".to_string(), |i| format!("identity {i}"));
+    eprintln!(
+        "identify: saved as the identified device file of {} ({who}): {}; serve, lab run --device and bench use it \
+         for that device when no --device-file is given",
+        identity.device,
+        path.display()
+    );
+    Ok(())
+}
+
+/// Runs the excitation on the hardware of `args` in real time (channel 0) and returns the record and the device's
+/// identity; every drive is switched off at the end, also after an error.
+fn record_in_real_time(args: &IdentifyArgs, believed: &DeviceConfig) -> Result<(Vec<IdSample>, Identity)> {
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
     let display = DisplayArgs::one(&args.device, args.device_file.clone(), ControllerArg::Model, args.seed);
-    let mut device = build_display(&display, &clock)?.device;
+    let mut device = build_display(&display, &clock, None)?.device;
+    let identity = Identity {
+        device: args.device.clone(),
+        identity: device.parts().first().and_then(|p| p.identity.clone()),
+    };
     let mut excitation = Excitation::new(believed)?;
     let dt_s = 1.0 / RATE_HZ;
     let ticks = (args.duration * RATE_HZ).round() as usize;
@@ -165,5 +229,5 @@ fn record_in_real_time(args: &IdentifyArgs, believed: &DeviceConfig) -> Result<V
     let off = device.all_off().context("switching the drive off after the excitation");
     run?;
     off?;
-    Ok(samples)
+    Ok((samples, identity))
 }

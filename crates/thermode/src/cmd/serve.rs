@@ -155,7 +155,8 @@ fn start_quiet(args: &ServeArgs) -> Result<(Daemon, String)> {
     };
     // Refuse an insecure bind before touching any hardware.
     server.validate()?;
-    let display = build_display(&args.display, &clock)?;
+    let state_dir = super::dose::state_dir(args.state_dir.as_deref())?;
+    let display = build_display(&args.display, &clock, Some(&state_dir))?;
     let config = DaemonConfig {
         core: CoreConfig {
             loop_config: LoopConfig {
@@ -170,11 +171,12 @@ fn start_quiet(args: &ServeArgs) -> Result<(Daemon, String)> {
                 OnRecordError::Continue => RecordErrorPolicy::Continue,
             },
             record_max_bytes: args.record_max_bytes,
-            state_dir: Some(super::dose::state_dir(args.state_dir.as_deref())?),
+            state_dir: Some(state_dir),
         },
         server,
         device_label: display.label,
         channel_names: display.names.clone(),
+        device_file: display.file_kind,
         lsl: args.lsl.then(|| LslConfig {
             name: args.lsl_name.clone(),
             source_id: args.lsl_name.clone(),

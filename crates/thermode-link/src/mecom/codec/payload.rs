@@ -16,6 +16,8 @@ use super::frame::{parse_hex, push_hex};
 pub mod param {
     /// Device type (INT32, e.g. 1089 for a TEC-1089).
     pub const DEVICE_TYPE: u16 = 100;
+    /// Serial number (INT32), what tells one controller from another of its type.
+    pub const SERIAL_NUMBER: u16 = 102;
     /// Device status (INT32): 0 init, 1 ready, 2 run, 3 error, 4 bootloader, 5 reset within 200 ms.
     pub const DEVICE_STATUS: u16 = 104;
     /// Error number (INT32; 0: none).
