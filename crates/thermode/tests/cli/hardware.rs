@@ -682,3 +682,130 @@ fn calibrate_recovers_an_injected_sensor_offset_and_gain() {
     assert!(bench.status.success(), "bench with the calibrated file: {stderr}");
     assert!(stderr.contains("read through its calibration"), "{stderr}");
 }
+
+/// `thermode serve --device DEVICE --duration 4 --state-dir STATE` (free ports, no OSC) plus `extra`: its
+/// `/api/status` once the banner is out, and its standard error after it stopped.
+fn serve_briefly(device: &str, state: &std::path::Path, extra: &[&str]) -> (serde_json::Value, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args(["serve", "--device", device, "--port", "0", "--no-osc", "--no-realtime"])
+        .args(["--duration", "4", "--state-dir"])
+        .arg(state)
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("spawn serve: {e}"));
+    let stdout = child.stdout.take().unwrap_or_else(|| panic!("serve stdout"));
+    let mut http_port = None;
+    let mut lines = BufReader::new(stdout).lines();
+    for line in lines.by_ref() {
+        let line = line.unwrap_or_else(|e| panic!("serve stdout: {e}"));
+        if line.contains("dashboard") {
+            http_port = line
+                .split("127.0.0.1:")
+                .nth(1)
+                .and_then(|rest| rest.split(['/', ' ']).next())
+                .and_then(|p| p.parse::<u16>().ok());
+        }
+        if line.starts_with("running for") {
+            break;
+        }
+    }
+    let status = http_port.map(super::serve_on_emulator::status);
+    std::thread::spawn(move || lines.for_each(drop));
+    let out = child.wait_with_output().unwrap_or_else(|e| panic!("serve: {e}"));
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    let status = status.unwrap_or_else(|| panic!("serve gave no dashboard address; stderr: {stderr}"));
+    (status, stderr)
+}
+
+/// First use of a MeCom controller (the emulator, which answers serial number 4242 for parameter 102): `serve`
+/// on its datasheet file says so in a warning and reports `datasheet`; `identify --save` stores the identified
+/// file as `devices/mecom-SN4242.toml` of the state directory; `serve` on the same controller then runs that file
+/// without being told, says which file and when it was identified, and reports `identified`; `bench` finds it in
+/// the default state directory (`$XDG_STATE_HOME/thermode`); an explicit `--device-file` wins and is named.
+#[test]
+fn identify_save_then_serve_and_bench_run_the_identified_file() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let link = tmp.path().join("tec");
+    let link_arg = link.display().to_string();
+    let args = ["--protocol", "mecom", "--channels", "1", "--no-finger", "--link", &link_arg];
+    let (_emulator, _) = emulate(&args);
+    let device = format!("mecom:{link_arg}");
+    let xdg = tmp.path().join("xdg");
+    let state = xdg.join("thermode");
+    let (before, stderr) = serve_briefly(&device, &state, &[]);
+    assert_eq!(before["channel_device_files"], serde_json::json!(["datasheet"]), "{stderr}");
+    assert!(
+        stderr.contains("WARNING") && stderr.contains("runs on a datasheet device file") && stderr.contains("--save"),
+        "no datasheet warning: {stderr}"
+    );
+    let run = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args(["identify", "--device", &device, "--duration", "30", "--save", "--state-dir"])
+        .arg(&state)
+        .output()
+        .unwrap_or_else(|e| panic!("run identify: {e}"));
+    let stderr = String::from_utf8_lossy(&run.stderr).into_owned();
+    assert!(run.status.success(), "identify --save failed: {stderr}");
+    assert!(run.stdout.is_empty(), "--save without --out prints nothing");
+    let saved = state.join("devices").join("mecom-SN4242.toml");
+    let text = std::fs::read_to_string(&saved).unwrap_or_else(|e| panic!("{}: {e}\n{stderr}", saved.display()));
+    thermode_device::DeviceConfig::from_toml_str(&text, "saved").unwrap_or_else(|e| panic!("{e}\n{text}"));
+    assert!(text.contains("# identified-at: 20"), "{text}");
+    let (after, stderr) = serve_briefly(&device, &state, &[]);
+    assert!(
+        stderr.contains(&format!(
+            "using the identified device file {} for {device} (SN4242) (identified 20",
+            saved.display()
+        )),
+        "serve did not say it runs the identified file: {stderr}"
+    );
+    assert!(!stderr.contains("WARNING"), "{stderr}");
+    assert_eq!(after["channel_device_files"], serde_json::json!(["identified"]), "{stderr}");
+    let bench = |extra: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_thermode"))
+            .args(["bench", "--device", &device, "--rate", "100", "--duration", "1"])
+            .args(extra)
+            .env("XDG_STATE_HOME", &xdg)
+            .output()
+            .unwrap_or_else(|e| panic!("run bench: {e}"));
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "bench failed: {stderr}");
+        stderr
+    };
+    let stderr = bench(&[]);
+    assert!(stderr.contains("using the identified device file"), "bench: {stderr}");
+    let given = tmp.path().join("given.toml");
+    std::fs::write(&given, thermode_device::DeviceConfig::default().to_toml_string()).expect("write");
+    let stderr = bench(&["--device-file", &given.display().to_string()]);
+    assert!(
+        stderr.contains(&format!("using the device file {} given by --device-file", given.display()))
+            && stderr.contains("(datasheet)")
+            && stderr.contains("WARNING"),
+        "bench --device-file: {stderr}"
+    );
+}
+
+/// The simulated display is neither real hardware nor stored: no identified file is looked for, no warning, and
+/// `/api/status` reports the kind of the file it is built from (`datasheet` for the built-in default) on every
+/// channel; `identify --save` refuses it.
+#[test]
+fn the_simulated_display_reports_its_file_and_is_never_saved() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let (status, stderr) = serve_briefly("sim", tmp.path(), &["--channels", "2"]);
+    assert_eq!(
+        status["channel_device_files"],
+        serde_json::json!(["datasheet", "datasheet"]),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("WARNING") && !stderr.contains("device file"), "{stderr}");
+    let run = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args(["identify", "--device", "sim", "--duration", "30", "--save", "--state-dir"])
+        .arg(tmp.path())
+        .output()
+        .unwrap_or_else(|e| panic!("run identify: {e}"));
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("--save") && stderr.contains("real device"), "{stderr}");
+    assert!(!tmp.path().join("devices").exists());
+}
