@@ -134,7 +134,11 @@ fn pipeline_of(device_config: DeviceConfig, controller: ControllerArg) -> Result
 }
 
 /// Opens the real display of `args` for `pipeline` (its device file and envelope set the devices' own limits).
-fn open_hardware(args: &DisplayArgs, pipeline: &PipelineConfig, clock: &Arc<dyn Clock>) -> Result<Box<dyn Device + Send>> {
+fn open_hardware(
+    args: &DisplayArgs,
+    pipeline: &PipelineConfig,
+    clock: &Arc<dyn Clock>,
+) -> Result<Box<dyn Device + Send>> {
     let context = HardwareContext {
         device: pipeline.device,
         envelope: pipeline.envelope,

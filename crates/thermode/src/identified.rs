@@ -92,7 +92,10 @@ pub fn path_in(state_dir: &Path, device: &str, identity: Option<&str>) -> PathBu
 /// The text `identify --save` stores: a header naming the device, its identity and the time, then `text` (the
 /// identified device file as `identify` writes it).
 pub fn stored_text(device: &str, identity: Option<&str>, identified_at: &str, text: &str) -> String {
-    let who = identity.map_or_else(|| "no identity: known by its port".to_string(), |i| format!("identity {i}"));
+    let who = identity.map_or_else(
+        || "no identity: known by its port".to_string(),
+        |i| format!("identity {i}"),
+    );
     format!("# Saved by `thermode identify --save` for {device} ({who}).\n{IDENTIFIED_AT}{identified_at}\n{text}")
 }
 
@@ -144,7 +147,10 @@ mod tests {
     #[test]
     fn file_names_are_the_kind_and_the_identity_or_the_port_made_safe() {
         assert_eq!(file_name("mecom:/dev/ttyUSB0", Some("SN4242")), "mecom-SN4242.toml");
-        assert_eq!(file_name("mecom-tcp:10.0.0.5:50000", Some("SN4242")), "mecom-SN4242.toml");
+        assert_eq!(
+            file_name("mecom-tcp:10.0.0.5:50000", Some("SN4242")),
+            "mecom-SN4242.toml"
+        );
         assert_eq!(
             file_name("mecom:/dev/ttyUSB0@2?mode=current", None),
             "mecom-dev-ttyUSB0-2.toml"
@@ -154,7 +160,10 @@ mod tests {
             "mecom-thermode-TEC-EMU-G01.toml"
         );
         assert_eq!(file_name("tcs2:/dev/ttyACM0", None), "tcs2-dev-ttyACM0.toml");
-        assert_eq!(file_name("mecom:../../etc/passwd", Some("  ")), "mecom-..-..-etc-passwd.toml");
+        assert_eq!(
+            file_name("mecom:../../etc/passwd", Some("  ")),
+            "mecom-..-..-etc-passwd.toml"
+        );
         assert_eq!(file_name("serial:", Some("/../")), "serial.toml");
         assert!(file_name("mecom:x", Some(&"9".repeat(500))).len() <= MAX_STEM_CHARS + 5);
     }

@@ -178,10 +178,10 @@ fn save(state_dir: &Path, identity: &Identity, text: &str) -> Result<()> {
         text,
     );
     write_atomically(&path, |sink| Ok(sink.write_all(stored.as_bytes())?))?;
-    let who = identity
-        .identity
-        .as_deref()
-        .map_or_else(|| "known by its port: it reports no serial number".to_string(), |i| format!("identity {i}"));
+    let who = identity.identity.as_deref().map_or_else(
+        || "known by its port: it reports no serial number".to_string(),
+        |i| format!("identity {i}"),
+    );
     eprintln!(
         "identify: saved as the identified device file of {} ({who}): {}; serve, lab run --device and bench use it \
          for that device when no --device-file is given",

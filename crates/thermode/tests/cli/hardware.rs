@@ -729,19 +729,39 @@ fn identify_save_then_serve_and_bench_run_the_identified_file() {
     let tmp = tempfile::tempdir().expect("temp dir");
     let link = tmp.path().join("tec");
     let link_arg = link.display().to_string();
-    let args = ["--protocol", "mecom", "--channels", "1", "--no-finger", "--link", &link_arg];
+    let args = [
+        "--protocol",
+        "mecom",
+        "--channels",
+        "1",
+        "--no-finger",
+        "--link",
+        &link_arg,
+    ];
     let (_emulator, _) = emulate(&args);
     let device = format!("mecom:{link_arg}");
     let xdg = tmp.path().join("xdg");
     let state = xdg.join("thermode");
     let (before, stderr) = serve_briefly(&device, &state, &[]);
-    assert_eq!(before["channel_device_files"], serde_json::json!(["datasheet"]), "{stderr}");
+    assert_eq!(
+        before["channel_device_files"],
+        serde_json::json!(["datasheet"]),
+        "{stderr}"
+    );
     assert!(
         stderr.contains("WARNING") && stderr.contains("runs on a datasheet device file") && stderr.contains("--save"),
         "no datasheet warning: {stderr}"
     );
     let run = Command::new(env!("CARGO_BIN_EXE_thermode"))
-        .args(["identify", "--device", &device, "--duration", "30", "--save", "--state-dir"])
+        .args([
+            "identify",
+            "--device",
+            &device,
+            "--duration",
+            "30",
+            "--save",
+            "--state-dir",
+        ])
         .arg(&state)
         .output()
         .unwrap_or_else(|e| panic!("run identify: {e}"));
@@ -761,7 +781,11 @@ fn identify_save_then_serve_and_bench_run_the_identified_file() {
         "serve did not say it runs the identified file: {stderr}"
     );
     assert!(!stderr.contains("WARNING"), "{stderr}");
-    assert_eq!(after["channel_device_files"], serde_json::json!(["identified"]), "{stderr}");
+    assert_eq!(
+        after["channel_device_files"],
+        serde_json::json!(["identified"]),
+        "{stderr}"
+    );
     let bench = |extra: &[&str]| {
         let out = Command::new(env!("CARGO_BIN_EXE_thermode"))
             .args(["bench", "--device", &device, "--rate", "100", "--duration", "1"])
@@ -779,8 +803,10 @@ fn identify_save_then_serve_and_bench_run_the_identified_file() {
     std::fs::write(&given, thermode_device::DeviceConfig::default().to_toml_string()).expect("write");
     let stderr = bench(&["--device-file", &given.display().to_string()]);
     assert!(
-        stderr.contains(&format!("using the device file {} given by --device-file", given.display()))
-            && stderr.contains("(datasheet)")
+        stderr.contains(&format!(
+            "using the device file {} given by --device-file",
+            given.display()
+        )) && stderr.contains("(datasheet)")
             && stderr.contains("WARNING"),
         "bench --device-file: {stderr}"
     );
@@ -798,9 +824,20 @@ fn the_simulated_display_reports_its_file_and_is_never_saved() {
         serde_json::json!(["datasheet", "datasheet"]),
         "{stderr}"
     );
-    assert!(!stderr.contains("WARNING") && !stderr.contains("device file"), "{stderr}");
+    assert!(
+        !stderr.contains("WARNING") && !stderr.contains("device file"),
+        "{stderr}"
+    );
     let run = Command::new(env!("CARGO_BIN_EXE_thermode"))
-        .args(["identify", "--device", "sim", "--duration", "30", "--save", "--state-dir"])
+        .args([
+            "identify",
+            "--device",
+            "sim",
+            "--duration",
+            "30",
+            "--save",
+            "--state-dir",
+        ])
         .arg(tmp.path())
         .output()
         .unwrap_or_else(|e| panic!("run identify: {e}"));
