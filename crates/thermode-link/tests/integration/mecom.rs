@@ -114,6 +114,11 @@ fn current_mode_connects_configures_and_drives_a_touch() {
         .unwrap_or_else(|e| panic!("open: {e}"));
     assert_eq!(device.channel_count(), 2, "instances found by ?VM");
     assert_eq!(device.identity()[0].1, "thermode-TEC EMU G01");
+    // The emulator's serial number (parameter 102 answers 4242) tells it apart, on the device and on its one part.
+    assert_eq!(Device::identity(&device).as_deref(), Some("SN4242"));
+    let parts = device.parts();
+    assert_eq!(parts.len(), 1, "{parts:?}");
+    assert_eq!(parts[0].identity.as_deref(), Some("SN4242"), "{parts:?}");
     let start = status(&pty);
     let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
     let first = control.tick(&[23.0, 23.0]);
