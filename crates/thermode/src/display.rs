@@ -86,6 +86,9 @@ pub struct Display {
     pub description: String,
     /// What its device file is (`/api/status` reports it per channel).
     pub file_kind: DeviceFileKind,
+    /// What the operator must know about the device file a real display runs, one line each (which file, or a
+    /// warning); `serve` prints them in its banner, the other commands on standard error.
+    pub notices: Vec<String>,
 }
 
 /// Finger names for five (one hand) or ten (two hands) channels.
@@ -150,7 +153,12 @@ fn open_hardware(
 /// The identified device file stored in `state_dir` for the one device of `device` (labelled `label`), if any. A
 /// display of several devices runs one device file for all of them: their stored files are not combined, and a
 /// warning says so when there are any.
-fn stored_file_for(state_dir: &Path, label: &str, device: &dyn Device) -> Result<Option<identified::Stored>> {
+fn stored_file_for(
+    state_dir: &Path,
+    label: &str,
+    device: &dyn Device,
+    notices: &mut Vec<String>,
+) -> Result<Option<identified::Stored>> {
     let parts = device.parts();
     if let [part] = parts.as_slice() {
         return identified::find(state_dir, &identified::device_of(part, label), part.identity.as_deref());
@@ -158,11 +166,11 @@ fn stored_file_for(state_dir: &Path, label: &str, device: &dyn Device) -> Result
     for part in &parts {
         let name = identified::device_of(part, label);
         if let Some(stored) = identified::find(state_dir, &name, part.identity.as_deref())? {
-            eprintln!(
-                "thermode: WARNING: {name} has an identified device file ({}), but a display of several devices runs \
-                 one device file for all of them: give it with --device-file if it fits every device",
+            notices.push(format!(
+                "WARNING: {name} has an identified device file ({}), but a display of several devices runs one \
+                 device file for all of them: give it with --device-file if it fits every device",
                 stored.path.display()
-            );
+            ));
         }
     }
     Ok(None)
@@ -182,7 +190,7 @@ fn datasheet_warning(label: &str, origin: &str, state_dir: Option<&Path>, can_id
         "identify cannot measure a temperature-commanded device yet".to_string()
     };
     format!(
-        "thermode: WARNING: {label} runs on a datasheet device file, {origin}{looked}: the model controller and the \
+        "WARNING: {label} runs on a datasheet device file, {origin}{looked}: the model controller and the \
          safety envelope's plate forecast use the datasheet's values, and the envelope's margins are the datasheet's \
          (a plant off its file, e.g. a sensor 30 % slower, makes the model controller overshoot by about 0.65 °C); \
          {remedy}"
@@ -191,13 +199,15 @@ fn datasheet_warning(label: &str, origin: &str, state_dir: Option<&Path>, can_id
 
 /// Builds the device and the pipelines from the arguments; `clock` stamps a serial device's readings. A real
 /// display without `--device-file` runs the identified device file stored for it in `state_dir`
-/// ([`crate::identified`]) when there is one (None: look nowhere); which file runs is said on standard error.
+/// ([`crate::identified`]) when there is one (None: look nowhere); which file runs is said in
+/// [`Display::notices`].
 pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>, state_dir: Option<&Path>) -> Result<Display> {
     let given_text = args.device_file.as_deref().map(resolve::read).transpose()?;
     let device_config = resolve::device_config(args.device_file.as_deref())?;
     let mut file_kind = identified::kind_of(&device_config, given_text.as_deref());
     let mut pipeline = pipeline_of(device_config, args.controller)?;
     let label = args.label();
+    let mut notices = Vec::new();
     let (device, label): (Box<dyn Device + Send>, String) = if args.is_sim() {
         // The simulated display is built from this very file, so the file is exact for it.
         pipeline.device = device_config.exact_for_its_simulation();
@@ -210,23 +220,23 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>, state_dir: Opti
     } else if args.device.iter().all(|d| is_hardware(d)) {
         let mut device = open_hardware(args, &pipeline, clock)?;
         let stored = match (&args.device_file, state_dir) {
-            (None, Some(dir)) => stored_file_for(dir, &label, device.as_ref())?,
+            (None, Some(dir)) => stored_file_for(dir, &label, device.as_ref(), &mut notices)?,
             _ => None,
         };
         if let Some(path) = &args.device_file {
-            eprintln!(
-                "thermode: using the device file {} given by --device-file for {label} ({})",
+            notices.push(format!(
+                "using the device file {} given by --device-file for {label} ({})",
                 path.display(),
                 identified::kind_name(file_kind)
-            );
+            ));
         } else if let Some(stored) = stored {
             let who = device.parts().first().and_then(|p| p.identity.clone());
-            eprintln!(
-                "thermode: using the identified device file {} for {label}{} (identified {})",
+            notices.push(format!(
+                "using the identified device file {} for {label}{} (identified {})",
                 stored.path.display(),
                 who.map_or_else(String::new, |i| format!(" ({i})")),
                 stored.identified_at.as_deref().unwrap_or("at an unknown time")
-            );
+            ));
             file_kind = identified::kind_of(&stored.config, Some("# Identified by `thermode identify`"));
             pipeline = pipeline_of(stored.config, args.controller)?;
             // The devices' own limits follow the file they run: opened again with it.
@@ -236,7 +246,7 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>, state_dir: Opti
         if file_kind == DeviceFileKind::Datasheet {
             let origin = resolve::device_origin(args.device_file.as_deref());
             let can_identify = device.measures().drive_current && args.device.len() == 1;
-            eprintln!("{}", datasheet_warning(&label, &origin, state_dir, can_identify));
+            notices.push(datasheet_warning(&label, &origin, state_dir, can_identify));
         }
         for part in device.parts() {
             if let Some(commands) = part.health.as_ref().and_then(|h| h.command_set()) {
@@ -296,5 +306,6 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>, state_dir: Opti
         names,
         description,
         file_kind,
+        notices,
     })
 }

@@ -63,6 +63,9 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     // The identified device files are looked for where `serve` keeps them by default (no state directory: nowhere).
     let state_dir = super::dose::state_dir(None).ok();
     let display = build_display(&display_args, &clock, state_dir.as_deref())?;
+    for line in &display.notices {
+        eprintln!("thermode: {line}");
+    }
     eprintln!(
         "bench: {} at {} Hz for {} s …",
         display.description, args.rate, args.duration

@@ -104,14 +104,15 @@ pub struct ServeArgs {
 
 /// Starts the daemon of `args` and prints where it listens.
 pub fn start(args: &ServeArgs) -> Result<Daemon> {
-    let (daemon, description) = start_quiet(args)?;
-    print_banner(&daemon, &description, args);
+    let (daemon, display) = start_quiet(args)?;
+    print_banner(&daemon, &display, args);
     Ok(daemon)
 }
 
 /// Starts `display` as `serve` would, for `thermode lab run --device`: on loopback at a free port, without OSC,
 /// with a random token of its own (so no other local program can drive it), the dose ledger in `state_dir` (the
-/// default when `None`). Prints no banner. Returns the daemon and its token.
+/// default when `None`). Prints no banner: only the notices about the display's device file (which file runs, or a
+/// warning), on standard error. Returns the daemon and its token.
 pub fn start_private(display: &DisplayArgs, state_dir: Option<PathBuf>) -> Result<(Daemon, String)> {
     use std::hash::BuildHasher;
     let random = std::collections::hash_map::RandomState::new();
@@ -136,11 +137,21 @@ pub fn start_private(display: &DisplayArgs, state_dir: Option<PathBuf>) -> Resul
         lsl: false,
         lsl_name: "thermode".to_string(),
     };
-    Ok((start_quiet(&args)?.0, token))
+    let (daemon, display) = start_quiet(&args)?;
+    for line in &display.notices {
+        eprintln!("thermode: {line}");
+    }
+    Ok((daemon, token))
 }
 
-/// Starts the daemon of `args`; returns it and the display's description.
-fn start_quiet(args: &ServeArgs) -> Result<(Daemon, String)> {
+/// What the banner says about the display: its description and the notices about its device file.
+struct Started {
+    description: String,
+    notices: Vec<String>,
+}
+
+/// Starts the daemon of `args`; returns it and what the banner says about the display.
+fn start_quiet(args: &ServeArgs) -> Result<(Daemon, Started)> {
     // Every option is checked before a port is opened or a device touched.
     check_duration(args.duration)?;
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
@@ -184,13 +195,20 @@ fn start_quiet(args: &ServeArgs) -> Result<(Daemon, String)> {
         }),
         taps: Vec::new(),
     };
+    let started = Started {
+        description: display.description,
+        notices: display.notices,
+    };
     let daemon = Daemon::start(config, display.device, display.engines, clock)?;
-    Ok((daemon, display.description))
+    Ok((daemon, started))
 }
 
-fn print_banner(daemon: &Daemon, description: &str, args: &ServeArgs) {
+fn print_banner(daemon: &Daemon, display: &Started, args: &ServeArgs) {
     let addr = daemon.http_addr();
-    println!("thermode serve: {description}, {} Hz", args.rate);
+    println!("thermode serve: {}, {} Hz", display.description, args.rate);
+    for line in &display.notices {
+        println!("  device file  {line}");
+    }
     println!("  dashboard  {}", daemon.dashboard_url());
     println!("  WebSocket  ws://{addr}/api/ws");
     match daemon.osc_addr() {

@@ -684,7 +684,7 @@ fn calibrate_recovers_an_injected_sensor_offset_and_gain() {
 }
 
 /// `thermode serve --device DEVICE --duration 4 --state-dir STATE` (free ports, no OSC) plus `extra`: its
-/// `/api/status` once the banner is out, and its standard error after it stopped.
+/// `/api/status` once the banner is out, and its banner and standard error after it stopped.
 fn serve_briefly(device: &str, state: &std::path::Path, extra: &[&str]) -> (serde_json::Value, String) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_thermode"))
         .args(["serve", "--device", device, "--port", "0", "--no-osc", "--no-realtime"])
@@ -696,10 +696,12 @@ fn serve_briefly(device: &str, state: &std::path::Path, extra: &[&str]) -> (serd
         .spawn()
         .unwrap_or_else(|e| panic!("spawn serve: {e}"));
     let stdout = child.stdout.take().unwrap_or_else(|| panic!("serve stdout"));
-    let mut http_port = None;
+    let (mut http_port, mut banner) = (None, String::new());
     let mut lines = BufReader::new(stdout).lines();
     for line in lines.by_ref() {
         let line = line.unwrap_or_else(|e| panic!("serve stdout: {e}"));
+        banner.push_str(&line);
+        banner.push('\n');
         if line.contains("dashboard") {
             http_port = line
                 .split("127.0.0.1:")
@@ -715,8 +717,9 @@ fn serve_briefly(device: &str, state: &std::path::Path, extra: &[&str]) -> (serd
     std::thread::spawn(move || lines.for_each(drop));
     let out = child.wait_with_output().unwrap_or_else(|e| panic!("serve: {e}"));
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    let status = status.unwrap_or_else(|| panic!("serve gave no dashboard address; stderr: {stderr}"));
-    (status, stderr)
+    let output = format!("{banner}{stderr}");
+    let status = status.unwrap_or_else(|| panic!("serve gave no dashboard address: {output}"));
+    (status, output)
 }
 
 /// First use of a MeCom controller (the emulator, which answers serial number 4242 for parameter 102): `serve`
