@@ -726,7 +726,8 @@ fn serve_briefly(device: &str, state: &std::path::Path, extra: &[&str]) -> (serd
 /// on its datasheet file says so in a warning and reports `datasheet`; `identify --save` stores the identified
 /// file as `devices/mecom-SN4242.toml` of the state directory; `serve` on the same controller then runs that file
 /// without being told, says which file and when it was identified, and reports `identified`; `bench` finds it in
-/// the default state directory (`$XDG_STATE_HOME/thermode`); an explicit `--device-file` wins and is named.
+/// the default state directory (`$XDG_STATE_HOME/thermode`); an explicit `--device-file` wins and is named, and a
+/// file with a `[calibration]` section is reported `calibrated`.
 #[test]
 fn identify_save_then_serve_and_bench_run_the_identified_file() {
     let tmp = tempfile::tempdir().expect("temp dir");
@@ -812,6 +813,23 @@ fn identify_save_then_serve_and_bench_run_the_identified_file() {
         )) && stderr.contains("(datasheet)")
             && stderr.contains("WARNING"),
         "bench --device-file: {stderr}"
+    );
+    let mut calibrated = thermode_device::DeviceConfig::default();
+    calibrated.calibration.sensor_offset_c = 0.1;
+    let calibrated_file = tmp.path().join("calibrated.toml");
+    std::fs::write(&calibrated_file, calibrated.to_toml_string()).expect("write");
+    let calibrated_arg = calibrated_file.display().to_string();
+    let (status, output) = serve_briefly(&device, &state, &["--device-file", &calibrated_arg]);
+    assert_eq!(
+        status["channel_device_files"],
+        serde_json::json!(["calibrated"]),
+        "{output}"
+    );
+    assert!(
+        output.contains(&format!(
+            "using the device file {calibrated_arg} given by --device-file for {device} (calibrated)"
+        )),
+        "{output}"
     );
 }
 
