@@ -237,7 +237,10 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>, state_dir: Opti
                 who.map_or_else(String::new, |i| format!(" ({i})")),
                 stored.identified_at.as_deref().unwrap_or("at an unknown time")
             ));
-            file_kind = identified::kind_of(&stored.config, Some("# Identified by `thermode identify`"));
+            file_kind = match stored.config.calibration.is_set() {
+                true => DeviceFileKind::Calibrated,
+                false => DeviceFileKind::Identified,
+            };
             pipeline = pipeline_of(stored.config, args.controller)?;
             // The devices' own limits follow the file they run: opened again with it.
             drop(device);
