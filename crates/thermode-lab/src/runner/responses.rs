@@ -13,6 +13,7 @@ use super::console::Console;
 use super::stimulus::TrialMeasurement;
 use super::RunError;
 use crate::participant::SimulatedParticipant;
+use crate::perception::PerceptualParticipant;
 use crate::plan::PlannedTrial;
 
 /// What a responder is asked for one trial.
@@ -216,6 +217,35 @@ impl Responder for SimulatedParticipant {
             .as_ref()
             .ok_or(crate::participant::ParticipantError::NoCurve)?;
         Ok(self.identify_trial(curve, query.participant_index, query.trial.trial)?)
+    }
+}
+
+impl Responder for PerceptualParticipant {
+    fn respond(&mut self, query: &ResponseQuery, _console: &mut dyn Console) -> Result<usize, RunError> {
+        let requirement = "the simulated participant's references must be the experiment's response options, in order";
+        if self.options() != query.options {
+            let refused = thermode_model::params::BadValue::custom("options", self.options().len() as f64, requirement);
+            return Err(RunError::Participant(refused.into()));
+        }
+        let curve = query
+            .measurement
+            .curve
+            .as_ref()
+            .ok_or(crate::participant::ParticipantError::NoCurve)?;
+        let features = crate::participant::CurveFeatures::of(curve)?;
+        let presented = self
+            .options()
+            .iter()
+            .position(|o| *o == query.trial.presented)
+            .unwrap_or(usize::MAX);
+        Ok(PerceptualParticipant::respond(
+            self,
+            &features,
+            presented,
+            query.trial.condition,
+            query.participant_index,
+            query.trial.trial,
+        ))
     }
 }
 

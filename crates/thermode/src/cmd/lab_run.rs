@@ -17,8 +17,10 @@
 //!   temperatures are the simulation's (`model_finger_*` columns). `--time-scale` scales the waits (0 skips them,
 //!   for demos).
 //!
-//! The simulated participant's references are real contact under the same stimulus (its `real` curves), so that its
-//! calibration to the paper's 66 % holds for the real trials it will see.
+//! The simulated participant is the perceptual model of `thermode_lab::perception` with the fitted parameters
+//! shipped in `crates/thermode-lab/data/participant_fit.toml` (docs/lab.md); its prototypes are real contact under
+//! the same stimulus (its `real` curves), so that its fit to the paper's real-condition rates holds for the real
+//! trials it will see.
 //!
 //! Seeds: the design's `seed` decides the plan (which material stands for which symbol of the Williams squares, the
 //! order of the rows) and the simulated display's sensor noise; `--seed N` decides only the participants' noise
@@ -40,7 +42,8 @@ use clap::{Args, ValueEnum};
 use serde_json::json;
 use thermode_device::DeviceConfig;
 use thermode_lab::design::{Experiment, ExperimentFile};
-use thermode_lab::participant::{CurveFeatures, SimulatedParticipant, PAPER_REAL_IDENTIFICATION_RATE};
+use thermode_lab::participant::CurveFeatures;
+use thermode_lab::perception::{PerceptionParams, PerceptualParticipant};
 use thermode_lab::runner::live::{LiveSettings, LiveStimulus};
 use thermode_lab::runner::stimulus::{DisplaySetup, DisplayStimulus};
 use thermode_lab::runner::ws_link::WsLink;
@@ -72,11 +75,6 @@ pub enum StimulusArg {
     Model,
 }
 
-/// Noise draws per option when calibrating the simulated participant.
-const CALIBRATION_SAMPLES: usize = 4000;
-/// Seed of the simulated participant calibration (fixed, so that the calibrated noise is the documented one).
-const CALIBRATION_SEED: u64 = 1;
-
 /// Arguments of `thermode lab run`.
 #[derive(Args, Debug)]
 pub struct LabRunArgs {
@@ -102,8 +100,8 @@ pub struct LabRunArgs {
     /// column; for a procedure file `press SECONDS [phs]`, `none`, `yes`, `no` or `rating VALUE` per line).
     #[arg(long, conflicts_with = "simulated_participant")]
     pub(crate) responses: Option<PathBuf>,
-    /// Let the simulated participant answer (calibrated to the paper's 66 % real identification rate; for a
-    /// procedure file, the file's `[simulated_participant]`).
+    /// Let the simulated participant answer (the perceptual model fitted to the paper's real identification rates;
+    /// for a procedure file, the file's `[simulated_participant]`).
     #[arg(long, alias = "observer")]
     pub(crate) simulated_participant: bool,
     /// Multiplies every wait of a simulated session (1 = real time, e.g. to pace a demo; default 0: a simulation
@@ -219,8 +217,8 @@ struct Prepared {
 
 /// Who answers, and its description for the sidecar.
 struct Answers {
-    /// The calibrated simulated participant (`None`: keyboard or responses file).
-    simulated: Option<SimulatedParticipant>,
+    /// The simulated participant (`None`: keyboard or responses file).
+    simulated: Option<PerceptualParticipant>,
     answers: String,
 }
 
@@ -251,28 +249,28 @@ fn prepare(args: &LabRunArgs, design: &Experiment, out: &mut dyn Write) -> Resul
     })
 }
 
-/// Who answers: the simulated participant calibrated on `references` (with `--simulated-participant`), a
-/// responses file or the keyboard; and its description for the sidecar.
+/// Who answers: the perceptual simulated participant with the shipped fitted parameters and prototypes learned
+/// from `references` (with `--simulated-participant`), a responses file or the keyboard; and its description for
+/// the sidecar.
 fn answers(
     args: &LabRunArgs,
     design: &Experiment,
     references: Vec<CurveFeatures>,
     out: &mut dyn Write,
-) -> Result<(Option<SimulatedParticipant>, String)> {
+) -> Result<(Option<PerceptualParticipant>, String)> {
     Ok(if args.simulated_participant {
-        let mut simulated = SimulatedParticipant::new(
+        let params = PerceptionParams::fitted();
+        let simulated = PerceptualParticipant::new(
             design.response_options.clone(),
-            references,
+            &references,
+            params.clone(),
             participant_seed(args, design),
-        );
-        let calibration = simulated.calibrate(PAPER_REAL_IDENTIFICATION_RATE, CALIBRATION_SAMPLES, CALIBRATION_SEED)?;
-        writeln!(
-            out,
-            "simulated participant: perceptual noise {:.4} (real contact identified {:.1} % on the calibration sample)",
-            calibration.noise_sd,
-            100.0 * calibration.rate
         )?;
-        let mut answers = format!("simulated participant, noise {:.4}", calibration.noise_sd);
+        let mut answers = format!(
+            "simulated participant (perceptual model fitted {}: Weber fraction {}, non-thermal cue {:.3})",
+            params.fitted_on, params.weber_fraction, params.non_thermal_strength
+        );
+        writeln!(out, "{answers}")?;
         if let Some(seed) = args.seed {
             answers.push_str(&format!(", seed {seed}"));
         }
