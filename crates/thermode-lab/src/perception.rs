@@ -274,6 +274,29 @@ impl PerceptualParticipant {
             .collect()
     }
 
+    /// Proportion correct of a 2AFC "which is colder" between `a` and `b` (options `ia`, `ib`, `b` the colder)
+    /// over `trials` trials of `persons` persons: each interval perceived with the sensory stage (finger temperature,
+    /// the person's contact conductance, sensory noise), the answer the interval whose summed perceived cues are larger.
+    pub fn two_afc_correct(
+        &self,
+        (a, ia): (&CurveFeatures, usize),
+        (b, ib): (&CurveFeatures, usize),
+        persons: usize,
+        trials: usize,
+    ) -> f64 {
+        let mut correct = 0usize;
+        for person_index in 0..persons {
+            let person = self.person(person_index);
+            for trial in 1..=trials {
+                let mut rng = trial_rng(self.seed ^ PERCEPTION_SALT, person_index, trial);
+                let pa = self.percept(a, ia, &person, &mut rng);
+                let pb = self.percept(b, ib, &person, &mut rng);
+                correct += usize::from(pb[0] + pb[1] > pa[0] + pa[1]);
+            }
+        }
+        correct as f64 / (persons * trials).max(1) as f64
+    }
+
     /// A copy with other parameters (same options, references and seed).
     pub fn with_params(&self, params: PerceptionParams) -> PerceptualParticipant {
         let bias = self

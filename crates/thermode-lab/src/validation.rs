@@ -240,6 +240,55 @@ impl Spread {
     }
 }
 
+/// The Weber fraction at which the sensory stage alone (no finger or contact variation) is 75 % correct in 2AFC
+/// around `reference`: bisection on the factor 1 + W with common random numbers (`trials` draws, seed `seed`).
+pub fn weber_fraction_at(params: &PerceptionParams, reference: &CurveFeatures, trials: usize, seed: u64) -> f64 {
+    let sd = params.sensory_sd();
+    let mut rng = crate::random::trial_rng(seed, 0, 0);
+    let noise: Vec<f64> = (0..trials)
+        .map(|_| (0..4).map(|_| crate::random::standard_normal(&mut rng)).sum::<f64>())
+        .collect();
+    let base = reference.perceived();
+    let rate = |w: f64| {
+        let scaled = CurveFeatures {
+            initial_cooling_rate_c_per_s: reference.initial_cooling_rate_c_per_s * (1.0 + w),
+            end_drop_c: reference.end_drop_c * (1.0 + w),
+        }
+        .perceived();
+        let shift = scaled[0] + scaled[1] - base[0] - base[1];
+        // The difference of the two intervals' summed cues: four independent noises of sd σ.
+        noise.iter().filter(|z| shift + sd * **z > 0.0).count() as f64 / noise.len().max(1) as f64
+    };
+    let (mut low, mut high) = (0.0, 5.0);
+    for _ in 0..50 {
+        let mid = 0.5 * (low + high);
+        if rate(mid) >= 0.75 {
+            high = mid;
+        } else {
+            low = mid;
+        }
+    }
+    high
+}
+
+/// The method of limits minus the method of levels for cold detection at `rate_c_s` \[°C\]: the limits estimate
+/// `θ + r·(t_rt + lag)` against the trapezoid threshold (plateau `plateau_s`, return at the same rate) of the
+/// procedures' skin response (`thermode_procedures::skin_response`) on the display's contact conductance.
+pub fn limits_levels_gap_c(threshold_c: f64, rate_c_s: f64, reaction_time_s: f64, plateau_s: f64) -> Option<f64> {
+    use thermode_procedures::skin_response::{SkinResponse, Trapezoid};
+    let skin = thermode_model::skin::Skin::fingertip();
+    let response =
+        SkinResponse::new(&skin, thermode_model::inverse::DEFAULT_DISPLAY_CONDUCTANCE_W_M2K).ok()?;
+    let limits = response.limits_estimate_c(threshold_c, rate_c_s, reaction_time_s)?;
+    let timing = Trapezoid {
+        rate_c_s,
+        plateau_s,
+        return_rate_c_s: rate_c_s,
+    };
+    let levels = response.trapezoid_threshold_c(threshold_c, timing)?;
+    Some(limits - levels)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
