@@ -4,7 +4,7 @@
 //!
 //! (a) The sensory noise follows in closed form from the 2AFC Weber fraction of heat-extraction rate (0.43,
 //! Bergmann Tiest & Kappers 2009); (b) the non-thermal cue's strength and the response biases are fitted to the
-//! paper's real-condition identification rates (53, 54, 80, 97, 56 %) on 400 persons × 5 trials per material of
+//! paper's real-condition identification rates (53, 54, 80, 97, 56 %) on 2000 persons × 3 trials per material of
 //! real contact under the default fv model, 30 s. Without `--write` it prints the fit only.
 
 use thermode_lab::perception::{PerceptionParams, PerceptualParticipant};
@@ -22,10 +22,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let references = contact_features(&FvContact::default(), 30.0)?;
     let options: Vec<String> = PAPER_MATERIALS.iter().map(|s| s.to_string()).collect();
     let base = PerceptualParticipant::new(options, &references, start, FIT_SEED)?;
-    let (mut params, rates) = fit_real_rates(&base, &PAPER_REAL_RATES, 400, 5, 120);
+    let (mut params, rates) = fit_real_rates(&base, &PAPER_REAL_RATES, 2000, 3, 120);
     params.fitted_on = today_utc();
     params.inputs = "2AFC Weber fraction 0.43 (Bergmann Tiest & Kappers 2009); real-condition rates 0.53 0.54 0.80 \
-                     0.97 0.56 (paper Tables 2-3); fv contact, 30 s; 400 persons x 5 trials, seed 28"
+                     0.97 0.56 (paper Tables 2-3); fv contact, 30 s; 2000 persons x 3 trials, seed 28"
         .to_string();
     println!(
         "sensory sd {:.4}, non-thermal strength {:.4}",

@@ -7,34 +7,16 @@
 //! (Kron renderer, PID, the default device) and on thermode's default display (fv renderer, model controller); the
 //! other rows are computed as `thermode_lab::validation` documents. Without `--write` it prints the table only.
 
-use thermode_device::DeviceConfig;
 use thermode_lab::participant::CurveFeatures;
 use thermode_lab::perception::{PerceptionParams, PerceptualParticipant};
-use thermode_lab::runner::stimulus::{DisplaySetup, DisplayStimulus};
+use thermode_lab::runner::FvContact;
 use thermode_lab::validation::{
-    design_over_seeds, limits_levels_gap_c, published, weber_fraction_at, DesignFigures, Spread, PAPER_MATERIALS,
+    contact_features, design_over_seeds, display_features, limits_levels_gap_c, metals_correct, own_display_pipeline,
+    paper_like_pipeline, published, weber_fraction_at, DesignFigures, Spread, PAPER_MATERIALS,
 };
-use thermode_model::materials::find;
-use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, RendererKind};
 
 /// Participant seeds of the predictive checks.
 const SEEDS: std::ops::Range<u64> = 1..101;
-
-type Features = (Vec<CurveFeatures>, Vec<CurveFeatures>);
-
-/// Real and simulated features of the paper's materials on a simulated display.
-fn display_features(controller: ControllerKind, renderer: RendererKind) -> Result<Features, Box<dyn std::error::Error>> {
-    let mut pipeline = PipelineConfig::new(DeviceConfig::default(), controller);
-    pipeline.renderer = renderer;
-    let mut stimulus = DisplayStimulus::new(DisplaySetup::new(pipeline), 0.0, 2008)?;
-    let (mut real, mut simulated) = (Vec::new(), Vec::new());
-    for name in PAPER_MATERIALS {
-        let curves = stimulus.curves(&find(name)?, 30.0)?;
-        real.push(CurveFeatures::of(&curves.real)?);
-        simulated.push(CurveFeatures::of(&curves.simulated)?);
-    }
-    Ok((real, simulated))
-}
 
 /// A table row.
 struct Row {
@@ -55,9 +37,8 @@ fn spread_row(key: &str, published: f64, runs: &[DesignFigures], pick: fn(&Desig
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let write = std::env::args().any(|a| a == "--write");
     let params = PerceptionParams::fitted();
-    let gains = gains_for_device(&DeviceConfig::default())?.0;
-    let paper = display_features(ControllerKind::Pid(gains), RendererKind::Kron)?;
-    let own = display_features(ControllerKind::Model, RendererKind::Fv)?;
+    let paper = display_features(paper_like_pipeline()?)?;
+    let own = display_features(own_display_pipeline())?;
     let start = std::time::Instant::now();
     let runs = design_over_seeds(&params, &paper.0, &paper.1, SEEDS)?;
     let elapsed = start.elapsed().as_secs_f64();
@@ -79,10 +60,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-fn rows(params: &PerceptionParams, real: &[CurveFeatures], runs: &[DesignFigures]) -> Result<Vec<Row>, Box<dyn std::error::Error>> {
+fn rows(
+    params: &PerceptionParams,
+    real: &[CurveFeatures],
+    runs: &[DesignFigures],
+) -> Result<Vec<Row>, Box<dyn std::error::Error>> {
     let mut rows = Vec::new();
     let published_rows = published();
-    let value = |key: &str| published_rows.iter().find(|r| r.key == key).map_or(f64::NAN, |r| r.published);
+    let value = |key: &str| {
+        published_rows
+            .iter()
+            .find(|r| r.key == key)
+            .map_or(f64::NAN, |r| r.published)
+    };
     let w_metal = weber_fraction_at(params, &real[0], 20_000, 7);
     let w_wood = weber_fraction_at(params, &real[3], 20_000, 7);
     rows.push(Row {
@@ -91,33 +81,53 @@ fn rows(params: &PerceptionParams, real: &[CurveFeatures], runs: &[DesignFigures
         pass: Some((w_metal - 0.43).abs() <= 0.03 && (w_wood - 0.43).abs() <= 0.03),
     });
     let options: Vec<String> = PAPER_MATERIALS.iter().map(|s| s.to_string()).collect();
-    let fit = PerceptualParticipant::new(options, real, params.clone(), 1)?;
-    let rates = fit.real_rates(400, 5);
+    let fv = contact_features(&FvContact::default(), 30.0)?;
+    let fit = PerceptualParticipant::new(options, &fv, params.clone(), 1)?;
+    let rates = fit.real_rates(2000, 2);
     for (k, name) in PAPER_MATERIALS.iter().enumerate() {
         let key = format!("real_{name}");
         rows.push(Row {
-            model: format!("{:.3} (display's real contact, 2000 trials)", rates[k]),
+            model: format!("{:.3} (real fv contact, 4000 trials, seed 1)", rates[k]),
             pass: Some((rates[k] - value(&key)).abs() <= 0.03),
             key,
         });
     }
     rows.push(spread_row("chi_square", value("chi_square"), runs, |f| f.chi_square));
-    rows.push(spread_row("mean_ratio_correct", value("mean_ratio_correct"), runs, |f| f.mean_ratio_correct));
-    rows.push(spread_row("mean_ratio_false", value("mean_ratio_false"), runs, |f| f.mean_ratio_false));
-    rows.push(spread_row("share_within_c", value("share_within_c"), runs, |f| f.share_within_c));
-    rows.push(spread_row("share_within_k", value("share_within_k"), runs, |f| f.share_within_k));
+    rows.push(spread_row(
+        "mean_ratio_correct",
+        value("mean_ratio_correct"),
+        runs,
+        |f| f.mean_ratio_correct,
+    ));
+    rows.push(spread_row("mean_ratio_false", value("mean_ratio_false"), runs, |f| {
+        f.mean_ratio_false
+    }));
+    rows.push(spread_row("share_within_c", value("share_within_c"), runs, |f| {
+        f.share_within_c
+    }));
+    rows.push(spread_row("share_within_k", value("share_within_k"), runs, |f| {
+        f.share_within_k
+    }));
     for (k, name) in PAPER_MATERIALS.iter().enumerate() {
         let key = format!("simulated_{name}");
         let mut v: Vec<f64> = runs.iter().map(|f| f.simulated_correct[k]).collect();
         v.sort_by(f64::total_cmp);
-        let (lo, hi) = (v[(0.025 * (v.len() - 1) as f64).round() as usize], v[(0.975 * (v.len() - 1) as f64).round() as usize]);
+        let (lo, hi) = (
+            v[(0.025 * (v.len() - 1) as f64).round() as usize],
+            v[(0.975 * (v.len() - 1) as f64).round() as usize],
+        );
         rows.push(Row {
             model: format!("2.5-97.5 % {lo:.2}-{hi:.2}"),
             pass: Some((lo..=hi).contains(&value(&key))),
             key,
         });
     }
-    rows.push(metals_row(params)?);
+    let correct = metals_correct(params, 200, 20)?;
+    rows.push(Row {
+        key: "metals_200".into(),
+        model: format!("{correct:.3} (copper vs aluminium, Δk 164 W/(m·K), 4000 trials)"),
+        pass: Some(correct <= 0.60),
+    });
     rows.push(Row {
         key: "fingers_summation".into(),
         model: "not modelled (one contact site; no summation rule)".into(),
@@ -137,30 +147,14 @@ fn rows(params: &PerceptionParams, real: &[CurveFeatures], runs: &[DesignFigures
     Ok(rows)
 }
 
-/// Jones & Berris 2002: copper against aluminium (Δk 164 W/(m·K)) under the fv model, 2AFC "which is colder".
-fn metals_row(params: &PerceptionParams) -> Result<Row, Box<dyn std::error::Error>> {
-    let contact = thermode_lab::runner::FvContact::default();
-    let names = ["aluminium".to_string(), "copper".to_string()];
-    let features: Vec<CurveFeatures> = names
-        .iter()
-        .map(|n| Ok(CurveFeatures::of(&contact.curve(&find(n)?, None, 30.0)?)?))
-        .collect::<Result<_, Box<dyn std::error::Error>>>()?;
-    let p = PerceptualParticipant::new(names.to_vec(), &features, params.clone(), 3)?;
-    let correct = p.two_afc_correct((&features[0], 0), (&features[1], 1), 200, 20);
-    Ok(Row {
-        key: "metals_200".into(),
-        model: format!("{correct:.3} (copper vs aluminium, 4000 trials)"),
-        pass: Some(correct <= 0.60),
-    })
-}
-
 fn render(rows: &[Row], own: &[DesignFigures], elapsed_s: f64) -> String {
     let published_rows = published();
-    let mut out = String::from(
-        "| effect | source | published | model | tolerance | result |\n|---|---|---|---|---|---|\n",
-    );
+    let mut out =
+        String::from("| effect | source | published | model | tolerance | result |\n|---|---|---|---|---|---|\n");
     for row in rows {
-        let Some(p) = published_rows.iter().find(|r| r.key == row.key) else { continue };
+        let Some(p) = published_rows.iter().find(|r| r.key == row.key) else {
+            continue;
+        };
         let result = match row.pass {
             Some(true) => "pass",
             Some(false) => "**FAIL**",

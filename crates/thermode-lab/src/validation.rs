@@ -4,8 +4,11 @@
 //! (`data/validation.csv`, [`published`]). The `fit_participant` and `validate_participant` examples run them.
 
 use serde::Deserialize;
+use thermode_device::DeviceConfig;
 use thermode_model::materials::find;
 use thermode_model::units::{conductivity_to_cgs, specific_heat_to_cgs};
+use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, PipelineError, RendererKind};
+use thiserror::Error;
 
 use crate::analysis::figure4::Discrimination;
 use crate::analysis::stats::mean_ratios;
@@ -13,7 +16,7 @@ use crate::analysis::{ChiSquareReport, Confusion, MaterialInfo, RatioTable};
 use crate::design::Condition;
 use crate::participant::{CurveFeatures, ParticipantError};
 use crate::perception::{PerceptionParams, PerceptualParticipant};
-use crate::runner::stimulus::{FvContact, StimulusError};
+use crate::runner::stimulus::{DisplaySetup, DisplayStimulus, FvContact, StimulusError};
 
 /// The paper's materials, in its order.
 pub const PAPER_MATERIALS: [&str; 5] = ["aluminium", "steel", "stone", "wood", "rubber"];
@@ -21,6 +24,66 @@ pub const PAPER_MATERIALS: [&str; 5] = ["aluminium", "steel", "stone", "wood", "
 pub const PAPER_REAL_RATES: [f64; 5] = [0.53, 0.54, 0.80, 0.97, 0.56];
 /// The published numbers with their sources (effect, source, published value, tolerance).
 pub const VALIDATION_CSV: &str = include_str!("../data/validation.csv");
+
+/// Why a validation figure could not be computed.
+#[derive(Debug, Error)]
+pub enum ValidationError {
+    /// The participant could not be built or a curve's features computed.
+    #[error("validation: {0}")]
+    Participant(#[from] ParticipantError),
+    /// A curve could not be computed.
+    #[error("validation: {0}")]
+    Stimulus(#[from] StimulusError),
+    /// The display's controller could not be set up.
+    #[error("validation: {0}")]
+    Pipeline(#[from] PipelineError),
+}
+
+/// Real and simulated features, one per paper material.
+pub type ConditionFeatures = (Vec<CurveFeatures>, Vec<CurveFeatures>);
+
+/// The paper-like display: the Kron renderer and the tuned PID on the default device (docs/lab.md).
+pub fn paper_like_pipeline() -> Result<PipelineConfig, ValidationError> {
+    let device = DeviceConfig::default();
+    let gains = gains_for_device(&device)?.0;
+    let mut pipeline = PipelineConfig::new(device, ControllerKind::Pid(gains));
+    pipeline.renderer = RendererKind::Kron;
+    Ok(pipeline)
+}
+
+/// thermode's own default display: the fv renderer and the model controller on the default device.
+pub fn own_display_pipeline() -> PipelineConfig {
+    PipelineConfig::new(DeviceConfig::default(), ControllerKind::Model)
+}
+
+/// The real and simulated features of the paper's materials (30 s) on the simulated display `pipeline`, finger
+/// without drift, display seed 2008 (the paper design's seed).
+pub fn display_features(pipeline: PipelineConfig) -> Result<ConditionFeatures, ValidationError> {
+    let mut stimulus = DisplayStimulus::new(DisplaySetup::new(pipeline), 0.0, 2008)?;
+    let (mut real, mut simulated) = (Vec::new(), Vec::new());
+    for name in PAPER_MATERIALS {
+        let curves = stimulus.curves(&find(name).map_err(ParticipantError::from)?, 30.0)?;
+        real.push(CurveFeatures::of(&curves.real)?);
+        simulated.push(CurveFeatures::of(&curves.simulated)?);
+    }
+    Ok((real, simulated))
+}
+
+/// Jones & Berris (2002)'s check: 2AFC proportion correct between copper and aluminium (Δk 164 W/(m·K)) under the
+/// default fv model (30 s), `persons` × `trials`, participant seed 3.
+pub fn metals_correct(params: &PerceptionParams, persons: usize, trials: usize) -> Result<f64, ValidationError> {
+    let contact = FvContact::default();
+    let names = ["aluminium".to_string(), "copper".to_string()];
+    let mut features = Vec::new();
+    for name in &names {
+        let material = find(name).map_err(ParticipantError::from)?;
+        features.push(CurveFeatures::of(
+            &contact.curve(&material, None, 30.0).map_err(StimulusError::from)?,
+        )?);
+    }
+    let p = PerceptualParticipant::new(names.to_vec(), &features, params.clone(), 3)?;
+    Ok(p.two_afc_correct((&features[0], 0), (&features[1], 1), persons, trials))
+}
 
 /// One row of `data/validation.csv`.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -277,8 +340,7 @@ pub fn weber_fraction_at(params: &PerceptionParams, reference: &CurveFeatures, t
 pub fn limits_levels_gap_c(threshold_c: f64, rate_c_s: f64, reaction_time_s: f64, plateau_s: f64) -> Option<f64> {
     use thermode_procedures::skin_response::{SkinResponse, Trapezoid};
     let skin = thermode_model::skin::Skin::fingertip();
-    let response =
-        SkinResponse::new(&skin, thermode_model::inverse::DEFAULT_DISPLAY_CONDUCTANCE_W_M2K).ok()?;
+    let response = SkinResponse::new(&skin, thermode_model::inverse::DEFAULT_DISPLAY_CONDUCTANCE_W_M2K).ok()?;
     let limits = response.limits_estimate_c(threshold_c, rate_c_s, reaction_time_s)?;
     let timing = Trapezoid {
         rate_c_s,
