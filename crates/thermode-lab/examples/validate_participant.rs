@@ -165,6 +165,15 @@ fn render(rows: &[Row], own: &[DesignFigures], elapsed_s: f64) -> String {
             p.effect, p.source, p.published, row.model, p.tolerance, result
         ));
     }
+    let table3 = rows
+        .iter()
+        .filter(|r| r.key.starts_with("simulated_") && r.pass == Some(true))
+        .count();
+    let verdict = if table3 >= 4 { "pass" } else { "**FAIL**" };
+    out.push_str(&format!(
+        "\nTable 3's simulated rates inside the model's 2.5-97.5 % range: {table3} of 5 materials (the check asks for \
+         at least 4): {verdict}.\n"
+    ));
     let ratio = Spread::of(own.iter().map(|f| f.mean_ratio_correct));
     out.push_str(&format!(
         "\nPredicted perceptual fidelity of thermode's own display (fv renderer, model controller, default device): \
