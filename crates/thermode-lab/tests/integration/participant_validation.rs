@@ -84,12 +84,13 @@ fn the_method_of_limits_exceeds_the_method_of_levels_by_the_published_gap() {
 }
 
 /// Table 2 on the paper-like display (Kron renderer, PID): the paper's mean false ratio 1.78 lies inside the model's
-/// 5-95 % range, and Table 3's 71 % for wood inside its 2.5-97.5 % range (30 seeds here, 100 in the example).
+/// 5-95 % range, and Table 3's 71 % for wood inside its 2.5-97.5 % range, over the example's 100 seeds (the test
+/// profile is optimised: about 0.1 s).
 /// The χ², the mean correct ratio, Fig. 4's shares and the other four Table 3 rates do not (docs/lab.md).
 #[test]
 fn the_paper_like_display_predicts_the_false_ratio_and_wood() {
     let (real, simulated) = display_features(paper_like_pipeline().expect("pipeline")).expect("features");
-    let runs = design_over_seeds(&PerceptionParams::fitted(), &real, &simulated, 1..31).expect("runs");
+    let runs = design_over_seeds(&PerceptionParams::fitted(), &real, &simulated, 1..101).expect("runs");
     let false_ratio = Spread::of(runs.iter().map(|f| f.mean_ratio_false));
     let published_false = published_value("mean_ratio_false");
     assert!(
@@ -98,7 +99,8 @@ fn the_paper_like_display_predicts_the_false_ratio_and_wood() {
     );
     let mut wood: Vec<f64> = runs.iter().map(|f| f.simulated_correct[3]).collect();
     wood.sort_by(f64::total_cmp);
-    let (lo, hi) = (wood[1], wood[wood.len() - 2]);
+    let at = |q: f64| wood[(q * (wood.len() - 1) as f64).round() as usize];
+    let (lo, hi) = (at(0.025), at(0.975));
     let published_wood = published_value("simulated_wood");
     assert!(
         (lo..=hi).contains(&published_wood),
