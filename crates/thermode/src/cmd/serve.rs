@@ -81,6 +81,15 @@ pub struct ServeArgs {
         allow_negative_numbers = true
     )]
     pub release_after: f64,
+    /// Lease of the HTTP commands (POST /api/command): when no command arrives for this long, the contacts made
+    /// over HTTP are released after the grace period (--release-after) [s], above 0, at most a day.
+    #[arg(
+        long = "command-lease",
+        value_name = "S",
+        default_value_t = 30.0,
+        allow_negative_numbers = true
+    )]
+    pub command_lease: f64,
     /// Stop after this many seconds (default: run until interrupted).
     #[arg(long, value_name = "S", allow_negative_numbers = true)]
     pub duration: Option<f64>,
@@ -130,6 +139,7 @@ pub fn start_private(display: &DisplayArgs, state_dir: Option<PathBuf>) -> Resul
         on_record_error: OnRecordError::Stop,
         record_max_bytes: None,
         release_after: 2.0,
+        command_lease: 30.0,
         duration: None,
         state_dir,
         no_realtime: false,
@@ -151,6 +161,10 @@ fn start_quiet(args: &ServeArgs) -> Result<(Daemon, String)> {
         osc_without_token: args.osc_without_token,
         token: args.token.clone(),
         allowed_origins: args.allow_origin.clone(),
+        net: thermode_serve::api::NetLimits {
+            command_lease_s: args.command_lease,
+            ..thermode_serve::api::NetLimits::default()
+        },
         ..ServerConfig::default()
     };
     // Refuse an insecure bind before touching any hardware.
