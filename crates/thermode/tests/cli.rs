@@ -9,6 +9,10 @@ use std::process::{Command, Output};
 #[cfg(unix)]
 #[path = "cli/python_packages.rs"]
 mod python_packages;
+// The MATLAB/Octave client under octave-cli.
+#[cfg(unix)]
+#[path = "cli/matlab_client.rs"]
+mod matlab_client;
 // `lab export --bids`, checked by the reference validator.
 #[cfg(unix)]
 #[path = "cli/bids.rs"]
