@@ -23,6 +23,9 @@ mod bids;
 mod lsl;
 #[path = "cli/serve_on_emulator.rs"]
 mod serve_on_emulator;
+// `simulate` and `render` to Arrow IPC and Parquet.
+#[path = "cli/columnar.rs"]
+mod columnar;
 #[cfg(unix)]
 #[path = "cli/service.rs"]
 mod service;
