@@ -11,8 +11,10 @@
 //! Arrow IPC is written uncompressed (the fastest to write and to read); Parquet uncompressed with dictionary
 //! encoding (no compression codec is compiled in).
 
+use std::borrow::Cow;
 use std::fs::File;
 use std::io::{Read, Seek, Write};
+use std::ops::Range;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -68,24 +70,37 @@ impl Format {
     }
 }
 
-/// One column's values.
+/// Rows per record batch written: small enough that the buffers of a batch are reused from one batch to the next
+/// (not fresh pages for a whole run), large enough that a batch's overhead does not count.
+pub const BATCH_ROWS: usize = 16 * 1024;
+
+/// One column's values (the numbers borrowed from the run that holds them, or owned).
 #[derive(Debug, Clone, PartialEq)]
-pub enum Values {
+pub enum Values<'a> {
     /// Floating-point numbers (NaN kept as NaN, as the CSV writes `NaN`).
-    F64(Vec<f64>),
+    F64(Cow<'a, [f64]>),
     /// Integers; `None` is an empty CSV field.
     I64(Vec<Option<i64>>),
     /// Text; `None` is an empty CSV field.
     Text(Vec<Option<String>>),
+    /// The same text in every one of `rows` rows (a run's material, controller, renderer): written as a text
+    /// column, built without a string per row. [`read`] gives [`Values::Text`].
+    Repeat {
+        /// The text of every row.
+        text: String,
+        /// Number of rows.
+        rows: usize,
+    },
 }
 
-impl Values {
+impl Values<'_> {
     /// Number of values.
     pub fn len(&self) -> usize {
         match self {
             Values::F64(v) => v.len(),
             Values::I64(v) => v.len(),
             Values::Text(v) => v.len(),
+            Values::Repeat { rows, .. } => *rows,
         }
     }
 
@@ -101,6 +116,7 @@ impl Values {
             Values::F64(v) => v[row].to_string(),
             Values::I64(v) => v[row].map(|x| x.to_string()).unwrap_or_default(),
             Values::Text(v) => v[row].clone().unwrap_or_default(),
+            Values::Repeat { text, .. } => text.clone(),
         }
     }
 
@@ -108,15 +124,20 @@ impl Values {
         match self {
             Values::F64(_) => DataType::Float64,
             Values::I64(_) => DataType::Int64,
-            Values::Text(_) => DataType::Utf8,
+            Values::Text(_) | Values::Repeat { .. } => DataType::Utf8,
         }
     }
 
-    fn to_array(&self) -> ArrayRef {
+    /// The values of `rows` as an Arrow array.
+    fn array(&self, rows: Range<usize>) -> ArrayRef {
         match self {
-            Values::F64(v) => Arc::new(Float64Array::from(v.clone())),
-            Values::I64(v) => Arc::new(Int64Array::from(v.clone())),
-            Values::Text(v) => Arc::new(StringArray::from(v.clone())),
+            Values::F64(v) => Arc::new(Float64Array::from(v[rows].to_vec())),
+            Values::I64(v) => Arc::new(Int64Array::from(v[rows].to_vec())),
+            Values::Text(v) => Arc::new(v[rows].iter().map(Option::as_deref).collect::<StringArray>()),
+            Values::Repeat { text, .. } => Arc::new(StringArray::from_iter_values(std::iter::repeat_n(
+                text.as_str(),
+                rows.len(),
+            ))),
         }
     }
 
@@ -126,20 +147,22 @@ impl Values {
         match self {
             Values::F64(v) => {
                 let a = any.downcast_ref::<Float64Array>().ok_or_else(wrong)?;
-                v.extend((0..a.len()).map(|i| if a.is_null(i) { f64::NAN } else { a.value(i) }));
+                v.to_mut()
+                    .extend((0..a.len()).map(|i| if a.is_null(i) { f64::NAN } else { a.value(i) }));
             }
             Values::I64(v) => v.extend(any.downcast_ref::<Int64Array>().ok_or_else(wrong)?.iter()),
             Values::Text(v) => {
                 let a = any.downcast_ref::<StringArray>().ok_or_else(wrong)?;
                 v.extend(a.iter().map(|s| s.map(str::to_string)));
             }
+            Values::Repeat { .. } => return Err(wrong()),
         }
         Ok(())
     }
 
-    fn empty_like(data_type: &DataType, name: &str) -> Result<Values, TableError> {
+    fn empty_like(data_type: &DataType, name: &str) -> Result<Values<'static>, TableError> {
         match data_type {
-            DataType::Float64 => Ok(Values::F64(Vec::new())),
+            DataType::Float64 => Ok(Values::F64(Cow::Owned(Vec::new()))),
             DataType::Int64 => Ok(Values::I64(Vec::new())),
             DataType::Utf8 => Ok(Values::Text(Vec::new())),
             other => Err(TableError::Shape(format!(
@@ -151,19 +174,19 @@ impl Values {
 
 /// Named columns of equal length, in the CSV's order.
 #[derive(Debug, Clone, PartialEq, Default)]
-pub struct Table {
+pub struct Table<'a> {
     /// (name, values) of every column.
-    pub columns: Vec<(String, Values)>,
+    pub columns: Vec<(String, Values<'a>)>,
 }
 
-impl Table {
+impl<'a> Table<'a> {
     /// An empty table, to which [`Table::push`] adds columns.
     pub fn new() -> Self {
         Table::default()
     }
 
     /// Adds the column `name` with `values`.
-    pub fn push(&mut self, name: impl Into<String>, values: Values) {
+    pub fn push(&mut self, name: impl Into<String>, values: Values<'a>) {
         self.columns.push((name.into(), values));
     }
 
@@ -173,7 +196,7 @@ impl Table {
     }
 
     /// The values of the column `name`, if there is one.
-    pub fn column(&self, name: &str) -> Option<&Values> {
+    pub fn column(&self, name: &str) -> Option<&Values<'a>> {
         self.columns.iter().find(|(n, _)| n == name).map(|(_, v)| v)
     }
 
@@ -186,21 +209,29 @@ impl Table {
         Arc::new(Schema::new(fields))
     }
 
-    fn to_batch(&self, schema: &SchemaRef) -> Result<RecordBatch, TableError> {
-        if let Some((name, _)) = self.columns.iter().find(|(_, v)| v.len() != self.rows()) {
-            return Err(TableError::Shape(format!(
+    /// The table as record batches of at most [`BATCH_ROWS`] rows, built one at a time.
+    fn batches<'t>(&'t self, schema: &'t SchemaRef) -> impl Iterator<Item = Result<RecordBatch, TableError>> + 't {
+        let shape = match self.columns.iter().find(|(_, v)| v.len() != self.rows()) {
+            Some((name, _)) => Err(TableError::Shape(format!(
                 "column `{name}` has not the table's {} rows",
                 self.rows()
-            )));
-        }
-        let arrays = self.columns.iter().map(|(_, v)| v.to_array()).collect();
-        Ok(RecordBatch::try_new(schema.clone(), arrays)?)
+            ))),
+            None => Ok(()),
+        };
+        let starts = (0..self.rows()).step_by(BATCH_ROWS);
+        let batches = starts.map(move |start| {
+            let rows = start..(start + BATCH_ROWS).min(self.rows());
+            let arrays = self.columns.iter().map(|(_, v)| v.array(rows.clone())).collect();
+            Ok(RecordBatch::try_new(schema.clone(), arrays)?)
+        });
+        shape.err().map(Err).into_iter().chain(batches)
     }
 }
 
-/// Writes `tables` (one per run, all with the same columns) to `sink` in `format` (Arrow or Parquet), each as one
-/// record batch or row group, in order. CSV is not written here: thermode's CSV writers stay as they are.
-pub fn write(tables: &[Table], format: Format, sink: &mut dyn Write) -> Result<(), TableError> {
+/// Writes `tables` (one per run, all with the same columns) to `sink` in `format` (Arrow or Parquet), their rows in
+/// order (record batches of at most [`BATCH_ROWS`] rows). CSV is not written here: thermode's CSV writers stay as
+/// they are.
+pub fn write(tables: &[Table<'_>], format: Format, sink: &mut dyn Write) -> Result<(), TableError> {
     let Some(first) = tables.first() else {
         return Err(TableError::Shape("nothing to write: no table".to_string()));
     };
@@ -216,7 +247,9 @@ pub fn write(tables: &[Table], format: Format, sink: &mut dyn Write) -> Result<(
         Format::Arrow => {
             let mut writer = arrow_ipc::writer::FileWriter::try_new(sink, &schema)?;
             for table in tables {
-                writer.write(&table.to_batch(&schema)?)?;
+                for batch in table.batches(&schema) {
+                    writer.write(&batch?)?;
+                }
             }
             writer.finish()?;
         }
@@ -224,7 +257,9 @@ pub fn write(tables: &[Table], format: Format, sink: &mut dyn Write) -> Result<(
             // The Parquet writer wants a sink it can send between threads: the file is built in memory.
             let mut writer = ArrowWriter::try_new(Vec::new(), schema.clone(), None)?;
             for table in tables {
-                writer.write(&table.to_batch(&schema)?)?;
+                for batch in table.batches(&schema) {
+                    writer.write(&batch?)?;
+                }
             }
             sink.write_all(&writer.into_inner()?)?;
         }
@@ -239,7 +274,7 @@ pub fn write(tables: &[Table], format: Format, sink: &mut dyn Write) -> Result<(
 
 /// Reads an Arrow IPC or Parquet file (by its name, [`Format::of`]) into one table: every record batch or row group
 /// in order. A file of another format, or a column of a type thermode does not write, is an error.
-pub fn read(path: &Path) -> Result<Table, TableError> {
+pub fn read(path: &Path) -> Result<Table<'static>, TableError> {
     let file = File::open(path)?;
     match Format::of(path) {
         Format::Arrow => read_arrow(file),
@@ -254,7 +289,7 @@ pub fn read(path: &Path) -> Result<Table, TableError> {
     }
 }
 
-fn read_arrow(file: impl Read + Seek) -> Result<Table, TableError> {
+fn read_arrow(file: impl Read + Seek) -> Result<Table<'static>, TableError> {
     let reader = arrow_ipc::reader::FileReader::try_new(file, None)?;
     let schema = reader.schema();
     collect(schema, reader)
@@ -264,7 +299,7 @@ fn read_arrow(file: impl Read + Seek) -> Result<Table, TableError> {
 fn collect(
     schema: SchemaRef,
     batches: impl Iterator<Item = Result<RecordBatch, ArrowError>>,
-) -> Result<Table, TableError> {
+) -> Result<Table<'static>, TableError> {
     let mut table = Table::new();
     for field in schema.fields() {
         table.push(
@@ -285,13 +320,19 @@ fn collect(
 mod tests {
     use super::*;
 
-    fn two_runs() -> Vec<Table> {
+    fn two_runs() -> Vec<Table<'static>> {
         let run = |material: &str, start: f64| {
             let mut t = Table::new();
-            t.push("time_s", Values::F64(vec![start, start + 0.1, start + 0.2]));
-            t.push("skin_c", Values::F64(vec![32.1, f64::NAN, 1.0 / 3.0]));
+            t.push("time_s", Values::F64(vec![start, start + 0.1, start + 0.2].into()));
+            t.push("skin_c", Values::F64(vec![32.1, f64::NAN, 1.0 / 3.0].into()));
             t.push("fault", Values::I64(vec![None, Some(104), None]));
-            t.push("material", Values::Text(vec![Some(material.to_string()); 3]));
+            t.push(
+                "material",
+                Values::Repeat {
+                    text: material.to_string(),
+                    rows: 3,
+                },
+            );
             t
         };
         vec![run("aluminium", -0.1), run("wood", 0.0)]
@@ -312,9 +353,13 @@ mod tests {
         let mut whole = runs[0].clone();
         for ((_, all), (_, more)) in whole.columns.iter_mut().zip(&runs[1].columns) {
             match (all, more) {
-                (Values::F64(a), Values::F64(b)) => a.extend(b),
+                (Values::F64(a), Values::F64(b)) => a.to_mut().extend(b.iter()),
                 (Values::I64(a), Values::I64(b)) => a.extend(b),
                 (Values::Text(a), Values::Text(b)) => a.extend(b.iter().cloned()),
+                (a @ Values::Repeat { .. }, b @ Values::Repeat { .. }) => {
+                    let texts = |v: &Values| (0..v.len()).map(|i| Some(v.field(i))).collect::<Vec<_>>();
+                    *a = Values::Text([texts(a), texts(b)].concat());
+                }
                 _ => unreachable!("same columns"),
             }
         }
@@ -326,6 +371,43 @@ mod tests {
             std::fs::write(&path, bytes).expect("save");
             let back = read(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
             assert_eq!(bits(&back), bits(&whole), "{name}");
+        }
+    }
+
+    #[test]
+    fn a_run_longer_than_a_batch_reads_back_whole_and_in_order() {
+        let rows = 2 * BATCH_ROWS + 5;
+        let mut table = Table::new();
+        table.push(
+            "time_s",
+            Values::F64((0..rows).map(|i| i as f64 * 1e-3).collect::<Vec<_>>().into()),
+        );
+        table.push(
+            "fault",
+            Values::I64((0..rows).map(|i| (i % 7 == 0).then_some(i as i64)).collect()),
+        );
+        table.push(
+            "material",
+            Values::Repeat {
+                text: "cork".into(),
+                rows,
+            },
+        );
+        let dir = tempfile::tempdir().expect("temp dir");
+        for name in ["long.arrow", "long.parquet"] {
+            let path = dir.path().join(name);
+            let mut bytes = Vec::new();
+            write(std::slice::from_ref(&table), Format::of(&path), &mut bytes).expect("write");
+            std::fs::write(&path, bytes).expect("save");
+            let back = read(&path).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(back.rows(), rows, "{name}");
+            assert_eq!(back.column("time_s"), table.column("time_s"), "{name}");
+            assert_eq!(back.column("fault"), table.column("fault"), "{name}");
+            assert_eq!(
+                back.column("material"),
+                Some(&Values::Text(vec![Some("cork".into()); rows])),
+                "{name}"
+            );
         }
     }
 
@@ -346,7 +428,7 @@ mod tests {
         runs[1].columns.pop();
         let error = write(&runs, Format::Arrow, &mut Vec::new()).expect_err("mismatched");
         assert!(error.to_string().contains("differ"), "{error}");
-        assert_eq!(Values::F64(vec![0.1 + 0.2]).field(0), "0.30000000000000004");
+        assert_eq!(Values::F64(vec![0.1 + 0.2].into()).field(0), "0.30000000000000004");
         assert_eq!(Values::I64(vec![None]).field(0), "");
     }
 }

@@ -127,7 +127,7 @@ pub fn check_columnar_precision(out: Option<&Path>, precision: Option<u8>) -> Re
 /// Writes the tables of `tables` (one per run) to `path` as Arrow IPC or Parquet when its name asks for one
 /// (`.arrow`, `.feather`, `.parquet`; atomically, like every output) and returns true; false (nothing written) for
 /// any other name, which the caller writes as CSV. Standard output (`-`) is always CSV.
-pub fn write_columnar(path: &Path, tables: impl FnOnce() -> Vec<Table>) -> Result<bool> {
+pub fn write_columnar<'a>(path: &Path, tables: impl FnOnce() -> Vec<Table<'a>>) -> Result<bool> {
     let format = Format::of(path);
     if is_stdout(path) || !format.is_columnar() {
         return Ok(false);

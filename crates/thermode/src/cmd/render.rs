@@ -184,33 +184,40 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 
 /// Every run's rows as one table each, with the CSV's columns (`thermode_render::run::CSV_HEADER`) and values:
 /// `contact` 0 or 1, `fault` the code (null without fault), `fault_description` null without fault.
-fn tables(runs: &[RenderRun]) -> Vec<Table> {
-    let table = |run: &RenderRun| {
-        let t = &run.trajectory;
-        let mut table = Table::new();
-        for (name, values) in t.numbers() {
-            table.push(name, Values::F64(values.to_vec()));
-        }
+fn tables(runs: &[RenderRun]) -> Vec<Table<'_>> {
+    runs.iter().map(run_table).collect()
+}
+
+fn run_table(run: &RenderRun) -> Table<'_> {
+    let t = &run.trajectory;
+    let mut table = Table::new();
+    for (name, values) in t.numbers() {
+        table.push(name, Values::F64(values.into()));
+    }
+    table.push(
+        "contact",
+        Values::I64(t.contact.iter().map(|&c| Some(i64::from(c))).collect()),
+    );
+    table.push(
+        "fault",
+        Values::I64(t.fault.iter().map(|f| f.map(|f| i64::from(f.code()))).collect()),
+    );
+    for (name, text) in [
+        ("material", run.spec.material.name.as_str()),
+        ("controller", run.summary.controller.as_str()),
+        ("renderer", run.spec.pipeline.renderer.name()),
+    ] {
         table.push(
-            "contact",
-            Values::I64(t.contact.iter().map(|&c| Some(i64::from(c))).collect()),
+            name,
+            Values::Repeat {
+                text: text.to_string(),
+                rows: t.len(),
+            },
         );
-        table.push(
-            "fault",
-            Values::I64(t.fault.iter().map(|f| f.map(|f| i64::from(f.code()))).collect()),
-        );
-        for (name, text) in [
-            ("material", run.spec.material.name.as_str()),
-            ("controller", run.summary.controller.as_str()),
-            ("renderer", run.spec.pipeline.renderer.name()),
-        ] {
-            table.push(name, Values::Text(vec![Some(text.to_string()); t.len()]));
-        }
-        let descriptions = t.fault.iter().map(|f| f.map(|f| f.description().to_string()));
-        table.push("fault_description", Values::Text(descriptions.collect()));
-        table
-    };
-    runs.iter().map(table).collect()
+    }
+    let descriptions = t.fault.iter().map(|f| f.map(|f| f.description().to_string()));
+    table.push("fault_description", Values::Text(descriptions.collect()));
+    table
 }
 
 /// The summaries as JSON objects whose window keys follow the windows actually used (`rms_skin_5_10_c` for a 10 s

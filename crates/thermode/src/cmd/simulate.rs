@@ -199,20 +199,21 @@ fn write_csv(path: &Path, traces: &[(Material, Trace)], precision: Precision) ->
 }
 
 /// The CSV's columns of every material's trace as one table each (Arrow and Parquet outputs).
-fn tables(traces: &[(Material, Trace)]) -> Vec<Table> {
-    let table = |(material, trace): &(Material, Trace)| {
-        let mut table = Table::new();
-        table.push("time_s", Values::F64(trace.time_s.clone()));
-        for (name, values) in &trace.columns {
-            table.push(name.as_str(), Values::F64(values.clone()));
-        }
-        table.push(
-            "material",
-            Values::Text(vec![Some(material.name.clone()); trace.time_s.len()]),
-        );
-        table
-    };
-    traces.iter().map(table).collect()
+fn tables(traces: &[(Material, Trace)]) -> Vec<Table<'_>> {
+    traces.iter().map(trace_table).collect()
+}
+
+fn trace_table((material, trace): &(Material, Trace)) -> Table<'_> {
+    let mut table = Table::new();
+    table.push("time_s", Values::F64(trace.time_s.as_slice().into()));
+    for (name, values) in &trace.columns {
+        table.push(name.as_str(), Values::F64(values.as_slice().into()));
+    }
+    table.push(
+        "material",
+        Values::Text(vec![Some(material.name.clone()); trace.time_s.len()]),
+    );
+    table
 }
 
 /// For each column, the first earlier column holding the same numbers bit for bit (kron's skin surface is its
