@@ -42,6 +42,7 @@ fn assert_same_as_csv(table: &Table, csv: &Path, what: &str) {
                 }
                 Values::I64(v) => v[row].map_or(String::new(), |x| x.to_string()) == field,
                 Values::Text(v) => v[row].as_deref().unwrap_or("") == field,
+                Values::Repeat { .. } => panic!("{what}: {name}: read back as text, never as a repeat"),
             };
             assert!(
                 same,
