@@ -123,6 +123,11 @@ impl CsvTable {
             }
             rows.push((line, record.iter().map(str::to_string).collect()));
         }
+        CsvTable::checked(path, header, rows)
+    }
+
+    /// The table of `path`, unless it has no data row or no column name (an error naming the file).
+    fn checked(path: &Path, header: Vec<String>, rows: Vec<(u64, Vec<String>)>) -> Result<CsvTable, LabError> {
         if rows.is_empty() || header.iter().all(String::is_empty) {
             return Err(LabError::EmptyFile {
                 file: path.to_path_buf(),
@@ -145,7 +150,7 @@ impl CsvTable {
             message: e.to_string(),
         })?;
         let header = table.columns.iter().map(|(name, _)| name.clone()).collect();
-        let rows: Vec<(u64, Vec<String>)> = (0..table.rows())
+        let rows = (0..table.rows())
             .map(|row| {
                 (
                     row as u64 + 2,
@@ -153,16 +158,7 @@ impl CsvTable {
                 )
             })
             .collect();
-        if rows.is_empty() {
-            return Err(LabError::EmptyFile {
-                file: path.to_path_buf(),
-            });
-        }
-        Ok(CsvTable {
-            file: path.to_path_buf(),
-            header,
-            rows,
-        })
+        CsvTable::checked(path, header, rows)
     }
 
     /// Index of the column `name` (case-insensitive); `None` if absent, an error if it appears twice.
