@@ -79,6 +79,9 @@ pub const BATCH_ROWS: usize = 16 * 1024;
 pub enum Values<'a> {
     /// Floating-point numbers (NaN kept as NaN, as the CSV writes `NaN`).
     F64(Cow<'a, [f64]>),
+    /// Floating-point numbers of a column that may be empty (a recording's material properties outside a touch);
+    /// `None` is an empty CSV field.
+    F64Null(Vec<Option<f64>>),
     /// Integers; `None` is an empty CSV field.
     I64(Vec<Option<i64>>),
     /// Text; `None` is an empty CSV field.
@@ -98,6 +101,7 @@ impl Values<'_> {
     pub fn len(&self) -> usize {
         match self {
             Values::F64(v) => v.len(),
+            Values::F64Null(v) => v.len(),
             Values::I64(v) => v.len(),
             Values::Text(v) => v.len(),
             Values::Repeat { rows, .. } => *rows,
@@ -114,6 +118,7 @@ impl Values<'_> {
     pub fn field(&self, row: usize) -> String {
         match self {
             Values::F64(v) => v[row].to_string(),
+            Values::F64Null(v) => v[row].map(|x| x.to_string()).unwrap_or_default(),
             Values::I64(v) => v[row].map(|x| x.to_string()).unwrap_or_default(),
             Values::Text(v) => v[row].clone().unwrap_or_default(),
             Values::Repeat { text, .. } => text.clone(),
@@ -122,7 +127,7 @@ impl Values<'_> {
 
     fn data_type(&self) -> DataType {
         match self {
-            Values::F64(_) => DataType::Float64,
+            Values::F64(_) | Values::F64Null(_) => DataType::Float64,
             Values::I64(_) => DataType::Int64,
             Values::Text(_) | Values::Repeat { .. } => DataType::Utf8,
         }
@@ -132,6 +137,7 @@ impl Values<'_> {
     fn array(&self, rows: Range<usize>) -> ArrayRef {
         match self {
             Values::F64(v) => Arc::new(Float64Array::from(v[rows].to_vec())),
+            Values::F64Null(v) => Arc::new(Float64Array::from(v[rows].to_vec())),
             Values::I64(v) => Arc::new(Int64Array::from(v[rows].to_vec())),
             Values::Text(v) => Arc::new(v[rows].iter().map(Option::as_deref).collect::<StringArray>()),
             Values::Repeat { text, .. } => Arc::new(StringArray::from_iter_values(std::iter::repeat_n(
@@ -150,6 +156,7 @@ impl Values<'_> {
                 v.to_mut()
                     .extend((0..a.len()).map(|i| if a.is_null(i) { f64::NAN } else { a.value(i) }));
             }
+            Values::F64Null(v) => v.extend(any.downcast_ref::<Float64Array>().ok_or_else(wrong)?.iter()),
             Values::I64(v) => v.extend(any.downcast_ref::<Int64Array>().ok_or_else(wrong)?.iter()),
             Values::Text(v) => {
                 let a = any.downcast_ref::<StringArray>().ok_or_else(wrong)?;
@@ -160,8 +167,10 @@ impl Values<'_> {
         Ok(())
     }
 
-    fn empty_like(data_type: &DataType, name: &str) -> Result<Values<'static>, TableError> {
-        match data_type {
+    fn empty_like(field: &Field) -> Result<Values<'static>, TableError> {
+        let name = field.name();
+        match field.data_type() {
+            DataType::Float64 if field.is_nullable() => Ok(Values::F64Null(Vec::new())),
             DataType::Float64 => Ok(Values::F64(Cow::Owned(Vec::new()))),
             DataType::Int64 => Ok(Values::I64(Vec::new())),
             DataType::Utf8 => Ok(Values::Text(Vec::new())),
@@ -302,10 +311,7 @@ fn collect(
 ) -> Result<Table<'static>, TableError> {
     let mut table = Table::new();
     for field in schema.fields() {
-        table.push(
-            field.name().clone(),
-            Values::empty_like(field.data_type(), field.name())?,
-        );
+        table.push(field.name().clone(), Values::empty_like(field)?);
     }
     for batch in batches {
         let batch = batch?;
@@ -326,6 +332,7 @@ mod tests {
             t.push("time_s", Values::F64(vec![start, start + 0.1, start + 0.2].into()));
             t.push("skin_c", Values::F64(vec![32.1, f64::NAN, 1.0 / 3.0].into()));
             t.push("fault", Values::I64(vec![None, Some(104), None]));
+            t.push("thickness_m", Values::F64Null(vec![None, Some(0.01), None]));
             t.push(
                 "material",
                 Values::Repeat {
@@ -355,6 +362,7 @@ mod tests {
             match (all, more) {
                 (Values::F64(a), Values::F64(b)) => a.to_mut().extend(b.iter()),
                 (Values::I64(a), Values::I64(b)) => a.extend(b),
+                (Values::F64Null(a), Values::F64Null(b)) => a.extend(b),
                 (Values::Text(a), Values::Text(b)) => a.extend(b.iter().cloned()),
                 (a @ Values::Repeat { .. }, b @ Values::Repeat { .. }) => {
                     let texts = |v: &Values| (0..v.len()).map(|i| Some(v.field(i))).collect::<Vec<_>>();

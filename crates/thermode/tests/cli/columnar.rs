@@ -41,6 +41,10 @@ fn assert_same_as_csv(table: &Table, csv: &Path, what: &str) {
                     csv_value.to_bits() == v[row].to_bits() || (csv_value.is_nan() && v[row].is_nan())
                 }
                 Values::I64(v) => v[row].map_or(String::new(), |x| x.to_string()) == field,
+                Values::F64Null(v) => match v[row] {
+                    Some(x) => field.parse::<f64>().is_ok_and(|c| c.to_bits() == x.to_bits()),
+                    None => field.is_empty(),
+                },
                 Values::Text(v) => v[row].as_deref().unwrap_or("") == field,
                 Values::Repeat { .. } => panic!("{what}: {name}: read back as text, never as a repeat"),
             };
@@ -108,4 +112,54 @@ fn simulate_and_render_write_arrow_and_parquet_with_the_csvs_columns_and_exact_v
         "stores every number exactly",
     );
     assert!(!Path::new(&path("rounded.parquet")).exists(), "refused before any work");
+}
+
+/// POSTs `body` to `/api/command` of the daemon on `port`; the response's text.
+#[cfg(unix)]
+fn post_command(port: u16, body: &str) -> String {
+    use std::io::{Read, Write};
+    let mut stream = std::net::TcpStream::connect(("127.0.0.1", port)).unwrap_or_else(|e| panic!("connect: {e}"));
+    let request = format!(
+        "POST /api/command HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\nConnection: close\r\nContent-Type: \
+         application/json\r\nContent-Length: {}\r\n\r\n{body}",
+        body.len()
+    );
+    stream
+        .write_all(request.as_bytes())
+        .unwrap_or_else(|e| panic!("send: {e}"));
+    let mut response = String::new();
+    let _ = stream.read_to_string(&mut response);
+    response
+}
+
+#[cfg(unix)]
+#[test]
+fn serve_record_to_arrow_or_parquet_also_writes_the_sessions_csv_values_there() {
+    for extension in ["arrow", "parquet"] {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let file = dir.path().join(format!("session.{extension}"));
+        let file_arg = file.display().to_string();
+        let (mut serve, port, _stderr) =
+            super::service::serve_with(&["--no-osc", "--duration", "3", "--record", &file_arg]);
+        let reply = post_command(port, r#"{"type":"touch","id":1,"channel":1,"material":"aluminium"}"#);
+        assert!(reply.contains(r#""request":"touch""#), "{reply}");
+        let status = serve.0.wait().unwrap_or_else(|e| panic!("wait for serve: {e}"));
+        assert!(status.success(), "serve --record {file_arg}: {status}");
+        let csv = std::fs::read_dir(dir.path())
+            .expect("the folder")
+            .filter_map(Result::ok)
+            .map(|e| e.path())
+            .find(|p| p.extension().is_some_and(|e| e == "csv") && !p.to_string_lossy().ends_with(".events.csv"))
+            .unwrap_or_else(|| panic!("no session CSV beside {file_arg}"));
+        let table = thermode_table::read(&file).unwrap_or_else(|e| panic!("{file_arg}: {e}"));
+        assert_same_as_csv(&table, &csv, &format!("serve --record .{extension}"));
+        let touched =
+            (0..table.rows()).filter(|&r| table.column("material").is_some_and(|m| m.field(r) == "aluminium"));
+        let conductivity = table.column("conductivity_w_mk").expect("the property columns");
+        let with_properties = touched.filter(|&r| !conductivity.field(r).is_empty()).count();
+        assert!(
+            with_properties > 10,
+            "the touch's rows hold aluminium's properties ({with_properties} rows)"
+        );
+    }
 }
