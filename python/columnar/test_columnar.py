@@ -64,3 +64,21 @@ def test_a_columnar_output_holds_the_csvs_columns_and_values(tmp_path: Path, com
         values = table.column(name).to_pylist()
         for row, (fields, value) in enumerate(zip(rows, values)):
             assert same(fields[index], value), f"{name} row {row}: CSV {fields[index]!r}, {extension} {value!r}"
+
+
+@pytest.mark.parametrize("extension", ["arrow", "parquet"])
+def test_a_recording_to_a_columnar_file_holds_the_sessions_csv(tmp_path: Path, extension: str) -> None:
+    target = tmp_path / f"session.{extension}"
+    state = tmp_path / "state"
+    run(["serve", "--port", "0", "--no-osc", "--duration", "1.5", "--state-dir", str(state), "--record", str(target)])
+    sessions = [p for p in tmp_path.glob("session_*.csv") if not p.name.endswith(".events.csv")]
+    assert len(sessions) == 1, sessions
+    table = parquet.read_table(target) if extension == "parquet" else feather.read_table(target)
+    with sessions[0].open(newline="") as f:
+        rows = list(csv.reader(f))
+    header, rows = rows[0], rows[1:]
+    assert table.column_names == header
+    assert table.num_rows == len(rows) > 100
+    for index, name in enumerate(header):
+        for row, (fields, value) in enumerate(zip(rows, table.column(name).to_pylist())):
+            assert same(fields[index], value), f"{name} row {row}: CSV {fields[index]!r}, {extension} {value!r}"
