@@ -10,6 +10,7 @@ mod controller;
 mod display;
 mod output;
 mod progress;
+mod record_columnar;
 mod resolve;
 mod signals;
 
