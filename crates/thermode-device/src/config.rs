@@ -50,6 +50,91 @@ pub struct SensorConfig {
     pub sample_rate_hz: f64,
 }
 
+/// The plate sensor's calibration against a reference thermometer (section `\[calibration\]`, written by `thermode
+/// calibrate`, present in a file only when set): the sensor reads `sensor_gain · T + sensor_offset_c` at a true
+/// plate temperature T, so thermode takes `(reading − sensor_offset_c) / sensor_gain` for the plate on real
+/// hardware (every reading, the envelope's included).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CalibrationConfig {
+    /// The sensor's gain \[-\], 0.5 to 2. Default 1 (uncalibrated).
+    pub sensor_gain: f64,
+    /// The sensor's offset \[°C\], −10 to 10. Default 0 (uncalibrated).
+    pub sensor_offset_c: f64,
+    /// Standard uncertainty of the gain \[-\], 0 to 1. Default 0.
+    pub gain_uncertainty: f64,
+    /// Standard uncertainty of the offset \[°C\], 0 to 10. Default 0.
+    pub offset_uncertainty_c: f64,
+}
+
+impl Default for CalibrationConfig {
+    fn default() -> Self {
+        CalibrationConfig {
+            sensor_gain: 1.0,
+            sensor_offset_c: 0.0,
+            gain_uncertainty: 0.0,
+            offset_uncertainty_c: 0.0,
+        }
+    }
+}
+
+/// The keys of `[calibration]`: (key, rule).
+const CALIBRATION_KEYS: [(&str, Rule); 4] = [
+    ("sensor_gain", Rule::Within { min: 0.5, max: 2.0 }),
+    ("sensor_offset_c", Rule::Within { min: -10.0, max: 10.0 }),
+    ("gain_uncertainty", Rule::Within { min: 0.0, max: 1.0 }),
+    ("offset_uncertainty_c", Rule::Within { min: 0.0, max: 10.0 }),
+];
+
+impl CalibrationConfig {
+    /// Whether anything is set (not the uncalibrated default).
+    pub fn is_set(&self) -> bool {
+        *self != CalibrationConfig::default()
+    }
+
+    /// The plate temperature \[°C\] the reading `reading_c` \[°C\] stands for.
+    pub fn plate_c(&self, reading_c: f64) -> f64 {
+        (reading_c - self.sensor_offset_c) / self.sensor_gain
+    }
+
+    fn values(&mut self) -> [&mut f64; 4] {
+        [
+            &mut self.sensor_gain,
+            &mut self.sensor_offset_c,
+            &mut self.gain_uncertainty,
+            &mut self.offset_uncertainty_c,
+        ]
+    }
+
+    /// Reads the section from `file`, if it has one.
+    fn read(file: &Table<'_>) -> Result<CalibrationConfig, ParamError> {
+        let mut calibration = CalibrationConfig::default();
+        if let Some(section) = file.section("calibration")? {
+            for ((key, rule), value) in CALIBRATION_KEYS.iter().zip(calibration.values()) {
+                if let Some(number) = section.number(key, *rule)? {
+                    *value = number;
+                }
+            }
+            section.finish()?;
+        }
+        Ok(calibration)
+    }
+
+    /// The section as device-file text (empty when nothing is set).
+    fn to_toml_string(mut self) -> String {
+        if !self.is_set() {
+            return String::new();
+        }
+        let mut out = String::from(
+            "\n[calibration]\n# The plate sensor's calibration (thermode calibrate): it reads sensor_gain · T + \
+             sensor_offset_c at a true\n# plate temperature T; the uncertainties are the fit's standard errors.\n",
+        );
+        for ((key, _), value) in CALIBRATION_KEYS.iter().zip(self.values()) {
+            out.push_str(&format!("{key} = {:?}\n", *value));
+        }
+        out
+    }
+}
+
 /// The bipolar current drive (section `\[drive\]`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DriveConfig {
@@ -104,6 +189,8 @@ pub struct DeviceConfig {
     pub ambient: AmbientConfig,
     /// Rendering settings of this display.
     pub render: RenderConfig,
+    /// The plate sensor's calibration (section `[calibration]`, not among [`DeviceConfig::keys`]).
+    pub calibration: CalibrationConfig,
 }
 
 impl Default for PlateConfig {
@@ -425,6 +512,7 @@ impl DeviceConfig {
             }
             section.finish()?;
         }
+        config.calibration = CalibrationConfig::read(&file)?;
         file.finish()?;
         config.validate(origin)?;
         Ok(config)
@@ -477,6 +565,7 @@ impl DeviceConfig {
             }
             out.push_str(&format!("{} = {:?}\n", field.key, *field.value));
         }
+        out.push_str(&self.calibration.to_toml_string());
         out
     }
 }

@@ -72,6 +72,27 @@ impl Measures {
     };
 }
 
+/// One device of a display: its name, the display's channels it holds, and its link.
+#[derive(Debug, Clone)]
+pub struct DevicePart {
+    /// The device's spelling (e.g. `mecom:/dev/ttyUSB0`); empty when the display has one device and no name for
+    /// it (whoever reports it names it by the display's label).
+    pub label: String,
+    /// The display's first channel on this device.
+    pub first_channel: usize,
+    /// How many of the display's channels are on this device.
+    pub channel_count: usize,
+    /// The device's link (None: a device without one, the simulated display).
+    pub health: Option<std::sync::Arc<crate::LinkHealth>>,
+}
+
+impl DevicePart {
+    /// The display's channels on this device.
+    pub fn channels(&self) -> std::ops::Range<usize> {
+        self.first_channel..self.first_channel + self.channel_count
+    }
+}
+
 /// A thermal display: channels that take gated drive commands and give sensor readings.
 pub trait Device {
     /// Number of channels.
@@ -112,6 +133,17 @@ pub trait Device {
     /// What the device measures or drives itself (default: everything, [`Measures::ALL`]).
     fn measures(&self) -> Measures {
         Measures::ALL
+    }
+
+    /// The devices the display is made of, each with its channels and link (default: one unnamed part holding
+    /// every channel, with [`Device::link_health`]; a [`crate::CompositeDevice`] lists its members).
+    fn parts(&self) -> Vec<DevicePart> {
+        vec![DevicePart {
+            label: String::new(),
+            first_channel: 0,
+            channel_count: self.channel_count(),
+            health: self.link_health(),
+        }]
     }
 }
 
@@ -341,5 +373,9 @@ impl<D: Device> Device for RecordingDevice<D> {
 
     fn measures(&self) -> Measures {
         self.inner.measures()
+    }
+
+    fn parts(&self) -> Vec<DevicePart> {
+        self.inner.parts()
     }
 }

@@ -2,7 +2,7 @@
 //!
 //! - [`Device`]: the small trait every display implements (apply a gated `DriveCommand`, read the sensors, do its
 //!   per-tick work at the loop's time); [`SimulatedDisplay`] (up to [`MAX_CHANNELS`] channels) and [`RecordingDevice`] (records
-//!   every command).
+//!   every command); [`CompositeDevice`]: one display made of several devices ([`DevicePart`] each).
 //! - [`SimulatedChannel`]: one channel's physics (`model.md` §5): a Peltier module from datasheet values
 //!   ([`thermode_model::peltier`]), the display plate, the hot side on the water-cooled aluminium box, the PT-100
 //!   ([`Pt100`]: lag, noise, 0.01 °C resolution, sampling), a bipolar current drive with a limit, and a finger resting
@@ -39,7 +39,9 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod calibrated;
 pub mod channel;
+pub mod composite;
 pub mod config;
 pub mod device;
 pub mod error;
@@ -48,9 +50,13 @@ pub mod link;
 pub mod link_error;
 pub mod sensor;
 
+pub use calibrated::CalibratedDevice;
 pub use channel::{ChannelState, Fault, HeatFlows, Polarity, SimulatedChannel, MAX_SUBSTEP_S};
+pub use composite::CompositeDevice;
 pub use config::DeviceConfig;
-pub use device::{Device, Measures, Reading, RecordedCommand, RecordingDevice, SimulatedDisplay, MAX_CHANNELS};
+pub use device::{
+    Device, DevicePart, Measures, Reading, RecordedCommand, RecordingDevice, SimulatedDisplay, MAX_CHANNELS,
+};
 pub use error::{DeviceCut, DeviceError};
 pub use finger::{default_finger, DefaultFinger, NoFinger, PlateFinger};
 pub use link::LinkHealth;

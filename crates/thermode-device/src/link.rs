@@ -13,6 +13,7 @@ pub struct LinkHealth {
     failures: AtomicU64,
     attempts: AtomicU64,
     error: Mutex<Option<String>>,
+    command_set: Mutex<Option<String>>,
 }
 
 impl Default for LinkHealth {
@@ -23,6 +24,7 @@ impl Default for LinkHealth {
             failures: AtomicU64::new(0),
             attempts: AtomicU64::new(0),
             error: Mutex::new(None),
+            command_set: Mutex::new(None),
         }
     }
 }
@@ -81,5 +83,18 @@ impl LinkHealth {
     /// The last failure's reason (kept after a reconnection, for the record).
     pub fn error(&self) -> Option<String> {
         self.error.lock().ok().and_then(|e| e.clone())
+    }
+
+    /// Records which of the protocol's commands the device is driven with (e.g. a MeCom firmware without the newer
+    /// commands), found at connect; set again at each reconnection.
+    pub fn set_command_set(&self, description: impl Into<String>) {
+        if let Ok(mut set) = self.command_set.lock() {
+            *set = Some(description.into());
+        }
+    }
+
+    /// Which commands the device is driven with, when the host records it.
+    pub fn command_set(&self) -> Option<String> {
+        self.command_set.lock().ok().and_then(|s| s.clone())
     }
 }

@@ -488,6 +488,9 @@ pub enum SpecFault {
     },
     /// No known prefix.
     NotHardware,
+    /// Several `mecom:PATH@ADDR` on one port (a bus) with a `channels=` list: the bus takes every instance of each
+    /// address.
+    BusWithChannels,
 }
 
 impl SpecFault {
@@ -507,6 +510,9 @@ impl SpecFault {
             SpecFault::NotAChannel { channel } => format!("channel {:?} is not ADDRESS:INSTANCE", text(channel)),
             SpecFault::NotHardware => {
                 "not a real display: use serial:PATH, mecom:PATH, mecom-tcp:HOST:PORT or tcs2:PATH".to_string()
+            }
+            SpecFault::BusWithChannels => {
+                "several addresses on one port take every instance of each address: no channels= list".to_string()
             }
         }
     }

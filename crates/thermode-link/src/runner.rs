@@ -446,6 +446,49 @@ pub struct PtyRunner<S, C> {
 #[cfg(unix)]
 pub type PtyFirmware = PtyRunner<FirmwareStatus, NoCommand>;
 
+/// A reference thermometer on a pseudo-terminal of its own, as USB lab thermometers are: every `period_s` \[s\]
+/// it writes the true plate temperature of `channel` of the emulated device that `control` runs, plus Gaussian
+/// noise of standard deviation `noise_c` \[°C\] (ChaCha8 seeded with `seed`), as one line in °C (`23.412`). Returns
+/// the path a reader opens; the thread runs until the process ends or its port fails.
+#[cfg(unix)]
+pub fn spawn_reference_thermometer(
+    control: Arc<FirmwareControl>,
+    channel: usize,
+    noise_c: f64,
+    seed: u64,
+    period_s: f64,
+) -> Result<String, EmulatorError> {
+    use rand::{Rng, SeedableRng};
+    use serialport::{SerialPort, TTYPort};
+    let io_error = |e: serialport::Error| EmulatorError::io(PortStep::PseudoTerminal, serial_error_kind(&e));
+    let (mut master, slave) = TTYPort::pair().map_err(io_error)?;
+    let path = slave
+        .name()
+        .ok_or(EmulatorError::io(PortStep::PseudoTerminalPath, io::ErrorKind::NotFound))?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    // Detached: it ends with the device's run or the process.
+    let _thread = start("thermode-reference", move || {
+        let _slave = slave;
+        loop {
+            std::thread::sleep(Duration::from_secs_f64(period_s));
+            if control.stop.load(Ordering::SeqCst) {
+                return Ok(RunEnd::Stopped);
+            }
+            let Some(plate_c) = control.status().map(|s| s.plate_c[channel.min(MAX_CHANNELS - 1)]) else {
+                continue;
+            };
+            // Box–Muller: one standard normal from two uniforms in (0, 1].
+            let (u1, u2): (f64, f64) = (1.0 - rng.gen::<f64>(), rng.gen::<f64>());
+            let normal = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+            let line = format!("{:.3}\n", plate_c + noise_c * normal);
+            if master.write_all(line.as_bytes()).and_then(|()| master.flush()).is_err() {
+                return Ok(RunEnd::HostClosed);
+            }
+        }
+    })?;
+    Ok(path)
+}
+
 #[cfg(unix)]
 impl<S: Copy + Send + 'static, C: Send + 'static> PtyRunner<S, C> {
     /// Creates a pseudo-terminal pair and runs `device` on its master side in real time on `clock`.

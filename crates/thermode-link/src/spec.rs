@@ -3,7 +3,7 @@
 //! | spelling | device |
 //! | --- | --- |
 //! | `serial:PATH` | thermode's own protocol ([`crate::own::host::SerialDevice`]) |
-//! | `mecom:PATH[?OPTIONS]` | Meerstetter TEC controller(s) over a serial port ([`crate::mecom::host::MecomDevice`]) |
+//! | `mecom:PATH[@ADDR][?OPTIONS]` | Meerstetter TEC controller(s) over a serial port ([`crate::mecom::host::MecomDevice`]); `@ADDR`: the instances of the device at RS-485 address ADDR (as `address=ADDR`) |
 //! | `mecom-tcp:HOST:PORT[?OPTIONS]` | the same over TCP |
 //! | `tcs2:PATH[?OPTIONS]` | QST.Lab TCS II in follow mode ([`crate::tcs2::host::Tcs2Device`]) |
 //!
@@ -12,11 +12,16 @@
 //! (the device's communication watchdog, 0.1 to 0.25 s; default 0.25). TCS II: `zones=N` (1 to 5; default 5),
 //! `hold_max=C` (the warmest set-point streamed, at most 43 °C; default 43), `neutral=C` (20 to 40 °C; default 32).
 //! Everything else follows the device file and the envelope ([`HardwareContext`]).
+//!
+//! A display of several devices ([`open_display`], `--device` given several times) is a
+//! [`thermode_device::CompositeDevice`] of their channels in order; `mecom:PATH@ADDR` spellings of one PATH are one
+//! bus: one MeCom host owns the port and asks every address in turn (requests one at a time, answers matched by
+//! address and sequence number), the channels of each address in the order the spellings come.
 
 use std::ops::Range;
 use std::sync::Arc;
 
-use thermode_device::{Device, DeviceConfig, DeviceError, LinkError, SpecFault};
+use thermode_device::{CompositeDevice, Device, DeviceConfig, DeviceError, LinkError, SpecFault};
 use thermode_platform::Clock;
 use thermode_safety::EnvelopeConfig;
 
@@ -181,6 +186,102 @@ pub fn mecom_config(
     Ok(config)
 }
 
+/// The path and settings of the MeCom serial spelling `spec` (`rest`: after the prefix): `PATH[@ADDR][?OPTIONS]`.
+fn mecom_serial<'a>(
+    spec: &str,
+    rest: &'a str,
+    context: &HardwareContext,
+) -> Result<(&'a str, MecomConfig), DeviceError> {
+    let (target, options) = split_options(spec, rest)?;
+    let (path, address) = match target.rsplit_once('@') {
+        Some((path, address)) if !path.is_empty() => (path, Some(address)),
+        _ => (target, None),
+    };
+    let mut config = mecom_config(spec, &options, context)?;
+    if let Some(address) = address {
+        config.discover_address = address
+            .parse()
+            .ok()
+            .filter(|a| (1..=254).contains(a))
+            .ok_or_else(|| bad_value(spec, "@", address, " is not an address from 1 to 254"))?;
+    }
+    Ok((path, config))
+}
+
+/// Opens the display the spellings `specs` name (each as [`open_hardware`] takes it): one device as it opens it;
+/// several as one [`CompositeDevice`] of their channels in order, named by their spellings. The `mecom:PATH@ADDR`
+/// spellings of one PATH (same options but the address) are one bus device whose channels are each address's
+/// instances, where the first of them stands.
+pub fn open_display(
+    specs: &[String],
+    context: &HardwareContext,
+    clock: Arc<dyn Clock>,
+) -> Result<Box<dyn Device + Send>, DeviceError> {
+    if let [spec] = specs {
+        return open_hardware(spec, context, clock);
+    }
+    let mut members: Vec<(String, Box<dyn Device + Send>)> = Vec::new();
+    for (index, spec) in specs.iter().enumerate() {
+        if let Some(bus) = bus_of(specs, index, context)? {
+            let (label, config, path) = bus;
+            members.push((
+                label,
+                Box::new(MecomDevice::open_serial(&path, &config, Arc::clone(&clock))?),
+            ));
+        } else if !joins_earlier_bus(specs, index, context) {
+            members.push((spec.clone(), open_hardware(spec, context, Arc::clone(&clock))?));
+        }
+    }
+    Ok(Box::new(CompositeDevice::new(members)?))
+}
+
+/// A MeCom serial spelling's path and settings (None for any other spelling).
+fn as_mecom(spec: &str, context: &HardwareContext) -> Result<Option<(String, MecomConfig)>, DeviceError> {
+    match spec.strip_prefix(MECOM_PREFIX) {
+        Some(rest) => mecom_serial(spec, rest, context).map(|(p, c)| Some((p.to_string(), c))),
+        None => Ok(None),
+    }
+}
+
+/// The bus that starts at `specs[index]`: its label, settings and path, when that spelling is the first of two or
+/// more MeCom spellings on its path (None otherwise).
+fn bus_of(
+    specs: &[String],
+    index: usize,
+    context: &HardwareContext,
+) -> Result<Option<(String, MecomConfig, String)>, DeviceError> {
+    let Some((path, mut config)) = as_mecom(&specs[index], context)? else {
+        return Ok(None);
+    };
+    if joins_earlier_bus(specs, index, context) {
+        return Ok(None);
+    }
+    let mut labels = vec![specs[index].clone()];
+    for spec in &specs[index + 1..] {
+        if let Some((other, more)) = as_mecom(spec, context)? {
+            if other == path {
+                if !more.channels.is_empty() || !config.channels.is_empty() {
+                    return Err(bad_spec(spec, SpecFault::BusWithChannels));
+                }
+                config.bus_addresses.push(more.discover_address);
+                labels.push(spec.clone());
+            }
+        }
+    }
+    Ok((labels.len() > 1).then(|| (labels.join(" + "), config, path)))
+}
+
+/// Whether `specs[index]` is a MeCom spelling on the path of an earlier one (it joined that one's bus).
+fn joins_earlier_bus(specs: &[String], index: usize, context: &HardwareContext) -> bool {
+    let path_of = |spec: &String| as_mecom(spec, context).ok().flatten().map(|(path, _)| path);
+    let Some(path) = path_of(&specs[index]) else {
+        return false;
+    };
+    specs[..index]
+        .iter()
+        .any(|earlier| path_of(earlier).as_ref() == Some(&path))
+}
+
 /// The TCS II settings of `spec`'s options over the defaults of `context`.
 pub fn tcs2_config(spec: &str, options: &[(&str, &str)], context: &HardwareContext) -> Result<Tcs2Config, DeviceError> {
     let envelope = &context.envelope;
@@ -233,8 +334,7 @@ pub fn open_hardware(
         return Ok(Box::new(MecomDevice::open_tcp(address, &config, clock)?));
     }
     if let Some(rest) = spec.strip_prefix(MECOM_PREFIX) {
-        let (path, options) = split_options(spec, rest)?;
-        let config = mecom_config(spec, &options, context)?;
+        let (path, config) = mecom_serial(spec, rest, context)?;
         return Ok(Box::new(MecomDevice::open_serial(path, &config, clock)?));
     }
     if let Some(rest) = spec.strip_prefix(TCS2_PREFIX) {

@@ -50,8 +50,13 @@ pub struct Status {
     pub recording: Option<Recording>,
     /// The Lab Streaming Layer streams, under `--lsl`.
     pub lsl: Option<LslStatus>,
-    /// The device link, for a device behind one.
+    /// The device link, for a device behind one; for a display of several devices, all of their links together
+    /// (`up` only when every one is up, the counts summed, the error of a link that is down).
     pub link: Option<LinkStatus>,
+    /// The devices the display is made of, in channel order (one for a display of one device).
+    pub devices: Vec<DeviceStatus>,
+    /// Per channel: the index in `devices` of the device it is on.
+    pub channel_devices: Vec<usize>,
     /// The dose ledger of the state directory, if any.
     pub dose_ledger: Option<DoseLedgerStatus>,
     /// The interlock (tripped by a failed recording under the policy `stop`).
@@ -173,6 +178,13 @@ pub struct HttpStatus {
     pub refused: u64,
     /// Failed accepts.
     pub accept_errors: u64,
+    /// `POST /api/command` requests read (answered, refused or rate-limited).
+    pub commands: u64,
+    /// The lease of `POST /api/command`'s virtual connection: its contacts are released after the grace period
+    /// once no HTTP command arrived for this long \[s\].
+    pub command_lease_s: f64,
+    /// The client number (`owner`) of `POST /api/command`'s virtual connection while its lease runs.
+    pub command_client: Option<u64>,
 }
 
 /// Access control.
@@ -290,6 +302,20 @@ pub struct LslStatus {
     pub markers: u64,
     /// Pushes that failed.
     pub failed: u64,
+}
+
+/// One device of the display.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, JsonSchema)]
+pub struct DeviceStatus {
+    /// The device as given to `--device`, e.g. `mecom:/dev/ttyUSB0` (the display's `device` for a display of one).
+    pub device: String,
+    /// The display's channels on this device.
+    pub channels: Vec<usize>,
+    /// Its link, for a device behind one (a device that is down has only its own channels faulted).
+    pub link: Option<LinkStatus>,
+    /// Which of its protocol's commands it is driven with, when the host records it (a MeCom controller: the full
+    /// command set, or the commands every firmware has and how its instances were counted).
+    pub command_set: Option<String>,
 }
 
 /// The device link.

@@ -135,6 +135,7 @@ pub struct LoopHandle {
     limits: Vec<StimulusLimits>,
     config: LoopConfig,
     link: Option<Arc<thermode_device::LinkHealth>>,
+    parts: Vec<thermode_device::DevicePart>,
     realtime: Realtime,
     self_tests: Vec<SelfTestState>,
 }
@@ -170,6 +171,7 @@ impl LoopHandle {
             )));
         }
         let link = device.link_health();
+        let parts = device.parts();
         let (queue, queue_receiver) = sync_channel(config.command_queue_len);
         let (urgent, urgent_receiver) = sync_channel(URGENT_QUEUE_LEN);
         let receiver = CommandReceiver {
@@ -234,6 +236,7 @@ impl LoopHandle {
             limits,
             config,
             link,
+            parts,
             realtime,
             self_tests,
         })
@@ -252,6 +255,11 @@ impl LoopHandle {
     /// The health of the device's link, for a device with one (a serial display).
     pub fn link_health(&self) -> Option<Arc<thermode_device::LinkHealth>> {
         self.link.clone()
+    }
+
+    /// The devices the display is made of, each with its channels and link ([`Device::parts`]).
+    pub fn device_parts(&self) -> &[thermode_device::DevicePart] {
+        &self.parts
     }
 
     /// Each channel's stimulus limits, as its engine reported them (the loop enforces them).

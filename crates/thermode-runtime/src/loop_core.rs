@@ -77,8 +77,8 @@ struct Notices {
     /// The recording's failures and resumptions already told.
     recording_failures: u64,
     recording_resumptions: u64,
-    link_failures: u64,
-    link_reconnects: u64,
+    /// Per device part ([`LoopHandle::device_parts`]): its link's failures and reconnections already told.
+    links: Vec<(u64, u64)>,
     /// The dose hold (an unwritable ledger) was told as on.
     dose_hold_told: bool,
 }
@@ -208,22 +208,8 @@ impl LoopCore {
             }
             _ => {}
         }
-        if let Some(link) = self.control.as_ref().and_then(LoopHandle::link_health) {
-            let (failures, reconnects) = (link.failures(), link.reconnects());
-            if failures > seen.link_failures {
-                seen.link_failures = failures;
-                lines.push(format!(
-                    "thermode: device link DOWN: {}; reconnecting with back-off (every channel faulted, 0 A)",
-                    link.error().unwrap_or_default()
-                ));
-            }
-            if reconnects > seen.link_reconnects {
-                seen.link_reconnects = reconnects;
-                lines.push(format!(
-                    "thermode: device link back up (reconnection {reconnects}); channels resume once their faults are \
-                     cleared (clear_fault)"
-                ));
-            }
+        if let Some(control) = &self.control {
+            link_notices(control.device_parts(), &mut seen.links, &mut lines);
         }
         lines
     }
@@ -329,6 +315,43 @@ impl PreparedCore {
 impl Drop for LoopCore {
     fn drop(&mut self) {
         let _ = self.finish();
+    }
+}
+
+/// The lines the device links' new failures and reconnections owe the operator: one display device as before
+/// (every channel faulted), several named with their channels (only those faulted). `seen` holds, per part, the
+/// failures and reconnections told already.
+fn link_notices(parts: &[thermode_device::DevicePart], seen: &mut Vec<(u64, u64)>, lines: &mut Vec<String>) {
+    seen.resize(parts.len(), (0, 0));
+    let several = parts.len() > 1;
+    for (part, (told_failures, told_reconnects)) in parts.iter().zip(seen.iter_mut()) {
+        let Some(link) = &part.health else { continue };
+        let (failures, reconnects) = (link.failures(), link.reconnects());
+        let channels = part.channels().map(|c| c.to_string()).collect::<Vec<_>>().join(", ");
+        if failures > *told_failures {
+            *told_failures = failures;
+            let which = if several {
+                format!("channels {channels} of {} faulted, 0 A; the others go on", part.label)
+            } else {
+                "every channel faulted, 0 A".to_string()
+            };
+            lines.push(format!(
+                "thermode: device link DOWN: {}; reconnecting with back-off ({which})",
+                link.error().unwrap_or_default()
+            ));
+        }
+        if reconnects > *told_reconnects {
+            *told_reconnects = reconnects;
+            let what = if several {
+                format!("{} (channels {channels})", part.label)
+            } else {
+                "channels".to_string()
+            };
+            lines.push(format!(
+                "thermode: device link back up (reconnection {reconnects}); {what} resume once their faults are \
+                 cleared (clear_fault)"
+            ));
+        }
     }
 }
 

@@ -7,8 +7,8 @@ use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
-use thermode_device::{DefaultFinger, Device, SimulatedDisplay, MAX_CHANNELS};
-use thermode_link::spec::{is_hardware, open_hardware, HardwareContext};
+use thermode_device::{CalibratedDevice, DefaultFinger, Device, SimulatedDisplay, MAX_CHANNELS};
+use thermode_link::spec::{is_hardware, open_display, HardwareContext};
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, SelfTestState};
 use thermode_platform::Clock;
 use thermode_runtime::engine::pipeline_engines;
@@ -20,15 +20,17 @@ use crate::resolve;
 /// How the display is set up (shared by serve, demo and bench).
 #[derive(Args, Debug, Clone)]
 pub struct DisplayArgs {
-    /// The display: `sim` (the simulated display), `serial:PATH` (thermode's own protocol), `mecom:PATH[?OPTIONS]` or
-    /// `mecom-tcp:HOST:PORT[?OPTIONS]` (Meerstetter TEC controllers; `mode=current|temperature`), `tcs2:PATH` (a
-    /// QST.Lab TCS II); a real display or `thermode emulate`. See docs/hardware.md.
+    /// The display: `sim` (the simulated display), `serial:PATH` (thermode's own protocol), `mecom:PATH[@ADDR][?OPTIONS]`
+    /// or `mecom-tcp:HOST:PORT[?OPTIONS]` (Meerstetter TEC controllers; `@ADDR` an RS-485 address;
+    /// `mode=current|temperature`), `tcs2:PATH` (a QST.Lab TCS II); a real display or `thermode emulate`. Given
+    /// several times (real devices only), one display of all their channels in that order; several addresses on one
+    /// port share it as one bus. See docs/hardware.md.
     #[arg(
         long,
-        value_name = "sim|serial:PATH|mecom:PATH|mecom-tcp:HOST:PORT|tcs2:PATH",
+        value_name = "sim|serial:PATH|mecom:PATH[@ADDR]|mecom-tcp:HOST:PORT|tcs2:PATH",
         default_value = "sim"
     )]
-    pub device: String,
+    pub device: Vec<String>,
     /// Device file (TOML) describing the display's hardware; default: the built-in default display.
     #[arg(long = "device-file", value_name = "FILE")]
     pub device_file: Option<PathBuf>,
@@ -43,13 +45,39 @@ pub struct DisplayArgs {
     pub seed: u64,
 }
 
+impl DisplayArgs {
+    /// The arguments of a display on the one device `device` (a spelling of `--device`).
+    pub fn one(device: &str, device_file: Option<PathBuf>, controller: ControllerArg, seed: u64) -> Self {
+        DisplayArgs {
+            device: vec![device.to_string()],
+            device_file,
+            channels: None,
+            controller,
+            seed,
+        }
+    }
+
+    /// Whether the display is the simulated one (`--device sim`, the default).
+    pub fn is_sim(&self) -> bool {
+        self.device.is_empty() || self.device == ["sim"]
+    }
+
+    /// The display's name: its device, or its devices joined by ` + `.
+    pub fn label(&self) -> String {
+        if self.device.is_empty() {
+            return "sim".to_string();
+        }
+        self.device.join(" + ")
+    }
+}
+
 /// A display ready for the loop.
 pub struct Display {
     /// The device.
     pub device: Box<dyn Device + Send>,
     /// One pipeline per channel.
     pub engines: EngineFactory,
-    /// `sim` or `serial:PATH`.
+    /// `sim`, `serial:PATH`, or several devices joined by ` + `.
     pub label: String,
     /// Finger names.
     pub names: Vec<String>,
@@ -100,7 +128,8 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Displ
     };
     let mut pipeline = PipelineConfig::new(device_config, controller);
     pipeline.validate()?;
-    let (device, label): (Box<dyn Device + Send>, String) = if args.device == "sim" {
+    let label = args.label();
+    let (device, label): (Box<dyn Device + Send>, String) = if args.is_sim() {
         // The simulated display is built from this very file, so the file is exact for it.
         pipeline.device = device_config.exact_for_its_simulation();
         let count = args.channels.unwrap_or(5);
@@ -108,29 +137,46 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>) -> Result<Displ
             bail!("--channels must be 1 to {MAX_CHANNELS}, not {count}");
         }
         let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device_config, count, args.seed)?;
-        (Box::new(display), "sim".to_string())
-    } else if is_hardware(&args.device) {
+        (Box::new(display), label)
+    } else if args.device.iter().all(|d| is_hardware(d)) {
         let context = HardwareContext {
             device: pipeline.device,
             envelope: pipeline.envelope,
         };
-        let device = open_hardware(&args.device, &context, clock.clone())
-            .with_context(|| format!("cannot open {}", args.device))?;
+        let device =
+            open_display(&args.device, &context, clock.clone()).with_context(|| format!("cannot open {label}"))?;
+        for part in device.parts() {
+            if let Some(commands) = part.health.as_ref().and_then(|h| h.command_set()) {
+                let name = if part.label.is_empty() { &label } else { &part.label };
+                eprintln!("thermode: {name}: {commands}");
+            }
+        }
+        let device: Box<dyn Device + Send> = match pipeline.device.calibration {
+            calibration if calibration.is_set() => {
+                if !device.measures().drive_current {
+                    bail!("{label} regulates its plate on its own sensor: a calibrated device file needs current mode");
+                }
+                eprintln!(
+                    "thermode: the plate sensor read through its calibration (gain {}, offset {} °C)",
+                    calibration.sensor_gain, calibration.sensor_offset_c
+                );
+                Box::new(CalibratedDevice::new(device, calibration))
+            }
+            _ => device,
+        };
         // A real display is tested against its file before a finger can be on it; a temperature-commanded device
         // (its own controller sets the current) cannot take the test's current pulse.
         pipeline.self_test_at_start = device.measures().drive_current;
         if let Some(n) = args.channels.filter(|&n| n != device.channel_count()) {
-            bail!(
-                "--channels {n}, but {} has {} channels",
-                args.device,
-                device.channel_count()
-            );
+            bail!("--channels {n}, but {label} has {} channels", device.channel_count());
         }
-        (device, args.device.clone())
+        (device, label)
+    } else if args.device.len() > 1 && args.device.iter().any(|d| d == "sim") {
+        bail!("--device sim is the simulated display alone; several --device name real devices only");
     } else {
         bail!(
-            "--device must be `sim`, `serial:PATH`, `mecom:PATH`, `mecom-tcp:HOST:PORT` or `tcs2:PATH`, not {:?}",
-            args.device
+            "--device must be `sim`, `serial:PATH`, `mecom:PATH[@ADDR]`, `mecom-tcp:HOST:PORT` or `tcs2:PATH`, not {:?}",
+            args.device.iter().find(|d| !is_hardware(d)).unwrap_or(&label)
         );
     };
     let count = device.channel_count();

@@ -10,6 +10,7 @@ mod controller;
 mod display;
 mod output;
 mod progress;
+mod record_columnar;
 mod resolve;
 mod signals;
 
@@ -41,6 +42,8 @@ enum Command {
     Tune(cmd::tune::TuneArgs),
     /// Identify a display (no finger on it): fit its device file's thermal parameters to an excitation.
     Identify(cmd::identify::IdentifyArgs),
+    /// Calibrate a display's plate sensor against a reference thermometer (no finger on it); writes a device file.
+    Calibrate(cmd::calibrate::CalibrateArgs),
     /// Experiments: plan, run and analyse material-identification studies.
     #[command(subcommand)]
     Lab(LabCommand),
@@ -89,6 +92,7 @@ fn main() -> ExitCode {
         Command::Render(args) => cmd::render::run(args),
         Command::Tune(args) => cmd::tune::run(args),
         Command::Identify(args) => cmd::identify::run(args),
+        Command::Calibrate(args) => cmd::calibrate::run(args),
         Command::Dose(DoseCommand::Show(args)) => cmd::dose::show(args),
         Command::Dose(DoseCommand::Reset(args)) => cmd::dose::reset(args),
     };

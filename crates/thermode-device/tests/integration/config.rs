@@ -260,3 +260,39 @@ fn cross_checks_are_made() {
     // A lower limit than I_max is fine.
     assert_eq!(parse("[drive]\ncurrent_limit_a = 2.0").drive.current_limit_a, 2.0);
 }
+
+/// A calibrated device file: `[calibration]` is written only when set (the default file has none), reads back to
+/// the same values, refuses a gain or offset no plate sensor has, and the calibrated plate is (reading − offset) /
+/// gain.
+#[test]
+fn a_calibration_round_trips_and_is_checked() {
+    use thermode_device::config::CalibrationConfig;
+    assert!(!DeviceConfig::default().to_toml_string().contains("[calibration]"));
+    let calibration = CalibrationConfig {
+        sensor_gain: 1.01,
+        sensor_offset_c: 0.3,
+        gain_uncertainty: 4e-5,
+        offset_uncertainty_c: 1.3e-3,
+    };
+    let calibrated = DeviceConfig {
+        calibration,
+        ..DeviceConfig::default()
+    };
+    let text = calibrated.to_toml_string();
+    assert!(text.contains("[calibration]"), "{text}");
+    assert_eq!(parse(&text), calibrated);
+    let plate_c = calibration.plate_c(1.01 * 30.0 + 0.3);
+    assert!((plate_c - 30.0).abs() < 1e-12, "plate {plate_c} °C for a true 30 °C");
+    for bad in [
+        "sensor_gain = 3.0",
+        "sensor_offset_c = -12.0",
+        "gain_uncertainty = -1.0",
+        "colour = 1.0",
+    ] {
+        let text = format!("[calibration]\n{bad}\n");
+        assert!(
+            DeviceConfig::from_toml_str(&text, "bad.toml").is_err(),
+            "accepted {bad}"
+        );
+    }
+}

@@ -173,3 +173,80 @@ fn a_faulted_envelope_switches_the_drive_off() {
     assert!(last.fault.is_some() && last.current_a == 0.0, "last command {last:?}");
     assert_eq!(d.inner().channel(0).map(|c| c.state().applied_current_a), Ok(0.0));
 }
+
+/// A composite of three simulated displays (2 + 1 + 2 channels): its channels are theirs in order, a command to
+/// channel k reaches only the member holding it (heated there, the others' plates untouched), a stop reaches every
+/// member, its parts say which channels each holds, and bad channel counts are refused.
+#[test]
+fn a_composite_device_routes_each_channel_to_its_member_and_stops_them_all() {
+    use thermode_device::CompositeDevice;
+    let members: Vec<(String, Box<dyn Device + Send>)> = [2, 1, 2]
+        .iter()
+        .enumerate()
+        .map(|(i, &n)| (format!("member-{i}"), Box::new(display(n)) as Box<dyn Device + Send>))
+        .collect();
+    let mut glove = CompositeDevice::new(members).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(glove.channel_count(), 5);
+    let parts = glove.parts();
+    let spans: Vec<(String, usize, usize)> = parts
+        .iter()
+        .map(|p| (p.label.clone(), p.first_channel, p.channel_count))
+        .collect();
+    assert_eq!(
+        spans,
+        [
+            ("member-0".into(), 0, 2),
+            ("member-1".into(), 2, 1),
+            ("member-2".into(), 3, 2)
+        ]
+    );
+    let mut envelopes: Vec<SafetyEnvelope> = (0..5).map(|_| envelope()).collect();
+    let start: Vec<f64> = (0..5).map(|c| ok(glove.read(c)).sensor_c).collect();
+    for n in 0..2000 {
+        let t = n as f64 * 1e-3;
+        for (channel, envelope) in envelopes.iter_mut().enumerate() {
+            envelope.observe(&ok(glove.read(channel)).measurement());
+            let wanted_a = if channel == 3 { 1.5 } else { 0.0 };
+            let command = envelope.gate_drive(t, wanted_a, &MeasuredOnly);
+            glove.apply(channel, &command).unwrap_or_else(|e| panic!("{e}"));
+        }
+        glove.poll(t + 1e-3);
+    }
+    let end: Vec<f64> = (0..5).map(|c| ok(glove.read(c)).sensor_c).collect();
+    // The undriven plates warm alike under their fingers (the same physics in every member); the driven one
+    // leaves them behind.
+    let undriven = [0, 1, 2, 4].map(|c| end[c] - start[c]);
+    let (low, high) = undriven
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(l, h), &d| (l.min(d), h.max(d)));
+    assert!(high - low < 0.2, "undriven channels moved apart: {undriven:?} °C");
+    assert!(
+        end[3] - start[3] > high + 1.0,
+        "channel 3 (member 2's first): {} → {} °C, the undriven moved {undriven:?} °C",
+        start[3],
+        end[3]
+    );
+    assert!(ok(glove.read(3)).current_a > 1.0, "{:?}", ok(glove.read(3)));
+    glove.all_off().unwrap_or_else(|e| panic!("{e}"));
+    glove.poll(2.1);
+    assert_eq!(ok(glove.read(3)).current_a, 0.0, "after all_off");
+    assert_eq!(
+        glove.read(5).err(),
+        Some(DeviceError::NoSuchChannel { channel: 5, count: 5 })
+    );
+    let too_many: Vec<(String, Box<dyn Device + Send>)> = (0..2)
+        .map(|i| (format!("d{i}"), Box::new(display(6)) as Box<dyn Device + Send>))
+        .collect();
+    assert_eq!(
+        CompositeDevice::new(too_many).err(),
+        Some(DeviceError::ChannelCount {
+            count: 12,
+            max: MAX_CHANNELS
+        })
+    );
+    assert!(CompositeDevice::new(Vec::new()).is_err(), "an empty composite");
+}
+
+fn ok(reading: Result<thermode_device::Reading, DeviceError>) -> thermode_device::Reading {
+    reading.unwrap_or_else(|e| panic!("{e}"))
+}

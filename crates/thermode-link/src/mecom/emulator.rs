@@ -19,12 +19,20 @@
 //!   `+05` unknown parameter, `+06` read only, `+07` out of range, `+08` no such instance). Frames with a bad CRC
 //!   or for another address get no answer, as on the device.
 //!
+//! With [`MecomEmulatorConfig::old_firmware`] it answers as an older firmware without the newer commands
+//! (`?VM` and three newer parameters refused as not available).
+//!
 //! Not emulated: error 139 (temperature changing too fast; the threshold is stored), the voltage limitation's
 //! effect (stored), flash wear, the bootloader, `?VB`/`VB` big data (answered `+01`).
 //!
+//! [`MecomBus`] puts several of them on one port at their own addresses (an RS-485 bus).
+//!
 //! Time runs in fixed ticks (default 1 ms) as in [`crate::own::emulator`]; answers leave as soon as their frame is read.
 
-use thermode_device::{Device, DeviceError, PlateFinger, SimulatedDisplay};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use thermode_device::{Device, DeviceError, PlateFinger, SimulatedDisplay, MAX_CHANNELS};
 use thermode_model::peltier::PeltierModule;
 
 use super::codec::frame::{encode_ack, encode_frame, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
@@ -49,6 +57,15 @@ pub struct MecomEmulatorConfig {
     pub kp_a_per_k: f64,
     /// Integral time of the emulated temperature controller \[s\], positive. Default 2.
     pub ti_s: f64,
+    /// Behave like an older firmware without the newer commands: `?VM` (metadata) answered "command not available"
+    /// (server error 1); the max object temperature change (4012), the live set voltage (50002) and the actual
+    /// output voltage (1021) answered "parameter not available" (5). Default false.
+    pub old_firmware: bool,
+    /// The object temperature sensor's gain error \[-\]: it reports `sensor_gain · T + sensor_offset_c` for a
+    /// sensor at T (a mounted sensor off the truth, for `thermode calibrate`), positive. Default 1.
+    pub sensor_gain: f64,
+    /// The object temperature sensor's offset error \[°C\] (see `sensor_gain`). Default 0.
+    pub sensor_offset_c: f64,
 }
 
 impl Default for MecomEmulatorConfig {
@@ -59,7 +76,22 @@ impl Default for MecomEmulatorConfig {
             tick_s: 1e-3,
             kp_a_per_k: 0.4,
             ti_s: 2.0,
+            old_firmware: false,
+            sensor_gain: 1.0,
+            sensor_offset_c: 0.0,
         }
+    }
+}
+
+/// Whether an older firmware ([`MecomEmulatorConfig::old_firmware`]) lacks `request`.
+fn lacks(request: &Request) -> bool {
+    match *request {
+        Request::Meta { .. } => true,
+        Request::Read { id, .. } | Request::Set { id, .. } => matches!(
+            id,
+            param::MAX_TEMP_CHANGE | param::LIVE_SET_VOLTAGE | param::ACTUAL_OUTPUT_VOLTAGE
+        ),
+        Request::Identify | Request::Reset => false,
     }
 }
 
@@ -188,6 +220,13 @@ impl<F: PlateFinger> MecomEmulator<F> {
         if !(config.ti_s.is_finite() && config.ti_s > 0.0) {
             return Err(bad("ti_s", config.ti_s, "must be positive"));
         }
+        if !(config.sensor_gain.is_finite() && config.sensor_gain > 0.0 && config.sensor_offset_c.is_finite()) {
+            return Err(bad(
+                "sensor_gain",
+                config.sensor_gain,
+                "must be positive, the offset finite",
+            ));
+        }
         if config.address == 0 || config.address == 255 {
             return Err(bad("address", f64::from(config.address), "must be from 1 to 254"));
         }
@@ -260,11 +299,13 @@ impl<F: PlateFinger> MecomEmulator<F> {
 
     fn step_plant(&mut self, dt_s: f64) {
         let now_s = self.time_s();
+        // The device sees its sensor's reading, errors included.
+        let (gain, offset_c) = (self.config.sensor_gain, self.config.sensor_offset_c);
         for (i, inst) in self.instances.iter_mut().enumerate() {
             let Ok(channel) = self.display.channel_mut(i) else {
                 continue;
             };
-            let sensor_c = channel.state().sensor.value_c;
+            let sensor_c = gain * channel.state().sensor.value_c + offset_c;
             let limit_a = f64::from(inst.current_limit_a).min(inst.hardware_limit_a);
             let heat_a = if self.error.is_some() || !inst.enabled() {
                 inst.integral_a = 0.0;
@@ -294,7 +335,7 @@ impl<F: PlateFinger> MecomEmulator<F> {
             };
             let state = channel.step(dt_s, heat_a);
             inst.applied_a = state.applied_current_a;
-            let reading_c = state.sensor.value_c;
+            let reading_c = gain * state.sensor.value_c + offset_c;
             if self.error.is_none() {
                 if reading_c > f64::from(inst.upper_error_c) {
                     self.error = Some((error_number::OBJECT_TOO_HIGH, (i + 1) as u8, now_s));
@@ -329,6 +370,10 @@ impl<F: PlateFinger> MecomEmulator<F> {
         self.last_valid_s = now_s;
         let answer = match Request::parse(payload) {
             Err(code) => format!("+{code:02X}"),
+            Ok(request) if self.config.old_firmware && lacks(&request) => match request {
+                Request::Meta { .. } => "+01".to_string(),
+                _ => "+05".to_string(),
+            },
             Ok(Request::Identify) => EMULATOR_IDENTITY.to_string(),
             Ok(Request::Reset) => {
                 self.reset(now_s);
@@ -401,7 +446,9 @@ impl<F: PlateFinger> MecomEmulator<F> {
             106 => i(self.error.map_or(0, |(_, inst, _)| i32::from(inst))),
             107 => i(0),
             108 => i(self.save_to_flash),
-            param::OBJECT_TEMPERATURE => f(state.sensor.value_c),
+            param::OBJECT_TEMPERATURE => {
+                f(self.config.sensor_gain * state.sensor.value_c + self.config.sensor_offset_c)
+            }
             param::SINK_TEMPERATURE => f(channel.hot_side_reading_c()),
             param::TARGET_OBJECT_TEMPERATURE => f(inst.active_target_c()),
             param::ACTUAL_OUTPUT_CURRENT => f(inst.applied_a * inst.sign()),
@@ -577,5 +624,77 @@ impl<F: PlateFinger + Send> Firmware for MecomEmulator<F> {
         status.frames_out = self.frames_out;
         status.error = self.error_number();
         status
+    }
+}
+
+/// Several emulated controllers on one RS-485 bus (one port): every byte from the host reaches each, and the one at
+/// the frame's address answers (as on a bus, where the others stay quiet). Each can be muted (it hears and answers
+/// nothing, its time runs on: its watchdog trips), a device unplugged from the bus.
+pub struct MecomBus {
+    devices: Vec<(Box<dyn Firmware>, Arc<AtomicBool>)>,
+}
+
+impl MecomBus {
+    /// A bus of `devices` (each at its own address); their channels follow one another in the status.
+    pub fn new(devices: Vec<Box<dyn Firmware>>) -> Self {
+        MecomBus {
+            devices: devices
+                .into_iter()
+                .map(|d| (d, Arc::new(AtomicBool::new(false))))
+                .collect(),
+        }
+    }
+
+    /// The switch that mutes device `index` (true: unplugged), if there is one.
+    pub fn mute(&self, index: usize) -> Option<Arc<AtomicBool>> {
+        self.devices.get(index).map(|(_, muted)| Arc::clone(muted))
+    }
+}
+
+impl Firmware for MecomBus {
+    fn receive(&mut self, bytes: &[u8], now_s: f64, out: &mut Vec<u8>) {
+        for (device, muted) in &mut self.devices {
+            if muted.load(Ordering::SeqCst) {
+                device.advance_to(now_s, &mut Vec::new());
+            } else {
+                device.receive(bytes, now_s, out);
+            }
+        }
+    }
+
+    fn advance_to(&mut self, now_s: f64, out: &mut Vec<u8>) {
+        for (device, _) in &mut self.devices {
+            device.advance_to(now_s, out);
+        }
+    }
+
+    fn tick_s(&self) -> f64 {
+        self.devices
+            .iter()
+            .map(|(d, _)| d.tick_s())
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// The devices' channels one after the other (as many as fit), their counters summed, the first error.
+    fn status(&self) -> FirmwareStatus {
+        let mut all = FirmwareStatus::new(0);
+        for (device, _) in &self.devices {
+            let one = device.status();
+            all.time_s = one.time_s;
+            for i in 0..one.channel_count {
+                let Some(slot) = (all.channel_count < MAX_CHANNELS).then_some(all.channel_count) else {
+                    break;
+                };
+                all.plate_c[slot] = one.plate_c[i];
+                all.applied_a[slot] = one.applied_a[i];
+                all.output_on[slot] = one.output_on[i];
+                all.channel_count += 1;
+            }
+            all.frames_in += one.frames_in;
+            all.frames_refused += one.frames_refused;
+            all.frames_out += one.frames_out;
+            all.error = all.error.or(one.error);
+        }
+        all
     }
 }

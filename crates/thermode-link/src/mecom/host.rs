@@ -53,8 +53,8 @@ pub use crate::host::Port;
 use crate::host::{self, read_step, start_thread, ReadStep, Reconnector, Recovering};
 use crate::own::guard::{sensor_lag_cooling_margin_c, sensor_lag_margin_c};
 use thermode_device::{
-    Device, DeviceConfig, DeviceCut, DeviceError, DownReason, LinkError, LinkFault, LinkHealth, Measures, MecomSetup,
-    OsError, Reading, RequestFault, MAX_CHANNELS,
+    Device, DeviceConfig, DeviceCut, DeviceError, DevicePart, DownReason, LinkError, LinkFault, LinkHealth, Measures,
+    MecomSetup, OsError, Reading, RequestFault, MAX_CHANNELS,
 };
 
 /// Default baud rate of a MeCom serial port \[bit/s\]: 57600 (the TEC family's default and the rate its service
@@ -104,6 +104,9 @@ pub struct MecomConfig {
     pub channels: Vec<MecomChannel>,
     /// Address whose instances become the channels when none are listed. Default 0 (the one device on the line).
     pub discover_address: u8,
+    /// Further addresses on the same port (an RS-485 bus, `mecom:PATH@ADDR` given several times) whose instances
+    /// follow those of [`MecomConfig::discover_address`] when no channels are listed, in this order. Default empty.
+    pub bus_addresses: Vec<u8>,
     /// Serial baud rate \[bit/s\]. Default [`DEFAULT_MECOM_BAUD_RATE`].
     pub baud_rate: u32,
     /// Longest wait for an answer before the request is sent once more \[s\], in (0, 1]. Default 0.05 (a request and
@@ -150,6 +153,7 @@ impl Default for MecomConfig {
             mode: MecomMode::Current,
             channels: Vec::new(),
             discover_address: 0,
+            bus_addresses: Vec::new(),
             baud_rate: DEFAULT_MECOM_BAUD_RATE,
             answer_timeout_s: 0.05,
             handshake_timeout_s: 3.0,
@@ -233,6 +237,18 @@ impl MecomConfig {
                 max: MAX_CHANNELS,
             });
         }
+        if !self.bus_addresses.is_empty() && self.discover_address == 0 {
+            let why = "must be 1 to 254 on a bus (address 0 is answered by every device on it)";
+            return Err(BadValue::custom("mecom bus address", 0.0, why).into());
+        }
+        let mut bus = vec![self.discover_address];
+        for &address in &self.bus_addresses {
+            if address == 0 || address == 255 || bus.contains(&address) {
+                let why = "must be 1 to 254, each address once";
+                return Err(BadValue::custom("mecom bus address", f64::from(address), why).into());
+            }
+            bus.push(address);
+        }
         if let Some(c) = self.channels.iter().find(|c| c.instance == 0 || c.address == 255) {
             return Err(LinkError::BadChannel {
                 address: c.address,
@@ -270,6 +286,59 @@ pub struct MecomStats {
     /// The device's error number found and cleared by a reset at connect, if any.
     pub reset_at_connect: Option<i32>,
 }
+
+/// Which MeCom commands a device is driven with: every firmware has `?IF`, `?VR`, `VS` and `RS` and the
+/// parameters thermode's safety rests on; older firmware answers the metadata request `?VM` and some newer
+/// parameters with a server error "command not available" (1) or "parameter not available" (5). Such a device is
+/// driven without them: its instances counted by probing (or taken from `channels=`), the optional settings left
+/// as they are, the voltage it does not report unknown.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct MecomCommandSet {
+    /// The instances were counted by reading the object temperature of instance 1, 2, … until one is refused
+    /// (`?VM` not available).
+    pub probed_instances: bool,
+    /// The optional commands the device refused as not available, in words.
+    pub missing: Vec<&'static str>,
+}
+
+impl MecomCommandSet {
+    /// The command set in one line, as `/api/status` and the start-up log show it.
+    pub fn describe(&self) -> String {
+        if self.missing.is_empty() && !self.probed_instances {
+            return "MeCom: the full command set".to_string();
+        }
+        let counted = match self.probed_instances {
+            true => "instances counted by probing the object temperature (1000); ",
+            false => "",
+        };
+        format!(
+            "MeCom: the commands every firmware has; {counted}not available: {}",
+            self.missing.join(", ")
+        )
+    }
+
+    fn lacks(&mut self, what: &'static str) {
+        if !self.missing.contains(&what) {
+            self.missing.push(what);
+        }
+    }
+}
+
+/// Whether `fault` is the device saying it lacks the command or parameter (server error 1 "command not available"
+/// or 5 "parameter not available").
+fn not_available(fault: &RequestFault) -> bool {
+    matches!(fault, RequestFault::Server { code: 1 | 5, .. })
+}
+
+/// What the metadata request `?VM` stands for, when the device lacks it.
+const MISSING_META: &str = "metadata (?VM)";
+/// The optional settings: (what, the parameter).
+const OPTIONAL_SETTINGS: [(&str, u16); 2] = [
+    ("max object temperature change (4012)", param::MAX_TEMP_CHANGE),
+    ("live set voltage (50002)", param::LIVE_SET_VOLTAGE),
+];
+/// The actual output voltage, when the device lacks it (its readings then carry NaN).
+const MISSING_VOLTAGE: &str = "actual output voltage (1021)";
 
 /// The newest values of one channel.
 #[derive(Debug, Clone, Default)]
@@ -437,6 +506,8 @@ pub struct MecomDevice {
     config: MecomConfig,
     channels: Vec<ChannelSetup>,
     identity: Vec<(u8, String)>,
+    /// The commands it is driven with, found at connect.
+    commands: MecomCommandSet,
     shared: Arc<Mutex<Shared>>,
     stop: Arc<AtomicBool>,
     worker: Option<JoinHandle<()>>,
@@ -448,6 +519,9 @@ pub struct MecomDevice {
     /// The last sample number handed out per channel.
     seq_seen: [u64; MAX_CHANNELS],
     health: Arc<LinkHealth>,
+    /// On a bus ([`MecomConfig::bus_addresses`]): each address's own link state, down while none of its channels
+    /// answered within [`MecomConfig::link_timeout_s`] (empty otherwise).
+    address_health: Vec<(u8, Arc<LinkHealth>)>,
 }
 
 impl std::fmt::Debug for MecomDevice {
@@ -549,7 +623,9 @@ impl MecomDevice {
             round_trip_total_s: 0.0,
         };
         let deadline_s = clock.now_s() + config.handshake_timeout_s;
-        let (channels, identity) = connect(&mut link, config, deadline_s).map_err(|e| link.error(e))?;
+        let (channels, identity, commands) = connect(&mut link, config, deadline_s).map_err(|e| link.error(e))?;
+        let health = Arc::new(LinkHealth::new());
+        health.set_command_set(commands.describe());
         let shared = Arc::new(Mutex::new(Shared {
             tracks: vec![Track::default(); MAX_CHANNELS],
             ..Shared::default()
@@ -559,6 +635,7 @@ impl MecomDevice {
             config: config.clone(),
             channels,
             identity,
+            commands: commands.clone(),
             shared: Arc::clone(&shared),
             stop: Arc::new(AtomicBool::new(false)),
             worker: None,
@@ -566,8 +643,17 @@ impl MecomDevice {
             recovery: None,
             seq_base: [0; MAX_CHANNELS],
             seq_seen: [0; MAX_CHANNELS],
-            health: Arc::new(LinkHealth::new()),
+            health,
+            address_health: Vec::new(),
         };
+        if !config.bus_addresses.is_empty() {
+            for setup in &device.channels {
+                let address = setup.channel.address;
+                if !device.address_health.iter().any(|(a, _)| *a == address) {
+                    device.address_health.push((address, Arc::new(LinkHealth::new())));
+                }
+            }
+        }
         // One cycle here, so the first read after open has values.
         let mut worker = Worker {
             link,
@@ -576,6 +662,9 @@ impl MecomDevice {
             shared,
             clock,
             enabled: vec![false; device.channels.len()],
+            voltage: vec![true; device.channels.len()],
+            set_up: vec![true; device.channels.len()],
+            silent_since: vec![None; device.channels.len()],
         };
         worker.cycle();
         let stop = Arc::clone(&device.stop);
@@ -592,6 +681,11 @@ impl MecomDevice {
     /// The channels (address, instance) in order.
     pub fn channels(&self) -> Vec<MecomChannel> {
         self.channels.iter().map(|c| c.channel).collect()
+    }
+
+    /// Which commands the device is driven with (found at connect; older firmware lacks some).
+    pub fn command_set(&self) -> &MecomCommandSet {
+        &self.commands
     }
 
     /// Each address's answer to `?IF`.
@@ -621,6 +715,38 @@ impl MecomDevice {
         LinkError::device(&self.name, fault).into()
     }
 
+    /// The link state of `address`: its own on a bus, the port's otherwise.
+    fn link_of(&self, address: u8) -> Arc<LinkHealth> {
+        let own = self.address_health.iter().find(|(a, _)| *a == address);
+        Arc::clone(own.map_or(&self.health, |(_, health)| health))
+    }
+
+    /// On a bus: takes an address's link state down when none of its channels answered within the link timeout,
+    /// and up again (a reconnection) when one does.
+    fn watch_addresses(&mut self) {
+        let now_s = self.clock.now_s();
+        let Ok(state) = self.shared.lock() else {
+            return;
+        };
+        for (address, health) in &self.address_health {
+            let last_s = self
+                .channels
+                .iter()
+                .zip(&state.tracks)
+                .filter(|(setup, _)| setup.channel.address == *address)
+                .filter_map(|(_, track)| track.last_answer_s)
+                .fold(f64::NEG_INFINITY, f64::max);
+            let silent_s = now_s - last_s;
+            let answering = silent_s <= self.config.link_timeout_s;
+            if health.is_up() && !answering {
+                let name = self.name.display();
+                health.down(format!("{name}@{address}: no answer for {silent_s:.2} s"));
+            } else if !health.is_up() && answering {
+                health.reconnected();
+            }
+        }
+    }
+
     fn check_channel(&self, channel: usize) -> Result<(), DeviceError> {
         let count = self.channels.len();
         if channel < count {
@@ -632,7 +758,7 @@ impl MecomDevice {
 }
 
 /// The configured channels and each address's identity.
-type Connected = (Vec<ChannelSetup>, Vec<(u8, String)>);
+type Connected = (Vec<ChannelSetup>, Vec<(u8, String)>, MecomCommandSet);
 
 /// Identifies the device(s), finds the channels and configures them, before `deadline_s` on the link's clock.
 /// Returns the channels and identities.
@@ -641,14 +767,26 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline_s: f64) -> Result<Con
     let mut addresses: Vec<u8> = config.channels.iter().map(|c| c.address).collect();
     if addresses.is_empty() {
         addresses.push(config.discover_address);
+        addresses.extend(&config.bus_addresses);
     }
     addresses.dedup();
     let mut identity = Vec::new();
     for &address in &addresses {
         identity.push((address, identify(link, address, deadline_s)?));
     }
+    let mut commands = MecomCommandSet::default();
     let channels = if config.channels.is_empty() {
-        discover(link, config.discover_address)?
+        let mut all = Vec::new();
+        for &address in &addresses {
+            all.extend(discover(link, address, &mut commands)?);
+        }
+        if all.len() > MAX_CHANNELS {
+            return Err(LinkFault::Setup(MecomSetup::InstanceCount {
+                count: all.len(),
+                max: MAX_CHANNELS,
+            }));
+        }
+        all
     } else {
         config.channels.clone()
     };
@@ -677,7 +815,7 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline_s: f64) -> Result<Con
     }
     let mut setups = Vec::with_capacity(channels.len());
     for &channel in &channels {
-        configure(link, config, channel).map_err(fail)?;
+        configure(link, config, channel, &mut commands).map_err(fail)?;
         let sign = match link.read_i32(channel, param::POSITIVE_CURRENT_IS) {
             Ok(0) => -1.0,
             Ok(_) => 1.0,
@@ -712,21 +850,38 @@ fn connect(link: &mut Link, config: &MecomConfig, deadline_s: f64) -> Result<Con
             }));
         }
     }
-    Ok((setups, identity))
+    for &address in &addresses {
+        let probe = MecomChannel { address, instance: 1 };
+        // Any other failure is the link's, and the worker's cycle meets it.
+        if link
+            .read_f32(probe, param::ACTUAL_OUTPUT_VOLTAGE)
+            .is_err_and(|why| not_available(&why))
+        {
+            commands.lacks(MISSING_VOLTAGE);
+        }
+    }
+    Ok((setups, identity, commands))
 }
 
-/// Every instance of `address` (counted with `?VM` on its object temperature).
-fn discover(link: &mut Link, address: u8) -> Result<Vec<MecomChannel>, LinkFault> {
-    let count = link
-        .transact(
-            address,
-            &Request::Meta {
-                id: param::OBJECT_TEMPERATURE,
-                instance: 1,
-            },
-        )
-        .map_err(|why| LinkFault::Setup(MecomSetup::CountInstances(why)))?
-        .unwrap_or(0) as usize;
+/// Every instance of `address`: counted with `?VM` on its object temperature, or, on a firmware without `?VM`,
+/// by reading the object temperature of instance 1, 2, … until one is refused.
+fn discover(link: &mut Link, address: u8, commands: &mut MecomCommandSet) -> Result<Vec<MecomChannel>, LinkFault> {
+    let meta = link.transact(
+        address,
+        &Request::Meta {
+            id: param::OBJECT_TEMPERATURE,
+            instance: 1,
+        },
+    );
+    let count = match meta {
+        Ok(count) => count.unwrap_or(0) as usize,
+        Err(why) if not_available(&why) => {
+            commands.lacks(MISSING_META);
+            commands.probed_instances = true;
+            probe_instances(link, address)?
+        }
+        Err(why) => return Err(LinkFault::Setup(MecomSetup::CountInstances(why))),
+    };
     if count == 0 || count > MAX_CHANNELS {
         return Err(LinkFault::Setup(MecomSetup::InstanceCount {
             count,
@@ -736,6 +891,19 @@ fn discover(link: &mut Link, address: u8) -> Result<Vec<MecomChannel>, LinkFault
     Ok((1..=count as u8)
         .map(|instance| MecomChannel { address, instance })
         .collect())
+}
+
+/// The number of instances of `address`, found by reading the object temperature of instance 1, 2, … up to
+/// [`MAX_CHANNELS`] + 1 until the device refuses one with a server error.
+fn probe_instances(link: &mut Link, address: u8) -> Result<usize, LinkFault> {
+    for instance in 1..=(MAX_CHANNELS as u8 + 1) {
+        match link.read_f32(MecomChannel { address, instance }, param::OBJECT_TEMPERATURE) {
+            Ok(_) => {}
+            Err(RequestFault::Server { .. }) => return Ok(usize::from(instance) - 1),
+            Err(why) => return Err(LinkFault::Setup(MecomSetup::CountInstances(why))),
+        }
+    }
+    Ok(MAX_CHANNELS + 1)
 }
 
 /// `?IF` to `address` until it answers or `deadline_s` on the link's clock.
@@ -770,7 +938,12 @@ fn identity_text(link: &mut Link, address: u8) -> Option<String> {
 }
 
 /// The per-channel configuration: output off first, then the device's own limits, then the mode.
-fn configure(link: &mut Link, config: &MecomConfig, channel: MecomChannel) -> Result<(), MecomSetup> {
+fn configure(
+    link: &mut Link,
+    config: &MecomConfig,
+    channel: MecomChannel,
+    commands: &mut MecomCommandSet,
+) -> Result<(), MecomSetup> {
     let i = channel.instance;
     let mut steps: Vec<(&'static str, Request)> = vec![
         (
@@ -844,12 +1017,23 @@ fn configure(link: &mut Link, config: &MecomConfig, channel: MecomChannel) -> Re
         Request::set_i32(param::OUTPUT_STAGE_ENABLE, i, 2),
     ));
     for (step, request) in steps {
-        link.set(channel, request).map_err(|why| MecomSetup::Refused {
-            address: channel.address,
-            instance: i,
-            step,
-            why,
-        })?;
+        let optional = match request {
+            Request::Set { id, .. } => OPTIONAL_SETTINGS.iter().find(|(_, p)| *p == id).map(|(what, _)| *what),
+            _ => None,
+        };
+        match (link.set(channel, request), optional) {
+            (Ok(()), _) => {}
+            // A firmware without this setting: the device's own default stays.
+            (Err(why), Some(what)) if not_available(&why) => commands.lacks(what),
+            (Err(why), _) => {
+                return Err(MecomSetup::Refused {
+                    address: channel.address,
+                    instance: i,
+                    step,
+                    why,
+                })
+            }
+        }
     }
     Ok(())
 }
@@ -863,6 +1047,12 @@ struct Worker {
     clock: Arc<dyn Clock>,
     /// Whether live enable is set on each channel, as last acknowledged.
     enabled: Vec<bool>,
+    /// Per channel: whether its device reports the actual output voltage (1021; an older firmware may not).
+    voltage: Vec<bool>,
+    /// Whether each channel is configured (false once its address was silent for longer than the link timeout).
+    set_up: Vec<bool>,
+    /// Per channel: since when \[s\] its address has not answered, if it has not.
+    silent_since: Vec<Option<f64>>,
 }
 
 impl Worker {
@@ -898,12 +1088,37 @@ impl Worker {
                 }
             }
         }
+        // On a bus, an address that did not answer is asked nothing more this cycle, so one silent device costs the
+        // others one answer timeout per cycle, not one per request.
+        let first_address = self.channels.first().map(|c| c.channel.address);
+        let bus = self.channels.iter().any(|c| Some(c.channel.address) != first_address);
+        let mut silent: Vec<u8> = Vec::new();
         for (index, command) in commands.into_iter().enumerate().take(self.channels.len()) {
-            if let Err(port @ RequestFault::Port { .. }) = self.drive(index, command) {
-                return self.port_failed(port);
+            let address = self.channels[index].channel.address;
+            if silent.contains(&address) {
+                continue;
             }
-            if let Err(port @ RequestFault::Port { .. }) = self.sample(index) {
-                return self.port_failed(port);
+            let now_s = self.clock.now_s();
+            if self.silent_since[index].is_some_and(|t| now_s - t > self.config.link_timeout_s) {
+                self.set_up[index] = false;
+            }
+            let driven = self.set_up_again(index).and_then(|()| self.drive(index, command));
+            let result = match driven {
+                Err(fault @ RequestFault::Port { .. }) => Err(fault),
+                Err(RequestFault::NoAnswer) if bus => Err(RequestFault::NoAnswer),
+                // One device: read it all the same (a lost answer to the drive must not cost a sample).
+                driven => self.sample(index).and(driven),
+            };
+            match result {
+                Err(port @ RequestFault::Port { .. }) => return self.port_failed(port),
+                Err(RequestFault::NoAnswer) => {
+                    if bus {
+                        silent.push(address);
+                    }
+                    self.mark_silent(address, now_s);
+                }
+                Ok(()) => self.silent_since[index] = None,
+                Err(_) => {}
             }
         }
         let elapsed_s = self.clock.now_s() - start_s;
@@ -914,6 +1129,45 @@ impl Worker {
             state.stats = self.link.stats;
         }
         true
+    }
+
+    /// The channels of `address` did not answer at `now_s` \[s\]: silent since then, unless already.
+    fn mark_silent(&mut self, address: u8, now_s: f64) {
+        for (index, setup) in self.channels.iter().enumerate() {
+            if setup.channel.address == address {
+                self.silent_since[index].get_or_insert(now_s);
+            }
+        }
+    }
+
+    /// Sets channel `index` up again (output off first, then its limits, mode and the watchdog of its address) when
+    /// its address answers after a silence longer than [`MecomConfig::link_timeout_s`] (its readings failed
+    /// meanwhile): a device that restarted lost its live settings. A device found in its error state (its
+    /// watchdog tripped while the host could not reach it) is reset first, and set up at a later cycle, once it
+    /// answers again.
+    fn set_up_again(&mut self, index: usize) -> Result<(), RequestFault> {
+        if self.set_up[index] {
+            return Ok(());
+        }
+        self.enabled[index] = false;
+        let channel = self.channels[index].channel;
+        let probe = MecomChannel {
+            address: channel.address,
+            instance: 1,
+        };
+        if self.link.read_i32(probe, param::DEVICE_STATUS)? == status::ERROR {
+            self.link.set(probe, Request::Reset)?;
+            return Err(RequestFault::NoAnswer);
+        }
+        let mut commands = MecomCommandSet::default();
+        configure(&mut self.link, &self.config, channel, &mut commands).map_err(|setup| match setup {
+            MecomSetup::Refused { why, .. } | MecomSetup::ReadObject(why) => why,
+            _ => RequestFault::NoAnswer,
+        })?;
+        let watchdog = Request::set_f32(param::WATCHDOG_TIMEOUT, 1, self.config.watchdog_s as f32);
+        self.link.set(probe, watchdog)?;
+        self.set_up[index] = true;
+        Ok(())
     }
 
     fn port_failed(&mut self, fault: RequestFault) -> bool {
@@ -978,7 +1232,7 @@ impl Worker {
                 object_c,
                 sink_c: self.link.read_f32(channel, param::SINK_TEMPERATURE)?,
                 current_a: self.link.read_f32(channel, param::ACTUAL_OUTPUT_CURRENT)? * sign,
-                voltage_v: self.link.read_f32(channel, param::ACTUAL_OUTPUT_VOLTAGE)? * sign,
+                voltage_v: self.voltage(index)? * sign,
                 device_status: self.link.read_i32(channel, param::DEVICE_STATUS)?,
                 error_number: self.link.read_i32(channel, param::ERROR_NUMBER)?,
                 ..Track::default()
@@ -1005,6 +1259,24 @@ impl Worker {
                 self.note_failure(index, &e);
                 Err(e)
             }
+        }
+    }
+
+    /// Channel `index`'s actual output voltage \[V\] (1021, the device's sign), or NaN once its device answered that
+    /// it lacks it (an older firmware).
+    fn voltage(&mut self, index: usize) -> Result<f64, RequestFault> {
+        if !self.voltage[index] {
+            return Ok(f64::NAN);
+        }
+        match self
+            .link
+            .read_f32(self.channels[index].channel, param::ACTUAL_OUTPUT_VOLTAGE)
+        {
+            Err(why) if not_available(&why) => {
+                self.voltage[index] = false;
+                Ok(f64::NAN)
+            }
+            read => read,
         }
     }
 
@@ -1085,6 +1357,8 @@ impl Recovering for MecomDevice {
         std::mem::swap(&mut self.worker, &mut fresh.worker);
         self.channels = fresh.channels.clone();
         self.identity = fresh.identity.clone();
+        self.commands = fresh.commands.clone();
+        self.health.set_command_set(self.commands.describe());
         for (base, seen) in self.seq_base.iter_mut().zip(self.seq_seen) {
             *base = seen + 1;
         }
@@ -1124,6 +1398,7 @@ impl Device for MecomDevice {
 
     fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
         self.supervise();
+        self.watch_addresses();
         self.check_channel(channel)?;
         let now_s = self.clock.now_s();
         let seq_base = self.seq_base[channel];
@@ -1193,6 +1468,36 @@ impl Device for MecomDevice {
 
     /// The worker runs in real time: nothing to do.
     fn poll(&mut self, _now_s: f64) {}
+
+    /// One part per address on a bus (`mecom:PATH@ADDR` given several times: each address's channels, named
+    /// `mecom:PATH@ADDR`, with the address's own link state); one unnamed part otherwise.
+    fn parts(&self) -> Vec<DevicePart> {
+        let mut parts: Vec<DevicePart> = Vec::new();
+        for (index, setup) in self.channels.iter().enumerate() {
+            let label = format!("{}@{}", self.name.display(), setup.channel.address);
+            match parts.last_mut() {
+                Some(last) if last.label == label => last.channel_count += 1,
+                _ => parts.push(DevicePart {
+                    label,
+                    first_channel: index,
+                    channel_count: 1,
+                    health: Some(self.link_of(setup.channel.address)),
+                }),
+            }
+        }
+        let mut labels: Vec<&str> = parts.iter().map(|p| p.label.as_str()).collect();
+        labels.sort_unstable();
+        labels.dedup();
+        if self.config.bus_addresses.is_empty() || labels.len() != parts.len() {
+            return vec![DevicePart {
+                label: String::new(),
+                first_channel: 0,
+                channel_count: self.channels.len(),
+                health: Some(Arc::clone(&self.health)),
+            }];
+        }
+        parts
+    }
 
     /// Every output disabled (live enable 0, and 0 A in current mode); waits for the acknowledges (at most two
     /// answer timeouts per write and channel, plus a cycle).

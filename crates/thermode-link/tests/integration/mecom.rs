@@ -21,8 +21,8 @@ use thermode_device::{Device, DeviceConfig, DeviceError, NoFinger, SimulatedDisp
 use thermode_link::mecom::codec::frame::{encode_frame, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
 use thermode_link::mecom::codec::payload::param;
 use thermode_link::mecom::codec::payload::{check_answer, Request};
-use thermode_link::mecom::emulator::{MecomEmulator, MecomEmulatorConfig};
-use thermode_link::mecom::host::{MecomConfig, MecomDevice, MecomMode};
+use thermode_link::mecom::emulator::{MecomBus, MecomEmulator, MecomEmulatorConfig};
+use thermode_link::mecom::host::{MecomChannel, MecomConfig, MecomDevice, MecomMode};
 use thermode_link::runner::Firmware;
 use thermode_link::runner::{FirmwareStatus, PtyFirmware, TcpFirmware};
 use thermode_model::kron::KronModel;
@@ -659,4 +659,150 @@ proptest! {
         decoder.feed(&out, |r| { if r.is_ok() { answers += 1; } });
         prop_assert_eq!(answers, 3);
     }
+}
+
+/// An emulated controller of `channels` instances at `address`, an older firmware if `old_firmware`.
+fn emulator_at(channels: usize, address: u8, old_firmware: bool) -> MecomEmulator<KronModel> {
+    let display = SimulatedDisplay::<KronModel>::fingertips(&DeviceConfig::default(), channels, 5)
+        .unwrap_or_else(|e| panic!("display: {e}"));
+    let config = MecomEmulatorConfig {
+        address,
+        old_firmware,
+        ..MecomEmulatorConfig::default()
+    };
+    MecomEmulator::new(display, config).unwrap_or_else(|e| panic!("emulator: {e}"))
+}
+
+/// A firmware that answers `?VM` "command not available" and three newer parameters "parameter not available" is
+/// driven with the commands every version has: its three instances counted by probing (or two taken from
+/// `channels=`), a touch heats its plate, its voltage unknown (NaN), and the command set says what was used. The
+/// full firmware on the same test: counted by `?VM`, nothing missing, the voltage a number.
+#[test]
+fn an_older_firmware_without_the_newer_commands_is_driven_with_those_every_version_has() {
+    for old_firmware in [false, true] {
+        let clock = clock();
+        let pty = PtyFirmware::spawn(Box::new(emulator_at(3, 1, old_firmware)), Arc::clone(&clock))
+            .unwrap_or_else(|e| panic!("pty: {e}"));
+        let device = MecomDevice::open_serial(pty.path(), &config(MecomMode::Current), Arc::clone(&clock))
+            .unwrap_or_else(|e| panic!("open (old firmware {old_firmware}): {e}"));
+        let commands = device.command_set().clone();
+        let described = device.link_health().and_then(|h| h.command_set()).unwrap_or_default();
+        println!("old firmware {old_firmware}: {described}");
+        assert_eq!(device.channel_count(), 3, "instances, old firmware {old_firmware}");
+        assert_eq!(commands.probed_instances, old_firmware, "{commands:?}");
+        assert_eq!(commands.missing.len(), if old_firmware { 4 } else { 0 }, "{commands:?}");
+        assert_eq!(described.contains("every firmware"), old_firmware, "{described}");
+        let start = status(&pty);
+        let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
+        let last = control.run(3.0, &[38.0, 23.0, 23.0]);
+        let end = status(&pty);
+        assert!(
+            end.plate_c[0] > start.plate_c[0] + 5.0,
+            "old firmware {old_firmware}: plate {} → {} °C",
+            start.plate_c[0],
+            end.plate_c[0]
+        );
+        assert_eq!(ok(&last[0]).voltage_v.is_nan(), old_firmware, "{:?}", ok(&last[0]));
+    }
+    let clock = clock();
+    let pty = PtyFirmware::spawn(Box::new(emulator_at(3, 1, true)), Arc::clone(&clock))
+        .unwrap_or_else(|e| panic!("pty: {e}"));
+    let listed = MecomConfig {
+        channels: vec![
+            MecomChannel {
+                address: 1,
+                instance: 1,
+            },
+            MecomChannel {
+                address: 1,
+                instance: 2,
+            },
+        ],
+        ..config(MecomMode::Current)
+    };
+    let device =
+        MecomDevice::open_serial(pty.path(), &listed, Arc::clone(&clock)).unwrap_or_else(|e| panic!("open: {e}"));
+    assert_eq!(device.channel_count(), 2);
+    assert!(!device.command_set().probed_instances, "{:?}", device.command_set());
+}
+
+/// Two controllers at addresses 1 and 2 on one bus (one pseudo-terminal, one host owning it): four channels in
+/// address order, named per address; address 2 unplugged faults only its channels while address 1 goes on heating;
+/// plugged back (its watchdog tripped meanwhile), it is reset, set up again and read again.
+#[test]
+fn two_addresses_on_one_bus_an_unplugged_one_faults_only_its_channels_and_comes_back() {
+    let clock = clock();
+    let bus = MecomBus::new(vec![
+        Box::new(emulator_at(2, 1, false)),
+        Box::new(emulator_at(2, 2, true)),
+    ]);
+    let unplugged = bus.mute(1).unwrap_or_else(|| panic!("no device 1"));
+    let pty = PtyFirmware::spawn(Box::new(bus), Arc::clone(&clock)).unwrap_or_else(|e| panic!("pty: {e}"));
+    let config = MecomConfig {
+        discover_address: 1,
+        bus_addresses: vec![2],
+        ..config(MecomMode::Current)
+    };
+    let device =
+        MecomDevice::open_serial(pty.path(), &config, Arc::clone(&clock)).unwrap_or_else(|e| panic!("open: {e}"));
+    let addresses: Vec<u8> = device.channels().iter().map(|c| c.address).collect();
+    assert_eq!(addresses, [1, 1, 2, 2]);
+    let parts = device.parts();
+    let labels: Vec<&str> = parts.iter().map(|p| p.label.as_str()).collect();
+    assert_eq!(labels.len(), 2, "{labels:?}");
+    assert!(labels[0].ends_with("@1") && labels[1].ends_with("@2"), "{labels:?}");
+    assert_eq!((parts[1].first_channel, parts[1].channel_count), (2, 2));
+    let targets = [38.0, 23.0, 38.0, 23.0];
+    let start = status(&pty);
+    let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
+    control.run(2.0, &targets);
+    let driven = status(&pty);
+    println!("plates after 2 s: {:?}", &driven.plate_c[..4]);
+    for channel in [0, 2] {
+        assert!(
+            driven.plate_c[channel] > start.plate_c[channel] + 5.0,
+            "channel {channel}: plate {} → {} °C",
+            start.plate_c[channel],
+            driven.plate_c[channel]
+        );
+    }
+    unplugged.store(true, std::sync::atomic::Ordering::SeqCst);
+    let last = control.run(2.0, &targets);
+    let apart = status(&pty);
+    assert!(last[0].is_ok() && last[1].is_ok(), "address 1: {:?}", &last[..2]);
+    assert!(
+        last[2].is_err() && last[3].is_err(),
+        "address 2 unplugged: {:?}",
+        &last[2..]
+    );
+    assert!(
+        apart.output_on[0] && (apart.plate_c[0] - 38.0).abs() < 3.0,
+        "address 1 no longer held at 38 °C: {} → {} °C",
+        driven.plate_c[0],
+        apart.plate_c[0]
+    );
+    assert!(!apart.output_on[2], "address 2's watchdog left its output on");
+    let links: Vec<bool> = parts
+        .iter()
+        .filter_map(|p| p.health.as_ref().map(|h| h.is_up()))
+        .collect();
+    assert_eq!(
+        links,
+        [true, false],
+        "the link states of addresses 1 and 2 while 2 is unplugged"
+    );
+    unplugged.store(false, std::sync::atomic::Ordering::SeqCst);
+    let back = wait_for(5.0, || control.tick(&targets)[2].is_ok());
+    println!("address 2 read again {back:?} s after it was plugged back");
+    assert!(back.is_some(), "address 2 never read again");
+    assert_eq!(status(&pty).error, None, "address 2 not reset");
+    let address_2 = parts[1]
+        .health
+        .as_ref()
+        .map(|h| (h.is_up(), h.reconnects(), h.failures()));
+    assert_eq!(
+        address_2,
+        Some((true, 1, 1)),
+        "address 2's link (up, reconnects, failures)"
+    );
 }

@@ -55,7 +55,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         return print_report(&report, args.format);
     }
     let mut display_args = args.display.clone();
-    if display_args.device == "sim" {
+    if display_args.is_sim() {
         // The simulated display at its largest; a real display has the channels it reports.
         display_args.channels = Some(display_args.channels.unwrap_or(10));
     }

@@ -15,7 +15,7 @@ use std::io::Write;
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use thermode_device::{DefaultFinger, NoFinger, PlateFinger, SimulatedDisplay};
 use thermode_link::own::emulator::{Emulator, EmulatorConfig, LinkFaults, PtyEmulator};
@@ -62,16 +62,6 @@ pub struct EmulateArgs {
     link: Option<PathBuf>,
 }
 
-/// Points the symbolic link `link` at `target`, replacing whatever is there in one step (rename).
-fn publish_link(link: &std::path::Path, target: &str) -> Result<()> {
-    let mut tmp = link.as_os_str().to_owned();
-    tmp.push(format!(".{}.tmp", std::process::id()));
-    let tmp = PathBuf::from(tmp);
-    let _ = std::fs::remove_file(&tmp);
-    std::os::unix::fs::symlink(target, &tmp).with_context(|| format!("cannot create the link {}", tmp.display()))?;
-    std::fs::rename(&tmp, link).with_context(|| format!("cannot publish the link {}", link.display()))
-}
-
 /// Runs `thermode emulate`.
 pub fn run(args: &EmulateArgs) -> Result<()> {
     if args.hardware.protocol != Protocol::Own {
@@ -80,6 +70,7 @@ pub fn run(args: &EmulateArgs) -> Result<()> {
             device_file: args.device_file.as_deref(),
             seed: args.seed,
             trace: args.trace.as_deref(),
+            link: args.link.as_deref(),
         };
         return emulate_hw::run(&args.hardware, &display);
     }
@@ -115,7 +106,7 @@ fn run_own<F: PlateFinger + Send + 'static>(args: &EmulateArgs, display: Simulat
     }
     let pty = PtyEmulator::spawn(emulator, Arc::new(MonotonicClock::new()))?;
     if let Some(link) = &args.link {
-        publish_link(link, pty.path())?;
+        emulate_hw::publish_link(link, pty.path())?;
     }
     let mut stdout = std::io::stdout().lock();
     writeln!(stdout, "{}", pty.path()).and_then(|()| stdout.flush())?;

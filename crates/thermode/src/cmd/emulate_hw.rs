@@ -6,14 +6,14 @@
 //! the port picked), flushed at once; the emulator then runs in real time until the process is ended.
 
 use std::io::Write;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use thermode_device::{DefaultFinger, Device, NoFinger, PlateFinger, SimulatedDisplay};
-use thermode_link::mecom::emulator::{MecomEmulator, MecomEmulatorConfig};
-use thermode_link::runner::{Firmware, PtyFirmware, RunEnd, TcpFirmware};
+use thermode_link::mecom::emulator::{MecomBus, MecomEmulator, MecomEmulatorConfig};
+use thermode_link::runner::{spawn_reference_thermometer, Firmware, PtyFirmware, RunEnd, TcpFirmware};
 use thermode_link::tcs2::emulator::{Tcs2Emulator, Tcs2EmulatorConfig};
 use thermode_platform::{Clock, MonotonicClock};
 
@@ -41,9 +41,26 @@ pub struct HardwareArgs {
     /// of a pseudo-terminal.
     #[arg(long, value_name = "ADDR")]
     pub tcp: Option<String>,
-    /// MeCom only: the device address, 1 to 254 (frames to address 0 are answered too).
-    #[arg(long, value_name = "N", default_value_t = 1)]
-    pub address: u8,
+    /// MeCom only: the device address, 1 to 254 (frames to address 0 are answered too). Given several times, one
+    /// controller of `--channels` instances at each address, all on one port (an RS-485 bus; no `--trace`).
+    #[arg(long, value_name = "N", default_value = "1")]
+    pub address: Vec<u8>,
+    /// MeCom only: answer as an older firmware without the newer commands (`?VM` metadata "command not available";
+    /// max temperature change 4012, live set voltage 50002 and actual voltage 1021 "parameter not available").
+    #[arg(long = "old-firmware")]
+    pub old_firmware: bool,
+    /// MeCom only: the object temperature sensor's offset error [°C]: it reports gain · T + offset (see
+    /// `--sensor-gain`), a mounted sensor off the truth for `thermode calibrate`.
+    #[arg(long = "sensor-offset-c", value_name = "C", default_value_t = 0.0)]
+    pub sensor_offset_c: f64,
+    /// MeCom only: the object temperature sensor's gain error [-] (see `--sensor-offset-c`).
+    #[arg(long = "sensor-gain", value_name = "G", default_value_t = 1.0)]
+    pub sensor_gain: f64,
+    /// MeCom on a pseudo-terminal only: offer a reference thermometer of this channel's true plate on a second
+    /// pseudo-terminal (its path is the second line printed): one temperature in °C per line every 0.1 s, with
+    /// Gaussian noise of 0.01 °C.
+    #[arg(long = "reference-channel", value_name = "N")]
+    pub reference_channel: Option<usize>,
     /// TCS II only: stream temperature lines at this rate [Hz] even when muted (a test of the host).
     #[arg(long = "stream-hz", value_name = "HZ")]
     pub stream_hz: Option<f64>,
@@ -63,6 +80,8 @@ pub struct DisplayArgs<'a> {
     pub seed: u64,
     /// Where the trace of the true plate goes (None: no trace).
     pub trace: Option<&'a Path>,
+    /// A symbolic link published to the pseudo-terminal (None: none), so a restarted emulator is found there.
+    pub link: Option<&'a Path>,
 }
 
 /// Creates (replaces) the trace file `path`, unbuffered so each step's rows reach it whole; its folder is created
@@ -73,11 +92,31 @@ pub fn trace_file(path: &Path) -> Result<Box<dyn std::io::Write + Send>> {
     Ok(Box::new(file))
 }
 
+/// Points the symbolic link `link` at `target`, replacing whatever is there in one step (rename).
+pub fn publish_link(link: &std::path::Path, target: &str) -> Result<()> {
+    let mut tmp = link.as_os_str().to_owned();
+    tmp.push(format!(".{}.tmp", std::process::id()));
+    let tmp = PathBuf::from(tmp);
+    let _ = std::fs::remove_file(&tmp);
+    std::os::unix::fs::symlink(target, &tmp).with_context(|| format!("cannot create the link {}", tmp.display()))?;
+    std::fs::rename(&tmp, link).with_context(|| format!("cannot publish the link {}", link.display()))
+}
+
+/// Removes the symbolic link `link` if it still points at `path` (this emulator's pseudo-terminal).
+pub fn remove_link(link: &Path, path: &str) {
+    if std::fs::read_link(link).is_ok_and(|target| target.as_os_str() == path) {
+        let _ = std::fs::remove_file(link);
+    }
+}
+
 /// Runs the MeCom or TCS II emulator of `args` over the display of `display`.
 pub fn run(args: &HardwareArgs, display: &DisplayArgs<'_>) -> Result<()> {
     let device = resolve::device_config(display.device_file)?;
     let (channels, seed) = (display.channels, display.seed);
     let trace = display.trace.map(trace_file).transpose()?;
+    if args.address.len() > 1 {
+        return serve_bus(args, display);
+    }
     let (firmware, what, spelling) = match args.no_finger {
         true => firmware(
             args,
@@ -90,7 +129,47 @@ pub fn run(args: &HardwareArgs, display: &DisplayArgs<'_>) -> Result<()> {
             trace,
         )?,
     };
-    serve_firmware(args, firmware, &what, spelling)
+    serve_firmware(args, firmware, &what, spelling, display.link)
+}
+
+/// Serves one MeCom controller of `display.channels` instances at each of `args.address` on one port (a bus), each
+/// over its own simulated display (seeds `display.seed`, `display.seed + 1`, …).
+fn serve_bus(args: &HardwareArgs, display: &DisplayArgs<'_>) -> Result<()> {
+    if args.protocol != Protocol::Mecom || display.trace.is_some() {
+        bail!("several --address are for --protocol mecom, without --trace");
+    }
+    let device = resolve::device_config(display.device_file)?;
+    let mut controllers: Vec<Box<dyn Firmware>> = Vec::new();
+    for (index, &address) in args.address.iter().enumerate() {
+        let seed = display.seed + index as u64;
+        let one = HardwareArgs {
+            address: vec![address],
+            tcp: None,
+            ..*args
+        };
+        let controller = match args.no_finger {
+            true => firmware(
+                &one,
+                SimulatedDisplay::<NoFinger>::fingertips(&device, display.channels, seed)?,
+                None,
+            )?,
+            false => firmware(
+                &one,
+                SimulatedDisplay::<DefaultFinger>::fingertips(&device, display.channels, seed)?,
+                None,
+            )?,
+        };
+        controllers.push(controller.0);
+    }
+    let addresses: Vec<String> = args.address.iter().map(u8::to_string).collect();
+    let what = format!(
+        "a MeCom bus of {} controllers at addresses {}, {} instances each",
+        addresses.len(),
+        addresses.join(", "),
+        display.channels
+    );
+    let bus: Box<dyn Firmware> = Box::new(MecomBus::new(controllers));
+    serve_firmware(args, bus, &what, "mecom:", display.link)
 }
 
 /// The emulator of `args.protocol` over `display` (tracing its plant into `trace`), what it is, and the `--device`
@@ -103,18 +182,20 @@ fn firmware<F: PlateFinger + Send + 'static>(
     let channels = display.channel_count();
     Ok(match args.protocol {
         Protocol::Mecom => {
+            let address = args.address.first().copied().unwrap_or(1);
             let config = MecomEmulatorConfig {
-                address: args.address,
+                address,
+                old_firmware: args.old_firmware,
+                sensor_gain: args.sensor_gain,
+                sensor_offset_c: args.sensor_offset_c,
                 ..MecomEmulatorConfig::default()
             };
             let mut emulator = MecomEmulator::new(display, config)?;
             if let Some(trace) = trace {
                 emulator.trace_to(trace);
             }
-            let what = format!(
-                "a MeCom TEC controller at address {}, {channels} instances",
-                args.address
-            );
+            let firmware = if args.old_firmware { " (older firmware)" } else { "" };
+            let what = format!("a MeCom TEC controller{firmware} at address {address}, {channels} instances");
             let spelling = if args.tcp.is_some() { "mecom-tcp:" } else { "mecom:" };
             (Box::new(emulator), what, spelling)
         }
@@ -161,7 +242,13 @@ pub fn stop_on_signal<S: Copy + Send + Sync + 'static, C: Send + Sync + 'static>
     Ok(())
 }
 
-fn serve_firmware(args: &HardwareArgs, firmware: Box<dyn Firmware>, what: &str, spelling: &str) -> Result<()> {
+fn serve_firmware(
+    args: &HardwareArgs,
+    firmware: Box<dyn Firmware>,
+    what: &str,
+    spelling: &str,
+    link: Option<&Path>,
+) -> Result<()> {
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
     let mut stdout = std::io::stdout().lock();
     let end = if let Some(bind) = &args.tcp {
@@ -176,14 +263,27 @@ fn serve_firmware(args: &HardwareArgs, firmware: Box<dyn Firmware>, what: &str, 
         tcp.wait()?
     } else {
         let pty = PtyFirmware::spawn(firmware, clock)?;
+        if let Some(link) = link {
+            publish_link(link, pty.path())?;
+        }
         writeln!(stdout, "{}", pty.path()).and_then(|()| stdout.flush())?;
+        if let Some(channel) = args.reference_channel {
+            let reference = spawn_reference_thermometer(Arc::clone(pty.control()), channel, 0.01, 7, 0.1)?;
+            writeln!(stdout, "{reference}").and_then(|()| stdout.flush())?;
+            eprintln!("thermode emulate: a reference thermometer of channel {channel}'s plate on {reference}");
+        }
         drop(stdout);
         eprintln!(
             "thermode emulate: {what}; connect with --device {spelling}{}",
             pty.path()
         );
         stop_on_signal(pty.control())?;
-        pty.wait()?
+        let path = pty.path().to_string();
+        let end = pty.wait();
+        if let Some(link) = link {
+            remove_link(link, &path);
+        }
+        end?
     };
     match end {
         RunEnd::Stopped | RunEnd::PortClosed | RunEnd::HostClosed => Ok(()),

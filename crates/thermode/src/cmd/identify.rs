@@ -135,13 +135,7 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
 /// switched off at the end, also after an error.
 fn record_in_real_time(args: &IdentifyArgs, believed: &DeviceConfig) -> Result<Vec<IdSample>> {
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
-    let display = DisplayArgs {
-        device: args.device.clone(),
-        device_file: args.device_file.clone(),
-        channels: None,
-        controller: ControllerArg::Model,
-        seed: args.seed,
-    };
+    let display = DisplayArgs::one(&args.device, args.device_file.clone(), ControllerArg::Model, args.seed);
     let mut device = build_display(&display, &clock)?.device;
     let mut excitation = Excitation::new(believed)?;
     let dt_s = 1.0 / RATE_HZ;

@@ -137,10 +137,10 @@ pub struct LabRunArgs {
     #[arg(long, value_name = "T", requires = "display")]
     pub(crate) token: Option<String>,
     /// Present on a display connected to this machine: the values `thermode serve --device` takes (`sim` is the
-    /// simulated display in real time, `serial:PATH`, `mecom:PATH`, …); thermode runs it as `serve` would, on
-    /// loopback only, for this session.
+    /// simulated display in real time, `serial:PATH`, `mecom:PATH`, …; given several times, one display of their
+    /// channels in that order); thermode runs it as `serve` would, on loopback only, for this session.
     #[arg(long, value_name = "DEVICE", conflicts_with = "simulate")]
-    pub(crate) device: Option<String>,
+    pub(crate) device: Vec<String>,
     /// The display channel (finger) the trials are presented on, with `--display` or `--device`.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub(crate) channel: usize,
@@ -167,7 +167,7 @@ pub fn run(args: &LabRunArgs) -> Result<()> {
     for participant in &participants {
         participant_plan(&experiment, participant)?;
     }
-    let live = args.display.is_some() || args.device.is_some();
+    let live = args.display.is_some() || !args.device.is_empty();
     if !live && !args.simulate {
         bail!(
             "choose where the materials are presented: --display ws://HOST:PORT (a running `thermode serve`), \
@@ -289,7 +289,7 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
     on_display(args, |url, token| {
         let link = WsLink::connect(url, token, args.channel)?;
         let device = link.status().map(|s| s.device.clone()).unwrap_or_default();
-        if device.starts_with("tcs2:") || device.contains("mode=temperature") {
+        if device.contains("tcs2:") || device.contains("mode=temperature") {
             bail!(
                 "{device} regulates its plate itself, so the plate's heat balance cannot measure the finger on it \
                  (docs/lab.md): run the lab on a current-commanded display"
@@ -310,7 +310,11 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
         writeln!(
             out,
             "presenting on {} channel {}",
-            args.device.as_deref().unwrap_or(url),
+            if args.device.is_empty() {
+                url.to_string()
+            } else {
+                args.device.join(" + ")
+            },
             args.channel
         )?;
         // The simulated participant compares what it feels with real contact under the fv model.
@@ -347,12 +351,12 @@ fn run_live(args: &LabRunArgs, experiment: &ExperimentFile, participant: &str, o
 pub(crate) fn on_display(args: &LabRunArgs, body: impl FnOnce(&str, Option<&str>) -> Result<()>) -> Result<()> {
     // With --device this process runs the display: a stop signal must stop it cleanly (every drive to 0 A, the
     // dose ledger written) before the process ends. Installed before the daemon starts.
-    let signals = args.device.is_some().then(StopSignals::install).transpose()?;
-    let (daemon, url, token) = match (&args.display, &args.device) {
+    let signals = (!args.device.is_empty()).then(StopSignals::install).transpose()?;
+    let (daemon, url, token) = match (&args.display, args.device.is_empty()) {
         (Some(url), _) => (None, url.clone(), args.token.clone()),
-        (None, Some(device)) => {
+        (None, false) => {
             let display = DisplayArgs {
-                device: device.clone(),
+                device: args.device.clone(),
                 device_file: args.device_file.clone(),
                 channels: None,
                 controller: args.controller.unwrap_or(ControllerArg::Model),
@@ -362,7 +366,7 @@ pub(crate) fn on_display(args: &LabRunArgs, body: impl FnOnce(&str, Option<&str>
             let url = format!("ws://{}", daemon.http_addr());
             (Some(daemon), url, Some(token))
         }
-        (None, None) => bail!("--display or --device"),
+        (None, true) => bail!("--display or --device"),
     };
     let daemon = Arc::new(Mutex::new(daemon));
     let (done, interrupted) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));

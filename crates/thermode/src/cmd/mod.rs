@@ -1,6 +1,7 @@
 //! One module per subcommand; each exposes its clap `Args` struct and a `run` function.
 
 pub mod bench;
+pub mod calibrate;
 pub mod demo;
 pub mod dose;
 pub mod emulate;

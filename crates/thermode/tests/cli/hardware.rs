@@ -142,6 +142,39 @@ fn bad_hardware_spellings_are_refused_with_the_reason() {
     );
 }
 
+/// A display of several devices refuses the simulated display among real ones, an address out
+/// of 1 to 254, and address 0 on a bus (every device would answer it); a bus takes every instance of each address.
+#[test]
+fn bad_several_device_spellings_are_refused_with_the_reason() {
+    let bench = |devices: &[&str]| {
+        let mut args = vec!["bench", "--duration", "1"];
+        for device in devices {
+            args.extend(["--device", device]);
+        }
+        args.iter().map(|a| a.to_string()).collect::<Vec<_>>()
+    };
+    let cases: [(&[&str], &str); 4] = [
+        (
+            &["sim", "mecom:/dev/null"],
+            "--device sim is the simulated display alone",
+        ),
+        (
+            &["mecom:/dev/null@300", "serial:/dev/null"],
+            "is not an address from 1 to 254",
+        ),
+        (&["mecom:/dev/null", "mecom:/dev/null@2"], "must be 1 to 254 on a bus"),
+        (
+            &["mecom:/dev/null@1?channels=1:1", "mecom:/dev/null@2"],
+            "no channels= list",
+        ),
+    ];
+    for (devices, reason) in cases {
+        let args = bench(devices);
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        super::expect_error(&args, reason);
+    }
+}
+
 #[test]
 fn bench_floor_measures_an_empty_loop_and_refuses_impossible_rates() {
     let out = Command::new(env!("CARGO_BIN_EXE_thermode"))
@@ -403,4 +436,249 @@ fn a_procedure_runs_on_the_temperature_commanded_tcs2_and_mecom_emulators() {
             assert!(events.contains(kind), "{device}: no {kind} event in\n{events}");
         }
     }
+}
+
+/// The display channels with a latched fault, from `/api/status`.
+fn faulted(status: &serde_json::Value) -> Vec<u64> {
+    let faults = status["faults"].as_array().cloned().unwrap_or_default();
+    faults.iter().filter_map(|f| f["channel"].as_u64()).collect()
+}
+
+/// Polls `/api/status` of `http_port` every 50 ms until `done` holds, or panics after `limit_s` \[s\] naming `what`
+/// with the last status.
+fn status_until(
+    http_port: u16,
+    limit_s: f64,
+    what: &str,
+    done: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let start = std::time::Instant::now();
+    loop {
+        let status = super::serve_on_emulator::status(http_port);
+        if done(&status) {
+            return status;
+        }
+        assert!(
+            start.elapsed().as_secs_f64() < limit_s,
+            "{what} not within {limit_s} s; status: devices {} faults {} channels {}",
+            status["devices"],
+            status["faults"],
+            status["channels"]
+        );
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+}
+
+/// The plate reading of `channel` \[°C\].
+fn sensor_c(status: &serde_json::Value, channel: usize) -> f64 {
+    status["channels"][channel]["sensor_c"].as_f64().unwrap_or(f64::NAN)
+}
+
+/// A display of two MeCom controllers (two instances each) on two pseudo-terminals, `--device` given twice, for
+/// every firmware the emulator speaks: both driven; one killed, and only its channels fault (its link down) while
+/// the other's channel keeps following its set-point; the killed one back on the same path, its link up again.
+#[test]
+fn a_display_of_two_mecom_devices_faults_only_the_killed_ones_channels_and_takes_it_back() {
+    for firmware in [None, Some("--old-firmware")] {
+        two_mecom_devices_one_killed(firmware);
+    }
+}
+
+/// The test above with the emulators' `firmware` switch (None: the full command set).
+fn two_mecom_devices_one_killed(firmware: Option<&str>) {
+    use super::serve_on_emulator::{serve_devices, setpoint};
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
+    let links = [dir.path().join("tec-a"), dir.path().join("tec-b")];
+    let emulator = |link: &std::path::Path| {
+        let link = link.to_string_lossy().to_string();
+        let mut args = vec!["--protocol", "mecom", "--channels", "2", "--no-finger", "--link", &link];
+        args.extend(firmware);
+        emulate(&args)
+    };
+    let _a = emulator(&links[0]);
+    let b = emulator(&links[1]);
+    let devices: Vec<String> = links.iter().map(|l| format!("mecom:{}", l.display())).collect();
+    let host = serve_devices(&[&devices[0], &devices[1]], None, None);
+    let started = super::serve_on_emulator::status(host.http_port);
+    assert_eq!(started["channel_count"], 4, "{}", started["devices"]);
+    assert_eq!(started["channel_devices"], serde_json::json!([0, 0, 1, 1]));
+    for (index, device) in devices.iter().enumerate() {
+        let entry = &started["devices"][index];
+        assert_eq!(entry["device"], device.as_str(), "{entry}");
+        assert_eq!(
+            entry["channels"],
+            serde_json::json!([2 * index, 2 * index + 1]),
+            "{entry}"
+        );
+        assert_eq!(entry["link"]["state"], "up", "{entry}");
+        let commands = entry["command_set"].as_str().unwrap_or_default();
+        assert_eq!(commands.contains("every firmware"), firmware.is_some(), "{entry}");
+    }
+    let (start_0, start_2) = (sensor_c(&started, 0), sensor_c(&started, 2));
+    setpoint(host.osc_port, 0, 34.0, 4.0);
+    setpoint(host.osc_port, 2, 34.0, 4.0);
+    let driven = status_until(host.http_port, 15.0, "both devices driven 1 °C up", |s| {
+        sensor_c(s, 0) > start_0 + 1.0 && sensor_c(s, 2) > start_2 + 1.0
+    });
+    drop(b);
+    let down = status_until(host.http_port, 5.0, "device b down, its channels faulted", |s| {
+        s["devices"][1]["link"]["state"] == "down" && faulted(s).contains(&2) && faulted(s).contains(&3)
+    });
+    assert!(
+        !faulted(&down).contains(&0) && !faulted(&down).contains(&1),
+        "faults {}",
+        down["faults"]
+    );
+    assert_eq!(down["devices"][0]["link"]["state"], "up", "{}", down["devices"]);
+    let before_c = sensor_c(&down, 0);
+    let after = status_until(host.http_port, 8.0, "device a's channel still heating", |s| {
+        sensor_c(s, 0) > before_c + 0.5
+    });
+    assert!(
+        after["channels"][0]["link_ok"].as_bool() == Some(true),
+        "{}",
+        after["channels"][0]
+    );
+    assert!(sensor_c(&driven, 0) < sensor_c(&after, 0), "channel 0 stopped with b");
+    let _b = emulator(&links[1]);
+    status_until(host.http_port, 15.0, "device b back up", |s| {
+        s["devices"][1]["link"]["state"] == "up" && s["devices"][1]["link"]["reconnects"].as_u64() >= Some(1)
+    });
+}
+
+/// Two controllers at addresses 1 and 2 on one emulated bus (one pseudo-terminal, `thermode emulate --address 1
+/// --address 2`) under `serve --device mecom:PTY@1 --device mecom:PTY@2`: four channels in address order, each
+/// address a device of its own in `/api/status`, both driven.
+#[test]
+fn two_addresses_on_one_emulated_bus_make_one_display() {
+    use super::serve_on_emulator::{serve_devices, setpoint};
+    let (_bus, pty) = emulate(&[
+        "--protocol",
+        "mecom",
+        "--channels",
+        "2",
+        "--no-finger",
+        "--address",
+        "1",
+        "--address",
+        "2",
+    ]);
+    let devices = [format!("mecom:{pty}@1"), format!("mecom:{pty}@2")];
+    let host = serve_devices(&[&devices[0], &devices[1]], None, None);
+    let started = super::serve_on_emulator::status(host.http_port);
+    assert_eq!(started["channel_count"], 4, "{}", started["devices"]);
+    assert_eq!(started["channel_devices"], serde_json::json!([0, 0, 1, 1]));
+    for (index, device) in devices.iter().enumerate() {
+        let entry = &started["devices"][index];
+        assert_eq!(entry["device"], device.as_str(), "{entry}");
+        assert_eq!(
+            entry["channels"],
+            serde_json::json!([2 * index, 2 * index + 1]),
+            "{entry}"
+        );
+    }
+    let (start_0, start_2) = (sensor_c(&started, 0), sensor_c(&started, 2));
+    setpoint(host.osc_port, 0, 34.0, 4.0);
+    setpoint(host.osc_port, 2, 34.0, 4.0);
+    status_until(host.http_port, 15.0, "both addresses driven 1 °C up", |s| {
+        sensor_c(s, 0) > start_0 + 1.0 && sensor_c(s, 2) > start_2 + 1.0
+    });
+}
+
+/// `thermode emulate` with `args`; returns it and the first two lines it printed (the device's and the reference
+/// thermometer's pseudo-terminals).
+fn emulate_with_reference(args: &[&str]) -> (Process, String, String) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .arg("emulate")
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap_or_else(|e| panic!("spawn emulate: {e}"));
+    let stdout = child.stdout.take().unwrap_or_else(|| panic!("emulate stdout"));
+    let mut lines = BufReader::new(stdout).lines();
+    let mut line = || {
+        lines
+            .next()
+            .and_then(Result::ok)
+            .unwrap_or_else(|| panic!("emulate printed too few lines"))
+    };
+    let (device, reference) = (line(), line());
+    (Process(child), device, reference)
+}
+
+/// `thermode calibrate` against a MeCom emulator whose sensor reads 1.01 · T + 0.3 °C and its reference thermometer
+/// (the true plate, 0.01 °C noise): the fitted line is the injected one within 0.02 °C over 15–45 °C, the file
+/// holds it, and a display opened with that file reads through it.
+#[test]
+fn calibrate_recovers_an_injected_sensor_offset_and_gain() {
+    let (_emulator, pty, reference) = emulate_with_reference(&[
+        "--protocol",
+        "mecom",
+        "--channels",
+        "1",
+        "--no-finger",
+        "--sensor-offset-c",
+        "0.3",
+        "--sensor-gain",
+        "1.01",
+        "--reference-channel",
+        "0",
+    ]);
+    let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
+    let out = dir.path().join("calibrated").join("display.toml");
+    let device = format!("mecom:{pty}");
+    let run = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args([
+            "calibrate",
+            "--device",
+            &device,
+            "--reference",
+            &format!("serial:{reference}"),
+        ])
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap_or_else(|e| panic!("run calibrate: {e}"));
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr),
+    );
+    assert!(run.status.success(), "calibrate failed: {stdout}{stderr}");
+    println!("{stderr}{stdout}");
+    let text = std::fs::read_to_string(&out).unwrap_or_else(|e| panic!("read {}: {e}", out.display()));
+    let file = thermode_device::DeviceConfig::from_toml_str(&text, "calibrated")
+        .unwrap_or_else(|e| panic!("the calibrated file: {e}"));
+    let fitted = file.calibration;
+    for temp_c in (15..=45).map(f64::from) {
+        let (injected_c, found_c) = (
+            1.01 * temp_c + 0.3,
+            fitted.sensor_gain * temp_c + fitted.sensor_offset_c,
+        );
+        assert!(
+            (found_c - injected_c).abs() < 0.02,
+            "at {temp_c} °C the sensor reads {injected_c:.4} °C, the fit says {found_c:.4} °C ({fitted:?})"
+        );
+    }
+    assert!(
+        fitted.gain_uncertainty > 0.0 && fitted.offset_uncertainty_c > 0.0,
+        "{fitted:?}"
+    );
+    let bench = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args([
+            "bench",
+            "--device",
+            &device,
+            "--rate",
+            "100",
+            "--duration",
+            "1",
+            "--device-file",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap_or_else(|e| panic!("run bench: {e}"));
+    let stderr = String::from_utf8_lossy(&bench.stderr);
+    assert!(bench.status.success(), "bench with the calibrated file: {stderr}");
+    assert!(stderr.contains("read through its calibration"), "{stderr}");
 }

@@ -101,9 +101,19 @@ fn serve(pty: &str, device_file: Option<&Path>, record: Option<&Path>) -> Serve 
 
 /// `thermode serve --device DEVICE`, with free ports; waits for its banner.
 pub(crate) fn serve_device(device: &str, device_file: Option<&Path>, record: Option<&Path>) -> Serve {
+    serve_devices(&[device], device_file, record)
+}
+
+/// `thermode serve` with `--device` for each of `devices` (one display of all their channels), with free ports;
+/// waits for its banner.
+pub(crate) fn serve_devices(devices: &[&str], device_file: Option<&Path>, record: Option<&Path>) -> Serve {
     let state = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
     let mut command = Command::new(binary());
-    command.args(["serve", "--device", device, "--port", "0", "--osc-port", "0"]);
+    command.arg("serve");
+    for device in devices {
+        command.args(["--device", device]);
+    }
+    command.args(["--port", "0", "--osc-port", "0"]);
     command.arg("--state-dir").arg(state.path());
     if let Some(file) = device_file {
         command.arg("--device-file").arg(file);

@@ -1,0 +1,334 @@
+//! `thermode calibrate`: checks the plate sensor against a reference thermometer, as labs do before a study. With no
+//! finger on the plate, the display is driven (through the control loop, every drive through its channel's safety
+//! envelope) to each set point in turn; once the sensor's reading has settled (a plateau), the sensor and the
+//! reference are averaged over a few seconds. A straight line through the pairs gives the sensor's gain and offset
+//! (reading = gain · T + offset at a true plate temperature T) with their standard errors, written into the device
+//! file's `[calibration]` section; every command that reads that file then takes the calibrated plate temperature.
+//!
+//! The reference is `prompt` (the operator types each reading) or `serial:PATH`, a thermometer that writes one
+//! temperature in °C per line (many USB lab thermometers; `thermode emulate --reference-channel N` offers one).
+
+use std::io::BufRead;
+use std::path::PathBuf;
+use std::sync::mpsc::{channel, Receiver};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use thermode_device::config::CalibrationConfig;
+use thermode_link::mecom::host::{lower_error_threshold_c, upper_error_threshold_c};
+use thermode_platform::{Clock, MonotonicClock};
+use thermode_runtime::{Command, LoopConfig, LoopHandle, Owner};
+
+use crate::controller::ControllerArg;
+use crate::display::{build_display, DisplayArgs};
+use crate::resolve;
+
+/// Arguments of `thermode calibrate`.
+#[derive(Args, Debug)]
+pub struct CalibrateArgs {
+    /// The display, one device as `serve --device` takes it (current-commanded: a device that regulates its plate
+    /// itself does so on its own sensor).
+    #[arg(long, value_name = "DEVICE")]
+    device: String,
+    /// The display's device file (TOML); default: the built-in default display. Its other values are kept.
+    #[arg(long = "device-file", value_name = "FILE")]
+    device_file: Option<PathBuf>,
+    /// The reference thermometer: `prompt` (type each reading) or `serial:PATH` (one temperature in °C per line).
+    #[arg(long, value_name = "prompt|serial:PATH")]
+    reference: String,
+    /// The calibrated device file to write (replaced if it exists).
+    #[arg(long, value_name = "FILE.toml")]
+    out: PathBuf,
+    /// The channel whose sensor is calibrated (no finger on it).
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    channel: usize,
+    /// The set points [°C], at least two; each is held within what the device allows.
+    #[arg(long, value_name = "C,C,…", value_delimiter = ',', default_value = "15,25,35,45")]
+    setpoints: Vec<f64>,
+    /// The longest wait for a plateau at a set point [s].
+    #[arg(long = "settle-max-s", value_name = "S", default_value_t = 180.0)]
+    settle_max_s: f64,
+    /// How long the sensor and the reference are averaged at a plateau [s].
+    #[arg(long = "average-s", value_name = "S", default_value_t = 3.0)]
+    average_s: f64,
+}
+
+/// The largest drift of the sensor's mean reading over half of [`PLATEAU_WINDOW_S`] at a plateau \[°C\] (the
+/// sensor's lag then hides less than a thousandth of a degree).
+const PLATEAU_DRIFT_C: f64 = 0.005;
+/// The window over which a plateau is judged \[s\].
+const PLATEAU_WINDOW_S: f64 = 3.0;
+/// The rate at which the set point is approached \[°C/s\].
+const APPROACH_C_PER_S: f64 = 5.0;
+
+/// Where the reference readings come from.
+enum Reference {
+    /// The operator types them.
+    Prompt,
+    /// A thermometer's lines, each with the time it arrived.
+    Serial(Receiver<(Instant, f64)>),
+}
+
+impl Reference {
+    /// Opens `spec` (`prompt` or `serial:PATH`).
+    fn open(spec: &str) -> Result<Reference> {
+        if spec == "prompt" {
+            return Ok(Reference::Prompt);
+        }
+        let Some(path) = spec.strip_prefix("serial:") else {
+            bail!("--reference must be `prompt` or `serial:PATH`, not {spec:?}");
+        };
+        let file = std::fs::File::open(path).with_context(|| format!("cannot open the reference {path}"))?;
+        let (send, receive) = channel();
+        std::thread::Builder::new()
+            .name("thermode-reference".into())
+            .spawn(move || {
+                for line in std::io::BufReader::new(file).lines() {
+                    let Ok(line) = line else { return };
+                    if let Ok(value) = line.trim().parse::<f64>() {
+                        if value.is_finite() && send.send((Instant::now(), value)).is_err() {
+                            return;
+                        }
+                    }
+                }
+            })
+            .context("cannot start the reference reader")?;
+        Ok(Reference::Serial(receive))
+    }
+
+    /// The reference's mean over the readings that arrived from `since` on (waiting `average_s` \[s\] more for
+    /// some if none did), or the operator's reading at a plate the display reads `display_c` \[°C\].
+    fn reading(&self, since: Instant, average_s: f64, display_c: f64) -> Result<f64> {
+        match self {
+            Reference::Prompt => {
+                eprint!("the display reads {display_c:.2} °C: type the reference thermometer's reading in °C: ");
+                let mut line = String::new();
+                std::io::stdin().lock().read_line(&mut line)?;
+                line.trim()
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite())
+                    .with_context(|| format!("not a temperature: {:?}", line.trim()))
+            }
+            Reference::Serial(lines) => {
+                let deadline = Instant::now() + Duration::from_secs_f64(average_s);
+                let mut values = Vec::new();
+                while values.is_empty() || Instant::now() < deadline {
+                    match lines.recv_timeout(Duration::from_secs(5)) {
+                        Ok((at, value)) if at >= since => values.push(value),
+                        Ok(_) => {}
+                        Err(_) => bail!("the reference thermometer sent no reading for 5 s"),
+                    }
+                }
+                Ok(values.iter().sum::<f64>() / values.len() as f64)
+            }
+        }
+    }
+}
+
+/// One plateau: the reference and the sensor's raw reading \[°C\].
+#[derive(Debug, Clone, Copy)]
+struct Pair {
+    reference_c: f64,
+    sensor_c: f64,
+}
+
+/// The straight line `sensor = gain · reference + offset` through `pairs`, with the standard errors of both (0 with
+/// two pairs).
+fn fit(pairs: &[Pair]) -> CalibrationConfig {
+    let n = pairs.len() as f64;
+    let mean_x = pairs.iter().map(|p| p.reference_c).sum::<f64>() / n;
+    let mean_y = pairs.iter().map(|p| p.sensor_c).sum::<f64>() / n;
+    let sxx: f64 = pairs.iter().map(|p| (p.reference_c - mean_x).powi(2)).sum();
+    let sxy: f64 = pairs
+        .iter()
+        .map(|p| (p.reference_c - mean_x) * (p.sensor_c - mean_y))
+        .sum();
+    let gain = sxy / sxx;
+    let offset_c = mean_y - gain * mean_x;
+    let residual: f64 = pairs
+        .iter()
+        .map(|p| (p.sensor_c - offset_c - gain * p.reference_c).powi(2))
+        .sum();
+    let variance = if pairs.len() > 2 { residual / (n - 2.0) } else { 0.0 };
+    CalibrationConfig {
+        sensor_gain: gain,
+        sensor_offset_c: offset_c,
+        gain_uncertainty: (variance / sxx).sqrt(),
+        offset_uncertainty_c: (variance * (1.0 / n + mean_x * mean_x / sxx)).sqrt(),
+    }
+}
+
+/// Runs `thermode calibrate`.
+pub fn run(args: &CalibrateArgs) -> Result<()> {
+    let distinct = args.setpoints.iter().any(|&c| (c - args.setpoints[0]).abs() > 1.0);
+    if args.setpoints.len() < 2 || !distinct || args.setpoints.iter().any(|c| !c.is_finite()) {
+        bail!("--setpoints needs at least two finite set points at least 1 °C apart");
+    }
+    if !(args.average_s > 0.0 && args.settle_max_s > PLATEAU_WINDOW_S) {
+        bail!("--average-s must be positive and --settle-max-s longer than {PLATEAU_WINDOW_S} s");
+    }
+    crate::output::check_outputs(&[("--out", Some(&args.out))])?;
+    let device = resolve::device_config(args.device_file.as_deref())?;
+    let before = device.calibration;
+    let reference = Reference::open(&args.reference)?;
+    let setpoints = held_setpoints(args, &device)?;
+    let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
+    let display = DisplayArgs::one(&args.device, args.device_file.clone(), ControllerArg::Model, 1);
+    let display = build_display(&display, &clock)?;
+    if args.channel >= display.device.channel_count() {
+        bail!(
+            "--channel {}: {} has {} channels",
+            args.channel,
+            display.label,
+            display.device.channel_count()
+        );
+    }
+    let mut control = LoopHandle::spawn(
+        LoopConfig::default(),
+        display.device,
+        display.engines,
+        clock,
+        Vec::new(),
+        Arc::default(),
+    )?;
+    let pairs = (|| {
+        let mut pairs = Vec::new();
+        for &setpoint_c in &setpoints {
+            let pair = plateau(&control, args, setpoint_c, &reference)?;
+            // Back to what the sensor reads without the file's calibration.
+            let sensor_c = before.sensor_gain * pair.sensor_c + before.sensor_offset_c;
+            eprintln!(
+                "calibrate: set point {setpoint_c:.1} °C: reference {:.3} °C, sensor {sensor_c:.3} °C",
+                pair.reference_c
+            );
+            pairs.push(Pair { sensor_c, ..pair });
+        }
+        Ok::<_, anyhow::Error>(pairs)
+    })();
+    let _ = control.commands().send(Command::StopAll);
+    let stopped = control.stop();
+    let pairs = pairs?;
+    if let Some(Err(e)) = stopped {
+        bail!("the device did not take the all-off command: {e}");
+    }
+    write_calibration(args, device, &pairs)
+}
+
+/// The set points of `args`, each held within what the device allows (a MeCom controller's own error thresholds,
+/// with 1 °C to spare).
+fn held_setpoints(args: &CalibrateArgs, device: &thermode_device::DeviceConfig) -> Result<Vec<f64>> {
+    if !args.device.starts_with("mecom") {
+        return Ok(args.setpoints.clone());
+    }
+    let (low_c, high_c) = (
+        lower_error_threshold_c(device)? + 1.0,
+        upper_error_threshold_c(device)? - 1.0,
+    );
+    let held: Vec<f64> = args.setpoints.iter().map(|c| c.clamp(low_c, high_c)).collect();
+    if held != args.setpoints {
+        eprintln!(
+            "calibrate: the controller's own thresholds allow {low_c:.1} to {high_c:.1} °C: set points {held:?} °C"
+        );
+    }
+    Ok(held)
+}
+
+/// Drives `args.channel` to `setpoint_c` \[°C\], waits for the sensor's plateau, and averages the sensor and the
+/// reference over `args.average_s`.
+fn plateau(control: &LoopHandle, args: &CalibrateArgs, setpoint_c: f64, reference: &Reference) -> Result<Pair> {
+    let command = Command::direct(args.channel, setpoint_c, APPROACH_C_PER_S, Owner::Script);
+    control
+        .commands()
+        .request(command)
+        .context("the loop refused the set point")?;
+    let start = Instant::now();
+    let mut history: Vec<(Instant, f64)> = Vec::new();
+    loop {
+        std::thread::sleep(Duration::from_millis(50));
+        let now = Instant::now();
+        history.push((now, sensor_c(control, args.channel)?));
+        history.retain(|(t, _)| now.duration_since(*t).as_secs_f64() <= PLATEAU_WINDOW_S);
+        // The drift over the window: the second half's mean less the first's (the noise averages out).
+        let half = history.len() / 2;
+        let mean = |part: &[(Instant, f64)]| part.iter().map(|(_, c)| c).sum::<f64>() / part.len().max(1) as f64;
+        let drift_c = mean(&history[half..]) - mean(&history[..half]);
+        let waited_s = start.elapsed().as_secs_f64();
+        if waited_s > PLATEAU_WINDOW_S + 2.0 && drift_c.abs() < PLATEAU_DRIFT_C {
+            break;
+        }
+        if waited_s > args.settle_max_s {
+            bail!(
+                "no plateau at {setpoint_c} °C within {} s (the reading drifted {drift_c:.3} °C over {} s)",
+                args.settle_max_s,
+                PLATEAU_WINDOW_S / 2.0
+            );
+        }
+    }
+    let since = Instant::now();
+    let mut readings = Vec::new();
+    while since.elapsed().as_secs_f64() < args.average_s {
+        readings.push(sensor_c(control, args.channel)?);
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let sensor_c = readings.iter().sum::<f64>() / readings.len().max(1) as f64;
+    let reference_c = reference.reading(since, args.average_s, sensor_c)?;
+    Ok(Pair { reference_c, sensor_c })
+}
+
+/// The newest sensor reading of `channel` \[°C\]; an error once the channel faulted or its link failed.
+fn sensor_c(control: &LoopHandle, channel: usize) -> Result<f64> {
+    let snapshot = control.snapshot();
+    let status = snapshot.channels.get(channel).context("no such channel")?;
+    if let Some(fault) = status.telemetry.fault {
+        let cut = status
+            .device_cut
+            .map(|c| format!(", device cut {c:?}"))
+            .unwrap_or_default();
+        bail!(
+            "channel {channel} faulted ({fault:?}{cut}; sensor {:.2} °C): calibration stopped",
+            status.telemetry.sensor_c
+        );
+    }
+    if !status.link_ok {
+        bail!("channel {channel}: the device link failed: calibration stopped");
+    }
+    Ok(status.telemetry.sensor_c)
+}
+
+/// Fits the pairs, writes the device file with the calibration and prints the result.
+fn write_calibration(args: &CalibrateArgs, mut device: thermode_device::DeviceConfig, pairs: &[Pair]) -> Result<()> {
+    let calibration = fit(pairs);
+    let ok = |rule_min: f64, rule_max: f64, v: f64| v.is_finite() && (rule_min..=rule_max).contains(&v);
+    if !ok(0.5, 2.0, calibration.sensor_gain) || !ok(-10.0, 10.0, calibration.sensor_offset_c) {
+        bail!(
+            "the fit (gain {}, offset {} °C) is outside what a plate sensor can be off (gain 0.5 to 2, offset ±10 °C): \
+             check the reference and its channel",
+            calibration.sensor_gain,
+            calibration.sensor_offset_c
+        );
+    }
+    device.calibration = calibration;
+    crate::output::create_folder_of(&args.out)?;
+    let text = device.to_toml_string();
+    crate::output::write_atomically(&args.out, |out| Ok(out.write_all(text.as_bytes())?))?;
+    let (low, high) = pairs.iter().fold((f64::MAX, f64::MIN), |(l, h), p| {
+        (l.min(p.reference_c), h.max(p.reference_c))
+    });
+    let largest_c = [low, high]
+        .iter()
+        .map(|&t| (calibration.plate_c(t) - t).abs())
+        .fold(0.0, f64::max);
+    println!(
+        "calibrated: gain {:.5} ± {:.5}, offset {:.3} ± {:.3} °C; the correction is at most {largest_c:.3} °C over \
+         {low:.1}–{high:.1} °C; written to {}",
+        calibration.sensor_gain,
+        calibration.gain_uncertainty,
+        calibration.sensor_offset_c,
+        calibration.offset_uncertainty_c,
+        args.out.display()
+    );
+    Ok(())
+}
