@@ -11,7 +11,8 @@
 //! - [`error`]: the typed error [`LabError`] shared by the lab's modules.
 //! - [`design`]: experiment files (TOML); [`plan`]: the counterbalanced trial plan (Williams designs);
 //!   [`session`]: durable session CSVs and sidecars; [`runner`]: the trial runner and its stimulus, clock, console
-//!   and responder seams; [`participant`]: the simulated participant; [`random`]: the per-trial random streams.
+//!   and responder seams; [`participant`]: the nearest-reference simulated participant;
+//!   [`perception`]: the perceptual simulated participant `lab run` uses (issue 28); [`random`]: the per-trial random streams.
 //! - [`procedure`]: psychophysical procedures (method of limits, levels, staircases, QUEST+, multi-zone programs)
 //!   run as programs on a display, their session files and their analysis.
 
@@ -20,10 +21,12 @@ pub mod design;
 pub mod error;
 pub mod export;
 pub mod participant;
+pub mod perception;
 pub mod plan;
 pub mod procedure;
 pub mod random;
 pub mod runner;
 pub mod session;
+pub mod validation;
 
 pub use error::LabError;

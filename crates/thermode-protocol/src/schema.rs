@@ -1,7 +1,8 @@
 //! The JSON Schema (draft 2020-12) of the wire protocol, generated from the serde types: `$defs` holds every type,
 //! and the root accepts any message of either direction. A client validates what it sends against
 //! `#/$defs/ClientMessage`, what it receives against `#/$defs/Response`, `/api/status` against `#/$defs/Status`,
-//! `/api/materials` against `#/$defs/MaterialList` and `/api/history` against `#/$defs/History`.
+//! `/api/materials` against `#/$defs/MaterialList` and `/api/history` against `#/$defs/History`. `POST
+//! /api/command` takes a `ClientMessage` as its body and answers with a `Response`.
 //!
 //! The checked-in copy is `docs/protocol.schema.json`; a test fails when it is stale (`THERMODE_WRITE_SCHEMA=1
 //! cargo test -p thermode-protocol` rewrites it).
@@ -33,8 +34,9 @@ pub fn protocol_schema() -> Value {
     json!({
         "$schema": "https://json-schema.org/draft/2020-12/schema",
         "title": "thermode wire protocol",
-        "description": "Every message of thermode's WebSocket API (/api/ws) and the bodies of its HTTP routes, \
-            generated from the serde types of the thermode-protocol crate. docs/api.md is the prose.",
+        "description": "Every message of thermode's WebSocket API (/api/ws) and the bodies of its HTTP routes \
+            (POST /api/command takes a ClientMessage and answers with a Response), generated from the serde types \
+            of the thermode-protocol crate. docs/api.md is the prose.",
         "oneOf": [{"$ref": "#/$defs/ClientMessage"}, {"$ref": "#/$defs/Response"}],
         "$defs": Value::Object(defs),
     })

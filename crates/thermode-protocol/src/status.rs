@@ -180,6 +180,13 @@ pub struct HttpStatus {
     pub refused: u64,
     /// Failed accepts.
     pub accept_errors: u64,
+    /// `POST /api/command` requests read (answered, refused or rate-limited).
+    pub commands: u64,
+    /// The lease of `POST /api/command`'s virtual connection: its contacts are released after the grace period
+    /// once no HTTP command arrived for this long \[s\].
+    pub command_lease_s: f64,
+    /// The client number (`owner`) of `POST /api/command`'s virtual connection while its lease runs.
+    pub command_client: Option<u64>,
 }
 
 /// Access control.

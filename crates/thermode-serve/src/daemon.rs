@@ -252,6 +252,7 @@ impl Daemon {
             ),
             clients: AtomicUsize::new(0),
             next_client: AtomicU64::new(1),
+            command_lease: crate::api::command::CommandLease::new(server.net.requests_per_s, server.net.burst),
             http: Arc::new(crate::api::server::HttpCounters::default()),
             http_cap: crate::api::server::fitted_cap(
                 server.net.max_http_connections,

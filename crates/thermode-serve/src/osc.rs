@@ -608,13 +608,13 @@ fn is_stop(message: &OscMessage) -> bool {
 /// Queues `command` (a stop-all on the loop's urgent lane) and counts the loop's answer when it comes (within the
 /// reply wait; a withdrawn command is refused as busy); a full queue is counted as refused at once.
 fn queue(command: Command, message: &OscMessage, app: &Arc<App>) {
-    match app.commands.request(command).map_err(crate::api::ws::loop_error) {
+    match app.commands.request(command).map_err(crate::api::execute::loop_error) {
         Ok(answer) => {
             let (counters, address, wait) = (app.osc.clone(), message.address.clone(), app.reply_wait);
             tokio::spawn(async move {
                 let reply = crate::api::answer_within(answer, wait)
                     .await
-                    .map_err(crate::api::ws::loop_error);
+                    .map_err(crate::api::execute::loop_error);
                 count(&counters, &address, reply.map(|_| ()));
             });
         }

@@ -11,6 +11,7 @@ mod display;
 mod identified;
 mod output;
 mod progress;
+mod record_columnar;
 mod resolve;
 mod signals;
 

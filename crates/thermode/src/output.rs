@@ -18,6 +18,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use thermode_platform::csv_text::Precision;
 use thermode_platform::WriteError;
+use thermode_table::{Format, Table};
 
 /// Whether `path` names standard output (`-`).
 pub fn is_stdout(path: &Path) -> bool {
@@ -103,4 +104,35 @@ pub fn print_stdout(text: &str) -> Result<()> {
 /// The CSV precision of a `--precision` option: exact without one.
 pub fn csv_precision(decimals: Option<u8>) -> Precision {
     decimals.map_or(Precision::Exact, Precision::Decimals)
+}
+
+/// Refuses, before any work, `--precision` with an Arrow or Parquet output: those store every float exactly.
+pub fn check_columnar_precision(out: Option<&Path>, precision: Option<u8>) -> Result<()> {
+    match out {
+        Some(path) if Format::of(path).is_columnar() && precision.is_some() => bail!(
+            "--precision {}: --out {} is written as {}, which stores every number exactly; --precision rounds CSV \
+             text only",
+            precision.unwrap_or_default(),
+            path.display(),
+            if Format::of(path) == Format::Arrow {
+                "Arrow IPC"
+            } else {
+                "Parquet"
+            }
+        ),
+        _ => Ok(()),
+    }
+}
+
+/// Writes the tables of `tables` (one per run) to `path` as Arrow IPC or Parquet when its name asks for one
+/// (`.arrow`, `.feather`, `.parquet`; atomically, like every output) and returns true; false (nothing written) for
+/// any other name, which the caller writes as CSV. Standard output (`-`) is always CSV.
+pub fn write_columnar<'a>(path: &Path, tables: impl FnOnce() -> Vec<Table<'a>>) -> Result<bool> {
+    let format = Format::of(path);
+    if is_stdout(path) || !format.is_columnar() {
+        return Ok(false);
+    }
+    let tables = tables();
+    write_atomically(path, |sink| Ok(thermode_table::write(&tables, format, sink)?))?;
+    Ok(true)
 }

@@ -13,6 +13,10 @@ mod python_packages;
 #[cfg(unix)]
 #[path = "cli/node_packages.rs"]
 mod node_packages;
+// The MATLAB/Octave client under octave-cli.
+#[cfg(unix)]
+#[path = "cli/matlab_client.rs"]
+mod matlab_client;
 // `lab export --bids`, checked by the reference validator.
 #[cfg(unix)]
 #[path = "cli/bids.rs"]
@@ -23,6 +27,9 @@ mod bids;
 mod lsl;
 #[path = "cli/serve_on_emulator.rs"]
 mod serve_on_emulator;
+// `simulate` and `render` to Arrow IPC and Parquet.
+#[path = "cli/columnar.rs"]
+mod columnar;
 #[cfg(unix)]
 #[path = "cli/service.rs"]
 mod service;

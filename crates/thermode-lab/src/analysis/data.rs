@@ -90,6 +90,9 @@ impl CsvTable {
     /// Reads `path`; a row with a different number of fields than the header or a file without data rows is an
     /// error naming the file (and line).
     pub fn read(path: &Path) -> Result<CsvTable, LabError> {
+        if thermode_table::Format::of(path).is_columnar() {
+            return CsvTable::read_columnar(path);
+        }
         let file = open_at_most(path, MAX_DATA_BYTES).map_err(|e| LabError::io(path, e))?;
         let mut reader = csv::ReaderBuilder::new()
             .flexible(true)
@@ -120,6 +123,11 @@ impl CsvTable {
             }
             rows.push((line, record.iter().map(str::to_string).collect()));
         }
+        CsvTable::checked(path, header, rows)
+    }
+
+    /// The table of `path`, unless it has no data row or no column name (an error naming the file).
+    fn checked(path: &Path, header: Vec<String>, rows: Vec<(u64, Vec<String>)>) -> Result<CsvTable, LabError> {
         if rows.is_empty() || header.iter().all(String::is_empty) {
             return Err(LabError::EmptyFile {
                 file: path.to_path_buf(),
@@ -130,6 +138,27 @@ impl CsvTable {
             header,
             rows,
         })
+    }
+
+    /// Reads an Arrow IPC (`.arrow`, `.feather`) or Parquet (`.parquet`) file that `simulate` or `render` wrote:
+    /// each value as the field the CSV holds (floats in their shortest exact form, null as an empty field), so
+    /// every reader of thermode's CSVs reads these too; rows are numbered as the CSV's lines would be.
+    fn read_columnar(path: &Path) -> Result<CsvTable, LabError> {
+        let table = thermode_table::read(path).map_err(|e| LabError::Csv {
+            file: path.to_path_buf(),
+            line: None,
+            message: e.to_string(),
+        })?;
+        let header = table.columns.iter().map(|(name, _)| name.clone()).collect();
+        let rows = (0..table.rows())
+            .map(|row| {
+                (
+                    row as u64 + 2,
+                    table.columns.iter().map(|(_, v)| v.field(row)).collect(),
+                )
+            })
+            .collect();
+        CsvTable::checked(path, header, rows)
     }
 
     /// Index of the column `name` (case-insensitive); `None` if absent, an error if it appears twice.

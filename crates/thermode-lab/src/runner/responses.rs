@@ -10,9 +10,10 @@ use thermode_model::materials::find;
 use thermode_platform::fs::{read_text_at_most, MAX_SETTINGS_BYTES};
 
 use super::console::Console;
-use super::stimulus::TrialMeasurement;
+use super::stimulus::{SkinCurve, TrialMeasurement};
 use super::RunError;
 use crate::participant::SimulatedParticipant;
+use crate::perception::PerceptualParticipant;
 use crate::plan::PlannedTrial;
 
 /// What a responder is asked for one trial.
@@ -202,20 +203,46 @@ impl Responder for ScriptedResponses {
     }
 }
 
+/// The trial's skin curve, once the simulated participant's `options` are checked to be the query's.
+fn simulated_curve<'a>(options: &[String], query: &ResponseQuery<'a>) -> Result<&'a SkinCurve, RunError> {
+    if options != query.options {
+        let requirement = "the simulated participant's references must be the experiment's response options, in order";
+        let refused = thermode_model::params::BadValue::custom("options", options.len() as f64, requirement);
+        return Err(RunError::Participant(refused.into()));
+    }
+    Ok(query
+        .measurement
+        .curve
+        .as_ref()
+        .ok_or(crate::participant::ParticipantError::NoCurve)?)
+}
+
 impl Responder for SimulatedParticipant {
     fn respond(&mut self, query: &ResponseQuery, _console: &mut dyn Console) -> Result<usize, RunError> {
-        if self.options() != query.options {
-            let requirement =
-                "the simulated participant's references must be the experiment's response options, in order";
-            let refused = thermode_model::params::BadValue::custom("options", self.options().len() as f64, requirement);
-            return Err(RunError::Participant(refused.into()));
-        }
-        let curve = query
-            .measurement
-            .curve
-            .as_ref()
-            .ok_or(crate::participant::ParticipantError::NoCurve)?;
+        let curve = simulated_curve(self.options(), query)?;
         Ok(self.identify_trial(curve, query.participant_index, query.trial.trial)?)
+    }
+}
+
+impl Responder for PerceptualParticipant {
+    fn respond(&mut self, query: &ResponseQuery, _console: &mut dyn Console) -> Result<usize, RunError> {
+        let curve = simulated_curve(self.options(), query)?;
+        let features = crate::participant::CurveFeatures::of(curve)?;
+        // A presented material that is not an option (never in a valid design) gets no non-thermal cue.
+        let presented = self
+            .options()
+            .iter()
+            .position(|o| *o == query.trial.presented)
+            .unwrap_or(usize::MAX);
+        let trial = query.trial;
+        Ok(PerceptualParticipant::respond(
+            self,
+            &features,
+            presented,
+            trial.condition,
+            query.participant_index,
+            trial.trial,
+        ))
     }
 }
 

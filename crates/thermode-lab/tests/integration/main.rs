@@ -3,6 +3,7 @@
 mod analysis;
 mod display_stimulus;
 mod kill;
+mod participant_validation;
 mod plan;
 mod procedures;
 mod runner;

@@ -1,8 +1,10 @@
-//! The network side: HTTP routes (`/` dashboard, `/api/status`, `/api/materials`, `/api/ws`), the access check
-//! in front of every route, and the state the handlers share. It talks to the control loop only through the
-//! bounded command queue and the published snapshot.
+//! The network side: HTTP routes (`/` dashboard, `/api/status`, `/api/materials`, `/api/history`, `/api/ws`,
+//! `POST /api/command`), the access check in front of every route, and the state the handlers share. It talks to
+//! the control loop only through the bounded command queue and the published snapshot.
 
 pub mod access;
+pub mod command;
+pub(crate) mod execute;
 pub mod history;
 pub mod limit;
 pub mod protocol;
@@ -17,7 +19,7 @@ use axum::extract::{Request, State};
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::middleware::{self, Next};
 use axum::response::{Html, IntoResponse, Response};
-use axum::routing::get;
+use axum::routing::{get, post};
 use axum::{Json, Router};
 use thermode_platform::to_clock_resolution;
 use thermode_protocol::finite;
@@ -68,6 +70,10 @@ pub struct NetLimits {
     pub http_idle_timeout_s: f64,
     /// Longest wait for the control loop's answer \[s\]. Default 1.
     pub reply_timeout_s: f64,
+    /// The lease of `POST /api/command`'s virtual connection: when no HTTP command arrives for this long, the
+    /// contacts made over HTTP are released after the grace period, as a disconnected WebSocket client's are
+    /// ([`command`]) \[s\]. Default 30 (a method-of-limits ramp of 17 °C at 1 °C/s with its response fits).
+    pub command_lease_s: f64,
     /// A connection from which nothing (not even a pong) arrives for this long is closed \[s\]. Default 20.
     pub idle_timeout_s: f64,
     /// Interval of the server's pings \[s\]. Default 1.
@@ -101,6 +107,7 @@ impl Default for NetLimits {
             header_timeout_s: 5.0,
             http_idle_timeout_s: 10.0,
             reply_timeout_s: 1.0,
+            command_lease_s: 30.0,
             idle_timeout_s: 20.0,
             ping_interval_s: 1.0,
             send_timeout_s: 5.0,
@@ -123,6 +130,7 @@ impl NetLimits {
         };
         let durations = [
             ("reply_timeout_s", self.reply_timeout_s),
+            ("command_lease_s", self.command_lease_s),
             ("idle_timeout_s", self.idle_timeout_s),
             ("ping_interval_s", self.ping_interval_s),
             ("send_timeout_s", self.send_timeout_s),
@@ -228,6 +236,8 @@ pub struct App {
     pub(crate) reply_wait: Duration,
     pub(crate) clients: AtomicUsize,
     pub(crate) next_client: AtomicU64,
+    /// The rate limit and lease of `POST /api/command`.
+    pub(crate) command_lease: command::CommandLease,
     /// What the HTTP server did.
     pub(crate) http: Arc<server::HttpCounters>,
     /// The HTTP connection cap in force (fitted to the open-files limit).
@@ -283,6 +293,7 @@ pub fn router(app: Arc<App>) -> Router {
         .route("/api/materials", get(materials))
         .route("/api/history", get(history_route))
         .route("/api/ws", get(ws::upgrade))
+        .route("/api/command", post(command::post).fallback(command::other_method))
         .fallback(not_found)
         .layer(middleware::from_fn_with_state(app.clone(), check_access))
         .with_state(app)
@@ -341,7 +352,7 @@ async fn materials() -> Json<Vec<thermode_protocol::MaterialInfo>> {
 async fn not_found() -> Response {
     let e = ApiError::new(
         ErrorCode::UnknownType,
-        "no such route; see /, /api/status, /api/materials, /api/history, /api/ws",
+        "no such route; see /, /api/status, /api/materials, /api/history, /api/ws, /api/command (POST)",
     );
     error_response(StatusCode::NOT_FOUND, &e)
 }
@@ -384,6 +395,9 @@ pub fn status(app: &App) -> Status {
             timed_out: count(&app.http.timed_out),
             refused: count(&app.http.refused),
             accept_errors: count(&app.http.accept_errors),
+            commands: count(&app.http.commands),
+            command_lease_s: app.net.command_lease_s,
+            command_client: app.command_lease.client(),
         },
         auth: Auth {
             token_required: app.access.token_required(),

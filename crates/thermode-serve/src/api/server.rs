@@ -71,6 +71,8 @@ pub struct HttpCounters {
     pub refused: AtomicU64,
     /// Failed accepts (e.g. out of file descriptors).
     pub accept_errors: AtomicU64,
+    /// `POST /api/command` requests whose body was read (answered, refused or rate-limited).
+    pub commands: AtomicU64,
 }
 
 /// The connection cap for an open-files limit: the configured cap, at most the limit less [`RESERVED_FILES`], at

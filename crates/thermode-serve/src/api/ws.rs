@@ -18,15 +18,15 @@ use axum::extract::State;
 use axum::http::{HeaderMap, StatusCode};
 use axum::response::Response;
 use axum::Extension;
-use thermode_platform::to_clock_resolution;
-use thermode_protocol::{Done, Event, OkReply, RecordingEvent, RequestId, Response as Reply, StatusReply};
+use thermode_protocol::{Done, Event, OkReply, RecordingEvent, Response as Reply};
 use tokio::sync::{broadcast, watch};
 use tokio::time::{interval, timeout, Instant, Interval, MissedTickBehavior};
 
+use super::execute;
 use super::protocol::{self, ApiError, ApiRequest, ErrorCode};
-use super::{error_response, recording_status, status, App};
-use thermode_runtime::command::{Command, CommandError, Owner};
-use thermode_runtime::recorder::{RecordEvents, RecordState};
+use super::{error_response, recording_status, App};
+use thermode_runtime::command::{Command, Owner};
+use thermode_runtime::recorder::RecordEvents;
 
 /// The close code for a text frame that is not UTF-8 (RFC 6455 §7.4.1: invalid frame payload data).
 pub const CLOSE_INVALID_PAYLOAD: u16 = 1007;
@@ -146,7 +146,7 @@ impl Connection {
         }
         let (app, client) = (self.app.clone(), self.client);
         drop(self);
-        goodbye(&app, client).await;
+        execute::goodbye(&app, client, None).await;
     }
 
     /// Handles one received item; false when the connection is over.
@@ -194,64 +194,35 @@ impl Connection {
         let owner = Owner::Client(self.client);
         let now_s = self.origin.elapsed().as_secs_f64();
         if !self.bucket.take(now_s) {
-            let (id, _) = protocol::parse(text, &self.app.limits, owner);
-            let message = format!(
-                "more than {} requests per second (burst {}); slow down",
-                self.app.net.requests_per_s, self.app.net.burst
-            );
-            return ApiError::new(ErrorCode::RateLimited, message).reply(id);
+            return execute::rate_limited(&self.app, text, owner);
         }
-        match protocol::parse(text, &self.app.limits, owner) {
-            (Some(id), Ok(request)) => match self.execute(request, id.clone()).await {
-                Ok(reply) => reply,
-                Err(e) => e.reply(Some(id)),
-            },
-            (id, Err(e)) => e.reply(id),
-            // parse_request gives every request it accepts its id; answered as a missing one all the same.
-            (None, Ok(_)) => ApiError::new(ErrorCode::MissingField, "every request needs an `id`").reply(None),
-        }
-    }
-
-    async fn execute(&mut self, request: ApiRequest, id: RequestId) -> Result<Reply, ApiError> {
-        if let ApiRequest::Command(Command::Program { .. } | Command::Response { .. }) = &request {
-            self.follows_programs = true;
-        }
-        let done = match request {
-            ApiRequest::Command(command) => to_loop(&self.app, command).await?,
+        let (id, request) = match execute::parsed(&self.app, text, owner) {
+            Ok(parsed) => parsed,
+            Err(reply) => return *reply,
+        };
+        match request {
             ApiRequest::Subscribe { rate_hz } => {
                 let mut every = interval(Duration::from_secs_f64(1.0 / rate_hz));
                 every.set_missed_tick_behavior(MissedTickBehavior::Skip);
                 self.subscription = Some(every);
-                Done::Subscribe { rate_hz }
+                Reply::Ok(OkReply {
+                    id,
+                    done: Done::Subscribe { rate_hz },
+                })
             }
             ApiRequest::Unsubscribe => {
                 self.subscription = None;
-                Done::Unsubscribe {}
+                Reply::Ok(OkReply {
+                    id,
+                    done: Done::Unsubscribe {},
+                })
             }
-            ApiRequest::AckRecording => self.acknowledge(),
-            ApiRequest::Marker { text, channel } => marker(&self.app, text, channel)?,
-            ApiRequest::Status => {
-                let status = status(&self.app);
-                return Ok(Reply::Status(Box::new(StatusReply { id, status })));
+            request => {
+                if let ApiRequest::Command(Command::Program { .. } | Command::Response { .. }) = &request {
+                    self.follows_programs = true;
+                }
+                execute::execute(&self.app, request, id).await
             }
-        };
-        Ok(Reply::Ok(OkReply { id, done }))
-    }
-
-    /// An operator acknowledges a failed recording (also under the policy `continue`, without an interlock: a
-    /// failed recording goes on in a new file).
-    fn acknowledge(&self) -> Done {
-        let mut acknowledged = self.app.interlock.acknowledge();
-        if let Some(recording) = &self.app.recording {
-            acknowledged |= recording.state() == RecordState::Failed;
-            if acknowledged {
-                recording.request_resume();
-            }
-        }
-        let recording = self.app.recording.as_ref().map(|r| recording_status(&self.app, r));
-        Done::AckRecording {
-            acknowledged,
-            recording,
         }
     }
 
@@ -315,49 +286,6 @@ impl Connection {
     }
 }
 
-/// Tells the loop a client is gone, and when (retrying while the urgent lane is full: its contacts must be released).
-async fn goodbye(app: &App, client: u64) {
-    let at_s = Some(app.clock.now_s());
-    for _ in 0..1000 {
-        match app.commands.send(Command::ClientGone { client, at_s }) {
-            Err(CommandError::Busy) => tokio::time::sleep(Duration::from_millis(5)).await,
-            _ => return,
-        }
-    }
-}
-
-/// A client marker: stamped with the loop clock now, forwarded to the LSL marker stream when there is one;
-/// answered with the loop time (and the LSL time under `--lsl`).
-fn marker(app: &App, text: String, channel: Option<usize>) -> Result<Done, ApiError> {
-    let time_s = app.clock.now_s();
-    let lsl_time_s = match &app.markers {
-        Some(markers) => {
-            let lsl_time_s = to_clock_resolution(markers.clock().lsl_time_s(time_s));
-            if !markers.send(crate::lsl::ClientMarker { time_s, text, channel }) {
-                return Err(ApiError::new(
-                    ErrorCode::Busy,
-                    "the LSL marker queue is full; nothing was sent",
-                ));
-            }
-            Some(lsl_time_s)
-        }
-        None => None,
-    };
-    Ok(Done::Marker {
-        channel,
-        time_s: to_clock_resolution(time_s),
-        lsl_time_s,
-        lsl: lsl_time_s.is_some(),
-    })
-}
-
-/// Sends `command` to the loop and waits (bounded) for its answer.
-async fn to_loop(app: &App, command: Command) -> Result<Done, ApiError> {
-    let answer = app.commands.request(command.clone()).map_err(loop_error)?;
-    let applied = super::answer_within(answer, app.reply_wait).await.map_err(loop_error)?;
-    Ok(protocol::done(&command, &applied))
-}
-
 /// Waits for the subscription's next tick, or forever without one.
 async fn tick(subscription: &mut Option<Interval>) {
     match subscription {
@@ -403,20 +331,4 @@ fn is_invalid_utf8(e: axum::Error) -> bool {
         inner.downcast_ref::<tokio_tungstenite::tungstenite::Error>(),
         Some(tokio_tungstenite::tungstenite::Error::Utf8(_))
     )
-}
-
-/// The API error for a loop refusal.
-pub(crate) fn loop_error(e: CommandError) -> ApiError {
-    let code = match &e {
-        CommandError::UnknownChannel { .. } => ErrorCode::UnknownChannel,
-        CommandError::Faulted { .. } | CommandError::FaultPersists { .. } => ErrorCode::DeviceFault,
-        CommandError::Rejected { .. } | CommandError::Program(_) => ErrorCode::BadValue,
-        CommandError::NoStartTemperature { .. } => ErrorCode::Busy,
-        CommandError::Busy | CommandError::Stopped => ErrorCode::Busy,
-        CommandError::Cancelled => ErrorCode::Cancelled,
-        CommandError::RecordingFailed => ErrorCode::RecordingFailed,
-        CommandError::DoseNotRecorded => ErrorCode::DoseNotRecorded,
-        CommandError::DoseBudgetSpent { .. } => ErrorCode::DoseBudgetSpent,
-    };
-    ApiError::new(code, e.to_string())
 }

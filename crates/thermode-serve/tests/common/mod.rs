@@ -222,17 +222,39 @@ pub fn wait_until(limit_s: f64, mut condition: impl FnMut() -> bool) -> bool {
 
 /// An HTTP/1.1 GET: (status code, body). `headers` are extra header lines.
 pub fn http_get(addr: SocketAddr, path: &str, headers: &[(&str, &str)]) -> (u16, String) {
+    http_request(addr, "GET", path, headers, None)
+}
+
+/// An HTTP/1.1 POST of `body`: (status code, body). `headers` are extra header lines.
+pub fn http_post(addr: SocketAddr, path: &str, headers: &[(&str, &str)], body: &[u8]) -> (u16, String) {
+    http_request(addr, "POST", path, headers, Some(body))
+}
+
+/// An HTTP/1.1 request with `method` and an optional `body` (sent with its `Content-Length`): (status code, body).
+pub fn http_request(
+    addr: SocketAddr,
+    method: &str,
+    path: &str,
+    headers: &[(&str, &str)],
+    body: Option<&[u8]>,
+) -> (u16, String) {
     let mut stream = TcpStream::connect(addr).expect("connect");
     stream.set_read_timeout(Some(Duration::from_secs(10))).expect("timeout");
-    let mut request = format!("GET {path} HTTP/1.1\r\nConnection: close\r\n");
+    let mut request = format!("{method} {path} HTTP/1.1\r\nConnection: close\r\n");
     if !headers.iter().any(|(k, _)| k.eq_ignore_ascii_case("host")) {
         request.push_str(&format!("Host: {addr}\r\n"));
     }
     for (k, v) in headers {
         request.push_str(&format!("{k}: {v}\r\n"));
     }
+    if let Some(body) = body {
+        request.push_str(&format!("Content-Length: {}\r\n", body.len()));
+    }
     request.push_str("\r\n");
-    stream.write_all(request.as_bytes()).expect("send");
+    let mut bytes = request.into_bytes();
+    bytes.extend_from_slice(body.unwrap_or_default());
+    // A server may answer (413) and close before reading a large body: a failed write is not the test's failure.
+    let _ = stream.write_all(&bytes);
     let mut reader = std::io::BufReader::new(stream);
     let mut head = String::new();
     let mut content_length = None;

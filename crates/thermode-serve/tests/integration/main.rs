@@ -4,6 +4,7 @@
 mod common;
 
 mod api;
+mod command;
 mod dashboard;
 mod dose;
 mod example_client;

@@ -17,8 +17,12 @@
 //!   temperatures are the simulation's (`model_finger_*` columns). `--time-scale` scales the waits (0 skips them,
 //!   for demos).
 //!
-//! The simulated participant's references are real contact under the same stimulus (its `real` curves), so that its
-//! calibration to the paper's 66 % holds for the real trials it will see.
+//! The simulated participant (`--participant-model`): by default the nearest-reference participant whose one noise
+//! term is calibrated to the paper's 66 % real identification rate; `perceptual` is the model of
+//! `thermode_lab::perception` with the fitted parameters shipped in `crates/thermode-lab/data/participant_fit.toml`
+//! (docs/lab.md, with its validation table: it does not yet reproduce the paper's simulated condition). The
+//! references of either are real contact under the same stimulus (its `real` curves), so that its calibration or
+//! fit to the paper's real-condition rates holds for the real trials it will see.
 //!
 //! Seeds: the design's `seed` decides the plan (which material stands for which symbol of the Williams squares, the
 //! order of the rows) and the simulated display's sensor noise; `--seed N` decides only the participants' noise
@@ -41,6 +45,7 @@ use serde_json::json;
 use thermode_device::DeviceConfig;
 use thermode_lab::design::{Experiment, ExperimentFile};
 use thermode_lab::participant::{CurveFeatures, SimulatedParticipant, PAPER_REAL_IDENTIFICATION_RATE};
+use thermode_lab::perception::{PerceptionParams, PerceptualParticipant};
 use thermode_lab::runner::live::{LiveSettings, LiveStimulus};
 use thermode_lab::runner::stimulus::{DisplaySetup, DisplayStimulus};
 use thermode_lab::runner::ws_link::WsLink;
@@ -70,6 +75,32 @@ pub enum StimulusArg {
     Display,
     /// Real contact under the fv model for both conditions (no display in the loop).
     Model,
+}
+
+/// Which simulated participant answers an identification design.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ParticipantModel {
+    /// The nearest-reference participant, one noise term calibrated to the paper's 66 % real identification rate.
+    Calibrated,
+    /// The perceptual participant of `thermode_lab::perception`, fitted to the paper's real rates per material.
+    Perceptual,
+}
+
+/// A simulated participant of either model, copied for each session.
+#[derive(Debug, Clone)]
+enum Simulated {
+    Calibrated(SimulatedParticipant),
+    Perceptual(PerceptualParticipant),
+}
+
+impl Simulated {
+    /// A copy that answers one session.
+    fn responder(&self) -> Box<dyn Responder> {
+        match self {
+            Simulated::Calibrated(p) => Box::new(p.clone()),
+            Simulated::Perceptual(p) => Box::new(p.clone()),
+        }
+    }
 }
 
 /// Noise draws per option when calibrating the simulated participant.
@@ -102,10 +133,16 @@ pub struct LabRunArgs {
     /// column; for a procedure file `press SECONDS [phs]`, `none`, `yes`, `no` or `rating VALUE` per line).
     #[arg(long, conflicts_with = "simulated_participant")]
     pub(crate) responses: Option<PathBuf>,
-    /// Let the simulated participant answer (calibrated to the paper's 66 % real identification rate; for a
-    /// procedure file, the file's `[simulated_participant]`).
+    /// Let the simulated participant answer (`--participant-model`; for a procedure file, the file's
+    /// `[simulated_participant]`).
     #[arg(long, alias = "observer")]
     pub(crate) simulated_participant: bool,
+    /// Which simulated participant answers an identification design: `calibrated` (default: one noise term
+    /// calibrated to the paper's 66 % real identification rate) or `perceptual` (Weber-fraction noise, prototypes,
+    /// response bias, per-person contact, a non-thermal cue; fitted to the paper's real rates per material;
+    /// docs/lab.md's validation table).
+    #[arg(long, value_enum, default_value = "calibrated", requires = "simulated_participant")]
+    pub(crate) participant_model: ParticipantModel,
     /// Multiplies every wait of a simulated session (1 = real time, e.g. to pace a demo; default 0: a simulation
     /// does not wait). A display presents in real time (1).
     #[arg(long, allow_negative_numbers = true)]
@@ -219,8 +256,8 @@ struct Prepared {
 
 /// Who answers, and its description for the sidecar.
 struct Answers {
-    /// The calibrated simulated participant (`None`: keyboard or responses file).
-    simulated: Option<SimulatedParticipant>,
+    /// The simulated participant (`None`: keyboard or responses file).
+    simulated: Option<Simulated>,
     answers: String,
 }
 
@@ -251,37 +288,51 @@ fn prepare(args: &LabRunArgs, design: &Experiment, out: &mut dyn Write) -> Resul
     })
 }
 
-/// Who answers: the simulated participant calibrated on `references` (with `--simulated-participant`), a
-/// responses file or the keyboard; and its description for the sidecar.
+/// Who answers: the simulated participant of `--participant-model` with references `references` (with
+/// `--simulated-participant`), a responses file or the keyboard; and its description for the sidecar.
 fn answers(
     args: &LabRunArgs,
     design: &Experiment,
     references: Vec<CurveFeatures>,
     out: &mut dyn Write,
-) -> Result<(Option<SimulatedParticipant>, String)> {
-    Ok(if args.simulated_participant {
-        let mut simulated = SimulatedParticipant::new(
-            design.response_options.clone(),
-            references,
-            participant_seed(args, design),
-        );
-        let calibration = simulated.calibrate(PAPER_REAL_IDENTIFICATION_RATE, CALIBRATION_SAMPLES, CALIBRATION_SEED)?;
-        writeln!(
-            out,
-            "simulated participant: perceptual noise {:.4} (real contact identified {:.1} % on the calibration sample)",
-            calibration.noise_sd,
-            100.0 * calibration.rate
-        )?;
-        let mut answers = format!("simulated participant, noise {:.4}", calibration.noise_sd);
-        if let Some(seed) = args.seed {
-            answers.push_str(&format!(", seed {seed}"));
+) -> Result<(Option<Simulated>, String)> {
+    if !args.simulated_participant {
+        return Ok(match &args.responses {
+            Some(path) => (None, format!("responses file {}", path.display())),
+            None => (None, "keyboard".to_string()),
+        });
+    }
+    let seed = participant_seed(args, design);
+    let (simulated, mut answers) = match args.participant_model {
+        ParticipantModel::Calibrated => {
+            let mut simulated = SimulatedParticipant::new(design.response_options.clone(), references, seed);
+            let calibration =
+                simulated.calibrate(PAPER_REAL_IDENTIFICATION_RATE, CALIBRATION_SAMPLES, CALIBRATION_SEED)?;
+            writeln!(
+                out,
+                "simulated participant: perceptual noise {:.4} (real contact identified {:.1} % on the calibration sample)",
+                calibration.noise_sd,
+                100.0 * calibration.rate
+            )?;
+            let answers = format!("simulated participant, noise {:.4}", calibration.noise_sd);
+            (Simulated::Calibrated(simulated), answers)
         }
-        (Some(simulated), answers)
-    } else if let Some(path) = &args.responses {
-        (None, format!("responses file {}", path.display()))
-    } else {
-        (None, "keyboard".to_string())
-    })
+        ParticipantModel::Perceptual => {
+            let params = PerceptionParams::fitted();
+            let simulated =
+                PerceptualParticipant::new(design.response_options.clone(), &references, params.clone(), seed)?;
+            let answers = format!(
+                "simulated participant (perceptual model fitted {}: Weber fraction {}, non-thermal cue {:.3})",
+                params.fitted_on, params.weber_fraction, params.non_thermal_strength
+            );
+            writeln!(out, "{answers}")?;
+            (Simulated::Perceptual(simulated), answers)
+        }
+    };
+    if let Some(seed) = args.seed {
+        answers.push_str(&format!(", seed {seed}"));
+    }
+    Ok((Some(simulated), answers))
 }
 
 /// Runs one participant on a real display: a running daemon (`--display`) or one started for the session
@@ -496,7 +547,7 @@ fn session(
     let clock = MonotonicClock::new();
     let design = &experiment.experiment;
     let mut responder: Box<dyn Responder> = match (&who.simulated, &args.responses) {
-        (Some(simulated), _) => Box::new(simulated.clone()),
+        (Some(simulated), _) => simulated.responder(),
         (None, Some(path)) => Box::new(ScriptedResponses::load(
             path,
             &design.response_options,

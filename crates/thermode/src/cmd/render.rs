@@ -14,15 +14,19 @@ use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, Render
 use thermode_plot::write_figure;
 use thermode_render::figure::figure3;
 use thermode_render::run::{
-    render_all_with_progress, write_csv, DEFAULT_DURATION_S, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ,
+    render_all_with_progress, write_csv, RenderRun, DEFAULT_DURATION_S, DEFAULT_PRE_CONTACT_S, DEFAULT_RATE_HZ,
 };
 use thermode_render::summary::{summary_table, RenderSummary};
 use thermode_render::RenderSpec;
 
 use crate::controller::{ControllerArg, RENDER_CONTROLLERS};
-use crate::output::{check_outputs, create_folder_of, csv_precision, is_stdout, print_stdout, write_atomically};
+use crate::output::{
+    check_columnar_precision, check_outputs, create_folder_of, csv_precision, is_stdout, print_stdout,
+    write_atomically, write_columnar,
+};
 use crate::progress::Progress;
 use crate::resolve;
+use thermode_table::{Table, Values};
 
 /// The renderer (and display-inverse finger model).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -106,7 +110,9 @@ pub struct RenderArgs {
     /// Seed of the simulated sensor noise.
     #[arg(long, value_name = "N", default_value_t = thermode_render::run::DEFAULT_SEED)]
     seed: u64,
-    /// Write every tick of every run as CSV; `-`: standard output (the summary then goes to standard error).
+    /// Write every tick of every run as CSV; `-`: standard output (the summary then goes to standard error). A name
+    /// ending in .arrow or .feather writes Arrow IPC (Feather v2), .parquet Parquet: the same columns, every number
+    /// exact.
     #[arg(long, value_name = "FILE.csv")]
     out: Option<PathBuf>,
     /// Draw the paper's Figure 3 for the simulated system (.svg or .png).
@@ -129,6 +135,7 @@ pub struct RenderArgs {
 pub fn run(args: &RenderArgs) -> Result<()> {
     let specs = specs(args)?;
     check_outputs(&[("--out", args.out.as_deref()), ("--plot", args.plot.as_deref())])?;
+    check_columnar_precision(args.out.as_deref(), args.precision)?;
     let progress = Progress::bar(specs.len() as u64, "runs", "render");
     let runs = render_all_with_progress(&specs, &|| progress.step()).context("rendering")?;
     progress.finish();
@@ -149,9 +156,11 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
     }
     if let Some(path) = &args.out {
-        write_atomically(path, |sink| {
-            write_csv(&runs, csv_precision(args.precision), sink).map_err(anyhow::Error::from)
-        })?;
+        if !write_columnar(path, || tables(&runs))? {
+            write_atomically(path, |sink| {
+                write_csv(&runs, csv_precision(args.precision), sink).map_err(anyhow::Error::from)
+            })?;
+        }
     }
     if let Some(path) = &args.plot {
         create_folder_of(path)?;
@@ -171,6 +180,44 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Every run's rows as one table each, with the CSV's columns (`thermode_render::run::CSV_HEADER`) and values:
+/// `contact` 0 or 1, `fault` the code (null without fault), `fault_description` null without fault.
+fn tables(runs: &[RenderRun]) -> Vec<Table<'_>> {
+    runs.iter().map(run_table).collect()
+}
+
+fn run_table(run: &RenderRun) -> Table<'_> {
+    let t = &run.trajectory;
+    let mut table = Table::new();
+    for (name, values) in t.numbers() {
+        table.push(name, Values::F64(values.into()));
+    }
+    table.push(
+        "contact",
+        Values::I64(t.contact.iter().map(|&c| Some(i64::from(c))).collect()),
+    );
+    table.push(
+        "fault",
+        Values::I64(t.fault.iter().map(|f| f.map(|f| i64::from(f.code()))).collect()),
+    );
+    for (name, text) in [
+        ("material", run.spec.material.name.as_str()),
+        ("controller", run.summary.controller.as_str()),
+        ("renderer", run.spec.pipeline.renderer.name()),
+    ] {
+        table.push(
+            name,
+            Values::Repeat {
+                text: text.to_string(),
+                rows: t.len(),
+            },
+        );
+    }
+    let descriptions = t.fault.iter().map(|f| f.map(|f| f.description().to_string()));
+    table.push("fault_description", Values::Text(descriptions.collect()));
+    table
 }
 
 /// The summaries as JSON objects whose window keys follow the windows actually used (`rms_skin_5_10_c` for a 10 s

@@ -62,7 +62,9 @@ pub struct ServeArgs {
     /// A web origin (e.g. `https://app.example`) allowed to open the WebSocket; repeatable.
     #[arg(long = "allow-origin", value_name = "ORIGIN")]
     pub allow_origin: Vec<String>,
-    /// Write one CSV per session (one row per tick per channel) into this directory.
+    /// Write one CSV per session (one row per tick per channel) into this directory. A name ending in .arrow or
+    /// .feather (Arrow IPC) or .parquet: the CSV goes into that file's folder, and when serve stops the session is
+    /// also written to that file (the CSV's columns and values).
     #[arg(long, value_name = "DIR")]
     pub record: Option<PathBuf>,
     /// When the recording cannot be written (a full disk): `stop` releases every stimulus and refuses new ones until
@@ -81,6 +83,15 @@ pub struct ServeArgs {
         allow_negative_numbers = true
     )]
     pub release_after: f64,
+    /// Lease of the HTTP commands (POST /api/command): when no command arrives for this long, the contacts made
+    /// over HTTP are released after the grace period (--release-after) [s], above 0, at most a day.
+    #[arg(
+        long = "command-lease",
+        value_name = "S",
+        default_value_t = 30.0,
+        allow_negative_numbers = true
+    )]
+    pub command_lease: f64,
     /// Stop after this many seconds (default: run until interrupted).
     #[arg(long, value_name = "S", allow_negative_numbers = true)]
     pub duration: Option<f64>,
@@ -131,6 +142,7 @@ pub fn start_private(display: &DisplayArgs, state_dir: Option<PathBuf>) -> Resul
         on_record_error: OnRecordError::Stop,
         record_max_bytes: None,
         release_after: 2.0,
+        command_lease: 30.0,
         duration: None,
         state_dir,
         no_realtime: false,
@@ -154,6 +166,13 @@ struct Started {
 fn start_quiet(args: &ServeArgs) -> Result<(Daemon, Started)> {
     // Every option is checked before a port is opened or a device touched.
     check_duration(args.duration)?;
+    if let Some(file) = args
+        .record
+        .as_deref()
+        .filter(|r| crate::record_columnar::is_columnar(r))
+    {
+        crate::output::check_outputs(&[("--record", Some(file))])?;
+    }
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
     let server = ServerConfig {
         bind: args.bind,
@@ -162,6 +181,10 @@ fn start_quiet(args: &ServeArgs) -> Result<(Daemon, Started)> {
         osc_without_token: args.osc_without_token,
         token: args.token.clone(),
         allowed_origins: args.allow_origin.clone(),
+        net: thermode_serve::api::NetLimits {
+            command_lease_s: args.command_lease,
+            ..thermode_serve::api::NetLimits::default()
+        },
         ..ServerConfig::default()
     };
     // Refuse an insecure bind before touching any hardware.
@@ -176,7 +199,7 @@ fn start_quiet(args: &ServeArgs) -> Result<(Daemon, Started)> {
                 realtime: !args.no_realtime,
                 ..LoopConfig::default()
             },
-            record_dir: args.record.clone(),
+            record_dir: args.record.as_deref().map(crate::record_columnar::record_folder),
             record_policy: match args.on_record_error {
                 OnRecordError::Stop => RecordErrorPolicy::Stop,
                 OnRecordError::Continue => RecordErrorPolicy::Continue,
@@ -355,6 +378,16 @@ pub fn print_notices(daemon: &Daemon) {
 pub fn run(args: &ServeArgs) -> Result<()> {
     let signals = StopSignals::install()?;
     let daemon = start(args)?;
+    let recording = daemon.recording();
     let ended = run_for(args.duration, &signals, |_| print_notices(&daemon))?;
-    finish(daemon, ended)
+    let finished = finish(daemon, ended);
+    let columnar = args
+        .record
+        .as_deref()
+        .filter(|r| crate::record_columnar::is_columnar(r));
+    if let (Some(file), Some(recording)) = (columnar, recording) {
+        let rows = crate::record_columnar::write_session(file, &recording)?;
+        eprintln!("thermode: the session's {rows} rows also written to {}", file.display());
+    }
+    finished
 }

@@ -13,8 +13,12 @@ use thermode_platform::csv_text::{self, CsvText, Precision};
 use thermode_plot::{write_figure, Figure, Marker, Panel, Series, SeriesStyle};
 use thermode_render::figure::EARLY_WINDOW_S;
 
-use crate::output::{check_outputs, create_folder_of, csv_precision, is_stdout, print_stdout, write_atomically};
+use crate::output::{
+    check_columnar_precision, check_outputs, create_folder_of, csv_precision, is_stdout, print_stdout,
+    write_atomically, write_columnar,
+};
 use crate::resolve;
+use thermode_table::{Table, Values};
 
 /// The skin model to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -82,6 +86,8 @@ pub struct SimulateArgs {
     #[arg(long = "fv-tolerance", value_name = "K", default_value_t = thermode_model::fv::DEFAULT_TOLERANCE_C, allow_negative_numbers = true)]
     fv_tolerance: f64,
     /// Write the trajectory as CSV (one row per step; a `material` column names the material); `-`: standard output.
+    /// A name ending in .arrow or .feather writes Arrow IPC (Feather v2), .parquet Parquet: the same columns, every
+    /// number exact.
     #[arg(long, value_name = "FILE.csv")]
     out: Option<PathBuf>,
     /// Draw skin temperature against time (.svg or .png).
@@ -133,6 +139,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         );
     }
     check_outputs(&[("--out", args.out.as_deref()), ("--plot", args.plot.as_deref())])?;
+    check_columnar_precision(args.out.as_deref(), args.precision)?;
     let mut traces = Vec::with_capacity(specs.len());
     for spec in specs {
         let trace = simulate(&spec).with_context(|| format!("simulating {}", spec.material.name))?;
@@ -140,7 +147,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         traces.push((spec.material, trace));
     }
     if let Some(path) = &args.out {
-        write_csv(path, &traces, csv_precision(args.precision))?;
+        if !write_columnar(path, || tables(&traces))? {
+            write_csv(path, &traces, csv_precision(args.precision))?;
+        }
     }
     if let Some(path) = &args.plot {
         write_plot(path, &traces, args.model)?;
@@ -187,6 +196,24 @@ fn write_csv(path: &Path, traces: &[(Material, Trace)], precision: Precision) ->
         }
         Ok(())
     })
+}
+
+/// The CSV's columns of every material's trace as one table each (Arrow and Parquet outputs).
+fn tables(traces: &[(Material, Trace)]) -> Vec<Table<'_>> {
+    traces.iter().map(trace_table).collect()
+}
+
+fn trace_table((material, trace): &(Material, Trace)) -> Table<'_> {
+    let mut table = Table::new();
+    table.push("time_s", Values::F64(trace.time_s.as_slice().into()));
+    for (name, values) in &trace.columns {
+        table.push(name.as_str(), Values::F64(values.as_slice().into()));
+    }
+    table.push(
+        "material",
+        Values::Text(vec![Some(material.name.clone()); trace.time_s.len()]),
+    );
+    table
 }
 
 /// For each column, the first earlier column holding the same numbers bit for bit (kron's skin surface is its

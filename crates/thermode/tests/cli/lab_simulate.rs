@@ -252,3 +252,31 @@ fn lab_analyze_reports_the_confusion_comparison_and_the_jnds() {
         "{report}"
     );
 }
+
+#[test]
+fn the_perceptual_participant_answers_when_asked_and_the_calibrated_one_by_default() {
+    let (calibrated, perceptual) = (tempfile::tempdir().expect("dir"), tempfile::tempdir().expect("dir"));
+    let default = run_sessions(calibrated.path(), &[]);
+    let chosen = run_sessions(perceptual.path(), &["--participant-model", "perceptual"]);
+    assert_eq!(default.len(), chosen.len());
+    let sidecar = |dir: &Path| std::fs::read_to_string(dir.join(first_sidecar_name(dir))).expect("sidecar");
+    assert!(
+        sidecar(calibrated.path()).contains("simulated participant, noise"),
+        "calibrated by default"
+    );
+    assert!(
+        sidecar(perceptual.path()).contains("perceptual model fitted"),
+        "the perceptual model when asked"
+    );
+    let presented = |sessions: &BTreeMap<String, String>| -> Vec<Vec<Vec<String>>> {
+        sessions
+            .values()
+            .map(|csv| columns(csv, &["presented", "condition"]))
+            .collect()
+    };
+    assert_eq!(
+        presented(&default),
+        presented(&chosen),
+        "the same trials, other answers"
+    );
+}

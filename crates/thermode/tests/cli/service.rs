@@ -120,7 +120,7 @@ fn emulate_on(link: &Path) -> Process {
 }
 
 /// `thermode serve` with `args`; returns it, its HTTP port and a reader of its standard error.
-fn serve_with(args: &[&str]) -> (Process, u16, std::sync::mpsc::Receiver<String>) {
+pub(crate) fn serve_with(args: &[&str]) -> (Process, u16, std::sync::mpsc::Receiver<String>) {
     let child = Command::new(binary())
         .arg("serve")
         .args(["--port", "0"])

@@ -1,0 +1,357 @@
+//! The perceptual simulated participant (issue 28): sensory noise from discrimination data, a separate categorical
+//! stage, response bias, per-person contact conductance, finger temperature varying between trials and a
+//! non-thermal cue in real trials. docs/lab.md ("The simulated participant") gives each parameter's source.
+//!
+//! **Sensory stage.** The two thermal cues of [`CurveFeatures`] (initial cooling rate, end drop) are scaled by the
+//! trial's physical factors — the finger's temperature, drawn per trial around rest (the heat extracted is
+//! proportional to the finger–object difference), and the person's contact conductance, drawn once per person
+//! (it limits the heat flux most for high-effusivity materials) — then perceived on the Weber-like
+//! `asinh(x / x₀)` scale ([`CurveFeatures::perceived`]) with Gaussian noise `sensory_sd` on each cue.
+//! `sensory_sd` follows from the 2AFC Weber fraction W of heat-extraction rate (Bergmann Tiest & Kappers 2009):
+//! a change by the factor 1 + W shifts both perceived cues by ln(1 + W), and a 2AFC observer summing them is 75 %
+//! correct when ln(1 + W) / σ = Φ⁻¹(0.75), so σ = ln(1 + W) / 0.6745 ([`sensory_sd_for`]).
+//!
+//! **Categorical stage.** Each person holds a prototype per response option: the perceived cues of real contact with
+//! it (the references), plus memory noise drawn once per person (standard deviation `memory_noise_ratio ×
+//! sensory_sd` per cue). The answer maximises `−‖ψ − p_k‖² / (2 σ_c²) + b_k + s·y_k` with σ_c² the sum of the sensory
+//! and memory variances, `b_k` the response bias of option k, and, in real trials only, the non-thermal cue: a
+//! vector y = s·e_presented + N(0, I) over the options (texture, hardness, sound: any signature that differs between
+//! real samples and is absent on a display's plate), of strength s (d′ between two materials: s√2).
+//!
+//! **Randomness.** Each person's draws come from ChaCha8 stream `(participant, 0)` and each trial's from
+//! `(participant, trial)` of the seed ([`trial_rng`]), so a resumed session gives the same answers.
+
+use rand::Rng;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use thermode_model::materials::find;
+
+use crate::design::Condition;
+use crate::participant::{CurveFeatures, ParticipantError};
+use crate::random::{standard_normal, trial_rng};
+
+/// The fitted parameters shipped with thermode (written by the `fit_participant` example).
+pub const FITTED_TOML: &str = include_str!("../data/participant_fit.toml");
+/// Φ⁻¹(0.75): the 2AFC criterion of a threshold at 75 % correct.
+pub const Z_75: f64 = 0.674_489_750_196_081_7;
+/// Seed salt of the perceptual participant's streams.
+const PERCEPTION_SALT: u64 = 0x7065_7263_6570_0028;
+/// Window of the heat-flux cue used for the contact-conductance factor \[s\] (the initial cooling-rate window).
+const CUE_WINDOW_S: f64 = 2.0;
+
+/// The model's parameters (the TOML file [`FITTED_TOML`]; docs/lab.md lists the sources).
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PerceptionParams {
+    /// When the fit was run (UTC date), or `unfitted`.
+    pub fitted_on: String,
+    /// The data the fit used.
+    pub inputs: String,
+    /// 2AFC Weber fraction of heat-extraction rate (Bergmann Tiest & Kappers 2009: 0.43).
+    pub weber_fraction: f64,
+    /// Memory noise of the prototypes relative to the sensory noise (assumed 1).
+    pub memory_noise_ratio: f64,
+    /// Strength s of the non-thermal cue of real trials (fitted; 0 = none).
+    pub non_thermal_strength: f64,
+    /// Finger–object temperature difference at rest \[°C\] (default 9: a 32 °C finger on 23 °C samples).
+    pub finger_object_difference_c: f64,
+    /// Standard deviation of the finger temperature between trials \[°C\] (assumed 0.5).
+    pub finger_temperature_sd_c: f64,
+    /// Median contact conductance of finger and object \[W/(m²·K)\] (assumed 3000).
+    pub contact_conductance_w_m2k: f64,
+    /// Standard deviation of ln(contact conductance) between persons (assumed 0.4).
+    pub contact_conductance_log_sd: f64,
+    /// Effusivity of the skin \[W·s^½/(m²·K)\] (k 0.37 W/(m·K), ρc 3.5 MJ/(m³·K): 1138).
+    pub skin_effusivity: f64,
+    /// Response bias per option name (added to the option's decision score; missing options: 0).
+    pub bias: BTreeMap<String, f64>,
+}
+
+impl PerceptionParams {
+    /// The shipped fitted parameters.
+    pub fn fitted() -> PerceptionParams {
+        toml::from_str(FITTED_TOML).expect("the shipped participant_fit.toml parses (a unit test checks it)")
+    }
+
+    /// Reads parameters from TOML text.
+    pub fn from_toml(text: &str) -> Result<PerceptionParams, toml::de::Error> {
+        toml::from_str(text)
+    }
+
+    /// The parameters as the TOML of `participant_fit.toml`.
+    pub fn to_toml(&self) -> String {
+        let bias: Vec<String> = self.bias.iter().map(|(k, v)| format!("{k} = {v:.4}")).collect();
+        format!(
+            "# The perceptual simulated participant's parameters (crates/thermode-lab/src/perception.rs, docs/lab.md).\n\
+             # Written by: cargo run --release -p thermode-lab --example fit_participant -- --write\n\
+             fitted_on = \"{}\"\ninputs = \"{}\"\nweber_fraction = {}\nmemory_noise_ratio = {}\n\
+             non_thermal_strength = {:.4}\nfinger_object_difference_c = {}\nfinger_temperature_sd_c = {}\n\
+             contact_conductance_w_m2k = {}\ncontact_conductance_log_sd = {}\nskin_effusivity = {}\n\
+             bias = {{ {} }}\n",
+            self.fitted_on,
+            self.inputs,
+            self.weber_fraction,
+            self.memory_noise_ratio,
+            self.non_thermal_strength,
+            self.finger_object_difference_c,
+            self.finger_temperature_sd_c,
+            self.contact_conductance_w_m2k,
+            self.contact_conductance_log_sd,
+            self.skin_effusivity,
+            bias.join(", ")
+        )
+    }
+
+    /// The sensory noise per perceived cue implied by the Weber fraction ([`sensory_sd_for`]).
+    pub fn sensory_sd(&self) -> f64 {
+        sensory_sd_for(self.weber_fraction)
+    }
+}
+
+/// The sensory noise σ per perceived cue at which a 2AFC observer summing both cues is 75 % correct for a change of
+/// heat-extraction rate by the factor `1 + weber_fraction`: ln(1 + W) / Φ⁻¹(0.75).
+pub fn sensory_sd_for(weber_fraction: f64) -> f64 {
+    (1.0 + weber_fraction).ln() / Z_75
+}
+
+/// The fraction of the perfect-contact heat flux that passes a contact of conductance `h_w_m2k` between skin and a
+/// material, over the cue window: the bodies' resistance `2√(t/π)(1/e_skin + 1/e_material)` (constant flux into
+/// two semi-infinite bodies) in series with `1/h`.
+pub fn contact_factor(h_w_m2k: f64, skin_effusivity: f64, material_effusivity: f64) -> f64 {
+    let bodies =
+        2.0 * (CUE_WINDOW_S / std::f64::consts::PI).sqrt() * (1.0 / skin_effusivity + 1.0 / material_effusivity);
+    bodies / (bodies + 1.0 / h_w_m2k)
+}
+
+/// One person's draws: prototypes (perceived, with memory noise) and contact conductance.
+#[derive(Debug, Clone)]
+struct Person {
+    prototypes: Vec<[f64; 2]>,
+    conductance_w_m2k: f64,
+}
+
+/// The perceptual simulated participant (see the module documentation).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PerceptualParticipant {
+    options: Vec<String>,
+    perceived: Vec<[f64; 2]>,
+    effusivity: Vec<f64>,
+    bias: Vec<f64>,
+    params: PerceptionParams,
+    seed: u64,
+}
+
+impl PerceptualParticipant {
+    /// A participant for `options` (library names) whose prototypes are `references` (real contact with each
+    /// option), with `params`; `seed` seeds every person's and trial's draws.
+    pub fn new(
+        options: Vec<String>,
+        references: &[CurveFeatures],
+        params: PerceptionParams,
+        seed: u64,
+    ) -> Result<PerceptualParticipant, ParticipantError> {
+        let effusivity = options
+            .iter()
+            .map(|name| Ok(find(name)?.effusivity()))
+            .collect::<Result<Vec<f64>, ParticipantError>>()?;
+        let bias = options
+            .iter()
+            .map(|o| params.bias.get(o).copied().unwrap_or(0.0))
+            .collect();
+        Ok(PerceptualParticipant {
+            perceived: references.iter().map(CurveFeatures::perceived).collect(),
+            options,
+            effusivity,
+            bias,
+            params,
+            seed,
+        })
+    }
+
+    /// The response options.
+    pub fn options(&self) -> &[String] {
+        &self.options
+    }
+
+    /// The parameters in use.
+    pub fn params(&self) -> &PerceptionParams {
+        &self.params
+    }
+
+    fn person(&self, participant_index: usize) -> Person {
+        let mut rng = trial_rng(self.seed ^ PERCEPTION_SALT, participant_index, 0);
+        let p = &self.params;
+        let conductance_w_m2k =
+            p.contact_conductance_w_m2k * (p.contact_conductance_log_sd * standard_normal(&mut rng)).exp();
+        let memory_sd = p.memory_noise_ratio * p.sensory_sd();
+        let prototypes = self
+            .perceived
+            .iter()
+            .map(|r| {
+                [
+                    r[0] + memory_sd * standard_normal(&mut rng),
+                    r[1] + memory_sd * standard_normal(&mut rng),
+                ]
+            })
+            .collect();
+        Person {
+            prototypes,
+            conductance_w_m2k,
+        }
+    }
+
+    /// The answer (0-based option) of participant `participant_index` to trial `trial` (≥ 1) presenting option
+    /// `presented` whose skin curve has `features`, in `condition`.
+    pub fn respond(
+        &self,
+        features: &CurveFeatures,
+        presented: usize,
+        condition: Condition,
+        participant_index: usize,
+        trial: usize,
+    ) -> usize {
+        let person = self.person(participant_index);
+        let mut rng = trial_rng(self.seed ^ PERCEPTION_SALT, participant_index, trial.max(1));
+        let percept = self.percept(features, presented, &person, &mut rng);
+        let p = &self.params;
+        let sensory = p.sensory_sd();
+        let categorical_var = sensory * sensory * (1.0 + p.memory_noise_ratio * p.memory_noise_ratio);
+        let s = if condition == Condition::Real {
+            p.non_thermal_strength
+        } else {
+            0.0
+        };
+        let mut best = (0, f64::NEG_INFINITY);
+        for (k, proto) in person.prototypes.iter().enumerate() {
+            let distance = (percept[0] - proto[0]).powi(2) + (percept[1] - proto[1]).powi(2);
+            let mut score = -distance / (2.0 * categorical_var) + self.bias[k];
+            if s > 0.0 {
+                let y = s * f64::from(u8::from(k == presented)) + standard_normal(&mut rng);
+                score += s * y;
+            }
+            if score > best.1 {
+                best = (k, score);
+            }
+        }
+        best.0
+    }
+
+    /// The noisy perceived cues of one trial.
+    fn percept(&self, features: &CurveFeatures, presented: usize, person: &Person, rng: &mut impl Rng) -> [f64; 2] {
+        let p = &self.params;
+        let finger = 1.0 + p.finger_temperature_sd_c * standard_normal(rng) / p.finger_object_difference_c;
+        let e = self.effusivity.get(presented).copied().unwrap_or(f64::INFINITY);
+        let contact = contact_factor(person.conductance_w_m2k, p.skin_effusivity, e)
+            / contact_factor(p.contact_conductance_w_m2k, p.skin_effusivity, e);
+        let scale = finger * contact;
+        let scaled = CurveFeatures {
+            initial_cooling_rate_c_per_s: features.initial_cooling_rate_c_per_s * scale,
+            end_drop_c: features.end_drop_c * scale,
+        };
+        let q = scaled.perceived();
+        let sd = p.sensory_sd();
+        [q[0] + sd * standard_normal(rng), q[1] + sd * standard_normal(rng)]
+    }
+
+    /// Identification rates of real contact per option: `persons` persons, `repetitions` trials of each option each,
+    /// the references as the presented curves (the fit's and the checks' common random numbers: the same seed gives
+    /// the same draws).
+    pub fn real_rates(&self, persons: usize, repetitions: usize) -> Vec<f64> {
+        let references: Vec<CurveFeatures> = self.perceived.iter().map(|q| unperceive(*q)).collect();
+        let n = self.options.len();
+        let mut correct = vec![0usize; n];
+        for person in 0..persons {
+            for k in 0..n {
+                for r in 0..repetitions {
+                    let trial = 1 + r * n + k;
+                    correct[k] += usize::from(self.respond(&references[k], k, Condition::Real, person, trial) == k);
+                }
+            }
+        }
+        correct
+            .iter()
+            .map(|&c| c as f64 / (persons * repetitions).max(1) as f64)
+            .collect()
+    }
+
+    /// Proportion correct of a 2AFC "which is colder" between `a` and `b` (options `ia`, `ib`, `b` the colder)
+    /// over `trials` trials of `persons` persons: each interval perceived with the sensory stage (finger temperature,
+    /// the person's contact conductance, sensory noise), the answer the interval whose summed perceived cues are larger.
+    pub fn two_afc_correct(
+        &self,
+        (a, ia): (&CurveFeatures, usize),
+        (b, ib): (&CurveFeatures, usize),
+        persons: usize,
+        trials: usize,
+    ) -> f64 {
+        let mut correct = 0usize;
+        for person_index in 0..persons {
+            let person = self.person(person_index);
+            for trial in 1..=trials {
+                let mut rng = trial_rng(self.seed ^ PERCEPTION_SALT, person_index, trial);
+                let pa = self.percept(a, ia, &person, &mut rng);
+                let pb = self.percept(b, ib, &person, &mut rng);
+                correct += usize::from(pb[0] + pb[1] > pa[0] + pa[1]);
+            }
+        }
+        correct as f64 / (persons * trials).max(1) as f64
+    }
+
+    /// A copy with other parameters (same options, references and seed).
+    pub fn with_params(&self, params: PerceptionParams) -> PerceptualParticipant {
+        let bias = self
+            .options
+            .iter()
+            .map(|o| params.bias.get(o).copied().unwrap_or(0.0))
+            .collect();
+        PerceptualParticipant {
+            bias,
+            params,
+            ..self.clone()
+        }
+    }
+}
+
+/// The features whose perceived values are `q` (the inverse of [`CurveFeatures::perceived`]).
+fn unperceive(q: [f64; 2]) -> CurveFeatures {
+    CurveFeatures {
+        initial_cooling_rate_c_per_s: crate::participant::RATE_SCALE_C_PER_S * q[0].sinh(),
+        end_drop_c: crate::participant::DROP_SCALE_C * q[1].sinh(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_shipped_parameters_parse_and_round_trip() {
+        let p = PerceptionParams::fitted();
+        assert_eq!(
+            PerceptionParams::from_toml(&p.to_toml())
+                .expect("round trip")
+                .bias
+                .len(),
+            p.bias.len()
+        );
+    }
+
+    #[test]
+    fn the_sensory_noise_of_a_43_percent_weber_fraction() {
+        // ln(1.43) / 0.674490 = 0.357674 / 0.674490 = 0.530289.
+        assert!(
+            (sensory_sd_for(0.43) - 0.530_289).abs() < 1e-5,
+            "{}",
+            sensory_sd_for(0.43)
+        );
+    }
+
+    #[test]
+    fn contact_conductance_limits_metals_more_than_wood() {
+        // Aluminium e ≈ 2.4e4, wood e ≈ 4e2 W·s^½/(m²·K): halving h loses more of the metal's flux.
+        let metal = contact_factor(1500.0, 1138.0, 2.4e4) / contact_factor(3000.0, 1138.0, 2.4e4);
+        let wood = contact_factor(1500.0, 1138.0, 4e2) / contact_factor(3000.0, 1138.0, 4e2);
+        assert!(metal < wood && metal < 0.9 && wood > 0.9, "metal {metal} wood {wood}");
+        assert!((contact_factor(1e12, 1138.0, 4e2) - 1.0).abs() < 1e-6);
+    }
+}
