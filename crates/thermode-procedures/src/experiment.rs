@@ -30,6 +30,19 @@ pub enum ProcedureKind {
     Program,
 }
 
+impl ProcedureKind {
+    /// The name an experiment file gives it (`limits`, `levels`, `staircase`, `questplus`, `program`).
+    pub fn name(self) -> &'static str {
+        match self {
+            ProcedureKind::Limits => "limits",
+            ProcedureKind::Levels => "levels",
+            ProcedureKind::Staircase => "staircase",
+            ProcedureKind::Questplus => "questplus",
+            ProcedureKind::Program => "program",
+        }
+    }
+}
+
 /// An experiment file of a procedure: one with a `procedure` key (the identification design of `thermode-lab` has
 /// none; [`ProcedureFile::declares_procedure`] tells them apart).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -70,13 +70,6 @@ fn procedure(args: &LabPlanArgs, text: &str) -> Result<()> {
         "{}: {} ({}): {what}\n",
         out.display(),
         file.name,
-        text_procedure(&file)
+        file.procedure.name()
     ))
-}
-
-fn text_procedure(file: &thermode_procedures::ProcedureFile) -> String {
-    serde_json::to_value(file.procedure)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_string))
-        .unwrap_or_default()
 }

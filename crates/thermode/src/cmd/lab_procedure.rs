@@ -129,7 +129,7 @@ fn session(
     let mut session = ProcedureSession::open(&ProcedureSessionSpec {
         participant,
         experiment: &file.name,
-        procedure: &procedure_name(file),
+        procedure: file.procedure.name(),
         seed: file.seed,
         experiment_file: (&args.experiment, text),
         data_dir: &args.data_dir,
@@ -148,7 +148,7 @@ fn session(
         out,
         "{} ({}) for {participant}: {}{}",
         file.name,
-        procedure_name(file),
+        file.procedure.name(),
         session.csv_path().display(),
         if recorded > 0 {
             format!(", resuming after trial {recorded}")
@@ -175,13 +175,6 @@ fn session(
         session.csv_path().display()
     )?;
     Ok(())
-}
-
-fn procedure_name(file: &ProcedureFile) -> String {
-    serde_json::to_value(file.procedure)
-        .ok()
-        .and_then(|v| v.as_str().map(str::to_string))
-        .unwrap_or_default()
 }
 
 /// Whether a file's text is a procedure file (a top-level `procedure` key).

@@ -438,6 +438,38 @@ fn a_procedure_runs_on_the_temperature_commanded_tcs2_and_mecom_emulators() {
     }
 }
 
+/// The status of a display made of two devices of two channels each, `devices` in `--device` order: four channels,
+/// the first two on the first device.
+fn two_devices_of_two_channels(http_port: u16, devices: &[String]) -> serde_json::Value {
+    let started = super::serve_on_emulator::status(http_port);
+    assert_eq!(started["channel_count"], 4, "{}", started["devices"]);
+    assert_eq!(started["channel_devices"], serde_json::json!([0, 0, 1, 1]));
+    for (index, device) in devices.iter().enumerate() {
+        let entry = &started["devices"][index];
+        assert_eq!(entry["device"], device.as_str(), "{entry}");
+        assert_eq!(
+            entry["channels"],
+            serde_json::json!([2 * index, 2 * index + 1]),
+            "{entry}"
+        );
+    }
+    started
+}
+
+/// Drives channels 0 and 2 (one on each device) to 4 °C above the warmer of their temperatures in `started` (the
+/// start-up self-test's pulse may have left a plate above its rest, so a fixed target could be barely above it)
+/// and waits up to 15 s for each to pass 1.5 °C above its start (still heating then); returns that status.
+fn drive_channels_0_and_2_up(host: &super::serve_on_emulator::Serve, started: &serde_json::Value) -> serde_json::Value {
+    use super::serve_on_emulator::setpoint;
+    let (start_0, start_2) = (sensor_c(started, 0), sensor_c(started, 2));
+    let target_c = start_0.max(start_2) + 4.0;
+    setpoint(host.osc_port, 0, target_c as f32, 4.0);
+    setpoint(host.osc_port, 2, target_c as f32, 4.0);
+    status_until(host.http_port, 15.0, "channels 0 and 2 driven 1.5 °C up", |s| {
+        sensor_c(s, 0) > start_0 + 1.5 && sensor_c(s, 2) > start_2 + 1.5
+    })
+}
+
 /// The display channels with a latched fault, from `/api/status`.
 fn faulted(status: &serde_json::Value) -> Vec<u64> {
     let faults = status["faults"].as_array().cloned().unwrap_or_default();
@@ -486,7 +518,7 @@ fn a_display_of_two_mecom_devices_faults_only_the_killed_ones_channels_and_takes
 
 /// The test above with the emulators' `firmware` switch (None: the full command set).
 fn two_mecom_devices_one_killed(firmware: Option<&str>) {
-    use super::serve_on_emulator::{serve_devices, setpoint};
+    use super::serve_on_emulator::serve_devices;
     let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
     let links = [dir.path().join("tec-a"), dir.path().join("tec-b")];
     let emulator = |link: &std::path::Path| {
@@ -499,27 +531,14 @@ fn two_mecom_devices_one_killed(firmware: Option<&str>) {
     let b = emulator(&links[1]);
     let devices: Vec<String> = links.iter().map(|l| format!("mecom:{}", l.display())).collect();
     let host = serve_devices(&[&devices[0], &devices[1]], None, None);
-    let started = super::serve_on_emulator::status(host.http_port);
-    assert_eq!(started["channel_count"], 4, "{}", started["devices"]);
-    assert_eq!(started["channel_devices"], serde_json::json!([0, 0, 1, 1]));
-    for (index, device) in devices.iter().enumerate() {
+    let started = two_devices_of_two_channels(host.http_port, &devices);
+    for index in 0..devices.len() {
         let entry = &started["devices"][index];
-        assert_eq!(entry["device"], device.as_str(), "{entry}");
-        assert_eq!(
-            entry["channels"],
-            serde_json::json!([2 * index, 2 * index + 1]),
-            "{entry}"
-        );
         assert_eq!(entry["link"]["state"], "up", "{entry}");
         let commands = entry["command_set"].as_str().unwrap_or_default();
         assert_eq!(commands.contains("every firmware"), firmware.is_some(), "{entry}");
     }
-    let (start_0, start_2) = (sensor_c(&started, 0), sensor_c(&started, 2));
-    setpoint(host.osc_port, 0, 34.0, 4.0);
-    setpoint(host.osc_port, 2, 34.0, 4.0);
-    let driven = status_until(host.http_port, 15.0, "both devices driven 1 °C up", |s| {
-        sensor_c(s, 0) > start_0 + 1.0 && sensor_c(s, 2) > start_2 + 1.0
-    });
+    let driven = drive_channels_0_and_2_up(&host, &started);
     drop(b);
     let down = status_until(host.http_port, 5.0, "device b down, its channels faulted", |s| {
         s["devices"][1]["link"]["state"] == "down" && faulted(s).contains(&2) && faulted(s).contains(&3)
@@ -551,7 +570,7 @@ fn two_mecom_devices_one_killed(firmware: Option<&str>) {
 /// address a device of its own in `/api/status`, both driven.
 #[test]
 fn two_addresses_on_one_emulated_bus_make_one_display() {
-    use super::serve_on_emulator::{serve_devices, setpoint};
+    use super::serve_on_emulator::serve_devices;
     let (_bus, pty) = emulate(&[
         "--protocol",
         "mecom",
@@ -565,27 +584,8 @@ fn two_addresses_on_one_emulated_bus_make_one_display() {
     ]);
     let devices = [format!("mecom:{pty}@1"), format!("mecom:{pty}@2")];
     let host = serve_devices(&[&devices[0], &devices[1]], None, None);
-    let started = super::serve_on_emulator::status(host.http_port);
-    assert_eq!(started["channel_count"], 4, "{}", started["devices"]);
-    assert_eq!(started["channel_devices"], serde_json::json!([0, 0, 1, 1]));
-    for (index, device) in devices.iter().enumerate() {
-        let entry = &started["devices"][index];
-        assert_eq!(entry["device"], device.as_str(), "{entry}");
-        assert_eq!(
-            entry["channels"],
-            serde_json::json!([2 * index, 2 * index + 1]),
-            "{entry}"
-        );
-    }
-    // Both plates driven to 2 °C above the warmer of their starting temperatures (the start-up self-test's pulse
-    // may have left them above their rest), each must pass 1.5 °C above its start.
-    let (start_0, start_2) = (sensor_c(&started, 0), sensor_c(&started, 2));
-    let target_c = start_0.max(start_2) + 2.0;
-    setpoint(host.osc_port, 0, target_c as f32, 4.0);
-    setpoint(host.osc_port, 2, target_c as f32, 4.0);
-    status_until(host.http_port, 15.0, "both addresses driven 1.5 °C up", |s| {
-        sensor_c(s, 0) > start_0 + 1.5 && sensor_c(s, 2) > start_2 + 1.5
-    });
+    let started = two_devices_of_two_channels(host.http_port, &devices);
+    drive_channels_0_and_2_up(&host, &started);
 }
 
 /// `thermode emulate` with `args`; returns it and the first two lines it printed (the device's and the reference
