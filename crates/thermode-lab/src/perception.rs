@@ -13,10 +13,14 @@
 //!
 //! **Categorical stage.** Each person holds a prototype per response option: the perceived cues of real contact with
 //! it (the references), plus memory noise drawn once per person (standard deviation `memory_noise_ratio ×
-//! sensory_sd` per cue). The answer maximises `−‖ψ − p_k‖² / (2 σ_c²) + b_k + s·y_k` with σ_c² the sum of the sensory
-//! and memory variances, `b_k` the response bias of option k, and, in real trials only, the non-thermal cue: a
-//! vector y = s·e_presented + N(0, I) over the options (texture, hardness, sound: any signature that differs between
-//! real samples and is absent on a display's plate), of strength s (d′ between two materials: s√2).
+//! sensory_sd` per cue). The thermal answer maximises `−‖ψ − p_k‖² / (2 σ_c²) + b_k` with σ_c² the sum of the
+//! sensory and memory variances and `b_k` the response bias of option k.
+//!
+//! **Non-thermal channel.** In real trials only, a separate categorical channel: with probability `π_k` (the
+//! non-thermal recognition of the presented material k: texture, compliance, sound — any signature a real sample
+//! has and a display's plate lacks) the person recognises the material by it and answers k; otherwise the thermal
+//! stage answers. The channel carries no prior of its own into the thermal decision, so a material that is easy to
+//! recognise by touch in real trials is not favoured in simulated ones (a bias fitted to the real rates would be).
 //!
 //! **Randomness.** Each person's draws come from ChaCha8 stream `(participant, 0)` and each trial's from
 //! `(participant, trial)` of the seed ([`trial_rng`]), so a resumed session gives the same answers.
@@ -51,8 +55,9 @@ pub struct PerceptionParams {
     pub weber_fraction: f64,
     /// Memory noise of the prototypes relative to the sensory noise (assumed 1).
     pub memory_noise_ratio: f64,
-    /// Strength s of the non-thermal cue of real trials (fitted; 0 = none).
-    pub non_thermal_strength: f64,
+    /// Probability π_k that the non-thermal channel recognises option k in a real trial, per option name (fitted;
+    /// missing options: 0 = no non-thermal cue).
+    pub non_thermal_recognition: BTreeMap<String, f64>,
     /// Finger–object temperature difference at rest \[°C\] (default 9: a 32 °C finger on 23 °C samples).
     pub finger_object_difference_c: f64,
     /// Standard deviation of the finger temperature between trials \[°C\] (assumed 0.5).
@@ -80,26 +85,40 @@ impl PerceptionParams {
 
     /// The parameters as the TOML of `participant_fit.toml`.
     pub fn to_toml(&self) -> String {
-        let bias: Vec<String> = self.bias.iter().map(|(k, v)| format!("{k} = {v:.4}")).collect();
+        let table = |m: &BTreeMap<String, f64>| {
+            m.iter()
+                .map(|(k, v)| format!("{k} = {v:.4}"))
+                .collect::<Vec<String>>()
+                .join(", ")
+        };
         format!(
             "# The perceptual simulated participant's parameters (crates/thermode-lab/src/perception.rs, docs/lab.md).\n\
              # Written by: cargo run --release -p thermode-lab --example fit_participant -- --write\n\
              fitted_on = \"{}\"\ninputs = \"{}\"\nweber_fraction = {}\nmemory_noise_ratio = {}\n\
-             non_thermal_strength = {:.4}\nfinger_object_difference_c = {}\nfinger_temperature_sd_c = {}\n\
+             non_thermal_recognition = {{ {} }}\nfinger_object_difference_c = {}\nfinger_temperature_sd_c = {}\n\
              contact_conductance_w_m2k = {}\ncontact_conductance_log_sd = {}\nskin_effusivity = {}\n\
              bias = {{ {} }}\n",
             self.fitted_on,
             self.inputs,
             self.weber_fraction,
             self.memory_noise_ratio,
-            self.non_thermal_strength,
+            table(&self.non_thermal_recognition),
             self.finger_object_difference_c,
             self.finger_temperature_sd_c,
             self.contact_conductance_w_m2k,
             self.contact_conductance_log_sd,
             self.skin_effusivity,
-            bias.join(", ")
+            table(&self.bias)
         )
+    }
+
+    /// The non-thermal recognition probabilities as `name π` pairs, e.g. `aluminium 0.12, wood 0.93`.
+    pub fn recognition_summary(&self) -> String {
+        self.non_thermal_recognition
+            .iter()
+            .map(|(name, p)| format!("{name} {p:.2}"))
+            .collect::<Vec<String>>()
+            .join(", ")
     }
 
     /// The sensory noise per perceived cue implied by the Weber fraction ([`sensory_sd_for`]).
@@ -137,6 +156,7 @@ pub struct PerceptualParticipant {
     perceived: Vec<[f64; 2]>,
     effusivity: Vec<f64>,
     bias: Vec<f64>,
+    recognition: Vec<f64>,
     params: PerceptionParams,
     seed: u64,
 }
@@ -154,15 +174,12 @@ impl PerceptualParticipant {
             .iter()
             .map(|name| Ok(find(name)?.effusivity()))
             .collect::<Result<Vec<f64>, ParticipantError>>()?;
-        let bias = options
-            .iter()
-            .map(|o| params.bias.get(o).copied().unwrap_or(0.0))
-            .collect();
         Ok(PerceptualParticipant {
             perceived: references.iter().map(CurveFeatures::perceived).collect(),
+            bias: per_option(&options, &params.bias),
+            recognition: per_option(&options, &params.non_thermal_recognition),
             options,
             effusivity,
-            bias,
             params,
             seed,
         })
@@ -213,22 +230,22 @@ impl PerceptualParticipant {
         let person = self.person(participant_index);
         let mut rng = trial_rng(self.seed ^ PERCEPTION_SALT, participant_index, trial.max(1));
         let percept = self.percept(features, presented, &person, &mut rng);
+        let recognised = rng.gen::<f64>() < self.recognition.get(presented).copied().unwrap_or(0.0);
+        if condition == Condition::Real && recognised {
+            return presented;
+        }
+        self.thermal_answer(percept, &person)
+    }
+
+    /// The categorical stage on thermal evidence: the option maximising `−‖ψ − p_k‖² / (2 σ_c²) + b_k`.
+    fn thermal_answer(&self, percept: [f64; 2], person: &Person) -> usize {
         let p = &self.params;
         let sensory = p.sensory_sd();
         let categorical_var = sensory * sensory * (1.0 + p.memory_noise_ratio * p.memory_noise_ratio);
-        let s = if condition == Condition::Real {
-            p.non_thermal_strength
-        } else {
-            0.0
-        };
         let mut best = (0, f64::NEG_INFINITY);
         for (k, proto) in person.prototypes.iter().enumerate() {
             let distance = (percept[0] - proto[0]).powi(2) + (percept[1] - proto[1]).powi(2);
-            let mut score = -distance / (2.0 * categorical_var) + self.bias[k];
-            if s > 0.0 {
-                let y = s * f64::from(u8::from(k == presented)) + standard_normal(&mut rng);
-                score += s * y;
-            }
+            let score = -distance / (2.0 * categorical_var) + self.bias[k];
             if score > best.1 {
                 best = (k, score);
             }
@@ -299,17 +316,18 @@ impl PerceptualParticipant {
 
     /// A copy with other parameters (same options, references and seed).
     pub fn with_params(&self, params: PerceptionParams) -> PerceptualParticipant {
-        let bias = self
-            .options
-            .iter()
-            .map(|o| params.bias.get(o).copied().unwrap_or(0.0))
-            .collect();
         PerceptualParticipant {
-            bias,
+            bias: per_option(&self.options, &params.bias),
+            recognition: per_option(&self.options, &params.non_thermal_recognition),
             params,
             ..self.clone()
         }
     }
+}
+
+/// The values of `table` for `options` in order (missing: 0).
+fn per_option(options: &[String], table: &BTreeMap<String, f64>) -> Vec<f64> {
+    options.iter().map(|o| table.get(o).copied().unwrap_or(0.0)).collect()
 }
 
 /// The features whose perceived values are `q` (the inverse of [`CurveFeatures::perceived`]).

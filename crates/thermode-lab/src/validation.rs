@@ -121,40 +121,25 @@ pub fn contact_features(contact: &FvContact, duration_s: f64) -> Result<Vec<Curv
         .collect()
 }
 
-fn logit(p: f64) -> f64 {
-    (p / (1.0 - p)).ln()
-}
-
-/// Fits the non-thermal cue's strength and the response biases so that `base` identifies real contact at `targets`
-/// (one per option): `iterations` damped logit steps on common random numbers (`persons` × `repetitions` trials per
-/// option, the same seed every step). The mean of the biases stays 0. Returns the fitted parameters and the rates.
+/// Fits the non-thermal recognition probabilities so that `base` identifies real contact at `targets` (one per
+/// option): the thermal stage alone (π = 0) identifies option k at `t_k` on common random numbers (`persons` ×
+/// `repetitions` trials per option); a recognised trial is always correct and the others are answered thermally,
+/// so the real rate is `π_k + (1 − π_k) t_k` and `π_k = (r_k − t_k) / (1 − t_k)`, 0 where the thermal stage alone
+/// already reaches the target. The biases stay as given. Returns the fitted parameters and the thermal-only rates.
 pub fn fit_real_rates(
     base: &PerceptualParticipant,
     targets: &[f64],
     persons: usize,
     repetitions: usize,
-    iterations: usize,
 ) -> (PerceptionParams, Vec<f64>) {
     let mut params = base.params().clone();
-    let n = targets.len();
-    let floor = 0.5 / (persons * repetitions) as f64;
-    let mut rates = Vec::new();
-    for _ in 0..iterations {
-        rates = base.with_params(params.clone()).real_rates(persons, repetitions);
-        let d: Vec<f64> = targets
-            .iter()
-            .zip(&rates)
-            .map(|(t, r)| logit(*t) - logit(r.clamp(floor, 1.0 - floor)))
-            .collect();
-        let mean_d = d.iter().sum::<f64>() / n as f64;
-        params.non_thermal_strength *= (0.3 * mean_d).exp();
-        for (name, dk) in base.options().iter().zip(&d) {
-            *params.bias.entry(name.clone()).or_insert(0.0) += 0.5 * (dk - mean_d);
-        }
-        let mean_bias = params.bias.values().sum::<f64>() / params.bias.len().max(1) as f64;
-        params.bias.values_mut().for_each(|b| *b -= mean_bias);
+    params.non_thermal_recognition.clear();
+    let thermal = base.with_params(params.clone()).real_rates(persons, repetitions);
+    for ((name, target), t) in base.options().iter().zip(targets).zip(&thermal) {
+        let recognition = if *t < 1.0 { ((target - t) / (1.0 - t)).max(0.0) } else { 0.0 };
+        params.non_thermal_recognition.insert(name.clone(), recognition);
     }
-    (params, rates)
+    (params, thermal)
 }
 
 /// The figures of one simulated run of the paper's design (as `lab analyze` computes them).

@@ -322,8 +322,10 @@ fn answers(
             let simulated =
                 PerceptualParticipant::new(design.response_options.clone(), &references, params.clone(), seed)?;
             let answers = format!(
-                "simulated participant (perceptual model fitted {}: Weber fraction {}, non-thermal cue {:.3})",
-                params.fitted_on, params.weber_fraction, params.non_thermal_strength
+                "simulated participant (perceptual model fitted {}: Weber fraction {}, non-thermal recognition {})",
+                params.fitted_on,
+                params.weber_fraction,
+                params.recognition_summary()
             );
             writeln!(out, "{answers}")?;
             (Simulated::Perceptual(simulated), answers)
