@@ -296,8 +296,24 @@ impl PerceptualParticipant {
     /// the person's contact conductance, sensory noise), the answer the interval whose summed perceived cues are larger.
     pub fn two_afc_correct(
         &self,
+        a: (&CurveFeatures, usize),
+        b: (&CurveFeatures, usize),
+        persons: usize,
+        trials: usize,
+    ) -> f64 {
+        self.two_afc_correct_sites(a, b, 1, persons, trials)
+    }
+
+    /// [`Self::two_afc_correct`] with the colder material `b` touching `colder_sites` fingers (≥ 1) and `a` one.
+    /// Summation rule: each finger is an independent channel (its own finger-temperature and sensory-noise draws, the
+    /// person's contact conductance shared) and the interval's percept is the mean of its fingers' perceived cues —
+    /// averaging of independent noisy channels, the ideal combination of equal channels, so the colder interval's
+    /// noise variance falls by the number of fingers and its mean stays (no intensity summation is claimed).
+    pub fn two_afc_correct_sites(
+        &self,
         (a, ia): (&CurveFeatures, usize),
         (b, ib): (&CurveFeatures, usize),
+        colder_sites: usize,
         persons: usize,
         trials: usize,
     ) -> f64 {
@@ -308,7 +324,12 @@ impl PerceptualParticipant {
                 let mut rng = trial_rng(self.seed ^ PERCEPTION_SALT, person_index, trial);
                 let pa = self.percept(a, ia, &person, &mut rng);
                 let pb = self.percept(b, ib, &person, &mut rng);
-                correct += usize::from(pb[0] + pb[1] > pa[0] + pa[1]);
+                let mut colder = pb[0] + pb[1];
+                for _ in 1..colder_sites {
+                    let more = self.percept(b, ib, &person, &mut rng);
+                    colder += more[0] + more[1];
+                }
+                correct += usize::from(colder / colder_sites.max(1) as f64 > pa[0] + pa[1]);
             }
         }
         correct as f64 / (persons * trials).max(1) as f64
@@ -352,6 +373,46 @@ mod tests {
                 .len(),
             p.bias.len()
         );
+    }
+
+    /// A participant recognising every material by its non-thermal cue: real trials are always right, simulated
+    /// trials answer exactly as a participant without the channel (the channel carries no prior into them).
+    #[test]
+    fn the_non_thermal_channel_acts_in_real_trials_only() {
+        let options: Vec<String> = ["aluminium", "wood"].iter().map(|s| s.to_string()).collect();
+        let features = [
+            CurveFeatures {
+                initial_cooling_rate_c_per_s: 4.0,
+                end_drop_c: 7.0,
+            },
+            CurveFeatures {
+                initial_cooling_rate_c_per_s: 1.4,
+                end_drop_c: 2.5,
+            },
+        ];
+        let mut without = PerceptionParams::fitted();
+        without.non_thermal_recognition.clear();
+        let mut with = without.clone();
+        with.non_thermal_recognition = options.iter().map(|o| (o.clone(), 1.0)).collect();
+        let p0 = PerceptualParticipant::new(options.clone(), &features, without, 4).expect("participant");
+        let p1 = p0.with_params(with);
+        // The stimulus halfway between the prototypes: the thermal stage errs often.
+        let middle = CurveFeatures {
+            initial_cooling_rate_c_per_s: 2.4,
+            end_drop_c: 4.2,
+        };
+        let (mut real_wrong, mut differ) = (0, 0);
+        for trial in 1..=400 {
+            real_wrong += usize::from(p1.respond(&middle, 0, Condition::Real, trial % 7, trial) != 0);
+            let a = p0.respond(&middle, 0, Condition::Simulated, trial % 7, trial);
+            differ += usize::from(a != p1.respond(&middle, 0, Condition::Simulated, trial % 7, trial));
+        }
+        let thermal_wrong = (1..=400)
+            .filter(|&t| p0.respond(&middle, 0, Condition::Real, t % 7, t) != 0)
+            .count();
+        assert_eq!(real_wrong, 0, "recognised real trials are all right");
+        assert_eq!(differ, 0, "simulated trials unchanged by the channel");
+        assert!(thermal_wrong > 40, "the thermal stage alone errs: {thermal_wrong} of 400");
     }
 
     #[test]

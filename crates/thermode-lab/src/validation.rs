@@ -85,6 +85,67 @@ pub fn metals_correct(params: &PerceptionParams, persons: usize, trials: usize) 
     Ok(p.two_afc_correct((&features[0], 0), (&features[1], 1), persons, trials))
 }
 
+/// Yang, Kwon & Jones (2009)'s check: 2AFC proportion correct between aluminium and stone (stone the warmer, fv
+/// model, 30 s) when aluminium touches `colder_sites` fingers and stone one, `persons` × `trials`, participant seed
+/// 3; the summation rule is [`PerceptualParticipant::two_afc_correct_sites`]'s (averaging of independent channels).
+pub fn fingers_correct(
+    params: &PerceptionParams,
+    colder_sites: usize,
+    persons: usize,
+    trials: usize,
+) -> Result<f64, ValidationError> {
+    let names = ["stone".to_string(), "aluminium".to_string()];
+    let contact = FvContact::default();
+    let mut features = Vec::new();
+    for name in &names {
+        let material = find(name).map_err(ParticipantError::from)?;
+        features.push(CurveFeatures::of(
+            &contact.curve(&material, None, 30.0).map_err(StimulusError::from)?,
+        )?);
+    }
+    let p = PerceptualParticipant::new(names.to_vec(), &features, params.clone(), 3)?;
+    Ok(p.two_afc_correct_sites((&features[0], 0), (&features[1], 1), colder_sites, persons, trials))
+}
+
+/// The largest share of mistakes between wood and rubber (the only pair of the paper's materials within
+/// k ± 0.005 cal/(cm·s·°C)) that any data matching the paper's correct rates can have: every mistake made on wood or
+/// rubber in either condition taken as a wood–rubber confusion, over all mistakes, with equal trials per material and
+/// condition (real rates [`PAPER_REAL_RATES`], simulated rates `simulated`).
+pub fn wood_rubber_share_bound(simulated: &[f64; 5]) -> f64 {
+    let mistakes = |rates: &[f64]| rates.iter().map(|r| 1.0 - r).collect::<Vec<f64>>();
+    let (real, sim) = (mistakes(&PAPER_REAL_RATES), mistakes(simulated));
+    let total: f64 = real.iter().chain(&sim).sum();
+    (real[3] + real[4] + sim[3] + sim[4]) / total
+}
+
+/// P(X ≥ k) for X ~ Binomial(n, p).
+pub fn binomial_upper_tail(n: u64, k: u64, p: f64) -> f64 {
+    if p >= 1.0 {
+        return if k <= n { 1.0 } else { 0.0 };
+    }
+    let mut pmf = (1.0 - p).powi(n as i32);
+    let mut tail = if k == 0 { pmf } else { 0.0 };
+    for i in 1..=n {
+        pmf *= (n - i + 1) as f64 / i as f64 * p / (1.0 - p);
+        if i >= k {
+            tail += pmf;
+        }
+    }
+    tail.min(1.0)
+}
+
+/// The largest probability, over every split p + q = 1, that one run of `n` trials each gives at least `wood` correct
+/// wood answers (rate p) and at least `rubber` correct rubber answers (rate q): the bound for an observer to whom the
+/// two materials feel alike (its answers depend on the percept only, so p + q ≤ 1; grid of 0.001).
+pub fn alike_pair_joint_probability(n: u64, wood: u64, rubber: u64) -> f64 {
+    (0..=1000)
+        .map(|i| {
+            let p = f64::from(i) / 1000.0;
+            binomial_upper_tail(n, wood, p) * binomial_upper_tail(n, rubber, 1.0 - p)
+        })
+        .fold(0.0, f64::max)
+}
+
 /// One row of `data/validation.csv`.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 pub struct Published {
@@ -345,6 +406,14 @@ mod tests {
         let rows = published();
         assert!(rows.iter().any(|r| r.key == "chi_square"), "{rows:?}");
         assert!(rows.iter().all(|r| !r.source.is_empty()));
+    }
+
+    #[test]
+    fn binomial_tails_match_hand_computed_values() {
+        // P(X ≥ 2), n 3, p 0.5: (3 + 1) / 8; P(X ≥ 0) = 1; P(X ≥ 3), p 0.1: 0.001.
+        assert!((binomial_upper_tail(3, 2, 0.5) - 0.5).abs() < 1e-12);
+        assert!((binomial_upper_tail(3, 0, 0.3) - 1.0).abs() < 1e-12);
+        assert!((binomial_upper_tail(3, 3, 0.1) - 0.001).abs() < 1e-12);
     }
 
     #[test]
