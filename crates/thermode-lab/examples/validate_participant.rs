@@ -12,7 +12,7 @@ use thermode_lab::perception::{PerceptionParams, PerceptualParticipant};
 use thermode_lab::runner::FvContact;
 use thermode_lab::validation::{
     alike_pair_joint_probability, contact_features, design_over_seeds, display_features, fingers_correct,
-    limits_levels_gap_c, metals_correct, own_display_pipeline, wood_rubber_share_bound,
+    limits_levels_gap_c, matched_identification, metals_correct, own_display_pipeline, wood_rubber_share_bound,
     paper_like_pipeline, published, weber_fraction_at, DesignFigures, Spread, PAPER_MATERIALS,
 };
 
@@ -139,10 +139,20 @@ fn rows(
         ),
         pass: Some(three - one > 3.0 * se),
     });
+    let mut matched = Vec::new();
+    for (presented, to) in [(0, 3), (3, 0), (2, 0)] {
+        let (object_c, rate) = matched_identification(params, (presented, to), 1000, 4)?;
+        matched.push((PAPER_MATERIALS[presented], PAPER_MATERIALS[to], object_c, rate));
+    }
     rows.push(Row {
         key: "matched_curves".into(),
-        model: "not checked (the pre-heated pairs' curves are not in the material library)".into(),
-        pass: None,
+        model: matched
+            .iter()
+            .map(|(p, t, c, r)| format!("{p} at {c:.1} °C matched to {t}: {r:.3}"))
+            .collect::<Vec<String>>()
+            .join("; ")
+            + " (thermal cues, 4000 trials each)",
+        pass: Some(matched.iter().all(|m| m.3 <= 0.20)),
     });
     let gap = limits_levels_gap_c(0.5, 1.0, 0.4, 1.0).unwrap_or(f64::NAN);
     rows.push(Row {

@@ -107,6 +107,64 @@ pub fn fingers_correct(
     Ok(p.two_afc_correct_sites((&features[0], 0), (&features[1], 1), colder_sites, persons, trials))
 }
 
+/// A sample of `presented` whose contact curve (fv model, 30 s) matches that of `matched_to` at room temperature:
+/// its temperature at the touch \[°C\], found by bisection in −30…60 °C so that the summed perceived cues (the 2AFC
+/// decision variable) are equal, and the curve's features.
+pub fn matched_sample(presented: &str, matched_to: &str) -> Result<(f64, CurveFeatures), ValidationError> {
+    let room = FvContact::default();
+    let features = |contact: &FvContact, name: &str| -> Result<CurveFeatures, ValidationError> {
+        let material = find(name).map_err(ParticipantError::from)?;
+        Ok(CurveFeatures::of(
+            &contact.curve(&material, None, 30.0).map_err(StimulusError::from)?,
+        )?)
+    };
+    let sum = |f: &CurveFeatures| f.perceived()[0] + f.perceived()[1];
+    let target = sum(&features(&room, matched_to)?);
+    let (mut cold_c, mut warm_c) = (-30.0, 60.0);
+    for _ in 0..40 {
+        let mid_c = 0.5 * (cold_c + warm_c);
+        let contact = FvContact {
+            object_c: mid_c,
+            ..FvContact::default()
+        };
+        // A colder sample cools the finger more: a larger sum.
+        if sum(&features(&contact, presented)?) > target {
+            cold_c = mid_c;
+        } else {
+            warm_c = mid_c;
+        }
+    }
+    let object_c = 0.5 * (cold_c + warm_c);
+    let contact = FvContact {
+        object_c,
+        ..FvContact::default()
+    };
+    Ok((object_c, features(&contact, presented)?))
+}
+
+/// Bhattacharjee et al. (2020)'s check: how often `presented`, pre-heated or pre-cooled so that its contact curve
+/// matches `matched_to`'s ([`matched_sample`]), is identified among the paper's five materials (prototypes at room
+/// temperature) on its thermal cues alone (a display presentation: no non-thermal channel), `persons` ×
+/// `repetitions`, participant seed 3; both are indices into [`PAPER_MATERIALS`] (panics outside it). Returns the sample's temperature and the proportion correct.
+pub fn matched_identification(
+    params: &PerceptionParams,
+    (presented, matched_to): (usize, usize),
+    persons: usize,
+    repetitions: usize,
+) -> Result<(f64, f64), ValidationError> {
+    let (object_c, features) = matched_sample(PAPER_MATERIALS[presented], PAPER_MATERIALS[matched_to])?;
+    let options: Vec<String> = PAPER_MATERIALS.iter().map(|s| s.to_string()).collect();
+    let references = contact_features(&FvContact::default(), 30.0)?;
+    let p = PerceptualParticipant::new(options, &references, params.clone(), 3)?;
+    let mut correct = 0usize;
+    for person in 0..persons {
+        for trial in 1..=repetitions {
+            correct += usize::from(p.respond(&features, presented, Condition::Simulated, person, trial) == presented);
+        }
+    }
+    Ok((object_c, correct as f64 / (persons * repetitions).max(1) as f64))
+}
+
 /// The largest share of mistakes between wood and rubber (the only pair of the paper's materials within
 /// k ± 0.005 cal/(cm·s·°C)) that any data matching the paper's correct rates can have: every mistake made on wood or
 /// rubber in either condition taken as a wood–rubber confusion, over all mistakes, with equal trials per material and
