@@ -12,8 +12,8 @@ use thermode_lab::perception::{PerceptionParams, PerceptualParticipant};
 use thermode_lab::runner::FvContact;
 use thermode_lab::validation::{
     alike_pair_joint_probability, contact_features, design_over_seeds, display_features, fingers_correct,
-    limits_levels_gap_c, matched_identification, metals_correct, own_display_pipeline, wood_rubber_share_bound,
-    paper_like_pipeline, published, weber_fraction_at, DesignFigures, Spread, PAPER_MATERIALS,
+    limits_levels_gap_c, matched_identification, metals_correct, own_display_pipeline, paper_like_pipeline, published,
+    weber_fraction_at, wood_rubber_share_bound, DesignFigures, Spread, PAPER_MATERIALS,
 };
 
 /// Participant seeds of the predictive checks.
@@ -129,7 +129,10 @@ fn rows(
         model: format!("{correct:.3} (copper vs aluminium, Δk 164 W/(m·K), 4000 trials)"),
         pass: Some(correct <= 0.60),
     });
-    let (one, three) = (fingers_correct(params, 1, 1000, 20)?, fingers_correct(params, 3, 1000, 20)?);
+    let (one, three) = (
+        fingers_correct(params, 1, 1000, 20)?,
+        fingers_correct(params, 3, 1000, 20)?,
+    );
     let se = (one * (1.0 - one) / 20_000.0 + three * (1.0 - three) / 20_000.0).sqrt();
     rows.push(Row {
         key: "fingers_summation".into(),

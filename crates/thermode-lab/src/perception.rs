@@ -412,7 +412,10 @@ mod tests {
             .count();
         assert_eq!(real_wrong, 0, "recognised real trials are all right");
         assert_eq!(differ, 0, "simulated trials unchanged by the channel");
-        assert!(thermal_wrong > 40, "the thermal stage alone errs: {thermal_wrong} of 400");
+        assert!(
+            thermal_wrong > 40,
+            "the thermal stage alone errs: {thermal_wrong} of 400"
+        );
     }
 
     #[test]

@@ -69,20 +69,37 @@ pub fn display_features(pipeline: PipelineConfig) -> Result<ConditionFeatures, V
     Ok((real, simulated))
 }
 
+/// The features of `name`'s contact curve under `contact` over 30 s.
+fn contact_curve_features(contact: &FvContact, name: &str) -> Result<CurveFeatures, ValidationError> {
+    let material = find(name).map_err(ParticipantError::from)?;
+    Ok(CurveFeatures::of(
+        &contact.curve(&material, None, 30.0).map_err(StimulusError::from)?,
+    )?)
+}
+
+/// A two-option participant (seed 3) for `warmer` and `colder` with their room-temperature fv features.
+fn pair_participant(
+    params: &PerceptionParams,
+    warmer: &str,
+    colder: &str,
+) -> Result<(PerceptualParticipant, [CurveFeatures; 2]), ValidationError> {
+    let contact = FvContact::default();
+    let features = [
+        contact_curve_features(&contact, warmer)?,
+        contact_curve_features(&contact, colder)?,
+    ];
+    let names = vec![warmer.to_string(), colder.to_string()];
+    Ok((
+        PerceptualParticipant::new(names, &features, params.clone(), 3)?,
+        features,
+    ))
+}
+
 /// Jones & Berris (2002)'s check: 2AFC proportion correct between copper and aluminium (Δk 164 W/(m·K)) under the
 /// default fv model (30 s), `persons` × `trials`, participant seed 3.
 pub fn metals_correct(params: &PerceptionParams, persons: usize, trials: usize) -> Result<f64, ValidationError> {
-    let contact = FvContact::default();
-    let names = ["aluminium".to_string(), "copper".to_string()];
-    let mut features = Vec::new();
-    for name in &names {
-        let material = find(name).map_err(ParticipantError::from)?;
-        features.push(CurveFeatures::of(
-            &contact.curve(&material, None, 30.0).map_err(StimulusError::from)?,
-        )?);
-    }
-    let p = PerceptualParticipant::new(names.to_vec(), &features, params.clone(), 3)?;
-    Ok(p.two_afc_correct((&features[0], 0), (&features[1], 1), persons, trials))
+    let (p, f) = pair_participant(params, "aluminium", "copper")?;
+    Ok(p.two_afc_correct((&f[0], 0), (&f[1], 1), persons, trials))
 }
 
 /// Yang, Kwon & Jones (2009)'s check: 2AFC proportion correct between aluminium and stone (stone the warmer, fv
@@ -94,17 +111,8 @@ pub fn fingers_correct(
     persons: usize,
     trials: usize,
 ) -> Result<f64, ValidationError> {
-    let names = ["stone".to_string(), "aluminium".to_string()];
-    let contact = FvContact::default();
-    let mut features = Vec::new();
-    for name in &names {
-        let material = find(name).map_err(ParticipantError::from)?;
-        features.push(CurveFeatures::of(
-            &contact.curve(&material, None, 30.0).map_err(StimulusError::from)?,
-        )?);
-    }
-    let p = PerceptualParticipant::new(names.to_vec(), &features, params.clone(), 3)?;
-    Ok(p.two_afc_correct_sites((&features[0], 0), (&features[1], 1), colder_sites, persons, trials))
+    let (p, f) = pair_participant(params, "stone", "aluminium")?;
+    Ok(p.two_afc_correct_sites((&f[0], 0), (&f[1], 1), colder_sites, persons, trials))
 }
 
 /// A sample of `presented` whose contact curve (fv model, 30 s) matches that of `matched_to` at room temperature:
@@ -112,12 +120,7 @@ pub fn fingers_correct(
 /// decision variable) are equal, and the curve's features.
 pub fn matched_sample(presented: &str, matched_to: &str) -> Result<(f64, CurveFeatures), ValidationError> {
     let room = FvContact::default();
-    let features = |contact: &FvContact, name: &str| -> Result<CurveFeatures, ValidationError> {
-        let material = find(name).map_err(ParticipantError::from)?;
-        Ok(CurveFeatures::of(
-            &contact.curve(&material, None, 30.0).map_err(StimulusError::from)?,
-        )?)
-    };
+    let features = contact_curve_features;
     let sum = |f: &CurveFeatures| f.perceived()[0] + f.perceived()[1];
     let target = sum(&features(&room, matched_to)?);
     let (mut cold_c, mut warm_c) = (-30.0, 60.0);
@@ -255,7 +258,11 @@ pub fn fit_real_rates(
     params.non_thermal_recognition.clear();
     let thermal = base.with_params(params.clone()).real_rates(persons, repetitions);
     for ((name, target), t) in base.options().iter().zip(targets).zip(&thermal) {
-        let recognition = if *t < 1.0 { ((target - t) / (1.0 - t)).max(0.0) } else { 0.0 };
+        let recognition = if *t < 1.0 {
+            ((target - t) / (1.0 - t)).max(0.0)
+        } else {
+            0.0
+        };
         params.non_thermal_recognition.insert(name.clone(), recognition);
     }
     (params, thermal)

@@ -9,9 +9,9 @@ use thermode_lab::design::Condition;
 use thermode_lab::perception::{PerceptionParams, PerceptualParticipant};
 use thermode_lab::runner::FvContact;
 use thermode_lab::validation::{
-    contact_features, design_counts, design_over_seeds, display_features, limits_levels_gap_c, metals_correct,
-    fingers_correct, matched_identification, paper_like_pipeline, published, weber_fraction_at, wood_rubber_share_bound, Spread, PAPER_MATERIALS,
-    PAPER_REAL_RATES,
+    contact_features, design_counts, design_over_seeds, display_features, fingers_correct, limits_levels_gap_c,
+    matched_identification, metals_correct, paper_like_pipeline, published, weber_fraction_at, wood_rubber_share_bound,
+    Spread, PAPER_MATERIALS, PAPER_REAL_RATES,
 };
 
 fn published_value(key: &str) -> f64 {
@@ -97,7 +97,10 @@ fn the_paper_like_display_predicts_the_chi_square_the_false_ratio_and_three_rate
         ("mean_ratio_false", Spread::of(runs.iter().map(|f| f.mean_ratio_false))),
     ] {
         let published = published_value(key);
-        assert!(spread.contains(published), "{key}: model {spread:?} vs paper {published}");
+        assert!(
+            spread.contains(published),
+            "{key}: model {spread:?} vs paper {published}"
+        );
     }
     for k in [1, 2, 4] {
         let mut rates: Vec<f64> = runs.iter().map(|f| f.simulated_correct[k]).collect();
@@ -106,7 +109,10 @@ fn the_paper_like_display_predicts_the_chi_square_the_false_ratio_and_three_rate
         let (lo, hi) = (at(0.025), at(0.975));
         let key = format!("simulated_{}", PAPER_MATERIALS[k]);
         let published = published_value(&key);
-        assert!((lo..=hi).contains(&published), "{key}: model {lo}-{hi} vs paper {published}");
+        assert!(
+            (lo..=hi).contains(&published),
+            "{key}: model {lo}-{hi} vs paper {published}"
+        );
     }
 }
 
@@ -120,11 +126,18 @@ fn three_fingers_discriminate_better_than_one() {
     let one = fingers_correct(&params, 1, 500, 20).expect("curves");
     let three = fingers_correct(&params, 3, 500, 20).expect("curves");
     let se = (one * (1.0 - one) / 10_000.0 + three * (1.0 - three) / 10_000.0).sqrt();
-    assert!(three - one > 3.0 * se, "one finger {one:.4}, three {three:.4}, se {se:.4}");
+    assert!(
+        three - one > 3.0 * se,
+        "one finger {one:.4}, three {three:.4}, se {se:.4}"
+    );
     let normal = statrs::distribution::Normal::new(0.0, 1.0).expect("standard normal");
     let z = |p: f64| statrs::distribution::ContinuousCDF::inverse_cdf(&normal, p);
     let ideal = z(one) * (2.0_f64 / (1.0 + 1.0 / 3.0)).sqrt();
-    assert!(z(three) <= ideal + 0.05, "three fingers d' {:.3} above the ideal {ideal:.3}", z(three));
+    assert!(
+        z(three) <= ideal + 0.05,
+        "three fingers d' {:.3} above the ideal {ideal:.3}",
+        z(three)
+    );
 }
 
 /// Bhattacharjee et al. 2020: a sample pre-heated or pre-cooled so that its contact curve matches another material's
