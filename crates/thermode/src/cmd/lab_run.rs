@@ -139,7 +139,8 @@ pub struct LabRunArgs {
     pub(crate) simulated_participant: bool,
     /// Which simulated participant answers an identification design: `calibrated` (default: one noise term
     /// calibrated to the paper's 66 % real identification rate) or `perceptual` (Weber-fraction noise, prototypes,
-    /// response bias, per-person contact, a non-thermal cue; fitted to the paper's real rates per material;
+    /// response bias, per-person contact, a non-thermal recognition channel in real trials; fitted to the paper's
+    /// real rates per material;
     /// docs/lab.md's validation table).
     #[arg(long, value_enum, default_value = "calibrated", requires = "simulated_participant")]
     pub(crate) participant_model: ParticipantModel,
