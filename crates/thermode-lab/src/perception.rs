@@ -229,7 +229,12 @@ impl PerceptualParticipant {
     ) -> usize {
         let person = self.person(participant_index);
         let mut rng = trial_rng(self.seed ^ PERCEPTION_SALT, participant_index, trial.max(1));
-        let percept = self.percept(features, presented, &person, &mut rng);
+        let percept = self.percept(
+            features,
+            self.surface_effusivity(presented, condition),
+            &person,
+            &mut rng,
+        );
         let recognised = rng.gen::<f64>() < self.recognition.get(presented).copied().unwrap_or(0.0);
         if condition == Condition::Real && recognised {
             return presented;
@@ -253,11 +258,20 @@ impl PerceptualParticipant {
         best.0
     }
 
-    /// The noisy perceived cues of one trial.
-    fn percept(&self, features: &CurveFeatures, presented: usize, person: &Person, rng: &mut impl Rng) -> [f64; 2] {
+    /// The effusivity of what the finger touches \[W·s^½/(m²·K)\]: the presented material in a real trial; in a
+    /// simulated trial the display's temperature-controlled plate, which acts as a body of infinite effusivity (the
+    /// person's contact conductance limits its flux as it limits a metal's, whatever material is rendered).
+    fn surface_effusivity(&self, presented: usize, condition: Condition) -> f64 {
+        match condition {
+            Condition::Real => self.effusivity.get(presented).copied().unwrap_or(f64::INFINITY),
+            Condition::Simulated => f64::INFINITY,
+        }
+    }
+
+    /// The noisy perceived cues of one trial (`e` the effusivity of the touched surface).
+    fn percept(&self, features: &CurveFeatures, e: f64, person: &Person, rng: &mut impl Rng) -> [f64; 2] {
         let p = &self.params;
         let finger = 1.0 + p.finger_temperature_sd_c * standard_normal(rng) / p.finger_object_difference_c;
-        let e = self.effusivity.get(presented).copied().unwrap_or(f64::INFINITY);
         let contact = contact_factor(person.conductance_w_m2k, p.skin_effusivity, e)
             / contact_factor(p.contact_conductance_w_m2k, p.skin_effusivity, e);
         let scale = finger * contact;
@@ -322,11 +336,12 @@ impl PerceptualParticipant {
             let person = self.person(person_index);
             for trial in 1..=trials {
                 let mut rng = trial_rng(self.seed ^ PERCEPTION_SALT, person_index, trial);
-                let pa = self.percept(a, ia, &person, &mut rng);
-                let pb = self.percept(b, ib, &person, &mut rng);
+                let (ea, eb) = (self.effusivity[ia], self.effusivity[ib]);
+                let pa = self.percept(a, ea, &person, &mut rng);
+                let pb = self.percept(b, eb, &person, &mut rng);
                 let mut colder = pb[0] + pb[1];
                 for _ in 1..colder_sites {
-                    let more = self.percept(b, ib, &person, &mut rng);
+                    let more = self.percept(b, eb, &person, &mut rng);
                     colder += more[0] + more[1];
                 }
                 correct += usize::from(colder / colder_sites.max(1) as f64 > pa[0] + pa[1]);
