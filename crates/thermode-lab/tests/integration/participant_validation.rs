@@ -87,7 +87,8 @@ fn the_method_of_limits_exceeds_the_method_of_levels_by_the_published_gap() {
 /// Tables 2-3 on the paper-like display (Kron renderer, PID), over the example's 100 seeds (the test profile is
 /// optimised: about 0.1 s): the paper's χ²(4) 4.10 and mean false ratio 1.78 lie inside the model's 5-95 % range,
 /// and Table 3's aluminium, steel, stone and rubber rates inside its 2.5-97.5 % range (the check asks for 4 of 5).
-/// The mean correct ratio, Fig. 4's shares and Table 3's wood do not (docs/lab.md).
+/// The mean correct ratio, Fig. 4's shares and Table 3's wood do not (docs/lab.md). Aluminium's is borderline: its
+/// 97.5 % point is 0.57 on these seeds and 0.50 on `lab run`'s seeds 1-100 (docs/lab.md).
 #[test]
 fn the_paper_like_display_predicts_the_chi_square_the_false_ratio_and_table_3() {
     let (real, simulated) = display_features(paper_like_pipeline().expect("pipeline")).expect("features");
