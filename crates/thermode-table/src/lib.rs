@@ -134,6 +134,30 @@ pub fn read(path: &Path) -> Result<Table<'static>, TableError> {
     }
 }
 
+/// The header and rows of an Arrow IPC or Parquet file as the CSV of the same table holds them: every value as its
+/// CSV field ([`Values::field`]: a float in its shortest exact form, an integer in decimal, null as an empty field).
+/// The readers of thermode's CSVs read these files through it. A file larger than `max_bytes` [bytes] or not a
+/// regular file (a device, a FIFO) is refused before it is read.
+pub fn read_fields(path: &Path, max_bytes: u64) -> Result<(Vec<String>, Vec<Vec<String>>), TableError> {
+    let metadata = std::fs::metadata(path)?;
+    if !metadata.is_file() || metadata.len() > max_bytes {
+        return Err(TableError::Io(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "{}: not a regular file of at most {max_bytes} bytes ({} bytes)",
+                path.display(),
+                metadata.len()
+            ),
+        )));
+    }
+    let table = read(path)?;
+    let header = table.columns.iter().map(|(name, _)| name.clone()).collect();
+    let rows = (0..table.rows())
+        .map(|row| table.columns.iter().map(|(_, values)| values.field(row)).collect())
+        .collect();
+    Ok((header, rows))
+}
+
 fn read_arrow(file: impl Read + Seek) -> Result<Table<'static>, TableError> {
     let reader = arrow_ipc::reader::FileReader::try_new(file, None)?;
     let schema = reader.schema();
@@ -274,5 +298,29 @@ mod tests {
         assert!(error.to_string().contains("differ"), "{error}");
         assert_eq!(Values::F64(vec![0.1 + 0.2].into()).field(0), "0.30000000000000004");
         assert_eq!(Values::I64(vec![None]).field(0), "");
+    }
+
+    #[test]
+    fn a_files_fields_are_the_csvs_and_a_file_over_the_limit_is_refused() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("runs.parquet");
+        let mut bytes = Vec::new();
+        write(&two_runs(), Format::Parquet, &mut bytes).expect("write");
+        std::fs::write(&path, &bytes).expect("save");
+        let (header, rows) = read_fields(&path, 1 << 20).expect("read");
+        assert_eq!(header, ["time_s", "skin_c", "fault", "thickness_m", "material"]);
+        assert_eq!(rows.len(), 6);
+        assert_eq!(
+            rows[1],
+            ["0", "NaN", "104", "0.01", "aluminium"],
+            "the CSV's fields of the second row"
+        );
+        assert_eq!(rows[3][0], "0", "the second run's first time");
+        assert_eq!(rows[5][1], "0.3333333333333333");
+        assert_eq!(rows[0][2], "", "null as an empty field");
+        let error = read_fields(&path, bytes.len() as u64 - 1).expect_err("over the limit");
+        assert!(error.to_string().contains("at most"), "{error}");
+        let error = read_fields(dir.path(), 1 << 20).expect_err("a folder");
+        assert!(error.to_string().contains("not a regular file"), "{error}");
     }
 }

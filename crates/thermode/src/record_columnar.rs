@@ -2,7 +2,8 @@
 //! in its folder: crash-safe, whole rows, segments after a failure), and when `serve` stops, the session's CSV
 //! files (every segment, in order) are written once more as the named Arrow IPC or Parquet file, with the CSV's
 //! columns and values (`channel`, `contact`, `fault` as Int64, `material`, `mode` as Utf8, every other column
-//! Float64; an empty field null).
+//! Float64; an empty field null). The session's clock sidecar (`.clock.json`: the wall-clock time of the loop
+//! clock's zero) is copied beside the file under its name, as `lab export --recording` looks for it.
 
 use std::path::{Path, PathBuf};
 
@@ -35,6 +36,12 @@ pub fn write_session(target: &Path, recording: &RecordStatus) -> Result<usize> {
     let tables = files.iter().map(|f| session_table(f)).collect::<Result<Vec<_>>>()?;
     let rows = tables.iter().map(Table::rows).sum();
     write_columnar(target, || tables)?;
+    let clock = files[0].with_extension("clock.json");
+    if clock.is_file() {
+        let copy = target.with_extension("clock.json");
+        std::fs::copy(&clock, &copy)
+            .with_context(|| format!("cannot copy {} to {}", clock.display(), copy.display()))?;
+    }
     Ok(rows)
 }
 
