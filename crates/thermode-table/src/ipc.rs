@@ -38,7 +38,7 @@ const END_OF_STREAM: [u8; 8] = [0xFF, 0xFF, 0xFF, 0xFF, 0, 0, 0, 0];
 /// Size at which gathered bytes are written [bytes]: small enough to stay in cache and be reused, large enough that
 /// a write's overhead does not count.
 const SCRATCH_BYTES: usize = 64 * 1024;
-/// Rows per record batch at most: a table longer than this (a recording of more than 17 minutes at 1 kHz) is
+/// Rows per record batch at most: a table longer than this (more than 17 minutes of one channel at 1 kHz) is
 /// written as several batches, so that a batch's text stays within Arrow's 32-bit offsets.
 pub const ARROW_BATCH_ROWS: usize = 1 << 20;
 

@@ -136,7 +136,7 @@ pub fn read(path: &Path) -> Result<Table<'static>, TableError> {
 
 /// The header and rows of an Arrow IPC or Parquet file as the CSV of the same table holds them: every value as its
 /// CSV field ([`Values::field`]: a float in its shortest exact form, an integer in decimal, null as an empty field).
-/// The readers of thermode's CSVs read these files through it. A file larger than `max_bytes` [bytes] or not a
+/// The readers of thermode's CSVs read these files through it. A file larger than `max_bytes` (bytes) or not a
 /// regular file (a device, a FIFO) is refused before it is read.
 pub fn read_fields(path: &Path, max_bytes: u64) -> Result<(Vec<String>, Vec<Vec<String>>), TableError> {
     let metadata = std::fs::metadata(path)?;

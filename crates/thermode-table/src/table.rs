@@ -28,7 +28,7 @@ pub enum Values<'a> {
     /// Text; `None` is an empty CSV field.
     Text(Vec<Option<String>>),
     /// The same text in every one of `rows` rows (a run's material, controller, renderer): written as a text
-    /// column, built without a string per row. [`read`] gives [`Values::Text`].
+    /// column, built without a string per row. [`crate::read`] gives [`Values::Text`].
     Repeat {
         /// The text of every row.
         text: String,
