@@ -76,8 +76,8 @@ impl Format {
 }
 
 /// Writes `tables` (one per run, all with the same columns) to `sink` in `format` (Arrow or Parquet), their rows in
-/// order (in Arrow one record batch per table, in Parquet batches of [`BATCH_ROWS`] rows). CSV is not written here: thermode's CSV writers stay as
-/// they are.
+/// order (in Arrow one record batch per table, in Parquet batches of [`BATCH_ROWS`] rows). CSV is not written here:
+/// thermode's CSV writers stay as they are.
 pub fn write(tables: &[Table<'_>], format: Format, sink: &mut dyn Write) -> Result<(), TableError> {
     let Some(first) = tables.first() else {
         return Err(TableError::Shape("nothing to write: no table".to_string()));
@@ -90,31 +90,83 @@ pub fn write(tables: &[Table<'_>], format: Format, sink: &mut dyn Write) -> Resu
             other.columns.iter().map(|(n, _)| n).collect::<Vec<_>>()
         )));
     }
-    match format {
-        Format::Arrow => {
-            let mut writer = ArrowFileWriter::try_new(sink, schema)?;
-            for table in tables {
-                writer.write(table)?;
+    let mut writer = TableWriter::try_new(format, first, sink)?;
+    for table in tables {
+        writer.write(table)?;
+    }
+    writer.finish()
+}
+
+/// An Arrow IPC or Parquet file written a table at a time (a long recording converted a block of rows at a time,
+/// so that memory holds one block, not the session): [`TableWriter::try_new`] with the first table's columns,
+/// [`TableWriter::write`] for each table in order, [`TableWriter::finish`] at the end.
+pub struct TableWriter<'w> {
+    inner: Inner<'w>,
+}
+
+/// The writer of each format.
+enum Inner<'w> {
+    /// Straight to the sink.
+    Arrow(ArrowFileWriter<&'w mut dyn Write>),
+    /// The Parquet writer wants a sink it can send between threads: the file is built in memory (row groups of at
+    /// most the writer's default million rows are buffered; earlier ones are encoded) and copied at the end.
+    Parquet {
+        writer: Box<ArrowWriter<Vec<u8>>>,
+        schema: SchemaRef,
+        sink: &'w mut dyn Write,
+    },
+}
+
+impl<'w> TableWriter<'w> {
+    /// Starts a file in `format` on `sink` with the columns (names and types) of `columns_of`; nothing of its rows is
+    /// written. CSV is refused (thermode's CSV writers write it).
+    pub fn try_new(format: Format, columns_of: &Table<'_>, sink: &'w mut dyn Write) -> Result<Self, TableError> {
+        let schema = columns_of.schema();
+        let inner = match format {
+            Format::Arrow => Inner::Arrow(ArrowFileWriter::try_new(sink, schema)?),
+            Format::Parquet => Inner::Parquet {
+                writer: Box::new(ArrowWriter::try_new(Vec::new(), schema.clone(), None)?),
+                schema,
+                sink,
+            },
+            Format::Csv => {
+                return Err(TableError::Shape(
+                    "CSV is written by thermode's CSV writers".to_string(),
+                ))
             }
-            writer.finish()?;
-        }
-        Format::Parquet => {
-            // The Parquet writer wants a sink it can send between threads: the file is built in memory.
-            let mut writer = ArrowWriter::try_new(Vec::new(), schema.clone(), None)?;
-            for table in tables {
-                for batch in table.batches(&schema) {
+        };
+        Ok(TableWriter { inner })
+    }
+
+    /// Writes the rows of `table`, which has the file's columns (else an error).
+    pub fn write(&mut self, table: &Table<'_>) -> Result<(), TableError> {
+        match &mut self.inner {
+            Inner::Arrow(writer) => writer.write(table),
+            Inner::Parquet { writer, schema, .. } => {
+                if table.schema() != *schema {
+                    return Err(TableError::Shape(format!(
+                        "the table's columns differ from the file's: {:?}",
+                        table.columns.iter().map(|(n, _)| n).collect::<Vec<_>>()
+                    )));
+                }
+                for batch in table.batches(schema) {
                     writer.write(&batch?)?;
                 }
+                Ok(())
             }
-            sink.write_all(&writer.into_inner()?)?;
-        }
-        Format::Csv => {
-            return Err(TableError::Shape(
-                "CSV is written by thermode's CSV writers".to_string(),
-            ))
         }
     }
-    Ok(())
+
+    /// Ends the file (Arrow's footer, Parquet's metadata) and flushes it to the sink.
+    pub fn finish(self) -> Result<(), TableError> {
+        match self.inner {
+            Inner::Arrow(writer) => {
+                writer.finish()?;
+            }
+            Inner::Parquet { writer, sink, .. } => sink.write_all(&writer.into_inner()?)?,
+        }
+        Ok(())
+    }
 }
 
 /// Reads an Arrow IPC or Parquet file (by its name, [`Format::of`]) into one table: every record batch or row group
