@@ -166,6 +166,7 @@ fn serve_record_to_arrow_or_parquet_also_writes_the_sessions_csv_values_there() 
 
 /// The `_stim`/`_physio` signals of participant P01 in the BIDS folder `bids`: (file suffix, content) of each
 /// gunzipped TSV and of each sidecar's sampling rate, start time and columns.
+#[cfg(unix)]
 fn exported_signals(bids: &Path) -> Vec<(String, String)> {
     let subject = bids.join("sub-P01");
     let session = std::fs::read_dir(&subject)
@@ -210,40 +211,9 @@ fn exported_signals(bids: &Path) -> Vec<(String, String)> {
 fn lab_export_reads_a_recording_from_arrow_or_parquet_as_from_its_csv() {
     let root = tempfile::tempdir().expect("temp dir");
     let path = |name: &str| root.path().join(name).display().to_string();
-    let paper = Path::new(env!("CARGO_MANIFEST_DIR")).join("../thermode-lab/experiments/paper.toml");
-    let (data, state) = (path("data"), path("state"));
-    expect_success(&[
-        "lab",
-        "run",
-        "--simulate",
-        "--experiment",
-        paper.to_str().expect("utf-8"),
-        "--participant",
-        "P01",
-        "--data-dir",
-        &data,
-        "--observer",
-        "--time-scale",
-        "0",
-        "--stimulus",
-        "model",
-    ]);
-    let arrow = path("rec/session.arrow");
-    expect_success(&[
-        "serve",
-        "--port",
-        "0",
-        "--no-osc",
-        "--no-realtime",
-        "--channels",
-        "2",
-        "--duration",
-        "0.5",
-        "--record",
-        &arrow,
-        "--state-dir",
-        &state,
-    ]);
+    let (data, arrow) = (path("data"), path("rec/session.arrow"));
+    super::bids::observer_session(Path::new(&data), "P01");
+    super::bids::short_recording(Path::new(&arrow), Path::new(&path("state")));
     let csv = std::fs::read_dir(path("rec"))
         .expect("the recording's folder")
         .filter_map(Result::ok)
