@@ -7,7 +7,7 @@
 //! A file is written from one [`Table`] per run (the rows a CSV writes for one material or one render run), its rows
 //! in order: in Arrow one record batch per run (per [`ARROW_BATCH_ROWS`] rows of a longer one), every column's bytes
 //! written from the run's own values without a copy ([`ArrowFileWriter`], which also writes a file a table at a
-//! time); in Parquet through the Parquet writer, fed record batches of [`BATCH_ROWS`] rows. [`write`] writes a
+//! time); in Parquet through the Parquet writer, fed record batches of [`BATCH_ROWS`] rows. [`write()`] writes a
 //! file's tables at once, [`TableWriter`] one table at a time (a long recording converted a block at a time).
 //! [`read`] reads a file back into one table, [`read_fields`] into the CSV's header and fields (how the readers of
 //! thermode's CSVs read these files).
