@@ -395,8 +395,12 @@ fn tsv_field(value: &str) -> String {
     value.replace(['\t', '\n', '\r'], " ")
 }
 
-/// A CSV as its header and rows.
+/// A CSV as its header and rows; an Arrow IPC (`.arrow`, `.feather`) or Parquet (`.parquet`) file of the same
+/// table (`serve --record FILE.arrow`, `render --out FILE.parquet`) as the fields its CSV holds.
 fn read_csv(path: &Path) -> Result<(Vec<String>, Vec<Vec<String>>), ExportError> {
+    if thermode_table::Format::of(path).is_columnar() {
+        return thermode_table::read_fields(path, MAX_DATA_BYTES).map_err(|e| invalid(path, e.to_string()));
+    }
     let file = open_at_most(path, MAX_DATA_BYTES).map_err(|e| invalid(path, e.to_string()))?;
     let mut reader = csv::ReaderBuilder::new().comment(Some(b'#')).from_reader(file);
     let header = reader
@@ -640,7 +644,7 @@ fn column_description(name: &str) -> Value {
     }
 }
 
-/// Curve CSVs in folders beside the session CSV named after its stem.
+/// Curve CSVs (or Arrow and Parquet files) in folders beside the session CSV named after its stem.
 fn session_curves(session: &Session) -> Result<Vec<PathBuf>, ExportError> {
     let Some(stem) = session.csv.file_stem().map(|s| s.to_string_lossy().into_owned()) else {
         return Ok(Vec::new());
@@ -653,7 +657,8 @@ fn session_curves(session: &Session) -> Result<Vec<PathBuf>, ExportError> {
         if path.is_dir() && named {
             for inner in fs::read_dir(&path).map_err(io(&path))? {
                 let file = inner.map_err(io(&path))?.path();
-                if file.extension().is_some_and(|e| e == "csv") {
+                let columnar = thermode_table::Format::of(&file).is_columnar();
+                if columnar || file.extension().is_some_and(|e| e == "csv") {
                     curves.push(file);
                 }
             }

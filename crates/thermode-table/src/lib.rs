@@ -4,25 +4,32 @@
 //! every value is the one the CSV holds: floats as the exact `f64` (the CSV's exact default form reads back as
 //! the same number), integers (`contact`, `fault`) as 64-bit integers, text as UTF-8; an empty CSV field is null.
 //!
-//! A file is written from one [`Table`] per run (the rows a CSV writes for one material or one render run); each
-//! becomes one record batch (Arrow) or row group (Parquet), so the file's rows are the CSV's rows in order.
-//! [`read`] reads a file back into one table (the readers of thermode's CSVs use it for these files).
+//! A file is written from one [`Table`] per run (the rows a CSV writes for one material or one render run), its rows
+//! in order: in Arrow one record batch per run (per [`ARROW_BATCH_ROWS`] rows of a longer one), every column's bytes
+//! written from the run's own values without a copy ([`ArrowFileWriter`], which also writes a file a table at a
+//! time); in Parquet through the Parquet writer, fed record batches of [`BATCH_ROWS`] rows. [`write()`] writes a
+//! file's tables at once, [`TableWriter`] one table at a time (a long recording converted a block at a time).
+//! [`read`] reads a file back into one table, [`read_fields`] into the CSV's header and fields (how the readers of
+//! thermode's CSVs read these files).
 //!
 //! Arrow IPC is written uncompressed (the fastest to write and to read); Parquet uncompressed with dictionary
 //! encoding (no compression codec is compiled in).
 
-use std::borrow::Cow;
+mod ipc;
+mod table;
+
 use std::fs::File;
 use std::io::{Read, Seek, Write};
-use std::ops::Range;
 use std::path::Path;
-use std::sync::Arc;
 
-use arrow_array::{Array, ArrayRef, Float64Array, Int64Array, RecordBatch, RecordBatchReader, StringArray};
-use arrow_schema::{ArrowError, DataType, Field, Schema, SchemaRef};
+use arrow_array::{RecordBatch, RecordBatchReader};
+use arrow_schema::{ArrowError, SchemaRef};
 use parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
 use parquet::arrow::ArrowWriter;
 use parquet::errors::ParquetError;
+
+pub use ipc::{ArrowFileWriter, ARROW_BATCH_ROWS};
+pub use table::{Table, Values, BATCH_ROWS};
 
 /// What went wrong writing or reading a columnar file.
 #[derive(Debug, thiserror::Error)]
@@ -70,176 +77,9 @@ impl Format {
     }
 }
 
-/// Rows per record batch written: small enough that the buffers of a batch are reused from one batch to the next
-/// (not fresh pages for a whole run), large enough that a batch's overhead does not count.
-pub const BATCH_ROWS: usize = 16 * 1024;
-
-/// One column's values (the numbers borrowed from the run that holds them, or owned).
-#[derive(Debug, Clone, PartialEq)]
-pub enum Values<'a> {
-    /// Floating-point numbers (NaN kept as NaN, as the CSV writes `NaN`).
-    F64(Cow<'a, [f64]>),
-    /// Floating-point numbers of a column that may be empty (a recording's material properties outside a touch);
-    /// `None` is an empty CSV field.
-    F64Null(Vec<Option<f64>>),
-    /// Integers; `None` is an empty CSV field.
-    I64(Vec<Option<i64>>),
-    /// Text; `None` is an empty CSV field.
-    Text(Vec<Option<String>>),
-    /// The same text in every one of `rows` rows (a run's material, controller, renderer): written as a text
-    /// column, built without a string per row. [`read`] gives [`Values::Text`].
-    Repeat {
-        /// The text of every row.
-        text: String,
-        /// Number of rows.
-        rows: usize,
-    },
-}
-
-impl Values<'_> {
-    /// Number of values.
-    pub fn len(&self) -> usize {
-        match self {
-            Values::F64(v) => v.len(),
-            Values::F64Null(v) => v.len(),
-            Values::I64(v) => v.len(),
-            Values::Text(v) => v.len(),
-            Values::Repeat { rows, .. } => *rows,
-        }
-    }
-
-    /// Whether there are no values.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
-    /// The value of `row` as the CSV field that holds it: a float in its shortest exact form (`NaN`, `inf`,
-    /// `-inf` as Rust writes them), an integer in decimal, text as it is, empty for null.
-    pub fn field(&self, row: usize) -> String {
-        match self {
-            Values::F64(v) => v[row].to_string(),
-            Values::F64Null(v) => v[row].map(|x| x.to_string()).unwrap_or_default(),
-            Values::I64(v) => v[row].map(|x| x.to_string()).unwrap_or_default(),
-            Values::Text(v) => v[row].clone().unwrap_or_default(),
-            Values::Repeat { text, .. } => text.clone(),
-        }
-    }
-
-    fn data_type(&self) -> DataType {
-        match self {
-            Values::F64(_) | Values::F64Null(_) => DataType::Float64,
-            Values::I64(_) => DataType::Int64,
-            Values::Text(_) | Values::Repeat { .. } => DataType::Utf8,
-        }
-    }
-
-    /// The values of `rows` as an Arrow array.
-    fn array(&self, rows: Range<usize>) -> ArrayRef {
-        match self {
-            Values::F64(v) => Arc::new(Float64Array::from(v[rows].to_vec())),
-            Values::F64Null(v) => Arc::new(Float64Array::from(v[rows].to_vec())),
-            Values::I64(v) => Arc::new(Int64Array::from(v[rows].to_vec())),
-            Values::Text(v) => Arc::new(v[rows].iter().map(Option::as_deref).collect::<StringArray>()),
-            Values::Repeat { text, .. } => Arc::new(StringArray::from_iter_values(std::iter::repeat_n(
-                text.as_str(),
-                rows.len(),
-            ))),
-        }
-    }
-
-    fn append(&mut self, array: &dyn Array, name: &str) -> Result<(), TableError> {
-        let any = array.as_any();
-        let wrong = || TableError::Shape(format!("column `{name}` changes its type between record batches"));
-        match self {
-            Values::F64(v) => {
-                let a = any.downcast_ref::<Float64Array>().ok_or_else(wrong)?;
-                v.to_mut()
-                    .extend((0..a.len()).map(|i| if a.is_null(i) { f64::NAN } else { a.value(i) }));
-            }
-            Values::F64Null(v) => v.extend(any.downcast_ref::<Float64Array>().ok_or_else(wrong)?.iter()),
-            Values::I64(v) => v.extend(any.downcast_ref::<Int64Array>().ok_or_else(wrong)?.iter()),
-            Values::Text(v) => {
-                let a = any.downcast_ref::<StringArray>().ok_or_else(wrong)?;
-                v.extend(a.iter().map(|s| s.map(str::to_string)));
-            }
-            Values::Repeat { .. } => return Err(wrong()),
-        }
-        Ok(())
-    }
-
-    fn empty_like(field: &Field) -> Result<Values<'static>, TableError> {
-        let name = field.name();
-        match field.data_type() {
-            DataType::Float64 if field.is_nullable() => Ok(Values::F64Null(Vec::new())),
-            DataType::Float64 => Ok(Values::F64(Cow::Owned(Vec::new()))),
-            DataType::Int64 => Ok(Values::I64(Vec::new())),
-            DataType::Utf8 => Ok(Values::Text(Vec::new())),
-            other => Err(TableError::Shape(format!(
-                "column `{name}` is {other}; thermode's tables hold Float64, Int64 and Utf8 columns"
-            ))),
-        }
-    }
-}
-
-/// Named columns of equal length, in the CSV's order.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct Table<'a> {
-    /// (name, values) of every column.
-    pub columns: Vec<(String, Values<'a>)>,
-}
-
-impl<'a> Table<'a> {
-    /// An empty table, to which [`Table::push`] adds columns.
-    pub fn new() -> Self {
-        Table::default()
-    }
-
-    /// Adds the column `name` with `values`.
-    pub fn push(&mut self, name: impl Into<String>, values: Values<'a>) {
-        self.columns.push((name.into(), values));
-    }
-
-    /// Number of rows (of the first column; 0 without columns).
-    pub fn rows(&self) -> usize {
-        self.columns.first().map_or(0, |(_, v)| v.len())
-    }
-
-    /// The values of the column `name`, if there is one.
-    pub fn column(&self, name: &str) -> Option<&Values<'a>> {
-        self.columns.iter().find(|(n, _)| n == name).map(|(_, v)| v)
-    }
-
-    fn schema(&self) -> SchemaRef {
-        let fields: Vec<Field> = self
-            .columns
-            .iter()
-            .map(|(name, values)| Field::new(name, values.data_type(), !matches!(values, Values::F64(_))))
-            .collect();
-        Arc::new(Schema::new(fields))
-    }
-
-    /// The table as record batches of at most [`BATCH_ROWS`] rows, built one at a time.
-    fn batches<'t>(&'t self, schema: &'t SchemaRef) -> impl Iterator<Item = Result<RecordBatch, TableError>> + 't {
-        let shape = match self.columns.iter().find(|(_, v)| v.len() != self.rows()) {
-            Some((name, _)) => Err(TableError::Shape(format!(
-                "column `{name}` has not the table's {} rows",
-                self.rows()
-            ))),
-            None => Ok(()),
-        };
-        let starts = (0..self.rows()).step_by(BATCH_ROWS);
-        let batches = starts.map(move |start| {
-            let rows = start..(start + BATCH_ROWS).min(self.rows());
-            let arrays = self.columns.iter().map(|(_, v)| v.array(rows.clone())).collect();
-            Ok(RecordBatch::try_new(schema.clone(), arrays)?)
-        });
-        shape.err().map(Err).into_iter().chain(batches)
-    }
-}
-
 /// Writes `tables` (one per run, all with the same columns) to `sink` in `format` (Arrow or Parquet), their rows in
-/// order (record batches of at most [`BATCH_ROWS`] rows). CSV is not written here: thermode's CSV writers stay as
-/// they are.
+/// order (in Arrow one record batch per table, in Parquet batches of [`BATCH_ROWS`] rows). CSV is not written here:
+/// thermode's CSV writers stay as they are.
 pub fn write(tables: &[Table<'_>], format: Format, sink: &mut dyn Write) -> Result<(), TableError> {
     let Some(first) = tables.first() else {
         return Err(TableError::Shape("nothing to write: no table".to_string()));
@@ -252,33 +92,83 @@ pub fn write(tables: &[Table<'_>], format: Format, sink: &mut dyn Write) -> Resu
             other.columns.iter().map(|(n, _)| n).collect::<Vec<_>>()
         )));
     }
-    match format {
-        Format::Arrow => {
-            let mut writer = arrow_ipc::writer::FileWriter::try_new(sink, &schema)?;
-            for table in tables {
-                for batch in table.batches(&schema) {
+    let mut writer = TableWriter::try_new(format, first, sink)?;
+    for table in tables {
+        writer.write(table)?;
+    }
+    writer.finish()
+}
+
+/// An Arrow IPC or Parquet file written a table at a time (a long recording converted a block of rows at a time,
+/// so that memory holds one block, not the session): [`TableWriter::try_new`] with the first table's columns,
+/// [`TableWriter::write`] for each table in order, [`TableWriter::finish`] at the end.
+pub struct TableWriter<'w> {
+    inner: Inner<'w>,
+}
+
+/// The writer of each format.
+enum Inner<'w> {
+    /// Straight to the sink.
+    Arrow(ArrowFileWriter<&'w mut dyn Write>),
+    /// The Parquet writer wants a sink it can send between threads: the file is built in memory (row groups of at
+    /// most the writer's default million rows are buffered; earlier ones are encoded) and copied at the end.
+    Parquet {
+        writer: Box<ArrowWriter<Vec<u8>>>,
+        schema: SchemaRef,
+        sink: &'w mut dyn Write,
+    },
+}
+
+impl<'w> TableWriter<'w> {
+    /// Starts a file in `format` on `sink` with the columns (names and types) of `columns_of`; nothing of its rows is
+    /// written. CSV is refused (thermode's CSV writers write it).
+    pub fn try_new(format: Format, columns_of: &Table<'_>, sink: &'w mut dyn Write) -> Result<Self, TableError> {
+        let schema = columns_of.schema();
+        let inner = match format {
+            Format::Arrow => Inner::Arrow(ArrowFileWriter::try_new(sink, schema)?),
+            Format::Parquet => Inner::Parquet {
+                writer: Box::new(ArrowWriter::try_new(Vec::new(), schema.clone(), None)?),
+                schema,
+                sink,
+            },
+            Format::Csv => {
+                return Err(TableError::Shape(
+                    "CSV is written by thermode's CSV writers".to_string(),
+                ))
+            }
+        };
+        Ok(TableWriter { inner })
+    }
+
+    /// Writes the rows of `table`, which has the file's columns (else an error).
+    pub fn write(&mut self, table: &Table<'_>) -> Result<(), TableError> {
+        match &mut self.inner {
+            Inner::Arrow(writer) => writer.write(table),
+            Inner::Parquet { writer, schema, .. } => {
+                if table.schema() != *schema {
+                    return Err(TableError::Shape(format!(
+                        "the table's columns differ from the file's: {:?}",
+                        table.columns.iter().map(|(n, _)| n).collect::<Vec<_>>()
+                    )));
+                }
+                for batch in table.batches(schema) {
                     writer.write(&batch?)?;
                 }
+                Ok(())
             }
-            writer.finish()?;
-        }
-        Format::Parquet => {
-            // The Parquet writer wants a sink it can send between threads: the file is built in memory.
-            let mut writer = ArrowWriter::try_new(Vec::new(), schema.clone(), None)?;
-            for table in tables {
-                for batch in table.batches(&schema) {
-                    writer.write(&batch?)?;
-                }
-            }
-            sink.write_all(&writer.into_inner()?)?;
-        }
-        Format::Csv => {
-            return Err(TableError::Shape(
-                "CSV is written by thermode's CSV writers".to_string(),
-            ))
         }
     }
-    Ok(())
+
+    /// Ends the file (Arrow's footer, Parquet's metadata) and flushes it to the sink.
+    pub fn finish(self) -> Result<(), TableError> {
+        match self.inner {
+            Inner::Arrow(writer) => {
+                writer.finish()?;
+            }
+            Inner::Parquet { writer, sink, .. } => sink.write_all(&writer.into_inner()?)?,
+        }
+        Ok(())
+    }
 }
 
 /// Reads an Arrow IPC or Parquet file (by its name, [`Format::of`]) into one table: every record batch or row group
@@ -296,6 +186,30 @@ pub fn read(path: &Path) -> Result<Table<'static>, TableError> {
             path.display()
         ))),
     }
+}
+
+/// The header and rows of an Arrow IPC or Parquet file as the CSV of the same table holds them: every value as its
+/// CSV field ([`Values::field`]: a float in its shortest exact form, an integer in decimal, null as an empty field).
+/// The readers of thermode's CSVs read these files through it. A file larger than `max_bytes` (bytes) or not a
+/// regular file (a device, a FIFO) is refused before it is read.
+pub fn read_fields(path: &Path, max_bytes: u64) -> Result<(Vec<String>, Vec<Vec<String>>), TableError> {
+    let metadata = std::fs::metadata(path)?;
+    if !metadata.is_file() || metadata.len() > max_bytes {
+        return Err(TableError::Io(std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!(
+                "{}: not a regular file of at most {max_bytes} bytes ({} bytes)",
+                path.display(),
+                metadata.len()
+            ),
+        )));
+    }
+    let table = read(path)?;
+    let header = table.columns.iter().map(|(name, _)| name.clone()).collect();
+    let rows = (0..table.rows())
+        .map(|row| table.columns.iter().map(|(_, values)| values.field(row)).collect())
+        .collect();
+    Ok((header, rows))
 }
 
 fn read_arrow(file: impl Read + Seek) -> Result<Table<'static>, TableError> {
@@ -438,5 +352,29 @@ mod tests {
         assert!(error.to_string().contains("differ"), "{error}");
         assert_eq!(Values::F64(vec![0.1 + 0.2].into()).field(0), "0.30000000000000004");
         assert_eq!(Values::I64(vec![None]).field(0), "");
+    }
+
+    #[test]
+    fn a_files_fields_are_the_csvs_and_a_file_over_the_limit_is_refused() {
+        let dir = tempfile::tempdir().expect("temp dir");
+        let path = dir.path().join("runs.parquet");
+        let mut bytes = Vec::new();
+        write(&two_runs(), Format::Parquet, &mut bytes).expect("write");
+        std::fs::write(&path, &bytes).expect("save");
+        let (header, rows) = read_fields(&path, 1 << 20).expect("read");
+        assert_eq!(header, ["time_s", "skin_c", "fault", "thickness_m", "material"]);
+        assert_eq!(rows.len(), 6);
+        assert_eq!(
+            rows[1],
+            ["0", "NaN", "104", "0.01", "aluminium"],
+            "the CSV's fields of the second row"
+        );
+        assert_eq!(rows[3][0], "0", "the second run's first time");
+        assert_eq!(rows[5][1], "0.3333333333333333");
+        assert_eq!(rows[0][2], "", "null as an empty field");
+        let error = read_fields(&path, bytes.len() as u64 - 1).expect_err("over the limit");
+        assert!(error.to_string().contains("at most"), "{error}");
+        let error = read_fields(dir.path(), 1 << 20).expect_err("a folder");
+        assert!(error.to_string().contains("not a regular file"), "{error}");
     }
 }

@@ -144,20 +144,12 @@ impl CsvTable {
     /// each value as the field the CSV holds (floats in their shortest exact form, null as an empty field), so
     /// every reader of thermode's CSVs reads these too; rows are numbered as the CSV's lines would be.
     fn read_columnar(path: &Path) -> Result<CsvTable, LabError> {
-        let table = thermode_table::read(path).map_err(|e| LabError::Csv {
+        let (header, rows) = thermode_table::read_fields(path, MAX_DATA_BYTES).map_err(|e| LabError::Csv {
             file: path.to_path_buf(),
             line: None,
             message: e.to_string(),
         })?;
-        let header = table.columns.iter().map(|(name, _)| name.clone()).collect();
-        let rows = (0..table.rows())
-            .map(|row| {
-                (
-                    row as u64 + 2,
-                    table.columns.iter().map(|(_, v)| v.field(row)).collect(),
-                )
-            })
-            .collect();
+        let rows = rows.into_iter().zip(2..).map(|(fields, line)| (line, fields)).collect();
         CsvTable::checked(path, header, rows)
     }
 

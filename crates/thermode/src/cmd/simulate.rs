@@ -211,7 +211,10 @@ fn trace_table((material, trace): &(Material, Trace)) -> Table<'_> {
     }
     table.push(
         "material",
-        Values::Text(vec![Some(material.name.clone()); trace.time_s.len()]),
+        Values::Repeat {
+            text: material.name.clone(),
+            rows: trace.time_s.len(),
+        },
     );
     table
 }

@@ -32,26 +32,42 @@ fn paper() -> String {
 /// Two observer sessions of the paper design and a short `serve --record` recording of two channels.
 fn lab_folder(root: &Path) -> (PathBuf, PathBuf) {
     let data = root.join("data");
-    let data_s = data.to_str().expect("utf-8");
     for participant in ["P01", "P02"] {
-        thermode(&[
-            "lab",
-            "run",
-            "--simulate",
-            "--experiment",
-            &paper(),
-            "--participant",
-            participant,
-            "--data-dir",
-            data_s,
-            "--observer",
-            "--time-scale",
-            "0",
-            "--stimulus",
-            "model",
-        ]);
+        observer_session(&data, participant);
     }
-    let (record, state) = (root.join("rec"), root.join("state"));
+    let record = root.join("rec");
+    short_recording(&record, &root.join("state"));
+    let recording = std::fs::read_dir(&record)
+        .expect("list recordings")
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|e| e == "csv"))
+        .expect("a recording");
+    (data, recording)
+}
+
+/// A simulated observer session of the paper design for `participant` in the data folder `data`.
+pub(super) fn observer_session(data: &Path, participant: &str) {
+    thermode(&[
+        "lab",
+        "run",
+        "--simulate",
+        "--experiment",
+        &paper(),
+        "--participant",
+        participant,
+        "--data-dir",
+        data.to_str().expect("utf-8"),
+        "--observer",
+        "--time-scale",
+        "0",
+        "--stimulus",
+        "model",
+    ]);
+}
+
+/// A 0.5 s `serve --record record` of two channels (`record` a folder, or a `.arrow`/`.parquet` file).
+pub(super) fn short_recording(record: &Path, state: &Path) {
     thermode(&[
         "serve",
         "--port",
@@ -67,13 +83,6 @@ fn lab_folder(root: &Path) -> (PathBuf, PathBuf) {
         "--state-dir",
         state.to_str().expect("utf-8"),
     ]);
-    let recording = std::fs::read_dir(&record)
-        .expect("list recordings")
-        .filter_map(Result::ok)
-        .map(|e| e.path())
-        .find(|p| p.extension().is_some_and(|e| e == "csv"))
-        .expect("a recording");
-    (data, recording)
 }
 
 fn beh(bids: &Path, subject: &str) -> PathBuf {

@@ -163,3 +163,105 @@ fn serve_record_to_arrow_or_parquet_also_writes_the_sessions_csv_values_there() 
         );
     }
 }
+
+/// The `_stim`/`_physio` signals of participant P01 in the BIDS folder `bids`: (file suffix, content) of each
+/// gunzipped TSV and of each sidecar's sampling rate, start time and columns.
+#[cfg(unix)]
+fn exported_signals(bids: &Path) -> Vec<(String, String)> {
+    let subject = bids.join("sub-P01");
+    let session = std::fs::read_dir(&subject)
+        .unwrap_or_else(|e| panic!("{}: {e}", subject.display()))
+        .filter_map(Result::ok)
+        .next()
+        .expect("a session folder");
+    let beh = session.path().join("beh");
+    let mut signals = Vec::new();
+    for entry in std::fs::read_dir(&beh).expect("beh").filter_map(Result::ok) {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let Some(suffix) = ["_stim.tsv.gz", "_physio.tsv.gz", "_stim.json", "_physio.json"]
+            .into_iter()
+            .find(|s| name.contains("_recording-") && name.ends_with(s))
+        else {
+            continue;
+        };
+        let content = if suffix.ends_with(".gz") {
+            let mut text = String::new();
+            std::io::Read::read_to_string(
+                &mut flate2::read::GzDecoder::new(std::fs::File::open(entry.path()).expect("open")),
+                &mut text,
+            )
+            .expect("gzip");
+            text
+        } else {
+            let sidecar: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(entry.path()).expect("read")).expect("json");
+            format!(
+                "{} {} {}",
+                sidecar["SamplingFrequency"], sidecar["StartTime"], sidecar["Columns"]
+            )
+        };
+        signals.push((suffix.to_string(), content));
+    }
+    signals.sort();
+    signals
+}
+
+#[cfg(unix)]
+#[test]
+fn lab_export_reads_a_recording_from_arrow_or_parquet_as_from_its_csv() {
+    let root = tempfile::tempdir().expect("temp dir");
+    let path = |name: &str| root.path().join(name).display().to_string();
+    let (data, arrow) = (path("data"), path("rec/session.arrow"));
+    super::bids::observer_session(Path::new(&data), "P01");
+    super::bids::short_recording(Path::new(&arrow), Path::new(&path("state")));
+    let csv = std::fs::read_dir(path("rec"))
+        .expect("the recording's folder")
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|e| e == "csv") && !p.to_string_lossy().ends_with(".events.csv"))
+        .expect("the session's CSV");
+    let parquet = path("rec/session.parquet");
+    let table = thermode_table::read(Path::new(&arrow)).unwrap_or_else(|e| panic!("{arrow}: {e}"));
+    let mut bytes = Vec::new();
+    thermode_table::write(&[table], thermode_table::Format::Parquet, &mut bytes).expect("parquet");
+    std::fs::write(&parquet, bytes).expect("save the parquet file");
+    assert!(
+        Path::new(&path("rec/session.clock.json")).is_file(),
+        "the clock sidecar copied beside the Arrow file"
+    );
+    let export = |recording: &str, folder: &str| {
+        let given = format!("P01={recording}");
+        expect_success(&[
+            "lab",
+            "export",
+            "--bids",
+            &path(folder),
+            "--data-dir",
+            &data,
+            "--recording",
+            &given,
+        ]);
+        exported_signals(Path::new(&path(folder)))
+    };
+    let from_csv = export(csv.to_str().expect("utf-8"), "bids-csv");
+    assert_eq!(
+        from_csv.len(),
+        4,
+        "stim and physio signals with their sidecars: {from_csv:?}"
+    );
+    let stim = from_csv
+        .iter()
+        .find(|(suffix, _)| suffix == "_stim.tsv.gz")
+        .expect("a stim signal");
+    assert!(
+        stim.1.lines().count() > 20,
+        "the signals hold the recording's ticks: {stim:?}"
+    );
+    for (file, folder) in [(&arrow, "bids-arrow"), (&parquet, "bids-parquet")] {
+        let from_file = export(file, folder);
+        assert_eq!(
+            from_file, from_csv,
+            "lab export --recording {file}: the signals and sidecars of the CSV"
+        );
+    }
+}
