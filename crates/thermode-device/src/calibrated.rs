@@ -1,10 +1,13 @@
 //! [`CalibratedDevice`]: a real display whose plate sensor reads through its calibration
 //! ([`crate::config::CalibrationConfig`], written by `thermode calibrate`): every reading's plate temperature is the
-//! calibrated one, so the envelope, the controller and every record act on it. Only for current-commanded devices:
-//! a device that regulates its plate itself does so on its own, uncalibrated reading.
+//! calibrated one, so the envelope, the controller and every record act on it. A device that regulates its plate
+//! itself (temperature-commanded) does so on its own, uncalibrated reading: the set-point it is sent is put on that
+//! reading's scale ([`DriveCommand::on_sensor_scale`]), so its regulation brings the true plate to the envelope's
+//! set-point.
 
 use std::sync::Arc;
 
+use thermode_model::BadValue;
 use thermode_safety::DriveCommand;
 
 use crate::config::CalibrationConfig;
@@ -30,8 +33,20 @@ impl Device for CalibratedDevice {
         self.inner.channel_count()
     }
 
+    /// The command, with its set-point on the sensor's reading scale for a temperature-commanded device.
     fn apply(&mut self, channel: usize, command: &DriveCommand) -> Result<(), DeviceError> {
-        self.inner.apply(channel, command)
+        if self.inner.measures().drive_current || command.setpoint_c().is_none() {
+            return self.inner.apply(channel, command);
+        }
+        let (gain, offset_c) = (self.calibration.sensor_gain, self.calibration.sensor_offset_c);
+        let scaled = command.on_sensor_scale(gain, offset_c).ok_or_else(|| {
+            BadValue::custom(
+                "calibration sensor_gain",
+                gain,
+                "must be from 0.5 to 2 (offset within ±10 °C)",
+            )
+        })?;
+        self.inner.apply(channel, &scaled)
     }
 
     /// The inner reading with its plate temperature calibrated (a reading that is not finite stays as it is).

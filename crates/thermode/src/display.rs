@@ -184,10 +184,9 @@ fn datasheet_warning(label: &str, origin: &str, state_dir: Option<&Path>, can_id
             dir.join(identified::DEVICES_DIR).display()
         )
     });
-    let remedy = if can_identify {
-        format!("identify the display once, bare: `thermode identify --device {label} --save`")
-    } else {
-        "identify cannot measure a temperature-commanded device yet".to_string()
+    let remedy = match can_identify {
+        true => format!("identify the display once, bare: `thermode identify --device {label} --save`"),
+        false => "identify each device once, bare, on its own: `thermode identify --device DEVICE --save`".to_string(),
     };
     format!(
         "WARNING: {label} runs on a datasheet device file, {origin}{looked}: the model controller and the \
@@ -248,7 +247,7 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>, state_dir: Opti
         }
         if file_kind == DeviceFileKind::Datasheet {
             let origin = resolve::device_origin(args.device_file.as_deref());
-            let can_identify = device.measures().drive_current && args.device.len() == 1;
+            let can_identify = args.device.len() == 1;
             notices.push(datasheet_warning(&label, &origin, state_dir, can_identify));
         }
         for part in device.parts() {
@@ -259,11 +258,12 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>, state_dir: Opti
         }
         let device: Box<dyn Device + Send> = match pipeline.device.calibration {
             calibration if calibration.is_set() => {
-                if !device.measures().drive_current {
-                    bail!("{label} regulates its plate on its own sensor: a calibrated device file needs current mode");
-                }
+                let regulates = match device.measures().drive_current {
+                    true => "",
+                    false => "; the set-points the device regulates to are sent on its sensor's scale",
+                };
                 eprintln!(
-                    "thermode: the plate sensor read through its calibration (gain {}, offset {} °C)",
+                    "thermode: the plate sensor read through its calibration (gain {}, offset {} °C){regulates}",
                     calibration.sensor_gain, calibration.sensor_offset_c
                 );
                 Box::new(CalibratedDevice::new(device, calibration))
