@@ -174,10 +174,7 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
         });
     }
     eprintln!("{}", lines.join("\n"));
-    let sensor_sd_c = believed
-        .sensor
-        .noise_c
-        .hypot(believed.sensor.resolution_c / 12f64.sqrt());
+    let sensor_sd_c = sensor_sd_c(&believed);
     if fit.rms_residuals[0] > MAX_RESIDUAL_NOISES * sensor_sd_c {
         bail!(
             "the model does not explain the record (sensor residual {:.3} °C against {sensor_sd_c:.3} °C of noise): \
@@ -188,13 +185,24 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
     }
     let header: String = lines.iter().map(|l| format!("# {l}\n")).collect();
     let text = format!("{header}{}", device.to_toml_string());
-    if let (Some(dir), Some(identity)) = (&state_dir, &identity) {
-        save(dir, identity, &text)?;
+    write_identified(args, state_dir.as_deref().zip(identity.as_ref()), &text)
+}
+
+/// The sensor's noise \[°C\] of `device`: its noise and its resolution's quantisation, in quadrature.
+fn sensor_sd_c(device: &DeviceConfig) -> f64 {
+    device.sensor.noise_c.hypot(device.sensor.resolution_c / 12f64.sqrt())
+}
+
+/// Writes the identified file `text`: saved in the state directory under the identity (with `--save`: `saved`),
+/// to `--out`, or printed when neither is given.
+fn write_identified(args: &IdentifyArgs, saved: Option<(&Path, &Identity)>, text: &str) -> Result<()> {
+    if let Some((dir, identity)) = saved {
+        save(dir, identity, text)?;
     }
     match &args.out {
         Some(path) => write_atomically(path, |sink| Ok(sink.write_all(text.as_bytes())?)),
         None if args.save => Ok(()),
-        None => print_stdout(&text),
+        None => print_stdout(text),
     }
 }
 
@@ -323,10 +331,7 @@ fn identify_temperature_commanded(
     let identified = identify_steps::identified_device(believed, &found.lag)?;
     let lines = step_lines(args, &found, believed);
     eprintln!("{}", lines.join("\n"));
-    let sensor_sd_c = believed
-        .sensor
-        .noise_c
-        .hypot(believed.sensor.resolution_c / 12f64.sqrt());
+    let sensor_sd_c = sensor_sd_c(believed);
     if found.lag.rms_c > MAX_RESIDUAL_NOISES * sensor_sd_c {
         bail!(
             "the model does not explain the steps (residual {:.3} °C against {sensor_sd_c:.3} °C of noise): was a \
@@ -336,14 +341,7 @@ fn identify_temperature_commanded(
     }
     let header: String = lines.iter().map(|l| format!("# {l}\n")).collect();
     let text = format!("{header}{}", identified.to_toml_string());
-    if let Some(dir) = state_dir {
-        save(dir, &identity, &text)?;
-    }
-    match &args.out {
-        Some(path) => write_atomically(path, |sink| Ok(sink.write_all(text.as_bytes())?)),
-        None if args.save => Ok(()),
-        None => print_stdout(&text),
-    }
+    write_identified(args, state_dir.map(|dir| (dir, &identity)), &text)
 }
 
 /// Runs the steps of `method` on channel 0 of `device` in real time and returns the record.
