@@ -18,13 +18,32 @@ use crate::link::LinkHealth;
 /// See the module documentation.
 pub struct CalibratedDevice {
     inner: Box<dyn Device + Send>,
-    calibration: CalibrationConfig,
+    /// Per channel; channels past the list take its last entry.
+    calibrations: Vec<CalibrationConfig>,
 }
 
 impl CalibratedDevice {
-    /// `inner` read through `calibration`.
+    /// `inner` read through `calibration` on every channel.
     pub fn new(inner: Box<dyn Device + Send>, calibration: CalibrationConfig) -> Self {
-        CalibratedDevice { inner, calibration }
+        CalibratedDevice {
+            inner,
+            calibrations: vec![calibration],
+        }
+    }
+
+    /// `inner` with channel `i` read through `calibrations[i]` (a display of several devices, each with its own
+    /// device file; channels past the list take its last entry, none: uncalibrated).
+    pub fn per_channel(inner: Box<dyn Device + Send>, calibrations: Vec<CalibrationConfig>) -> Self {
+        CalibratedDevice { inner, calibrations }
+    }
+
+    /// The calibration of `channel`.
+    fn calibration(&self, channel: usize) -> CalibrationConfig {
+        self.calibrations
+            .get(channel)
+            .or(self.calibrations.last())
+            .copied()
+            .unwrap_or_default()
     }
 }
 
@@ -38,7 +57,8 @@ impl Device for CalibratedDevice {
         if self.inner.measures().drive_current || command.setpoint_c().is_none() {
             return self.inner.apply(channel, command);
         }
-        let (gain, offset_c) = (self.calibration.sensor_gain, self.calibration.sensor_offset_c);
+        let calibration = self.calibration(channel);
+        let (gain, offset_c) = (calibration.sensor_gain, calibration.sensor_offset_c);
         let scaled = command.on_sensor_scale(gain, offset_c).ok_or_else(|| {
             BadValue::custom(
                 "calibration sensor_gain",
@@ -53,7 +73,7 @@ impl Device for CalibratedDevice {
     fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
         let mut reading = self.inner.read(channel)?;
         if reading.sensor_c.is_finite() {
-            reading.sensor_c = self.calibration.plate_c(reading.sensor_c);
+            reading.sensor_c = self.calibration(channel).plate_c(reading.sensor_c);
         }
         Ok(reading)
     }

@@ -987,3 +987,50 @@ fn identify_bounds_the_sensor_lag_of_a_tcs2_and_serve_runs_the_saved_file() {
     assert!(every("calibrated", &status), "{status}\n{output}");
     assert!(output.contains("on its sensor's scale"), "{output}");
 }
+
+/// A display of two devices, one identified (issue 26): two TCS II emulators (five zones each), `identify --save`
+/// run on the first only; `serve` on both then runs the first's identified file on its five channels and the
+/// datasheet on the second's, says so per device, and reports the kind per channel.
+#[test]
+fn each_device_of_a_display_runs_its_own_identified_file() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let (_, plant_arg) = slower_sensor_plant(tmp.path());
+    let links: Vec<String> = ["first", "second"]
+        .iter()
+        .map(|name| tmp.path().join(name).display().to_string())
+        .collect();
+    let _emulators: Vec<_> = links
+        .iter()
+        .map(|link| {
+            let args = ["--protocol", "tcs2", "--channels", "1", "--no-finger", "--link", link];
+            emulate(&[&args[..], &["--device-file", &plant_arg]].concat()).0
+        })
+        .collect();
+    let devices: Vec<String> = links.iter().map(|l| format!("tcs2:{l}")).collect();
+    let state = tmp.path().join("state");
+    let state_arg = state.display().to_string();
+    let run = ["--device", &devices[0], "--save", "--state-dir", &state_arg];
+    let (found, _) = identify_temperature_commanded(&run, &state.join("devices"));
+    let (status, output) = serve_briefly(&devices[0], &state, &["--device", &devices[1]]);
+    let kinds: Vec<&str> = status["channel_device_files"]
+        .as_array()
+        .map(|files| files.iter().filter_map(|f| f.as_str()).collect())
+        .unwrap_or_default();
+    assert_eq!(
+        kinds,
+        [["identified"; 5], ["datasheet"; 5]].concat(),
+        "{status}\n{output}"
+    );
+    assert!(
+        output.contains("using the identified device file") && output.contains(&devices[0]),
+        "{output}"
+    );
+    let warning = output
+        .lines()
+        .find(|l| l.contains("WARNING") && l.contains("datasheet"));
+    assert!(
+        warning.is_some_and(|w| w.contains(&devices[1]) && !w.contains(&devices[0])),
+        "the datasheet warning names the second device only: {output}"
+    );
+    assert!(found.sensor.time_constant_s > 0.3, "{found:?}");
+}
