@@ -19,6 +19,7 @@
 pub mod error;
 pub mod figure;
 pub mod identify;
+pub mod identify_steps;
 pub mod nelder_mead;
 pub mod run;
 pub mod self_test;

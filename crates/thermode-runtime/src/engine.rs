@@ -232,6 +232,27 @@ pub fn pipeline_engines(config: thermode_pipeline::PipelineConfig) -> EngineFact
     })
 }
 
+/// An [`EngineFactory`] of one render pipeline per channel, channel `i` built from `configs[i]` (a display of
+/// several devices, each on its own device file); channels past the list take its last entry.
+pub fn pipeline_engines_per_channel(configs: Vec<thermode_pipeline::PipelineConfig>) -> EngineFactory {
+    Box::new(move |count| {
+        (0..count)
+            .map(|channel| {
+                let config = configs.get(channel).or(configs.last()).ok_or_else(|| {
+                    EngineError::BadValue(thermode_model::BadValue::custom(
+                        "pipeline configurations",
+                        0.0,
+                        "need at least one",
+                    ))
+                })?;
+                ChannelPipeline::new(config)
+                    .map(|p| Box::new(p) as Box<dyn ChannelEngine>)
+                    .map_err(EngineError::from)
+            })
+            .collect()
+    })
+}
+
 /// `engines` with each channel's saved dose restored (`saved(channel)`) before the factory returns, i.e. before
 /// the loop's first tick. A refused restore (a bad number) fails the start.
 pub fn with_restored_doses(

@@ -205,6 +205,23 @@ impl DriveCommand {
     pub fn setpoint_c(&self) -> Option<f64> {
         self.setpoint_c
     }
+
+    /// This command for a device that regulates its plate on a sensor reading `gain · T + offset_c` \[°C\] at a
+    /// true plate temperature T (a calibrated sensor: `thermode calibrate`), so that its own regulation brings the
+    /// true plate to the envelope's set-point: the set-point on the reading's scale, the current, the fault and the
+    /// limits unchanged. `None` when `gain` is not within 0.5 to 2 or `offset_c` not within ±10 °C (what a plate
+    /// sensor can be off, the bounds of a device file's calibration).
+    pub fn on_sensor_scale(&self, gain: f64, offset_c: f64) -> Option<DriveCommand> {
+        if !((0.5..=2.0).contains(&gain) && (-10.0..=10.0).contains(&offset_c)) {
+            return None;
+        }
+        Some(DriveCommand {
+            current_a: self.current_a,
+            fault: self.fault,
+            limited_by: self.limited_by,
+            setpoint_c: self.setpoint_c.map(|c| gain * c + offset_c),
+        })
+    }
 }
 
 /// A fault and when it latched.

@@ -150,8 +150,9 @@ pub struct DaemonConfig {
     pub device_label: String,
     /// A name per channel (e.g. the fingers), or empty.
     pub channel_names: Vec<String>,
-    /// What the display's device file is, as `/api/status` reports it for every channel. Default `datasheet`.
-    pub device_file: thermode_protocol::status::DeviceFileKind,
+    /// What each channel's device file is, as `/api/status` reports it (channels past the list: its last entry;
+    /// an empty list: `datasheet`). Default empty.
+    pub device_files: Vec<thermode_protocol::status::DeviceFileKind>,
     /// Lab Streaming Layer outlets (`serve --lsl`), or `None` (then liblsl is never loaded). The daemon fills in
     /// the rate, the channel count and the device label. Default `None`.
     pub lsl: Option<LslConfig>,
@@ -235,7 +236,7 @@ impl Daemon {
             info: Info {
                 device: config.device_label.clone(),
                 channel_names: config.channel_names.clone(),
-                device_file: config.device_file,
+                device_files: config.device_files.clone(),
                 osc_port: osc_addr.map(|a| a.port()),
                 http_port: http_addr.port(),
                 recording: core.recording_path().map(|p| p.display().to_string()),

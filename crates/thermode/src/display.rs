@@ -12,7 +12,7 @@ use thermode_link::spec::{is_hardware, open_display, HardwareContext};
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, SelfTestState};
 use thermode_platform::Clock;
 use thermode_protocol::status::DeviceFileKind;
-use thermode_runtime::engine::pipeline_engines;
+use thermode_runtime::engine::{pipeline_engines, pipeline_engines_per_channel};
 use thermode_runtime::EngineFactory;
 
 use crate::controller::{ControllerArg, DISPLAY_CONTROLLERS};
@@ -84,8 +84,8 @@ pub struct Display {
     pub names: Vec<String>,
     /// Human description for the start-up banner.
     pub description: String,
-    /// What its device file is (`/api/status` reports it per channel).
-    pub file_kind: DeviceFileKind,
+    /// What each channel's device file is (`/api/status` reports it per channel).
+    pub file_kinds: Vec<DeviceFileKind>,
     /// What the operator must know about the device file a real display runs, one line each (which file, or a
     /// warning); `serve` prints them in its banner, the other commands on standard error.
     pub notices: Vec<String>,
@@ -150,30 +150,29 @@ fn open_hardware(
     open_display(&args.device, &context, clock.clone()).with_context(|| format!("cannot open {label}"))
 }
 
-/// The identified device file stored in `state_dir` for the one device of `device` (labelled `label`), if any. A
-/// display of several devices runs one device file for all of them: their stored files are not combined, and a
-/// warning says so when there are any.
-fn stored_file_for(
-    state_dir: &Path,
-    label: &str,
-    device: &dyn Device,
-    notices: &mut Vec<String>,
-) -> Result<Option<identified::Stored>> {
-    let parts = device.parts();
-    if let [part] = parts.as_slice() {
-        return identified::find(state_dir, &identified::device_of(part, label), part.identity.as_deref());
+/// The identified device file stored in `state_dir` for each device of `device` (labelled `label` when it is one
+/// unnamed device), in the order of its parts; `None` for a device without one.
+fn stored_files(state_dir: &Path, label: &str, device: &dyn Device) -> Result<Vec<Option<identified::Stored>>> {
+    device
+        .parts()
+        .iter()
+        .map(|part| identified::find(state_dir, &identified::device_of(part, label), part.identity.as_deref()))
+        .collect()
+}
+
+/// The pipeline the devices' own limits are set from on a display whose devices run `pipelines` (one per channel):
+/// the first, with the slowest sensor of them all and the lowest drive limit (a MeCom controller's object
+/// thresholds leave room for its sensor's lag; one controller on a bus of several takes the bus's settings).
+fn most_cautious(pipelines: &[PipelineConfig]) -> Option<PipelineConfig> {
+    let mut cautious = pipelines.first()?.clone();
+    for p in pipelines {
+        let (sensor, drive) = (&mut cautious.device.sensor, &mut cautious.device.drive);
+        sensor.time_constant_s = sensor.time_constant_s.max(p.device.sensor.time_constant_s);
+        drive.current_limit_a = drive.current_limit_a.min(p.device.drive.current_limit_a);
+        let envelope = &mut cautious.envelope;
+        envelope.sensor_time_constant_s = envelope.sensor_time_constant_s.max(p.envelope.sensor_time_constant_s);
     }
-    for part in &parts {
-        let name = identified::device_of(part, label);
-        if let Some(stored) = identified::find(state_dir, &name, part.identity.as_deref())? {
-            notices.push(format!(
-                "WARNING: {name} has an identified device file ({}), but a display of several devices runs one \
-                 device file for all of them: give it with --device-file if it fits every device",
-                stored.path.display()
-            ));
-        }
-    }
-    Ok(None)
+    Some(cautious)
 }
 
 /// The warning for a real display run on a datasheet device file (`origin`).
@@ -184,10 +183,9 @@ fn datasheet_warning(label: &str, origin: &str, state_dir: Option<&Path>, can_id
             dir.join(identified::DEVICES_DIR).display()
         )
     });
-    let remedy = if can_identify {
-        format!("identify the display once, bare: `thermode identify --device {label} --save`")
-    } else {
-        "identify cannot measure a temperature-commanded device yet".to_string()
+    let remedy = match can_identify {
+        true => format!("identify the display once, bare: `thermode identify --device {label} --save`"),
+        false => "identify each device once, bare, on its own: `thermode identify --device DEVICE --save`".to_string(),
     };
     format!(
         "WARNING: {label} runs on a datasheet device file, {origin}{looked}: the model controller and the \
@@ -204,8 +202,9 @@ fn datasheet_warning(label: &str, origin: &str, state_dir: Option<&Path>, can_id
 pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>, state_dir: Option<&Path>) -> Result<Display> {
     let given_text = args.device_file.as_deref().map(resolve::read).transpose()?;
     let device_config = resolve::device_config(args.device_file.as_deref())?;
-    let mut file_kind = identified::kind_of(&device_config, given_text.as_deref());
+    let file_kind = identified::kind_of(&device_config, given_text.as_deref());
     let mut pipeline = pipeline_of(device_config, args.controller)?;
+    let (mut pipelines, mut file_kinds) = (Vec::new(), vec![file_kind]);
     let label = args.label();
     let mut notices = Vec::new();
     let (device, label): (Box<dyn Device + Send>, String) = if args.is_sim() {
@@ -218,65 +217,15 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>, state_dir: Opti
         let display = SimulatedDisplay::<DefaultFinger>::fingertips(&device_config, count, args.seed)?;
         (Box::new(display), label)
     } else if args.device.iter().all(|d| is_hardware(d)) {
-        let mut device = open_hardware(args, &pipeline, clock)?;
-        let stored = match (&args.device_file, state_dir) {
-            (None, Some(dir)) => stored_file_for(dir, &label, device.as_ref(), &mut notices)?,
-            _ => None,
-        };
-        if let Some(path) = &args.device_file {
-            notices.push(format!(
-                "using the device file {} given by --device-file for {label} ({})",
-                path.display(),
-                identified::kind_name(file_kind)
-            ));
-        } else if let Some(stored) = stored {
-            let who = device.parts().first().and_then(|p| p.identity.clone());
-            notices.push(format!(
-                "using the identified device file {} for {label}{} (identified {})",
-                stored.path.display(),
-                who.map_or_else(String::new, |i| format!(" ({i})")),
-                stored.identified_at.as_deref().unwrap_or("at an unknown time")
-            ));
-            file_kind = match stored.config.calibration.is_set() {
-                true => DeviceFileKind::Calibrated,
-                false => DeviceFileKind::Identified,
-            };
-            pipeline = pipeline_of(stored.config, args.controller)?;
-            // The devices' own limits follow the file they run: opened again with it.
-            drop(device);
-            device = open_hardware(args, &pipeline, clock)?;
+        let real = open_real(args, pipeline.clone(), file_kind, clock, state_dir, &mut notices)?;
+        if let Some(n) = args.channels.filter(|&n| n != real.device.channel_count()) {
+            bail!(
+                "--channels {n}, but {label} has {} channels",
+                real.device.channel_count()
+            );
         }
-        if file_kind == DeviceFileKind::Datasheet {
-            let origin = resolve::device_origin(args.device_file.as_deref());
-            let can_identify = device.measures().drive_current && args.device.len() == 1;
-            notices.push(datasheet_warning(&label, &origin, state_dir, can_identify));
-        }
-        for part in device.parts() {
-            if let Some(commands) = part.health.as_ref().and_then(|h| h.command_set()) {
-                let name = if part.label.is_empty() { &label } else { &part.label };
-                eprintln!("thermode: {name}: {commands}");
-            }
-        }
-        let device: Box<dyn Device + Send> = match pipeline.device.calibration {
-            calibration if calibration.is_set() => {
-                if !device.measures().drive_current {
-                    bail!("{label} regulates its plate on its own sensor: a calibrated device file needs current mode");
-                }
-                eprintln!(
-                    "thermode: the plate sensor read through its calibration (gain {}, offset {} °C)",
-                    calibration.sensor_gain, calibration.sensor_offset_c
-                );
-                Box::new(CalibratedDevice::new(device, calibration))
-            }
-            _ => device,
-        };
-        // A real display is tested against its file before a finger can be on it; a temperature-commanded device
-        // (its own controller sets the current) cannot take the test's current pulse.
-        pipeline.self_test_at_start = device.measures().drive_current;
-        if let Some(n) = args.channels.filter(|&n| n != device.channel_count()) {
-            bail!("--channels {n}, but {label} has {} channels", device.channel_count());
-        }
-        (device, label)
+        (pipelines, file_kinds) = (real.pipelines, real.kinds);
+        (real.device, label)
     } else if args.device.len() > 1 && args.device.iter().any(|d| d == "sim") {
         bail!("--device sim is the simulated display alone; several --device name real devices only");
     } else {
@@ -302,13 +251,145 @@ pub fn build_display(args: &DisplayArgs, clock: &Arc<dyn Clock>, state_dir: Opti
         "{what}, {count} channel{plural}{fingers}, {} controller",
         pipeline.controller.name()
     );
+    let engines = match pipelines.is_empty() {
+        true => pipeline_engines(pipeline),
+        false => pipeline_engines_per_channel(pipelines),
+    };
     Ok(Display {
         device,
-        engines: pipeline_engines(pipeline),
+        engines,
         label,
         names,
         description,
-        file_kind,
+        file_kinds,
         notices,
     })
+}
+
+/// A real display ready for the loop: its device and, per channel, its pipeline and what its device file is.
+struct Real {
+    device: Box<dyn Device + Send>,
+    pipelines: Vec<PipelineConfig>,
+    kinds: Vec<DeviceFileKind>,
+}
+
+/// Opens the real display of `args` for `pipeline` (from `--device-file` or the default display, of kind
+/// `file_kind`). Without `--device-file`, each device with an identified file stored in `state_dir` runs it on its
+/// own channels (and the devices are opened again with the most cautious of the files' limits); which file runs
+/// where, and a warning for a datasheet file, go into `notices`. A calibrated file's channels read through it.
+fn open_real(
+    args: &DisplayArgs,
+    pipeline: PipelineConfig,
+    file_kind: DeviceFileKind,
+    clock: &Arc<dyn Clock>,
+    state_dir: Option<&Path>,
+    notices: &mut Vec<String>,
+) -> Result<Real> {
+    let label = args.label();
+    let mut device = open_hardware(args, &pipeline, clock)?;
+    let stored = match (&args.device_file, state_dir) {
+        (None, Some(dir)) => stored_files(dir, &label, device.as_ref())?,
+        _ => Vec::new(),
+    };
+    if let Some(path) = &args.device_file {
+        notices.push(format!(
+            "using the device file {} given by --device-file for {label} ({})",
+            path.display(),
+            identified::kind_name(file_kind)
+        ));
+    }
+    let (mut pipelines, mut kinds) = (Vec::new(), Vec::new());
+    for (part, stored) in device.parts().iter().zip(stored.iter().chain(std::iter::repeat(&None))) {
+        let name = identified::device_of(part, &label);
+        let (part_pipeline, kind) = match stored {
+            Some(stored) => {
+                notices.push(format!(
+                    "using the identified device file {} for {name}{} (identified {})",
+                    stored.path.display(),
+                    part.identity.as_ref().map_or_else(String::new, |i| format!(" ({i})")),
+                    stored.identified_at.as_deref().unwrap_or("at an unknown time")
+                ));
+                let kind = match stored.config.calibration.is_set() {
+                    true => DeviceFileKind::Calibrated,
+                    false => DeviceFileKind::Identified,
+                };
+                (pipeline_of(stored.config, args.controller)?, kind)
+            }
+            None => (pipeline.clone(), file_kind),
+        };
+        pipelines.extend(std::iter::repeat_n(part_pipeline, part.channel_count));
+        kinds.extend(std::iter::repeat_n(kind, part.channel_count));
+    }
+    if let Some(cautious) = stored
+        .iter()
+        .any(Option::is_some)
+        .then(|| most_cautious(&pipelines))
+        .flatten()
+    {
+        // The devices' own limits follow the files they run: opened again with them.
+        drop(device);
+        device = open_hardware(args, &cautious, clock)?;
+    }
+    warn_datasheet(args, device.as_ref(), &kinds, state_dir, notices);
+    for part in device.parts() {
+        if let Some(commands) = part.health.as_ref().and_then(|h| h.command_set()) {
+            eprintln!("thermode: {}: {commands}", identified::device_of(&part, &label));
+        }
+    }
+    let calibrations: Vec<_> = pipelines.iter().map(|p| p.device.calibration).collect();
+    if calibrations.iter().any(|c| c.is_set()) {
+        let regulates = match device.measures().drive_current {
+            true => "",
+            false => "; the set-points the device regulates to are sent on its sensor's scale",
+        };
+        let every = calibrations.windows(2).all(|w| w[0] == w[1]);
+        for (channel, c) in calibrations.iter().enumerate().filter(|(_, c)| c.is_set()) {
+            let which = match every {
+                true => String::new(),
+                false => format!("channel {channel}: "),
+            };
+            eprintln!(
+                "thermode: {which}the plate sensor read through its calibration (gain {}, offset {} °C){regulates}",
+                c.sensor_gain, c.sensor_offset_c
+            );
+            if every {
+                break;
+            }
+        }
+        device = Box::new(CalibratedDevice::per_channel(device, calibrations));
+    }
+    // A real display is tested against its file before a finger can be on it; a temperature-commanded device
+    // (its own controller sets the current) cannot take the test's current pulse.
+    let self_test = device.measures().drive_current;
+    for p in &mut pipelines {
+        p.self_test_at_start = self_test;
+    }
+    Ok(Real {
+        device,
+        pipelines,
+        kinds,
+    })
+}
+
+/// The warning for the devices of a real display that run a datasheet file (`kinds` per channel): one for the
+/// display when every channel does, else one per such device.
+fn warn_datasheet(
+    args: &DisplayArgs,
+    device: &dyn Device,
+    kinds: &[DeviceFileKind],
+    state_dir: Option<&Path>,
+    notices: &mut Vec<String>,
+) {
+    let origin = resolve::device_origin(args.device_file.as_deref());
+    let label = args.label();
+    if kinds.iter().all(|&k| k == DeviceFileKind::Datasheet) {
+        notices.push(datasheet_warning(&label, &origin, state_dir, args.device.len() == 1));
+        return;
+    }
+    for part in device.parts() {
+        if kinds.get(part.first_channel) == Some(&DeviceFileKind::Datasheet) {
+            let name = identified::device_of(&part, &label);
+            notices.push(datasheet_warning(&name, &origin, state_dir, true));
+        }
+    }
 }

@@ -201,8 +201,8 @@ pub struct Info {
     pub device: String,
     /// A name per channel (e.g. the fingers), or empty.
     pub channel_names: Vec<String>,
-    /// What the display's device file is (every channel runs it).
-    pub device_file: thermode_protocol::status::DeviceFileKind,
+    /// What each channel's device file is (channels past the list: its last entry; none: `datasheet`).
+    pub device_files: Vec<thermode_protocol::status::DeviceFileKind>,
     /// The OSC port, when OSC listens.
     pub osc_port: Option<u16>,
     /// The HTTP port (an OSC subscription to it is refused, as to the OSC port).
@@ -439,7 +439,12 @@ pub fn status(app: &App) -> Status {
                     .unwrap_or(0)
             })
             .collect(),
-        channel_device_files: vec![app.info.device_file; snapshot.channels.len()],
+        channel_device_files: (0..snapshot.channels.len())
+            .map(|c| {
+                let files = &app.info.device_files;
+                files.get(c).or(files.last()).copied().unwrap_or_default()
+            })
+            .collect(),
         dose_ledger: app.dose_ledger.as_ref().map(|w| DoseLedgerStatus {
             path: w.path.display().to_string(),
             writes: count(&w.writes),

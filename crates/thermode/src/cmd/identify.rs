@@ -3,9 +3,16 @@
 //! parameters fitted with their confidence (`thermode_render::identify`, `thermode_control::identify`).
 //!
 //! The Peltier voltage fixes the absolute scale of the parameters (from temperatures alone only their ratios are
-//! known), so only a display that reports it can be identified: the simulated display (`--device sim`, whose
+//! known), so only a display that reports it is identified whole: the simulated display (`--device sim`, whose
 //! hidden hardware `--plant-device` sets; run in simulated time) and Meerstetter TEC controllers in current mode
-//! (`--device mecom:…`, in real time; thermode's own protocol and the TCS II carry no voltage).
+//! (`--device mecom:…`, in real time). Thermode's own protocol carries no voltage and is refused.
+//!
+//! A temperature-commanded device (a TCS II, `tcs2:PATH`; a MeCom controller with `?mode=temperature`) regulates its
+//! plate itself: what its sensor alone tells is identified from set-point steps through its own regulation
+//! ([`thermode_render::identify_steps`]): the sensor's lag (from the bare plate relaxing with the output off on a
+//! MeCom controller; an upper bound from the steps' tails on a TCS II, which cannot switch its output off) and the
+//! plate's closed-loop response. The identified file differs from the believed one in the sensor's time constant and
+//! its uncertainty, which the safety envelope's plate estimate uses.
 //!
 //! `--save` stores the identified file of a real device in the state directory under the device's identity
 //! ([`crate::identified`]), where `serve`, `lab run --device` and `bench` find it.
@@ -16,10 +23,12 @@ use std::sync::Arc;
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use thermode_control::identify::{IdSample, PARAMETERS};
-use thermode_device::DeviceConfig;
+use thermode_device::{Device, DeviceConfig, Reading};
 use thermode_model::params::Rule;
 use thermode_platform::{utc_iso8601, Clock, MonotonicClock};
 use thermode_render::identify::{fit, record, sample_of, Excitation, DURATION_S, RATE_HZ};
+use thermode_render::identify_steps::{self, StepExcitation, StepIdentification, StepMethod, StepRecord};
+use thermode_safety::DriveCommand;
 
 use crate::controller::ControllerArg;
 use crate::display::{build_display, DisplayArgs};
@@ -36,9 +45,14 @@ const MAX_RESIDUAL_NOISES: f64 = 10.0;
 /// Arguments of `thermode identify`.
 #[derive(Args, Debug)]
 pub struct IdentifyArgs {
-    /// The display: `sim` (the simulated display, in simulated time) or `mecom:PATH` / `mecom-tcp:HOST:PORT` (a
-    /// Meerstetter TEC controller in current mode, in real time); the others report no Peltier voltage.
-    #[arg(long, value_name = "sim|mecom:PATH|mecom-tcp:HOST:PORT", default_value = "sim")]
+    /// The display: `sim` (the simulated display, in simulated time), `mecom:PATH` / `mecom-tcp:HOST:PORT` (a
+    /// Meerstetter TEC controller, in real time: whole in current mode, its sensor's lag with `?mode=temperature`)
+    /// or `tcs2:PATH` (a TCS II: its sensor's lag, an upper bound); thermode's own protocol reports no voltage.
+    #[arg(
+        long,
+        value_name = "sim|mecom:PATH|mecom-tcp:HOST:PORT|tcs2:PATH",
+        default_value = "sim"
+    )]
     device: String,
     /// The device file the controller starts from (TOML); default: the built-in default display.
     #[arg(long = "device-file", value_name = "FILE")]
@@ -50,7 +64,8 @@ pub struct IdentifyArgs {
     /// Seed of the simulated sensor noise.
     #[arg(long, value_name = "N", default_value_t = 1)]
     seed: u64,
-    /// Length of the excitation [s], 30 to 160 (the whole sequence; shorter runs stop it early).
+    /// Length of the excitation [s], 30 to 160 (the whole sequence; shorter runs stop it early). A
+    /// temperature-commanded device runs its steps until each settles instead.
     #[arg(long, value_name = "S", default_value_t = DURATION_S)]
     duration: f64,
     /// Write the identified device file here; default: print it (unless --save).
@@ -77,10 +92,12 @@ struct Identity {
 /// Runs `thermode identify`.
 pub fn run(args: &IdentifyArgs) -> Result<()> {
     let sim = args.device == "sim";
-    if !(sim || args.device.starts_with("mecom:") || args.device.starts_with("mecom-tcp:")) {
+    let known = ["mecom:", "mecom-tcp:", "tcs2:"];
+    if !(sim || known.iter().any(|p| args.device.starts_with(p))) {
         bail!(
-            "--device {}: identify needs the Peltier voltage, which thermode's own protocol and the TCS II do not \
-             report; it runs on `sim` and on Meerstetter TEC controllers (`mecom:PATH`, `mecom-tcp:HOST:PORT`)",
+            "--device {}: identify needs the Peltier voltage, which thermode's own protocol does not report; it runs \
+             on `sim`, on Meerstetter TEC controllers (`mecom:PATH`, `mecom-tcp:HOST:PORT`) and, their sensor's lag \
+             only, on temperature-commanded devices (`tcs2:PATH`, `mecom:PATH?mode=temperature`)",
             args.device
         );
     }
@@ -106,16 +123,33 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
     };
     // Every input read and the output's folder writable before minutes of excitation.
     check_outputs(&[("--out", args.out.as_deref())])?;
+    let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
+    let device = match sim {
+        true => None,
+        false => {
+            let display = DisplayArgs::one(&args.device, args.device_file.clone(), ControllerArg::Model, args.seed);
+            Some(build_display(&display, &clock, None)?.device)
+        }
+    };
+    let device = match device {
+        Some(device) if !device.measures().drive_current => {
+            return identify_temperature_commanded(args, &believed, device, &clock, state_dir.as_deref());
+        }
+        device => device,
+    };
     eprintln!(
         "identify: {} s of excitation on {}, no finger on the plate…",
         args.duration, args.device
     );
-    let (samples, identity) = if sim {
-        let _simulating = Progress::spinner("identify: simulating the excitation");
-        (record(&believed, &plant, args.seed, args.duration)?, None)
-    } else {
-        let (samples, identity) = record_in_real_time(args, &believed)?;
-        (samples, Some(identity))
+    let (samples, identity) = match device {
+        None => {
+            let _simulating = Progress::spinner("identify: simulating the excitation");
+            (record(&believed, &plant, args.seed, args.duration)?, None)
+        }
+        Some(device) => {
+            let (samples, identity) = record_in_real_time(args, &believed, device, &clock)?;
+            (samples, Some(identity))
+        }
     };
     let progress = Progress::spinner("identify: fitting the model");
     let (fit, device) = fit(&believed, &samples)?;
@@ -139,10 +173,7 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
         });
     }
     eprintln!("{}", lines.join("\n"));
-    let sensor_sd_c = believed
-        .sensor
-        .noise_c
-        .hypot(believed.sensor.resolution_c / 12f64.sqrt());
+    let sensor_sd_c = sensor_sd_c(&believed);
     if fit.rms_residuals[0] > MAX_RESIDUAL_NOISES * sensor_sd_c {
         bail!(
             "the model does not explain the record (sensor residual {:.3} °C against {sensor_sd_c:.3} °C of noise): \
@@ -153,13 +184,24 @@ pub fn run(args: &IdentifyArgs) -> Result<()> {
     }
     let header: String = lines.iter().map(|l| format!("# {l}\n")).collect();
     let text = format!("{header}{}", device.to_toml_string());
-    if let (Some(dir), Some(identity)) = (&state_dir, &identity) {
-        save(dir, identity, &text)?;
+    write_identified(args, state_dir.as_deref().zip(identity.as_ref()), &text)
+}
+
+/// The sensor's noise \[°C\] of `device`: its noise and its resolution's quantisation, in quadrature.
+fn sensor_sd_c(device: &DeviceConfig) -> f64 {
+    device.sensor.noise_c.hypot(device.sensor.resolution_c / 12f64.sqrt())
+}
+
+/// Writes the identified file `text`: saved in the state directory under the identity (with `--save`: `saved`),
+/// to `--out`, or printed when neither is given.
+fn write_identified(args: &IdentifyArgs, saved: Option<(&Path, &Identity)>, text: &str) -> Result<()> {
+    if let Some((dir, identity)) = saved {
+        save(dir, identity, text)?;
     }
     match &args.out {
         Some(path) => write_atomically(path, |sink| Ok(sink.write_all(text.as_bytes())?)),
         None if args.save => Ok(()),
-        None => print_stdout(&text),
+        None => print_stdout(text),
     }
 }
 
@@ -191,25 +233,53 @@ fn save(state_dir: &Path, identity: &Identity, text: &str) -> Result<()> {
     Ok(())
 }
 
-/// Runs the excitation on the hardware of `args` in real time (channel 0) and returns the record and the device's
-/// identity; every drive is switched off at the end, also after an error.
-fn record_in_real_time(args: &IdentifyArgs, believed: &DeviceConfig) -> Result<(Vec<IdSample>, Identity)> {
-    let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
-    let display = DisplayArgs::one(&args.device, args.device_file.clone(), ControllerArg::Model, args.seed);
-    let mut device = build_display(&display, &clock, None)?.device;
-    let identity = Identity {
-        device: args.device.clone(),
-        identity: device.parts().first().and_then(|p| p.identity.clone()),
-    };
+/// Runs the excitation on `device` (the hardware of `args`) in real time (channel 0) and returns the record and the
+/// device's identity; every drive is switched off at the end, also after an error.
+fn record_in_real_time(
+    args: &IdentifyArgs,
+    believed: &DeviceConfig,
+    mut device: Box<dyn Device + Send>,
+    clock: &Arc<dyn Clock>,
+) -> Result<(Vec<IdSample>, Identity)> {
+    let identity = identity_of(args, device.as_ref());
     let mut excitation = Excitation::new(believed)?;
-    let dt_s = 1.0 / RATE_HZ;
     let ticks = (args.duration * RATE_HZ).round() as usize;
     let mut samples = Vec::with_capacity(ticks + 1);
-    let start_s = clock.now_s();
     let progress = Progress::seconds(args.duration, "identify: excitation");
+    let mut tick = 0;
+    drive_in_real_time(device.as_mut(), clock, |now_s, dt_s, reading| {
+        progress.at_s(tick as f64 * dt_s);
+        samples.push(sample_of(reading));
+        tick += 1;
+        if tick > ticks {
+            return Ok(None);
+        }
+        Ok(Some(excitation.tick(now_s, dt_s, reading)?))
+    })?;
+    progress.finish();
+    Ok((samples, identity))
+}
+
+/// The identity of the device of `args` as `device` reports it.
+fn identity_of(args: &IdentifyArgs, device: &dyn Device) -> Identity {
+    Identity {
+        device: args.device.clone(),
+        identity: device.parts().first().and_then(|p| p.identity.clone()),
+    }
+}
+
+/// Runs `step` on channel 0 of `device` at [`RATE_HZ`] in real time (`step` gets the tick's time \[s\], its length
+/// \[s\] and the reading, and returns the command to apply, or `None` to stop); every drive is switched off at the
+/// end, also after an error.
+fn drive_in_real_time(
+    device: &mut (dyn Device + Send),
+    clock: &Arc<dyn Clock>,
+    mut step: impl FnMut(f64, f64, &Reading) -> Result<Option<DriveCommand>>,
+) -> Result<()> {
+    let dt_s = 1.0 / RATE_HZ;
+    let start_s = clock.now_s();
     let run = (|| -> Result<()> {
-        for tick in 0..=ticks {
-            progress.at_s(tick as f64 * dt_s);
+        for tick in 0.. {
             let deadline_s = start_s + tick as f64 * dt_s;
             while clock.now_s() < deadline_s {
                 clock.sleep_until(deadline_s);
@@ -217,17 +287,121 @@ fn record_in_real_time(args: &IdentifyArgs, believed: &DeviceConfig) -> Result<(
             let now_s = clock.now_s();
             device.poll(now_s);
             let reading = device.read(0)?;
-            samples.push(sample_of(&reading));
-            if tick < ticks {
-                let drive = excitation.tick(now_s, dt_s, &reading)?;
-                device.apply(0, &drive)?;
+            match step(now_s, dt_s, &reading)? {
+                Some(drive) => device.apply(0, &drive)?,
+                None => return Ok(()),
             }
         }
         Ok(())
     })();
-    progress.finish();
     let off = device.all_off().context("switching the drive off after the excitation");
     run?;
     off?;
-    Ok((samples, identity))
+    Ok(())
+}
+
+/// `thermode identify` on the temperature-commanded `device` (opened from `args`): the steps of
+/// [`identify_steps`] in real time on channel 0, the sensor's lag fitted, the file written (and saved in
+/// `state_dir` with `--save`).
+fn identify_temperature_commanded(
+    args: &IdentifyArgs,
+    believed: &DeviceConfig,
+    mut device: Box<dyn Device + Send>,
+    clock: &Arc<dyn Clock>,
+    state_dir: Option<&Path>,
+) -> Result<()> {
+    let method = match args.device.starts_with("tcs2:") {
+        true => StepMethod::Tail,
+        false => StepMethod::Relaxation,
+    };
+    let identity = identity_of(args, device.as_ref());
+    eprintln!(
+        "identify: {} regulates its plate itself: its sensor's lag is identified from set-point steps ({}), no \
+         finger on the plate…",
+        args.device,
+        match method {
+            StepMethod::Relaxation => "the bare plate relaxing with the output off after each plateau",
+            StepMethod::Tail => "the steps' tails: an upper bound, the device cannot switch its output off",
+        }
+    );
+    let record = record_steps(device.as_mut(), clock, believed, method)?;
+    drop(device);
+    let found = identify_steps::identify_steps(&record, method, believed)?;
+    let identified = identify_steps::identified_device(believed, &found.lag)?;
+    let lines = step_lines(args, &found, believed);
+    eprintln!("{}", lines.join("\n"));
+    let sensor_sd_c = sensor_sd_c(believed);
+    if found.lag.rms_c > MAX_RESIDUAL_NOISES * sensor_sd_c {
+        bail!(
+            "the model does not explain the steps (residual {:.3} °C against {sensor_sd_c:.3} °C of noise): was a \
+             finger or an object on the plate? Nothing written",
+            found.lag.rms_c
+        );
+    }
+    let header: String = lines.iter().map(|l| format!("# {l}\n")).collect();
+    let text = format!("{header}{}", identified.to_toml_string());
+    write_identified(args, state_dir.map(|dir| (dir, &identity)), &text)
+}
+
+/// Runs the steps of `method` on channel 0 of `device` in real time and returns the record.
+fn record_steps(
+    device: &mut (dyn Device + Send),
+    clock: &Arc<dyn Clock>,
+    believed: &DeviceConfig,
+    method: StepMethod,
+) -> Result<StepRecord> {
+    let mut excitation = StepExcitation::new(believed, method)?;
+    let progress = Progress::spinner("identify: steps");
+    drive_in_real_time(device, clock, |now_s, dt_s, reading| {
+        let drive = excitation.tick(now_s, dt_s, reading)?;
+        Ok((!excitation.done()).then_some(drive))
+    })?;
+    progress.finish();
+    Ok(excitation.into_record())
+}
+
+/// The header lines of a file identified from steps: how, the lag with its uncertainty and each window's, and the
+/// plate's closed-loop response to each step.
+fn step_lines(args: &IdentifyArgs, found: &StepIdentification, believed: &DeviceConfig) -> Vec<String> {
+    let origin = resolve::device_origin(args.device_file.as_deref());
+    let (how, what) = match found.method {
+        StepMethod::Relaxation => ("relaxations of the bare plate with the output off", "the sensor's lag"),
+        StepMethod::Tail => (
+            "tails of regulated set-point steps",
+            "an upper bound of the sensor's lag",
+        ),
+    };
+    let lag = &found.lag;
+    let mut lines = vec![
+        format!(
+            "Identified by `thermode identify` on {} from {origin} (temperature-commanded: {how}, no finger).",
+            args.device
+        ),
+        format!(
+            "Sensor time constant ({what}): {:.4} ± {:.4} s (the file had {} s); RMS residual {:.4} °C.",
+            lag.time_constant_s, lag.sd_s, believed.sensor.time_constant_s, lag.rms_c
+        ),
+    ];
+    for (k, w) in found.windows.iter().enumerate() {
+        let plate = match w.plate_time_constant_s.is_finite() {
+            true => format!(", plate relaxing with {:.2} s", w.plate_time_constant_s),
+            false => String::new(),
+        };
+        lines.push(format!(
+            "  window {k}: {:.4} ± {:.4} s{plate}",
+            w.time_constant_s, w.sd_s
+        ));
+    }
+    for r in &found.responses {
+        lines.push(format!(
+            "Plate's closed-loop response to {:+.1} °C to {:.1} °C: within 10 % in {:.2} s, overshoot {:.2} °C.",
+            r.step_c, r.setpoint_c, r.rise_s, r.overshoot_c
+        ));
+    }
+    lines.push(
+        "Not identified (no current or voltage from the device): the module, the heat capacities, the water; the \
+         believed file's values are kept."
+            .to_string(),
+    );
+    lines
 }

@@ -210,7 +210,7 @@ fn start_quiet(args: &ServeArgs) -> Result<(Daemon, Started)> {
         server,
         device_label: display.label,
         channel_names: display.names.clone(),
-        device_file: display.file_kind,
+        device_files: display.file_kinds,
         lsl: args.lsl.then(|| LslConfig {
             name: args.lsl_name.clone(),
             source_id: args.lsl_name.clone(),
