@@ -38,6 +38,10 @@ use crate::random::{standard_normal, trial_rng};
 pub const FITTED_TOML: &str = include_str!("../data/participant_fit.toml");
 /// Φ⁻¹(0.75): the 2AFC criterion of a threshold at 75 % correct.
 pub const Z_75: f64 = 0.674_489_750_196_081_7;
+/// Channel capacity of absolute identification along one perceptual continuum \[bits\]: about 2.5 bits ("the span
+/// of absolute judgment", about seven categories) once the stimulus range is wide, for loudness, pitch, taste and
+/// cutaneous intensity alike (Miller, Psychological Review 63:81, 1956).
+pub const IDENTIFICATION_CAPACITY_BITS: f64 = 2.5;
 /// Seed salt of the perceptual participant's streams.
 const PERCEPTION_SALT: u64 = 0x7065_7263_6570_0028;
 /// Window of the heat-flux cue used for the contact-conductance factor \[s\] (the initial cooling-rate window).
@@ -53,7 +57,10 @@ pub struct PerceptionParams {
     pub inputs: String,
     /// 2AFC Weber fraction of heat-extraction rate (Bergmann Tiest & Kappers 2009: 0.43).
     pub weber_fraction: f64,
-    /// Memory noise of the prototypes relative to the sensory noise (assumed 1).
+    /// Memory noise of the prototypes relative to the sensory noise (dimensionless, per cue): the context-coding
+    /// noise of a set spanning the references' perceived range at the channel capacity of absolute identification
+    /// ([`memory_noise_sd_for`], [`IDENTIFICATION_CAPACITY_BITS`]) over `sensory_sd`, written by the fit (before:
+    /// 1, assumed).
     pub memory_noise_ratio: f64,
     /// Probability π_k that the non-thermal channel recognises option k in a real trial, per option name (fitted;
     /// missing options: 0 = no non-thermal cue).
@@ -131,6 +138,32 @@ impl PerceptionParams {
 /// heat-extraction rate by the factor `1 + weber_fraction`: ln(1 + W) / Φ⁻¹(0.75).
 pub fn sensory_sd_for(weber_fraction: f64) -> f64 {
     (1.0 + weber_fraction).ln() / Z_75
+}
+
+/// The memory (context-coding) noise \[perceived units\] of a set of prototypes spanning `range` perceived units, for an
+/// identification channel capacity of `capacity_bits`. Durlach & Braida's (1969) two-noise account of absolute
+/// identification (as Nosofsky, J Exp Psychol Hum Percept Perform 9:299, 1983, states it): a response's variance is
+/// sensory noise, which does not depend on the range, plus criterial (memory) noise, which grows with it; once the
+/// range is wide the memory noise dominates and identification transmits the capacity C whatever the range, so the
+/// memory noise is proportional to the range. A uniform input over `range` through Gaussian noise of standard
+/// deviation σ transmits log₂(range / σ) − ½ log₂(2πe) bits when range ≫ σ (the output's entropy is the input's
+/// plus nothing, the noise's is log₂(σ√(2πe))), so σ_m = range / (2^C √(2πe)): range / 23.4 at 2.5 bits.
+pub fn memory_noise_sd_for(range: f64, capacity_bits: f64) -> f64 {
+    range / (2f64.powf(capacity_bits) * (2.0 * std::f64::consts::PI * std::f64::consts::E).sqrt())
+}
+
+/// The extent of a set of references on the perceived scale \[perceived units\]: the largest Euclidean distance
+/// between two references' perceived cue pairs (the two cues rise together with effusivity, so the set lies near one
+/// line and this is its length).
+pub fn perceived_range(references: &[CurveFeatures]) -> f64 {
+    let points: Vec<[f64; 2]> = references.iter().map(CurveFeatures::perceived).collect();
+    let mut range = 0.0f64;
+    for (i, a) in points.iter().enumerate() {
+        for b in &points[i + 1..] {
+            range = range.max((a[0] - b[0]).hypot(a[1] - b[1]));
+        }
+    }
+    range
 }
 
 /// The fraction of the perfect-contact heat flux that passes a contact of conductance `h_w_m2k` between skin and a
@@ -387,6 +420,50 @@ mod tests {
                 .bias
                 .len(),
             p.bias.len()
+        );
+    }
+
+    /// The memory noise's closed form against the information a uniform input over R transmits through Gaussian noise
+    /// σ, integrated numerically: I = h(Y) − log₂(σ√(2πe)) with Y's density (Φ(y/σ) − Φ((y − R)/σ)) / R.
+    #[test]
+    fn the_memory_noise_transmits_the_capacity_over_the_range() {
+        let range = 2.0;
+        let sigma = memory_noise_sd_for(range, IDENTIFICATION_CAPACITY_BITS);
+        let phi = |x: f64| 0.5 * statrs::function::erf::erfc(-x / std::f64::consts::SQRT_2);
+        let (lo, hi, n) = (-8.0 * sigma, range + 8.0 * sigma, 200_000);
+        let dy = (hi - lo) / n as f64;
+        let mut entropy_bits = 0.0;
+        for i in 0..n {
+            let y = lo + (i as f64 + 0.5) * dy;
+            let p = (phi(y / sigma) - phi((y - range) / sigma)) / range;
+            if p > 0.0 {
+                entropy_bits -= p * p.log2() * dy;
+            }
+        }
+        let noise_bits = (sigma * (2.0 * std::f64::consts::PI * std::f64::consts::E).sqrt()).log2();
+        let transmitted = entropy_bits - noise_bits;
+        assert!(
+            (transmitted - IDENTIFICATION_CAPACITY_BITS).abs() < 0.05,
+            "σ_m = {sigma:.4} over a range of {range} transmits {transmitted:.4} bits, capacity {IDENTIFICATION_CAPACITY_BITS}"
+        );
+        assert!(
+            (range / sigma - 23.4).abs() < 0.1,
+            "range / σ_m = {:.3}, expected 2^2.5 √(2πe) = 23.4",
+            range / sigma
+        );
+    }
+
+    /// The extent of three collinear references is the distance between the outer two.
+    #[test]
+    fn the_perceived_range_is_the_largest_distance() {
+        let at = |q0: f64, q1: f64| CurveFeatures {
+            initial_cooling_rate_c_per_s: crate::participant::RATE_SCALE_C_PER_S * q0.sinh(),
+            end_drop_c: crate::participant::DROP_SCALE_C * q1.sinh(),
+        };
+        let range = perceived_range(&[at(1.0, 2.0), at(4.0, 6.0), at(2.5, 4.0)]);
+        assert!(
+            (range - 5.0).abs() < 1e-9,
+            "range {range}, expected 5 (a 3-4-5 triangle)"
         );
     }
 
