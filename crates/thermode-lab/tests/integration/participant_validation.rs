@@ -85,16 +85,21 @@ fn the_method_of_limits_exceeds_the_method_of_levels_by_the_published_gap() {
 }
 
 /// Tables 2-3 on the paper-like display (Kron renderer, PID), over the example's 100 seeds (the test profile is
-/// optimised: about 0.1 s): the paper's χ²(4) 4.10 and mean false ratio 1.78 lie inside the model's 5-95 % range,
-/// and Table 3's aluminium, steel, stone and rubber rates inside its 2.5-97.5 % range (the check asks for 4 of 5).
-/// The mean correct ratio, Fig. 4's shares and Table 3's wood do not (docs/lab.md). Aluminium's is borderline: its
-/// 97.5 % point is 0.57 on these seeds and 0.50 on `lab run`'s seeds 1-100 (docs/lab.md).
+/// optimised: about 0.1 s): the paper's χ²(4) 4.10, mean correct ratio 0.78 and mean false ratio 1.78 lie inside the
+/// model's 5-95 % range, and Table 3's five simulated rates inside its 2.5-97.5 % range (the check asks for 4 of 5;
+/// all five pass since the memory noise is the sourced 0.127 σ_s instead of the assumed σ_s, and each is asserted).
+/// Fig. 4's shares do not (docs/lab.md). Aluminium's (97.5 % point 0.57 against 0.54) and wood's (0.77 against
+/// 0.71) are near the edge of the model's spread.
 #[test]
-fn the_paper_like_display_predicts_the_chi_square_the_false_ratio_and_table_3() {
+fn the_paper_like_display_predicts_the_chi_square_the_ratios_and_table_3() {
     let (real, simulated) = display_features(paper_like_pipeline().expect("pipeline")).expect("features");
     let runs = design_over_seeds(&PerceptionParams::fitted(), &real, &simulated, 1..101).expect("runs");
     for (key, spread) in [
         ("chi_square", Spread::of(runs.iter().map(|f| f.chi_square))),
+        (
+            "mean_ratio_correct",
+            Spread::of(runs.iter().map(|f| f.mean_ratio_correct)),
+        ),
         ("mean_ratio_false", Spread::of(runs.iter().map(|f| f.mean_ratio_false))),
     ] {
         let published = published_value(key);
@@ -103,7 +108,7 @@ fn the_paper_like_display_predicts_the_chi_square_the_false_ratio_and_table_3() 
             "{key}: model {spread:?} vs paper {published}"
         );
     }
-    for k in [0, 1, 2, 4] {
+    for k in 0..PAPER_MATERIALS.len() {
         let mut rates: Vec<f64> = runs.iter().map(|f| f.simulated_correct[k]).collect();
         rates.sort_by(f64::total_cmp);
         let at = |q: f64| rates[(q * (rates.len() - 1) as f64).round() as usize];
@@ -144,7 +149,7 @@ fn three_fingers_discriminate_better_than_one() {
 /// Bhattacharjee et al. 2020: a sample pre-heated or pre-cooled so that its contact curve matches another material's
 /// is identified at no more than 20 % correct (five options, thermal cues; 1000 trials each, 4000 in the example):
 /// aluminium heated to feel like wood and wood cooled to feel like aluminium. The third pair of the table, stone
-/// cooled to feel like aluminium, fails (0.27: the thermal stage confuses stone and aluminium at room temperature
+/// cooled to feel like aluminium, fails (0.32: the thermal stage confuses stone and aluminium at room temperature
 /// already) and is not asserted. The matched temperatures are checked against the semi-infinite contact
 /// temperature: aluminium within 0.5 °C of wood's contact temperature, wood far below room.
 #[test]
