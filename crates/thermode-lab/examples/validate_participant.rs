@@ -8,7 +8,9 @@
 //! other rows are computed as `thermode_lab::validation` documents. Without `--write` it prints the table only.
 
 use thermode_lab::participant::CurveFeatures;
-use thermode_lab::perception::{PerceptionParams, PerceptualParticipant};
+use thermode_lab::perception::{
+    memory_noise_sd_for, perceived_range, PerceptionParams, PerceptualParticipant, IDENTIFICATION_CAPACITY_BITS,
+};
 use thermode_lab::runner::FvContact;
 use thermode_lab::validation::{
     alike_pair_joint_probability, contact_features, design_over_seeds, display_features, fingers_correct,
@@ -83,6 +85,18 @@ fn rows(
     });
     let options: Vec<String> = PAPER_MATERIALS.iter().map(|s| s.to_string()).collect();
     let fv = contact_features(&FvContact::default(), 30.0)?;
+    let range = perceived_range(&fv);
+    let derived = memory_noise_sd_for(range, IDENTIFICATION_CAPACITY_BITS) / params.sensory_sd();
+    rows.push(Row {
+        key: "memory_capacity".into(),
+        model: format!(
+            "σ_m / σ_s {} shipped, {derived:.4} derived: perceived range {range:.3} of the fv references / 23.4 / σ_s \
+             {:.4}",
+            params.memory_noise_ratio,
+            params.sensory_sd()
+        ),
+        pass: Some((params.memory_noise_ratio - derived).abs() <= 1e-4),
+    });
     let fit = PerceptualParticipant::new(options, &fv, params.clone(), 1)?;
     let rates = fit.real_rates(2000, 2);
     for (k, name) in PAPER_MATERIALS.iter().enumerate() {

@@ -6,7 +6,9 @@
 use std::time::Instant;
 
 use thermode_lab::design::Condition;
-use thermode_lab::perception::{PerceptionParams, PerceptualParticipant};
+use thermode_lab::perception::{
+    memory_noise_sd_for, perceived_range, PerceptionParams, PerceptualParticipant, IDENTIFICATION_CAPACITY_BITS,
+};
 use thermode_lab::runner::FvContact;
 use thermode_lab::validation::{
     contact_features, design_counts, design_over_seeds, display_features, fingers_correct, limits_levels_gap_c,
@@ -24,6 +26,28 @@ fn published_value(key: &str) -> f64 {
 
 fn options() -> Vec<String> {
     PAPER_MATERIALS.iter().map(|s| s.to_string()).collect()
+}
+
+/// Parameter input: the shipped memory noise is the context-coding noise of the fv references' perceived range at
+/// the published 2.5-bit capacity of absolute identification (Miller 1956), relative to the sensory noise; the range
+/// (aluminium and steel to wood and rubber) spans about three sensory standard deviations.
+#[test]
+fn the_memory_noise_follows_from_the_identification_capacity() {
+    assert!((IDENTIFICATION_CAPACITY_BITS - published_value("memory_capacity")).abs() < 1e-12);
+    let params = PerceptionParams::fitted();
+    let references = contact_features(&FvContact::default(), 30.0).expect("references");
+    let range = perceived_range(&references);
+    let derived = memory_noise_sd_for(range, IDENTIFICATION_CAPACITY_BITS) / params.sensory_sd();
+    assert!(
+        (params.memory_noise_ratio - derived).abs() <= 1e-4,
+        "shipped {} vs derived {derived:.5} (range {range:.4})",
+        params.memory_noise_ratio
+    );
+    assert!(
+        (2.5..3.5).contains(&(range / params.sensory_sd())),
+        "range {range:.3} is {:.2} sensory sd",
+        range / params.sensory_sd()
+    );
 }
 
 /// Fit input (b), Tables 2-3: the shipped parameters give the paper's real rates on real fv contact (4000 trials
