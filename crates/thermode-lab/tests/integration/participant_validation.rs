@@ -132,12 +132,12 @@ fn the_paper_like_display_predicts_the_chi_square_the_ratios_and_table_3() {
             "{key}: model {spread:?} vs paper {published}"
         );
     }
-    for k in 0..PAPER_MATERIALS.len() {
+    for (k, name) in PAPER_MATERIALS.iter().enumerate() {
         let mut rates: Vec<f64> = runs.iter().map(|f| f.simulated_correct[k]).collect();
         rates.sort_by(f64::total_cmp);
         let at = |q: f64| rates[(q * (rates.len() - 1) as f64).round() as usize];
         let (lo, hi) = (at(0.025), at(0.975));
-        let key = format!("simulated_{}", PAPER_MATERIALS[k]);
+        let key = format!("simulated_{name}");
         let published = published_value(&key);
         assert!(
             (lo..=hi).contains(&published),
