@@ -1,6 +1,6 @@
 //! The nearest-reference simulated participant (beyond the paper): identifies a material from the skin temperature
 //! curve of a trial, so that a lab can check its design and the effect sizes to expect before recruiting anyone.
-//! `lab run --simulated-participant` answers with this one by default; `--participant-model perceptual` uses the
+//! `lab run --simulated-participant --participant-model calibrated` answers with this one; the default is the
 //! perceptual participant of [`crate::perception`] (issue 28), which builds on this module's [`CurveFeatures`].
 //!
 //! **Features.** From a curve the simulated participant takes the two cues the paper's discussion of Figure 3 names: the

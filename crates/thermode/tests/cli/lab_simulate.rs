@@ -254,19 +254,19 @@ fn lab_analyze_reports_the_confusion_comparison_and_the_jnds() {
 }
 
 #[test]
-fn the_perceptual_participant_answers_when_asked_and_the_calibrated_one_by_default() {
+fn the_perceptual_participant_answers_by_default_and_the_calibrated_one_when_asked() {
     let (calibrated, perceptual) = (tempfile::tempdir().expect("dir"), tempfile::tempdir().expect("dir"));
-    let default = run_sessions(calibrated.path(), &[]);
-    let chosen = run_sessions(perceptual.path(), &["--participant-model", "perceptual"]);
+    let default = run_sessions(perceptual.path(), &[]);
+    let chosen = run_sessions(calibrated.path(), &["--participant-model", "calibrated"]);
     assert_eq!(default.len(), chosen.len());
     let sidecar = |dir: &Path| std::fs::read_to_string(dir.join(first_sidecar_name(dir))).expect("sidecar");
     assert!(
         sidecar(calibrated.path()).contains("simulated participant, noise"),
-        "calibrated by default"
+        "the calibrated participant when asked"
     );
     assert!(
         sidecar(perceptual.path()).contains("perceptual model fitted"),
-        "the perceptual model when asked"
+        "the perceptual model by default"
     );
     let presented = |sessions: &BTreeMap<String, String>| -> Vec<Vec<Vec<String>>> {
         sessions
