@@ -478,6 +478,23 @@ impl SetpointStage {
     }
 }
 
+/// The shaped set-point's rate `shaped_rate_c_per_s` \[°C/s\] as the controller is told it: 0 while the feasible
+/// band holds the request (`requested_c` beyond the band, so the band gave `feasible_c`) and the set-point moves away
+/// from it. The set-point then moves only because the band follows the plate estimate, not because the request
+/// turned back, and a controller that never drives the plate against the set-point's motion
+/// ([`thermode_control::ModelController`]) must not take an estimate's tick-to-tick wobble for the request's return:
+/// on a module 30 % weaker in S than its file, a 6 m°C rise of the estimate during the saturated drop stopped
+/// the cooling for 0.09 s (the plate then waited for a set-point that only followed it up).
+fn requested_motion_c_per_s(requested_c: f64, feasible_c: f64, shaped_rate_c_per_s: f64) -> f64 {
+    let held_below = requested_c < feasible_c && shaped_rate_c_per_s > 0.0;
+    let held_above = requested_c > feasible_c && shaped_rate_c_per_s < 0.0;
+    if held_below || held_above {
+        0.0
+    } else {
+        shaped_rate_c_per_s
+    }
+}
+
 impl DriveStage {
     /// The envelope of `config` around `controller`, nothing observed yet.
     pub fn new(config: &PipelineConfig, controller: Box<dyn Controller>) -> Result<Self, PipelineError> {
@@ -508,12 +525,13 @@ impl DriveStage {
         finger: Finger,
     ) -> DriveOutcome {
         let fresh_sample = self.guard.update(now_s, reading, self.applied_current_a, finger);
-        let decision = self.envelope.shape_setpoint(now_s, self.feasible(requested_c, dt_s));
+        let feasible_c = self.feasible(requested_c, dt_s);
+        let decision = self.envelope.shape_setpoint(now_s, feasible_c);
         let input = ControlInput {
             time_s: now_s,
             dt_s,
             setpoint_c: decision.setpoint_c,
-            setpoint_rate_c_per_s: decision.rate_c_per_s,
+            setpoint_rate_c_per_s: requested_motion_c_per_s(requested_c, feasible_c, decision.rate_c_per_s),
             sensor_c: reading.sensor_c,
             hot_side_c: reading.hot_side_c,
             applied_current_a: self.applied_current_a,
