@@ -79,6 +79,11 @@ pub struct ObserverDesign {
     /// Relative standard deviation of the plate's response to heat (its heat capacity as the file states it) at
     /// start; the observer then estimates the response's scale. Default 0 (the file's capacity, not estimated).
     pub plate_response_uncertainty: f64,
+    /// Relative uncertainty of the hot side's modelled change over a step (its heat capacity and water conductance as
+    /// the file states them): `(u · ΔT_h)²` is added to the hot side's variance at every prediction, so the filter
+    /// follows the hot-side reading where the file's hot side runs off it, and the reading's innovations are not
+    /// carried into the plate through the states' correlation. Default 0 (the file's hot side taken as exact).
+    pub hot_side_response_uncertainty: f64,
 }
 
 impl Default for ObserverDesign {
@@ -88,6 +93,7 @@ impl Default for ObserverDesign {
             disturbance_initial_fraction: 0.1,
             plant_heat_noise_fraction: 0.002,
             plate_response_uncertainty: 0.0,
+            hot_side_response_uncertainty: 0.0,
         }
     }
 }
@@ -99,6 +105,7 @@ impl ObserverDesign {
         Rule::NonNegative.check("disturbance_initial_fraction", self.disturbance_initial_fraction)?;
         Rule::NonNegative.check("plant_heat_noise_fraction", self.plant_heat_noise_fraction)?;
         Rule::NonNegative.check("plate_response_uncertainty", self.plate_response_uncertainty)?;
+        Rule::NonNegative.check("hot_side_response_uncertainty", self.hot_side_response_uncertainty)?;
         Ok(())
     }
 }
@@ -454,6 +461,7 @@ impl PlateObserver {
             let lag_s = self.plant.sensor_time_constant_s;
             let (f, _) = self.transition_from(&self.coasted.from_x, &interval, lag_s);
             self.propagate_covariance(&f, duration_s);
+            self.add_hot_side_response_noise(self.x[TH] - self.coasted.from_x[TH]);
             self.correct(TS, tick.sensor_c, self.plant.sensor_variance_c2(), duration_s);
             self.correct(TH, tick.hot_side_c, self.plant.hot_side_variance_c2(), duration_s);
         } else {
@@ -544,7 +552,17 @@ impl PlateObserver {
         let lag_s = self.plant.effective_sensor_lag_s(tick.dt_s);
         let (f, x1) = self.transition_from(&self.x, tick, lag_s);
         self.propagate_covariance(&f, tick.dt_s);
+        self.add_hot_side_response_noise(x1[TH] - self.x[TH]);
         self.x = x1;
+    }
+
+    /// Adds `(u · change)²` to the hot side's variance for its modelled `change_c` \[°C\] over a step, u the
+    /// design's [`ObserverDesign::hot_side_response_uncertainty`] (nothing when 0).
+    fn add_hot_side_response_noise(&mut self, change_c: f64) {
+        let u = self.design.hot_side_response_uncertainty;
+        if u > 0.0 {
+            self.p[TH][TH] += (u * change_c).powi(2);
+        }
     }
 
     /// `P ← F P Fᵀ + Q` over `dt_s` \[s\].
