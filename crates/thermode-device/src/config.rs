@@ -168,9 +168,9 @@ pub struct RenderConfig {
     pub plate_uncertainty: f64,
     /// Relative uncertainty of the hot side's response (its heat capacity `hot_side.heat_capacity_j_k` and water
     /// conductance `hot_side.water_conductance_w_k` as this file gives them) \[-\], 0 to 1. Default 0.3;
-    /// `thermode identify` writes its fit's. The model controller's observer takes the hot side's modelled change
-    /// over a step as uncertain by this fraction of itself and follows the hot-side reading instead (the file's
-    /// hot side taken as exact when 0).
+    /// `thermode identify` writes its fit's. While the hot-side reading runs off the model's prediction, the model
+    /// controller's observer takes the hot side's modelled change over a step as uncertain by this fraction of
+    /// itself and follows the reading instead (the file's hot side taken as exact when 0).
     pub hot_side_uncertainty: f64,
     /// Relative uncertainty of the sensor's time constant (`sensor.time_constant_s`) as this file gives it \[-\], 0
     /// to 1. Default 0.5; `thermode identify` writes its fit's. The safety envelope's plate guard holds its estimate
@@ -478,9 +478,10 @@ impl DeviceConfig {
                 rule: Rule::Within { min: 0.0, max: 1.0 },
                 value: &mut self.render.hot_side_uncertainty,
                 doc: "Relative uncertainty of the hot side's response (hot_side.heat_capacity_j_k and \
-                      hot_side.water_conductance_w_k as this file gives them) [-], 0 to 1. The model controller's \
-                      observer takes the hot side's modelled change over a step as uncertain by this fraction of \
-                      itself and follows the hot-side reading instead; 0 takes the file's hot side as exact. \
+                      hot_side.water_conductance_w_k as this file gives them) [-], 0 to 1. While the hot-side \
+                      reading runs off the model's prediction (beyond 3 standard deviations), the model \
+                      controller's observer takes the hot side's modelled change over a step as uncertain by this \
+                      fraction of itself and follows the reading instead; 0 takes the file's hot side as exact. \
                       `thermode identify` writes its fit's uncertainty.",
                 source: "The hot side's capacity is an estimate of a box the paper does not size and its water \
                          conductance one of a laminar flow (hot_side.*): about 30 %. Believed exact, a hot side 30 % \
