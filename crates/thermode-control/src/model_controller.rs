@@ -38,8 +38,8 @@
 //!   sensor delivers information.
 //!
 //! When the device reports the module's voltage ([`ControlInput::voltage_v`]), the observer's Peltier module is
-//! fitted to it live ([`ModuleFit`]: S and R from the voltage, K as [`ModelDesign::module_conductance`] says), so a module that
-//! is not its datasheet does not leave a current-dependent error in the observer's unknown heat.
+//! fitted to it live ([`ModuleFit`]: S and R from the voltage, K as [`ModelDesign::module_conductance`] says), so a
+//! module that is not its datasheet does not leave a current-dependent error in the observer's unknown heat.
 //!
 //! No control error is integrated anywhere, so there is nothing to wind up: the only integrating state is the
 //! observer's unknown heat, an estimate of a physical heat flow driven by the current really applied, which stays

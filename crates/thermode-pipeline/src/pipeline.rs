@@ -17,7 +17,8 @@
 //!    far from a plate that cannot follow (the paper's PID has no estimate and gets the request unchanged).
 //! 4. `envelope.shape_setpoint`: clamp into the display limits and rate limit.
 //! 5. `controller.update` on the shaped set-point, with the finger model's receptor temperature and its
-//!    conductance to the plate (receptor conductance × contact area).
+//!    conductance to the plate (receptor conductance × contact area); the set-point's rate is given as 0 while the
+//!    band of 3a holds the request and the set-point moves away from it (it then only follows the estimate).
 //! 6. `envelope.gate_drive`: the only way to a [`DriveCommand`], with the plate guard's forecast of the true
 //!    plate ([`crate::guard::PlateGuard`], updated at the start of this step), so the envelope bounds the plate and
 //!    not only the lagging reading, whatever the controller.
@@ -1004,5 +1005,28 @@ impl FingerModels {
         renderer.set_fv_fast_path(self.fast_path);
         display.set_fv_fast_path(self.fast_path);
         Some((renderer, display))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::requested_motion_c_per_s;
+
+    /// The controller hears the set-point's own rate unless the band holds the request and the set-point moves away
+    /// from it: a request far below a rising set-point (the band following a rising estimate) and far above a falling
+    /// one give 0; a request that has turned back inside the band, or a set-point moving towards the request, keep
+    /// their rate.
+    #[test]
+    fn the_band_following_the_estimate_is_not_a_set_point_turning_back() {
+        for (requested_c, feasible_c, rate, want) in [
+            (16.6, 29.8, 0.6, 0.0),
+            (600.0, 46.9, -0.6, 0.0),
+            (29.8, 29.8, 0.6, 0.6),
+            (16.6, 29.8, -20.0, -20.0),
+            (600.0, 46.9, 20.0, 20.0),
+        ] {
+            let got = requested_motion_c_per_s(requested_c, feasible_c, rate);
+            assert_eq!(got, want, "request {requested_c}, band {feasible_c}, rate {rate}");
+        }
     }
 }
