@@ -53,6 +53,6 @@ pub use controller::{ControlInput, Controller, PidController};
 pub use error::ControlError;
 pub use filter::LowPass;
 pub use model_controller::{ModelController, ModelDesign, ModelTerms};
-pub use module_fit::ModuleFit;
+pub use module_fit::{ConductanceRule, ModuleFit};
 pub use observer::{Finger, ObserverDesign, ObserverTick, PlantModel, PlateEstimate, PlateObserver};
 pub use pid::{AntiWindup, Pid, PidGains, PidTerms};

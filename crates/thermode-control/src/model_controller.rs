@@ -38,8 +38,8 @@
 //!   sensor delivers information.
 //!
 //! When the device reports the module's voltage ([`ControlInput::voltage_v`]), the observer's Peltier module is
-//! fitted to it live ([`ModuleFit`]: S and R from the voltage, K from the file's figure of merit), so a module that
-//! is not its datasheet does not leave a current-dependent error in the observer's unknown heat.
+//! fitted to it live ([`ModuleFit`]: S and R from the voltage, K as [`ModelDesign::module_conductance`] says), so a
+//! module that is not its datasheet does not leave a current-dependent error in the observer's unknown heat.
 //!
 //! No control error is integrated anywhere, so there is nothing to wind up: the only integrating state is the
 //! observer's unknown heat, an estimate of a physical heat flow driven by the current really applied, which stays
@@ -76,7 +76,7 @@
 
 use crate::controller::{ControlInput, Controller};
 use crate::error::ControlError;
-use crate::module_fit::ModuleFit;
+use crate::module_fit::{ConductanceRule, ModuleFit};
 use crate::observer::{Finger, ObserverDesign, ObserverTick, PlantModel, PlateEstimate, PlateObserver};
 use thermode_model::Rule;
 
@@ -90,6 +90,9 @@ pub struct ModelDesign {
     /// starts ([`ModuleFit`]), > 0; `None`: no fit (the file's module throughout). Default `Some(0.3)` (datasheet
     /// values); the pipeline gives the device file's `render.peltier_uncertainty`, and `None` when that is 0.
     pub module_fit_relative_sd: Option<f64>,
+    /// What the fitted S and R say of the module's conductance K ([`ConductanceRule`]). Default
+    /// [`ConductanceRule::ErrorSources`] (a module's S, R and K may each be off its file on its own).
+    pub module_conductance: ConductanceRule,
     /// Closed-loop time constant of the plate, in sensor sample periods (> 0). Default 2 (20 ms for the default
     /// 100 Hz PT-100).
     pub closed_loop_sample_periods: f64,
@@ -100,6 +103,7 @@ impl Default for ModelDesign {
         Self {
             observer: ObserverDesign::default(),
             module_fit_relative_sd: Some(0.3),
+            module_conductance: ConductanceRule::default(),
             closed_loop_sample_periods: 2.0,
         }
     }
@@ -146,7 +150,9 @@ impl ModelController {
         if let Some(sd) = design.module_fit_relative_sd {
             Rule::Positive.check("module_fit_relative_sd [-]", sd)?;
         }
-        let module_fit = design.module_fit_relative_sd.map(|sd| ModuleFit::new(plant.module, sd));
+        let module_fit = design
+            .module_fit_relative_sd
+            .map(|sd| ModuleFit::with_conductance(plant.module, sd, design.module_conductance));
         Ok(Self {
             observer: PlateObserver::with_design(plant, design.observer)?,
             closed_loop_sample_periods: periods,

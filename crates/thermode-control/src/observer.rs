@@ -50,6 +50,11 @@
 //! - Plate and hot-side heat: white noise of `heat_noise · Q_ref` RMS over one sample period (the finger's heat
 //!   varies within a step; the linear model is exact otherwise).
 //!
+//! - The hot side's response: while a hot-side reading lies beyond [`HOT_SIDE_GATE_SD`] standard deviations of its
+//!   prediction, `(u · ΔT_h)²` more variance on the hot side per step, u the file's uncertainty of its hot side
+//!   ([`ObserverDesign::hot_side_response_uncertainty`]), ΔT_h the modelled change: the filter then follows the
+//!   hot-side reading, whose innovations would otherwise reach the plate through the states' correlation.
+//!
 //! The filter is time-varying (the current changes F every tick) and costs a few hundred flops per tick; it never
 //! allocates.
 
@@ -79,6 +84,13 @@ pub struct ObserverDesign {
     /// Relative standard deviation of the plate's response to heat (its heat capacity as the file states it) at
     /// start; the observer then estimates the response's scale. Default 0 (the file's capacity, not estimated).
     pub plate_response_uncertainty: f64,
+    /// Relative uncertainty of the hot side's modelled change over a step (its heat capacity and water conductance as
+    /// the file states them): while the last hot-side reading lay beyond [`HOT_SIDE_GATE_SD`] standard deviations of
+    /// its prediction (the file's hot side running off the display's), `(u · ΔT_h)²` is added to the hot side's
+    /// variance at every prediction, so the filter follows the hot-side reading, and the reading's innovations are
+    /// not carried into the plate through the states' correlation. A hot side that agrees with its file changes
+    /// nothing. Default 0 (the file's hot side taken as exact).
+    pub hot_side_response_uncertainty: f64,
 }
 
 impl Default for ObserverDesign {
@@ -88,6 +100,7 @@ impl Default for ObserverDesign {
             disturbance_initial_fraction: 0.1,
             plant_heat_noise_fraction: 0.002,
             plate_response_uncertainty: 0.0,
+            hot_side_response_uncertainty: 0.0,
         }
     }
 }
@@ -99,9 +112,14 @@ impl ObserverDesign {
         Rule::NonNegative.check("disturbance_initial_fraction", self.disturbance_initial_fraction)?;
         Rule::NonNegative.check("plant_heat_noise_fraction", self.plant_heat_noise_fraction)?;
         Rule::NonNegative.check("plate_response_uncertainty", self.plate_response_uncertainty)?;
+        Rule::NonNegative.check("hot_side_response_uncertainty", self.hot_side_response_uncertainty)?;
         Ok(())
     }
 }
+
+/// A hot-side reading further than this many standard deviations from its prediction shows the file's hot side
+/// running off the display's: 3 (see [`ObserverDesign::hot_side_response_uncertainty`]).
+pub const HOT_SIDE_GATE_SD: f64 = 3.0;
 
 /// Smallest standard deviation assigned to a reading, °C: 1e-4 (keeps the filter well posed for a noiseless,
 /// unquantised sensor).
@@ -322,6 +340,9 @@ pub struct PlateObserver {
     started: bool,
     /// Multi-rate use ([`PlateObserver::coast`]): the ticks coasted since the last correction.
     coasted: Coasted,
+    /// Whether the last hot-side reading lay beyond [`HOT_SIDE_GATE_SD`] standard deviations of its prediction
+    /// (the file's hot side then runs off the display's; see [`ObserverDesign::hot_side_response_uncertainty`]).
+    hot_side_off: bool,
 }
 
 /// The ticks an observer coasted through since its last correction ([`PlateObserver::coast`]).
@@ -356,6 +377,7 @@ impl PlateObserver {
             p: [[0.0; OBSERVER_STATES]; OBSERVER_STATES],
             started: false,
             coasted: Coasted::default(),
+            hot_side_off: false,
         })
     }
 
@@ -380,6 +402,7 @@ impl PlateObserver {
         self.p = [[0.0; OBSERVER_STATES]; OBSERVER_STATES];
         self.started = false;
         self.coasted = Coasted::default();
+        self.hot_side_off = false;
     }
 
     /// The estimate (`None` before the first update).
@@ -454,6 +477,7 @@ impl PlateObserver {
             let lag_s = self.plant.sensor_time_constant_s;
             let (f, _) = self.transition_from(&self.coasted.from_x, &interval, lag_s);
             self.propagate_covariance(&f, duration_s);
+            self.add_hot_side_response_noise(self.x[TH] - self.coasted.from_x[TH]);
             self.correct(TS, tick.sensor_c, self.plant.sensor_variance_c2(), duration_s);
             self.correct(TH, tick.hot_side_c, self.plant.hot_side_variance_c2(), duration_s);
         } else {
@@ -544,7 +568,18 @@ impl PlateObserver {
         let lag_s = self.plant.effective_sensor_lag_s(tick.dt_s);
         let (f, x1) = self.transition_from(&self.x, tick, lag_s);
         self.propagate_covariance(&f, tick.dt_s);
+        self.add_hot_side_response_noise(x1[TH] - self.x[TH]);
         self.x = x1;
+    }
+
+    /// Adds `(u · change)²` to the hot side's variance for its modelled `change_c` \[°C\] over a step, u the
+    /// design's [`ObserverDesign::hot_side_response_uncertainty`], while the last hot-side reading was off its
+    /// prediction (nothing otherwise, or when u is 0).
+    fn add_hot_side_response_noise(&mut self, change_c: f64) {
+        let u = self.design.hot_side_response_uncertainty;
+        if u > 0.0 && self.hot_side_off {
+            self.p[TH][TH] += (u * change_c).powi(2);
+        }
     }
 
     /// `P ← F P Fᵀ + Q` over `dt_s` \[s\].
@@ -580,6 +615,9 @@ impl PlateObserver {
         let s = self.p[index][index] + r;
         let gain: Vector = std::array::from_fn(|i| self.p[i][index] / s);
         let innovation = reading - self.x[index];
+        if index == TH {
+            self.hot_side_off = innovation * innovation > HOT_SIDE_GATE_SD * HOT_SIDE_GATE_SD * s;
+        }
         for (x, k) in self.x.iter_mut().zip(gain) {
             *x += k * innovation;
         }

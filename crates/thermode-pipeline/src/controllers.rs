@@ -168,8 +168,9 @@ pub fn plant_model(device: &DeviceConfig) -> Result<PlantModel, PipelineError> {
 
 /// Builds the controller `kind` for `device` (output limited to the device's drive limit). The model controller
 /// fits its module to the device's voltage starting from the file's `render.peltier_uncertainty`, and its observer
-/// estimates the plate's response to heat starting from `render.plate_uncertainty`; neither when its uncertainty
-/// is 0 (a file exact for its display).
+/// estimates the plate's response to heat starting from `render.plate_uncertainty` and follows the hot-side reading
+/// as far as `render.hot_side_uncertainty` says; none of these when its uncertainty is 0 (a file exact for its
+/// display).
 pub fn build_controller(kind: &ControllerKind, device: &DeviceConfig) -> Result<Box<dyn Controller>, PipelineError> {
     match kind {
         ControllerKind::Pid(gains) => Ok(Box::new(PidController::new(*gains, device.drive.current_limit_a)?)),
@@ -178,6 +179,7 @@ pub fn build_controller(kind: &ControllerKind, device: &DeviceConfig) -> Result<
                 module_fit_relative_sd: Some(device.render.peltier_uncertainty).filter(|&u| u > 0.0),
                 observer: ObserverDesign {
                     plate_response_uncertainty: device.render.plate_uncertainty,
+                    hot_side_response_uncertainty: device.render.hot_side_uncertainty,
                     ..ObserverDesign::default()
                 },
                 ..ModelDesign::default()

@@ -17,7 +17,8 @@
 //!    far from a plate that cannot follow (the paper's PID has no estimate and gets the request unchanged).
 //! 4. `envelope.shape_setpoint`: clamp into the display limits and rate limit.
 //! 5. `controller.update` on the shaped set-point, with the finger model's receptor temperature and its
-//!    conductance to the plate (receptor conductance × contact area).
+//!    conductance to the plate (receptor conductance × contact area); the set-point's rate is given as 0 while the
+//!    band of 3a holds the request and the set-point moves away from it (it then only follows the estimate).
 //! 6. `envelope.gate_drive`: the only way to a [`DriveCommand`], with the plate guard's forecast of the true
 //!    plate ([`crate::guard::PlateGuard`], updated at the start of this step), so the envelope bounds the plate and
 //!    not only the lagging reading, whatever the controller.
@@ -478,6 +479,23 @@ impl SetpointStage {
     }
 }
 
+/// The shaped set-point's rate `shaped_rate_c_per_s` \[°C/s\] as the controller is told it: 0 while the feasible
+/// band holds the request (`requested_c` beyond the band, so the band gave `feasible_c`) and the set-point moves away
+/// from it. The set-point then moves only because the band follows the plate estimate, not because the request
+/// turned back, and a controller that never drives the plate against the set-point's motion
+/// ([`thermode_control::ModelController`]) must not take an estimate's tick-to-tick wobble for the request's return:
+/// on a module 30 % weaker in S than its file, a 6 m°C rise of the estimate during the saturated drop stopped
+/// the cooling for 0.09 s (the plate then waited for a set-point that only followed it up).
+fn requested_motion_c_per_s(requested_c: f64, feasible_c: f64, shaped_rate_c_per_s: f64) -> f64 {
+    let held_below = requested_c < feasible_c && shaped_rate_c_per_s > 0.0;
+    let held_above = requested_c > feasible_c && shaped_rate_c_per_s < 0.0;
+    if held_below || held_above {
+        0.0
+    } else {
+        shaped_rate_c_per_s
+    }
+}
+
 impl DriveStage {
     /// The envelope of `config` around `controller`, nothing observed yet.
     pub fn new(config: &PipelineConfig, controller: Box<dyn Controller>) -> Result<Self, PipelineError> {
@@ -508,12 +526,13 @@ impl DriveStage {
         finger: Finger,
     ) -> DriveOutcome {
         let fresh_sample = self.guard.update(now_s, reading, self.applied_current_a, finger);
-        let decision = self.envelope.shape_setpoint(now_s, self.feasible(requested_c, dt_s));
+        let feasible_c = self.feasible(requested_c, dt_s);
+        let decision = self.envelope.shape_setpoint(now_s, feasible_c);
         let input = ControlInput {
             time_s: now_s,
             dt_s,
             setpoint_c: decision.setpoint_c,
-            setpoint_rate_c_per_s: decision.rate_c_per_s,
+            setpoint_rate_c_per_s: requested_motion_c_per_s(requested_c, feasible_c, decision.rate_c_per_s),
             sensor_c: reading.sensor_c,
             hot_side_c: reading.hot_side_c,
             applied_current_a: self.applied_current_a,
@@ -986,5 +1005,28 @@ impl FingerModels {
         renderer.set_fv_fast_path(self.fast_path);
         display.set_fv_fast_path(self.fast_path);
         Some((renderer, display))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::requested_motion_c_per_s;
+
+    /// The controller hears the set-point's own rate unless the band holds the request and the set-point moves away
+    /// from it: a request far below a rising set-point (the band following a rising estimate) and far above a falling
+    /// one give 0; a request that has turned back inside the band, or a set-point moving towards the request, keep
+    /// their rate.
+    #[test]
+    fn the_band_following_the_estimate_is_not_a_set_point_turning_back() {
+        for (requested_c, feasible_c, rate, want) in [
+            (16.6, 29.8, 0.6, 0.0),
+            (600.0, 46.9, -0.6, 0.0),
+            (29.8, 29.8, 0.6, 0.6),
+            (16.6, 29.8, -20.0, -20.0),
+            (600.0, 46.9, 20.0, 20.0),
+        ] {
+            let got = requested_motion_c_per_s(requested_c, feasible_c, rate);
+            assert_eq!(got, want, "request {requested_c}, band {feasible_c}, rate {rate}");
+        }
     }
 }

@@ -10,7 +10,8 @@
 //! ([`PeltierDatasheet::from_module`]); the capacities, the water conductance and temperature and the sensor's time
 //! constant replace the believed file's; the module's uncertainty (`render.peltier_uncertainty`) becomes the fit's
 //! (three of the largest standard deviation of S, R, K, at least [`MIN_IDENTIFIED_UNCERTAINTY`]), and so does the
-//! plate's (`render.plate_uncertainty`, from the plate capacity's standard deviation) and the sensor's
+//! plate's (`render.plate_uncertainty`, from the plate capacity's standard deviation), the hot side's
+//! (`render.hot_side_uncertainty`, from its capacity's and water conductance's) and the sensor's
 //! (`render.sensor_lag_uncertainty`, from the time constant's); everything else
 //! (sensor noise and rate, contact, the render rate limit) is kept, and the drive limit too unless it exceeds the
 //! identified I_max (a device file bounds it by I_max).
@@ -152,6 +153,7 @@ pub fn identified_device(believed: &DeviceConfig, fit: &Identification) -> Resul
     device.sensor.time_constant_s = p.sensor_time_constant_s;
     device.render.peltier_uncertainty = identified_uncertainty(&fit.relative_sd[..3]);
     device.render.plate_uncertainty = identified_uncertainty(&fit.relative_sd[3..4]);
+    device.render.hot_side_uncertainty = identified_uncertainty(&fit.relative_sd[4..6]);
     device.render.sensor_lag_uncertainty = identified_uncertainty(&fit.relative_sd[7..8]);
     // The drive's limit is the drive's, not fitted; a device file bounds it by the module's I_max.
     device.drive.current_limit_a = device.drive.current_limit_a.min(device.peltier.imax_a);

@@ -46,7 +46,7 @@ fn default_file_is_the_generated_default() {
 fn every_key_is_documented_with_default_and_source() {
     let text = DeviceConfig::default().to_toml_string();
     let keys = DeviceConfig::keys();
-    assert_eq!(keys.len(), 20, "{keys:?}");
+    assert_eq!(keys.len(), 21, "{keys:?}");
     for full in keys {
         let (section, key) = full.split_once('.').unwrap_or(("", ""));
         assert!(text.contains(&format!("[{section}]")), "section {section} missing");
