@@ -25,6 +25,7 @@ use thermode_model::peltier::PeltierModule;
 use thiserror::Error;
 
 use crate::error::ControlError;
+use crate::linear::{inverse_diagonal, solve};
 use crate::observer::PlantModel;
 
 /// Why a record could not be identified.
@@ -196,7 +197,7 @@ pub fn identify(record: &[IdSample], initial: &PlantModel, dt_s: f64) -> Result<
             for (k, row) in a.iter_mut().enumerate() {
                 row[k] += lambda * jtj[k][k].max(1e-12);
             }
-            let Some(step) = solve8(a, jtr.map(|v| -v)) else {
+            let Some(step) = solve(a, jtr.map(|v| -v)) else {
                 lambda *= 10.0;
                 continue;
             };
@@ -228,10 +229,8 @@ pub fn identify(record: &[IdSample], initial: &PlantModel, dt_s: f64) -> Result<
     let scale = cost / dof;
     let mut relative_sd = [f64::NAN; 8];
     for (k, sd) in relative_sd.iter_mut().enumerate() {
-        let mut unit = [0.0; 8];
-        unit[k] = 1.0;
-        if let Some(column) = solve8(jtj, unit) {
-            *sd = (column[k] * scale).max(0.0).sqrt();
+        if let Some(variance) = inverse_diagonal(jtj, k) {
+            *sd = (variance * scale).max(0.0).sqrt();
         }
     }
     let n = (r.len() / 3) as f64;
@@ -292,32 +291,6 @@ fn normal_equations(jacobian: &[Vec<f64>], r: &[f64]) -> ([[f64; 8]; 8], [f64; 8
         }
     }
     (jtj, jtr)
-}
-
-/// Solves the 8×8 system `a x = b` by Gaussian elimination with partial pivoting; `None` when it is singular.
-fn solve8(mut a: [[f64; 8]; 8], mut b: [f64; 8]) -> Option<[f64; 8]> {
-    for col in 0..8 {
-        let pivot = (col..8).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
-        if a[pivot][col].abs() <= 1e-300 || a[pivot][col].is_nan() {
-            return None;
-        }
-        a.swap(col, pivot);
-        b.swap(col, pivot);
-        let pivot_row = a[col];
-        for row in col + 1..8 {
-            let f = a[row][col] / pivot_row[col];
-            for (value, above) in a[row].iter_mut().zip(pivot_row).skip(col) {
-                *value -= f * above;
-            }
-            b[row] -= f * b[col];
-        }
-    }
-    let mut x = [0.0; 8];
-    for row in (0..8).rev() {
-        let s: f64 = (row + 1..8).map(|k| a[row][k] * x[k]).sum();
-        x[row] = (b[row] - s) / a[row][row];
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
 #[cfg(test)]

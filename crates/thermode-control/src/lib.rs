@@ -17,6 +17,7 @@
 //!   infeasible, with nothing to wind up.
 //! - [`module_fit`]: [`ModuleFit`], the live fit of the Peltier module to its terminal voltage that the model-based
 //!   controller uses when the device reports one.
+//! - [`linear`]: the small dense solves of the least-squares fits.
 //! - [`error`]: [`ControlError`], refused parameters and inputs.
 //!
 //! One tick of a channel:
@@ -44,6 +45,7 @@ pub mod controller;
 pub mod error;
 pub mod filter;
 pub mod identify;
+pub mod linear;
 pub mod model_controller;
 pub mod module_fit;
 pub mod observer;

@@ -29,6 +29,7 @@
 //! Not identifiable from the sensor alone, and left at the believed file's values: the module (S, R, K), the heat
 //! capacities, the water conductance, the hot side.
 
+use thermode_control::linear::inverse_diagonal;
 use thermode_device::{DeviceConfig, Reading};
 use thermode_pipeline::{ChannelPipeline, ControllerKind, PipelineConfig, Stimulus};
 use thermode_safety::DriveCommand;
@@ -416,9 +417,7 @@ fn lag_sd(method: StepMethod, t: &[f64], y: &[f64], x: &[f64], variance: f64) ->
     let model = |p: &[f64], ti: f64| p[0] + p[1] * shape(method, ti, &p[2..]);
     let mut p = vec![a, b];
     p.extend_from_slice(x);
-    let n = p.len();
-    let mut jtj = vec![vec![0.0; n]; n];
-    let columns: Vec<Vec<f64>> = (0..n)
+    let columns: Vec<Vec<f64>> = (0..p.len())
         .map(|k| {
             let h = 1e-6 * p[k].abs().max(1e-3);
             let (mut up, mut down) = (p.clone(), p.clone());
@@ -429,43 +428,18 @@ fn lag_sd(method: StepMethod, t: &[f64], y: &[f64], x: &[f64], variance: f64) ->
                 .collect()
         })
         .collect();
-    for i in 0..n {
-        for j in 0..n {
-            jtj[i][j] = columns[i].iter().zip(&columns[j]).map(|(u, v)| u * v).sum();
-        }
-    }
-    let lag_index = match method {
-        StepMethod::Relaxation => 3,
-        StepMethod::Tail => 2,
+    let jtj_entry = |i: usize, j: usize| -> f64 { columns[i].iter().zip(&columns[j]).map(|(u, v)| u * v).sum() };
+    // The lag is the last parameter of the tail's (a, b, τ) and the fourth of the relaxation's (a, b, τ_p, τ_s, d).
+    let lag_variance = match method {
+        StepMethod::Relaxation => inverse_diagonal(normal_matrix::<5>(jtj_entry), 3),
+        StepMethod::Tail => inverse_diagonal(normal_matrix::<3>(jtj_entry), 2),
     };
-    invert(jtj).map_or(f64::NAN, |inverse| (variance * inverse[lag_index][lag_index]).sqrt())
+    lag_variance.map_or(f64::NAN, |v| (variance * v).sqrt())
 }
 
-/// The inverse of the square matrix `m` (Gauss–Jordan with partial pivoting); `None` when it is singular.
-fn invert(mut m: Vec<Vec<f64>>) -> Option<Vec<Vec<f64>>> {
-    let n = m.len();
-    let mut inv: Vec<Vec<f64>> = (0..n).map(|i| (0..n).map(|j| f64::from(i == j)).collect()).collect();
-    for col in 0..n {
-        let pivot = (col..n).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
-        if m[pivot][col].abs() < 1e-300 {
-            return None;
-        }
-        m.swap(col, pivot);
-        inv.swap(col, pivot);
-        let d = m[col][col];
-        for j in 0..n {
-            m[col][j] /= d;
-            inv[col][j] /= d;
-        }
-        for row in (0..n).filter(|&r| r != col) {
-            let f = m[row][col];
-            for j in 0..n {
-                m[row][j] -= f * m[col][j];
-                inv[row][j] -= f * inv[col][j];
-            }
-        }
-    }
-    Some(inv)
+/// The N × N matrix of `entry(i, j)` (JᵀJ of an N-parameter fit).
+fn normal_matrix<const N: usize>(entry: impl Fn(usize, usize) -> f64) -> [[f64; N]; N] {
+    std::array::from_fn(|i| std::array::from_fn(|j| entry(i, j)))
 }
 
 /// The windows' fits combined: the inverse-variance mean; its standard deviation the mean's, scaled up by the
