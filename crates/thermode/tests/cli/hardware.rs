@@ -17,6 +17,12 @@ impl Drop for Process {
 
 /// `thermode emulate` with `args`; returns it and the first line it printed (where to connect).
 fn emulate(args: &[&str]) -> (Process, String) {
+    let (process, mut lines) = emulate_printing(args, 1);
+    (process, lines.remove(0))
+}
+
+/// `thermode emulate` with `args`; returns it and the first `count` lines it printed, trimmed.
+fn emulate_printing(args: &[&str], count: usize) -> (Process, Vec<String>) {
     let mut child = Command::new(env!("CARGO_BIN_EXE_thermode"))
         .arg("emulate")
         .args(args)
@@ -25,11 +31,17 @@ fn emulate(args: &[&str]) -> (Process, String) {
         .spawn()
         .unwrap_or_else(|e| panic!("spawn emulate: {e}"));
     let stdout = child.stdout.take().unwrap_or_else(|| panic!("emulate stdout"));
-    let mut line = String::new();
-    BufReader::new(stdout)
-        .read_line(&mut line)
-        .unwrap_or_else(|e| panic!("read the emulator's address: {e}"));
-    (Process(child), line.trim().to_string())
+    let lines: Vec<String> = BufReader::new(stdout)
+        .lines()
+        .take(count)
+        .map(|line| {
+            line.unwrap_or_else(|e| panic!("read what emulate printed: {e}"))
+                .trim()
+                .to_string()
+        })
+        .collect();
+    assert_eq!(lines.len(), count, "emulate printed too few lines: {lines:?}");
+    (Process(child), lines)
 }
 
 /// `thermode bench` for one second at 100 Hz on `device`; its standard error.
@@ -591,23 +603,9 @@ fn two_addresses_on_one_emulated_bus_make_one_display() {
 /// `thermode emulate` with `args`; returns it and the first two lines it printed (the device's and the reference
 /// thermometer's pseudo-terminals).
 fn emulate_with_reference(args: &[&str]) -> (Process, String, String) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_thermode"))
-        .arg("emulate")
-        .args(args)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap_or_else(|e| panic!("spawn emulate: {e}"));
-    let stdout = child.stdout.take().unwrap_or_else(|| panic!("emulate stdout"));
-    let mut lines = BufReader::new(stdout).lines();
-    let mut line = || {
-        lines
-            .next()
-            .and_then(Result::ok)
-            .unwrap_or_else(|| panic!("emulate printed too few lines"))
-    };
-    let (device, reference) = (line(), line());
-    (Process(child), device, reference)
+    let (process, lines) = emulate_printing(args, 2);
+    let [device, reference] = <[String; 2]>::try_from(lines).unwrap_or_else(|lines| panic!("two lines: {lines:?}"));
+    (process, device, reference)
 }
 
 /// `thermode calibrate` against a MeCom emulator whose sensor reads 1.01 · T + 0.3 °C and its reference thermometer
