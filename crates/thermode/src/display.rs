@@ -7,6 +7,7 @@ use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use thermode_device::config::CalibrationConfig;
 use thermode_device::{CalibratedDevice, DefaultFinger, Device, DeviceConfig, SimulatedDisplay, MAX_CHANNELS};
 use thermode_link::spec::{is_hardware, open_display, HardwareContext};
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, SelfTestState};
@@ -309,11 +310,7 @@ fn open_real(
                     part.identity.as_ref().map_or_else(String::new, |i| format!(" ({i})")),
                     stored.identified_at.as_deref().unwrap_or("at an unknown time")
                 ));
-                let kind = match stored.config.calibration.is_set() {
-                    true => DeviceFileKind::Calibrated,
-                    false => DeviceFileKind::Identified,
-                };
-                (pipeline_of(stored.config, args.controller)?, kind)
+                (pipeline_of(stored.config, args.controller)?, stored.kind())
             }
             None => (pipeline.clone(), file_kind),
         };
@@ -342,18 +339,17 @@ fn open_real(
             true => "",
             false => "; the set-points the device regulates to are sent on its sensor's scale",
         };
-        let every = calibrations.windows(2).all(|w| w[0] == w[1]);
-        for (channel, c) in calibrations.iter().enumerate().filter(|(_, c)| c.is_set()) {
-            let which = match every {
-                true => String::new(),
-                false => format!("channel {channel}: "),
-            };
-            eprintln!(
-                "thermode: {which}the plate sensor read through its calibration (gain {}, offset {} °C){regulates}",
+        let read_through = |c: &CalibrationConfig| {
+            format!(
+                "the plate sensor read through its calibration (gain {}, offset {} °C){regulates}",
                 c.sensor_gain, c.sensor_offset_c
-            );
-            if every {
-                break;
+            )
+        };
+        if calibrations.windows(2).all(|w| w[0] == w[1]) {
+            eprintln!("thermode: {}", read_through(&calibrations[0]));
+        } else {
+            for (channel, c) in calibrations.iter().enumerate().filter(|(_, c)| c.is_set()) {
+                eprintln!("thermode: channel {channel}: {}", read_through(c));
             }
         }
         device = Box::new(CalibratedDevice::per_channel(device, calibrations));

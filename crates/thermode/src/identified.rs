@@ -38,6 +38,16 @@ pub struct Stored {
     pub identified_at: Option<String>,
 }
 
+impl Stored {
+    /// What the stored file is: `calibrated` with a `[calibration]` section, else `identified` (`identify` wrote it).
+    pub fn kind(&self) -> DeviceFileKind {
+        match self.config.calibration.is_set() {
+            true => DeviceFileKind::Calibrated,
+            false => DeviceFileKind::Identified,
+        }
+    }
+}
+
 /// The device of `part` on a display labelled `display_label`: the part's own label, or the display's for a display
 /// of one unnamed device.
 pub fn device_of(part: &DevicePart, display_label: &str) -> String {
