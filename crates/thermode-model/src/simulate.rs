@@ -289,12 +289,12 @@ impl Trace {
     /// `Ok` if every number of the trace is finite, else a [`ParamError::NonFinite`] naming the first column (in
     /// column order) that is not, with its first such value and time.
     pub fn check_finite(&self) -> Result<(), ParamError> {
-        let time = ("time_s".to_string(), self.time_s.clone());
-        for (name, values) in std::iter::once(&time).chain(&self.columns) {
+        let columns = self.columns.iter().map(|(name, values)| (name.as_str(), values));
+        for (name, values) in std::iter::once(("time_s", &self.time_s)).chain(columns) {
             if let Some(row) = values.iter().position(|v| !v.is_finite()) {
                 return Err(ParamError::NonFinite {
                     origin: ORIGIN.into(),
-                    quantity: name.clone(),
+                    quantity: name.to_string(),
                     value: values[row],
                     time_s: self.time_s.get(row).copied().unwrap_or(f64::NAN),
                 });
@@ -348,47 +348,149 @@ fn kron_initial(spec: &SimulationSpec) -> Result<KronModel, ParamError> {
 }
 
 fn simulate_kron(spec: &SimulationSpec) -> Result<Trace, ParamError> {
+    let mut columns = KronColumns::new(spec)?;
+    simulate_kron_into(spec, &mut columns, usize::MAX, &mut |_| {})?;
+    Ok(columns.into_trace(spec))
+}
+
+/// A kron run's numbers, allocated at their full length before it starts so that a caller can read the rows
+/// already computed while later ones are being filled ([`simulate_kron_into`]): the output times and the columns of
+/// the run's [`Trace`], in order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KronColumns {
+    /// Time since contact \[s\] ([`Trace::time_s`]).
+    pub time_s: Vec<f64>,
+    /// The columns' names, units in the names: `skin_surface_c` (the receptor, epidermis centre), the three
+    /// layers, `heat_flux_w_m2`, `display_setpoint_c`, `display_finger_c`.
+    pub names: Vec<String>,
+    /// The columns' values, each as long as `time_s` (zero until computed).
+    pub values: Vec<Vec<f64>>,
+}
+
+impl KronColumns {
+    /// Blank columns for the kron run of `spec`, which is validated first (and must be a kron run).
+    pub fn new(spec: &SimulationSpec) -> Result<Self, ParamError> {
+        spec.validate()?;
+        if spec.model != ModelKind::Kron {
+            return Err(invalid(format!("{:?} is not the kron model", spec.model)));
+        }
+        let mut names = vec!["skin_surface_c".to_string()];
+        names.extend(spec.skin.layers.iter().map(|l| format!("{}_c", column_name(&l.name))));
+        names.extend(["heat_flux_w_m2", "display_setpoint_c", "display_finger_c"].map(String::from));
+        let time_s = spec.times_s();
+        let values = names.iter().map(|_| vec![0.0; time_s.len()]).collect();
+        Ok(KronColumns { time_s, names, values })
+    }
+
+    /// The filled columns as the run's [`Trace`].
+    pub fn into_trace(self, spec: &SimulationSpec) -> Trace {
+        Trace {
+            time_s: self.time_s,
+            columns: self.names.into_iter().zip(self.values).collect(),
+            resolution: format!("kron, backward Euler, step {} s", spec.dt_s),
+        }
+    }
+}
+
+/// Rows of a kron run just computed, borrowed for as long as the run's [`KronColumns`] are.
+#[derive(Debug, Clone)]
+pub struct KronRows<'a> {
+    /// Index of the first of them in the run.
+    pub first_row: usize,
+    /// Their output times \[s\].
+    pub time_s: &'a [f64],
+    /// Their values, one slice per column of [`KronColumns::names`].
+    pub values: Vec<&'a [f64]>,
+}
+
+/// Runs the kron simulation of `spec` into `columns` (from [`KronColumns::new`] for the same spec) and hands
+/// every `rows_per_call` rows (at least 1; the last piece shorter) to `on_rows` as soon as they are computed and
+/// found finite, so that a caller writes them while the run goes on: the rows stay borrowed, never copied, for as
+/// long as `columns` is (a thread of the caller's scope may read them). A number that is not finite ends the run
+/// with [`ParamError::NonFinite`] (the first such column and time) before its rows are handed on.
+pub fn simulate_kron_into<'a>(
+    spec: &SimulationSpec,
+    columns: &'a mut KronColumns,
+    rows_per_call: usize,
+    on_rows: &mut dyn FnMut(KronRows<'a>),
+) -> Result<(), ParamError> {
     let mut finger = kron_initial(spec)?;
+    if columns.time_s.len() != spec.rows() || columns.values.len() != 7 {
+        return Err(invalid("the columns were not made for this run".into()));
+    }
     let object = KronEnvironment::touching(&spec.material, spec.object_c);
     object.validate(ORIGIN)?;
     let air = KronEnvironment::Air {
         ambient_c: spec.ambient_c,
     };
     let mut display = DisplayInverse::new(finger.clone(), spec.display_conductance_w_m2k)?;
-    let times = spec.times_s();
-    let mut layers: [Vec<f64>; 3] = std::array::from_fn(|_| Vec::with_capacity(times.len()));
-    let mut flux = Vec::with_capacity(times.len());
-    let mut setpoint = Vec::with_capacity(times.len());
-    let mut display_finger = Vec::with_capacity(times.len());
-    let mut record = |finger: &KronModel, env: &KronEnvironment, setpoint_c: f64, on_display_c: f64| {
-        for (column, t) in layers.iter_mut().zip(finger.temperatures_c()) {
-            column.push(t);
+    let KronColumns { time_s, names, values } = columns;
+    let (time_s, names): (&'a [f64], &'a [String]) = (time_s, names);
+    let mut unfilled: Vec<&'a mut [f64]> = values.iter_mut().map(Vec::as_mut_slice).collect();
+    let mut first = 0;
+    while first < time_s.len() {
+        let rows = first..(first + rows_per_call.max(1)).min(time_s.len());
+        let mut piece: Vec<&'a mut [f64]> = unfilled
+            .iter_mut()
+            .map(|rest| {
+                let (piece, later) = std::mem::take(rest).split_at_mut(rows.len());
+                *rest = later;
+                piece
+            })
+            .collect();
+        for (i, row) in rows.clone().enumerate() {
+            let (env, setpoint_c) = if row == 0 {
+                let [receptor_c, ..] = finger.temperatures_c();
+                (
+                    &air,
+                    resting_display_c(receptor_c, finger.heat_flux_to_env_w_m2(&air), spec),
+                )
+            } else {
+                let h = time_s[row] - time_s[row - 1];
+                finger.step(h, &object);
+                let setpoint_c = display.setpoint_c(finger.temperatures_c()[0], h);
+                display.advance(h, setpoint_c);
+                (&object, setpoint_c)
+            };
+            let [t1, t2, t3] = finger.temperatures_c();
+            let row_values = [
+                t1,
+                t1,
+                t2,
+                t3,
+                finger.heat_flux_to_env_w_m2(env),
+                setpoint_c,
+                display.receptor_c(),
+            ];
+            for (column, value) in piece.iter_mut().zip(row_values) {
+                column[i] = value;
+            }
         }
-        flux.push(finger.heat_flux_to_env_w_m2(env));
-        setpoint.push(setpoint_c);
-        display_finger.push(on_display_c);
-    };
-    let resting_setpoint = resting_display_c(finger.temperatures_c()[0], finger.heat_flux_to_env_w_m2(&air), spec);
-    record(&finger, &air, resting_setpoint, display.receptor_c());
-    for pair in times.windows(2) {
-        let h = pair[1] - pair[0];
-        finger.step(h, &object);
-        let setpoint_c = display.setpoint_c(finger.temperatures_c()[0], h);
-        display.advance(h, setpoint_c);
-        record(&finger, &object, setpoint_c, display.receptor_c());
+        let piece: Vec<&'a [f64]> = piece.into_iter().map(shared).collect();
+        let times = &time_s[rows.clone()];
+        for (name, column) in names.iter().zip(&piece) {
+            if let Some(i) = column.iter().position(|v| !v.is_finite()) {
+                return Err(ParamError::NonFinite {
+                    origin: ORIGIN.into(),
+                    quantity: name.clone(),
+                    value: column[i],
+                    time_s: times[i],
+                });
+            }
+        }
+        on_rows(KronRows {
+            first_row: first,
+            time_s: times,
+            values: piece,
+        });
+        first = rows.end;
     }
-    let names = spec.skin.layers.iter().map(|l| format!("{}_c", column_name(&l.name)));
-    let [t1, t2, t3] = layers;
-    let mut columns = vec![("skin_surface_c".to_string(), t1.clone())];
-    columns.extend(names.zip([t1, t2, t3]));
-    columns.push(("heat_flux_w_m2".into(), flux));
-    columns.push(("display_setpoint_c".into(), setpoint));
-    columns.push(("display_finger_c".into(), display_finger));
-    Ok(Trace {
-        time_s: times,
-        columns,
-        resolution: format!("kron, backward Euler, step {} s", spec.dt_s),
-    })
+    Ok(())
+}
+
+/// A slice filled, from now on only read.
+fn shared(slice: &mut [f64]) -> &[f64] {
+    slice
 }
 
 /// The plate temperature that draws the resting heat flux `flux_w_m2` from a finger whose receptor is at
@@ -579,6 +681,41 @@ mod tests {
         for bad in ["warm", "uniform:", "uniform:NaN", "surface:inf", "steady:3", ""] {
             assert!(bad.parse::<Initial>().is_err(), "`{bad}` was accepted");
         }
+    }
+
+    #[test]
+    fn kron_rows_are_handed_on_in_order_in_pieces_and_are_the_traces_numbers() {
+        let mut s = spec(ModelKind::Kron, "aluminium");
+        s.duration_s = 1.0;
+        s.dt_s = 0.001;
+        let whole = simulate(&s).unwrap_or_else(|e| panic!("{e}"));
+        let mut columns = KronColumns::new(&s).unwrap_or_else(|e| panic!("{e}"));
+        let mut pieces = Vec::new();
+        simulate_kron_into(&s, &mut columns, 300, &mut |rows| {
+            let values: Vec<Vec<f64>> = rows.values.iter().map(|v| v.to_vec()).collect();
+            pieces.push((rows.first_row, rows.time_s.to_vec(), values));
+        })
+        .unwrap_or_else(|e| panic!("{e}"));
+        let sizes: Vec<usize> = pieces.iter().map(|(_, time, _)| time.len()).collect();
+        assert_eq!(sizes, [300, 300, 300, 101], "piece sizes of 1001 rows by 300");
+        let mut next = 0;
+        for (first, time, values) in &pieces {
+            assert_eq!(*first, next, "pieces in order, none missing");
+            let rows = *first..first + time.len();
+            assert_eq!(time.as_slice(), &whole.time_s[rows.clone()]);
+            for ((name, column), piece) in whole.columns.iter().zip(values) {
+                let same = column[rows.clone()]
+                    .iter()
+                    .zip(piece)
+                    .all(|(a, b)| a.to_bits() == b.to_bits());
+                assert!(
+                    same,
+                    "{name}, rows {rows:?}: the piece handed on differs from the trace"
+                );
+            }
+            next = rows.end;
+        }
+        assert_eq!(columns.into_trace(&s), whole, "the filled columns are the trace");
     }
 
     #[test]

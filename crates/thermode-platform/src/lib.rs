@@ -16,7 +16,7 @@ pub mod fs;
 pub mod rt;
 pub mod time;
 
-pub use fs::{write_atomically, write_bytes_atomically, WriteError};
+pub use fs::{write_atomically, write_bytes_atomically, WriteError, WritingAhead, WRITE_AHEAD_BYTES};
 pub use time::{
     civil_date, civil_from_days, days_from_civil, parse_iso_date, to_clock_resolution, utc_iso8601, utc_iso8601_ms,
     utc_stamp, Clock, ManualClock, MonotonicClock, Tick, Ticker, TickerError, CLOCK_RESOLUTION_S,

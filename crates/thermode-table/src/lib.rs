@@ -4,8 +4,9 @@
 //! every value is the one the CSV holds: floats as the exact `f64` (the CSV's exact default form reads back as
 //! the same number), integers (`contact`, `fault`) as 64-bit integers, text as UTF-8; an empty CSV field is null.
 //!
-//! A file is written from one [`Table`] per run (the rows a CSV writes for one material or one render run), its rows
-//! in order: in Arrow one record batch per run (per [`ARROW_BATCH_ROWS`] rows of a longer one), every column's bytes
+//! A file is written from one [`Table`] per run or per piece of a run (the rows a CSV writes for one material or
+//! one render run, or the rows a run has just computed), its rows in order: in Arrow one record batch per table (per
+//! [`ARROW_BATCH_ROWS`] rows of a longer one), every column's bytes
 //! written from the run's own values without a copy ([`ArrowFileWriter`], which also writes a file a table at a
 //! time); in Parquet through the Parquet writer, fed record batches of [`BATCH_ROWS`] rows. [`write()`] writes a
 //! file's tables at once, [`TableWriter`] one table at a time (a long recording converted a block at a time).

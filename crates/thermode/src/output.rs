@@ -14,11 +14,13 @@
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::Path;
+use std::sync::mpsc::{sync_channel, SyncSender};
+use std::thread::{Scope, ScopedJoinHandle};
 
 use anyhow::{bail, Context, Result};
 use thermode_platform::csv_text::Precision;
-use thermode_platform::WriteError;
-use thermode_table::{Format, Table};
+use thermode_platform::{WriteError, WritingAhead};
+use thermode_table::{Format, Table, TableWriter};
 
 /// Whether `path` names standard output (`-`).
 pub fn is_stdout(path: &Path) -> bool {
@@ -78,8 +80,7 @@ pub fn write_atomically(path: &Path, fill: impl FnOnce(&mut dyn Write) -> Result
     }
     create_folder_of(path)?;
     let fill_file = |tmp: &Path| -> Result<()> {
-        let file = File::options().write(true).create(true).truncate(true).open(tmp)?;
-        let mut writer = BufWriter::new(file);
+        let mut writer = BufWriter::new(WritingAhead::create(tmp)?);
         fill(&mut writer)?;
         writer.flush()?;
         Ok(())
@@ -135,4 +136,120 @@ pub fn write_columnar<'a>(path: &Path, tables: impl FnOnce() -> Vec<Table<'a>>) 
     let tables = tables();
     write_atomically(path, |sink| Ok(thermode_table::write(&tables, format, sink)?))?;
     Ok(true)
+}
+
+/// Pieces of rows a [`ColumnarStream`] holds at most while its thread writes (the run waits beyond that).
+const STREAM_QUEUE_PIECES: usize = 16;
+
+/// What a [`ColumnarStream`]'s thread receives.
+enum Piece<'a> {
+    /// The next rows of the file.
+    Rows(Table<'a>),
+    /// Everything has been sent: the file is finished and put in place.
+    End,
+}
+
+/// An Arrow IPC or Parquet output written on a thread of its own while the runs that fill it compute, so that the
+/// writing (and the device taking the bytes, [`WritingAhead`]) overlaps the computing instead of following it. The
+/// thread belongs to the caller's scope (`std::thread::scope`), so the pieces it writes are the runs' own numbers,
+/// borrowed, not copies: [`ColumnarStream::start`], [`ColumnarStream::send`] for each piece of rows in order (all
+/// with the same columns), [`ColumnarStream::finish`]. The file is written atomically like every output: a stream
+/// dropped without `finish` (a run failed) leaves nothing behind and the target untouched.
+pub struct ColumnarStream<'scope, 'a> {
+    path: &'a Path,
+    pieces: SyncSender<Piece<'a>>,
+    writer: ScopedJoinHandle<'scope, Result<()>>,
+}
+
+impl<'scope, 'a: 'scope> ColumnarStream<'scope, 'a> {
+    /// Starts writing `path` on a thread of `scope` when its name asks for Arrow or Parquet (`.arrow`, `.feather`,
+    /// `.parquet`); `None` for any other name or standard output, which the caller writes as CSV.
+    pub fn start(scope: &'scope Scope<'scope, '_>, path: &'a Path) -> Option<Self> {
+        let format = Format::of(path);
+        if is_stdout(path) || !format.is_columnar() {
+            return None;
+        }
+        let (pieces, received) = sync_channel(STREAM_QUEUE_PIECES);
+        let writer = scope.spawn(move || {
+            write_atomically(path, |sink| {
+                let first = match received.recv() {
+                    Ok(Piece::Rows(table)) => table,
+                    Ok(Piece::End) => bail!("nothing to write: no rows"),
+                    Err(_) => bail!("the run stopped before its output was complete"),
+                };
+                let mut writer = TableWriter::try_new(format, &first, sink)?;
+                writer.write(&first)?;
+                for piece in received {
+                    match piece {
+                        Piece::Rows(table) => writer.write(&table)?,
+                        Piece::End => return Ok(writer.finish()?),
+                    }
+                }
+                bail!("the run stopped before its output was complete")
+            })
+        });
+        Some(ColumnarStream { path, pieces, writer })
+    }
+
+    /// Queues the next rows (waiting while the queue is full). Rows sent after the writer failed are dropped: its
+    /// error is reported by [`ColumnarStream::finish`].
+    pub fn send(&self, rows: Table<'a>) {
+        let _ = self.pieces.send(Piece::Rows(rows));
+    }
+
+    /// Ends the file, waits until it is written and in place, and reports the writer's error if it failed.
+    pub fn finish(self) -> Result<()> {
+        let _ = self.pieces.send(Piece::End);
+        match self.writer.join() {
+            Ok(result) => result,
+            Err(_) => bail!("cannot write {}: the writer thread panicked", self.path.display()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use thermode_table::Values;
+
+    fn piece(first: f64) -> Table<'static> {
+        let mut table = Table::new();
+        table.push("time_s", Values::F64(vec![first, first + 1.0].into()));
+        table
+    }
+
+    #[test]
+    fn a_finished_stream_is_the_file_of_its_pieces_and_an_abandoned_one_leaves_the_target_as_it_was() {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let target = dir.path().join("out.arrow");
+        std::thread::scope(|scope| {
+            let stream = ColumnarStream::start(scope, &target).expect("a columnar name");
+            stream.send(piece(0.0));
+            stream.send(piece(2.0));
+            stream.finish().expect("written");
+        });
+        let table = thermode_table::read(&target).expect("read back");
+        assert_eq!(
+            table.column("time_s"),
+            Some(&Values::F64(vec![0.0, 1.0, 2.0, 3.0].into()))
+        );
+        let before = std::fs::read(&target).expect("read");
+        std::thread::scope(|scope| {
+            let stream = ColumnarStream::start(scope, &target).expect("a columnar name");
+            stream.send(piece(10.0));
+            drop(stream);
+        });
+        assert!(
+            std::fs::read(&target).expect("read") == before,
+            "the abandoned stream changed the target"
+        );
+        let names: Vec<_> = std::fs::read_dir(dir.path())
+            .expect("list")
+            .flatten()
+            .map(|e| e.file_name())
+            .collect();
+        assert_eq!(names.len(), 1, "left behind: {names:?}");
+        let csv = dir.path().join("out.csv");
+        std::thread::scope(|scope| assert!(ColumnarStream::start(scope, &csv).is_none(), "CSV is not streamed"));
+    }
 }

@@ -8,17 +8,19 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use thermode_model::limits;
 use thermode_model::materials::Material;
-use thermode_model::simulate::{simulate, Initial, ModelKind, SimulationSpec, Trace};
+use thermode_model::simulate::{
+    simulate, simulate_kron_into, Initial, KronColumns, KronRows, ModelKind, SimulationSpec, Trace,
+};
 use thermode_platform::csv_text::{self, CsvText, Precision};
 use thermode_plot::{write_figure, Figure, Marker, Panel, Series, SeriesStyle};
 use thermode_render::figure::EARLY_WINDOW_S;
 
 use crate::output::{
     check_columnar_precision, check_outputs, create_folder_of, csv_precision, is_stdout, print_stdout,
-    write_atomically, write_columnar,
+    write_atomically, write_columnar, ColumnarStream,
 };
 use crate::resolve;
-use thermode_table::{Table, Values};
+use thermode_table::{Format, Table, Values};
 
 /// The skin model to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -140,13 +142,20 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     }
     check_outputs(&[("--out", args.out.as_deref()), ("--plot", args.plot.as_deref())])?;
     check_columnar_precision(args.out.as_deref(), args.precision)?;
-    let mut traces = Vec::with_capacity(specs.len());
-    for spec in specs {
-        let trace = simulate(&spec).with_context(|| format!("simulating {}", spec.material.name))?;
-        eprintln!("{}: {}", spec.material.name, trace.resolution);
-        traces.push((spec.material, trace));
+    // A kron run's Arrow or Parquet file is written on a second thread while the runs compute; CSV, and the fv and
+    // semi-infinite runs (whose rows come out whole at the end), are written after.
+    let streamed = args
+        .out
+        .as_deref()
+        .filter(|path| args.model == ModelArg::Kron && !is_stdout(path) && Format::of(path).is_columnar());
+    let traces = match streamed {
+        Some(path) => simulate_kron_writing(specs, path)?,
+        None => simulate_each(specs)?,
+    };
+    for (material, trace) in &traces {
+        eprintln!("{}: {}", material.name, trace.resolution);
     }
-    if let Some(path) = &args.out {
+    if let Some(path) = args.out.as_deref().filter(|_| streamed.is_none()) {
         if !write_columnar(path, || tables(&traces))? {
             write_csv(path, &traces, csv_precision(args.precision))?;
         }
@@ -161,6 +170,63 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     } else {
         print_stdout(&summary(&traces))
     }
+}
+
+/// Runs the simulation of every spec in turn.
+fn simulate_each(specs: Vec<SimulationSpec>) -> Result<Vec<(Material, Trace)>> {
+    let run = |spec: SimulationSpec| {
+        let trace = simulate(&spec).with_context(|| format!("simulating {}", spec.material.name))?;
+        Ok((spec.material, trace))
+    };
+    specs.into_iter().map(run).collect()
+}
+
+/// Rows of a kron run handed to the writer at a time (64 KiB of each column): the last piece, written after the
+/// run ends, is small, and a 90 s run at 1 ms is 11 record batches.
+const PIECE_ROWS: usize = 8192;
+
+/// Runs the kron simulations of `specs` and writes the Arrow or Parquet file `path` on a second thread while they
+/// compute, each piece of rows as soon as it is computed, from the runs' own columns (no copy).
+fn simulate_kron_writing(specs: Vec<SimulationSpec>, path: &Path) -> Result<Vec<(Material, Trace)>> {
+    let mut runs = Vec::with_capacity(specs.len());
+    for spec in &specs {
+        runs.push(KronColumns::new(spec).with_context(|| format!("simulating {}", spec.material.name))?);
+    }
+    let filled = &mut runs;
+    std::thread::scope(|scope| {
+        let stream = ColumnarStream::start(scope, path).context("not an Arrow or Parquet output")?;
+        for (spec, run) in specs.iter().zip(filled.iter_mut()) {
+            let names = run.names.clone();
+            let material = &spec.material.name;
+            simulate_kron_into(spec, run, PIECE_ROWS, &mut |rows| {
+                stream.send(rows_table(material, &names, rows));
+            })
+            .with_context(|| format!("simulating {material}"))?;
+        }
+        stream.finish()
+    })?;
+    let traces = specs.into_iter().zip(runs).map(|(spec, run)| {
+        let trace = run.into_trace(&spec);
+        (spec.material, trace)
+    });
+    Ok(traces.collect())
+}
+
+/// Rows of a kron run of `material` as the CSV's columns, borrowed.
+fn rows_table<'a>(material: &str, names: &[String], rows: KronRows<'a>) -> Table<'a> {
+    let mut table = Table::new();
+    table.push("time_s", Values::F64(rows.time_s.into()));
+    for (name, values) in names.iter().zip(rows.values) {
+        table.push(name.as_str(), Values::F64(values.into()));
+    }
+    table.push(
+        "material",
+        Values::Repeat {
+            text: material.to_string(),
+            rows: rows.time_s.len(),
+        },
+    );
+    table
 }
 
 fn write_csv(path: &Path, traces: &[(Material, Trace)], precision: Precision) -> Result<()> {
