@@ -18,8 +18,11 @@
 //! slower than its file) and ṙ the reading's steepest rate against its readings of 40–200 ms ago (beyond the noise's
 //! 2 °C/s). Where that bound lies beyond the model's forecast, the forecast's range is widened to it on that side
 //! only ([`PlateForecast::plate_after_range_c`]: a bound on a rising plate must not let it cool past the minimum).
-//! A file exact for its display (u = 0: a simulated display built from it) has no such bound: its model is the
-//! display (figures in `docs/security.md`).
+//! That trend cannot see a plate swung by pulses shorter than its window (a controller chattering at full current at
+//! the display's limit: 48.21 °C under a 48 °C maximum on a sensor 30 % slower than its file), so a second observer
+//! runs beside the first with the slowest sensor the file allows, `(1 + u) τ`, and its forecast widens the range the
+//! same way: where the plate is if the sensor is that slow. A file exact for its display (u = 0: a simulated display
+//! built from it) has neither bound: its model is the display (figures in `docs/security.md`).
 
 use thermode_control::{Finger, ObserverTick, PlantModel, PlateObserver};
 use thermode_device::Reading;
@@ -110,6 +113,9 @@ impl SensorTrend {
 #[derive(Debug, Clone)]
 pub struct PlateGuard {
     observer: PlateObserver,
+    /// The same observer with the sensor as slow as the file allows, `(1 + u) τ`: where the plate is if the
+    /// sensor lags that much (`None` for a file exact for its display, u = 0).
+    slow_observer: Option<PlateObserver>,
     /// Time of the previous update \[s\] (`None` before the first).
     last_time_s: Option<f64>,
     /// The sample number of the last PT-100 sample the observer corrected with (`None` before the first).
@@ -123,6 +129,8 @@ pub struct PlateGuard {
 #[derive(Debug, Clone, Copy)]
 pub struct TickForecast<'a> {
     observer: &'a PlateObserver,
+    /// The observer with the slowest sensor the file allows, if any.
+    slow_observer: Option<&'a PlateObserver>,
     /// How far the sensor's bound lies beyond the model's estimate in the direction the reading moves \[°C\]
     /// (positive rising, negative falling, 0 when the estimate is already beyond it or there is no bound).
     beyond_c: f64,
@@ -140,6 +148,9 @@ impl PlateGuard {
         let bound_lag_s =
             (sensor_lag_uncertainty > 0.0).then_some((1.0 + sensor_lag_uncertainty) * plant.sensor_time_constant_s);
         Ok(PlateGuard {
+            slow_observer: bound_lag_s
+                .map(|lag_s| slow_sensor_observer(&plant, lag_s))
+                .transpose()?,
             observer: PlateObserver::new(plant)?,
             last_time_s: None,
             last_sample_seq: None,
@@ -158,6 +169,9 @@ impl PlateGuard {
         let dt_s = self.last_time_s.map_or(1.0, |t| now_s - t);
         if self.last_sample_seq == Some(reading.sample_seq) {
             self.observer.coast(dt_s, applied_current_a, finger);
+            if let Some(slow) = &mut self.slow_observer {
+                slow.coast(dt_s, applied_current_a, finger);
+            }
             if dt_s > 0.0 {
                 self.last_time_s = Some(now_s);
             }
@@ -171,6 +185,10 @@ impl PlateGuard {
             sensor_c: reading.sensor_c,
             hot_side_c: reading.hot_side_c,
         };
+        if let Some(slow) = &mut self.slow_observer {
+            // Refused exactly when the main observer refuses (the same tick): its state is left as it was too.
+            let _ = slow.update_fresh(&tick);
+        }
         if self.observer.update_fresh(&tick).is_ok() {
             self.last_time_s = Some(now_s);
             self.last_sample_seq = Some(reading.sample_seq);
@@ -185,6 +203,10 @@ impl PlateGuard {
         let current_s = self.bound_lag_s.unwrap_or(0.0);
         if lag_s > current_s {
             self.bound_lag_s = Some(lag_s);
+            // A model the observer refuses (a lag beyond its range) keeps the slower sensor's bound from the trend.
+            if let Ok(slow) = slow_sensor_observer(self.observer.plant(), lag_s) {
+                self.slow_observer = Some(slow);
+            }
         }
     }
 
@@ -216,6 +238,7 @@ impl PlateGuard {
     pub fn forecast(&self, dt_s: f64, finger: Finger) -> TickForecast<'_> {
         TickForecast {
             observer: &self.observer,
+            slow_observer: self.slow_observer.as_ref(),
             beyond_c: self.beyond_estimate_c(),
             dt_s,
             finger,
@@ -237,22 +260,37 @@ impl PlateForecast for TickForecast<'_> {
             .unwrap_or(f64::NAN)
     }
 
-    /// The model's forecast, widened to where the sensor's bound puts the plate on the side the reading moves,
-    /// for a current that drives it further that way: the bound stops heating (or cooling) a plate the model may
-    /// lag, but never makes the envelope drive the other way on a worst case alone.
+    /// The model's forecast, widened on the side a current drives the plate to where the slowest sensor the file
+    /// allows puts it (the slow-sensor observer's forecast, and the sensor's trend bound on the side the reading
+    /// moves): the bounds stop heating (or cooling) a plate the model may lag, but never make the envelope drive
+    /// the other way on a worst case alone.
     fn plate_after_range_c(&self, current_a: f64) -> (f64, f64) {
         let plate_c = self.plate_after_c(current_a);
+        let slow_c = self
+            .slow_observer
+            .and_then(|slow| slow.predict_plate_c(self.dt_s, current_a, self.finger))
+            .unwrap_or(plate_c);
         let (lower_c, upper_c) = (self.beyond_c.min(0.0), self.beyond_c.max(0.0));
-        (
-            plate_c + if current_a < 0.0 { lower_c } else { 0.0 },
-            plate_c + if current_a > 0.0 { upper_c } else { 0.0 },
-        )
+        if current_a < 0.0 {
+            ((plate_c + lower_c).min(slow_c), plate_c)
+        } else if current_a > 0.0 {
+            (plate_c, (plate_c + upper_c).max(slow_c))
+        } else {
+            (plate_c, plate_c)
+        }
     }
 
     fn strongest_cooling_a(&self) -> f64 {
         let plate_c = self.observer.estimate().map_or(f64::NAN, |e| e.plate_c);
         self.observer.plant().most_useful_cooling_a(plate_c)
     }
+}
+
+/// An observer of `plant` with its sensor's time constant `lag_s` \[s\].
+fn slow_sensor_observer(plant: &PlantModel, lag_s: f64) -> Result<PlateObserver, PipelineError> {
+    let mut slow = plant.clone();
+    slow.sensor_time_constant_s = lag_s;
+    Ok(PlateObserver::new(slow)?)
 }
 
 #[cfg(test)]
