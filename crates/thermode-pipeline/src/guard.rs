@@ -288,7 +288,7 @@ impl PlateForecast for TickForecast<'_> {
 
 /// An observer of `plant` with its sensor's time constant `lag_s` \[s\].
 fn slow_sensor_observer(plant: &PlantModel, lag_s: f64) -> Result<PlateObserver, PipelineError> {
-    let mut slow = plant.clone();
+    let mut slow = *plant;
     slow.sensor_time_constant_s = lag_s;
     Ok(PlateObserver::new(slow)?)
 }
