@@ -262,6 +262,16 @@ fn sync_folder(path: &Path) -> io::Result<()> {
 mod tests {
     use super::*;
 
+    /// Fails unless `folder` holds exactly one file (the target: no temporary file left behind).
+    fn assert_only_file_in(folder: &Path) {
+        let names: Vec<_> = std::fs::read_dir(folder)
+            .expect("list")
+            .flatten()
+            .map(|e| e.file_name())
+            .collect();
+        assert_eq!(names.len(), 1, "left behind: {names:?}");
+    }
+
     #[test]
     fn a_file_written_ahead_holds_every_byte_in_order() {
         let dir = tempfile::tempdir().expect("temporary folder");
@@ -297,12 +307,7 @@ mod tests {
         );
         write_bytes_atomically(&target, b"new").expect("replace");
         assert_eq!(std::fs::read(&target).expect("read"), b"new");
-        let names: Vec<_> = std::fs::read_dir(dir.path())
-            .expect("list")
-            .flatten()
-            .map(|e| e.file_name())
-            .collect();
-        assert_eq!(names.len(), 1, "left behind: {names:?}");
+        assert_only_file_in(dir.path());
         assert!(large_file(&target).is_none(), "a small file is closed where it is");
     }
 
@@ -317,12 +322,7 @@ mod tests {
         });
         assert!(matches!(result, Err(WriteError::Fill(_))));
         assert_eq!(std::fs::read_to_string(&target).expect("read"), "old");
-        let names: Vec<_> = std::fs::read_dir(dir.path())
-            .expect("list")
-            .flatten()
-            .map(|e| e.file_name())
-            .collect();
-        assert_eq!(names.len(), 1, "left behind: {names:?}");
+        assert_only_file_in(dir.path());
     }
 
     #[test]
