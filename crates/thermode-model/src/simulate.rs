@@ -414,76 +414,103 @@ pub fn simulate_kron_into<'a>(
     rows_per_call: usize,
     on_rows: &mut dyn FnMut(KronRows<'a>),
 ) -> Result<(), ParamError> {
-    let mut finger = kron_initial(spec)?;
-    if columns.time_s.len() != spec.rows() || columns.values.len() != 7 {
+    let mut run = KronRun::new(spec)?;
+    if columns.time_s.len() != spec.rows() || columns.values.len() != KRON_COLUMNS {
         return Err(invalid("the columns were not made for this run".into()));
     }
-    let object = KronEnvironment::touching(&spec.material, spec.object_c);
-    object.validate(ORIGIN)?;
-    let air = KronEnvironment::Air {
-        ambient_c: spec.ambient_c,
-    };
-    let mut display = DisplayInverse::new(finger.clone(), spec.display_conductance_w_m2k)?;
     let KronColumns { time_s, names, values } = columns;
     let (time_s, names): (&'a [f64], &'a [String]) = (time_s, names);
     let mut unfilled: Vec<&'a mut [f64]> = values.iter_mut().map(Vec::as_mut_slice).collect();
     let mut first = 0;
     while first < time_s.len() {
         let rows = first..(first + rows_per_call.max(1)).min(time_s.len());
-        let mut piece: Vec<&'a mut [f64]> = unfilled
-            .iter_mut()
-            .map(|rest| {
-                let (piece, later) = std::mem::take(rest).split_at_mut(rows.len());
-                *rest = later;
-                piece
-            })
-            .collect();
+        let mut piece: Vec<&'a mut [f64]> = unfilled.iter_mut().map(|rest| split_off(rest, rows.len())).collect();
         for (i, row) in rows.clone().enumerate() {
-            let (env, setpoint_c) = if row == 0 {
-                let [receptor_c, ..] = finger.temperatures_c();
-                (
-                    &air,
-                    resting_display_c(receptor_c, finger.heat_flux_to_env_w_m2(&air), spec),
-                )
-            } else {
-                let h = time_s[row] - time_s[row - 1];
-                finger.step(h, &object);
-                let setpoint_c = display.setpoint_c(finger.temperatures_c()[0], h);
-                display.advance(h, setpoint_c);
-                (&object, setpoint_c)
-            };
-            let [t1, t2, t3] = finger.temperatures_c();
-            let row_values = [
-                t1,
-                t1,
-                t2,
-                t3,
-                finger.heat_flux_to_env_w_m2(env),
-                setpoint_c,
-                display.receptor_c(),
-            ];
-            for (column, value) in piece.iter_mut().zip(row_values) {
+            for (column, value) in piece.iter_mut().zip(run.row(row, time_s)) {
                 column[i] = value;
             }
         }
         let piece: Vec<&'a [f64]> = piece.into_iter().map(shared).collect();
         let times = &time_s[rows.clone()];
-        for (name, column) in names.iter().zip(&piece) {
-            if let Some(i) = column.iter().position(|v| !v.is_finite()) {
-                return Err(ParamError::NonFinite {
-                    origin: ORIGIN.into(),
-                    quantity: name.clone(),
-                    value: column[i],
-                    time_s: times[i],
-                });
-            }
-        }
+        check_finite_rows(names, times, &piece)?;
         on_rows(KronRows {
             first_row: first,
             time_s: times,
             values: piece,
         });
         first = rows.end;
+    }
+    Ok(())
+}
+
+/// A kron contact being run: the finger, the display inverse and the two environments (air before the touch).
+struct KronRun<'s> {
+    spec: &'s SimulationSpec,
+    finger: KronModel,
+    display: DisplayInverse<KronModel>,
+    object: KronEnvironment,
+    air: KronEnvironment,
+}
+
+/// Numbers of a kron row: the receptor (epidermis centre) as the skin surface, the three layers, the heat flux, the
+/// display set-point and the finger on the display.
+const KRON_COLUMNS: usize = 7;
+
+impl<'s> KronRun<'s> {
+    fn new(spec: &'s SimulationSpec) -> Result<Self, ParamError> {
+        let finger = kron_initial(spec)?;
+        let object = KronEnvironment::touching(&spec.material, spec.object_c);
+        object.validate(ORIGIN)?;
+        Ok(KronRun {
+            spec,
+            display: DisplayInverse::new(finger.clone(), spec.display_conductance_w_m2k)?,
+            finger,
+            object,
+            air: KronEnvironment::Air {
+                ambient_c: spec.ambient_c,
+            },
+        })
+    }
+
+    /// The numbers of `row` (0: the resting finger before the touch; later rows step from the one before, so rows
+    /// come in order) at the output times `time_s`.
+    fn row(&mut self, row: usize, time_s: &[f64]) -> [f64; KRON_COLUMNS] {
+        let (env, setpoint_c) = if row == 0 {
+            let receptor_c = self.finger.temperatures_c()[0];
+            let flux_w_m2 = self.finger.heat_flux_to_env_w_m2(&self.air);
+            (&self.air, resting_display_c(receptor_c, flux_w_m2, self.spec))
+        } else {
+            let h = time_s[row] - time_s[row - 1];
+            self.finger.step(h, &self.object);
+            let setpoint_c = self.display.setpoint_c(self.finger.temperatures_c()[0], h);
+            self.display.advance(h, setpoint_c);
+            (&self.object, setpoint_c)
+        };
+        let [t1, t2, t3] = self.finger.temperatures_c();
+        let flux_w_m2 = self.finger.heat_flux_to_env_w_m2(env);
+        [t1, t1, t2, t3, flux_w_m2, setpoint_c, self.display.receptor_c()]
+    }
+}
+
+/// The first `count` numbers of `rest`, which keeps the others.
+fn split_off<'a>(rest: &mut &'a mut [f64], count: usize) -> &'a mut [f64] {
+    let (piece, later) = std::mem::take(rest).split_at_mut(count);
+    *rest = later;
+    piece
+}
+
+/// `Ok` if every number of the rows `columns` (named `names`, at the times `time_s`) is finite, else a
+/// [`ParamError::NonFinite`] naming the first column that is not, with its first such value and time.
+fn check_finite_rows(names: &[String], time_s: &[f64], columns: &[&[f64]]) -> Result<(), ParamError> {
+    for (name, column) in names.iter().zip(columns) {
+        if let Some(i) = column.iter().position(|v| !v.is_finite()) {
+            return Err(ParamError::NonFinite {
+                origin: ORIGIN.into(),
+                quantity: name.clone(),
+                value: column[i],
+                time_s: time_s[i],
+            });
+        }
     }
     Ok(())
 }

@@ -125,14 +125,20 @@ pub fn check_columnar_precision(out: Option<&Path>, precision: Option<u8>) -> Re
     }
 }
 
+/// The columnar format the output `path` asks for by its name (Arrow IPC for `.arrow` and `.feather`, Parquet for
+/// `.parquet`); `None` for any other name and for standard output (`-`), which are CSV.
+pub fn columnar_format(path: &Path) -> Option<Format> {
+    let format = Format::of(path);
+    (!is_stdout(path) && format.is_columnar()).then_some(format)
+}
+
 /// Writes the tables of `tables` (one per run) to `path` as Arrow IPC or Parquet when its name asks for one
 /// (`.arrow`, `.feather`, `.parquet`; atomically, like every output) and returns true; false (nothing written) for
 /// any other name, which the caller writes as CSV. Standard output (`-`) is always CSV.
 pub fn write_columnar<'a>(path: &Path, tables: impl FnOnce() -> Vec<Table<'a>>) -> Result<bool> {
-    let format = Format::of(path);
-    if is_stdout(path) || !format.is_columnar() {
+    let Some(format) = columnar_format(path) else {
         return Ok(false);
-    }
+    };
     let tables = tables();
     write_atomically(path, |sink| Ok(thermode_table::write(&tables, format, sink)?))?;
     Ok(true)
@@ -165,10 +171,7 @@ impl<'scope, 'a: 'scope> ColumnarStream<'scope, 'a> {
     /// Starts writing `path` on a thread of `scope` when its name asks for Arrow or Parquet (`.arrow`, `.feather`,
     /// `.parquet`); `None` for any other name or standard output, which the caller writes as CSV.
     pub fn start(scope: &'scope Scope<'scope, '_>, path: &'a Path) -> Option<Self> {
-        let format = Format::of(path);
-        if is_stdout(path) || !format.is_columnar() {
-            return None;
-        }
+        let format = columnar_format(path)?;
         let (pieces, received) = sync_channel(STREAM_QUEUE_PIECES);
         let writer = scope.spawn(move || {
             write_atomically(path, |sink| {

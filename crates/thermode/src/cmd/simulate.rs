@@ -16,11 +16,11 @@ use thermode_plot::{write_figure, Figure, Marker, Panel, Series, SeriesStyle};
 use thermode_render::figure::EARLY_WINDOW_S;
 
 use crate::output::{
-    check_columnar_precision, check_outputs, create_folder_of, csv_precision, is_stdout, print_stdout,
+    check_columnar_precision, check_outputs, columnar_format, create_folder_of, csv_precision, is_stdout, print_stdout,
     write_atomically, write_columnar, ColumnarStream,
 };
 use crate::resolve;
-use thermode_table::{Format, Table, Values};
+use thermode_table::{Table, Values};
 
 /// The skin model to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -147,7 +147,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     let streamed = args
         .out
         .as_deref()
-        .filter(|path| args.model == ModelArg::Kron && !is_stdout(path) && Format::of(path).is_columnar());
+        .filter(|path| args.model == ModelArg::Kron && columnar_format(path).is_some());
     let traces = match streamed {
         Some(path) => simulate_kron_writing(specs, path)?,
         None => simulate_each(specs)?,
