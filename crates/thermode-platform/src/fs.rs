@@ -78,15 +78,7 @@ fn large_file(path: &Path) -> Option<File> {
 
 /// Writes `bytes` to `path` atomically (see [`write_atomically`]).
 pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
-    write_atomically(path, |tmp| {
-        OpenOptions::new()
-            .write(true)
-            .create(true)
-            .truncate(true)
-            .open(tmp)?
-            .write_all(bytes)
-    })
-    .map_err(|e| match e {
+    write_atomically(path, |tmp| WritingAhead::create(tmp)?.write_all(bytes)).map_err(|e| match e {
         WriteError::Fill(e) | WriteError::Io { source: e, .. } => e,
     })
 }
