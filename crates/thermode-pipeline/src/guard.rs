@@ -29,6 +29,7 @@ use thermode_device::Reading;
 use thermode_safety::{PlateForecast, PlateNow};
 
 use crate::error::PipelineError;
+use crate::reading_check::{Disagreement, ReadingCheck, DISTRUST_MARGIN_C};
 
 /// Readings the trend keeps (at least [`TREND_SPACING_S`] apart, so 240 ms or more of them).
 const TREND_READINGS: usize = 24;
@@ -123,6 +124,9 @@ pub struct PlateGuard {
     trend: SensorTrend,
     /// The sensor lag of the bound, `(1 + u) τ` \[s\]; `None` for a file exact for its display (u = 0).
     bound_lag_s: Option<f64>,
+    /// Whether the reading still measures the plate ([`crate::reading_check`]); `None` where the plate is not
+    /// driven by the current the model is given (a temperature-commanded device).
+    reading_check: Option<ReadingCheck>,
 }
 
 /// The plate guard's forecast over one tick.
@@ -156,17 +160,30 @@ impl PlateGuard {
             last_sample_seq: None,
             trend: SensorTrend::new(),
             bound_lag_s,
+            reading_check: Some(ReadingCheck::new()),
         })
     }
 
-    /// Updates the estimate at `now_s` \[s\] with `reading`, after `applied_current_a` \[A\] was applied since the
-    /// previous update and with `finger` on the plate. The observer corrects on a fresh PT-100 sample only and
+    /// This guard without the innovation check ([`crate::reading_check`]): for a display whose plate is not driven
+    /// by the current its model is given (a temperature-commanded device regulates it itself).
+    pub fn without_reading_check(mut self) -> Self {
+        self.reading_check = None;
+        self
+    }
+
+    /// Updates the estimate at `now_s` \[s\] with `reading`, after the device delivered the current it reports
+    /// (`reading.current_a`; the envelope's `gated_current_a` \[A\] where it reports none) since the previous update,
+    /// with `finger` on the plate. The observer corrects on a fresh PT-100 sample only and
     /// coasts through the ticks that see a held one ([`PlateObserver::update_fresh`]: the filter's covariance costs a
     /// few hundred flops, once per sample instead of once per tick). A reading the observer refuses (non-finite
     /// numbers, time not moving forward) leaves the estimate as it was: the envelope latches its own fault on such a
     /// reading. Returns whether `reading` is a fresh PT-100 sample (the controller's observer corrects on the same).
-    pub fn update(&mut self, now_s: f64, reading: &Reading, applied_current_a: f64, finger: Finger) -> bool {
+    pub fn update(&mut self, now_s: f64, reading: &Reading, gated_current_a: f64, finger: Finger) -> bool {
         let dt_s = self.last_time_s.map_or(1.0, |t| now_s - t);
+        let applied_current_a = delivered_current_a(reading, gated_current_a);
+        if let Some(check) = &mut self.reading_check {
+            check.coast(dt_s, applied_current_a, finger);
+        }
         if self.last_sample_seq == Some(reading.sample_seq) {
             self.observer.coast(dt_s, applied_current_a, finger);
             if let Some(slow) = &mut self.slow_observer {
@@ -193,8 +210,41 @@ impl PlateGuard {
             self.last_time_s = Some(now_s);
             self.last_sample_seq = Some(reading.sample_seq);
             self.trend.record(now_s, reading.sensor_c);
+            if let Some(check) = &mut self.reading_check {
+                check.judge(now_s, reading.sensor_c, &self.observer);
+            }
         }
         true
+    }
+
+    /// The innovation check's verdict: the reading stopped following the plate model under a drive
+    /// ([`crate::reading_check`]); it stays once given.
+    pub fn reading_disagreement(&self) -> Option<Disagreement> {
+        self.reading_check.as_ref().and_then(ReadingCheck::verdict)
+    }
+
+    /// Where the dose counts the plate while the reading is not believed \[°C\]: the innovation check's shadow
+    /// (the model run open loop since the reading last agreed) plus [`DISTRUST_MARGIN_C`] (NaN without one).
+    pub fn distrusted_plate_c(&self) -> f64 {
+        self.reading_check
+            .as_ref()
+            .map_or(f64::NAN, |check| check.shadow_plate_c() + DISTRUST_MARGIN_C)
+    }
+
+    /// Forgets the estimate (the next reading starts it afresh) and the innovation check's shadow; a verdict
+    /// stays. For a channel whose fault was cleared: the readings that faulted it (an open sensor's 850 °C) are no
+    /// plate the model should start from.
+    pub fn restart(&mut self) {
+        self.observer.reset();
+        if let Some(slow) = &mut self.slow_observer {
+            slow.reset();
+        }
+        self.last_time_s = None;
+        self.last_sample_seq = None;
+        self.trend = SensorTrend::new();
+        if let Some(check) = &mut self.reading_check {
+            check.restart_shadow();
+        }
     }
 
     /// Bounds the plate from here on with a sensor lag of at least `lag_s` \[s\] (a self-test measured the sensor
@@ -283,6 +333,17 @@ impl PlateForecast for TickForecast<'_> {
     fn strongest_cooling_a(&self) -> f64 {
         let plate_c = self.observer.estimate().map_or(f64::NAN, |e| e.plate_c);
         self.observer.plant().most_useful_cooling_a(plate_c)
+    }
+}
+
+/// The current that drove the plate over the interval the reading ends \[A\]: the one the device reports delivering
+/// (its own measurement: a drive stuck at its limit, a command still in transit on a slow link, a channel switched
+/// off by the loop), else the one the envelope gated, `gated_current_a` \[A\].
+fn delivered_current_a(reading: &Reading, gated_current_a: f64) -> f64 {
+    if reading.current_a.is_finite() {
+        reading.current_a
+    } else {
+        gated_current_a
     }
 }
 

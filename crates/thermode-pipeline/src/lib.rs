@@ -12,6 +12,7 @@
 //!   model from the device file).
 //! - [`guard`]: [`guard::PlateGuard`], the safety envelope's own model of the plate on every channel: the estimate
 //!   and one-tick forecast of the true plate that the envelope bounds.
+//! - [`reading_check`]: the innovation check, whether the plate sensor still measures the plate under a drive.
 //! - [`error`]: [`PipelineError`], refused parameters and stimuli.
 //!
 //! Temperatures in °C, currents in A (positive heats the display), times in s. Deterministic: nothing here draws a
@@ -22,6 +23,7 @@ pub mod display;
 pub mod error;
 pub mod guard;
 pub mod pipeline;
+pub mod reading_check;
 pub mod renderer;
 pub mod self_test;
 pub mod stimulus;

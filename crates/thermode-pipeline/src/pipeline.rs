@@ -526,6 +526,7 @@ impl DriveStage {
         finger: Finger,
     ) -> DriveOutcome {
         let fresh_sample = self.guard.update(now_s, reading, self.applied_current_a, finger);
+        self.act_on_reading_check(now_s);
         let feasible_c = self.feasible(requested_c, dt_s);
         let decision = self.envelope.shape_setpoint(now_s, feasible_c);
         let input = ControlInput {
@@ -566,6 +567,7 @@ impl DriveStage {
     /// is not asked (it restarts when the hold ends, [`DriveStage::end_hold`]).
     pub fn hold(&mut self, now_s: f64, reading: &Reading, finger: Finger) -> DriveCommand {
         self.guard.update(now_s, reading, self.applied_current_a, finger);
+        self.act_on_reading_check(now_s);
         self.applied_current_a = 0.0;
         self.envelope.hold(now_s)
     }
@@ -574,10 +576,26 @@ impl DriveStage {
     /// with the plate guard's forecast (no finger on the display); the controller is not asked.
     pub fn pulse(&mut self, now_s: f64, dt_s: f64, reading: &Reading, pulse_a: f64) -> DriveCommand {
         self.guard.update(now_s, reading, self.applied_current_a, Finger::NONE);
+        self.act_on_reading_check(now_s);
         let forecast = self.guard.forecast(dt_s, Finger::NONE);
         let drive = self.envelope.gate_drive(now_s, pulse_a, &forecast);
         self.applied_current_a = drive.current_a();
         drive
+    }
+
+    /// Gives the envelope the plate guard's innovation check at `now_s` \[s\] (after the guard took the tick): a
+    /// reading found disagreeing with the plate model is distrusted from the disagreement's start (a fault, the
+    /// dose counted at the model's plate), and from then on every tick renews the plate the dose counts at.
+    fn act_on_reading_check(&mut self, now_s: f64) {
+        let Some(disagreement) = self.guard.reading_disagreement() else {
+            return;
+        };
+        if self.envelope.reading_distrusted() {
+            self.envelope.set_distrusted_plate_c(self.guard.distrusted_plate_c());
+        } else {
+            let hottest_c = disagreement.hottest_plate_c + crate::reading_check::DISTRUST_MARGIN_C;
+            self.envelope.distrust_reading(now_s, disagreement.since_s, hottest_c);
+        }
     }
 
     /// Ends a hold: the controller restarts from the present readings, as on a fresh channel.
@@ -920,11 +938,12 @@ impl ChannelPipeline {
     }
 
     /// Clears the envelope's latched fault at `now_s` (see [`SafetyEnvelope::clear_fault`]) and resets the
-    /// controller, so it restarts from the present readings. Returns the cleared fault.
+    /// controller and the plate guard's estimate, so both restart from the present readings. Returns the cleared fault.
     pub fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, PipelineError> {
         let cleared = self.drive.envelope.clear_fault(now_s)?;
         if cleared.is_some() {
             self.drive.controller.reset();
+            self.drive.guard.restart();
             self.drive.applied_current_a = 0.0;
         }
         Ok(cleared)

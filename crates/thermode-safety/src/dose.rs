@@ -306,6 +306,13 @@ impl DoseTracker {
         self.unseen_c = Some(worst_c);
     }
 
+    /// Counts `dt_s` seconds (nothing if not positive) at `temp_c` (°C) once more, over time already counted: a
+    /// stretch whose readings turned out not to measure the plate (a frozen sensor), counted again at the hottest
+    /// the plate may have been. The counted instant does not move. Conservative: the stretch's first count stays.
+    pub fn count_again(&mut self, dt_s: f64, temp_c: f64) {
+        self.count(dt_s, temp_c);
+    }
+
     /// The time up to which the dose is counted, s (the newest sample's time, or later after unseen time; 0 before
     /// the first sample).
     pub fn counted_to_s(&self) -> f64 {

@@ -281,6 +281,9 @@ pub struct SafetyEnvelope {
     /// The strongest heating current gated (or held by the device) since the newest sample the dose counted, A
     /// (≥ 0).
     heating_since_sample_a: f64,
+    /// While the reading is distrusted ([`SafetyEnvelope::distrust_reading`]): the plate the dose counts at, °C,
+    /// renewed every tick by whoever models the plate ([`SafetyEnvelope::set_distrusted_plate_c`]).
+    distrusted_plate_c: Option<f64>,
 }
 
 impl SafetyEnvelope {
@@ -312,6 +315,7 @@ impl SafetyEnvelope {
             at_limit: None,
             drive_a: 0.0,
             heating_since_sample_a: 0.0,
+            distrusted_plate_c: None,
         };
         envelope.dose_changed();
         Ok(envelope)
@@ -444,18 +448,20 @@ impl SafetyEnvelope {
 
     /// Counts the dose of the time without a sample at time `now_s` (s), once the newest counted sample is older
     /// than the stale-sensor timeout: at [`SafetyEnvelope::unseen_plate_bound_c`] until the budget is spent, then
-    /// nothing (the channel is off for good). The lockout engages as on a sample.
+    /// nothing (the channel is off for good). While the reading is distrusted, every tick counts the time since the
+    /// last counted instant at the distrusted plate instead ([`SafetyEnvelope::distrust_reading`]). The lockout
+    /// engages as on a sample.
     fn count_unseen_dose(&mut self, now_s: f64) {
         let Some(last_s) = self.dose.last_sample_s() else {
             return;
         };
-        if now_s - last_s <= self.config.stale_timeout_s {
+        if self.distrusted_plate_c.is_none() && now_s - last_s <= self.config.stale_timeout_s {
             return;
         }
         let worst_c = if self.dose_budget_spent() {
             f64::NEG_INFINITY
         } else {
-            self.unseen_plate_bound_c()
+            self.distrusted_plate_c.unwrap_or_else(|| self.unseen_plate_bound_c())
         };
         self.dose.count_unseen(now_s, worst_c);
         if self.dose_lockout_active() {
@@ -606,6 +612,10 @@ impl SafetyEnvelope {
             self.latch(code, m.time_s);
         }
         self.check_rate(m);
+        if self.distrusted_plate_c.is_some() {
+            // No measurement of the plate: the dose counts at the distrusted plate (count_unseen_dose).
+            return;
+        }
         self.dose.add_sample(m.time_s, m.sensor_c);
         self.dose_changed();
         self.heating_since_sample_a = self.drive_a.max(0.0);
@@ -867,6 +877,44 @@ impl SafetyEnvelope {
         self.latch(FaultCode::DisplayNotAsFiled, now_s);
     }
 
+    /// The reading no longer measures the plate: a model of the plate (the plate guard's innovation check) found
+    /// it disagreeing under a drive since `since_s` \[s\], while the plate may have been as hot as `hottest_c`
+    /// \[°C\] (the model's hottest over that stretch). Latches [`FaultCode::ReadingDisagreesWithModel`] at `now_s`
+    /// \[s\] (never cleared: a sensor that lied once is not trusted again this session), counts the stretch from
+    /// `since_s` once more at `hottest_c` (its readings were counted; the count errs high), and from now on counts
+    /// the dose at the plate [`SafetyEnvelope::set_distrusted_plate_c`] gives each tick (starting at `hottest_c`),
+    /// not at the readings. Non-finite arguments count the stretch at the over-temperature limit.
+    pub fn distrust_reading(&mut self, now_s: f64, since_s: f64, hottest_c: f64) {
+        self.latch(FaultCode::ReadingDisagreesWithModel, now_s);
+        let over_c = ABSOLUTE_MAX_C + self.config.limit_margin_c;
+        let hottest_c = if hottest_c.is_finite() { hottest_c } else { over_c };
+        let counted_to_s = self.dose.counted_to_s();
+        let stretch_s = counted_to_s - since_s;
+        if stretch_s.is_finite() && stretch_s > 0.0 {
+            self.dose.count_again(stretch_s, hottest_c);
+        }
+        self.distrusted_plate_c = Some(hottest_c);
+        self.dose_changed();
+        self.lower_dose_ceiling();
+    }
+
+    /// The plate the dose counts at while the reading is distrusted, \[°C\] (renewed every tick; a non-finite
+    /// value counts at the over-temperature limit). Does nothing while the reading is trusted.
+    pub fn set_distrusted_plate_c(&mut self, plate_c: f64) {
+        if let Some(distrusted_c) = &mut self.distrusted_plate_c {
+            *distrusted_c = if plate_c.is_finite() {
+                plate_c
+            } else {
+                ABSOLUTE_MAX_C + self.config.limit_margin_c
+            };
+        }
+    }
+
+    /// Whether the reading is distrusted ([`SafetyEnvelope::distrust_reading`]).
+    pub fn reading_distrusted(&self) -> bool {
+        self.distrusted_plate_c.is_some()
+    }
+
     /// Remembers the drive just gated (`current_a`, A), for the bound on unseen time.
     fn note_drive(&mut self, current_a: f64) {
         self.drive_a = current_a;
@@ -881,7 +929,10 @@ impl SafetyEnvelope {
         let Some(latch) = self.latch else {
             return Ok(None);
         };
-        if latch.code == FaultCode::DisplayNotAsFiled {
+        if matches!(
+            latch.code,
+            FaultCode::DisplayNotAsFiled | FaultCode::ReadingDisagreesWithModel
+        ) {
             return Err(EnvelopeError::FaultPersists(latch.code));
         }
         Rule::Finite.check("now_s", now_s)?;

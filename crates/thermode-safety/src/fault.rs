@@ -22,6 +22,11 @@ pub enum FaultCode {
     /// slower, or a plate answering heat faster, than the file says): the channel is refused before any touch,
     /// and stays refused (only a device file that describes the display lifts it).
     DisplayNotAsFiled,
+    /// The display reading disagrees with the plate guard's model of the plate under a drive (a reading frozen while
+    /// its sample counter advances, a sensor that reads another plate): the reading is no measurement of the plate
+    /// from the disagreement's start on, the dose is counted at the model's plate, and the channel stays off for
+    /// the session (a sensor that lied once is not trusted again).
+    ReadingDisagreesWithModel,
     /// Hot (reference) side above `hot_side_max_c`: the water cooling has failed.
     HotSideOverTemperature,
     /// Hot-side sensor below `hot_side_min_c` (shorted or implausible), so cooling failure could go unseen.
@@ -53,13 +58,14 @@ pub enum FaultCode {
 
 impl FaultCode {
     /// Every fault code, in code order.
-    pub const ALL: [FaultCode; 18] = [
+    pub const ALL: [FaultCode; 19] = [
         FaultCode::SensorOpen,
         FaultCode::SensorShort,
         FaultCode::SensorOutOfRange,
         FaultCode::SensorStale,
         FaultCode::SensorRateImplausible,
         FaultCode::DisplayNotAsFiled,
+        FaultCode::ReadingDisagreesWithModel,
         FaultCode::HotSideOverTemperature,
         FaultCode::HotSideSensorImplausible,
         FaultCode::DisplayOverTemperature,
@@ -83,6 +89,7 @@ impl FaultCode {
             FaultCode::SensorStale => 104,
             FaultCode::SensorRateImplausible => 105,
             FaultCode::DisplayNotAsFiled => 106,
+            FaultCode::ReadingDisagreesWithModel => 107,
             FaultCode::HotSideOverTemperature => 201,
             FaultCode::HotSideSensorImplausible => 202,
             FaultCode::DisplayOverTemperature => 203,
@@ -112,6 +119,9 @@ impl FaultCode {
             FaultCode::SensorStale => "display sensor stale",
             FaultCode::SensorRateImplausible => "display temperature changes implausibly fast",
             FaultCode::DisplayNotAsFiled => "display unlike its device file (self-test): refused",
+            FaultCode::ReadingDisagreesWithModel => {
+                "display reading disagrees with the plate model under a drive (frozen or lying sensor)"
+            }
             FaultCode::HotSideOverTemperature => "hot side over temperature (cooling failure)",
             FaultCode::HotSideSensorImplausible => "hot-side sensor implausible",
             FaultCode::DisplayOverTemperature => "display above its maximum",

@@ -8,6 +8,7 @@ mod faults;
 mod identify;
 mod judged;
 mod kron_depth;
+mod lying_sensor;
 mod pipeline;
 mod props;
 mod run;
