@@ -24,12 +24,16 @@
 //! same way: where the plate is if the sensor is that slow. A file exact for its display (u = 0: a simulated display
 //! built from it) has neither bound: its model is the display (figures in `docs/security.md`).
 
-use thermode_control::{Finger, ObserverTick, PlantModel, PlateObserver};
+use thermode_control::{Finger, ObserverDesign, ObserverTick, PlantModel, PlateObserver};
 use thermode_device::Reading;
 use thermode_safety::{PlateForecast, PlateNow};
 
 use crate::error::PipelineError;
 use crate::reading_check::{Disagreement, ReadingCheck, DISTRUST_MARGIN_C};
+
+/// How much faster the unknown heat of a temperature-commanded device's guard may drift than the default's: 10
+/// (the device's own regulation is heat the model is not told of).
+pub const REGULATED_DRIFT_RATIO: f64 = 10.0;
 
 /// Readings the trend keeps (at least [`TREND_SPACING_S`] apart, so 240 ms or more of them).
 const TREND_READINGS: usize = 24;
@@ -164,11 +168,26 @@ impl PlateGuard {
         })
     }
 
-    /// This guard without the innovation check ([`crate::reading_check`]): for a display whose plate is not driven
-    /// by the current its model is given (a temperature-commanded device regulates it itself).
-    pub fn without_reading_check(mut self) -> Self {
+    /// This guard for a device that regulates its plate itself (temperature-commanded): no innovation check
+    /// ([`crate::reading_check`]: the current the model is given is not what drives the plate), and an observer whose
+    /// unknown heat follows the plate [`REGULATED_DRIFT_RATIO`] times faster, so that without a reported current
+    /// (a TCS II) the estimate follows the reading's lag-corrected plate instead of trailing the device's own
+    /// regulation by up to 15 °C (a 24 → 32 °C approach).
+    pub fn for_regulating_device(mut self) -> Result<Self, PipelineError> {
         self.reading_check = None;
-        self
+        let plant = *self.observer.plant();
+        let design = ObserverDesign {
+            disturbance_drift_per_sqrt_s: REGULATED_DRIFT_RATIO
+                * ObserverDesign::default().disturbance_drift_per_sqrt_s,
+            ..ObserverDesign::default()
+        };
+        self.observer = PlateObserver::with_design(plant, design)?;
+        if let Some(slow) = &mut self.slow_observer {
+            let mut slow_plant = plant;
+            slow_plant.sensor_time_constant_s = slow.plant().sensor_time_constant_s;
+            *slow = PlateObserver::with_design(slow_plant, design)?;
+        }
+        Ok(self)
     }
 
     /// Updates the estimate at `now_s` \[s\] with `reading`, after the device delivered the current it reports

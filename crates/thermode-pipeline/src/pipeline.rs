@@ -93,6 +93,10 @@ pub fn render_envelope(device: &DeviceConfig) -> EnvelopeConfig {
     render_envelope_with_rate(device, device.render.max_setpoint_rate_c_per_s)
 }
 
+/// The fastest an idle temperature-commanded channel (rendering air) moves its set-point \[°C/s\]: 1 (see
+/// [`ChannelPipeline::tick`]; the paper's displays changed at 0.1–2 °C/s, where a change from rest is barely felt).
+pub const IDLE_RATE_C_PER_S: f64 = 1.0;
+
 /// Half width of the band around the controller's plate estimate that a requested set-point is limited to \[°C\]:
 /// 1 (see the module documentation, step 3a). A model controller asks for its full current about 0.3 °C beyond
 /// the plate at 100 Hz; 1 °C leaves margin.
@@ -138,6 +142,14 @@ pub struct PipelineConfig {
     /// false (a simulated display built from its own file is that file); a daemon on real hardware driven by
     /// current sets it.
     pub self_test_at_start: bool,
+    /// Whether the device regulates its plate to the set-point itself (a TCS II; a MeCom controller in temperature
+    /// mode): thermode's current does not reach the plate. The controller is then not asked (a model controller
+    /// would integrate a current the plate never gets and wind its estimate, and with it the set-point, up: an
+    /// idle MeCom channel reached 48 °C in 2 s), no feasible band is drawn around its estimate, the finger model
+    /// on the display follows the shaped set-point (what the device regulates to), the plate guard takes the current
+    /// the device reports delivering (none reported: 0 A) and runs no innovation check, and nothing counts as a
+    /// drive stuck at its limit. Default false (thermode drives the current).
+    pub temperature_commanded: bool,
 }
 
 impl PipelineConfig {
@@ -154,6 +166,7 @@ impl PipelineConfig {
             calibrate_finger_at_touch: true,
             fv_fast_path: Some(ModalStepping::Exact),
             self_test_at_start: false,
+            temperature_commanded: false,
         }
     }
 
@@ -246,6 +259,8 @@ pub struct DriveStage {
     guard: PlateGuard,
     /// The current the envelope let through on the previous tick \[A\].
     applied_current_a: f64,
+    /// The device regulates its plate itself ([`PipelineConfig::temperature_commanded`]).
+    temperature_commanded: bool,
 }
 
 /// What the drive stage did in one tick.
@@ -499,15 +514,30 @@ fn requested_motion_c_per_s(requested_c: f64, feasible_c: f64, shaped_rate_c_per
 impl DriveStage {
     /// The envelope of `config` around `controller`, nothing observed yet.
     pub fn new(config: &PipelineConfig, controller: Box<dyn Controller>) -> Result<Self, PipelineError> {
+        let guard = PlateGuard::new(
+            plant_model(&config.device)?,
+            config.device.render.sensor_lag_uncertainty,
+        )?;
         Ok(DriveStage {
             controller,
             envelope: SafetyEnvelope::new(config.envelope, config.device.drive.current_limit_a)?,
-            guard: PlateGuard::new(
-                plant_model(&config.device)?,
-                config.device.render.sensor_lag_uncertainty,
-            )?,
+            guard: match config.temperature_commanded {
+                true => guard.for_regulating_device()?,
+                false => guard,
+            },
             applied_current_a: 0.0,
+            temperature_commanded: config.temperature_commanded,
         })
+    }
+
+    /// The current the plate guard is told the envelope gated \[A\]: none on a temperature-commanded device (it
+    /// takes the current the device reports delivering, if any).
+    fn gated_for_guard_a(&self) -> f64 {
+        if self.temperature_commanded {
+            0.0
+        } else {
+            self.applied_current_a
+        }
     }
 
     /// Step 1: the envelope observes the newest reading (fault checks, thermal dose).
@@ -525,10 +555,24 @@ impl DriveStage {
         requested_c: f64,
         finger: Finger,
     ) -> DriveOutcome {
-        let fresh_sample = self.guard.update(now_s, reading, self.applied_current_a, finger);
+        let fresh_sample = self.guard.update(now_s, reading, self.gated_for_guard_a(), finger);
         self.act_on_reading_check(now_s);
-        let feasible_c = self.feasible(requested_c, dt_s);
+        self.envelope.check_estimate(now_s, self.guard.plate_estimate_c());
+        let feasible_c = match self.temperature_commanded {
+            true => requested_c,
+            false => self.feasible(requested_c, dt_s),
+        };
         let decision = self.envelope.shape_setpoint(now_s, feasible_c);
+        if self.temperature_commanded {
+            // The device regulates to the set-point; no current of thermode's reaches the plate.
+            let forecast = self.guard.forecast(dt_s, finger);
+            let drive = self.envelope.gate_drive(now_s, 0.0, &forecast);
+            return DriveOutcome {
+                decision,
+                requested_current_a: f64::NAN,
+                drive,
+            };
+        }
         let input = ControlInput {
             time_s: now_s,
             dt_s,
@@ -566,7 +610,7 @@ impl DriveStage {
     /// with `finger`, the envelope checks faults with the drive off ([`SafetyEnvelope::hold`]), and the controller
     /// is not asked (it restarts when the hold ends, [`DriveStage::end_hold`]).
     pub fn hold(&mut self, now_s: f64, reading: &Reading, finger: Finger) -> DriveCommand {
-        self.guard.update(now_s, reading, self.applied_current_a, finger);
+        self.guard.update(now_s, reading, self.gated_for_guard_a(), finger);
         self.act_on_reading_check(now_s);
         self.applied_current_a = 0.0;
         self.envelope.hold(now_s)
@@ -625,9 +669,12 @@ impl DriveStage {
         }
     }
 
-    /// Where step 7 puts the plate \[°C\]: the controller's estimate if it has one (an observer), else the shaped
-    /// set-point (the paper's way).
+    /// Where step 7 puts the plate \[°C\]: the controller's estimate if it has one (an observer), else (and on a
+    /// temperature-commanded device) the shaped set-point (the paper's way).
     pub fn plate_for_finger_c(&self, decision: &SetpointDecision) -> f64 {
+        if self.temperature_commanded {
+            return decision.setpoint_c;
+        }
         self.controller
             .plate_estimate_c()
             .filter(|p| p.is_finite())
@@ -797,6 +844,7 @@ impl ChannelPipeline {
             }
             return (drive, telemetry);
         }
+        let requested_c = self.idle_request_c((target_c, requested_c), reading, dt_s);
         let outcome = self.drive.drive(now_s, dt_s, reading, requested_c, finger);
         self.last_setpoint_c = Some(outcome.decision.setpoint_c);
         if self.calibration.is_some() && self.setpoint.mode == Mode::Render && !self.setpoint.renderer.in_contact() {
@@ -810,6 +858,8 @@ impl ChannelPipeline {
         }
         let plate_c = self.drive.plate_for_finger_c(&outcome.decision);
         self.setpoint.follow(dt_s, plate_c);
+        // From the next tick on: a finger model that left the band drives nothing.
+        self.drive.envelope.check_estimate(now_s, self.setpoint.receptor_c());
         let drive = outcome.drive;
         let telemetry = Telemetry {
             time_s: now_s,
@@ -823,14 +873,34 @@ impl ChannelPipeline {
             requested_current_a: outcome.requested_current_a,
             current_a: drive.current_a(),
             plate_estimate_c: self.drive.plate_estimate_c(),
-            finger_c: self
-                .drive
-                .controller
-                .unknown_heat_w()
-                .map_or(f64::NAN, |heat_w| finger.receptor_c + heat_w / finger.conductance_w_k),
+            finger_c: match self.drive.temperature_commanded {
+                true => f64::NAN,
+                false => self
+                    .drive
+                    .controller
+                    .unknown_heat_w()
+                    .map_or(f64::NAN, |heat_w| finger.receptor_c + heat_w / finger.conductance_w_k),
+            },
             fault: drive.fault(),
         };
         (drive, telemetry)
+    }
+
+    /// The request of an idle temperature-commanded channel (rendering air): the rendered skin temperature
+    /// `target_c` \[°C\] itself, reached from the last set-point (the reading, before the first) at no more than
+    /// [`IDLE_RATE_C_PER_S`] over `dt_s` \[s\]. The display inverse would warm a finger model cooled by a plate that
+    /// started cold past the skin (33.3 °C on an emulated MeCom controller), and a device's own regulation overshoots
+    /// a fast set-point (3.6 °C on a 20 °C/s approach from 24.5 to 32 °C); at rest nothing needs either. Every other
+    /// request (`requested_c`) passes unchanged.
+    fn idle_request_c(&self, (target_c, requested_c): (f64, f64), reading: &Reading, dt_s: f64) -> f64 {
+        let idle =
+            self.drive.temperature_commanded && self.setpoint.mode == Mode::Render && !self.setpoint.in_contact();
+        let from_c = self.last_setpoint_c.unwrap_or(reading.sensor_c);
+        if !(idle && from_c.is_finite() && target_c.is_finite()) {
+            return requested_c;
+        }
+        let step_c = IDLE_RATE_C_PER_S * dt_s;
+        target_c.clamp(from_c - step_c, from_c + step_c)
     }
 
     /// A tick while held off: 0 A; the finger model on the display follows the estimated plate.

@@ -898,6 +898,17 @@ impl SafetyEnvelope {
         self.lower_dose_ceiling();
     }
 
+    /// Latches [`FaultCode::EstimateImplausible`] at `now_s` \[s\] if `estimate_c` \[°C\] (a model's plate or finger
+    /// temperature) is finite and outside the plausible band of readings (`[plausible_min_c, plausible_max_c]`).
+    /// NaN (no estimate yet) passes. Cleared like the causes outside the measurement: it latches again at once if
+    /// the estimate is still out.
+    pub fn check_estimate(&mut self, now_s: f64, estimate_c: f64) {
+        let c = &self.config;
+        if estimate_c.is_finite() && !(c.plausible_min_c..=c.plausible_max_c).contains(&estimate_c) {
+            self.latch(FaultCode::EstimateImplausible, now_s);
+        }
+    }
+
     /// The plate the dose counts at while the reading is distrusted, \[°C\] (renewed every tick; a non-finite
     /// value counts at the over-temperature limit). Does nothing while the reading is trusted.
     pub fn set_distrusted_plate_c(&mut self, plate_c: f64) {

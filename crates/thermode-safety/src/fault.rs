@@ -54,11 +54,15 @@ pub enum FaultCode {
     NonFiniteTime,
     /// Time went backwards (a `now_s` or a sample time earlier than a previous one).
     TimeNotMonotonic,
+    /// A model's estimate (the plate guard's plate, the finger model on the display) left the plausible band of the
+    /// readings (`[plausible_min_c, plausible_max_c]`): the model no longer describes the display (a current it
+    /// integrates never reaching the plate, a device file far off its display), so nothing built on it is driven.
+    EstimateImplausible,
 }
 
 impl FaultCode {
     /// Every fault code, in code order.
-    pub const ALL: [FaultCode; 19] = [
+    pub const ALL: [FaultCode; 20] = [
         FaultCode::SensorOpen,
         FaultCode::SensorShort,
         FaultCode::SensorOutOfRange,
@@ -78,6 +82,7 @@ impl FaultCode {
         FaultCode::NonFiniteCommand,
         FaultCode::NonFiniteTime,
         FaultCode::TimeNotMonotonic,
+        FaultCode::EstimateImplausible,
     ];
 
     /// The stable numeric code.
@@ -102,6 +107,7 @@ impl FaultCode {
             FaultCode::NonFiniteCommand => 403,
             FaultCode::NonFiniteTime => 404,
             FaultCode::TimeNotMonotonic => 405,
+            FaultCode::EstimateImplausible => 406,
         }
     }
 
@@ -134,6 +140,7 @@ impl FaultCode {
             FaultCode::NonFiniteCommand => "drive request not finite",
             FaultCode::NonFiniteTime => "time not finite",
             FaultCode::TimeNotMonotonic => "time went backwards",
+            FaultCode::EstimateImplausible => "a model's estimate of the plate or finger left the plausible band",
         }
     }
 }

@@ -359,6 +359,7 @@ fn open_real(
     let self_test = device.measures().drive_current;
     for p in &mut pipelines {
         p.self_test_at_start = self_test;
+        p.temperature_commanded = !device.measures().drive_current;
     }
     Ok(Real {
         device,

@@ -509,7 +509,8 @@ impl Device for Tcs2Device {
             hot_side_c: state.neutral_c,
             time_s: state.time_s,
             sample_seq: state.sample_seq,
-            current_a: 0.0,
+            // The stimulator sets its current itself and reports none.
+            current_a: f64::NAN,
             voltage_v: f64::NAN,
         })
     }

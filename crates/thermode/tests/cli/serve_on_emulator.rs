@@ -864,3 +864,67 @@ fn wait_for(protocol: &str, what: &str, mut condition: impl FnMut() -> bool) {
         std::thread::sleep(Duration::from_millis(50));
     }
 }
+
+/// Issue 35, finding 3: a temperature-commanded device (a MeCom controller in temperature mode, a TCS II) regulates
+/// its plate itself, so thermode's current never reaches it. A model controller and the plate guard that integrated
+/// that current wound up on an idle channel: its set-point reached 48 °C in 2 s, `plate_estimate_c` and `skin_c` passed
+/// 200 °C, and a program to 36 °C ended held at 48 °C. Now, nobody connected, with the emulated finger on the plate:
+/// for 10 s of the loop's time the true plate stays at or below 33 °C and the set-point at or below 34 °C; the plate
+/// estimate stays within 8 °C of the reading and the finger model within 8 °C of 32 °C; a program to 36 °C then ends with its last set-point held.
+#[test]
+fn an_idle_temperature_commanded_channel_rests_at_the_skin_and_a_program_ends_at_its_last_set_point() {
+    for (protocol, query) in [("mecom", "?mode=temperature"), ("tcs2", "?zones=1")] {
+        let dir = tempfile::tempdir().unwrap_or_else(|e| panic!("tempdir: {e}"));
+        let trace = dir.path().join("trace.csv");
+        let (emulator, pty) = emulate_with(1, None, &trace, &["--protocol", protocol]);
+        let host = serve_device(&format!("{protocol}:{pty}{query}"), None, None);
+        let mut highest_setpoint_c = f64::MIN;
+        let mut worst_estimate_c: f64 = 0.0;
+        wait_for(protocol, "10 s of loop time", || {
+            let s = status(host.http_port);
+            let c = &s["channels"][0];
+            // The first second is the devices' own start (a TCS II's probe runs from 24.6 to 30 °C by itself).
+            let started = s["time_s"].as_f64().is_some_and(|t| t >= 1.0);
+            if let (Some(setpoint_c), Some(sensor_c), true) =
+                (c["display_setpoint_c"].as_f64(), c["sensor_c"].as_f64(), started)
+            {
+                highest_setpoint_c = highest_setpoint_c.max(setpoint_c);
+                let plate_off_c = c["plate_estimate_c"].as_f64().map_or(0.0, |v| (v - sensor_c).abs());
+                // The finger model rests near the skin, never where a wound-up estimate took it.
+                let skin_off_c = c["skin_c"].as_f64().map_or(0.0, |v| (v - 32.0).abs());
+                worst_estimate_c = worst_estimate_c.max(plate_off_c).max(skin_off_c);
+            }
+            s["time_s"].as_f64().is_some_and(|t| t >= 10.0)
+        });
+        let hottest_c = read_trace(&trace).iter().map(|r| r.plate_c).fold(f64::MIN, f64::max);
+        println!(
+            "{protocol}: idle 10 s: true plate at most {hottest_c:.2} °C, set-point at most {highest_setpoint_c:.2} \
+             °C, estimates off by at most {worst_estimate_c:.2} °C (plate from the reading, finger from 32 °C)"
+        );
+        assert!(
+            hottest_c <= 33.0 && highest_setpoint_c <= 34.0 && worst_estimate_c < 8.0,
+            "{protocol}: idle: true plate {hottest_c} °C (≤ 33), set-point {highest_setpoint_c} °C (≤ 34), an \
+             estimate {worst_estimate_c} °C off the reading"
+        );
+        let socket = UdpSocket::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("udp: {e}"));
+        let program = r#"{"0": [{"to_c": 36, "rate_c_s": 2}]}"#;
+        socket
+            .send_to(&osc_text("/thermode/program", program), ("127.0.0.1", host.osc_port))
+            .unwrap_or_else(|e| panic!("send: {e}"));
+        wait_for(protocol, "the program's start", || {
+            status(host.http_port)["channels"][0]["program_segment"].is_number()
+        });
+        wait_for(protocol, "the program's end", || {
+            status(host.http_port)["channels"][0]["program_segment"].is_null()
+        });
+        wait_for(protocol, "36 °C held", || {
+            let c = &status(host.http_port)["channels"][0];
+            let held = c["display_setpoint_c"]
+                .as_f64()
+                .is_some_and(|v| (v - 36.0).abs() < 1e-6);
+            held && c["sensor_c"].as_f64().is_some_and(|v| (v - 36.0).abs() < 0.3)
+        });
+        drop(host);
+        drop(emulator);
+    }
+}
