@@ -52,7 +52,7 @@ pub enum DeviceError {
         /// The longest period the host accepts \[ms\].
         max_ms: u16,
     },
-    /// The device's own protection latched part of a channel's drive off; its readings are withheld until the
+    /// The device's own protection latched part of a channel's drive off; the channel takes no drive until the
     /// device releases the cut.
     #[error("channel {channel}: {cut}")]
     Cut {
@@ -60,6 +60,10 @@ pub enum DeviceError {
         channel: usize,
         /// What the device cut.
         cut: DeviceCut,
+        /// The channel's newest reading, where the device goes on measuring while cut (a MeCom controller in its
+        /// error state, thermode's own firmware): the plate is still seen, so its thermal dose is counted from it
+        /// and not at a bound on unseen time.
+        reading: Option<crate::device::Reading>,
     },
 }
 

@@ -277,6 +277,8 @@ pub struct DriveOutcome {
 /// One display channel: renderer, display inverse, controller and safety envelope. See the module documentation.
 pub struct ChannelPipeline {
     setpoint: SetpointStage,
+    /// The set-point stage as built, at rest in air: what a cleared fault restarts the finger models from.
+    setpoint_at_rest: Box<SetpointStage>,
     drive: DriveStage,
     /// Receptor-to-plate conductance of the finger model over the contact area [W/K].
     finger_conductance_w_k: f64,
@@ -718,6 +720,7 @@ impl ChannelPipeline {
         let drive = DriveStage::new(config, controller)?;
         let finger_conductance_w_k = setpoint.display.receptor_conductance_w_m2k() * config.device.plate.area_m2;
         Ok(ChannelPipeline {
+            setpoint_at_rest: Box::new(setpoint.clone()),
             setpoint,
             drive,
             finger_conductance_w_k,
@@ -1008,13 +1011,25 @@ impl ChannelPipeline {
     }
 
     /// Clears the envelope's latched fault at `now_s` (see [`SafetyEnvelope::clear_fault`]) and resets the
-    /// controller and the plate guard's estimate, so both restart from the present readings. Returns the cleared fault.
+    /// controller and the plate guard's estimate, so both restart from the present readings; a finger model on the
+    /// display outside the plausible band restarts from rest in air. Returns the cleared fault.
     pub fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, PipelineError> {
         let cleared = self.drive.envelope.clear_fault(now_s)?;
         if cleared.is_some() {
             self.drive.controller.reset();
             self.drive.guard.restart();
             self.drive.applied_current_a = 0.0;
+            let plausible = self.drive.envelope.config().plausible_min_c..=self.drive.envelope.config().plausible_max_c;
+            if !plausible.contains(&self.setpoint.receptor_c()) {
+                // The finger model followed a plate the faulted readings made up (an open sensor's 850 °C): it starts
+                // again from rest in air, rendering what it rendered.
+                let mode = self.setpoint.mode;
+                let renderer = self.setpoint.renderer.clone();
+                self.setpoint = (*self.setpoint_at_rest).clone();
+                (self.setpoint.mode, self.setpoint.renderer) = (mode, renderer);
+                self.receptor_offset_c = 0.0;
+                self.last_setpoint_c = None;
+            }
         }
         Ok(cleared)
     }

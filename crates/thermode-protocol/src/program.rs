@@ -91,6 +91,9 @@ pub enum ProgramEventKind {
     Response,
     /// The program's last segment is over; the set-point holds.
     ProgramEnd,
+    /// The program stopped before its end (`reason`: the channel faulted, or its device cut it); the channel
+    /// renders air and nothing of the program resumes.
+    ProgramStopped,
 }
 
 /// A program's event, sent to the WebSocket clients that follow programs (telemetry subscribers and clients that
@@ -125,4 +128,7 @@ pub struct ProgramEvent {
     pub setpoint_c: Option<f64>,
     /// The plate sensor at that tick \[°C\] (null where the device cannot measure).
     pub sensor_c: Option<f64>,
+    /// Why the program stopped (`program_stopped`), e.g. `the channel faulted: E107 …`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reason: Option<String>,
 }

@@ -38,7 +38,9 @@ use crate::error::RuntimeError;
 use crate::interlock::Interlock;
 use crate::limits::StimulusLimits;
 use crate::program::{Executor, Program};
-use crate::snapshot::{ChannelStatus, LoopStats, MaterialProperties, Mode, RecordRow, Shared, Snapshot, TickRecord};
+use crate::snapshot::{
+    ChannelStatus, LoopStats, MaterialProperties, Mode, ProgramStop, RecordRow, Shared, Snapshot, TickRecord,
+};
 use crate::stats::Window;
 use thermode_platform::rt::Realtime;
 use thermode_platform::Clock;
@@ -532,8 +534,12 @@ impl ControlLoop {
             }
             Err(error) => {
                 self.counters.device_errors += 1;
-                if let DeviceError::Cut { cut, .. } = error {
+                if let DeviceError::Cut { cut, reading, .. } = error {
                     self.status[channel].device_cut = Some(cut);
+                    // A device that goes on measuring while cut: the plate is seen (its dose counted from it).
+                    if let Some(reading) = reading {
+                        self.slots[channel].reading = reading;
+                    }
                 }
                 false
             }
@@ -582,6 +588,25 @@ impl ControlLoop {
         status.link_ok = link_ok;
         status.engine_failed = slot.failed;
         status.telemetry = unknown_unmeasured(telemetry, self.measures);
+        let running = slot.program.as_ref().is_some_and(|e| !e.finished());
+        let stop = match (telemetry.fault, status.device_cut) {
+            (Some(code), _) => Some(ProgramStop::Fault(code)),
+            (None, Some(cut)) => Some(ProgramStop::DeviceCut(cut)),
+            (None, None) => None,
+        };
+        if let (true, Some(stop)) = (running, stop) {
+            self.stop_program(channel, stop);
+        }
+    }
+
+    /// Stops `channel`'s program before its end (a fault, a device cut): the channel renders air, so nothing of
+    /// the program resumes when the cause clears (a program that kept its clock through a fault jumped from 38.9 to
+    /// 45 °C at 12 °C/s after `clear_fault`, where it asked 2 °C/s), and the tick's mark says why.
+    fn stop_program(&mut self, channel: usize, stop: ProgramStop) {
+        self.release(channel);
+        let mark = &mut self.status[channel].program;
+        mark.segment = None;
+        mark.stopped = Some(stop);
     }
 
     /// The urgent lane first (all of it), then at most `commands_per_tick` ordinary commands.

@@ -70,20 +70,41 @@ pub struct ProgramMark {
     pub started: Option<(usize, Option<f64>, Option<f64>)>,
     /// The program's last segment ended on this tick.
     pub ended: bool,
+    /// The program was stopped on this tick before its end: the channel faulted or its device cut it (the channel
+    /// then renders air; nothing of the program resumes).
+    pub stopped: Option<ProgramStop>,
     /// The (last) response applied on this tick: its kind, its rating, and the `until: response` segment it
     /// ended (if it ended one).
     pub response: Option<(ResponseKind, Option<f64>, Option<usize>)>,
 }
 
 impl ProgramMark {
-    /// Whether something happened on this tick (a segment's start, the end, a response).
+    /// Whether something happened on this tick (a segment's start, the end, a stop, a response).
     pub fn has_event(&self) -> bool {
-        self.started.is_some() || self.ended || self.response.is_some()
+        self.started.is_some() || self.ended || self.stopped.is_some() || self.response.is_some()
     }
 
     /// This tick's events cleared (the running segment kept).
     pub fn next_tick(&mut self) {
-        (self.started, self.ended, self.response) = (None, false, None);
+        (self.started, self.ended, self.stopped, self.response) = (None, false, None, None);
+    }
+}
+
+/// Why a program stopped before its end.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ProgramStop {
+    /// The channel's safety envelope latched a fault.
+    Fault(thermode_safety::FaultCode),
+    /// The device's own protection cut the channel.
+    DeviceCut(DeviceCut),
+}
+
+impl std::fmt::Display for ProgramStop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ProgramStop::Fault(code) => write!(f, "the channel faulted: {code}"),
+            ProgramStop::DeviceCut(cut) => write!(f, "the device cut the channel: {cut}"),
+        }
     }
 }
 

@@ -47,6 +47,7 @@ fn of_row(channel: usize, row: &RecordRow, tick: u64, time_s: f64) -> Vec<Progra
         value: None,
         setpoint_c: finite(t.display_setpoint_c),
         sensor_c: finite(t.sensor_c),
+        reason: None,
     };
     let mut events = Vec::new();
     if let Some((kind, value, ended)) = mark.response {
@@ -68,14 +69,21 @@ fn of_row(channel: usize, row: &RecordRow, tick: u64, time_s: f64) -> Vec<Progra
     if mark.ended {
         events.push(event(ProgramEventKind::ProgramEnd));
     }
+    if let Some(stop) = mark.stopped {
+        events.push(ProgramEvent {
+            reason: Some(stop.to_string()),
+            ..event(ProgramEventKind::ProgramStopped)
+        });
+    }
     events
 }
 
 /// The header of `<session>.events.csv`: loop time and tick, the channel, the event (`segment_start`, `response`,
-/// `program_end`), the segment (started, or ended by the response), the started segment's target and cut-off
-/// \[°C\], the response's kind and rating, the display set-point and the plate sensor of that tick \[°C\] (empty
-/// where unknown).
-pub const EVENTS_CSV_HEADER: &str = "time_s,tick,channel,event,segment,to_c,cutoff_c,kind,value,setpoint_c,sensor_c";
+/// `program_end`, `program_stopped`), the segment (started, or ended by the response), the started segment's target
+/// and cut-off \[°C\], the response's kind and rating, the display set-point and the plate sensor of that tick
+/// \[°C\] (empty where unknown), and why a program stopped (quoted).
+pub const EVENTS_CSV_HEADER: &str =
+    "time_s,tick,channel,event,segment,to_c,cutoff_c,kind,value,setpoint_c,sensor_c,reason";
 
 /// The events file of the session recorded in `csv`: `<session>.events.csv` beside it.
 pub fn events_csv_path(csv: &Path) -> PathBuf {
@@ -179,7 +187,7 @@ fn wire_name(value: &impl Serialize) -> String {
 fn csv_row(event: &ProgramEvent) -> String {
     let number = |v: Option<f64>| v.map_or(String::new(), |v| v.to_string());
     format!(
-        "{:.6},{},{},{},{},{},{},{},{},{},{}",
+        "{:.6},{},{},{},{},{},{},{},{},{},{},{}",
         event.time_s,
         event.tick,
         event.channel,
@@ -191,6 +199,10 @@ fn csv_row(event: &ProgramEvent) -> String {
         number(event.value),
         number(event.setpoint_c),
         number(event.sensor_c),
+        event
+            .reason
+            .as_ref()
+            .map_or(String::new(), |r| format!("\"{}\"", r.replace('"', "\"\""))),
     )
 }
 
@@ -223,6 +235,7 @@ mod tests {
             segment: Some(1),
             started: Some((1, Some(32.0), None)),
             ended: false,
+            stopped: None,
             response: Some((ResponseKind::Rating, Some(55.0), Some(0))),
         };
         let events = of_row(3, &row(mark), 1200, 1.2);

@@ -123,6 +123,13 @@ impl ProgramDisplay for WsLink {
                     }
                     // The runner has the response from its reply.
                     ProgramEventKind::Response => continue,
+                    ProgramEventKind::ProgramStopped => {
+                        let reason = event.reason.unwrap_or_default();
+                        return Err(StimulusError::Device(format!(
+                            "the program on channel {} stopped at loop time {:.2} s: {reason}",
+                            event.channel, event.time_s
+                        )));
+                    }
                 },
                 _ => continue,
             }

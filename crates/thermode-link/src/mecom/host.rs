@@ -1464,22 +1464,6 @@ impl Device for MecomDevice {
                 why: track.last_failure.unwrap_or(RequestFault::NoAnswer),
             }));
         }
-        if track.device_status == status::ERROR {
-            return Err(match track.error_number {
-                error_number::OBJECT_TOO_HIGH => DeviceError::Cut {
-                    channel,
-                    cut: DeviceCut::OverTemperature,
-                },
-                error_number::OBJECT_TOO_LOW => DeviceError::Cut {
-                    channel,
-                    cut: DeviceCut::UnderTemperature,
-                },
-                number => self.error(LinkFault::ErrorState {
-                    number,
-                    meaning: describe_error(number),
-                }),
-            });
-        }
         let reading = Reading {
             sensor_c: track.object_c,
             hot_side_c: track.sink_c,
@@ -1488,9 +1472,27 @@ impl Device for MecomDevice {
             current_a: track.current_a,
             voltage_v: track.voltage_v,
         };
+        let in_error = track.device_status == status::ERROR;
+        let error_number = track.error_number;
         drop(state);
         self.seq_seen[channel] = reading.sample_seq;
-        Ok(reading)
+        if !in_error {
+            return Ok(reading);
+        }
+        // In its error state the controller still measures its object: the cut carries the reading.
+        let cut = |cut| DeviceError::Cut {
+            channel,
+            cut,
+            reading: Some(reading),
+        };
+        Err(match error_number {
+            error_number::OBJECT_TOO_HIGH => cut(DeviceCut::OverTemperature),
+            error_number::OBJECT_TOO_LOW => cut(DeviceCut::UnderTemperature),
+            number => self.error(LinkFault::ErrorState {
+                number,
+                meaning: describe_error(number),
+            }),
+        })
     }
 
     fn link_health(&self) -> Option<Arc<LinkHealth>> {

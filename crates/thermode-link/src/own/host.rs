@@ -660,19 +660,25 @@ impl SerialDevice {
         }
         let track = state.tracks[channel];
         drop(state);
-        if let Some(cut) = cut_of(track.faults) {
-            return Err(DeviceError::Cut { channel, cut });
-        }
         let sample_seq = self.seq_base[channel] + track.sample_seq;
         self.seq_seen[channel] = sample_seq;
-        Ok(Reading {
+        let reading = Reading {
             sensor_c: track.sensor_c,
             hot_side_c: track.hot_side_c,
             time_s: track.time_s,
             sample_seq,
             current_a: track.current_a,
             voltage_v: f64::NAN,
-        })
+        };
+        match cut_of(track.faults) {
+            // The firmware goes on reporting its plate while cut.
+            Some(cut) => Err(DeviceError::Cut {
+                channel,
+                cut,
+                reading: Some(reading),
+            }),
+            None => Ok(reading),
+        }
     }
 }
 

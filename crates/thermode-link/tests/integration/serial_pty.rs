@@ -596,7 +596,8 @@ fn the_device_cut_reaches_the_host_and_is_released_back_inside() {
             last[0],
             Err(DeviceError::Cut {
                 channel: 0,
-                cut: DeviceCut::OverTemperature
+                cut: DeviceCut::OverTemperature,
+                reading: Some(_),
             })
         ),
         "{last:?}"

@@ -67,6 +67,9 @@ pub struct SpyControl {
     /// Reads of channel 0 fail for a while once its true plate first reaches a temperature, in device time (so a
     /// test on a jumping clock gets it at the right moment): (plate \[°C\], delay after that \[s\], length \[s\]).
     pub outage_when_hot: Option<(f64, f64, f64)>,
+    /// The outage of [`SpyControl::outage_when_hot`] is the device's own cut (over-temperature, heating off, its
+    /// readings still reported) instead of failing reads.
+    pub outage_is_cut: bool,
 }
 
 /// The simulated display with a recorder and a remote control.
@@ -126,12 +129,26 @@ impl Device for SpyDevice {
             };
             return Err(DeviceError::Link(thermode_device::LinkError::device("spy", fault)));
         }
+        let outage_is_cut = control.outage_is_cut;
         if let Some(&(_, cut)) = control.cut_reads.iter().find(|(c, _)| *c == channel) {
-            return Err(DeviceError::Cut { channel, cut });
+            // A real device goes on reporting its plate while cut.
+            return Err(DeviceError::Cut {
+                channel,
+                cut,
+                reading: self.inner.read(channel).ok(),
+            });
         }
         drop(control);
         let outage = self.log.lock().expect("spy log").outage_s;
         if channel == 0 && outage.is_some_and(|(from_s, until_s)| (from_s..until_s).contains(&self.time_s)) {
+            if outage_is_cut {
+                // The device cut its own drive: the loop sends 0 A, the plate is still reported.
+                return Err(DeviceError::Cut {
+                    channel,
+                    cut: DeviceCut::OverTemperature,
+                    reading: self.inner.read(channel).ok(),
+                });
+            }
             let fault = thermode_device::LinkFault::ReadFailed {
                 error: std::io::ErrorKind::TimedOut.into(),
             };

@@ -410,3 +410,45 @@ fn a_link_fault_during_a_hot_touch_spends_the_budget_at_the_bound_and_the_channe
     drop(log);
     daemon.shutdown().expect("clean shutdown");
 }
+
+/// Issue 35, finding 4: a device cut withheld the channel's readings, and the unseen time was counted at the
+/// envelope's bound (a heating drive's 49 °C): a 42 °C set-point on a MeCom controller that cut at 39.7 °C counted
+/// 1.026 CEM43-min against a true 0.0003 and locked the channel out, persisted for the next session. A device that
+/// goes on measuring while cut (MeCom, thermode's own firmware) now reports its reading with the cut, the loop
+/// sends 0 A and the dose is counted from the plate it reports: direct 44 °C, the device's own cut for 10 s once
+/// the true plate reaches 43.5 °C, then 5 s more; the counted dose is within 2.5 % + 0.01 CEM43-min of the true
+/// plate's, and never below it by more than that.
+#[test]
+fn a_device_cut_that_still_reports_its_plate_counts_the_dose_the_plate_had() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let (daemon, log, control) = start_spy(tmp.path(), pipelines());
+    {
+        let mut c = control.lock().expect("control");
+        c.outage_when_hot = Some((43.5, 0.5, 10.0));
+        c.outage_is_cut = true;
+    }
+    daemon
+        .commands()
+        .expect("commands")
+        .request(Command::direct(0, 44.0, 20.0, Owner::Script))
+        .expect("queued")
+        .blocking_recv()
+        .expect("answered")
+        .expect("applied");
+    let scheduled = wait_until(60.0, || log.lock().expect("log").outage_s.is_some());
+    assert!(scheduled, "the plate never reached 43.5 °C");
+    let (from_s, until_s) = log.lock().expect("log").outage_s.expect("cut");
+    run_until(&daemon, until_s + 5.0);
+    let counted = daemon.snapshot().expect("snapshot").channels[0].dose.cem43_min;
+    let truth = true_dose_min(&log.lock().expect("log").plate_trace, f64::NEG_INFINITY, f64::INFINITY);
+    let tolerance = 0.025 * truth + 0.01;
+    println!(
+        "direct 44 °C, the device's cut {from_s:.2}-{until_s:.2} s: counted {counted:.5} CEM43-min, true plate \
+         {truth:.5} (tolerance ±{tolerance:.5})"
+    );
+    assert!(
+        (counted - truth).abs() <= tolerance,
+        "counted {counted} CEM43-min, the true plate's {truth} ± {tolerance}"
+    );
+    daemon.shutdown().expect("clean shutdown");
+}

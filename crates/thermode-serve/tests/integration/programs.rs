@@ -435,3 +435,115 @@ fn osc_runs_a_program_and_its_responses_reach_the_events_file() {
     ];
     assert_eq!(summary, want, "the events file");
 }
+
+/// Issue 35, finding 7: a program kept its clock while its channel was faulted, and after `clear_fault` its
+/// set-point jumped from 38.9 to 45 °C in 0.5 s (12 °C/s) where the program asked 2 °C/s. Now a channel that faults
+/// (its cable pulled: reads fail until the sensor is stale) or that its device cuts stops its program on that tick,
+/// says so in a `program_stopped` event with the reason (over the WebSocket and in the events file), renders air,
+/// and once the cable is back and the fault cleared nothing of the program resumes: the set-point rose no faster
+/// than the program's own 2 °C/s, and after the stop it renders air (below 40 °C), never the program's 45 °C.
+#[test]
+fn a_program_stops_with_its_reason_when_its_channel_faults_or_is_cut_and_never_resumes_faster() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let device = SpyDevice::new(2);
+    let control = device.control.clone();
+    let mut config = common::test_config();
+    config.core.record_dir = Some(dir.path().to_path_buf());
+    let daemon = common::start(config, device, common::pipelines());
+    let addr = daemon.http_addr();
+    let path = daemon.recording_path().expect("recording");
+    let measured = || {
+        let status = common::get_json(addr, "/api/status");
+        (0..2).all(|i| status["channels"][i]["sensor_c"].is_number())
+    };
+    assert!(common::wait_until(10.0, measured), "no first reading within 10 s");
+    let stopped: Vec<Value> = client_runtime().block_on(async {
+        let mut ws = ws_connect(addr, "").await;
+        let mut events = Vec::new();
+        let ramp = json!({"0": [{"to_c": 45, "rate_c_s": 2}], "1": [{"to_c": 45, "rate_c_s": 2}]});
+        let started = ask_keeping(
+            &mut ws,
+            &json!({"type": "program", "id": 1, "channels": ramp}).to_string(),
+            &mut events,
+        )
+        .await;
+        assert_eq!(started["type"], "ok", "{started}");
+        tokio::time::sleep(std::time::Duration::from_millis(1500)).await;
+        {
+            let mut c = control.lock().expect("spy control");
+            c.failing_reads.push(0);
+            c.cut_reads.push((1, thermode_device::DeviceCut::OverTemperature));
+        }
+        let stops = |events: &[Value]| events.iter().filter(|e| e["event"] == "program_stopped").count();
+        while stops(&events) < 2 {
+            let message = next_json(&mut ws).await;
+            if message["type"] == "program_event" {
+                events.push(message);
+            }
+        }
+        {
+            let mut c = control.lock().expect("spy control");
+            c.failing_reads.clear();
+            c.cut_reads.clear();
+        }
+        tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+        let cleared = ask_keeping(&mut ws, r#"{"type":"clear_fault","id":2,"channel":0}"#, &mut events).await;
+        assert_eq!(cleared["type"], "ok", "{cleared}");
+        tokio::time::sleep(std::time::Duration::from_millis(1500)).await;
+        events.into_iter().filter(|e| e["event"] == "program_stopped").collect()
+    });
+    let reasons: Vec<&str> = stopped.iter().filter_map(|e| e["reason"].as_str()).collect();
+    println!("program_stopped reasons: {reasons:?}");
+    assert!(
+        reasons.iter().any(|r| r.contains("E104")) && reasons.iter().any(|r| r.contains("device cut")),
+        "{stopped:?}"
+    );
+    let status = common::get_json(addr, "/api/status");
+    for i in 0..2 {
+        assert_eq!(
+            status["channels"][i]["mode"], "air",
+            "channel {i}: {}",
+            status["channels"][i]
+        );
+    }
+    daemon.shutdown().expect("shutdown");
+    let events = recorded_events(&path);
+    assert_eq!(
+        events.iter().filter(|e| e.3 == "program_stopped").count(),
+        2,
+        "{events:?}"
+    );
+    for channel in 0..2 {
+        let stop_s = events
+            .iter()
+            .find(|e| e.2 == channel && e.3 == "program_stopped")
+            .map_or(f64::NAN, |e| e.1);
+        let rows: Vec<(f64, f64)> = recorded(&path)
+            .into_iter()
+            .filter(|r| r.1 == channel && r.2.is_finite())
+            .map(|r| (r.0, r.2))
+            .collect();
+        let (program, after): (Vec<(f64, f64)>, Vec<(f64, f64)>) = rows.iter().partition(|r| r.0 < stop_s);
+        let steepest = program
+            .windows(2)
+            .filter(|w| w[1].1 > w[0].1)
+            .map(|w| (w[1].1 - w[0].1) / (w[1].0 - w[0].0))
+            .fold(0.0, f64::max);
+        let at_stop_c = program.last().map_or(f64::NAN, |r| r.1);
+        let highest_after_c = after.iter().map(|r| r.1).fold(f64::MIN, f64::max);
+        println!(
+            "channel {channel}: stopped at {stop_s:.2} s at {at_stop_c:.2} °C; steepest rise before {steepest:.3} °C/s, \
+             highest after {highest_after_c:.2} °C"
+        );
+        assert!(
+            steepest <= 2.0 + 1e-6,
+            "channel {channel}: set-point rose at {steepest} °C/s"
+        );
+        // Air renders the resting finger (a finger model cooled by the cold plate is warmed back, up to about
+        // 37 °C); a program resumed would have gone on to its 45 °C.
+        assert!(
+            highest_after_c < 40.0,
+            "channel {channel}: after the stop at {at_stop_c} °C the set-point went to {highest_after_c} °C"
+        );
+    }
+}

@@ -870,7 +870,8 @@ fn wait_for(protocol: &str, what: &str, mut condition: impl FnMut() -> bool) {
 /// that current wound up on an idle channel: its set-point reached 48 °C in 2 s, `plate_estimate_c` and `skin_c` passed
 /// 200 °C, and a program to 36 °C ended held at 48 °C. Now, nobody connected, with the emulated finger on the plate:
 /// for 10 s of the loop's time the true plate stays at or below 33 °C and the set-point at or below 34 °C; the plate
-/// estimate stays within 8 °C of the reading and the finger model within 8 °C of 32 °C; a program to 36 °C then ends with its last set-point held.
+/// estimate stays within 8 °C of the reading and the finger model within 8 °C of 32 °C; a program of 11 s at 44 °C
+/// then down to 36 °C runs without a fault (no false stuck drive) and ends with its last set-point held.
 #[test]
 fn an_idle_temperature_commanded_channel_rests_at_the_skin_and_a_program_ends_at_its_last_set_point() {
     for (protocol, query) in [("mecom", "?mode=temperature"), ("tcs2", "?zones=1")] {
@@ -907,16 +908,24 @@ fn an_idle_temperature_commanded_channel_rests_at_the_skin_and_a_program_ends_at
              estimate {worst_estimate_c} °C off the reading"
         );
         let socket = UdpSocket::bind("127.0.0.1:0").unwrap_or_else(|e| panic!("udp: {e}"));
-        let program = r#"{"0": [{"to_c": 36, "rate_c_s": 2}]}"#;
+        // 11 s above 43 °C first: a TCS II latched a false stuck drive (E301) after 10 s there, on a current it
+        // never receives.
+        let program = r#"{"0": [{"to_c": 44, "rate_c_s": 4}, {"hold_s": 11}, {"to_c": 36, "rate_c_s": 4}]}"#;
         socket
             .send_to(&osc_text("/thermode/program", program), ("127.0.0.1", host.osc_port))
             .unwrap_or_else(|e| panic!("send: {e}"));
         wait_for(protocol, "the program's start", || {
             status(host.http_port)["channels"][0]["program_segment"].is_number()
         });
+        let mut faults = Vec::new();
         wait_for(protocol, "the program's end", || {
-            status(host.http_port)["channels"][0]["program_segment"].is_null()
+            let c = status(host.http_port)["channels"][0].clone();
+            if c["fault"].as_u64().is_some_and(|f| f != 0) {
+                faults.push(c["fault"].clone());
+            }
+            c["program_segment"].is_null()
         });
+        assert!(faults.is_empty(), "{protocol}: faults during the program: {faults:?}");
         wait_for(protocol, "36 °C held", || {
             let c = &status(host.http_port)["channels"][0];
             let held = c["display_setpoint_c"]
