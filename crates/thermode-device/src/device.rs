@@ -9,47 +9,17 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use thermode_model::Rule;
 use thermode_safety::fault::FaultCode;
-use thermode_safety::{DriveCommand, DriveLimits, Measurement};
+use thermode_safety::{DriveCommand, DriveLimits};
 
 use crate::channel::SimulatedChannel;
 use crate::config::DeviceConfig;
 use crate::error::DeviceError;
 use crate::finger::PlateFinger;
+pub use crate::reading::Reading;
 use crate::sensor::standard_normal;
 
 /// Most channels of one display: the paper found at most about ten independently resolvable sites per hand.
 pub const MAX_CHANNELS: usize = 10;
-
-/// One reading of a channel's sensors.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Reading {
-    /// Display (plate) temperature from the PT-100 \[°C\]: lagged, noisy, quantised, held between samples; fault
-    /// values when the sensor is open or shorted.
-    pub sensor_c: f64,
-    /// Hot-side temperature from the box sensor \[°C\].
-    pub hot_side_c: f64,
-    /// When the PT-100 sample was taken \[s\] (device clock: the loop time of the last [`Device::poll`], or the sum of the steps of `SimulatedDisplay::advance`).
-    pub time_s: f64,
-    /// Sequence number of the PT-100 sample; it stops advancing when the sensor is stale.
-    pub sample_seq: u64,
-    /// The current the drive delivers \[A\] (its own measurement).
-    pub current_a: f64,
-    /// The voltage across the Peltier module \[V\] (its own measurement; NaN when the device does not report it).
-    /// `thermode identify` needs it: it fixes the absolute scale of the module's parameters.
-    pub voltage_v: f64,
-}
-
-impl Reading {
-    /// The reading as the safety envelope takes it.
-    pub fn measurement(&self) -> Measurement {
-        Measurement {
-            time_s: self.time_s,
-            sensor_c: self.sensor_c,
-            hot_side_c: self.hot_side_c,
-            sample_seq: self.sample_seq,
-        }
-    }
-}
 
 /// What a device measures or drives itself, so that the numbers it cannot give are reported as unknown (`null`),
 /// never as the controller's or the model's guess.

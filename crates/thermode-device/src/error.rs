@@ -63,7 +63,7 @@ pub enum DeviceError {
         /// The channel's newest reading, where the device goes on measuring while cut (a MeCom controller in its
         /// error state, thermode's own firmware): the plate is still seen, so its thermal dose is counted from it
         /// and not at a bound on unseen time.
-        reading: Option<crate::device::Reading>,
+        reading: Option<crate::reading::Reading>,
     },
 }
 

@@ -48,6 +48,7 @@ pub mod error;
 pub mod finger;
 pub mod link;
 pub mod link_error;
+pub mod reading;
 pub mod sensor;
 
 pub use calibrated::CalibratedDevice;

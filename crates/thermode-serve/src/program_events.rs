@@ -250,8 +250,11 @@ mod tests {
         assert!(events
             .iter()
             .all(|e| (e.channel, e.tick, e.sensor_c) == (3, 1200, Some(29.75))));
-        assert_eq!(csv_row(&events[0]), "1.200000,1200,3,response,0,,,rating,55,29.5,29.75");
-        assert_eq!(csv_row(&events[1]), "1.200000,1200,3,segment_start,1,32,,,,29.5,29.75");
+        assert_eq!(
+            csv_row(&events[0]),
+            "1.200000,1200,3,response,0,,,rating,55,29.5,29.75,"
+        );
+        assert_eq!(csv_row(&events[1]), "1.200000,1200,3,segment_start,1,32,,,,29.5,29.75,");
         assert_eq!(
             EVENTS_CSV_HEADER.split(',').count(),
             csv_row(&events[0]).split(',').count()

@@ -523,7 +523,8 @@ fn a_program_stops_with_its_reason_when_its_channel_faults_or_is_cut_and_never_r
             .filter(|r| r.1 == channel && r.2.is_finite())
             .map(|r| (r.0, r.2))
             .collect();
-        let (program, after): (Vec<(f64, f64)>, Vec<(f64, f64)>) = rows.iter().partition(|r| r.0 < stop_s);
+        let split = rows.partition_point(|r| r.0 < stop_s);
+        let (program, after) = rows.split_at(split);
         let steepest = program
             .windows(2)
             .filter(|w| w[1].1 > w[0].1)
