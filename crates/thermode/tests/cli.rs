@@ -43,6 +43,11 @@ mod lab_simulate;
 #[path = "cli/procedures.rs"]
 mod procedures;
 
+// A device file's calibration on every backend's own lines, judged by the emulators' true plate.
+#[cfg(unix)]
+#[path = "cli/calibrated_lines.rs"]
+mod calibrated_lines;
+
 // MeCom and TCS II emulators with `bench` on them.
 #[cfg(unix)]
 #[path = "cli/hardware.rs"]
