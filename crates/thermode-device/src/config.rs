@@ -96,6 +96,33 @@ impl CalibrationConfig {
         (reading_c - self.sensor_offset_c) / self.sensor_gain
     }
 
+    /// The reading \[°C\] the sensor gives at a true plate temperature `plate_c` \[°C\]: `gain · T + offset`.
+    pub fn reading_c(&self, plate_c: f64) -> f64 {
+        self.sensor_gain * plate_c + self.sensor_offset_c
+    }
+
+    /// A device-side upper line `line_c` \[°C\] (a plate temperature the device itself keeps its plate below: a
+    /// controller's object threshold, a stimulator's warmest set-point) on the scale of the sensor's own reading,
+    /// which is all the device compares: the more cautious (lower) of the line as calibrated (`gain · line +
+    /// offset`: right if the calibration is honest and the sensor errs) and the line as it stands (right if the
+    /// sensor is honest and the calibration lies). Neither an honest calibration of a sensor that reads low nor a
+    /// lying calibration of an honest sensor moves the line outward.
+    pub fn upper_line_on_reading_c(&self, line_c: f64) -> f64 {
+        line_c.min(self.reading_c(line_c))
+    }
+
+    /// The mirror of [`CalibrationConfig::upper_line_on_reading_c`] for a lower line `line_c` \[°C\]: the more
+    /// cautious (higher) of `gain · line + offset` and `line`.
+    pub fn lower_line_on_reading_c(&self, line_c: f64) -> f64 {
+        line_c.max(self.reading_c(line_c))
+    }
+
+    /// A device-side limit on how fast the plate may change, `rate_c_per_s` \[°C/s\], on the reading's scale (a
+    /// reading changes `gain` times as fast as the plate): the more cautious (lower) of `gain · rate` and `rate`.
+    pub fn rate_on_reading_c_per_s(&self, rate_c_per_s: f64) -> f64 {
+        rate_c_per_s * self.sensor_gain.min(1.0)
+    }
+
     fn values(&mut self) -> [&mut f64; 4] {
         [
             &mut self.sensor_gain,

@@ -1,6 +1,7 @@
 //! Typed errors of the device layer: bad channel numbers, bad values handed to a device, bad faults, bad
-//! configuration, link failures of real devices, a device whose watchdog is too slow, and a channel that a device's
-//! own protection cut ([`DeviceCut`]).
+//! configuration, link failures of real devices, a device whose watchdog is too slow, a channel that a device's
+//! own protection cut ([`DeviceCut`]), and a calibration a device's own lines cannot follow
+//! ([`CalibrationRefusal`]).
 
 use std::path::PathBuf;
 
@@ -52,6 +53,9 @@ pub enum DeviceError {
         /// The longest period the host accepts \[ms\].
         max_ms: u16,
     },
+    /// The device file's calibration asks more of a device's own line than the device can follow.
+    #[error(transparent)]
+    Calibration(#[from] CalibrationRefusal),
     /// The device's own protection latched part of a channel's drive off; the channel takes no drive until the
     /// device releases the cut.
     #[error("channel {channel}: {cut}")]
@@ -64,6 +68,48 @@ pub enum DeviceError {
         /// error state, thermode's own firmware): the plate is still seen, so its thermal dose is counted from it
         /// and not at a bound on unseen time.
         reading: Option<crate::reading::Reading>,
+    },
+}
+
+/// A device file's calibration (`[calibration]`, `thermode calibrate`) that a device's own line cannot follow: the
+/// device compares only its own reading, and where it does not let the host move its line, a calibration that says
+/// the reading errs outward there by more than the line's margin would let the true plate pass it.
+#[derive(Debug, Clone, Copy, PartialEq, Error)]
+pub enum CalibrationRefusal {
+    /// A cut fixed in the device's firmware (thermode's own protocol: 48 °C and 10 °C on its own reading), which
+    /// the calibration would move beyond its margin on the true scale.
+    #[error(
+        "the device file's calibration (gain {gain}, offset {offset_c} °C) says the plate sensor reads {error_c:+.2} \
+         °C off at {line_c} °C, so the device's own cut, fixed in its firmware at {line_c} °C on its own reading (the \
+         host cannot move it), would come at a true {true_c:.2} °C, more than {margin_c} K beyond {line_c} °C: \
+         refused; check the sensor's mount and the reference thermometer, and calibrate again"
+    )]
+    BeyondFixedCut {
+        /// The calibration's gain \[-\].
+        gain: f64,
+        /// The calibration's offset \[°C\].
+        offset_c: f64,
+        /// The firmware's line \[°C\] (on its reading).
+        line_c: f64,
+        /// What the sensor reads less the truth at the line, as the calibration has it \[K\].
+        error_c: f64,
+        /// The true plate at which the cut would come \[°C\].
+        true_c: f64,
+        /// How far beyond its line the cut may come on the true scale \[K\].
+        margin_c: f64,
+    },
+    /// A stimulator's neutral temperature (where its probe rests, and stays when the host is gone) above the
+    /// warmest set-point it may hold, once that is put on the zone's own reading through the calibration.
+    #[error(
+        "the neutral temperature {neutral_c} °C is above the warmest the probe may hold, {hold_max_c:.2} °C on the \
+         zone's own reading under the device file's calibration (the probe rests at neutral when the host is gone): \
+         use a lower neutral= or check the calibration"
+    )]
+    NeutralAboveHold {
+        /// The neutral temperature \[°C\].
+        neutral_c: f64,
+        /// The warmest set-point on the zone's reading \[°C\].
+        hold_max_c: f64,
     },
 }
 

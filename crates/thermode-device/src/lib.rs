@@ -58,7 +58,7 @@ pub use config::DeviceConfig;
 pub use device::{
     Device, DevicePart, Measures, Reading, RecordedCommand, RecordingDevice, SimulatedDisplay, MAX_CHANNELS,
 };
-pub use error::{DeviceCut, DeviceError};
+pub use error::{CalibrationRefusal, DeviceCut, DeviceError};
 pub use finger::{default_finger, DefaultFinger, NoFinger, PlateFinger};
 pub use link::LinkHealth;
 pub use link_error::{

@@ -16,7 +16,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use thermode_device::{Device, DeviceError, OsError, PlateFinger, SimulatedDisplay, MAX_CHANNELS};
+use thermode_device::{Device, DeviceError, OsError, PlateFinger, SensorSample, SimulatedDisplay, MAX_CHANNELS};
 use thermode_platform::Clock;
 use thiserror::Error;
 
@@ -691,6 +691,54 @@ pub(crate) fn tick_at(now_s: f64, tick_s: f64) -> Option<u64> {
     now_s
         .is_finite()
         .then(|| (now_s / tick_s + 1e-9).floor().max(0.0) as u64)
+}
+
+/// The error of an emulated device's plate sensor as the device sees it: it reads `gain · T + offset_c` at a true
+/// plate (sensor element) temperature T, and the device regulates, cuts, clamps and reports on that reading (a
+/// mounted sensor off the truth, for `thermode calibrate` and the tests of the device-side lines under a
+/// calibration). The same for every protocol's emulator (`thermode emulate --sensor-offset-c --sensor-gain`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SensorError {
+    /// The sensor's gain \[-\], positive. Default 1.
+    pub gain: f64,
+    /// The sensor's offset \[°C\], finite. Default 0.
+    pub offset_c: f64,
+}
+
+impl Default for SensorError {
+    fn default() -> Self {
+        SensorError {
+            gain: 1.0,
+            offset_c: 0.0,
+        }
+    }
+}
+
+impl SensorError {
+    /// What the sensor reads \[°C\] at the true temperature `true_c` \[°C\].
+    pub fn reads_c(&self, true_c: f64) -> f64 {
+        self.gain * true_c + self.offset_c
+    }
+
+    /// `sample` as the device reads it (its value through [`SensorError::reads_c`]).
+    pub fn sample(&self, sample: SensorSample) -> SensorSample {
+        SensorSample {
+            value_c: self.reads_c(sample.value_c),
+            ..sample
+        }
+    }
+
+    /// `Ok` for a positive gain and a finite offset.
+    pub fn check(&self) -> Result<(), EmulatorError> {
+        if self.gain.is_finite() && self.gain > 0.0 && self.offset_c.is_finite() {
+            return Ok(());
+        }
+        Err(EmulatorError::BadSetting {
+            what: "sensor gain",
+            value: self.gain,
+            requirement: "must be positive, the offset finite",
+        })
+    }
 }
 
 /// The one merged plant step \[s\] from `tick` to `target` when that is more than 0.1 s (the plant is implicit and

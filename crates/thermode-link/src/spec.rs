@@ -21,13 +21,14 @@
 use std::ops::Range;
 use std::sync::Arc;
 
-use thermode_device::{CompositeDevice, Device, DeviceConfig, DeviceError, LinkError, SpecFault};
+use thermode_device::{CalibrationRefusal, CompositeDevice, Device, DeviceConfig, DeviceError, LinkError, SpecFault};
 use thermode_platform::Clock;
 use thermode_safety::EnvelopeConfig;
 
 use crate::mecom::host::{
     lower_error_threshold_c, upper_error_threshold_c, MecomChannel, MecomConfig, MecomDevice, MecomMode,
 };
+use crate::own::guard::own_cut_allows;
 use crate::own::host::{SerialConfig, SerialDevice, SERIAL_PREFIX};
 use crate::tcs2::codec::TCS2_MIN_C;
 use crate::tcs2::host::{Tcs2Config, Tcs2Device, DEFAULT_HOLD_MAX_C};
@@ -117,18 +118,38 @@ fn number(spec: &str, key: &'static str, value: &str) -> Result<f64, DeviceError
         .ok_or_else(|| bad_value(spec, key, value, " is not a number"))
 }
 
-/// The MeCom settings of `spec`'s options over the defaults of `context`.
+/// The lower and upper object temperature error thresholds \[°C\] a MeCom controller of the device file `device`
+/// is set to, on its own reading: [`lower_error_threshold_c`] and [`upper_error_threshold_c`] through the file's
+/// calibration, the more cautious of both scales.
+pub fn mecom_thresholds_on_reading_c(device: &DeviceConfig) -> Result<(f64, f64), DeviceError> {
+    let calibration = &device.calibration;
+    Ok((
+        calibration.lower_line_on_reading_c(lower_error_threshold_c(device)?),
+        calibration.upper_line_on_reading_c(upper_error_threshold_c(device)?),
+    ))
+}
+
+/// The MeCom settings of `spec`'s options over the defaults of `context`. The device compares only its own
+/// reading, so each of its lines (object thresholds, largest change, temperature mode's target range) is put on
+/// that reading's scale through the device file's calibration, the more cautious of both scales
+/// ([`thermode_device::config::CalibrationConfig::upper_line_on_reading_c`]).
 pub fn mecom_config(
     spec: &str,
     options: &[(&str, &str)],
     context: &HardwareContext,
 ) -> Result<MecomConfig, DeviceError> {
+    let (calibration, envelope) = (&context.device.calibration, &context.envelope);
+    let (lower_error_c, upper_error_c) = mecom_thresholds_on_reading_c(&context.device)?;
     let mut config = MecomConfig {
         current_limit_a: context.device.drive.current_limit_a,
         voltage_limit_v: context.device.peltier.vmax_v,
-        lower_error_c: lower_error_threshold_c(&context.device)?,
-        upper_error_c: upper_error_threshold_c(&context.device)?,
-        max_change_c_per_s: context.envelope.max_measured_rate_c_per_s.clamp(1.0, 200.0),
+        lower_error_c,
+        upper_error_c,
+        max_change_c_per_s: calibration
+            .rate_on_reading_c_per_s(envelope.max_measured_rate_c_per_s)
+            .clamp(1.0, 200.0),
+        target_min_c: calibration.lower_line_on_reading_c(envelope.min_display_c),
+        target_max_c: calibration.upper_line_on_reading_c(envelope.max_display_c),
         ..MecomConfig::default()
     };
     for &(key, value) in options {
@@ -282,7 +303,12 @@ fn joins_earlier_bus(specs: &[String], index: usize, context: &HardwareContext) 
         .any(|earlier| path_of(earlier).as_ref() == Some(&path))
 }
 
-/// The TCS II settings of `spec`'s options over the defaults of `context`.
+/// The TCS II settings of `spec`'s options over the defaults of `context`. The stimulator regulates and clamps on its
+/// own reading, so its lines (the warmest and coolest set-points streamed, `Om`) are put on that reading's scale
+/// through the device file's calibration, the more cautious of both scales
+/// ([`thermode_device::config::CalibrationConfig::upper_line_on_reading_c`]): a zone that reads 5 °C low,
+/// honestly calibrated, holds at most a true 43 °C when the host is gone, and so does an honest zone under a
+/// calibration that lies.
 pub fn tcs2_config(spec: &str, options: &[(&str, &str)], context: &HardwareContext) -> Result<Tcs2Config, DeviceError> {
     let envelope = &context.envelope;
     let mut config = Tcs2Config {
@@ -309,9 +335,20 @@ pub fn tcs2_config(spec: &str, options: &[(&str, &str)], context: &HardwareConte
             }
         }
     }
-    config.hold_max_c = config.hold_max_c.min(DEFAULT_HOLD_MAX_C).min(envelope.max_display_c);
-    config.max_c = envelope.max_display_c.max(config.hold_max_c);
-    config.hold_min_c = envelope.min_display_c.max(TCS2_MIN_C).min(config.neutral_c);
+    let calibration = &context.device.calibration;
+    let hold_max_c = config.hold_max_c.min(DEFAULT_HOLD_MAX_C).min(envelope.max_display_c);
+    config.hold_max_c = calibration.upper_line_on_reading_c(hold_max_c);
+    config.max_c = calibration.upper_line_on_reading_c(envelope.max_display_c.max(hold_max_c));
+    config.hold_min_c = calibration
+        .lower_line_on_reading_c(envelope.min_display_c.max(TCS2_MIN_C))
+        .min(config.neutral_c);
+    if config.hold_max_c < config.neutral_c {
+        return Err(CalibrationRefusal::NeutralAboveHold {
+            neutral_c: config.neutral_c,
+            hold_max_c: config.hold_max_c,
+        }
+        .into());
+    }
     config.validate()?;
     Ok(config)
 }
@@ -326,6 +363,7 @@ pub fn open_hardware(
         if rest.is_empty() {
             return Err(bad_spec(spec, SpecFault::NoPath));
         }
+        own_cut_allows(&context.device.calibration)?;
         return Ok(Box::new(SerialDevice::open(rest, &SerialConfig::default(), clock)?));
     }
     if let Some(rest) = spec.strip_prefix(MECOM_TCP_PREFIX) {

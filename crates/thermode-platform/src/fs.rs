@@ -227,6 +227,38 @@ fn is_special_file(path: &Path) -> bool {
     std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
 }
 
+/// What `path` is when it exists and is not a regular file (following links), in words ("a FIFO", "a device", "a
+/// socket", "a directory"); None for a regular file or nothing there. For outputs written after the drives are off
+/// or inputs read at start, where a FIFO without its other end would block for ever.
+pub fn special_file_kind(path: &Path) -> Option<&'static str> {
+    std::fs::metadata(path)
+        .ok()
+        .filter(|m| !m.is_file())
+        .map(|m| file_kind(&m.file_type()))
+}
+
+/// What a file that is not a regular file is, in words.
+pub fn file_kind(kind: &std::fs::FileType) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if kind.is_fifo() {
+            return "a FIFO";
+        }
+        if kind.is_char_device() || kind.is_block_device() {
+            return "a device";
+        }
+        if kind.is_socket() {
+            return "a socket";
+        }
+    }
+    if kind.is_dir() {
+        "a directory"
+    } else {
+        "not a regular file"
+    }
+}
+
 /// `.NAME.PID.tmp.EXT` beside `path`.
 fn temporary_path(path: &Path) -> PathBuf {
     let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("output");

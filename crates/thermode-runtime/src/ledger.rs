@@ -51,7 +51,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use serde::{Deserialize, Serialize};
 use thermode_device::MAX_CHANNELS;
 use thermode_model::params::{BadValue, Rule};
-use thermode_platform::fs::AtMost;
+use thermode_platform::fs::{file_kind, AtMost};
 use thermode_platform::{utc_iso8601, write_bytes_atomically};
 use thermode_safety::DoseLedger;
 use thiserror::Error;
@@ -568,28 +568,6 @@ fn read_regular_text(path: &Path, limit: u64) -> io::Result<String> {
     let mut text = String::new();
     AtMost::new(file, limit).read_to_string(&mut text)?;
     Ok(text)
-}
-
-/// What a file that is not a regular file is, in words.
-fn file_kind(kind: &std::fs::FileType) -> &'static str {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        if kind.is_fifo() {
-            return "a FIFO";
-        }
-        if kind.is_char_device() || kind.is_block_device() {
-            return "a device";
-        }
-        if kind.is_socket() {
-            return "a socket";
-        }
-    }
-    if kind.is_dir() {
-        "a directory"
-    } else {
-        "not a regular file"
-    }
 }
 
 /// The reason, trimmed, if it is acceptable.

@@ -3,7 +3,9 @@
 //! never leaves half a file behind, and printing to standard output without panicking on a closed pipe.
 //!
 //! One convention for every command: `-` as an output file means standard output; a device or FIFO is written in
-//! place, never replaced; and every output of a command is checked ([`check_outputs`]) before the command does its
+//! place, never replaced (except an output written when the command stops, after the drives are off — `serve
+//! --record FILE.arrow` — which must be a regular file, [`check_regular_output`]: a FIFO without a reader would hold
+//! the stop for ever); and every output of a command is checked ([`check_outputs`]) before the command does its
 //! work, so that a bad second path (an unwritable plot) cannot leave the first output (the CSV) behind.
 //!
 //! One path policy: **every output folder is created** (with its parents) when the command writes into it, never
@@ -53,6 +55,20 @@ pub fn check_outputs(outputs: &[(&str, Option<&Path>)]) -> Result<()> {
             .with_context(|| format!("{option} {}: cannot write in {}", path.display(), folder.display()))?;
     }
     Ok(())
+}
+
+/// Refuses the output `path` of `option` when it exists and is not a regular file (a FIFO, a device, a socket), for
+/// an output written when the command stops (after the drives are off), where the in-place write of a special file
+/// would wait for ever for a FIFO's reader, deaf to signals. Checked without opening it.
+pub fn check_regular_output(option: &str, path: &Path) -> Result<()> {
+    match thermode_platform::fs::special_file_kind(path) {
+        Some(kind) => bail!(
+            "{option} {}: it is {kind}, not a regular file: this output is written when the command stops, where \
+             a FIFO without a reader would hold it for ever; name a regular file",
+            path.display()
+        ),
+        None => Ok(()),
+    }
 }
 
 /// The folder of the output file `path` (`.` for a bare file name).

@@ -34,9 +34,19 @@ pub fn record_folder(record: &Path) -> PathBuf {
 /// long the session.
 const BLOCK_ROWS: usize = 64 * 1024;
 
+/// Refuses `target` or its clock sidecar when either is not a regular file (a FIFO, a device, a socket): both are
+/// written when `serve` stops, after the drives are off, where a FIFO without a reader would hold it for ever, deaf
+/// to signals ([`crate::output::check_regular_output`]). Checked at start and again before the write.
+pub fn check_targets(target: &Path) -> Result<()> {
+    crate::output::check_regular_output("--record", target)?;
+    crate::output::check_regular_output("--record", &target.with_extension("clock.json"))
+}
+
 /// Writes the session's CSV files (earlier segments first) to `target` as Arrow IPC or Parquet; returns the rows.
-/// The session's clock sidecar is copied beside `target`.
+/// The session's clock sidecar is copied beside `target`. A target that has become a special file since the start is
+/// refused ([`check_targets`]), never waited on.
 pub fn write_session(target: &Path, recording: &RecordStatus) -> Result<usize> {
+    check_targets(target)?;
     let mut files: Vec<PathBuf> = recording.earlier_files().into_iter().map(|(path, _)| path).collect();
     files.push(recording.path());
     let rows = write_files(target, &files, BLOCK_ROWS)?;

@@ -43,6 +43,11 @@ mod lab_simulate;
 #[path = "cli/procedures.rs"]
 mod procedures;
 
+// A device file's calibration on every backend's own lines, judged by the emulators' true plate.
+#[cfg(unix)]
+#[path = "cli/calibrated_lines.rs"]
+mod calibrated_lines;
+
 // MeCom and TCS II emulators with `bench` on them.
 #[cfg(unix)]
 #[path = "cli/hardware.rs"]
@@ -683,12 +688,11 @@ fn dose_show_and_reset_and_a_corrupt_ledger_is_refused_never_reset() {
 
 /// `thermode args`, killed and failed if it runs for 60 s (a FIFO ledger blocked `serve` for ever).
 fn thermode_within_60_s(args: &[&str]) -> Output {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_thermode"))
-        .args(args)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("run thermode");
+    with_env_within_60_s(args, &[])
+}
+
+/// The output of `child` (thermode with `args`), killed and a panic if it still runs after 60 s.
+fn wait_within_60_s(mut child: std::process::Child, args: &[&str]) -> Output {
     let start = std::time::Instant::now();
     while child.try_wait().expect("wait").is_none() {
         if start.elapsed().as_secs_f64() > 60.0 {
@@ -744,6 +748,98 @@ fn hostile_ledgers_are_refused_at_once_naming_what_is_wrong() {
             );
         }
     }
+}
+
+/// Special files where `serve` would wait for ever (issue 35, finding 9): `--record X.arrow` with X a FIFO (written
+/// when serve stops, after the drives are off: it blocked there, deaf to SIGINT), or its clock sidecar a FIFO, and
+/// `--lsl` with a FIFO as the library (the loader waited for a writer at start). Each is refused at start, exit 2,
+/// one line naming the file and what it is, before anything listens.
+#[cfg(unix)]
+#[test]
+fn serve_refuses_special_files_it_would_wait_on_for_ever() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let state = tmp.path().join("state");
+    let state = state.to_str().expect("utf-8 path");
+    let mkfifo = |path: &std::path::Path| {
+        let made = Command::new("mkfifo").arg(path).status().expect("mkfifo");
+        assert!(made.success(), "mkfifo {}", path.display());
+        path.to_str().expect("utf-8 path").to_string()
+    };
+    let arrow = mkfifo(&tmp.path().join("session.arrow"));
+    let sidecar_of = tmp.path().join("other.arrow");
+    mkfifo(&sidecar_of.with_extension("clock.json"));
+    let library = mkfifo(&tmp.path().join("liblsl.so"));
+    let sidecar_of = sidecar_of.to_str().expect("utf-8 path");
+    let serve = serve_once_on(state);
+    let cases: [(&str, Vec<&str>, Option<&str>, &str); 3] = [
+        ("--record FIFO", vec!["--record", &arrow], None, &arrow),
+        (
+            "--record, sidecar FIFO",
+            vec!["--record", sidecar_of],
+            None,
+            "other.clock.json",
+        ),
+        ("--lsl, library FIFO", vec!["--lsl"], Some(&library), &library),
+    ];
+    for (what, extra, liblsl, names) in cases {
+        let mut args = serve.to_vec();
+        args.extend(extra);
+        let out = match liblsl {
+            Some(library) => with_env_within_60_s(&args, &[("THERMODE_LIBLSL", library)]),
+            None => thermode_within_60_s(&args),
+        };
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{what}: {stderr}");
+        let errors: Vec<&str> = stderr.lines().filter(|l| l.contains("error")).collect();
+        assert!(
+            errors.len() == 1 && errors[0].contains("a FIFO, not a regular file") && errors[0].contains(names),
+            "{what}: {stderr}"
+        );
+        assert!(
+            !String::from_utf8_lossy(&out.stdout).contains("ws://"),
+            "{what}: it listened before refusing"
+        );
+    }
+}
+
+/// A Python that hangs when asked where `pylsl` lives held `serve --lsl` at start for ever (issue 35, finding 9): the
+/// probe is now killed at its time-out and named among what was tried (where the system has no liblsl of its own;
+/// with one, serve starts before asking Python).
+#[cfg(unix)]
+#[test]
+fn serve_lsl_with_a_hanging_python_probe_ends_and_names_it() {
+    let tmp = tempfile::tempdir().expect("temp dir");
+    let python = tmp.path().join("python3");
+    std::fs::write(&python, "#!/bin/sh\nexec sleep 600\n").expect("write the hanging python");
+    let made = Command::new("chmod").arg("+x").arg(&python).status().expect("chmod");
+    assert!(made.success(), "chmod");
+    let state = tmp.path().join("state");
+    let mut args = serve_once_on(state.to_str().expect("utf-8 path")).to_vec();
+    args.push("--lsl");
+    let out = with_env_within_60_s(&args, &[("THERMODE_PYTHON", python.to_str().expect("utf-8 path"))]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    if out.status.success() {
+        println!("skipped: this system has a liblsl of its own, found before Python is asked");
+        return;
+    }
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("asked of") && stderr.contains("no answer within 5 s: killed"),
+        "{stderr}"
+    );
+}
+
+/// [`thermode_within_60_s`] with `envs` set.
+fn with_env_within_60_s(args: &[&str], envs: &[(&str, &str)]) -> Output {
+    let mut command = Command::new(env!("CARGO_BIN_EXE_thermode"));
+    command
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped());
+    for (key, value) in envs {
+        command.env(key, value);
+    }
+    wait_within_60_s(command.spawn().expect("run thermode"), args)
 }
 
 /// An OSC message `/thermode/channel/<channel>/setpoint f f`.

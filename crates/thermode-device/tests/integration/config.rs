@@ -296,3 +296,40 @@ fn a_calibration_round_trips_and_is_checked() {
         );
     }
 }
+
+/// A device-side line on the reading's scale is the more cautious of the line as calibrated and as it stands, in
+/// all four cases of finding 2 of issue 35: a sensor that reads 5 °C low honestly calibrated (offset −5) puts the
+/// upper line 5 °C lower on the reading, so the device cuts at the true line; a lying calibration of an honest
+/// sensor (offset +5) leaves it where it is; lower lines mirror; a gain below 1 slows the rate limit by the gain.
+#[test]
+fn a_device_line_on_the_reading_is_the_more_cautious_of_both_scales() {
+    use thermode_device::config::CalibrationConfig;
+    let offset = |sensor_offset_c: f64, sensor_gain: f64| CalibrationConfig {
+        sensor_gain,
+        sensor_offset_c,
+        ..CalibrationConfig::default()
+    };
+    let cases = [
+        // (calibration, upper line of 48 °C on the reading, lower line of 10 °C on the reading)
+        (offset(-5.0, 1.0), 43.0, 10.0),
+        (offset(5.0, 1.0), 48.0, 15.0),
+        (offset(0.0, 1.02), 48.0, 10.2),
+        (offset(0.0, 0.98), 47.04, 10.0),
+        (CalibrationConfig::default(), 48.0, 10.0),
+    ];
+    for (calibration, upper_c, lower_c) in cases {
+        let (got_upper_c, got_lower_c) = (
+            calibration.upper_line_on_reading_c(48.0),
+            calibration.lower_line_on_reading_c(10.0),
+        );
+        assert!(
+            (got_upper_c - upper_c).abs() < 1e-9 && (got_lower_c - lower_c).abs() < 1e-9,
+            "{calibration:?}: upper line {got_upper_c} °C (want {upper_c}), lower {got_lower_c} °C (want {lower_c})"
+        );
+        // On the true scale of either reading of the sensor, the line never lies outside 10–48 °C.
+        assert!(calibration.plate_c(got_upper_c) <= 48.0 + 1e-9 && got_upper_c <= 48.0);
+        assert!(calibration.plate_c(got_lower_c) >= 10.0 - 1e-9 && got_lower_c >= 10.0);
+    }
+    assert_eq!(offset(0.0, 0.98).rate_on_reading_c_per_s(50.0), 49.0);
+    assert_eq!(offset(0.0, 1.02).rate_on_reading_c_per_s(50.0), 50.0);
+}

@@ -38,7 +38,7 @@ use thermode_model::peltier::PeltierModule;
 use super::codec::frame::{encode_ack, encode_frame, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
 use super::codec::payload::{error_number, param, status, Request};
 use crate::runner::EmulatorError;
-use crate::runner::{merged_step_s, tick_at, Firmware, FirmwareStatus, Trace};
+use crate::runner::{merged_step_s, tick_at, Firmware, FirmwareStatus, SensorError, Trace};
 
 /// The identity the emulator answers to `?IF` (20 characters).
 pub const EMULATOR_IDENTITY: &str = "thermode-TEC EMU G01";
@@ -61,11 +61,9 @@ pub struct MecomEmulatorConfig {
     /// (server error 1); the max object temperature change (4012), the live set voltage (50002) and the actual
     /// output voltage (1021) answered "parameter not available" (5). Default false.
     pub old_firmware: bool,
-    /// The object temperature sensor's gain error \[-\]: it reports `sensor_gain · T + sensor_offset_c` for a
-    /// sensor at T (a mounted sensor off the truth, for `thermode calibrate`), positive. Default 1.
-    pub sensor_gain: f64,
-    /// The object temperature sensor's offset error \[°C\] (see `sensor_gain`). Default 0.
-    pub sensor_offset_c: f64,
+    /// The object temperature sensor's error: it reports `gain · T + offset_c` for a sensor at T, and the device
+    /// regulates and compares its thresholds on that reading. Default none (gain 1, offset 0).
+    pub sensor: SensorError,
 }
 
 impl Default for MecomEmulatorConfig {
@@ -77,8 +75,7 @@ impl Default for MecomEmulatorConfig {
             kp_a_per_k: 0.4,
             ti_s: 2.0,
             old_firmware: false,
-            sensor_gain: 1.0,
-            sensor_offset_c: 0.0,
+            sensor: SensorError::default(),
         }
     }
 }
@@ -220,13 +217,7 @@ impl<F: PlateFinger> MecomEmulator<F> {
         if !(config.ti_s.is_finite() && config.ti_s > 0.0) {
             return Err(bad("ti_s", config.ti_s, "must be positive"));
         }
-        if !(config.sensor_gain.is_finite() && config.sensor_gain > 0.0 && config.sensor_offset_c.is_finite()) {
-            return Err(bad(
-                "sensor_gain",
-                config.sensor_gain,
-                "must be positive, the offset finite",
-            ));
-        }
+        config.sensor.check()?;
         if config.address == 0 || config.address == 255 {
             return Err(bad("address", f64::from(config.address), "must be from 1 to 254"));
         }
@@ -300,12 +291,12 @@ impl<F: PlateFinger> MecomEmulator<F> {
     fn step_plant(&mut self, dt_s: f64) {
         let now_s = self.time_s();
         // The device sees its sensor's reading, errors included.
-        let (gain, offset_c) = (self.config.sensor_gain, self.config.sensor_offset_c);
+        let sensor = self.config.sensor;
         for (i, inst) in self.instances.iter_mut().enumerate() {
             let Ok(channel) = self.display.channel_mut(i) else {
                 continue;
             };
-            let sensor_c = gain * channel.state().sensor.value_c + offset_c;
+            let sensor_c = sensor.reads_c(channel.state().sensor.value_c);
             let limit_a = f64::from(inst.current_limit_a).min(inst.hardware_limit_a);
             let heat_a = if self.error.is_some() || !inst.enabled() {
                 inst.integral_a = 0.0;
@@ -335,7 +326,7 @@ impl<F: PlateFinger> MecomEmulator<F> {
             };
             let state = channel.step(dt_s, heat_a);
             inst.applied_a = state.applied_current_a;
-            let reading_c = gain * state.sensor.value_c + offset_c;
+            let reading_c = sensor.reads_c(state.sensor.value_c);
             if self.error.is_none() {
                 if reading_c > f64::from(inst.upper_error_c) {
                     self.error = Some((error_number::OBJECT_TOO_HIGH, (i + 1) as u8, now_s));
@@ -446,9 +437,7 @@ impl<F: PlateFinger> MecomEmulator<F> {
             106 => i(self.error.map_or(0, |(_, inst, _)| i32::from(inst))),
             107 => i(0),
             108 => i(self.save_to_flash),
-            param::OBJECT_TEMPERATURE => {
-                f(self.config.sensor_gain * state.sensor.value_c + self.config.sensor_offset_c)
-            }
+            param::OBJECT_TEMPERATURE => f(self.config.sensor.reads_c(state.sensor.value_c)),
             param::SINK_TEMPERATURE => f(channel.hot_side_reading_c()),
             param::TARGET_OBJECT_TEMPERATURE => f(inst.active_target_c()),
             param::ACTUAL_OUTPUT_CURRENT => f(inst.applied_a * inst.sign()),

@@ -16,8 +16,13 @@
 //!   current every cycle (sign per the device's "positive current is" 3034), so thermode's controller and envelope
 //!   drive the Peltier and the device's limits are the second line; live enable follows whether the current is
 //!   non-zero. *Temperature-commanded* — the device's own controller follows the live target (50012), which
-//!   carries the envelope's shaped set-point of the gated command ([`DriveCommand::setpoint_c`]); a command without
-//!   one (off, a hold, a fault) disables the output.
+//!   carries the envelope's shaped set-point of the gated command ([`DriveCommand::setpoint_c`]), clamped to
+//!   [`MecomConfig::target_min_c`]–[`MecomConfig::target_max_c`] (the envelope's range on the device's own reading:
+//!   what it regulates to if the host dies while another client feeds its watchdog); a command without one (off, a
+//!   hold, a fault) disables the output. Every device-side line (the thresholds, the rate, the target range) is set
+//!   on the more cautious of the calibrated and the raw scale when the device file has a `[calibration]`
+//!   ([`crate::spec::mecom_config`]), so neither an honest calibration of a sensor that errs nor a lying calibration
+//!   of an honest sensor moves a line outward.
 //! - **Cycle**: a worker thread owns the port and, at most every [`MecomConfig::cycle_interval_s`], per channel
 //!   writes the drive and reads object temperature (1000), sink temperature (1001), actual current (1020), actual
 //!   voltage (1021, which `thermode identify` needs), device
@@ -136,6 +141,14 @@ pub struct MecomConfig {
     /// Largest plausible object temperature change \[°C/s\] (4012), in \[1, 200\]. Default 50 (the envelope's
     /// implausible-rate check).
     pub max_change_c_per_s: f64,
+    /// Temperature mode: the coolest live target (50012) sent \[°C\], on the device's own reading. Default 15 (the
+    /// envelope's minimum); `--device mecom:…` sets it from the envelope and the device file's calibration (the
+    /// more cautious of both scales, [`thermode_device::config::CalibrationConfig::lower_line_on_reading_c`]).
+    pub target_min_c: f64,
+    /// Temperature mode: the warmest live target (50012) sent \[°C\], on the device's own reading: what the device
+    /// regulates to when the host is gone and another client feeds its watchdog. Default 48 (the envelope's
+    /// maximum); `--device mecom:…` sets it as [`MecomConfig::target_min_c`].
+    pub target_max_c: f64,
     /// Reset (`RS`) a device found in its error state at connect (e.g. after the watchdog of an earlier session
     /// tripped) instead of refusing it. Default true.
     pub reset_on_error: bool,
@@ -167,6 +180,8 @@ impl Default for MecomConfig {
             // The default display's file is valid; were it not, 10 °C makes `validate` refuse the configuration.
             upper_error_c: upper_error_threshold_c(&DeviceConfig::default()).unwrap_or(ABSOLUTE_MIN_C),
             max_change_c_per_s: 50.0,
+            target_min_c: 15.0,
+            target_max_c: ABSOLUTE_MAX_C,
             reset_on_error: true,
             reconnect_after_silence_s: 1.0,
             reconnect_backoff_max_s: 5.0,
@@ -206,6 +221,18 @@ impl MecomConfig {
             ("mecom lower_error_c [°C]", self.lower_error_c, -273.0, 1000.0),
             ("mecom upper_error_c [°C]", self.upper_error_c, -273.0, 1000.0),
             ("mecom max_change_c_per_s [°C/s]", self.max_change_c_per_s, 1.0, 200.0),
+            (
+                "mecom target_min_c [°C]",
+                self.target_min_c,
+                ABSOLUTE_MIN_C,
+                ABSOLUTE_MAX_C,
+            ),
+            (
+                "mecom target_max_c [°C]",
+                self.target_max_c,
+                self.target_min_c,
+                ABSOLUTE_MAX_C,
+            ),
             (
                 "mecom reconnect_after_silence_s [s]",
                 self.reconnect_after_silence_s,
@@ -1231,7 +1258,10 @@ impl Worker {
                 )
             }
             MecomMode::Temperature => match command.setpoint_c {
-                Some(setpoint_c) => (true, Request::set_f32(param::LIVE_TARGET, i, setpoint_c as f32)),
+                Some(setpoint_c) => {
+                    let target_c = setpoint_c.clamp(self.config.target_min_c, self.config.target_max_c);
+                    (true, Request::set_f32(param::LIVE_TARGET, i, target_c as f32))
+                }
                 None => (false, Request::set_i32(param::LIVE_ENABLE, i, 0)),
             },
         };

@@ -43,7 +43,7 @@ use super::codec::{
 use super::guard::{Cuts, GuardTrip, PlateGuard};
 #[cfg(unix)]
 use crate::runner::PtyRunner;
-use crate::runner::{Control, Emulated, EmulatorError, RunEnd, Trace};
+use crate::runner::{Control, Emulated, EmulatorError, RunEnd, SensorError, Trace};
 use thermode_device::DeviceError;
 use thermode_device::PlateFinger;
 use thermode_device::{Device, SimulatedDisplay, MAX_CHANNELS};
@@ -55,7 +55,7 @@ pub const EMULATOR_FIRMWARE: FirmwareVersion = FirmwareVersion {
     patch: 0,
 };
 
-/// Timing of the emulated firmware.
+/// Timing and sensor of the emulated firmware.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EmulatorConfig {
     /// Watchdog period \[ms\], 10 to 60000. Default [`DEFAULT_WATCHDOG_MS`] (250).
@@ -70,6 +70,9 @@ pub struct EmulatorConfig {
     pub max_catch_up_s: f64,
     /// Seed of the link-fault randomness (ChaCha8). Default 0.
     pub fault_seed: u64,
+    /// The plate sensor's error: each channel reads `gain · T + offset_c` at T, and the firmware cuts
+    /// ([`PlateGuard`]) and reports on that reading. Default none (gain 1, offset 0).
+    pub sensor: SensorError,
 }
 
 impl Default for EmulatorConfig {
@@ -80,6 +83,7 @@ impl Default for EmulatorConfig {
             tick_s: 1e-3,
             max_catch_up_s: 0.1,
             fault_seed: 0,
+            sensor: SensorError::default(),
         }
     }
 }
@@ -113,6 +117,7 @@ impl EmulatorConfig {
                 });
             }
         }
+        self.sensor.check()?;
         if !(self.max_catch_up_s.is_finite() && self.max_catch_up_s >= self.tick_s) {
             return Err(EmulatorError::BadSetting {
                 what: "max_catch_up_s",
@@ -308,7 +313,8 @@ impl<F: PlateFinger> Emulator<F> {
         let mut guards = Vec::with_capacity(display.channel_count());
         for i in 0..display.channel_count() {
             let channel = display.channel(i)?;
-            let guard = PlateGuard::new(channel.config(), channel.state().sensor).map_err(DeviceError::from)?;
+            let sample = config.sensor.sample(channel.state().sensor);
+            let guard = PlateGuard::new(channel.config(), sample).map_err(DeviceError::from)?;
             guards.push(guard);
         }
         let report_every = ((f64::from(config.report_interval_ms) * 1e-3 / config.tick_s).round() as u64).max(1);
@@ -528,7 +534,7 @@ impl<F: PlateFinger> Emulator<F> {
                 state.time_s,
                 state.applied_current_a,
                 hot_side_c,
-                state.sensor,
+                self.config.sensor.sample(state.sensor),
             );
         }
         self.pending_s = 0.0;
@@ -629,7 +635,7 @@ impl<F: PlateFinger> Emulator<F> {
         let limit_a = channel.config().drive.current_limit_a;
         let commanded_a = self.commanded_a[index];
         let mut faults = 0u8;
-        let sensor_c = state.sensor.value_c;
+        let sensor_c = self.config.sensor.reads_c(state.sensor.value_c);
         if sensor_c >= SENSOR_OPEN_THRESHOLD_C {
             faults |= ChannelFaults::SENSOR_OPEN;
         }

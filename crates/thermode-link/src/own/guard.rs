@@ -53,7 +53,8 @@
 //! [`SENSOR_SHORT_THRESHOLD_C`], or not a number) leaves the plate unbounded: both directions are cut. A frozen
 //! sensor stops the sample clock; the rise since the last sample grows until the bound cuts.
 
-use thermode_device::{DeviceConfig, SensorSample};
+use thermode_device::config::CalibrationConfig;
+use thermode_device::{CalibrationRefusal, DeviceConfig, SensorSample};
 use thermode_model::peltier::PeltierModule;
 use thermode_safety::{ABSOLUTE_MAX_C, ABSOLUTE_MIN_C};
 
@@ -117,6 +118,33 @@ pub fn sensor_lag_cooling_margin_c(config: &DeviceConfig) -> Result<f64, thermod
     let cooling_w = -module.heat_into_display_w(-current_a, PLATE_MIN_C, PLATE_MIN_C);
     let rate_c_per_s = cooling_w.max(0.0) / config.plate.heat_capacity_j_k;
     Ok(config.sensor.time_constant_s.max(0.0) * rate_c_per_s)
+}
+
+/// How far beyond its lines ([`PLATE_MAX_C`], [`PLATE_MIN_C`]) the firmware's cut may come on the true scale under
+/// a device file's calibration \[K\]: 0.5, so a sensor that reads low, honestly calibrated, still has its cut
+/// stop the true plate by 48.5 °C (the line every host-kill test judges by; the cut itself peaks at 47.64 °C with an
+/// honest sensor). The cut compares only the firmware's own reading and the protocol has no message to move it.
+pub const CALIBRATION_MARGIN_C: f64 = 0.5;
+
+/// `Ok` if the firmware's fixed cut, compared with its own reading, still holds the true plate within
+/// [`CALIBRATION_MARGIN_C`] of its lines under `calibration` (the reading `gain · T + offset` at a true T: the cut
+/// at a reading of 48 °C comes at a true `(48 − offset) / gain`); else the refusal that says by how much. A sensor
+/// that reads high at 48 °C (or low at 10 °C) only makes the cut come earlier, and is allowed.
+pub fn own_cut_allows(calibration: &CalibrationConfig) -> Result<(), CalibrationRefusal> {
+    for (line_c, outward) in [(PLATE_MAX_C, 1.0), (PLATE_MIN_C, -1.0)] {
+        let true_c = calibration.plate_c(line_c);
+        if (true_c - line_c) * outward > CALIBRATION_MARGIN_C {
+            return Err(CalibrationRefusal::BeyondFixedCut {
+                gain: calibration.sensor_gain,
+                offset_c: calibration.sensor_offset_c,
+                line_c,
+                error_c: calibration.reading_c(line_c) - line_c,
+                true_c,
+                margin_c: CALIBRATION_MARGIN_C,
+            });
+        }
+    }
+    Ok(())
 }
 
 /// What a channel's guard has cut.

@@ -6,7 +6,8 @@
 //! mode (each zone's target ramps at its speed to its stimulation temperature and stays there), `A` (leave follow
 //! mode: back to neutral at the return speed), `F` mute, `Oa`/`Ob` streams, `E` temperatures once, `Q` error state.
 //! Each zone's plate is driven by the emulator's own PI controller on its sensor towards the ramped target, within
-//! the display's current limit. Like the stimulator, it has **no communication watchdog**: with the host gone it
+//! the display's current limit (its sensor may err, [`Tcs2EmulatorConfig::sensor`]: the stimulator then regulates,
+//! clamps and reports on the wrong reading). Like the stimulator, it has **no communication watchdog**: with the host gone it
 //! holds the last stimulation temperature for ever.
 //!
 //! Temperatures stream, unless muted, once a second outside follow mode and at 100 Hz in follow mode (the
@@ -18,7 +19,7 @@ use thermode_device::{Device, PlateFinger, SimulatedDisplay};
 
 use super::codec::{parse_command, Command, ParseStep, Temperatures, TCS2_ZONES};
 use crate::runner::EmulatorError;
-use crate::runner::{merged_step_s, tick_at, Firmware, FirmwareStatus, Trace};
+use crate::runner::{merged_step_s, tick_at, Firmware, FirmwareStatus, SensorError, Trace};
 
 /// Settings of the emulated stimulator.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -31,6 +32,9 @@ pub struct Tcs2EmulatorConfig {
     pub kp_a_per_k: f64,
     /// Integral time of the zone controllers \[s\]. Default 2.
     pub ti_s: f64,
+    /// The zones' sensor error: each reads `gain · T + offset_c` at T, and the stimulator regulates, clamps and
+    /// reports on that reading. Default none (gain 1, offset 0).
+    pub sensor: SensorError,
 }
 
 impl Default for Tcs2EmulatorConfig {
@@ -40,6 +44,7 @@ impl Default for Tcs2EmulatorConfig {
             forced_stream_hz: None,
             kp_a_per_k: 0.4,
             ti_s: 2.0,
+            sensor: SensorError::default(),
         }
     }
 }
@@ -97,6 +102,7 @@ impl<F: PlateFinger> Tcs2Emulator<F> {
         if !(1e-4..=0.01).contains(&config.tick_s) {
             return Err(bad("tick_s", config.tick_s, "must be from 1e-4 to 0.01"));
         }
+        config.sensor.check()?;
         if let Some(hz) = config.forced_stream_hz {
             if !(hz.is_finite() && hz > 0.0 && hz <= 1000.0) {
                 return Err(bad("forced_stream_hz", hz, "must lie in (0, 1000]"));
@@ -167,7 +173,7 @@ impl<F: PlateFinger> Tcs2Emulator<F> {
         let mut zones_c = [f64::NAN; TCS2_ZONES];
         for (i, slot) in zones_c.iter_mut().enumerate().take(self.zones.len()) {
             if let Ok(channel) = self.display.channel(i) {
-                *slot = channel.state().sensor.value_c;
+                *slot = self.config.sensor.reads_c(channel.state().sensor.value_c);
             }
         }
         let neutral_c = self
@@ -256,7 +262,7 @@ impl<F: PlateFinger> Tcs2Emulator<F> {
                     let bad = self
                         .display
                         .channel(i)
-                        .is_ok_and(|c| !(-20.0..=90.0).contains(&c.state().sensor.value_c));
+                        .is_ok_and(|c| !(-20.0..=90.0).contains(&self.config.sensor.reads_c(c.state().sensor.value_c)));
                     codes.push(if bad { '1' } else { '0' });
                 }
                 self.send_line(&codes, out);
@@ -267,7 +273,7 @@ impl<F: PlateFinger> Tcs2Emulator<F> {
     }
 
     fn step(&mut self, dt_s: f64) {
-        let (follow, neutral_c) = (self.follow, self.neutral_c);
+        let (follow, neutral_c, sensor) = (self.follow, self.neutral_c, self.config.sensor);
         for (i, zone) in self.zones.iter_mut().enumerate() {
             let Ok(channel) = self.display.channel_mut(i) else {
                 continue;
@@ -282,7 +288,7 @@ impl<F: PlateFinger> Tcs2Emulator<F> {
             let step_c = speed * dt_s;
             zone.target_c += (goal_c - zone.target_c).clamp(-step_c, step_c);
             let limit_a = channel.config().drive.current_limit_a;
-            let error_c = zone.target_c - channel.state().sensor.value_c;
+            let error_c = zone.target_c - sensor.reads_c(channel.state().sensor.value_c);
             let p_a = self.config.kp_a_per_k * error_c;
             if (p_a + zone.integral_a).abs() < limit_a {
                 zone.integral_a += self.config.kp_a_per_k * error_c * dt_s / self.config.ti_s;
@@ -291,8 +297,9 @@ impl<F: PlateFinger> Tcs2Emulator<F> {
             let current_a = if current_a.is_finite() { current_a } else { 0.0 };
             // The clamp: the zone stays between where its target was and where it goes. No heating at or above the
             // higher of the two, no cooling at or below the lower (the plate has no mass beyond its own node, so it
-            // stops within a tick's rise), and the integral holds while clamped.
-            let plate_c = channel.state().plate_c;
+            // stops within a tick's rise), and the integral holds while clamped. The stimulator knows its plate only
+            // through its sensor (without the lag: its clamp reads fast), errors included.
+            let plate_c = sensor.reads_c(channel.state().plate_c);
             let clamped = (current_a > 0.0 && plate_c >= goal_c.max(zone.target_c))
                 || (current_a < 0.0 && plate_c <= goal_c.min(zone.target_c));
             let current_a = if clamped {

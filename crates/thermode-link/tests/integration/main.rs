@@ -1,5 +1,6 @@
 //! The crate's integration tests in one binary (one link instead of one per file keeps the test build short).
 
+mod calibration;
 mod emulator;
 mod guard;
 mod hardware_common;

@@ -8,7 +8,10 @@
 //! 3. the system's library search path (`LD_LIBRARY_PATH`, the loader cache): `liblsl.so.2`, `liblsl.so`
 //!    (`liblsl.dylib` on macOS, `lsl.dll` on Windows);
 //! 4. the copy inside an installed `pylsl` wheel (pylsl 1.16+ ships `pylsl/lib/liblsl.so`), found by asking
-//!    `python3` (or `$THERMODE_PYTHON`) where the `pylsl` package lives, without importing it.
+//!    `python3` (or `$THERMODE_PYTHON`) where the `pylsl` package lives, without importing it; a probe that has not
+//!    answered within [`PYTHON_PROBE_TIMEOUT_S`] is killed and counts as no package.
+//!
+//! A candidate that is not a regular file (a FIFO, a device) is refused without being opened.
 //!
 //! The C API used (liblsl 1.14+, `lsl_c.h`): stream info and its XML description, outlets, pushing one sample with
 //! an explicit timestamp, and the LSL clock.
@@ -108,8 +111,8 @@ impl std::fmt::Debug for Liblsl {
 impl Liblsl {
     /// Loads liblsl from the first candidate of the search order (module documentation) that loads.
     pub fn locate() -> Result<Liblsl, LslError> {
-        let mut tried = Vec::new();
-        for candidate in candidates() {
+        let (candidates, mut tried) = candidates();
+        for candidate in candidates {
             match Liblsl::open(&candidate) {
                 Ok(lib) => return Ok(lib),
                 Err(LslError::NotFound { tried: why }) => tried.extend(why),
@@ -119,9 +122,20 @@ impl Liblsl {
         Err(LslError::NotFound { tried })
     }
 
-    /// Loads liblsl from `path` (a file, or a bare name the system loader searches for).
+    /// Loads liblsl from `path` (a file, or a bare name the system loader searches for). A path that is not a
+    /// regular file (a FIFO, whose open would wait for a writer for ever; a device) is refused without opening it.
     pub fn open(path: &Path) -> Result<Liblsl, LslError> {
         let shown = path.display().to_string();
+        // A bare name is the loader's to search (never the working folder); a path is checked where it points.
+        let is_path = path.components().count() > 1 || path.is_absolute();
+        if let Some(kind) = is_path
+            .then(|| thermode_platform::fs::special_file_kind(path))
+            .flatten()
+        {
+            return Err(LslError::NotFound {
+                tried: vec![format!("{shown} (it is {kind}, not a regular file: not opened)")],
+            });
+        }
         // SAFETY: loading a shared library runs its initialisers; liblsl's (C++ static constructors of its
         // configuration and clock) have no preconditions on the caller. The path is one the operator pointed to
         // or liblsl's own installed name.
@@ -350,16 +364,22 @@ fn cstring(text: &str) -> Result<CString, LslError> {
     CString::new(text).map_err(|_| LslError::Nul(text.to_string()))
 }
 
-/// The candidates of the search order (module documentation).
-fn candidates() -> Vec<PathBuf> {
+/// The candidates of the search order (module documentation), and why a way of finding them failed (a Python probe
+/// that did not answer), for the error's list of what was tried.
+fn candidates() -> (Vec<PathBuf>, Vec<String>) {
     for variable in ["THERMODE_LIBLSL", "PYLSL_LIB"] {
         if let Some(path) = std::env::var_os(variable).filter(|v| !v.is_empty()) {
-            return vec![PathBuf::from(path)];
+            return (vec![PathBuf::from(path)], Vec::new());
         }
     }
     let mut all: Vec<PathBuf> = system_names().iter().map(PathBuf::from).collect();
-    all.extend(pylsl_copies());
-    all
+    match pylsl_copies() {
+        Ok(copies) => {
+            all.extend(copies);
+            (all, Vec::new())
+        }
+        Err(why) => (all, vec![why]),
+    }
 }
 
 fn system_names() -> &'static [&'static str] {
@@ -372,18 +392,133 @@ fn system_names() -> &'static [&'static str] {
     }
 }
 
-/// The library files inside the installed `pylsl` package, if Python finds one.
-fn pylsl_copies() -> Vec<PathBuf> {
+/// The longest wait for the Python probe that finds the `pylsl` package \[s\]: 5 (it answers in about 0.05 s; a
+/// hanging interpreter must not hold `serve --lsl` at start).
+pub const PYTHON_PROBE_TIMEOUT_S: f64 = 5.0;
+
+/// Why a probe program gave no answer.
+#[derive(Debug)]
+enum ProbeFailure {
+    /// It could not be started (not installed), or it ended unsuccessfully: it has nothing to say.
+    NoAnswer,
+    /// It was still running, or its output still open, at the deadline (it is killed): the reason, in words.
+    Hung(String),
+}
+
+/// What `program` with `args` printed on standard output, if it ended successfully within `timeout_s` \[s\]; else
+/// why not (one that has not ended by then is killed). Its standard input and error are closed.
+fn output_within(program: &str, args: &[&str], timeout_s: f64) -> Result<String, ProbeFailure> {
+    use std::io::Read;
+    use std::process::{Command, Stdio};
+    use std::time::{Duration, Instant};
+    let mut child = Command::new(program)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .map_err(|_| ProbeFailure::NoAnswer)?;
+    let mut stdout = child.stdout.take().ok_or(ProbeFailure::NoAnswer)?;
+    // Read on a thread of its own, so that neither a child writing much nor one whose own children keep the pipe
+    // open can hold the wait past the deadline (such a reader is left to end with the pipe).
+    let (send, receive) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let mut text = String::new();
+        let _ = send.send(stdout.read_to_string(&mut text).map(|_| text));
+    });
+    let deadline = Instant::now() + Duration::from_secs_f64(timeout_s);
+    loop {
+        match child.try_wait() {
+            Ok(Some(status)) if status.success() => break,
+            Ok(Some(_)) => return Err(ProbeFailure::NoAnswer),
+            Ok(None) if Instant::now() < deadline => std::thread::sleep(Duration::from_millis(10)),
+            _ => {
+                let _ = child.kill();
+                let _ = child.wait();
+                return Err(ProbeFailure::Hung(format!("no answer within {timeout_s} s: killed")));
+            }
+        }
+    }
+    let left = deadline.saturating_duration_since(Instant::now());
+    match receive.recv_timeout(left) {
+        Ok(Ok(text)) => Ok(text),
+        Ok(Err(_)) => Err(ProbeFailure::NoAnswer),
+        Err(_) => Err(ProbeFailure::Hung(format!(
+            "its output still open {timeout_s} s after it began"
+        ))),
+    }
+}
+
+/// The library files inside the installed `pylsl` package, if Python finds one within
+/// [`PYTHON_PROBE_TIMEOUT_S`] (none when Python or the package is missing); why the probe failed when it hung.
+fn pylsl_copies() -> Result<Vec<PathBuf>, String> {
     let python = std::env::var("THERMODE_PYTHON").unwrap_or_else(|_| "python3".into());
     let script = "import importlib.util as u; s = u.find_spec('pylsl'); \
                   print(s.submodule_search_locations[0] if s and s.submodule_search_locations else '')";
-    let Ok(out) = std::process::Command::new(python).args(["-c", script]).output() else {
-        return Vec::new();
+    let out = match output_within(&python, &["-c", script], PYTHON_PROBE_TIMEOUT_S) {
+        Ok(out) => out,
+        Err(ProbeFailure::NoAnswer) => return Ok(Vec::new()),
+        Err(ProbeFailure::Hung(why)) => return Err(format!("the pylsl package, asked of {python} ({why})")),
     };
-    let dir = String::from_utf8_lossy(&out.stdout).trim().to_string();
-    if !out.status.success() || dir.is_empty() {
-        return Vec::new();
+    let dir = out.trim().to_string();
+    if dir.is_empty() {
+        return Ok(Vec::new());
     }
     let lib = Path::new(&dir).join("lib");
-    system_names().iter().map(|name| lib.join(name)).collect()
+    Ok(system_names().iter().map(|name| lib.join(name)).collect())
+}
+
+#[cfg(all(test, unix))]
+mod tests {
+    use super::*;
+
+    /// A FIFO as the library (`THERMODE_LIBLSL`) held `serve --lsl` at start for ever, the loader waiting for a
+    /// writer; now it is refused without being opened. Judged on another thread with a generous bound.
+    #[test]
+    fn a_fifo_as_the_library_is_refused_without_opening_it() {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let fifo = dir.path().join("liblsl.so");
+        let made = std::process::Command::new("mkfifo")
+            .arg(&fifo)
+            .status()
+            .expect("run mkfifo");
+        assert!(made.success(), "mkfifo {}", fifo.display());
+        let (send, receive) = std::sync::mpsc::channel();
+        let path = fifo.clone();
+        std::thread::spawn(move || {
+            let _ = send.send(Liblsl::open(&path).map(|_| ()).map_err(|e| e.to_string()));
+        });
+        let answer = receive
+            .recv_timeout(std::time::Duration::from_secs(30))
+            .expect("Liblsl::open blocked on a FIFO");
+        let text = answer.expect_err("a FIFO loaded as liblsl");
+        assert!(
+            text.contains("a FIFO, not a regular file") && text.contains(&fifo.display().to_string()),
+            "{text}"
+        );
+    }
+
+    /// A probe that hangs is killed at its deadline and says so; one that answers is read; one that cannot run or
+    /// fails has nothing to say (as a machine without Python).
+    #[test]
+    fn a_probe_answers_within_its_time_out_or_is_killed() {
+        match output_within("sleep", &["600"], 0.2) {
+            Err(ProbeFailure::Hung(why)) => assert!(why.contains("killed"), "{why}"),
+            other => panic!("a hanging probe: {other:?}"),
+        }
+        assert_eq!(
+            output_within("sh", &["-c", "echo /some/where"], 30.0).expect("echo answers"),
+            "/some/where\n"
+        );
+        assert!(matches!(
+            output_within("/nonexistent/python3", &[], 30.0),
+            Err(ProbeFailure::NoAnswer)
+        ));
+        assert!(matches!(output_within("false", &[], 30.0), Err(ProbeFailure::NoAnswer)));
+        // A child whose own child keeps the pipe open past the deadline does not hold the wait either.
+        match output_within("sh", &["-c", "sleep 5 & echo started"], 0.5) {
+            Err(ProbeFailure::Hung(why)) => assert!(why.contains("still open"), "{why}"),
+            other => panic!("a probe whose child holds its output: {other:?}"),
+        }
+    }
 }

@@ -7,6 +7,13 @@
 //!
 //! The reference is `prompt` (the operator types each reading) or `serial:PATH`, a thermometer that writes one
 //! temperature in °C per line (many USB lab thermometers; `thermode emulate --reference-channel N` offers one).
+//!
+//! A mounted PT-100 reads within a few tenths of a degree: a fit whose offset is beyond ±[`PLAIN_OFFSET_C`] or whose
+//! gain is beyond 1 ± [`PLAIN_GAIN_ERROR`] says a lying reference or a wrong mount, and is refused (nothing written)
+//! unless the operator confirms the very figure with `--accept-offset-c C` or `--accept-gain G`. A fit that would
+//! move a device's fixed cut beyond its margin (thermode's own firmware,
+//! [`thermode_link::own::guard::own_cut_allows`]) is refused whatever is confirmed. What the envelope will act on,
+//! and where the device's own lines go, is printed with the result.
 
 use std::io::BufRead;
 use std::path::PathBuf;
@@ -17,7 +24,8 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use thermode_device::config::CalibrationConfig;
-use thermode_link::mecom::host::{lower_error_threshold_c, upper_error_threshold_c};
+use thermode_link::own::guard::own_cut_allows;
+use thermode_link::spec::mecom_thresholds_on_reading_c;
 use thermode_platform::{Clock, MonotonicClock};
 use thermode_runtime::{Command, LoopConfig, LoopHandle, Owner};
 
@@ -53,7 +61,26 @@ pub struct CalibrateArgs {
     /// How long the sensor and the reference are averaged at a plateau [s].
     #[arg(long = "average-s", value_name = "S", default_value_t = 3.0)]
     average_s: f64,
+    /// Confirms a fitted offset beyond ±1 °C [°C]: the figure the refusal printed (the fit must lie within
+    /// ±0.25 °C of it). Default: none (such a fit is refused).
+    #[arg(long = "accept-offset-c", value_name = "C", allow_negative_numbers = true)]
+    accept_offset_c: Option<f64>,
+    /// Confirms a fitted gain beyond 1 ± 0.02 [-]: the figure the refusal printed (the fit must lie within ±0.005
+    /// of it). Default: none (such a fit is refused).
+    #[arg(long = "accept-gain", value_name = "G")]
+    accept_gain: Option<f64>,
 }
+
+/// The largest offset a fit may have without the operator's confirmation \[°C\]: 1 (a mounted PT-100 reads within a
+/// few tenths; more means a lying reference, a wrong channel or a sensor off the plate).
+const PLAIN_OFFSET_C: f64 = 1.0;
+/// The largest gain error (|gain − 1|) a fit may have without the operator's confirmation \[-\]: 0.02 (2 %).
+const PLAIN_GAIN_ERROR: f64 = 0.02;
+/// How close a fitted offset must be to the one the operator confirmed \[°C\]: 0.25 (the figure as printed, 0.1 °C,
+/// and what a second run of the same calibration may differ by).
+const ACCEPT_OFFSET_TOLERANCE_C: f64 = 0.25;
+/// How close a fitted gain must be to the one the operator confirmed \[-\]: 0.005.
+const ACCEPT_GAIN_TOLERANCE: f64 = 0.005;
 
 /// The largest drift of the sensor's mean reading over half of [`PLATEAU_WINDOW_S`] at a plateau \[°C\] (the
 /// sensor's lag then hides less than a thousandth of a degree).
@@ -170,6 +197,10 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     if !(args.average_s > 0.0 && args.settle_max_s > PLATEAU_WINDOW_S) {
         bail!("--average-s must be positive and --settle-max-s longer than {PLATEAU_WINDOW_S} s");
     }
+    let finite = |v: Option<f64>| v.is_none_or(f64::is_finite);
+    if !(finite(args.accept_offset_c) && finite(args.accept_gain)) {
+        bail!("--accept-offset-c and --accept-gain must be finite numbers");
+    }
     crate::output::check_outputs(&[("--out", Some(&args.out))])?;
     let device = resolve::device_config(args.device_file.as_deref())?;
     let before = device.calibration;
@@ -217,16 +248,15 @@ pub fn run(args: &CalibrateArgs) -> Result<()> {
     write_calibration(args, device, &pairs)
 }
 
-/// The set points of `args`, each held within what the device allows (a MeCom controller's own error thresholds,
-/// with 1 °C to spare).
+/// The set points of `args`, each held within what the device allows (a MeCom controller's own error thresholds on
+/// its reading, through the file's calibration, with 1 °C to spare).
 fn held_setpoints(args: &CalibrateArgs, device: &thermode_device::DeviceConfig) -> Result<Vec<f64>> {
     if !args.device.starts_with("mecom") {
         return Ok(args.setpoints.clone());
     }
-    let (low_c, high_c) = (
-        lower_error_threshold_c(device)? + 1.0,
-        upper_error_threshold_c(device)? - 1.0,
-    );
+    let (low_c, high_c) = mecom_thresholds_on_reading_c(device)?;
+    let calibration = device.calibration;
+    let (low_c, high_c) = (calibration.plate_c(low_c) + 1.0, calibration.plate_c(high_c) - 1.0);
     let held: Vec<f64> = args.setpoints.iter().map(|c| c.clamp(low_c, high_c)).collect();
     if held != args.setpoints {
         eprintln!(
@@ -298,6 +328,82 @@ fn sensor_c(control: &LoopHandle, channel: usize) -> Result<f64> {
     Ok(status.telemetry.sensor_c)
 }
 
+/// `Ok` if the fit `calibration` is what a mounted sensor can be off by (offset within ±[`PLAIN_OFFSET_C`], gain
+/// within 1 ± [`PLAIN_GAIN_ERROR`]), or the operator confirmed its figures (`accept_offset_c`, `accept_gain`); else
+/// the refusal, which names the figures to confirm.
+fn check_plausible(
+    calibration: &CalibrationConfig,
+    accept_offset_c: Option<f64>,
+    accept_gain: Option<f64>,
+) -> Result<()> {
+    let (gain, offset_c) = (calibration.sensor_gain, calibration.sensor_offset_c);
+    let plain_offset = format!("±{PLAIN_OFFSET_C} °C");
+    let plain_gain = format!("1 ± {PLAIN_GAIN_ERROR}");
+    let checks = [
+        (
+            "offset",
+            "--accept-offset-c",
+            offset_c,
+            0.0,
+            PLAIN_OFFSET_C,
+            plain_offset,
+            accept_offset_c,
+            ACCEPT_OFFSET_TOLERANCE_C,
+        ),
+        (
+            "gain",
+            "--accept-gain",
+            gain,
+            1.0,
+            PLAIN_GAIN_ERROR,
+            plain_gain,
+            accept_gain,
+            ACCEPT_GAIN_TOLERANCE,
+        ),
+    ];
+    for (what, flag, fitted, nominal, plain, limit, accepted, tolerance) in checks {
+        if (fitted - nominal).abs() <= plain {
+            continue;
+        }
+        match accepted {
+            Some(accepted) if (fitted - accepted).abs() <= tolerance => {}
+            Some(accepted) => bail!(
+                "the fitted {what} {fitted:.4} is not the {accepted} confirmed with {flag} (it must lie within \
+                 ±{tolerance}): nothing written; check the reference and the mount, and run again"
+            ),
+            None => bail!(
+                "the fit (offset {offset_c:.3} °C, gain {gain:.5}) has its {what} beyond {limit}, more than a \
+                 mounted PT-100 is off (a few tenths of a degree): a lying reference thermometer, a wrong channel or a \
+                 sensor off the plate; nothing written. Check them; if this is the sensor's true error, run again with \
+                 {flag} {fitted:.prec$}",
+                prec = if what == "gain" { 3 } else { 1 }
+            ),
+        }
+    }
+    Ok(())
+}
+
+/// What the envelope will act on under `calibration` and where `args.device`'s own lines go, in one line; an error
+/// if the device's own lines cannot follow it (a cut fixed in its firmware).
+fn acts_on(args: &CalibrateArgs, device: &thermode_device::DeviceConfig) -> Result<String> {
+    let calibration = &device.calibration;
+    let max_c = thermode_safety::ABSOLUTE_MAX_C;
+    let lines = if args.device.starts_with(thermode_link::own::host::SERIAL_PREFIX) {
+        own_cut_allows(calibration)?;
+        "its firmware's own cut stays at 48 °C on its own reading (within its margin)".to_string()
+    } else if args.device.starts_with("mecom") {
+        let (low_c, high_c) = mecom_thresholds_on_reading_c(device)?;
+        format!("the controller's object thresholds go to {low_c:.2}–{high_c:.2} °C on its own reading")
+    } else {
+        "the device's own lines go on the more cautious of the calibrated and the raw reading".to_string()
+    };
+    Ok(format!(
+        "the envelope, the controller and the records act on the calibrated plate, (reading − offset) / gain: the \
+         display's {max_c} °C is a reading of {:.2} °C; {lines}",
+        calibration.reading_c(max_c)
+    ))
+}
+
 /// Fits the pairs, writes the device file with the calibration and prints the result.
 fn write_calibration(args: &CalibrateArgs, mut device: thermode_device::DeviceConfig, pairs: &[Pair]) -> Result<()> {
     let calibration = fit(pairs);
@@ -310,7 +416,9 @@ fn write_calibration(args: &CalibrateArgs, mut device: thermode_device::DeviceCo
             calibration.sensor_offset_c
         );
     }
+    check_plausible(&calibration, args.accept_offset_c, args.accept_gain)?;
     device.calibration = calibration;
+    let acts_on = acts_on(args, &device).map_err(|e| anyhow::anyhow!("{e}; nothing written"))?;
     crate::output::create_folder_of(&args.out)?;
     let text = device.to_toml_string();
     crate::output::write_atomically(&args.out, |out| Ok(out.write_all(text.as_bytes())?))?;
@@ -330,5 +438,51 @@ fn write_calibration(args: &CalibrateArgs, mut device: thermode_device::DeviceCo
         calibration.offset_uncertainty_c,
         args.out.display()
     );
+    println!("{acts_on}");
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn calibration(offset_c: f64, gain: f64) -> CalibrationConfig {
+        CalibrationConfig {
+            sensor_gain: gain,
+            sensor_offset_c: offset_c,
+            ..CalibrationConfig::default()
+        }
+    }
+
+    fn refusal(result: Result<()>) -> String {
+        match result {
+            Ok(()) => panic!("accepted"),
+            Err(e) => e.to_string(),
+        }
+    }
+
+    /// A fit 5 °C off is refused with the flag and figure that would confirm it; that figure confirms it, another
+    /// does not; a gain 3 % off likewise; a fit within a few tenths needs nothing.
+    #[test]
+    fn a_fit_beyond_what_a_mounted_sensor_is_off_needs_its_figure_confirmed() {
+        let off = calibration(-5.004, 1.00008);
+        let refused = refusal(check_plausible(&off, None, None));
+        assert!(
+            refused.contains("--accept-offset-c -5.0") && refused.contains("nothing written"),
+            "{refused}"
+        );
+        assert!(check_plausible(&off, Some(-5.0), None).is_ok());
+        let wrong = refusal(check_plausible(&off, Some(-3.0), None));
+        assert!(wrong.contains("-3") && wrong.contains("nothing written"), "{wrong}");
+        let steep = calibration(0.2, 1.03);
+        let refused = refusal(check_plausible(&steep, None, None));
+        assert!(refused.contains("--accept-gain 1.030"), "{refused}");
+        assert!(check_plausible(&steep, None, Some(1.03)).is_ok());
+        assert!(
+            check_plausible(&steep, Some(0.2), None).is_err(),
+            "an offset confirmed is not a gain"
+        );
+        assert!(check_plausible(&calibration(0.3, 1.01), None, None).is_ok());
+        assert!(check_plausible(&calibration(-0.99, 0.981), None, None).is_ok());
+    }
 }

@@ -93,6 +93,7 @@ fn run_own<F: PlateFinger + Send + 'static>(args: &EmulateArgs, display: Simulat
         watchdog_ms: args.watchdog_ms,
         report_interval_ms: args.report_ms,
         fault_seed: args.seed,
+        sensor: args.hardware.sensor_error(),
         ..EmulatorConfig::default()
     };
     let mut emulator = Emulator::new(display, config)?;

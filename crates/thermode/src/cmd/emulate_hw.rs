@@ -13,7 +13,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
 use thermode_device::{DefaultFinger, Device, NoFinger, PlateFinger, SimulatedDisplay};
 use thermode_link::mecom::emulator::{MecomBus, MecomEmulator, MecomEmulatorConfig};
-use thermode_link::runner::{spawn_reference_thermometer, Firmware, PtyFirmware, RunEnd, TcpFirmware};
+use thermode_link::runner::{spawn_reference_thermometer, Firmware, PtyFirmware, RunEnd, SensorError, TcpFirmware};
 use thermode_link::tcs2::emulator::{Tcs2Emulator, Tcs2EmulatorConfig};
 use thermode_platform::{Clock, MonotonicClock};
 
@@ -49,11 +49,17 @@ pub struct HardwareArgs {
     /// max temperature change 4012, live set voltage 50002 and actual voltage 1021 "parameter not available").
     #[arg(long = "old-firmware")]
     pub old_firmware: bool,
-    /// MeCom only: the object temperature sensor's offset error [°C]: it reports gain · T + offset (see
-    /// `--sensor-gain`), a mounted sensor off the truth for `thermode calibrate`.
-    #[arg(long = "sensor-offset-c", value_name = "C", default_value_t = 0.0)]
+    /// Every protocol: the plate sensor's offset error [°C]: it reads gain · T + offset (see `--sensor-gain`), and
+    /// the device regulates, cuts, clamps and reports on that reading (a mounted sensor off the truth, for
+    /// `thermode calibrate` and the tests of the device-side lines under a calibration).
+    #[arg(
+        long = "sensor-offset-c",
+        value_name = "C",
+        default_value_t = 0.0,
+        allow_negative_numbers = true
+    )]
     pub sensor_offset_c: f64,
-    /// MeCom only: the object temperature sensor's gain error [-] (see `--sensor-offset-c`).
+    /// Every protocol: the plate sensor's gain error [-] (see `--sensor-offset-c`).
     #[arg(long = "sensor-gain", value_name = "G", default_value_t = 1.0)]
     pub sensor_gain: f64,
     /// MeCom on a pseudo-terminal only: offer a reference thermometer of this channel's true plate on a second
@@ -67,6 +73,16 @@ pub struct HardwareArgs {
     /// No finger on the simulated plates (the bare display `thermode identify` and the start-up self-test measure).
     #[arg(long = "no-finger")]
     pub no_finger: bool,
+}
+
+impl HardwareArgs {
+    /// The emulated plate sensor's error (`--sensor-gain`, `--sensor-offset-c`).
+    pub fn sensor_error(&self) -> SensorError {
+        SensorError {
+            gain: self.sensor_gain,
+            offset_c: self.sensor_offset_c,
+        }
+    }
 }
 
 /// The simulated display behind an emulator, and its trace.
@@ -186,8 +202,7 @@ fn firmware<F: PlateFinger + Send + 'static>(
             let config = MecomEmulatorConfig {
                 address,
                 old_firmware: args.old_firmware,
-                sensor_gain: args.sensor_gain,
-                sensor_offset_c: args.sensor_offset_c,
+                sensor: args.sensor_error(),
                 ..MecomEmulatorConfig::default()
             };
             let mut emulator = MecomEmulator::new(display, config)?;
@@ -205,6 +220,7 @@ fn firmware<F: PlateFinger + Send + 'static>(
             }
             let config = Tcs2EmulatorConfig {
                 forced_stream_hz: args.stream_hz,
+                sensor: args.sensor_error(),
                 ..Tcs2EmulatorConfig::default()
             };
             let mut emulator = Tcs2Emulator::new(display, config)?;

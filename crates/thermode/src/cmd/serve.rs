@@ -172,6 +172,7 @@ fn start_quiet(args: &ServeArgs) -> Result<(Daemon, Started)> {
         .filter(|r| crate::record_columnar::is_columnar(r))
     {
         crate::output::check_outputs(&[("--record", Some(file))])?;
+        crate::record_columnar::check_targets(file)?;
     }
     let clock: Arc<dyn Clock> = Arc::new(MonotonicClock::new());
     let server = ServerConfig {

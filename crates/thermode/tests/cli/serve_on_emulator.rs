@@ -61,7 +61,12 @@ fn emulate(channels: usize, device_file: Option<&Path>, trace: &Path) -> (Proces
 }
 
 /// As [`emulate`], with more arguments.
-fn emulate_with(channels: usize, device_file: Option<&Path>, trace: &Path, extra: &[&str]) -> (Process, String) {
+pub(crate) fn emulate_with(
+    channels: usize,
+    device_file: Option<&Path>,
+    trace: &Path,
+    extra: &[&str],
+) -> (Process, String) {
     let mut command = Command::new(binary());
     command
         .args(["emulate", "--channels", &channels.to_string(), "--trace"])
@@ -85,7 +90,7 @@ fn emulate_with(channels: usize, device_file: Option<&Path>, trace: &Path, extra
 
 /// Where a started `serve` listens.
 pub(crate) struct Serve {
-    process: Process,
+    pub(crate) process: Process,
     pub(crate) http_port: u16,
     pub(crate) osc_port: u16,
     /// The banner's lines.
@@ -215,11 +220,11 @@ pub(crate) fn status(http_port: u16) -> serde_json::Value {
 
 /// One trace row.
 #[derive(Debug, Clone, Copy)]
-struct Row {
-    time_s: f64,
-    channel: usize,
-    plate_c: f64,
-    current_a: f64,
+pub(crate) struct Row {
+    pub(crate) time_s: f64,
+    pub(crate) channel: usize,
+    pub(crate) plate_c: f64,
+    pub(crate) current_a: f64,
 }
 
 /// Parses a whole trace row; panics on a torn or malformed one.
@@ -241,14 +246,14 @@ fn row(line: &str) -> Row {
 }
 
 /// Follows a growing trace: hands out the whole rows written since the last call.
-struct Tail {
+pub(crate) struct Tail {
     file: File,
     pending: String,
     header_seen: bool,
 }
 
 impl Tail {
-    fn open(path: &Path) -> Tail {
+    pub(crate) fn open(path: &Path) -> Tail {
         let file = File::open(path).unwrap_or_else(|e| panic!("open trace {}: {e}", path.display()));
         Tail {
             file,
@@ -257,7 +262,7 @@ impl Tail {
         }
     }
 
-    fn rows(&mut self) -> Vec<Row> {
+    pub(crate) fn rows(&mut self) -> Vec<Row> {
         let mut bytes = Vec::new();
         self.file
             .read_to_end(&mut bytes)
@@ -281,7 +286,7 @@ impl Tail {
 }
 
 /// Every row of a finished trace; the file must end with a whole row.
-fn read_trace(path: &Path) -> Vec<Row> {
+pub(crate) fn read_trace(path: &Path) -> Vec<Row> {
     let mut file = File::open(path).unwrap_or_else(|e| panic!("trace: {e}"));
     let mut text = String::new();
     file.seek(SeekFrom::Start(0)).unwrap_or_else(|e| panic!("{e}"));
@@ -449,7 +454,7 @@ fn serve_refuses_a_display_whose_sensor_is_slower_than_its_file_before_any_touch
 
 /// Another MeCom client on the controller's TCP port at `address`: asks for the object temperature every 20 ms for
 /// `watch_s` \[s\] (its frames feed the controller's communication watchdog, as any client's do).
-fn poll_mecom_as_a_second_client(address: &str, watch_s: f64) -> u64 {
+pub(crate) fn poll_mecom_as_a_second_client(address: &str, watch_s: f64) -> u64 {
     use thermode_link::mecom::codec::frame::{encode_frame, HOST_CONTROL};
     use thermode_link::mecom::codec::payload::{param, Request};
     let started = Instant::now();
