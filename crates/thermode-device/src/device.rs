@@ -37,6 +37,11 @@ pub struct Reading {
     /// The voltage across the Peltier module \[V\] (its own measurement; NaN when the device does not report it).
     /// `thermode identify` needs it: it fixes the absolute scale of the module's parameters.
     pub voltage_v: f64,
+    /// The largest heating current the device delivers now \[A\], whatever it is sent: its own second line where the
+    /// host keeps one on it (a MeCom controller's current limitation, which shrinks as the plate warms,
+    /// `thermode_link::mecom::line`); infinite for a device without one. The pipeline asks no more, so that its
+    /// models integrate the current the plate receives.
+    pub heating_limit_a: f64,
 }
 
 impl Reading {
@@ -286,6 +291,7 @@ impl<F: PlateFinger> Device for SimulatedDisplay<F> {
                 .module()
                 .voltage_v(state.applied_current_a, state.plate_c, state.hot_side_c)
                 + voltage_noise_v,
+            heating_limit_a: f64::INFINITY,
         })
     }
 

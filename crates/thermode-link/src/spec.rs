@@ -28,6 +28,7 @@ use thermode_safety::EnvelopeConfig;
 use crate::mecom::host::{
     lower_error_threshold_c, upper_error_threshold_c, MecomChannel, MecomConfig, MecomDevice, MecomMode,
 };
+use crate::mecom::line::HeatingLine;
 use crate::own::host::{SerialConfig, SerialDevice, SERIAL_PREFIX};
 use crate::tcs2::codec::TCS2_MIN_C;
 use crate::tcs2::host::{Tcs2Config, Tcs2Device, DEFAULT_HOLD_MAX_C};
@@ -129,6 +130,7 @@ pub fn mecom_config(
         lower_error_c: lower_error_threshold_c(&context.device)?,
         upper_error_c: upper_error_threshold_c(&context.device)?,
         max_change_c_per_s: context.envelope.max_measured_rate_c_per_s.clamp(1.0, 200.0),
+        heating_line: Some(HeatingLine::new(&context.device).map_err(DeviceError::from)?),
         ..MecomConfig::default()
     };
     for &(key, value) in options {

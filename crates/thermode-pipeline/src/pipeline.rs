@@ -542,7 +542,7 @@ impl DriveStage {
             voltage_v: reading.voltage_v,
             fresh_sample,
         };
-        let requested_current_a = self.controller.update(&input).unwrap_or(f64::NAN);
+        let requested_current_a = within_device_limit(self.controller.update(&input).unwrap_or(f64::NAN), reading);
         let forecast = self.guard.forecast(dt_s, finger);
         let drive = self.envelope.gate_drive(now_s, requested_current_a, &forecast);
         self.applied_current_a = drive.current_a();
@@ -575,7 +575,7 @@ impl DriveStage {
     pub fn pulse(&mut self, now_s: f64, dt_s: f64, reading: &Reading, pulse_a: f64) -> DriveCommand {
         self.guard.update(now_s, reading, self.applied_current_a, Finger::NONE);
         let forecast = self.guard.forecast(dt_s, Finger::NONE);
-        let drive = self.envelope.gate_drive(now_s, pulse_a, &forecast);
+        let drive = self.envelope.gate_drive(now_s, within_device_limit(pulse_a, reading), &forecast);
         self.applied_current_a = drive.current_a();
         drive
     }
@@ -624,6 +624,16 @@ impl DriveStage {
     /// The controller.
     pub fn controller(&self) -> &dyn Controller {
         self.controller.as_ref()
+    }
+}
+
+/// `current_a` \[A\] with its heating bounded by the device's own present limit ([`Reading::heating_limit_a`]), so
+/// that the models integrate the current the plate receives; NaN stays NaN (the envelope latches it).
+fn within_device_limit(current_a: f64, reading: &Reading) -> f64 {
+    if current_a > reading.heating_limit_a {
+        reading.heating_limit_a.max(0.0)
+    } else {
+        current_a
     }
 }
 

@@ -672,6 +672,7 @@ impl SerialDevice {
             sample_seq,
             current_a: track.current_a,
             voltage_v: f64::NAN,
+            heating_limit_a: f64::INFINITY,
         })
     }
 }

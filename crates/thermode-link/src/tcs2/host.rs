@@ -511,6 +511,7 @@ impl Device for Tcs2Device {
             sample_seq: state.sample_seq,
             current_a: 0.0,
             voltage_v: f64::NAN,
+            heating_limit_a: f64::INFINITY,
         })
     }
 
