@@ -963,3 +963,51 @@ fn the_dynamic_line_lets_the_plate_reach_48_without_a_cut() {
         }
     }
 }
+
+/// Issue 35 item 8: a channel cut by the device's own threshold (error 138) comes back without a reconnect, in both
+/// modes: once its command is off and its reading is back inside the static thresholds by 1 K, the host resets the
+/// controller (`RS`) and configures it again, and the readings return (the envelope's fault is then the operator's
+/// to clear).
+#[test]
+fn a_cut_channel_back_inside_is_reset_and_configured_again_once_it_is_off() {
+    for mode in [MecomMode::Current, MecomMode::Temperature] {
+        let clock = clock();
+        let pty = PtyFirmware::spawn(Box::new(emulator(1)), Arc::clone(&clock)).unwrap_or_else(|e| panic!("pty: {e}"));
+        // A low static threshold and no dynamic line, so a heat cuts.
+        let config = MecomConfig {
+            upper_error_c: 33.0,
+            heating_line: None,
+            ..config(mode)
+        };
+        let device = MecomDevice::open_serial(pty.path(), &config, Arc::clone(&clock))
+            .unwrap_or_else(|e| panic!("open: {e}"));
+        let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
+        let cut = wait_for(10.0, || {
+            control.tick(&[40.0]);
+            std::thread::sleep(Duration::from_millis(5));
+            status(&pty).error == Some(138)
+        });
+        assert!(cut.is_some(), "{} mode: no cut: {:?}", mode.name(), status(&pty));
+        let seen = wait_for(2.0, || matches!(control.device.read(0), Err(DeviceError::Cut { .. })));
+        assert!(seen.is_some(), "{} mode: the cut does not read as one", mode.name());
+        // The envelope sees no fresh reading (stale, fault) and the host commands the channel off.
+        control
+            .device
+            .apply(0, &DriveCommand::off())
+            .unwrap_or_else(|e| panic!("off: {e}"));
+        let back = wait_for(30.0, || control.device.read(0).is_ok());
+        let s = status(&pty);
+        println!(
+            "{} mode: cut at {:.2} s, back after {back:?} s with the output off, plate {:.2} °C, error {:?}",
+            mode.name(),
+            cut.unwrap_or_default(),
+            s.plate_c[0],
+            s.error
+        );
+        assert!(back.is_some(), "{} mode: the cut was never released: {s:?}", mode.name());
+        assert_eq!(s.error, None);
+        assert!(!s.output_on[0], "{} mode: output on after the reset", mode.name());
+        let reading = ok(&control.device.read(0));
+        assert!(reading.sensor_c <= 32.05, "{} mode: released at {} °C", mode.name(), reading.sensor_c);
+    }
+}
