@@ -22,6 +22,10 @@ pub enum FaultCode {
     /// slower, or a plate answering heat faster, than the file says): the channel is refused before any touch,
     /// and stays refused (only a device file that describes the display lifts it).
     DisplayNotAsFiled,
+    /// The display's self-test could not judge it (samples missing or stale, the pulse not delivered, the host
+    /// behind, the display not at rest, or a measurement too uncertain): the channel is held off, unverified, until
+    /// the fault is cleared, which tests the display again.
+    SelfTestInconclusive,
     /// Hot (reference) side above `hot_side_max_c`: the water cooling has failed.
     HotSideOverTemperature,
     /// Hot-side sensor below `hot_side_min_c` (shorted or implausible), so cooling failure could go unseen.
@@ -53,13 +57,14 @@ pub enum FaultCode {
 
 impl FaultCode {
     /// Every fault code, in code order.
-    pub const ALL: [FaultCode; 18] = [
+    pub const ALL: [FaultCode; 19] = [
         FaultCode::SensorOpen,
         FaultCode::SensorShort,
         FaultCode::SensorOutOfRange,
         FaultCode::SensorStale,
         FaultCode::SensorRateImplausible,
         FaultCode::DisplayNotAsFiled,
+        FaultCode::SelfTestInconclusive,
         FaultCode::HotSideOverTemperature,
         FaultCode::HotSideSensorImplausible,
         FaultCode::DisplayOverTemperature,
@@ -83,6 +88,7 @@ impl FaultCode {
             FaultCode::SensorStale => 104,
             FaultCode::SensorRateImplausible => 105,
             FaultCode::DisplayNotAsFiled => 106,
+            FaultCode::SelfTestInconclusive => 108,
             FaultCode::HotSideOverTemperature => 201,
             FaultCode::HotSideSensorImplausible => 202,
             FaultCode::DisplayOverTemperature => 203,
@@ -112,6 +118,7 @@ impl FaultCode {
             FaultCode::SensorStale => "display sensor stale",
             FaultCode::SensorRateImplausible => "display temperature changes implausibly fast",
             FaultCode::DisplayNotAsFiled => "display unlike its device file (self-test): refused",
+            FaultCode::SelfTestInconclusive => "display self-test inconclusive: held off until clear_fault tests it again",
             FaultCode::HotSideOverTemperature => "hot side over temperature (cooling failure)",
             FaultCode::HotSideSensorImplausible => "hot-side sensor implausible",
             FaultCode::DisplayOverTemperature => "display above its maximum",

@@ -1577,6 +1577,14 @@ impl Worker {
                     // The device disabled its output by itself; it stays off until thermode enables it again.
                     self.enabled[index] = false;
                 }
+                // The current and voltage measured now are the drive written at this cycle's start, in force from
+                // now on; over the interval that ends at this sample the previous cycle's were (a reading reports
+                // the current over the interval before its sample, as the simulated display does).
+                let previous = &self.last[index];
+                let (current_a, voltage_v) = match previous.last_answer_s {
+                    Some(_) => (previous.current_a, previous.voltage_v),
+                    None => (new.current_a, new.voltage_v),
+                };
                 self.last[index] = Track {
                     last_answer_s: Some(new.time_s),
                     ..new.clone()
@@ -1587,6 +1595,8 @@ impl Worker {
                         time_s: track.time_s.max(new.time_s),
                         last_answer_s: Some(self.clock.now_s()),
                         last_failure: None,
+                        current_a,
+                        voltage_v,
                         ..new
                     };
                 }
