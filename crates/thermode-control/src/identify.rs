@@ -10,7 +10,10 @@
 //!
 //! From temperatures and current alone, multiplying S, R, K, C_p, C_h and G_w by one factor changes nothing: the
 //! heat balance fixes only their ratios. The voltage fixes the scale (R and S in volts), which is why a device
-//! that does not report it cannot be identified absolutely.
+//! that does not report it cannot be identified absolutely. A record without any voltage (an older MeCom firmware,
+//! which lacks parameter 1021) is fitted with the Seebeck coefficient held at the starting file's: the ratios —
+//! what the plate's rates, the sensor's lag and therefore the safety envelope's bounds depend on — are identified,
+//! the scale is the file's ([`Identification::scale_from_file`]).
 //!
 //! # Fit
 //! Output error: the model is simulated from the first reading with the recorded currents (backward Euler for
@@ -82,6 +85,9 @@ pub struct Identification {
     pub rms_residuals: [f64; 3],
     /// Levenberg–Marquardt iterations taken.
     pub iterations: usize,
+    /// The record had no voltage: the Seebeck coefficient was held at the starting file's (its standard deviation
+    /// 0), the module's scale is the file's, and the voltage's RMS residual is NaN.
+    pub scale_from_file: bool,
 }
 
 type Theta = [f64; 8];
@@ -118,6 +124,7 @@ fn bad(e: thermode_model::ParamError) -> IdentifyError {
 /// The weighted residuals of `plant` on `record` (sample period `dt_s`): sensor, hot side and voltage per reading.
 fn residuals(plant: &PlantModel, record: &[IdSample], dt_s: f64, out: &mut Vec<f64>) {
     out.clear();
+    let with_voltage = record.iter().any(|s| s.voltage_v.is_finite());
     let (ws, wh, wv) = (
         plant.sensor_variance_c2().sqrt().recip(),
         plant.hot_side_variance_c2().sqrt().recip(),
@@ -151,7 +158,10 @@ fn residuals(plant: &PlantModel, record: &[IdSample], dt_s: f64, out: &mut Vec<f
         }
         out.push(ws * (ts - sample.sensor_c));
         out.push(wh * (th - sample.hot_side_c));
-        out.push(wv * (plant.module.voltage_v(i, tp, th) - sample.voltage_v));
+        out.push(match with_voltage {
+            true => wv * (plant.module.voltage_v(i, tp, th) - sample.voltage_v),
+            false => 0.0,
+        });
     }
 }
 
@@ -160,8 +170,8 @@ fn sum_squares(r: &[f64]) -> f64 {
 }
 
 /// Fits the thermal parameters of `initial` (the device file's, the starting point) to `record`, readings every
-/// `dt_s` seconds. The record must hold at least 100 readings, all finite (a device without a voltage reading
-/// cannot be identified).
+/// `dt_s` seconds. The record must hold at least 100 readings, all finite — or, a device without a voltage
+/// reading, with no voltage at all (NaN throughout: the scale is then the file's, see the module documentation).
 pub fn identify(record: &[IdSample], initial: &PlantModel, dt_s: f64) -> Result<Identification, IdentifyError> {
     initial.validate()?;
     if !(dt_s.is_finite() && dt_s > 0.0) || record.len() < 100 {
@@ -170,16 +180,20 @@ pub fn identify(record: &[IdSample], initial: &PlantModel, dt_s: f64) -> Result<
             record.len()
         )));
     }
+    let scale_from_file = record.iter().all(|s| s.voltage_v.is_nan());
     let finite = |s: &IdSample| {
-        [s.current_a, s.sensor_c, s.hot_side_c, s.voltage_v]
+        [s.current_a, s.sensor_c, s.hot_side_c]
             .iter()
+            .chain((!scale_from_file).then_some(&s.voltage_v))
             .all(|v| v.is_finite())
     };
     if let Some(k) = record.iter().position(|s| !finite(s)) {
         return Err(IdentifyError::Record(format!(
-            "reading {k} is not finite (a device that does not report the Peltier voltage cannot be identified)"
+            "reading {k} is not finite (a device that reports the Peltier voltage must report it in every reading)"
         )));
     }
+    // Without a voltage the scale is the file's: the Seebeck coefficient (parameter 0) stays.
+    let fixed = |k: usize| scale_from_file && k == 0;
     let mut theta = theta_of(initial);
     let mut r = Vec::new();
     residuals(&plant_of(&theta, initial)?, record, dt_s, &mut r);
@@ -190,7 +204,7 @@ pub fn identify(record: &[IdSample], initial: &PlantModel, dt_s: f64) -> Result<
     for _ in 0..MAX_ITERATIONS {
         iterations += 1;
         jacobian_at(&theta, initial, record, dt_s, &r, &mut jacobian)?;
-        let (jtj, jtr) = normal_equations(&jacobian, &r);
+        let (jtj, jtr) = normal_equations(&jacobian, &r, fixed);
         let mut improved = false;
         while lambda < 1e12 {
             let mut a = jtj;
@@ -224,12 +238,18 @@ pub fn identify(record: &[IdSample], initial: &PlantModel, dt_s: f64) -> Result<
         }
     }
     jacobian_at(&theta, initial, record, dt_s, &r, &mut jacobian)?;
-    let (jtj, _) = normal_equations(&jacobian, &r);
-    let dof = (r.len() as f64 - 8.0).max(1.0);
+    let (jtj, _) = normal_equations(&jacobian, &r, fixed);
+    let (readings, free) = match scale_from_file {
+        true => (2.0, 7.0),
+        false => (3.0, 8.0),
+    };
+    let dof = (readings * (r.len() / 3) as f64 - free).max(1.0);
     let scale = cost / dof;
     let mut relative_sd = [f64::NAN; 8];
     for (k, sd) in relative_sd.iter_mut().enumerate() {
-        if let Some(variance) = inverse_diagonal(jtj, k) {
+        if fixed(k) {
+            *sd = 0.0;
+        } else if let Some(variance) = inverse_diagonal(jtj, k) {
             *sd = (variance * scale).max(0.0).sqrt();
         }
     }
@@ -247,13 +267,18 @@ pub fn identify(record: &[IdSample], initial: &PlantModel, dt_s: f64) -> Result<
     let rms_residuals = [
         rms(0, plant.sensor_variance_c2().sqrt().recip()),
         rms(1, plant.hot_side_variance_c2().sqrt().recip()),
-        rms(2, VOLTAGE_SD_V.recip()),
+        if scale_from_file {
+            f64::NAN
+        } else {
+            rms(2, VOLTAGE_SD_V.recip())
+        },
     ];
     Ok(Identification {
         plant,
         relative_sd,
         rms_residuals,
         iterations,
+        scale_from_file,
     })
 }
 
@@ -278,13 +303,17 @@ fn jacobian_at(
     Ok(())
 }
 
-/// JᵀJ and Jᵀr.
-fn normal_equations(jacobian: &[Vec<f64>], r: &[f64]) -> ([[f64; 8]; 8], [f64; 8]) {
+/// JᵀJ and Jᵀr; a `fixed` parameter's row and column are the identity's (its step 0, its block apart).
+fn normal_equations(jacobian: &[Vec<f64>], r: &[f64], fixed: impl Fn(usize) -> bool) -> ([[f64; 8]; 8], [f64; 8]) {
     let mut jtj = [[0.0; 8]; 8];
     let mut jtr = [0.0; 8];
     for a in 0..8 {
+        if fixed(a) {
+            jtj[a][a] = 1.0;
+            continue;
+        }
         jtr[a] = jacobian[a].iter().zip(r).map(|(x, y)| x * y).sum();
-        for b in a..8 {
+        for b in (a..8).filter(|&b| !fixed(b)) {
             let v: f64 = jacobian[a].iter().zip(&jacobian[b]).map(|(x, y)| x * y).sum();
             jtj[a][b] = v;
             jtj[b][a] = v;
@@ -378,6 +407,55 @@ mod tests {
                 got[k],
                 want[k],
                 fit.iterations
+            );
+        }
+    }
+
+    /// Issue 35 item 5 (an older MeCom firmware reports no voltage): with the Seebeck coefficient held at the file's,
+    /// a record without any voltage gives back every ratio the heat balance fixes — each parameter over the
+    /// Seebeck coefficient's scale — and the sensor's lag and the water temperature exactly.
+    #[test]
+    fn a_record_without_any_voltage_gives_the_ratios_on_the_files_scale() {
+        let base = plant();
+        let truth = PlantModel {
+            module: PeltierModule::new(
+                base.module.seebeck_v_k * 1.2,
+                base.module.resistance_ohm * 0.8,
+                base.module.conductance_w_k * 1.25,
+            )
+            .expect("module"),
+            plate_heat_capacity_j_k: 0.28 * 0.75,
+            hot_heat_capacity_j_k: 1.7 * 1.3,
+            water_conductance_w_k: 0.3 * 0.7,
+            sensor_time_constant_s: 0.3 * 1.3,
+            ..base
+        };
+        let mut r = record(&truth);
+        for s in &mut r {
+            s.voltage_v = f64::NAN;
+        }
+        let fit = identify(&r, &base, 0.01).expect("identified");
+        assert!(fit.scale_from_file && fit.rms_residuals[2].is_nan() && fit.relative_sd[0] == 0.0);
+        let (got, want) = (theta_of(&fit.plant), theta_of(&truth));
+        // The scale: the file's Seebeck coefficient over the true one (1/1.2), the same for every scaled parameter.
+        let scale = got[0] - want[0];
+        assert!((scale - (1.0f64 / 1.2).ln()).abs() < 1e-12, "scale {scale}");
+        for k in [1, 2, 3, 4, 5] {
+            assert!(
+                (got[k] - want[k] - scale).abs() < 1e-4,
+                "{}: fitted {} vs true {} on the file's scale {scale}",
+                PARAMETERS[k],
+                got[k],
+                want[k]
+            );
+        }
+        for k in [6, 7] {
+            assert!(
+                (got[k] - want[k]).abs() < 1e-4,
+                "{}: {} vs {}",
+                PARAMETERS[k],
+                got[k],
+                want[k]
             );
         }
     }

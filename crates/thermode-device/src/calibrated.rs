@@ -133,6 +133,7 @@ mod tests {
                 sample_seq: 1,
                 current_a: f64::NAN,
                 voltage_v: f64::NAN,
+                heating_limit_a: f64::INFINITY,
             })
         }
         fn poll(&mut self, _now_s: f64) {}

@@ -256,6 +256,7 @@ impl<F: PlateFinger> Device for SimulatedDisplay<F> {
                 .module()
                 .voltage_v(state.applied_current_a, state.plate_c, state.hot_side_c)
                 + voltage_noise_v,
+            heating_limit_a: f64::INFINITY,
         })
     }
 

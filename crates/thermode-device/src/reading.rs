@@ -15,11 +15,17 @@ pub struct Reading {
     pub time_s: f64,
     /// Sequence number of the PT-100 sample; it stops advancing when the sensor is stale.
     pub sample_seq: u64,
-    /// The current the drive delivers \[A\] (its own measurement).
+    /// The current the drive delivered over the interval that ends at this reading's sample \[A\] (its own
+    /// measurement).
     pub current_a: f64,
     /// The voltage across the Peltier module \[V\] (its own measurement; NaN when the device does not report it).
     /// `thermode identify` needs it: it fixes the absolute scale of the module's parameters.
     pub voltage_v: f64,
+    /// The largest heating current the device delivers now \[A\], whatever it is sent: its own second line where the
+    /// host keeps one on it (a MeCom controller's current limitation, which shrinks as the plate warms,
+    /// `thermode_link::mecom::line`); infinite for a device without one. The pipeline asks no more, so that its
+    /// models integrate the current the plate receives.
+    pub heating_limit_a: f64,
 }
 
 impl Reading {

@@ -124,6 +124,9 @@ pub struct FirmwareStatus {
     pub frames_out: u64,
     /// Why the device stopped driving, if it did (its error state, e.g. `183` after its watchdog).
     pub error: Option<i32>,
+    /// Writes of the device's stored settings to its non-volatile memory (a MeCom controller's flash: a stored
+    /// parameter set while saving to flash is on); 0 for a device without one.
+    pub stored_writes: u64,
 }
 
 impl FirmwareStatus {
@@ -158,6 +161,7 @@ impl FirmwareStatus {
             frames_refused: 0,
             frames_out: 0,
             error: None,
+            stored_writes: 0,
         }
     }
 }

@@ -28,6 +28,7 @@ use thermode_safety::EnvelopeConfig;
 use crate::mecom::host::{
     lower_error_threshold_c, upper_error_threshold_c, MecomChannel, MecomConfig, MecomDevice, MecomMode,
 };
+use crate::mecom::line::HeatingLine;
 use crate::own::guard::own_cut_allows;
 use crate::own::host::{SerialConfig, SerialDevice, SERIAL_PREFIX};
 use crate::tcs2::codec::TCS2_MIN_C;
@@ -150,6 +151,12 @@ pub fn mecom_config(
             .clamp(1.0, 200.0),
         target_min_c: calibration.lower_line_on_reading_c(envelope.min_display_c),
         target_max_c: calibration.upper_line_on_reading_c(envelope.max_display_c),
+        // The dynamic line works on the device's raw reading against the true plate's limit: with a calibration
+        // the static thresholds (on the more cautious of both scales) are the line.
+        heating_line: match calibration.is_set() {
+            true => None,
+            false => Some(HeatingLine::new(&context.device).map_err(DeviceError::from)?),
+        },
         ..MecomConfig::default()
     };
     for &(key, value) in options {

@@ -299,6 +299,9 @@ pub struct ChannelPipeline {
     held: bool,
     /// The start-up self-test under way (`None`: none, or done).
     self_test: Option<Box<SelfTestRun>>,
+    /// A fresh run of the start-up self-test, for a retest once an inconclusive one's fault is cleared (`None`:
+    /// the channel runs none).
+    retest: Option<Box<SelfTestRun>>,
     /// Where the start-up self-test stands.
     self_test_state: SelfTestState,
 }
@@ -310,9 +313,11 @@ pub enum SelfTestState {
     NotRun,
     /// Under way: the pulse is driven and every stimulus but air is refused.
     Running,
-    /// Done: what it measured (a display off its file is refused, fault E106).
+    /// Done: what it measured (a display off its file is refused, fault E106; an inconclusive test holds the
+    /// channel off, fault E108, until `clear_fault` tests it again).
     Done(SelfTestReport),
-    /// Stopped before its end (stop all): the display is refused, as untested.
+    /// Stopped before its end (stop all): the display is held off, untested (fault E108), until `clear_fault`
+    /// tests it again.
     Interrupted,
 }
 
@@ -589,7 +594,7 @@ impl DriveStage {
             voltage_v: reading.voltage_v,
             fresh_sample,
         };
-        let requested_current_a = self.controller.update(&input).unwrap_or(f64::NAN);
+        let requested_current_a = within_device_limit(self.controller.update(&input).unwrap_or(f64::NAN), reading);
         let forecast = self.guard.forecast(dt_s, finger);
         let drive = self.envelope.gate_drive(now_s, requested_current_a, &forecast);
         self.applied_current_a = drive.current_a();
@@ -624,7 +629,9 @@ impl DriveStage {
         self.guard.update(now_s, reading, self.applied_current_a, Finger::NONE);
         self.act_on_reading_check(now_s);
         let forecast = self.guard.forecast(dt_s, Finger::NONE);
-        let drive = self.envelope.gate_drive(now_s, pulse_a, &forecast);
+        let drive = self
+            .envelope
+            .gate_drive(now_s, within_device_limit(pulse_a, reading), &forecast);
         self.applied_current_a = drive.current_a();
         drive
     }
@@ -694,6 +701,16 @@ impl DriveStage {
     }
 }
 
+/// `current_a` \[A\] with its heating bounded by the device's own present limit ([`Reading::heating_limit_a`]), so
+/// that the models integrate the current the plate receives; NaN stays NaN (the envelope latches it).
+fn within_device_limit(current_a: f64, reading: &Reading) -> f64 {
+    if current_a > reading.heating_limit_a {
+        reading.heating_limit_a.max(0.0)
+    } else {
+        current_a
+    }
+}
+
 /// The start-up self-test of `config`'s display ([`PipelineConfig::self_test_at_start`]): the default pulse,
 /// recorded for as long as the file's sensor needs ([`SelfTest::for_sensor`]).
 fn self_test_run(config: &PipelineConfig) -> Result<Box<SelfTestRun>, PipelineError> {
@@ -738,6 +755,7 @@ impl ChannelPipeline {
             receptor_offset_c: 0.0,
             held: false,
             self_test: config.self_test_at_start.then(|| self_test_run(config)).transpose()?,
+            retest: config.self_test_at_start.then(|| self_test_run(config)).transpose()?,
             self_test_state: if config.self_test_at_start {
                 SelfTestState::Running
             } else {
@@ -781,7 +799,7 @@ impl ChannelPipeline {
         if self.self_test.take().is_some() {
             self.self_test_state = SelfTestState::Interrupted;
             let now_s = self.drive.envelope.last_measurement().map_or(0.0, |m| m.time_s);
-            self.drive.envelope.refuse_display(now_s);
+            self.drive.envelope.hold_untested(now_s);
         }
     }
 
@@ -1013,6 +1031,9 @@ impl ChannelPipeline {
     /// Clears the envelope's latched fault at `now_s` (see [`SafetyEnvelope::clear_fault`]) and resets the
     /// controller and the plate guard's estimate, so both restart from the present readings; a finger model on the
     /// display outside the plausible band restarts from rest in air. Returns the cleared fault.
+    /// A channel whose start-up self-test was inconclusive or interrupted is tested again from here (stimuli but
+    /// air refused meanwhile); one whose display was refused stays refused (E106 latched again, should another
+    /// fault have been latched first).
     pub fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, PipelineError> {
         let cleared = self.drive.envelope.clear_fault(now_s)?;
         if cleared.is_some() {
@@ -1030,8 +1051,27 @@ impl ChannelPipeline {
                 self.receptor_offset_c = 0.0;
                 self.last_setpoint_c = None;
             }
+            self.after_cleared(now_s);
         }
         Ok(cleared)
+    }
+
+    /// What the start-up self-test asks of a channel whose fault was just cleared at `now_s` \[s\]: a refused
+    /// display refused again, an untested one (inconclusive, interrupted) tested again.
+    fn after_cleared(&mut self, now_s: f64) {
+        let untested = match self.self_test_state {
+            SelfTestState::Done(report) if report.off_file().is_some() => {
+                self.drive.envelope.refuse_display(now_s);
+                return;
+            }
+            SelfTestState::Done(report) => report.inconclusive.is_some(),
+            SelfTestState::Interrupted => true,
+            SelfTestState::NotRun | SelfTestState::Running => false,
+        };
+        if let (true, Some(fresh)) = (untested, &self.retest) {
+            self.self_test = Some(fresh.clone());
+            self.self_test_state = SelfTestState::Running;
+        }
     }
 
     /// The safety envelope (fault, thermal dose, limits).
@@ -1056,14 +1096,15 @@ impl ChannelPipeline {
     }
 
     /// Takes the display's self-test at `now_s` \[s\]: a display unlike the device file this pipeline was built
-    /// for is refused ([`SafetyEnvelope::refuse_display`]: 0 A from now on, a fault that cannot be cleared); one
+    /// for is refused ([`SafetyEnvelope::refuse_display`]: 0 A from now on, a fault that cannot be cleared); one the
+    /// test could not judge is held off ([`SafetyEnvelope::hold_untested`], until `clear_fault` tests it again); one
     /// within it has its plate bounded with the sensor lag measured ([`crate::self_test::LAG_MARGIN`]) where that
     /// is longer than the file's allowance.
     pub fn take_self_test(&mut self, report: &crate::self_test::SelfTestReport, now_s: f64) {
-        if report.off_file().is_some() {
-            self.drive.envelope.refuse_display(now_s);
-        } else {
-            self.drive.guard.allow_sensor_lag(report.guard_lag_s());
+        match report.verdict() {
+            crate::self_test::Verdict::NotAsFiled(_) => self.drive.envelope.refuse_display(now_s),
+            crate::self_test::Verdict::Inconclusive(_) => self.drive.envelope.hold_untested(now_s),
+            crate::self_test::Verdict::Matches => self.drive.guard.allow_sensor_lag(report.guard_lag_s()),
         }
     }
 

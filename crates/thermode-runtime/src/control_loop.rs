@@ -377,6 +377,7 @@ const NO_READING: Reading = Reading {
     sample_seq: 0,
     current_a: 0.0,
     voltage_v: f64::NAN,
+    heating_limit_a: f64::INFINITY,
 };
 
 impl ControlLoop {

@@ -926,6 +926,13 @@ impl SafetyEnvelope {
         self.distrusted_plate_c.is_some()
     }
 
+    /// Holds the display off, unverified, at `now_s` \[s\]: its self-test could not judge it
+    /// ([`FaultCode::SelfTestInconclusive`], latched unless a fault already is; [`SafetyEnvelope::clear_fault`]
+    /// clears it like any fault, and the pipeline then tests the display again).
+    pub fn hold_untested(&mut self, now_s: f64) {
+        self.latch(FaultCode::SelfTestInconclusive, now_s);
+    }
+
     /// Remembers the drive just gated (`current_a`, A), for the bound on unseen time.
     fn note_drive(&mut self, current_a: f64) {
         self.drive_a = current_a;

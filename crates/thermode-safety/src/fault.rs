@@ -27,6 +27,10 @@ pub enum FaultCode {
     /// from the disagreement's start on, the dose is counted at the model's plate, and the channel stays off for
     /// the session (a sensor that lied once is not trusted again).
     ReadingDisagreesWithModel,
+    /// The display's self-test could not judge it (samples missing or stale, the pulse not delivered, the host
+    /// behind, the display not at rest, or a measurement too uncertain): the channel is held off, unverified, until
+    /// the fault is cleared, which tests the display again.
+    SelfTestInconclusive,
     /// Hot (reference) side above `hot_side_max_c`: the water cooling has failed.
     HotSideOverTemperature,
     /// Hot-side sensor below `hot_side_min_c` (shorted or implausible), so cooling failure could go unseen.
@@ -62,7 +66,7 @@ pub enum FaultCode {
 
 impl FaultCode {
     /// Every fault code, in code order.
-    pub const ALL: [FaultCode; 20] = [
+    pub const ALL: [FaultCode; 21] = [
         FaultCode::SensorOpen,
         FaultCode::SensorShort,
         FaultCode::SensorOutOfRange,
@@ -70,6 +74,7 @@ impl FaultCode {
         FaultCode::SensorRateImplausible,
         FaultCode::DisplayNotAsFiled,
         FaultCode::ReadingDisagreesWithModel,
+        FaultCode::SelfTestInconclusive,
         FaultCode::HotSideOverTemperature,
         FaultCode::HotSideSensorImplausible,
         FaultCode::DisplayOverTemperature,
@@ -95,6 +100,7 @@ impl FaultCode {
             FaultCode::SensorRateImplausible => 105,
             FaultCode::DisplayNotAsFiled => 106,
             FaultCode::ReadingDisagreesWithModel => 107,
+            FaultCode::SelfTestInconclusive => 108,
             FaultCode::HotSideOverTemperature => 201,
             FaultCode::HotSideSensorImplausible => 202,
             FaultCode::DisplayOverTemperature => 203,
@@ -127,6 +133,9 @@ impl FaultCode {
             FaultCode::DisplayNotAsFiled => "display unlike its device file (self-test): refused",
             FaultCode::ReadingDisagreesWithModel => {
                 "display reading disagrees with the plate model under a drive (frozen or lying sensor)"
+            }
+            FaultCode::SelfTestInconclusive => {
+                "display self-test inconclusive: held off until clear_fault tests it again"
             }
             FaultCode::HotSideOverTemperature => "hot side over temperature (cooling failure)",
             FaultCode::HotSideSensorImplausible => "hot-side sensor implausible",

@@ -10,6 +10,7 @@ use clap::Args;
 use thermode_device::config::CalibrationConfig;
 use thermode_device::{CalibratedDevice, DefaultFinger, Device, DeviceConfig, SimulatedDisplay, MAX_CHANNELS};
 use thermode_link::spec::{is_hardware, open_display, HardwareContext};
+use thermode_pipeline::self_test::Verdict;
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, SelfTestState};
 use thermode_platform::Clock;
 use thermode_protocol::status::DeviceFileKind;
@@ -113,13 +114,20 @@ pub fn describe_self_tests(tests: &[SelfTestState]) -> Vec<String> {
         .enumerate()
         .filter_map(|(channel, test)| match test {
             SelfTestState::NotRun | SelfTestState::Running => None,
-            SelfTestState::Done(report) if report.off_file().is_some() => Some(format!(
-                "channel {channel}: {report}; the channel stays off (fault E106). A finger on the display during the \
-                 test slows its answer: restart with the display bare, or give the display its own device file"
-            )),
-            SelfTestState::Done(report) => Some(format!("channel {channel}: {report}")),
+            SelfTestState::Done(report) => Some(match report.verdict() {
+                Verdict::NotAsFiled(_) => format!(
+                    "channel {channel}: {report}; the channel stays off (fault E106). A finger on the display during \
+                     the test slows its answer: restart with the display bare, or give the display its own device file"
+                ),
+                Verdict::Inconclusive(_) => format!(
+                    "channel {channel}: {report}; the channel is held off, untested (fault E108), until clear_fault \
+                     tests it again"
+                ),
+                Verdict::Matches => format!("channel {channel}: {report}"),
+            }),
             SelfTestState::Interrupted => Some(format!(
-                "channel {channel}: the self-test was stopped before its end; the display stays off (restart to test it)"
+                "channel {channel}: the self-test was stopped before its end; the channel is held off, untested (fault \
+                 E108), until clear_fault tests it again"
             )),
         })
         .collect()

@@ -22,8 +22,14 @@
 //! With [`MecomEmulatorConfig::old_firmware`] it answers as an older firmware without the newer commands
 //! (`?VM` and three newer parameters refused as not available).
 //!
+//! **Flash.** The stored (non-live) parameters live in RAM and in a flash copy: while saving to flash is on (108 = 0,
+//! the power-up state) every stored parameter set is also written to the copy (counted:
+//! [`FirmwareStatus::stored_writes`]) and the flash status (109) reads 1 "pending" for 0.5 s after it, then 0 "all
+//! saved"; with 108 = 1 the parameters are RAM only and 109 reads 2 "disabled". `RS` restarts the device as the real
+//! one does: the stored parameters come back from the flash copy, saving to flash is on again, the live ones reset.
+//!
 //! Not emulated: error 139 (temperature changing too fast; the threshold is stored), the voltage limitation's
-//! effect (stored), flash wear, the bootloader, `?VB`/`VB` big data (answered `+01`).
+//! effect (stored), the bootloader, `?VB`/`VB` big data (answered `+01`).
 //!
 //! [`MecomBus`] puts several of them on one port at their own addresses (an RS-485 bus).
 //!
@@ -39,6 +45,10 @@ use super::codec::frame::{encode_ack, encode_frame, FrameDecoder, DEVICE_CONTROL
 use super::codec::payload::{error_number, param, status, Request};
 use crate::runner::EmulatorError;
 use crate::runner::{merged_step_s, tick_at, Firmware, FirmwareStatus, SensorError, Trace};
+
+/// How long the flash status reads "pending" after a stored parameter was set \[s\]: 0.5 (the controller saves
+/// about 0.5 s after the last change).
+const FLASH_SAVE_S: f64 = 0.5;
 
 /// The identity the emulator answers to `?IF` (20 characters).
 pub const EMULATOR_IDENTITY: &str = "thermode-TEC EMU G01";
@@ -188,7 +198,14 @@ pub struct MecomEmulator<F> {
     decoder: FrameDecoder,
     instances: Vec<Instance>,
     watchdog_s: f32,
+    /// Parameter 108: 0 saving to flash on, 1 RAM only.
     save_to_flash: i32,
+    /// The flash copy of the stored parameters (every instance's, and the watchdog).
+    flash: (Vec<Instance>, f32),
+    /// Device time until which the flash status reads "pending" \[s\].
+    flash_pending_until_s: f64,
+    /// Stored parameters written to the flash copy.
+    stored_writes: u64,
     last_valid_s: f64,
     /// The error state: (error number, instance) and when it began.
     error: Option<(i32, u8, f64)>,
@@ -234,9 +251,12 @@ impl<F: PlateFinger> MecomEmulator<F> {
             display,
             config,
             decoder: FrameDecoder::new(HOST_CONTROL),
+            flash: (instances.clone(), 0.0),
             instances,
             watchdog_s: 0.0,
             save_to_flash: 0,
+            flash_pending_until_s: 0.0,
+            stored_writes: 0,
             last_valid_s: 0.0,
             error: None,
             tick: 0,
@@ -379,7 +399,10 @@ impl<F: PlateFinger> MecomEmulator<F> {
                 Err(code) => format!("+{code:02X}"),
             },
             Ok(Request::Set { id, instance, value }) => match self.set(id, instance, value) {
-                Ok(()) => String::new(),
+                Ok(()) => {
+                    self.save_if_stored(id, now_s);
+                    String::new()
+                }
                 Err(code) => format!("+{code:02X}"),
             },
         };
@@ -392,12 +415,42 @@ impl<F: PlateFinger> MecomEmulator<F> {
         self.frames_out += 1;
     }
 
+    /// After parameter `id` was set at `now_s` \[s\]: a stored parameter goes to the flash copy while saving is on.
+    fn save_if_stored(&mut self, id: u16, now_s: f64) {
+        let live = id == param::FLASH_SAVE_OFF || (50000..=50099).contains(&id);
+        if live || self.save_to_flash != 0 {
+            return;
+        }
+        self.flash = (self.instances.clone(), self.watchdog_s);
+        self.stored_writes += 1;
+        self.flash_pending_until_s = now_s + FLASH_SAVE_S;
+    }
+
+    /// `RS`: the device restarts: stored parameters from the flash copy, saving to flash on, live parameters reset.
     fn reset(&mut self, now_s: f64) {
         self.resets += 1;
         self.error = None;
         self.last_valid_s = now_s;
-        for inst in &mut self.instances {
+        let (stored, watchdog_s) = &self.flash;
+        for (inst, saved) in self.instances.iter_mut().zip(stored) {
+            *inst = Instance {
+                applied_a: inst.applied_a,
+                ..*saved
+            };
             inst.reset_volatile();
+        }
+        self.watchdog_s = *watchdog_s;
+        self.save_to_flash = 0;
+    }
+
+    /// Parameter 109: 0 all saved, 1 a save pending, 2 saving disabled.
+    fn flash_status(&self) -> i32 {
+        if self.save_to_flash != 0 {
+            2
+        } else if self.time_s() < self.flash_pending_until_s {
+            1
+        } else {
+            0
         }
     }
 
@@ -436,7 +489,8 @@ impl<F: PlateFinger> MecomEmulator<F> {
             param::ERROR_NUMBER => i(self.error.map_or(0, |(n, _, _)| n)),
             106 => i(self.error.map_or(0, |(_, inst, _)| i32::from(inst))),
             107 => i(0),
-            108 => i(self.save_to_flash),
+            param::FLASH_SAVE_OFF => i(self.save_to_flash),
+            param::FLASH_STATUS => i(self.flash_status()),
             param::OBJECT_TEMPERATURE => f(self.config.sensor.reads_c(state.sensor.value_c)),
             param::SINK_TEMPERATURE => f(channel.hot_side_reading_c()),
             param::TARGET_OBJECT_TEMPERATURE => f(inst.active_target_c()),
@@ -515,11 +569,11 @@ impl<F: PlateFinger> MecomEmulator<F> {
         };
         let choice = |v: i32, max: i32| if (0..=max).contains(&v) { Ok(v) } else { Err(7u8) };
         match id {
-            100..=107 | 1000..=1099 => {
+            100..=107 | param::FLASH_STATUS | 1000..=1099 => {
                 self.instance(instance)?;
                 return Err(6);
             }
-            108 => {
+            param::FLASH_SAVE_OFF => {
                 self.instance(instance)?;
                 self.save_to_flash = choice(int, 1)?;
                 return Ok(());
@@ -612,6 +666,7 @@ impl<F: PlateFinger + Send> Firmware for MecomEmulator<F> {
         status.frames_refused = self.frames_refused;
         status.frames_out = self.frames_out;
         status.error = self.error_number();
+        status.stored_writes = self.stored_writes;
         status
     }
 }

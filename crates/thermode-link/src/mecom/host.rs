@@ -54,9 +54,10 @@ use thermode_safety::{DriveCommand, ABSOLUTE_MAX_C, ABSOLUTE_MIN_C};
 
 use super::codec::frame::{encode_frame, FrameCounters, FrameDecoder, DEVICE_CONTROL, HOST_CONTROL};
 use super::codec::payload::{check_answer, describe_error, error_number, param, status, Request};
+use super::line::{HeatingLine, LineState};
 pub use crate::host::Port;
 use crate::host::{self, read_step, start_thread, ReadStep, Reconnector, Recovering};
-use crate::own::guard::{sensor_lag_cooling_margin_c, sensor_lag_margin_c};
+use crate::own::guard::{sensor_lag_cooling_margin_c, sensor_lag_margin_c, RELEASE_HYSTERESIS_C};
 use thermode_device::{
     Device, DeviceConfig, DeviceCut, DeviceError, DevicePart, DownReason, LinkError, LinkFault, LinkHealth, Measures,
     MecomSetup, OsError, Reading, RequestFault, MAX_CHANNELS,
@@ -149,6 +150,13 @@ pub struct MecomConfig {
     /// regulates to when the host is gone and another client feeds its watchdog. Default 48 (the envelope's
     /// maximum); `--device mecom:…` sets it as [`MecomConfig::target_min_c`].
     pub target_max_c: f64,
+    /// The dynamic second line on heating ([`super::line`]): once the configuration is saved to flash, saving is
+    /// switched off (108 = 1) and the host keeps rewriting each channel's current limitation (2030) and upper
+    /// threshold (4011) as the plate warms, so the plate can reach 48 °C while a dead host leaves it below
+    /// [`super::line::LINE_PLATE_MAX_C`]. `None`: the static thresholds above only. Default the default display's
+    /// line; `--device mecom:…` makes it from the device file. A device that cannot switch saving off keeps the
+    /// static line (said in [`MecomCommandSet`]).
+    pub heating_line: Option<HeatingLine>,
     /// Reset (`RS`) a device found in its error state at connect (e.g. after the watchdog of an earlier session
     /// tripped) instead of refusing it. Default true.
     pub reset_on_error: bool,
@@ -182,6 +190,7 @@ impl Default for MecomConfig {
             max_change_c_per_s: 50.0,
             target_min_c: 15.0,
             target_max_c: ABSOLUTE_MAX_C,
+            heating_line: HeatingLine::new(&DeviceConfig::default()).ok(),
             reset_on_error: true,
             reconnect_after_silence_s: 1.0,
             reconnect_backoff_max_s: 5.0,
@@ -326,20 +335,27 @@ pub struct MecomCommandSet {
     pub probed_instances: bool,
     /// The optional commands the device refused as not available, in words.
     pub missing: Vec<&'static str>,
+    /// Why the dynamic second line on heating is not in force, when it is not (no `heating_line`, or the device
+    /// cannot switch saving to flash off): the static upper threshold holds.
+    pub static_line: Option<&'static str>,
 }
 
 impl MecomCommandSet {
     /// The command set in one line, as `/api/status` and the start-up log show it.
     pub fn describe(&self) -> String {
+        let line = match self.static_line {
+            Some(why) => format!("; the static upper threshold only ({why})"),
+            None => String::new(),
+        };
         if self.missing.is_empty() && !self.probed_instances {
-            return "MeCom: the full command set".to_string();
+            return format!("MeCom: the full command set{line}");
         }
         let counted = match self.probed_instances {
             true => "instances counted by probing the object temperature (1000); ",
             false => "",
         };
         format!(
-            "MeCom: the commands every firmware has; {counted}not available: {}",
+            "MeCom: the commands every firmware has; {counted}not available: {}{line}",
             self.missing.join(", ")
         )
     }
@@ -397,12 +413,16 @@ struct Command {
 struct Shared {
     tracks: Vec<Track>,
     commands: [Command; MAX_CHANNELS],
+    /// The largest heating current each channel's device delivers now \[A\] ([`Reading::heating_limit_a`]).
+    heating_limits_a: [f64; MAX_CHANNELS],
     /// All-off requests made and carried out.
     off_requested: u64,
     off_done: u64,
     stats: MecomStats,
     /// Set when the port failed; permanent.
     error: Option<LinkFault>,
+    /// Why the worker found the dynamic line unavailable, if it did (the device's command set says so).
+    static_line: Option<&'static str>,
 }
 
 /// The port and the request/answer machinery (used by the connecting thread, then by the worker).
@@ -656,12 +676,16 @@ impl MecomDevice {
             channels,
             identity,
             serials,
-            commands,
+            mut commands,
         } = connect(&mut link, config, deadline_s).map_err(|e| link.error(e))?;
+        if config.heating_line.is_none() {
+            commands.static_line = Some("no dynamic line configured");
+        }
         let health = Arc::new(LinkHealth::new());
         health.set_command_set(commands.describe());
         let shared = Arc::new(Mutex::new(Shared {
             tracks: vec![Track::default(); MAX_CHANNELS],
+            heating_limits_a: [config.current_limit_a; MAX_CHANNELS],
             ..Shared::default()
         }));
         let mut device = MecomDevice {
@@ -700,7 +724,13 @@ impl MecomDevice {
             voltage: vec![true; device.channels.len()],
             set_up: vec![true; device.channels.len()],
             silent_since: vec![None; device.channels.len()],
+            line: vec![LineState::default(); device.channels.len()],
+            written: vec![(config.current_limit_a, config.upper_error_c); device.channels.len()],
+            heating_a: vec![0.0; device.channels.len()],
+            last: vec![Track::default(); device.channels.len()],
+            flash: Vec::new(),
         };
+        worker.flash_saving_from(worker.clock.now_s());
         worker.cycle();
         let stop = Arc::clone(&device.stop);
         let thread = start_thread(&device.name, "thermode-mecom", move || worker.run(&stop))?;
@@ -791,6 +821,15 @@ impl MecomDevice {
             } else if !health.is_up() && answering {
                 health.reconnected();
             }
+        }
+    }
+
+    /// The command set says so once the worker found the dynamic line unavailable.
+    fn note_static_line(&mut self) {
+        let found = self.shared.lock().ok().and_then(|s| s.static_line);
+        if found.is_some() && self.commands.static_line.is_none() {
+            self.commands.static_line = found;
+            self.health.set_command_set(self.commands.describe());
         }
     }
 
@@ -1119,6 +1158,43 @@ struct Worker {
     set_up: Vec<bool>,
     /// Per channel: since when \[s\] its address has not answered, if it has not.
     silent_since: Vec<Option<f64>>,
+    /// Per channel: the dynamic second line's state ([`super::line`]).
+    line: Vec<LineState>,
+    /// Per channel: the line's pair in force, (heating limit \[A\], upper threshold \[°C\]); the limit is the
+    /// current limitation (2030) in temperature mode and the host's own bound on the live current in current mode.
+    written: Vec<(f64, f64)>,
+    /// Per channel: the heating current the device may deliver until the next cycle \[A\], heat-positive: the live
+    /// current written (current mode) or the one measured at the last sample (temperature mode).
+    heating_a: Vec<f64>,
+    /// Per channel: the last sample taken (object and sink temperature, current, status).
+    last: Vec<Track>,
+    /// Per address: whether saving to flash is off, so the line's writes stay in RAM.
+    flash: Vec<(u8, Flash)>,
+}
+
+/// Where an address stands with saving to flash (parameter 108), which the dynamic second line needs off.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Flash {
+    /// The configuration is being saved (flash status 109 pending) since this host time \[s\].
+    Saving { since_s: f64 },
+    /// Saving is off: the line's writes are RAM only.
+    Off,
+    /// The device cannot switch saving off (why): the static threshold holds.
+    Unavailable(&'static str),
+}
+
+/// Longest wait for the configuration to be saved before the line gives up and the static threshold holds \[s\]: 3
+/// (the controller saves about 0.5 s after the last change).
+const FLASH_SAVE_LIMIT_S: f64 = 3.0;
+/// The line's heating limit is lowered in steps of at least this \[A\] and raised in steps of five (0.05 A), so a
+/// plate at rest costs no writes.
+const LIMIT_STEP_A: f64 = 0.01;
+/// The line's upper threshold is raised in steps of at least this \[°C\] (lowered at once).
+const UPPER_STEP_C: f64 = 0.1;
+
+/// `x` rounded down to a multiple of `step`.
+fn floor_to(x: f64, step: f64) -> f64 {
+    (x / step).floor() * step
 }
 
 impl Worker {
@@ -1134,8 +1210,9 @@ impl Worker {
                 std::thread::sleep(Duration::from_secs_f64(rest_s));
             }
         }
-        // Dropped: every output off before the worker ends.
+        // Dropped: every output off before the worker ends, and the static line back in RAM.
         self.switch_all_off();
+        self.restore_static_line();
     }
 
     /// One cycle over every channel; false when the port failed.
@@ -1156,6 +1233,7 @@ impl Worker {
         }
         // On a bus, an address that did not answer is asked nothing more this cycle, so one silent device costs the
         // others one answer timeout per cycle, not one per request.
+        self.release_cuts(&commands);
         let first_address = self.channels.first().map(|c| c.channel.address);
         let bus = self.channels.iter().any(|c| Some(c.channel.address) != first_address);
         let mut silent: Vec<u8> = Vec::new();
@@ -1168,7 +1246,10 @@ impl Worker {
             if self.silent_since[index].is_some_and(|t| now_s - t > self.config.link_timeout_s) {
                 self.set_up[index] = false;
             }
-            let driven = self.set_up_again(index).and_then(|()| self.drive(index, command));
+            let driven = self
+                .set_up_again(index)
+                .and_then(|()| self.keep_line(index))
+                .and_then(|()| self.drive(index, command));
             let result = match driven {
                 Err(fault @ RequestFault::Port { .. }) => Err(fault),
                 Err(RequestFault::NoAnswer) if bus => Err(RequestFault::NoAnswer),
@@ -1233,7 +1314,212 @@ impl Worker {
         let watchdog = Request::set_f32(param::WATCHDOG_TIMEOUT, 1, self.config.watchdog_s as f32);
         self.link.set(probe, watchdog)?;
         self.set_up[index] = true;
+        // Configured anew: the static pair is in force and being saved; the line starts again once it is.
+        self.line[index] = LineState::default();
+        self.set_written(index, (self.config.current_limit_a, self.config.upper_error_c));
+        let now_s = self.clock.now_s();
+        if let Some((_, flash)) = self.flash.iter_mut().find(|(a, _)| *a == channel.address) {
+            if !matches!(flash, Flash::Unavailable(_)) {
+                *flash = Flash::Saving { since_s: now_s };
+            }
+        }
         Ok(())
+    }
+
+    /// Every address of the channels starts saving its configuration at `now_s` \[s\] (the line waits for it), or,
+    /// without a line, keeps the static threshold.
+    fn flash_saving_from(&mut self, now_s: f64) {
+        let start = match self.config.heating_line {
+            Some(_) => Flash::Saving { since_s: now_s },
+            None => Flash::Unavailable("no dynamic line configured"),
+        };
+        for setup in &self.channels {
+            let address = setup.channel.address;
+            if !self.flash.iter().any(|(a, _)| *a == address) {
+                self.flash.push((address, start));
+            }
+        }
+    }
+
+    /// Whether saving to flash is off at `address` (the line may write), switching it off once the configuration
+    /// is saved (flash status 109 reads 0, or 2: already off). A device that refuses either parameter, or whose save
+    /// stays pending for [`FLASH_SAVE_LIMIT_S`], keeps its static threshold.
+    fn flash_off(&mut self, address: u8) -> Result<bool, RequestFault> {
+        let Some(index) = self.flash.iter().position(|(a, _)| *a == address) else {
+            return Ok(false);
+        };
+        let since_s = match self.flash[index].1 {
+            Flash::Off => return Ok(true),
+            Flash::Unavailable(_) => return Ok(false),
+            Flash::Saving { since_s } => since_s,
+        };
+        let probe = MecomChannel { address, instance: 1 };
+        let stage = match self.link.read_i32(probe, param::FLASH_STATUS) {
+            Err(why) if not_available(&why) => Flash::Unavailable("the device has no flash status (109)"),
+            Err(why) => return Err(why),
+            Ok(0 | 2) => match self.link.set(probe, Request::set_i32(param::FLASH_SAVE_OFF, 1, 1)) {
+                Ok(()) => Flash::Off,
+                Err(RequestFault::Server { .. }) => {
+                    Flash::Unavailable("the device refused to switch saving to flash off (108)")
+                }
+                Err(why) => return Err(why),
+            },
+            Ok(_) if self.clock.now_s() - since_s > FLASH_SAVE_LIMIT_S => {
+                Flash::Unavailable("its configuration was not saved to flash within 3 s")
+            }
+            Ok(_) => Flash::Saving { since_s },
+        };
+        self.flash[index].1 = stage;
+        if let (Flash::Unavailable(why), Ok(mut state)) = (stage, self.shared.lock()) {
+            state.static_line = Some(why);
+        }
+        Ok(stage == Flash::Off)
+    }
+
+    /// The dynamic second line of channel `index` before its drive ([`super::line`]): the gap bound accounted with
+    /// the heating current in force since the last cycle, then the pair rewritten where it must change — a
+    /// threshold that is no longer safe lowered, the limit lowered, a higher limit only after the threshold that is
+    /// safe with it, and the threshold raised as far as the limit in force allows. Each write leaves a safe pair.
+    fn keep_line(&mut self, index: usize) -> Result<(), RequestFault> {
+        let Some(line) = self.config.heating_line else {
+            return Ok(());
+        };
+        let last = self.last[index].clone();
+        if last.last_answer_s.is_none() || last.device_status == status::ERROR {
+            return Ok(());
+        }
+        if !self.flash_off(self.channels[index].channel.address)? {
+            return Ok(());
+        }
+        let (reading_c, hot_c) = (last.object_c, last.sink_c);
+        let heating_a = self.heating_a[index].max(last.current_a);
+        if self.config.mode == MecomMode::Temperature {
+            // The device's own loop sets its current: the last one measured is the best known till the next sample.
+            self.heating_a[index] = last.current_a.max(0.0);
+        }
+        let now_s = self.clock.now_s();
+        self.line[index].account(&line, now_s, heating_a, reading_c, hot_c);
+        let state = self.line[index];
+        let upper = |limit_a: f64| floor_to(state.upper_c(&line, limit_a, reading_c, hot_c), 0.01);
+        let want_a = floor_to(state.limit_a(&line, reading_c, hot_c), LIMIT_STEP_A);
+        let (have_a, have_c) = self.written[index];
+        let safe_c = upper(have_a);
+        if !safe_c.is_finite() {
+            // Nothing can be judged: no heating until it can.
+            return self.write_limit(index, 0.0);
+        }
+        if safe_c < have_c {
+            self.write_upper(index, safe_c)?;
+        }
+        if want_a < have_a - LIMIT_STEP_A || (want_a == 0.0 && have_a > 0.0) {
+            self.write_limit(index, want_a)?;
+        }
+        let (have_a, have_c) = self.written[index];
+        if want_a > have_a + 5.0 * LIMIT_STEP_A || (want_a > have_a && want_a >= line.current_limit_a()) {
+            let with_c = upper(want_a);
+            if with_c < have_c {
+                self.write_upper(index, with_c)?;
+            }
+            self.write_limit(index, want_a)?;
+        }
+        let (have_a, have_c) = self.written[index];
+        let room_c = upper(have_a);
+        if room_c >= have_c + UPPER_STEP_C {
+            self.write_upper(index, room_c)?;
+        }
+        Ok(())
+    }
+
+    /// The line's heating limit of channel `index` set to `limit_a` \[A\]: the current limitation (2030) in
+    /// temperature mode (the device's own loop sets the current), the host's bound on the live current in current
+    /// mode (the device holds the last live current after a host death).
+    fn write_limit(&mut self, index: usize, limit_a: f64) -> Result<(), RequestFault> {
+        if self.config.mode == MecomMode::Temperature {
+            let channel = self.channels[index].channel;
+            let request = Request::set_f32(param::CURRENT_LIMITATION, channel.instance, limit_a as f32);
+            if let Err(why) = self.link.set(channel, request) {
+                self.note_failure(index, &why);
+                return Err(why);
+            }
+        }
+        let (_, upper_c) = self.written[index];
+        self.set_written(index, (limit_a, upper_c));
+        Ok(())
+    }
+
+    /// Channel `index`'s upper object threshold (4011) set to `upper_c` \[°C\].
+    fn write_upper(&mut self, index: usize, upper_c: f64) -> Result<(), RequestFault> {
+        let channel = self.channels[index].channel;
+        let request = Request::set_f32(param::UPPER_ERROR_THRESHOLD, channel.instance, upper_c as f32);
+        if let Err(why) = self.link.set(channel, request) {
+            self.note_failure(index, &why);
+            return Err(why);
+        }
+        let (limit_a, _) = self.written[index];
+        self.set_written(index, (limit_a, upper_c));
+        Ok(())
+    }
+
+    /// The pair in force on channel `index`, also as the readings' heating limit.
+    fn set_written(&mut self, index: usize, pair: (f64, f64)) {
+        self.written[index] = pair;
+        if let Ok(mut state) = self.shared.lock() {
+            if let Some(limit) = state.heating_limits_a.get_mut(index) {
+                *limit = pair.0.min(self.config.current_limit_a);
+            }
+        }
+    }
+
+    /// Releases the device's own over- or under-temperature cut (its error state, errors 137 and 138) the way the
+    /// own protocol's `ClearFault` does: once every channel of its address is commanded off (`commands`: their
+    /// envelopes have faulted) and each reading is back inside the static thresholds by [`RELEASE_HYSTERESIS_C`]
+    /// (after the reset the static pair is in force until the line starts again), the address is reset (`RS`) and
+    /// configured again ([`Worker::set_up_again`]). The channels stay off until their faults are cleared.
+    fn release_cuts(&mut self, commands: &[Command; MAX_CHANNELS]) {
+        let (lower_c, upper_c) = (
+            self.config.lower_error_c + RELEASE_HYSTERESIS_C,
+            self.config.upper_error_c - RELEASE_HYSTERESIS_C,
+        );
+        let cut = |t: &Track| {
+            t.device_status == status::ERROR
+                && matches!(
+                    t.error_number,
+                    error_number::OBJECT_TOO_HIGH | error_number::OBJECT_TOO_LOW
+                )
+        };
+        for index in 0..self.channels.len() {
+            if !(self.set_up[index] && cut(&self.last[index])) {
+                continue;
+            }
+            let address = self.channels[index].channel.address;
+            let of_address: Vec<usize> = (0..self.channels.len())
+                .filter(|&k| self.channels[k].channel.address == address)
+                .collect();
+            let released = of_address.iter().all(|&k| {
+                let inside = (lower_c..=upper_c).contains(&self.last[k].object_c);
+                commands[k] == Command::default() && inside
+            });
+            if released {
+                for k in of_address {
+                    self.set_up[k] = false;
+                }
+            }
+        }
+    }
+
+    /// The static pair back on every channel whose line wrote one (the worker ends; saving to flash stays off until
+    /// the device restarts, so its flash keeps the configuration's static pair).
+    fn restore_static_line(&mut self) {
+        let static_pair = (self.config.current_limit_a, self.config.upper_error_c);
+        for index in 0..self.channels.len() {
+            let (limit_a, upper_c) = self.written[index];
+            if upper_c > static_pair.1 {
+                let _ = self.write_upper(index, static_pair.1);
+            }
+            if limit_a < static_pair.0 {
+                let _ = self.write_limit(index, static_pair.0);
+            }
+        }
     }
 
     fn port_failed(&mut self, fault: RequestFault) -> bool {
@@ -1251,7 +1537,12 @@ impl Worker {
         let (enable, value) = match self.config.mode {
             MecomMode::Current => {
                 let limit_a = self.config.current_limit_a;
-                let current_a = command.current_a.clamp(-limit_a, limit_a);
+                // The dynamic line bounds heating (its limit is the host's own in current mode).
+                let heating_a = limit_a.min(self.written[index].0);
+                let current_a = command.current_a.clamp(-limit_a, heating_a);
+                // In force from now to the next cycle (the device holds it): the line accounts it then (the larger
+                // of it and the one before, should the write fail).
+                self.heating_a[index] = self.heating_a[index].max(current_a);
                 (
                     current_a != 0.0,
                     Request::set_f32(param::LIVE_SET_CURRENT, i, (current_a * sign) as f32),
@@ -1285,7 +1576,13 @@ impl Worker {
                 })
         };
         match &result {
-            Ok(()) => self.enabled[index] = enable,
+            Ok(()) => {
+                self.enabled[index] = enable;
+                if self.config.mode == MecomMode::Current {
+                    let live_a = if enable { command.current_a } else { 0.0 };
+                    self.heating_a[index] = live_a.clamp(0.0, self.written[index].0);
+                }
+            }
             Err(e) => self.note_failure(index, e),
         }
         result
@@ -1313,12 +1610,26 @@ impl Worker {
                     // The device disabled its output by itself; it stays off until thermode enables it again.
                     self.enabled[index] = false;
                 }
+                // The current and voltage measured now are the drive written at this cycle's start, in force from
+                // now on; over the interval that ends at this sample the previous cycle's were (a reading reports
+                // the current over the interval before its sample, as the simulated display does).
+                let previous = &self.last[index];
+                let (current_a, voltage_v) = match previous.last_answer_s {
+                    Some(_) => (previous.current_a, previous.voltage_v),
+                    None => (new.current_a, new.voltage_v),
+                };
+                self.last[index] = Track {
+                    last_answer_s: Some(new.time_s),
+                    ..new.clone()
+                };
                 if let Some(track) = self.shared.lock().ok().as_mut().and_then(|s| s.tracks.get_mut(index)) {
                     *track = Track {
                         sample_seq: track.sample_seq + 1,
                         time_s: track.time_s.max(new.time_s),
                         last_answer_s: Some(self.clock.now_s()),
                         last_failure: None,
+                        current_a,
+                        voltage_v,
                         ..new
                     };
                 }
@@ -1469,6 +1780,7 @@ impl Device for MecomDevice {
     fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
         self.supervise();
         self.watch_addresses();
+        self.note_static_line();
         self.check_channel(channel)?;
         let now_s = self.clock.now_s();
         let seq_base = self.seq_base[channel];
@@ -1501,6 +1813,7 @@ impl Device for MecomDevice {
             sample_seq: seq_base + track.sample_seq,
             current_a: track.current_a,
             voltage_v: track.voltage_v,
+            heating_limit_a: state.heating_limits_a[channel],
         };
         let in_error = track.device_status == status::ERROR;
         let error_number = track.error_number;

@@ -12,3 +12,4 @@
 pub mod codec;
 pub mod emulator;
 pub mod host;
+pub mod line;

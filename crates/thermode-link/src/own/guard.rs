@@ -78,10 +78,22 @@ pub const BODY_CORE_C: f64 = 37.0;
 /// Standard deviations of the sensor noise in the reading's error bound \[-\]: 4.
 pub const NOISE_SIGMAS: f64 = 4.0;
 
+/// The sensor lag \[s\] a static line on the reading allows for: the file's sensor time constant, and never less
+/// than the datasheet's (the built-in default file's 0.3 s), so that a file claiming a faster sensor (an identified
+/// file tampered with, a fit gone wrong) cannot lift a device's threshold towards 48 °C (issue 35: a file claiming a
+/// too-short lag lifted a MeCom threshold to 47.7 °C and the true plate reached 52 °C).
+pub fn static_line_lag_s(config: &DeviceConfig) -> f64 {
+    config
+        .sensor
+        .time_constant_s
+        .max(DeviceConfig::default().sensor.time_constant_s)
+}
+
 /// What a sensor that lags its plate can hide at the display's fastest heating \[K\]: the plate's fastest heating
 /// rate at full current times the sensor's time constant,
 ///
-/// `M = τ · r_max`, `r_max = (S·I_max·T + ½·I_max²·R) / C_d` at `T` = [`PLATE_MAX_C`] (in kelvin),
+/// `M = τ · r_max`, `r_max = (S·I_max·T + ½·I_max²·R) / C_d` at `T` = [`PLATE_MAX_C`] (in kelvin), τ the
+/// [`static_line_lag_s`],
 ///
 /// with the hot side at the plate's temperature (no conduction back to the sink, the fastest case with a hot side
 /// below 48 °C) and no finger (a finger below 48 °C only takes heat away). Under a constant rate `r` the gap
@@ -96,7 +108,7 @@ pub fn sensor_lag_margin_c(config: &DeviceConfig) -> Result<f64, thermode_model:
     let module = config.module()?;
     let heating_w = module.max_heating_w(config.drive.current_limit_a, PLATE_MAX_C, PLATE_MAX_C);
     let rate_c_per_s = heating_w.max(0.0) / config.plate.heat_capacity_j_k;
-    Ok(config.sensor.time_constant_s.max(0.0) * rate_c_per_s)
+    Ok(static_line_lag_s(config) * rate_c_per_s)
 }
 
 /// What a sensor that lags its plate can hide at the display's fastest cooling \[K\]: the plate's fastest cooling rate
@@ -117,7 +129,7 @@ pub fn sensor_lag_cooling_margin_c(config: &DeviceConfig) -> Result<f64, thermod
         .min(module.seebeck_v_k * plate_k / module.resistance_ohm);
     let cooling_w = -module.heat_into_display_w(-current_a, PLATE_MIN_C, PLATE_MIN_C);
     let rate_c_per_s = cooling_w.max(0.0) / config.plate.heat_capacity_j_k;
-    Ok(config.sensor.time_constant_s.max(0.0) * rate_c_per_s)
+    Ok(static_line_lag_s(config) * rate_c_per_s)
 }
 
 /// How far beyond its lines ([`PLATE_MAX_C`], [`PLATE_MIN_C`]) the firmware's cut may come on the true scale under
@@ -178,20 +190,57 @@ struct Sample {
     gap_lo_c: f64,
 }
 
-/// One channel's over- and under-temperature cut. See the module documentation.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PlateGuard {
+/// Bounds on a plate's rate from its device file (the "rate bounds" of the module documentation): the Peltier heat
+/// at a current, with the plate anywhere in a range and the hot side within its reading's error, and a finger whose
+/// skin lies between the plate and the body core. The own firmware's [`PlateGuard`] and the MeCom host's dynamic
+/// second line (`crate::mecom::line`) bound the gap between plate and sensor with it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlateRates {
     module: PeltierModule,
     /// Heat capacity of the plate node \[J/K\].
     capacity_j_k: f64,
     /// Contact conductance of a finger on the plate, A h_c \[W/K\].
     contact_w_k: f64,
+    /// Error bound of the hot-side reading \[K\] (its resolution).
+    hot_error_c: f64,
+}
+
+impl PlateRates {
+    /// The bounds of a display of `config`. Fails if the configuration's module is invalid.
+    pub fn new(config: &DeviceConfig) -> Result<Self, thermode_model::ParamError> {
+        Ok(PlateRates {
+            module: config.module()?,
+            capacity_j_k: config.plate.heat_capacity_j_k,
+            contact_w_k: config.plate.area_m2 * config.plate.contact_conductance_w_m2k,
+            hot_error_c: config.sensor.resolution_c,
+        })
+    }
+
+    /// Lower and upper bounds on the plate's rate \[K/s\] at `current_a` \[A\] with the plate in `[lo, hi]` \[°C\] and
+    /// the hot side reading `hot_side_c` \[°C\]; unbounded when a number is not finite.
+    pub fn bounds_c_per_s(&self, current_a: f64, lo: f64, hi: f64, hot_side_c: f64) -> (f64, f64) {
+        if !(lo.is_finite() && hi.is_finite() && current_a.is_finite() && hot_side_c.is_finite()) {
+            return (f64::NEG_INFINITY, f64::INFINITY);
+        }
+        let peltier = |plate_c: f64, hot_c: f64| self.module.heat_into_display_w(current_a, plate_c, hot_c);
+        let finger = |plate_c: f64| self.contact_w_k * (BODY_CORE_C - plate_c);
+        let upper = |plate_c: f64| peltier(plate_c, hot_side_c + self.hot_error_c) + finger(plate_c).max(0.0);
+        let lower = |plate_c: f64| peltier(plate_c, hot_side_c - self.hot_error_c) + finger(plate_c).min(0.0);
+        (
+            lower(lo).min(lower(hi)) / self.capacity_j_k,
+            upper(lo).max(upper(hi)) / self.capacity_j_k,
+        )
+    }
+}
+
+/// One channel's over- and under-temperature cut. See the module documentation.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlateGuard {
+    rates: PlateRates,
     /// Sensor time constant τ \[s\] (0: no lag).
     tau_s: f64,
     /// Error bound of a reading, δ \[K\].
     reading_error_c: f64,
-    /// Error bound of the hot-side reading \[K\] (its resolution).
-    hot_error_c: f64,
     /// Bounds on plate − sensor element now \[K\].
     gap_hi_c: f64,
     gap_lo_c: f64,
@@ -208,12 +257,9 @@ impl PlateGuard {
     pub fn new(config: &DeviceConfig, sample: SensorSample) -> Result<Self, thermode_model::ParamError> {
         let sensor = &config.sensor;
         Ok(PlateGuard {
-            module: config.module()?,
-            capacity_j_k: config.plate.heat_capacity_j_k,
-            contact_w_k: config.plate.area_m2 * config.plate.contact_conductance_w_m2k,
+            rates: PlateRates::new(config)?,
             tau_s: sensor.time_constant_s.max(0.0),
             reading_error_c: NOISE_SIGMAS * sensor.noise_c + sensor.resolution_c,
-            hot_error_c: sensor.resolution_c,
             gap_hi_c: 0.0,
             gap_lo_c: 0.0,
             sample: Sample {
@@ -350,17 +396,7 @@ impl PlateGuard {
 
     /// Lower and upper bounds on the plate's rate \[K/s\] at `current_a` with the plate in `[lo, hi]`.
     fn rates(&self, current_a: f64, lo: f64, hi: f64, hot_side_c: f64) -> (f64, f64) {
-        if !(lo.is_finite() && hi.is_finite() && current_a.is_finite() && hot_side_c.is_finite()) {
-            return (f64::NEG_INFINITY, f64::INFINITY);
-        }
-        let peltier = |plate_c: f64, hot_c: f64| self.module.heat_into_display_w(current_a, plate_c, hot_c);
-        let finger = |plate_c: f64| self.contact_w_k * (BODY_CORE_C - plate_c);
-        let upper = |plate_c: f64| peltier(plate_c, hot_side_c + self.hot_error_c) + finger(plate_c).max(0.0);
-        let lower = |plate_c: f64| peltier(plate_c, hot_side_c - self.hot_error_c) + finger(plate_c).min(0.0);
-        (
-            lower(lo).min(lower(hi)) / self.capacity_j_k,
-            upper(lo).max(upper(hi)) / self.capacity_j_k,
-        )
+        self.rates.bounds_c_per_s(current_a, lo, hi, hot_side_c)
     }
 }
 
@@ -393,6 +429,14 @@ mod tests {
         assert!(
             (doubled_c - 2.0 * margin_c).abs() < 1e-9,
             "a sensor twice as slow hides twice as much: {doubled_c:.3} K against {margin_c:.3} K"
+        );
+        // A file claiming a sensor thirty times faster (0.01 s) keeps the datasheet's margin.
+        let mut tampered = DeviceConfig::default();
+        tampered.sensor.time_constant_s = 0.01;
+        let tampered_c = sensor_lag_margin_c(&tampered).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            (tampered_c - margin_c).abs() < 1e-9,
+            "a file claiming a faster sensor: {tampered_c:.3} K against the datasheet's {margin_c:.3} K"
         );
     }
 }

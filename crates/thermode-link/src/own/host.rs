@@ -669,6 +669,7 @@ impl SerialDevice {
             sample_seq,
             current_a: track.current_a,
             voltage_v: f64::NAN,
+            heating_limit_a: f64::INFINITY,
         };
         match cut_of(track.faults) {
             // The firmware goes on reporting its plate while cut.

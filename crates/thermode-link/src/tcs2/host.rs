@@ -512,6 +512,7 @@ impl Device for Tcs2Device {
             // The stimulator sets its current itself and reports none.
             current_a: f64::NAN,
             voltage_v: f64::NAN,
+            heating_limit_a: f64::INFINITY,
         })
     }
 

@@ -37,6 +37,11 @@ impl<D: Device> Loop<D> {
             stale_timeout_s: 1.0,
             ..EnvelopeConfig::default()
         };
+        Loop::with_envelope(device, clock, limit_a, config)
+    }
+
+    /// As [`Loop::new`] with the envelopes' settings `config`.
+    pub fn with_envelope(device: D, clock: Arc<dyn Clock>, limit_a: f64, config: EnvelopeConfig) -> Self {
         let envelopes = (0..device.channel_count())
             .map(|_| SafetyEnvelope::new(config, limit_a).unwrap_or_else(|e| panic!("{e}")))
             .collect();

@@ -404,17 +404,28 @@ fn poll_as_a_second_client(mut stream: TcpStream, watch_s: f64, mut sample: impl
     }
 }
 
+/// What a kill test found: the true plate at the kill, the lowest and highest true plate after it, the controller's
+/// error number at the end, and the highest true plate before the kill.
+#[derive(Debug, Clone, Copy)]
+struct Killed {
+    at_kill_c: f64,
+    low_c: f64,
+    peak_c: f64,
+    error: Option<i32>,
+    before_c: f64,
+}
+
 /// A host drives channel 0 of a `mecom-tcp` emulator (no finger: nothing takes heat off the plate) through an
-/// envelope at full current towards `target_c` with the controller's object thresholds at `thresholds_c` (lower,
-/// upper), and is killed (its connection shut both ways, no all-off) once the controller's reading has passed
-/// `kill_at_c` while the output drives towards the target at more than 1 A; then another client polls the
-/// controller. The lowest and highest true plate seen and the
-/// controller's error number at the end.
-fn killed_mid_drive_with_a_second_client(
-    thresholds_c: (f64, f64),
+/// envelope towards `target_c` with the settings `config` (a proportional request of 20 A/K, so the drive is at its
+/// limit until the plate is near the target), and is killed (its connection shut both ways, no all-off) once `kill`
+/// holds for the reading and the emulator's status; then, with `second_client`, another client polls the
+/// controller every 20 ms for 3 s (its frames feed the communication watchdog), else nobody talks to it for 3 s.
+fn killed_host(
+    config: &MecomConfig,
     target_c: f64,
-    kill_at_c: f64,
-) -> (f64, f64, Option<i32>) {
+    kill: impl Fn(&thermode_device::Reading, &FirmwareStatus) -> bool,
+    second_client: bool,
+) -> Killed {
     let clock = clock();
     let display = SimulatedDisplay::<NoFinger>::fingertips(&DeviceConfig::default(), 1, 5)
         .unwrap_or_else(|e| panic!("display: {e}"));
@@ -427,47 +438,89 @@ fn killed_mid_drive_with_a_second_client(
         .and_then(|()| stream.set_nodelay(true))
         .unwrap_or_else(|e| panic!("{e}"));
     let killer = stream.try_clone().unwrap_or_else(|e| panic!("{e}"));
-    let (lower_error_c, upper_error_c) = thresholds_c;
-    let config = MecomConfig {
-        lower_error_c,
-        upper_error_c,
-        ..config(MecomMode::Current)
-    };
-    let device = MecomDevice::open("mecom-tcp:killable", Box::new(stream), &config, Arc::clone(&clock))
+    let device = MecomDevice::open("mecom-tcp:killable", Box::new(stream), config, Arc::clone(&clock))
         .unwrap_or_else(|e| panic!("open: {e}"));
     let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
     control.gain_a_per_c = 20.0;
-    let heating = target_c > kill_at_c;
-    let driven = wait_for(10.0, || {
+    let mut before_c = f64::NEG_INFINITY;
+    let driven = wait_for(30.0, || {
         let reading = control.tick(&[target_c]).remove(0);
         std::thread::sleep(Duration::from_millis(5));
-        // Killed while the output drives towards the target (the envelope's loop may swing both ways).
-        let driving = tcp
-            .control()
-            .status()
-            .is_some_and(|s| (s.applied_a[0] > 0.0) == heating && s.applied_a[0].abs() > 1.0);
-        driving && reading.is_ok_and(|r| (r.sensor_c >= kill_at_c) == heating)
+        let Some(status) = tcp.control().status() else {
+            return false;
+        };
+        before_c = before_c.max(status.plate_c[0]);
+        reading.is_ok_and(|r| kill(&r, &status))
     });
-    assert!(driven.is_some(), "the reading never reached {kill_at_c} °C");
+    assert!(
+        driven.is_some(),
+        "the kill's condition never held (plate up to {before_c:.2} °C)"
+    );
     let at_kill = tcp.control().status().unwrap_or_else(|| panic!("no status"));
     // Killed: the kernel closes the connection; no all-off reaches the controller.
     killer.shutdown(Shutdown::Both).unwrap_or_else(|e| panic!("{e}"));
     drop(control);
     let (mut low_c, mut peak_c) = (at_kill.plate_c[0], at_kill.plate_c[0]);
-    let second = TcpStream::connect(tcp.address()).unwrap_or_else(|e| panic!("second client: {e}"));
-    poll_as_a_second_client(second, 3.0, || {
+    let mut watch = || {
         if let Some(status) = tcp.control().status() {
             low_c = low_c.min(status.plate_c[0]);
             peak_c = peak_c.max(status.plate_c[0]);
         }
-    });
+    };
+    if second_client {
+        let second = TcpStream::connect(tcp.address()).unwrap_or_else(|e| panic!("second client: {e}"));
+        poll_as_a_second_client(second, 3.0, watch);
+    } else {
+        let start = std::time::Instant::now();
+        while start.elapsed().as_secs_f64() < 3.0 {
+            watch();
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
     let end = tcp.control().status().unwrap_or_else(|| panic!("no status"));
+    let killed = Killed {
+        at_kill_c: at_kill.plate_c[0],
+        low_c,
+        peak_c,
+        error: end.error,
+        before_c,
+    };
     println!(
-        "thresholds {lower_error_c:.2} / {upper_error_c:.2} °C, towards {target_c} °C: killed at true plate {:.2} °C \
-         ({:.2} A); true plate {low_c:.2} to {peak_c:.2} °C, controller error {:?}, output {}",
-        at_kill.plate_c[0], at_kill.applied_a[0], end.error, end.output_on[0]
+        "{} mode, towards {target_c} °C, second client {second_client}: killed at true plate {:.2} °C ({:.2} A); \
+         true plate {low_c:.2} to {peak_c:.2} °C after (up to {before_c:.2} °C before), controller error {:?}, \
+         output {}, stored writes {}",
+        config.mode.name(),
+        at_kill.plate_c[0],
+        at_kill.applied_a[0],
+        end.error,
+        end.output_on[0],
+        end.stored_writes
     );
-    (low_c, peak_c, end.error)
+    killed
+}
+
+/// [`killed_host`] with the static thresholds `thresholds_c` (lower, upper) and no dynamic line, killed once the
+/// reading has passed `kill_at_c` while the output drives towards the target at more than 1 A, a second client
+/// polling: the lowest and highest true plate after the kill and the controller's error number.
+fn killed_mid_drive_with_a_second_client(
+    thresholds_c: (f64, f64),
+    target_c: f64,
+    kill_at_c: f64,
+) -> (f64, f64, Option<i32>) {
+    let (lower_error_c, upper_error_c) = thresholds_c;
+    let config = MecomConfig {
+        lower_error_c,
+        upper_error_c,
+        heating_line: None,
+        ..config(MecomMode::Current)
+    };
+    let heating = target_c > kill_at_c;
+    // Killed while the output drives towards the target (the envelope's loop may swing both ways).
+    let kill = |r: &thermode_device::Reading, s: &FirmwareStatus| {
+        (s.applied_a[0] > 0.0) == heating && s.applied_a[0].abs() > 1.0 && (r.sensor_c >= kill_at_c) == heating
+    };
+    let killed = killed_host(&config, target_c, kill, true);
+    (killed.low_c, killed.peak_c, killed.error)
 }
 
 #[test]
@@ -509,6 +562,54 @@ fn a_host_killed_mid_cooling_with_a_second_client_polling_leaves_the_plate_above
     }
     let (old_low_c, _, _) = killed_mid_drive_with_a_second_client((10.0, upper_c), 10.0, 18.0);
     println!("with the lower threshold at 10 °C the true plate reached {old_low_c:.2} °C");
+}
+
+/// Issue 35 item 8: the dynamic second line lets the plate reach 48 °C while a dead host leaves it at most 48.5 °C.
+/// In both modes, a host driving the bare plate towards 48 °C at its limit is killed once the true plate has passed
+/// 44, 45, 46, 47 and 47.5 °C while heating, with and without a second client polling (feeding the communication
+/// watchdog): the true plate stays at most 48.5 °C after the kill, and before it (the host alive, the line braking
+/// the ramp) at most 48.5 °C with the device never cut; the plate reaches 47.5 °C at all (the static line cut at
+/// 39.7 °C); the line's writes stay in RAM (the flash holds the connect's writes only).
+#[test]
+fn the_dynamic_line_reaches_48_and_a_host_killed_at_44_to_47_5_leaves_the_plate_at_most_48_5() {
+    let mut worst_c: f64 = f64::NEG_INFINITY;
+    for mode in [MecomMode::Current, MecomMode::Temperature] {
+        for kill_at_c in [44.0, 45.0, 46.0, 47.0, 47.5] {
+            for second_client in [true, false] {
+                let kill = |_: &thermode_device::Reading, s: &FirmwareStatus| {
+                    s.plate_c[0] >= kill_at_c && s.applied_a[0] > 0.0 && s.output_on[0]
+                };
+                let killed = killed_host(&config(mode), 48.0, kill, second_client);
+                let case = format!(
+                    "{} mode, killed at {kill_at_c} °C (true {:.2} °C), second client {second_client}",
+                    mode.name(),
+                    killed.at_kill_c
+                );
+                assert!(
+                    killed.peak_c <= 48.5,
+                    "{case}: true plate {:.2} °C after the kill",
+                    killed.peak_c
+                );
+                assert!(
+                    killed.before_c <= 48.5,
+                    "{case}: true plate {:.2} °C before it",
+                    killed.before_c
+                );
+                match second_client {
+                    // The second client fed the watchdog: the line's threshold (138) or nothing (the coast ended
+                    // below it) stopped the plate.
+                    true => assert_ne!(killed.error, Some(183), "{case}: the watchdog tripped"),
+                    false => assert!(
+                        matches!(killed.error, Some(183 | 138)),
+                        "{case}: controller error {:?}",
+                        killed.error
+                    ),
+                }
+                worst_c = worst_c.max(killed.peak_c);
+            }
+        }
+    }
+    println!("the hottest true plate after a kill: {worst_c:.2} °C");
 }
 
 #[test]
@@ -810,4 +911,138 @@ fn two_addresses_on_one_bus_an_unplugged_one_faults_only_its_channels_and_comes_
         Some((true, 1, 1)),
         "address 2's link (up, reconnects, failures)"
     );
+}
+
+/// Issue 35 item 8, normal use: with the dynamic second line a host driving towards 47.9 °C at its limit brings the
+/// reading to 47.8 °C and more in both modes bare (47.0 °C with the emulated finger, which takes heat the line
+/// cannot count on: a finger may lift when the host dies), without the device cutting its output, and the true plate stays at most 48.3 °C (the line's maximum); then, cooled back, the line has raised the
+/// limit again (the readings' heating limit is the drive's 2.8 A).
+#[test]
+fn the_dynamic_line_lets_the_plate_reach_48_without_a_cut() {
+    for mode in [MecomMode::Current, MecomMode::Temperature] {
+        for finger in [false, true] {
+            let clock = clock();
+            let firmware: Box<dyn Firmware> = match finger {
+                true => Box::new(emulator(1)),
+                false => {
+                    let display = SimulatedDisplay::<NoFinger>::fingertips(&DeviceConfig::default(), 1, 5)
+                        .unwrap_or_else(|e| panic!("display: {e}"));
+                    Box::new(
+                        MecomEmulator::new(display, MecomEmulatorConfig::default()).unwrap_or_else(|e| panic!("{e}")),
+                    )
+                }
+            };
+            let pty = PtyFirmware::spawn(firmware, Arc::clone(&clock)).unwrap_or_else(|e| panic!("pty: {e}"));
+            let device = MecomDevice::open_serial(pty.path(), &config(mode), Arc::clone(&clock))
+                .unwrap_or_else(|e| panic!("open: {e}"));
+            // The dose budget at its largest (10 CEM43-min): the test is about the device's line, not the dose cap.
+            let envelope = thermode_safety::EnvelopeConfig {
+                stale_timeout_s: 1.0,
+                cem43_budget_min: 10.0,
+                ..thermode_safety::EnvelopeConfig::default()
+            };
+            let mut control = Loop::with_envelope(device, Arc::clone(&clock), LIMIT_A, envelope);
+            control.gain_a_per_c = 20.0;
+            let (mut reading_max_c, mut plate_max_c, mut limit_min_a) =
+                (f64::NEG_INFINITY, f64::NEG_INFINITY, f64::INFINITY);
+            let start = std::time::Instant::now();
+            while start.elapsed().as_secs_f64() < 12.0 {
+                let reading = control.tick(&[47.9]).remove(0);
+                let case = format!("{} mode, finger {finger}", mode.name());
+                let reading = reading.unwrap_or_else(|e| panic!("{case}: {e} (status {:?})", status(&pty)));
+                reading_max_c = reading_max_c.max(reading.sensor_c);
+                limit_min_a = limit_min_a.min(reading.heating_limit_a);
+                plate_max_c = plate_max_c.max(status(&pty).plate_c[0]);
+                std::thread::sleep(Duration::from_millis(5));
+            }
+            let cooled = control.run(6.0, &[30.0]);
+            let limit_a = ok(&cooled[0]).heating_limit_a;
+            println!(
+                "{} mode, finger {finger}: reading up to {reading_max_c:.2} °C, true plate up to {plate_max_c:.2} °C, \
+                 heating limit down to {limit_min_a:.2} A, {limit_a:.2} A once cooled; stored writes {}",
+                mode.name(),
+                status(&pty).stored_writes
+            );
+            // A finger held at 48 °C takes about 0.5 A; were the host to die and the finger lift then, the plate would
+            // rise at 1.6 K/s and its sensor hide 0.7 K: the line holds a finger lower.
+            let reached_c = if finger { 47.0 } else { 47.8 };
+            assert!(
+                reading_max_c >= reached_c,
+                "{} mode, finger {finger}: reading only {reading_max_c:.2} °C",
+                mode.name()
+            );
+            assert!(
+                plate_max_c <= 48.3 + 0.02,
+                "{} mode, finger {finger}: true plate {plate_max_c:.2} °C",
+                mode.name()
+            );
+            assert_eq!(
+                status(&pty).error,
+                None,
+                "{} mode, finger {finger}: the device cut",
+                mode.name()
+            );
+            assert!(
+                limit_min_a < 0.7 && (limit_a - LIMIT_A).abs() < 1e-9,
+                "{limit_min_a} / {limit_a} A"
+            );
+        }
+    }
+}
+
+/// Issue 35 item 8: a channel cut by the device's own threshold (error 138) comes back without a reconnect, in both
+/// modes: once its command is off and its reading is back inside the static thresholds by 1 K, the host resets the
+/// controller (`RS`) and configures it again, and the readings return (the envelope's fault is then the operator's
+/// to clear).
+#[test]
+fn a_cut_channel_back_inside_is_reset_and_configured_again_once_it_is_off() {
+    for mode in [MecomMode::Current, MecomMode::Temperature] {
+        let clock = clock();
+        let pty = PtyFirmware::spawn(Box::new(emulator(1)), Arc::clone(&clock)).unwrap_or_else(|e| panic!("pty: {e}"));
+        // A low static threshold and no dynamic line, so a heat cuts.
+        let config = MecomConfig {
+            upper_error_c: 33.0,
+            heating_line: None,
+            ..config(mode)
+        };
+        let device =
+            MecomDevice::open_serial(pty.path(), &config, Arc::clone(&clock)).unwrap_or_else(|e| panic!("open: {e}"));
+        let mut control = Loop::new(device, Arc::clone(&clock), LIMIT_A);
+        let cut = wait_for(10.0, || {
+            control.tick(&[40.0]);
+            std::thread::sleep(Duration::from_millis(5));
+            status(&pty).error == Some(138)
+        });
+        assert!(cut.is_some(), "{} mode: no cut: {:?}", mode.name(), status(&pty));
+        let seen = wait_for(2.0, || matches!(control.device.read(0), Err(DeviceError::Cut { .. })));
+        assert!(seen.is_some(), "{} mode: the cut does not read as one", mode.name());
+        // The envelope sees no fresh reading (stale, fault) and the host commands the channel off.
+        control
+            .device
+            .apply(0, &DriveCommand::off())
+            .unwrap_or_else(|e| panic!("off: {e}"));
+        let back = wait_for(30.0, || control.device.read(0).is_ok());
+        let s = status(&pty);
+        println!(
+            "{} mode: cut at {:.2} s, back after {back:?} s with the output off, plate {:.2} °C, error {:?}",
+            mode.name(),
+            cut.unwrap_or_default(),
+            s.plate_c[0],
+            s.error
+        );
+        assert!(
+            back.is_some(),
+            "{} mode: the cut was never released: {s:?}",
+            mode.name()
+        );
+        assert_eq!(s.error, None);
+        assert!(!s.output_on[0], "{} mode: output on after the reset", mode.name());
+        let reading = ok(&control.device.read(0));
+        assert!(
+            reading.sensor_c <= 32.05,
+            "{} mode: released at {} °C",
+            mode.name(),
+            reading.sensor_c
+        );
+    }
 }

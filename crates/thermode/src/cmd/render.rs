@@ -10,6 +10,7 @@ use thermode_control::PidGains;
 use thermode_device::DeviceConfig;
 use thermode_pipeline::controllers::GainsSource;
 use thermode_pipeline::pipeline::render_envelope_with_rate;
+use thermode_pipeline::self_test::Verdict;
 use thermode_pipeline::{gains_for_device, ControllerKind, PipelineConfig, RendererKind};
 use thermode_plot::write_figure;
 use thermode_render::figure::figure3;
@@ -140,9 +141,13 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let runs = render_all_with_progress(&specs, &|| progress.step()).context("rendering")?;
     progress.finish();
     for run in &runs {
-        if let Some(report) = run.self_test.filter(|r| r.off_file().is_some()) {
+        if let Some(report) = run.self_test.filter(|r| r.verdict() != Verdict::Matches) {
+            let outcome = match report.verdict() {
+                Verdict::Inconclusive(_) => "held off, untested, before the touch",
+                _ => "refused before the touch",
+            };
             eprintln!(
-                "{} ({}): self-test: {report}; the display was refused before the touch",
+                "{} ({}): self-test: {report}; the display was {outcome}",
                 run.summary.material, run.summary.controller
             );
         }

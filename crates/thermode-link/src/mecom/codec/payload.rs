@@ -22,6 +22,11 @@ pub mod param {
     pub const DEVICE_STATUS: u16 = 104;
     /// Error number (INT32; 0: none).
     pub const ERROR_NUMBER: u16 = 105;
+    /// Saving to flash off (INT32): 0 every stored parameter set is saved to flash (about 0.5 s after the last
+    /// change; the power-up state), 1 the parameters are RAM only until the device restarts.
+    pub const FLASH_SAVE_OFF: u16 = 108;
+    /// Flash status (INT32, read only): 0 every parameter saved, 1 a save pending or under way, 2 saving is off.
+    pub const FLASH_STATUS: u16 = 109;
     /// Object (plate) temperature \[°C\] (FLOAT32, read only).
     pub const OBJECT_TEMPERATURE: u16 = 1000;
     /// Sink (hot-side) temperature \[°C\] (FLOAT32, read only).
