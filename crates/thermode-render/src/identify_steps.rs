@@ -128,14 +128,18 @@ pub struct StepExcitation {
 }
 
 impl StepExcitation {
-    /// The excitation for `method` on a fresh pipeline of `believed` with the model controller.
+    /// The excitation for `method` on a fresh temperature-commanded pipeline of `believed`.
     pub fn new(believed: &DeviceConfig, method: StepMethod) -> Result<Self, RenderError> {
         let plan = match method {
             StepMethod::Relaxation => RELAXATION_PLAN.to_vec(),
             StepMethod::Tail => TAIL_SETPOINTS_C.iter().map(|&c| Phase::Hold(c)).collect(),
         };
+        // The device regulates its plate itself: no current reaches the guard's model, which must not judge the
+        // reading against a drive the device never applied.
+        let mut config = PipelineConfig::new(*believed, ControllerKind::Model);
+        config.temperature_commanded = true;
         Ok(StepExcitation {
-            pipeline: ChannelPipeline::new(&PipelineConfig::new(*believed, ControllerKind::Model))?,
+            pipeline: ChannelPipeline::new(&config)?,
             method,
             plan,
             next: 0,

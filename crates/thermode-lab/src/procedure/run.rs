@@ -583,13 +583,78 @@ fn replay(procedure: &mut dyn Procedure, rows: &[ProcedureRow]) -> Result<usize,
                 ),
             });
         }
+        let detected = match row.response.as_str() {
+            "press" | "yes" => true,
+            "none" | "no" => false,
+            other => return Err(resume_error(row, format!("the response `{other}` is not one this trial gives"))),
+        };
+        check_delivered(row, &plan)?;
         procedure.record(Response {
-            detected: matches!(row.response.as_str(), "press" | "yes"),
+            detected,
             delivered_c: row.delivered_c,
             paradoxical_heat: row.paradoxical_heat,
         })?;
+        check_estimate(row, procedure.estimate_c())?;
     }
     Ok(rows.len())
+}
+
+/// How far \[°C\] a recorded delivery may lie outside the span from the trial's baseline to its target (the plate
+/// overshoots a ramp's end by a few tenths at most).
+const DELIVERED_SLACK_C: f64 = 1.0;
+
+fn resume_error(row: &ProcedureRow, message: String) -> ProcedureRunError {
+    ProcedureRunError::Resume {
+        trial: row.trial,
+        message,
+    }
+}
+
+/// A recorded delivery the trial could have given: a finite plate between its baseline and its target (or the
+/// display's cut-off), within [`DELIVERED_SLACK_C`]; the procedure would otherwise be fed a stimulus it never gave.
+fn check_delivered(row: &ProcedureRow, plan: &TrialPlan) -> Result<(), ProcedureRunError> {
+    let end_c = match row.cutoff_c.is_finite() {
+        true => row.cutoff_c,
+        false => plan.target_c(),
+    };
+    let low_c = plan.baseline_c.min(end_c) - DELIVERED_SLACK_C;
+    let high_c = plan.baseline_c.max(end_c) + DELIVERED_SLACK_C;
+    match row.delivered_c.is_finite() && (low_c..=high_c).contains(&row.delivered_c) {
+        true => Ok(()),
+        false => Err(resume_error(
+            row,
+            format!(
+                "`delivered_c` = {} °C is not a plate this trial can deliver (it ramps from {} to {} °C; at most \
+                 {DELIVERED_SLACK_C} °C beyond)",
+                match row.delivered_c.is_finite() {
+                    true => number(row.delivered_c),
+                    false => "empty".to_string(),
+                },
+                number(plan.baseline_c),
+                number(end_c)
+            ),
+        )),
+    }
+}
+
+/// The recorded estimate is the one the replayed procedure gives after the trial (both absent, or equal to 1e-6
+/// °C): a row whose estimate was edited or lost does not resume.
+fn check_estimate(row: &ProcedureRow, replayed_c: Option<f64>) -> Result<(), ProcedureRunError> {
+    let same = match replayed_c {
+        Some(c) => (c - row.estimate_c).abs() <= 1e-6,
+        None => !row.estimate_c.is_finite(),
+    };
+    match same {
+        true => Ok(()),
+        false => Err(resume_error(
+            row,
+            format!(
+                "`estimate_c` = `{}` where the replayed procedure gives `{}`",
+                number(row.estimate_c),
+                replayed_c.map(number).unwrap_or_default()
+            ),
+        )),
+    }
 }
 
 fn describe_row(row: &ProcedureRow) -> String {
