@@ -3,13 +3,43 @@
 //! A method-of-limits session's ramps are listed as they run when nobody presses (each to its cut-off; a thermal
 //! sensory limen's later ramps start where the previous one stops, marked `continues_previous`); an adaptive
 //! procedure (levels, staircase, QUEST+) lists its first trial, its later intensities depending on the answers; a
-//! multi-zone program lists every presentation with its channels and duration.
+//! multi-zone program lists every presentation with its channels and duration. Every listed trial is checked against
+//! the display's stimulus limits as `lab run` checks it ([`PlanError::Refused`]): a plan says what a run would refuse.
 
 use thermode_procedures::program::segment_times_s;
-use thermode_procedures::{ProcedureFile, ProcedureKind, Response, TrialPlan};
+use thermode_procedures::{ProcedureFile, ProcedureKind, Response, Segment, TrialPlan};
+use thermode_runtime::program::Program;
+use thermode_runtime::StimulusLimits;
 
 use super::session::number;
+use super::simulated::loop_segment;
 use thermode_procedures::ProcedureError;
+
+/// Why a procedure file has no plan.
+#[derive(Debug, thiserror::Error)]
+pub enum PlanError {
+    /// The file is not a procedure.
+    #[error(transparent)]
+    Procedure(#[from] ProcedureError),
+    /// A trial the display would refuse (as `lab run` would, before presenting it).
+    #[error("trial {trial}: the display refuses its program ({message}); `lab run` would stop there")]
+    Refused {
+        /// The 1-based trial.
+        trial: usize,
+        /// What the display's limits say.
+        message: String,
+    },
+}
+
+/// Checks trial `trial`'s `segments` on `channel` against `limits` as the display does.
+fn check_trial(trial: usize, channel: usize, segments: &[Segment], limits: &StimulusLimits) -> Result<(), PlanError> {
+    Program::new(channel, segments.iter().map(loop_segment).collect(), limits)
+        .map(|_| ())
+        .map_err(|e| PlanError::Refused {
+            trial,
+            message: e.to_string(),
+        })
+}
 
 /// Columns of a procedure plan.
 pub const PLAN_COLUMNS: [&str; 13] = [
@@ -71,14 +101,19 @@ fn plan_row(plan: &TrialPlan, channel: usize) -> Vec<String> {
     ]
 }
 
-/// The plan of `file` for a single-channel procedure on `channel`.
-pub fn procedure_plan(file: &ProcedureFile, channel: usize) -> Result<ProcedurePlan, ProcedureError> {
+/// The plan of `file` for a single-channel procedure on `channel` of a display with stimulus `limits`.
+pub fn procedure_plan(
+    file: &ProcedureFile,
+    channel: usize,
+    limits: &StimulusLimits,
+) -> Result<ProcedurePlan, PlanError> {
     let mut rows: Vec<Vec<String>> = Vec::new();
     let mut duration_s = file.adaptation_s;
     let adaptive = !matches!(file.procedure, ProcedureKind::Limits | ProcedureKind::Program);
     match file.procedure()? {
         Some(mut procedure) => {
             while let Some(plan) = procedure.next_trial() {
+                check_trial(plan.index + 1, channel, &plan.segments(), limits)?;
                 duration_s += plan_duration_s(&plan);
                 rows.push(plan_row(&plan, channel));
                 if adaptive {
@@ -93,6 +128,9 @@ pub fn procedure_plan(file: &ProcedureFile, channel: usize) -> Result<ProcedureP
                 .as_ref()
                 .ok_or_else(|| ProcedureError::bad("program", "none", "a [program] table"))?;
             for trial in config.trials()? {
+                for (&zone, segments) in &trial.channels {
+                    check_trial(trial.index + 1, zone, segments, limits)?;
+                }
                 let length_s = trial
                     .channels
                     .values()

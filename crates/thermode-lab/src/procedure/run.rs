@@ -586,7 +586,12 @@ fn replay(procedure: &mut dyn Procedure, rows: &[ProcedureRow]) -> Result<usize,
         let detected = match row.response.as_str() {
             "press" | "yes" => true,
             "none" | "no" => false,
-            other => return Err(resume_error(row, format!("the response `{other}` is not one this trial gives"))),
+            other => {
+                return Err(resume_error(
+                    row,
+                    format!("the response `{other}` is not one this trial gives"),
+                ))
+            }
         };
         check_delivered(row, &plan)?;
         procedure.record(Response {

@@ -1,6 +1,6 @@
 //! Procedure sessions on the simulated display in virtual time: bit-identical runs, a session cut short by its
 //! answers resumed where it stopped (the procedure replayed from the rows), a torn last row cut, rows that are not
-//! the procedure's trials refused, and the display's cut-off reported per trial.
+//! the procedure's trials refused, rows whose delivery or estimate the trial cannot have given refused, and the display's cut-off reported per trial.
 
 use std::path::Path;
 
@@ -108,6 +108,50 @@ fn rows_that_are_not_the_procedures_trials_are_refused_on_resume() {
         .map(|e| e.to_string())
         .unwrap_or_default();
     assert!(error.contains("trial 2") && error.contains("WDT run 2"), "{error}");
+}
+
+/// The session CSV with `column` of data row `row` (1-based) set to `value`.
+fn with_field(text: &str, row: usize, column: &str, value: &str) -> String {
+    let mut lines: Vec<String> = text.lines().map(str::to_string).collect();
+    let at = lines[0].split(',').position(|h| h == column).expect("column");
+    let mut fields: Vec<String> = lines[row].split(',').map(str::to_string).collect();
+    fields[at] = value.to_string();
+    lines[row] = fields.join(",");
+    lines.iter().map(|l| format!("{l}\n")).collect()
+}
+
+#[test]
+fn a_resumed_row_whose_delivery_or_estimate_the_trial_cannot_have_given_is_refused() {
+    let dir = tempfile::tempdir().expect("dir");
+    run(dir.path(), FOUR_PRESSES).expect("run");
+    let path = dir.path().join("P01_cdt_2026-11-27.csv");
+    let recorded = csv(dir.path());
+    let first: Vec<String> = recorded.lines().take(2).map(str::to_string).collect();
+    let estimate_at = first[0].split(',').position(|h| h == "estimate_c").expect("column");
+    let recorded_estimate = first[1].split(',').nth(estimate_at).unwrap_or("").to_string();
+    let edited_estimate = match recorded_estimate.is_empty() {
+        true => "31.5".to_string(),
+        false => String::new(),
+    };
+    let cases = [
+        ("delivered_c", "99", "`delivered_c` = 99"),
+        ("delivered_c", "", "`delivered_c` = empty"),
+        ("response", "maybe", "`maybe`"),
+        ("estimate_c", edited_estimate.as_str(), "`estimate_c`"),
+    ];
+    for (column, value, expected) in cases {
+        std::fs::write(&path, with_field(&recorded, 1, column, value)).expect("edit");
+        let error = run(dir.path(), FOUR_PRESSES)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(
+            error.contains("trial 1") && error.contains(expected),
+            "{column} = `{value}`: expected a refusal naming {expected}, got: {error}"
+        );
+    }
+    std::fs::write(&path, &recorded).expect("restore");
+    assert_eq!(run(dir.path(), FOUR_PRESSES).expect("the unedited session resumes"), 4);
 }
 
 #[test]

@@ -9,6 +9,8 @@ use anyhow::Result;
 use clap::Args;
 use thermode_lab::design::ExperimentFile;
 use thermode_lab::plan::make_plan;
+use thermode_pipeline::pipeline::render_envelope;
+use thermode_runtime::StimulusLimits;
 
 use crate::output::{print_stdout, write_atomically};
 
@@ -22,6 +24,10 @@ pub struct LabPlanArgs {
     /// Write the plan CSV to this file (atomically) and print a summary, instead of printing the CSV.
     #[arg(long)]
     out: Option<PathBuf>,
+    /// The display's device file (TOML) whose stimulus limits a procedure's trials are checked against, as `lab
+    /// run --device-file` would check them; default: the built-in default display.
+    #[arg(long, value_name = "FILE")]
+    device_file: Option<PathBuf>,
 }
 
 /// Runs `thermode lab plan`.
@@ -54,7 +60,9 @@ pub fn run(args: &LabPlanArgs) -> Result<()> {
 /// `lab plan` of a procedure file: its trials as far as they are known before anyone answers.
 fn procedure(args: &LabPlanArgs, text: &str) -> Result<()> {
     let file = thermode_procedures::ProcedureFile::from_toml_str(text)?;
-    let plan = thermode_lab::procedure::plan::procedure_plan(&file, 0)?;
+    let device = crate::resolve::device_config(args.device_file.as_deref())?;
+    let limits = StimulusLimits::of_envelope(&render_envelope(&device));
+    let plan = thermode_lab::procedure::plan::procedure_plan(&file, 0, &limits)?;
     let Some(out) = &args.out else {
         return print_stdout(&plan.csv);
     };

@@ -1,7 +1,8 @@
 //! `thermode lab run`, `lab analyze` and `lab export --bids` on procedure files, run as a lab would: the method of
 //! limits on the simulated display against the analytic line at three rates, a QUEST+ session replayed through the
 //! `questplus` package, a multi-zone program starting every channel on one tick, a scripted limits run on the TCS II
-//! emulator (a temperature-commanded device), and a procedure session's BIDS events.
+//! emulator (a temperature-commanded device), a procedure session's BIDS events, and `lab plan` refusing what `lab
+//! run` refuses.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -10,7 +11,7 @@ use thermode_model::skin::Skin;
 use thermode_procedures::participant::ParticipantConfig;
 use thermode_procedures::skin_response::SkinResponse;
 
-use super::{expect_success, read_csv};
+use super::{expect_success, read_csv, thermode};
 
 fn experiment(name: &str) -> String {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -339,4 +340,52 @@ fn the_space_bar_stops_a_ramp_on_the_simulated_display_in_real_time() {
         (29.8..=31.7).contains(&delivered_c),
         "plate at the press {delivered_c} °C; {printed:?}"
     );
+}
+
+#[test]
+fn lab_plan_refuses_a_ramp_the_display_refuses_as_lab_run_does() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let file = dir.path().join("fast.toml");
+    let write = |rate_c_s: f64| {
+        std::fs::write(
+            &file,
+            format!(
+                "name = \"fast\"\nprocedure = \"limits\"\nadaptation_s = 1.0\n[limits]\ntests = [\"CDT\"]\n\
+                 runs = 1\nrate_c_s = {rate_c_s}\nisi_s = 1.0\n"
+            ),
+        )
+        .expect("write experiment")
+    };
+    let path = file.to_str().expect("utf-8");
+    write(50.0);
+    let plan = thermode(&["lab", "plan", "--experiment", path]);
+    let data = dir.path().join("data");
+    let run = thermode(&[
+        "lab",
+        "run",
+        "--experiment",
+        path,
+        "--participant",
+        "P01",
+        "--simulate",
+        "--simulated-participant",
+        "--data-dir",
+        data.to_str().expect("utf-8"),
+    ]);
+    let limit = "`rate_c_s [°C/s]` = 50 is invalid: must be a finite number from 0.01 to 20";
+    for (what, out) in [("lab plan", &plan), ("lab run", &run)] {
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && stderr.contains(limit),
+            "{what} of a 50 °C/s ramp: expected a refusal naming `{limit}`, got {:?}: {stderr}",
+            out.status.code()
+        );
+    }
+    assert!(
+        plan.stdout.is_empty(),
+        "no plan printed: {}",
+        String::from_utf8_lossy(&plan.stdout)
+    );
+    write(20.0);
+    expect_success(&["lab", "plan", "--experiment", path]);
 }
