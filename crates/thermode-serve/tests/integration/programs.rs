@@ -126,6 +126,19 @@ fn a_five_channel_program_changes_every_channel_s_set_point_first_on_one_tick_of
     let daemon = daemon(5, 1000.0, dir.path());
     let path = daemon.recording_path().expect("recording");
     let addr = daemon.http_addr();
+    // A program that arrives before a channel's first sample starts on its tick but cannot move a set-point until
+    // the samples are there (no shaping without a measurement; the display samples at 100 Hz): wait for every
+    // channel's readings over the first 0.1 s.
+    let measured = (0..5000).any(|_| {
+        let ready = daemon
+            .snapshot()
+            .is_some_and(|s| s.time_s >= 0.1 && s.channels.iter().all(|c| c.telemetry.sensor_c.is_finite()));
+        if !ready {
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+        ready
+    });
+    assert!(measured, "no channel measured within 5000 polls of the snapshot");
     let reply = client_runtime().block_on(async {
         let mut ws = ws_connect(addr, "").await;
         // A grill-like pattern: alternate bars step to 20 and 40 °C (40 within the display), then hold.

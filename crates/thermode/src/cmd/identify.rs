@@ -26,6 +26,7 @@ use thermode_control::identify::{IdSample, PARAMETERS};
 use thermode_device::{Device, DeviceConfig, Reading};
 use thermode_model::params::Rule;
 use thermode_platform::{utc_iso8601, Clock, MonotonicClock};
+use thermode_pipeline::self_test::{RestWatch, REST_DRIFT_C_PER_S, REST_WINDOW_S};
 use thermode_render::identify::{fit, record, sample_of, Excitation, DURATION_S, RATE_HZ};
 use thermode_render::identify_steps::{self, StepExcitation, StepIdentification, StepMethod, StepRecord};
 use thermode_safety::DriveCommand;
@@ -242,6 +243,7 @@ fn record_in_real_time(
     clock: &Arc<dyn Clock>,
 ) -> Result<(Vec<IdSample>, Identity)> {
     let identity = identity_of(args, device.as_ref());
+    wait_for_rest(device.as_mut(), clock)?;
     let mut excitation = Excitation::new(believed)?;
     let ticks = (args.duration * RATE_HZ).round() as usize;
     let mut samples = Vec::with_capacity(ticks + 1);
@@ -258,6 +260,40 @@ fn record_in_real_time(
     })?;
     progress.finish();
     Ok((samples, identity))
+}
+
+/// Longest wait for the plate to rest before an excitation \[s\]: 180 (a plate a `serve` left at 45 °C relaxes to
+/// within the rest slope in about a minute on the default display).
+const REST_WAIT_LIMIT_S: f64 = 180.0;
+
+/// Waits, output off, until channel 0's plate and hot side rest (their least-squares slopes over
+/// [`REST_WINDOW_S`] below [`REST_DRIFT_C_PER_S`], as the self-test judges rest), at most [`REST_WAIT_LIMIT_S`]:
+/// the fit starts from a plate at rest, which one a `serve` just left is not.
+fn wait_for_rest(device: &mut (dyn Device + Send), clock: &Arc<dyn Clock>) -> Result<()> {
+    let mut watch = RestWatch::new(REST_WINDOW_S, (4.0 * REST_WINDOW_S * RATE_HZ) as usize);
+    let progress = Progress::seconds(REST_WAIT_LIMIT_S, "identify: waiting for the plate to rest");
+    let mut drift = None;
+    let mut started_s = None;
+    drive_in_real_time(device, clock, |now_s, _, reading| {
+        let start_s = *started_s.get_or_insert(now_s);
+        progress.at_s(now_s - start_s);
+        watch.push(reading);
+        drift = watch.drift_c_per_s();
+        if drift.is_some_and(|(plate, hot)| plate.abs() < REST_DRIFT_C_PER_S && hot.abs() < REST_DRIFT_C_PER_S) {
+            return Ok(None);
+        }
+        if now_s - start_s > REST_WAIT_LIMIT_S {
+            let (plate, hot) = drift.unwrap_or((f64::NAN, f64::NAN));
+            bail!(
+                "the plate did not come to rest within {REST_WAIT_LIMIT_S} s with its output off (slopes: plate \
+                 {plate:.3} °C/s, hot side {hot:.3} °C/s, at most {REST_DRIFT_C_PER_S} allowed): is a finger or an \
+                 object on it? Nothing written"
+            );
+        }
+        Ok(Some(DriveCommand::off()))
+    })?;
+    progress.finish();
+    Ok(())
 }
 
 /// The identity of the device of `args` as `device` reports it.
