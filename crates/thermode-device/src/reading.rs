@@ -11,7 +11,7 @@ pub struct Reading {
     pub sensor_c: f64,
     /// Hot-side temperature from the box sensor \[°C\].
     pub hot_side_c: f64,
-    /// When the PT-100 sample was taken \[s\] (device clock: the loop time of the last [`Device::poll`], or the sum of the steps of `SimulatedDisplay::advance`).
+    /// When the PT-100 sample was taken \[s\] (device clock: the loop time of the last [`crate::Device::poll`], or the sum of the steps of `SimulatedDisplay::advance`).
     pub time_s: f64,
     /// Sequence number of the PT-100 sample; it stops advancing when the sensor is stale.
     pub sample_seq: u64,
