@@ -564,15 +564,14 @@ fn zone_plan(trial: &ZoneTrial) -> TrialPlan {
 /// Replays the recorded rows into `procedure`; every row must be the trial the procedure asks for.
 fn replay(procedure: &mut dyn Procedure, rows: &[ProcedureRow]) -> Result<usize, ProcedureRunError> {
     for row in rows {
-        let plan = procedure.next_trial().ok_or_else(|| ProcedureRunError::Resume {
-            trial: row.trial,
-            message: "the procedure has no trial left here".into(),
-        })?;
+        let plan = procedure
+            .next_trial()
+            .ok_or_else(|| resume_error(row, "the procedure has no trial left here".into()))?;
         let same = plan.label == row.label && plan.run == row.run && (plan.intensity_c - row.intensity_c).abs() < 1e-6;
         if !same {
-            return Err(ProcedureRunError::Resume {
-                trial: row.trial,
-                message: format!(
+            return Err(resume_error(
+                row,
+                format!(
                     "the file has {} run {} at {} °C where the procedure asks for {} run {} at {} °C",
                     row.label,
                     row.run,
@@ -581,7 +580,7 @@ fn replay(procedure: &mut dyn Procedure, rows: &[ProcedureRow]) -> Result<usize,
                     plan.run,
                     number(plan.intensity_c)
                 ),
-            });
+            ));
         }
         let detected = match row.response.as_str() {
             "press" | "yes" => true,
@@ -631,10 +630,9 @@ fn check_delivered(row: &ProcedureRow, plan: &TrialPlan) -> Result<(), Procedure
             format!(
                 "`delivered_c` = {} °C is not a plate this trial can deliver (it ramps from {} to {} °C; at most \
                  {DELIVERED_SLACK_C} °C beyond)",
-                match row.delivered_c.is_finite() {
-                    true => number(row.delivered_c),
-                    false => "empty".to_string(),
-                },
+                Some(number(row.delivered_c))
+                    .filter(|shown| !shown.is_empty())
+                    .unwrap_or_else(|| "empty".into()),
                 number(plan.baseline_c),
                 number(end_c)
             ),

@@ -1,6 +1,7 @@
 //! Procedure sessions on the simulated display in virtual time: bit-identical runs, a session cut short by its
 //! answers resumed where it stopped (the procedure replayed from the rows), a torn last row cut, rows that are not
-//! the procedure's trials refused, rows whose delivery or estimate the trial cannot have given refused, and the display's cut-off reported per trial.
+//! the procedure's trials refused, rows whose delivery or estimate the trial cannot have given refused, and the
+//! display's cut-off reported per trial.
 
 use std::path::Path;
 
@@ -48,6 +49,11 @@ fn run(data: &Path, script: &str) -> Result<usize, ProcedureRunError> {
     Ok(summary.trials)
 }
 
+/// The error of a run that must fail (empty if it succeeded).
+fn refusal(data: &Path, script: &str) -> String {
+    run(data, script).err().map(|e| e.to_string()).unwrap_or_default()
+}
+
 fn csv(data: &Path) -> String {
     std::fs::read_to_string(data.join("P01_cdt_2026-11-27.csv")).unwrap_or_else(|e| panic!("session CSV: {e}"))
 }
@@ -65,10 +71,7 @@ fn a_simulated_procedure_session_is_bit_identical_run_after_run() {
 #[test]
 fn a_session_cut_short_resumes_at_its_first_missing_trial() {
     let dir = tempfile::tempdir().expect("dir");
-    let error = run(dir.path(), "press 1.5\npress 1.5\n")
-        .err()
-        .map(|e| e.to_string())
-        .unwrap_or_default();
+    let error = refusal(dir.path(), "press 1.5\npress 1.5\n");
     assert!(error.contains("no answer for trial 3"), "{error}");
     let rows = |d: &Path| csv(d).lines().count() - 1;
     assert_eq!(rows(dir.path()), 2, "the two answered trials are on disk");
@@ -103,10 +106,7 @@ fn rows_that_are_not_the_procedures_trials_are_refused_on_resume() {
         lines[2].replace(",CDT,2,", ",WDT,2,")
     );
     std::fs::write(&path, changed).expect("write");
-    let error = run(dir.path(), FOUR_PRESSES)
-        .err()
-        .map(|e| e.to_string())
-        .unwrap_or_default();
+    let error = refusal(dir.path(), FOUR_PRESSES);
     assert!(error.contains("trial 2") && error.contains("WDT run 2"), "{error}");
 }
 
@@ -141,10 +141,7 @@ fn a_resumed_row_whose_delivery_or_estimate_the_trial_cannot_have_given_is_refus
     ];
     for (column, value, expected) in cases {
         std::fs::write(&path, with_field(&recorded, 1, column, value)).expect("edit");
-        let error = run(dir.path(), FOUR_PRESSES)
-            .err()
-            .map(|e| e.to_string())
-            .unwrap_or_default();
+        let error = refusal(dir.path(), FOUR_PRESSES);
         assert!(
             error.contains("trial 1") && error.contains(expected),
             "{column} = `{value}`: expected a refusal naming {expected}, got: {error}"

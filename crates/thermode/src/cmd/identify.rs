@@ -272,13 +272,12 @@ const REST_WAIT_LIMIT_S: f64 = 180.0;
 fn wait_for_rest(device: &mut (dyn Device + Send), clock: &Arc<dyn Clock>) -> Result<()> {
     let mut watch = RestWatch::new(REST_WINDOW_S, (4.0 * REST_WINDOW_S * RATE_HZ) as usize);
     let progress = Progress::seconds(REST_WAIT_LIMIT_S, "identify: waiting for the plate to rest");
-    let mut drift = None;
     let mut started_s = None;
     drive_in_real_time(device, clock, |now_s, _, reading| {
         let start_s = *started_s.get_or_insert(now_s);
         progress.at_s(now_s - start_s);
         watch.push(reading);
-        drift = watch.drift_c_per_s();
+        let drift = watch.drift_c_per_s();
         if drift.is_some_and(|(plate, hot)| plate.abs() < REST_DRIFT_C_PER_S && hot.abs() < REST_DRIFT_C_PER_S) {
             return Ok(None);
         }

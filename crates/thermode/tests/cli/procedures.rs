@@ -39,8 +39,9 @@ fn session_csv(data: &Path) -> PathBuf {
     found.remove(0)
 }
 
-fn run_simulated(file: &Path, data: &Path) -> String {
-    expect_success(&[
+/// `lab run` of `file` for P01 on the simulated display, answered by the simulated participant, into `data`.
+fn simulated_run_args<'a>(file: &'a Path, data: &'a Path) -> [&'a str; 10] {
+    [
         "lab",
         "run",
         "--experiment",
@@ -51,7 +52,11 @@ fn run_simulated(file: &Path, data: &Path) -> String {
         "--simulated-participant",
         "--data-dir",
         data.to_str().expect("utf-8"),
-    ])
+    ]
+}
+
+fn run_simulated(file: &Path, data: &Path) -> String {
+    expect_success(&simulated_run_args(file, data))
 }
 
 #[test]
@@ -359,19 +364,7 @@ fn lab_plan_refuses_a_ramp_the_display_refuses_as_lab_run_does() {
     let path = file.to_str().expect("utf-8");
     write(50.0);
     let plan = thermode(&["lab", "plan", "--experiment", path]);
-    let data = dir.path().join("data");
-    let run = thermode(&[
-        "lab",
-        "run",
-        "--experiment",
-        path,
-        "--participant",
-        "P01",
-        "--simulate",
-        "--simulated-participant",
-        "--data-dir",
-        data.to_str().expect("utf-8"),
-    ]);
+    let run = thermode(&simulated_run_args(&file, &dir.path().join("data")));
     let limit = "`rate_c_s [°C/s]` = 50 is invalid: must be a finite number from 0.01 to 20";
     for (what, out) in [("lab plan", &plan), ("lab run", &run)] {
         let stderr = String::from_utf8_lossy(&out.stderr);
