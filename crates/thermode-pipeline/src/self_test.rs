@@ -42,6 +42,7 @@ use std::collections::VecDeque;
 use std::fmt;
 
 use thermode_control::{Finger, PlantModel};
+use thermode_device::config::SELF_TEST_LAG_ERROR;
 use thermode_device::Reading;
 
 /// The pulse of the self-test.
@@ -521,10 +522,10 @@ pub struct SelfTestReport {
     pub sensor_lag_sd_s: f64,
     /// The file's \[s\].
     pub filed_sensor_lag_s: f64,
-    /// The longest the envelope allows for: the file's times `1 + render.sensor_lag_uncertainty` \[s\]. A sensor
-    /// measured within it (within three of the fit's standard deviations) gives the plate guard's bound its
-    /// measured lag with [`LAG_MARGIN`] (where that is longer than the file's allowance), so the bound holds the
-    /// plate whatever the measurement's own error.
+    /// The longest the envelope allows for: the file's times `1 + render.sensor_lag_uncertainty` (at least
+    /// [`SELF_TEST_LAG_ERROR`], the test's own error) \[s\]. A sensor measured within it (within three of the
+    /// fit's standard deviations) gives the plate guard's bound its measured lag with [`LAG_MARGIN`] (where that is
+    /// longer than the file's allowance), so the bound holds the plate whatever the measurement's own error.
     pub allowed_sensor_lag_s: f64,
     /// How fast the plate answers heat relative to the file (2: twice as fast, a heat capacity half the file's).
     pub response_scale: f64,
@@ -712,9 +713,9 @@ const RESPONSE_RANGE: (f64, f64) = (0.2, 5.0);
 const MAX_REFINEMENTS: usize = 20;
 
 /// Measures the sensor's lag and the plate's response from `record` (the display at rest with no finger before its
-/// first sample, then the pulse) against `plant` (the file's model) and the file's `sensor_lag_uncertainty`, with
-/// the display's drift at rest `drift_c_per_s` \[°C/s\] subtracted (`None`: the straight drift within
-/// ±[`REST_DRIFT_C_PER_S`] that fits best). A record of fewer than [`MIN_SAMPLES`] samples measures nothing: the
+/// first sample, then the pulse) against `plant` (the file's model) and the file's `sensor_lag_uncertainty` (at
+/// least [`SELF_TEST_LAG_ERROR`]), with the display's drift at rest `drift_c_per_s` \[°C/s\] subtracted (`None`:
+/// the straight drift within ±[`REST_DRIFT_C_PER_S`] that fits best). A record of fewer than [`MIN_SAMPLES`] samples measures nothing: the
 /// report is inconclusive (samples missing).
 pub fn assess(
     plant: &PlantModel,
@@ -727,7 +728,7 @@ pub fn assess(
         sensor_lag_s: f64::NAN,
         sensor_lag_sd_s: f64::NAN,
         filed_sensor_lag_s: filed_s,
-        allowed_sensor_lag_s: (1.0 + sensor_lag_uncertainty) * filed_s.max(MIN_LAG_S),
+        allowed_sensor_lag_s: (1.0 + sensor_lag_uncertainty.max(SELF_TEST_LAG_ERROR)) * filed_s.max(MIN_LAG_S),
         response_scale: f64::NAN,
         response_sd: f64::NAN,
         allowed_response_scale: MAX_RESPONSE_SCALE,
@@ -1054,6 +1055,17 @@ mod tests {
             text.contains("not its device file") && text.contains("0.30 s in the device file"),
             "{text}"
         );
+        // A file that states less than the test's own error is judged with the test's error: a sensor 10 % slower
+        // than a file stating 2 % passes (the red team's 0.34 s against 0.31 s), one 30 % slower does not.
+        let narrow = |lag| assess(&file, 0.02, &record(lag, 1.0), None);
+        let allowed_s = narrow(1.0).allowed_sensor_lag_s;
+        let expected_s = (1.0 + SELF_TEST_LAG_ERROR) * file.sensor_time_constant_s;
+        assert!(
+            (allowed_s - expected_s).abs() < 1e-12,
+            "allowed {allowed_s} s, expected {expected_s} s"
+        );
+        assert_eq!(narrow(1.1).off_file(), None, "{}", narrow(1.1));
+        assert_eq!(narrow(1.3).off_file(), Some(OffFile::SensorSlower), "{}", narrow(1.3));
         let nothing = assess(&file, 0.5, &[], None);
         assert!(
             matches!(

@@ -30,6 +30,7 @@
 //! capacities, the water conductance, the hot side.
 
 use thermode_control::linear::inverse_diagonal;
+use thermode_device::config::SELF_TEST_LAG_ERROR;
 use thermode_device::{DeviceConfig, Reading};
 use thermode_pipeline::{ChannelPipeline, ControllerKind, PipelineConfig, Stimulus};
 use thermode_safety::DriveCommand;
@@ -85,8 +86,9 @@ const MAX_DEAD_TIME_S: f64 = 0.25;
 const TAIL_FROM_FRACTION: f64 = 0.15;
 /// Half-width of the derivative used for the plate's reconstruction \[samples\]: 10 (±0.1 s at 100 Hz).
 const DERIVATIVE_HALF_WIDTH: usize = 10;
-/// The smallest relative uncertainty given to an identified sensor lag \[-\]: 0.05.
-pub const MIN_LAG_UNCERTAINTY: f64 = 0.05;
+/// The smallest relative uncertainty given to an identified sensor lag \[-\]: the self-test's own error (0.15), which
+/// judges the file at every start.
+pub const MIN_LAG_UNCERTAINTY: f64 = SELF_TEST_LAG_ERROR;
 
 /// One fresh sensor sample of the record.
 #[derive(Debug, Clone, Copy, PartialEq)]

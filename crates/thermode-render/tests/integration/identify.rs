@@ -3,6 +3,7 @@
 //! 10 % of the hidden one, and the model controller with the identified file renders the paper's materials with an
 //! RMS skin error within 1.05 × the one it reaches with the true file.
 
+use thermode_device::config::SELF_TEST_LAG_ERROR;
 use thermode_device::DeviceConfig;
 use thermode_model::materials::paper_materials;
 use thermode_model::peltier::PeltierDatasheet;
@@ -85,19 +86,22 @@ fn identify_recovers_every_hidden_parameter_within_ten_percent() {
             );
         }
         // The plate and sensor-lag uncertainties the identified file states cover the real errors of its capacity
-        // and time constant, and are far below a datasheet file's 0.2 and 0.5.
-        for (what, got, want, stated) in [
+        // and time constant, and are far below a datasheet file's 0.2 and 0.5; the sensor lag's is at least the
+        // start-up self-test's own error (SELF_TEST_LAG_ERROR), never above it by the fit alone.
+        for (what, got, want, stated, stated_at_most) in [
             (
                 "plate capacity",
                 identified.plate.heat_capacity_j_k,
                 hidden.plate.heat_capacity_j_k,
                 identified.render.plate_uncertainty,
+                0.1,
             ),
             (
                 "sensor time constant",
                 identified.sensor.time_constant_s,
                 hidden.sensor.time_constant_s,
                 identified.render.sensor_lag_uncertainty,
+                SELF_TEST_LAG_ERROR,
             ),
         ] {
             let error = got / want - 1.0;
@@ -107,8 +111,8 @@ fn identify_recovers_every_hidden_parameter_within_ten_percent() {
                 100.0 * stated
             );
             assert!(
-                error.abs() <= stated && stated < 0.1,
-                "{what} off by {error}, stated uncertainty {stated}"
+                error.abs() <= stated && stated <= stated_at_most,
+                "{what} off by {error}, stated uncertainty {stated} (at most {stated_at_most})"
             );
         }
         let (with_identified, with_true) = (mean_rms_c(&identified, &hidden), mean_rms_c(&hidden, &hidden));
