@@ -336,8 +336,13 @@ fn a_recording_on_a_full_tmpfs_fails_loudly_with_whole_rows_and_stops_every_stim
         return;
     };
     let m = mount.display();
-    let (pid, mut serve, port, stderr) =
-        serve_on_small_tmpfs(&mount, &format!("--port 0 --no-osc --channels 5 --record {m}"));
+    // Its ledger beside the mount point, so the machine's own ledger (another display's) cannot refuse it.
+    let state = mount.with_file_name("state");
+    let arguments = format!(
+        "--port 0 --no-osc --channels 5 --record {m} --state-dir {}",
+        state.display()
+    );
+    let (pid, mut serve, port, stderr) = serve_on_small_tmpfs(&mount, &arguments);
     let r = ws_ask(
         port,
         &[serde_json::json!({"type": "setpoint", "id": 1, "channel": 0, "temp_c": 36, "rate_c_s": 2})],
