@@ -202,7 +202,7 @@ pub struct RenderConfig {
     /// Relative uncertainty of the sensor's time constant (`sensor.time_constant_s`) as this file gives it \[-\], 0
     /// to 1. Default 0.5; `thermode identify` writes its fit's. The safety envelope's plate guard holds its estimate
     /// of the true plate to where a sensor that much slower puts it (none when 0). The start-up self-test and the
-    /// device-side lines allow for at least [`SELF_TEST_LAG_ERROR`] ([`RenderConfig::verified_lag_uncertainty`]).
+    /// device-side lines allow for at least [`SELF_TEST_LAG_ERROR`] ([`verified_lag_uncertainty`]).
     pub sensor_lag_uncertainty: f64,
 }
 
@@ -213,12 +213,10 @@ pub struct RenderConfig {
 /// device-side line allows for a sensor this much slower than the file.
 pub const SELF_TEST_LAG_ERROR: f64 = 0.15;
 
-impl RenderConfig {
-    /// The sensor-lag uncertainty the self-test and the device-side lines allow for \[-\]:
-    /// `sensor_lag_uncertainty`, at least [`SELF_TEST_LAG_ERROR`].
-    pub fn verified_lag_uncertainty(&self) -> f64 {
-        self.sensor_lag_uncertainty.max(SELF_TEST_LAG_ERROR)
-    }
+/// The sensor-lag uncertainty \[-\] the self-test, `identify` and the device-side lines work with for a stated
+/// `sensor_lag_uncertainty` \[-\]: that, at least [`SELF_TEST_LAG_ERROR`].
+pub fn verified_lag_uncertainty(sensor_lag_uncertainty: f64) -> f64 {
+    sensor_lag_uncertainty.max(SELF_TEST_LAG_ERROR)
 }
 
 /// Everything that describes one simulated display channel (all channels of a display are identical).

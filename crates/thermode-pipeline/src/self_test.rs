@@ -42,7 +42,7 @@ use std::collections::VecDeque;
 use std::fmt;
 
 use thermode_control::{Finger, PlantModel};
-use thermode_device::config::SELF_TEST_LAG_ERROR;
+use thermode_device::config::verified_lag_uncertainty;
 use thermode_device::Reading;
 
 /// The pulse of the self-test.
@@ -523,9 +523,10 @@ pub struct SelfTestReport {
     /// The file's \[s\].
     pub filed_sensor_lag_s: f64,
     /// The longest the envelope allows for: the file's times `1 + render.sensor_lag_uncertainty` (at least
-    /// [`SELF_TEST_LAG_ERROR`], the test's own error) \[s\]. A sensor measured within it (within three of the
-    /// fit's standard deviations) gives the plate guard's bound its measured lag with [`LAG_MARGIN`] (where that is
-    /// longer than the file's allowance), so the bound holds the plate whatever the measurement's own error.
+    /// [`thermode_device::config::SELF_TEST_LAG_ERROR`], the test's own error) \[s\]. A sensor measured within it
+    /// (within three of the fit's standard deviations) gives the plate guard's bound its measured lag with
+    /// [`LAG_MARGIN`] (where that is longer than the file's allowance), so the bound holds the plate whatever the
+    /// measurement's own error.
     pub allowed_sensor_lag_s: f64,
     /// How fast the plate answers heat relative to the file (2: twice as fast, a heat capacity half the file's).
     pub response_scale: f64,
@@ -714,9 +715,9 @@ const MAX_REFINEMENTS: usize = 20;
 
 /// Measures the sensor's lag and the plate's response from `record` (the display at rest with no finger before its
 /// first sample, then the pulse) against `plant` (the file's model) and the file's `sensor_lag_uncertainty` (at
-/// least [`SELF_TEST_LAG_ERROR`]), with the display's drift at rest `drift_c_per_s` \[°C/s\] subtracted (`None`:
-/// the straight drift within ±[`REST_DRIFT_C_PER_S`] that fits best). A record of fewer than [`MIN_SAMPLES`] samples measures nothing: the
-/// report is inconclusive (samples missing).
+/// least [`thermode_device::config::SELF_TEST_LAG_ERROR`]), with the display's drift at rest `drift_c_per_s`
+/// \[°C/s\] subtracted (`None`: the straight drift within ±[`REST_DRIFT_C_PER_S`] that fits best). A record of
+/// fewer than [`MIN_SAMPLES`] samples measures nothing: the report is inconclusive (samples missing).
 pub fn assess(
     plant: &PlantModel,
     sensor_lag_uncertainty: f64,
@@ -728,7 +729,7 @@ pub fn assess(
         sensor_lag_s: f64::NAN,
         sensor_lag_sd_s: f64::NAN,
         filed_sensor_lag_s: filed_s,
-        allowed_sensor_lag_s: (1.0 + sensor_lag_uncertainty.max(SELF_TEST_LAG_ERROR)) * filed_s.max(MIN_LAG_S),
+        allowed_sensor_lag_s: (1.0 + verified_lag_uncertainty(sensor_lag_uncertainty)) * filed_s.max(MIN_LAG_S),
         response_scale: f64::NAN,
         response_sd: f64::NAN,
         allowed_response_scale: MAX_RESPONSE_SCALE,
@@ -899,6 +900,7 @@ mod tests {
     use super::*;
     use crate::controllers::plant_model;
     use crate::ChannelPipeline;
+    use thermode_device::config::SELF_TEST_LAG_ERROR;
     use thermode_device::DeviceConfig;
 
     /// The record of the pulse on a model display whose sensor lags `lag` times and whose plate answers heat

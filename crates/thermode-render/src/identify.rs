@@ -13,11 +13,12 @@
 //! plate's (`render.plate_uncertainty`, from the plate capacity's standard deviation), the hot side's
 //! (`render.hot_side_uncertainty`, from its capacity's and water conductance's) and the sensor's
 //! (`render.sensor_lag_uncertainty`, from the time constant's, at least the self-test's own error
-//! [`SELF_TEST_LAG_ERROR`]); everything else (sensor noise and rate, contact, the render rate limit) is kept, and the drive limit too unless it exceeds the
-//! identified I_max (a device file bounds it by I_max).
+//! [`thermode_device::config::SELF_TEST_LAG_ERROR`]); everything else (sensor noise and rate, contact, the render
+//! rate limit) is kept, and the drive limit too unless it exceeds the identified I_max (a device file bounds it by
+//! I_max).
 
 use thermode_control::identify::{identify, IdSample, Identification, IdentifyError};
-use thermode_device::config::SELF_TEST_LAG_ERROR;
+use thermode_device::config::verified_lag_uncertainty;
 use thermode_device::{Device, DeviceConfig, NoFinger, Reading, SimulatedDisplay};
 use thermode_model::peltier::PeltierDatasheet;
 use thermode_pipeline::{controllers::plant_model, ChannelPipeline, ControllerKind, PipelineConfig, Stimulus};
@@ -156,7 +157,7 @@ pub fn identified_device(believed: &DeviceConfig, fit: &Identification) -> Resul
     device.render.plate_uncertainty = identified_uncertainty(&fit.relative_sd[3..4]);
     device.render.hot_side_uncertainty = identified_uncertainty(&fit.relative_sd[4..6]);
     // The lag's uncertainty at least the self-test's own error, which judges the file at every start.
-    device.render.sensor_lag_uncertainty = identified_uncertainty(&fit.relative_sd[7..8]).max(SELF_TEST_LAG_ERROR);
+    device.render.sensor_lag_uncertainty = verified_lag_uncertainty(identified_uncertainty(&fit.relative_sd[7..8]));
     // The drive's limit is the drive's, not fitted; a device file bounds it by the module's I_max.
     device.drive.current_limit_a = device.drive.current_limit_a.min(device.peltier.imax_a);
     Ok(device)

@@ -86,9 +86,6 @@ const MAX_DEAD_TIME_S: f64 = 0.25;
 const TAIL_FROM_FRACTION: f64 = 0.15;
 /// Half-width of the derivative used for the plate's reconstruction \[samples\]: 10 (±0.1 s at 100 Hz).
 const DERIVATIVE_HALF_WIDTH: usize = 10;
-/// The smallest relative uncertainty given to an identified sensor lag \[-\]: the self-test's own error (0.15), which
-/// judges the file at every start.
-pub const MIN_LAG_UNCERTAINTY: f64 = SELF_TEST_LAG_ERROR;
 
 /// One fresh sensor sample of the record.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -540,12 +537,13 @@ pub fn identify_steps(
 }
 
 /// The device file identified from `believed`: the sensor's time constant the fitted one, its uncertainty
-/// (`render.sensor_lag_uncertainty`) three of its relative standard deviations, at least [`MIN_LAG_UNCERTAINTY`],
+/// (`render.sensor_lag_uncertainty`) three of its relative standard deviations, at least the self-test's own error
+/// ([`SELF_TEST_LAG_ERROR`], 0.15),
 /// at most 1; everything else the believed file's (module, capacities, water: not identifiable from the sensor).
 pub fn identified_device(believed: &DeviceConfig, lag: &LagFit) -> Result<DeviceConfig, RenderError> {
     let mut device = *believed;
     device.sensor.time_constant_s = lag.time_constant_s;
-    device.render.sensor_lag_uncertainty = (3.0 * lag.sd_s / lag.time_constant_s).clamp(MIN_LAG_UNCERTAINTY, 1.0);
+    device.render.sensor_lag_uncertainty = (3.0 * lag.sd_s / lag.time_constant_s).clamp(SELF_TEST_LAG_ERROR, 1.0);
     device
         .validate("the identified device file")
         .map_err(|e| RenderError::Invalid(e.to_string()))?;

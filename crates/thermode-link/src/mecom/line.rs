@@ -35,6 +35,7 @@
 //! start-up self-test), and never less than the datasheet's (the built-in default file's 0.3 s): a file that claims
 //! a faster sensor does not lift the line ([`line_lag_s`]).
 
+use thermode_device::config::verified_lag_uncertainty;
 use thermode_device::DeviceConfig;
 use thermode_safety::ABSOLUTE_MAX_C;
 
@@ -63,7 +64,8 @@ pub fn approach_share(room_c: f64) -> f64 {
 /// `1 + render.sensor_lag_uncertainty` (at least the self-test's own error), and never less than the datasheet's
 /// (the built-in default file's).
 pub fn line_lag_s(device: &DeviceConfig) -> f64 {
-    let filed_s = device.sensor.time_constant_s * (1.0 + device.render.verified_lag_uncertainty());
+    let filed_s =
+        device.sensor.time_constant_s * (1.0 + verified_lag_uncertainty(device.render.sensor_lag_uncertainty));
     filed_s.max(DeviceConfig::default().sensor.time_constant_s)
 }
 
@@ -234,13 +236,13 @@ mod tests {
         identified.render.sensor_lag_uncertainty = 0.065;
         assert!(
             (line_lag_s(&identified) - 0.3565).abs() < 1e-9,
-            "{}",
+            "{} s, expected 0.3565 s",
             line_lag_s(&identified)
         );
         identified.render.sensor_lag_uncertainty = 0.2;
         assert!(
             (line_lag_s(&identified) - 0.372).abs() < 1e-9,
-            "{}",
+            "{} s, expected 0.372 s",
             line_lag_s(&identified)
         );
     }
