@@ -22,7 +22,7 @@ pub mod status;
 pub mod telemetry;
 
 pub use materials::{MaterialInfo, MaterialProperties};
-pub use parse::{parse_request, parse_request_sized, ApiError};
+pub use parse::{parse_request, parse_request_sized, request_id_only, ApiError};
 pub use program::{ProgramCutoff, ProgramEvent, ProgramEventKind, ResponseKind};
 pub use reply::{AppliedAt, Done, ErrorCode, ErrorReply, Event, OkReply, RecordingEvent, Response, StatusReply};
 pub use request::{Envelope, Request, RequestId};

@@ -111,6 +111,22 @@ pub fn parse_request_sized(
     (Some(id), request_of(map))
 }
 
+/// Only the `id` of a message (`None` when it has no readable one), read without building the rest: the cheap
+/// read for a message refused before it is parsed (`rate_limited`), so that a flood of large programs costs a
+/// tokenizer pass each, not a parse. A duplicated `id` key, or text that is not a JSON object, gives `None`.
+pub fn request_id_only(text: &str) -> Option<RequestId> {
+    #[derive(serde::Deserialize)]
+    struct IdOnly {
+        id: Option<Value>,
+    }
+    // serde reads a struct from an array as well: only an object has an `id`.
+    if !text.trim_start().starts_with('{') {
+        return None;
+    }
+    let id = serde_json::from_str::<IdOnly>(text).ok()?.id;
+    request_id(id).ok()
+}
+
 fn request_id(id: Option<Value>) -> Result<RequestId, ApiError> {
     match id {
         None => Err(ApiError::new(ErrorCode::MissingField, "every request needs an `id`")),
@@ -304,5 +320,22 @@ mod tests {
             Some(RequestId::Text("abc".into())),
             "ids are echoed even with errors"
         );
+    }
+
+    #[test]
+    fn the_id_alone_is_the_id_the_full_read_finds() {
+        let messages = [
+            r#"{"type":"touch","id":18446744073709551615,"channel":1,"material":"Aluminum"}"#,
+            r#"{"channels":{"0":[{"hold_s":1}]},"type":"program","id":"p-1"}"#,
+            r#"{"type":"fly","id":"abc"}"#,
+            r#"{"type":"status","id":[1]}"#,
+            r#"{"type":"status"}"#,
+        ];
+        for text in messages {
+            assert_eq!(request_id_only(text), parse_request(text, 1024).0, "{text}");
+        }
+        for text in [r#"{"id":1,"id":2}"#, "[1]", "{", r#""id""#] {
+            assert_eq!(request_id_only(text), None, "{text}");
+        }
     }
 }

@@ -11,7 +11,12 @@
 //!   whose drive command is computed with the touch (`applied`, 1 = the very next tick), and the first tick whose
 //!   drive current differs from the pre-touch current by more than [`DRIVE_CHANGE_A`] (`drive_changed`); and the
 //!   time from sending to the start of that tick, in periods.
+//! - *`stop_all` under a program flood* (`flooders` > 0, instead of the touches): that many clients send
+//!   999-segment programs on every channel back to back without waiting for their replies (about 19 KB per
+//!   channel), while a fresh client connects every touch interval and times its `stop_all` from sending to the
+//!   reply (and from connecting to the reply).
 
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver};
 use std::sync::Arc;
 use std::time::Duration;
@@ -19,7 +24,7 @@ use std::time::Duration;
 use futures_util::{SinkExt, StreamExt};
 use serde::Serialize;
 use thermode_device::Device;
-use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::tungstenite::{Message, Utf8Bytes};
 
 use crate::daemon::{Daemon, DaemonConfig, ServerConfig};
 use crate::error::ServeError;
@@ -46,6 +51,9 @@ pub struct BenchConfig {
     pub subscribers: usize,
     /// Ask for real-time scheduling and locked memory for the loop ([`LoopConfig::realtime`]). Default false.
     pub realtime: bool,
+    /// WebSocket clients flooding the daemon with 999-segment programs; when above 0, `stop_all` from a fresh
+    /// client is timed instead of the touches. Default 0.
+    pub flooders: usize,
 }
 
 impl Default for BenchConfig {
@@ -56,6 +64,7 @@ impl Default for BenchConfig {
             touch_interval_s: 0.5,
             subscribers: 0,
             realtime: false,
+            flooders: 0,
         }
     }
 }
@@ -142,6 +151,12 @@ pub struct BenchReport {
     pub telemetry_messages: u64,
     /// What real-time treatment the loop obtained.
     pub realtime: String,
+    /// Clients flooding programs during the run.
+    pub flooders: usize,
+    /// A fresh client's `stop_all` sent → its reply, under the flood \[s\] (empty without flooders).
+    pub stop_all_reply_s: Spread,
+    /// The same client's connect → the `stop_all` reply \[s\].
+    pub stop_all_connect_reply_s: Spread,
 }
 
 impl std::fmt::Display for BenchReport {
@@ -178,6 +193,23 @@ impl std::fmt::Display for BenchReport {
             self.work_p99_s * 1e6,
             self.work_max_s * 1e6
         )?;
+        if self.flooders > 0 {
+            let millis = |s: &Spread| {
+                let ms = |x: f64| x * 1e3;
+                let (p50, p99, max) = (ms(s.p50), ms(s.p99), ms(s.max));
+                format!(
+                    "p50 {p50:6.1} ms   p99 {p99:6.1} ms   max {max:6.1} ms   (n = {})",
+                    s.count
+                )
+            };
+            writeln!(
+                f,
+                "stop_all from a fresh client, {} clients flooding programs:",
+                self.flooders
+            )?;
+            writeln!(f, "  sent → reply       {}", millis(&self.stop_all_reply_s))?;
+            return write!(f, "  connect → reply    {}", millis(&self.stop_all_connect_reply_s));
+        }
         writeln!(f, "touch over WebSocket → drive, in loop periods:")?;
         writeln!(f, "  applied (ticks)         {}", ticks(&self.touch_applied_ticks))?;
         writeln!(
@@ -335,8 +367,8 @@ pub fn run(
             port: 0,
             osc_port: None,
             net: crate::api::NetLimits {
-                max_connections: config.subscribers + 1,
-                max_http_connections: (config.subscribers + 1).max(127) + 1,
+                max_connections: config.subscribers + config.flooders + 2,
+                max_http_connections: (config.subscribers + config.flooders + 2).max(127) + 1,
                 ..crate::api::NetLimits::default()
             },
             ..ServerConfig::default()
@@ -354,13 +386,16 @@ pub fn run(
     let rows = collector
         .join()
         .map_err(|_| ServeError::Config("bench collector panicked".into()))?;
-    let (sent, telemetry_messages) = sent?;
+    let driven = sent?;
     let stats = snapshot.map(|s| s.stats).unwrap_or_default();
-    let mut report = report(config, channels, &rows, &sent, stats);
+    let mut report = report(config, channels, &rows, &driven.touches, stats);
     report.dropped_records = dropped_records;
     report.subscribers = config.subscribers;
-    report.telemetry_messages = telemetry_messages;
+    report.telemetry_messages = driven.telemetry_messages;
     report.realtime = realtime;
+    report.flooders = config.flooders;
+    report.stop_all_reply_s = Spread::of(&driven.stop_all_reply_s);
+    report.stop_all_connect_reply_s = Spread::of(&driven.stop_all_connect_reply_s);
     Ok(report)
 }
 
@@ -382,22 +417,38 @@ fn collect(records: Receiver<TickRecord>) -> Vec<Row> {
     rows
 }
 
-/// Touches and releases over a WebSocket for the run's duration, with `config.subscribers` telemetry subscribers
-/// reading alongside; returns when each touch was sent and how many telemetry messages the subscribers received.
+/// What the clients measured.
+struct Driven {
+    /// When each touch was sent (none under a flood).
+    touches: Vec<Sent>,
+    /// Telemetry messages the subscribers received.
+    telemetry_messages: u64,
+    /// `stop_all` sent → reply \[s\] (only under a flood).
+    stop_all_reply_s: Vec<f64>,
+    /// Connect → `stop_all` reply \[s\].
+    stop_all_connect_reply_s: Vec<f64>,
+}
+
+/// The bench client's I/O error.
+fn client_error(e: impl std::fmt::Display) -> ServeError {
+    ServeError::Io {
+        context: "bench client".into(),
+        source: std::io::Error::other(e.to_string()),
+    }
+}
+
+/// Touches and releases over a WebSocket for the run's duration (or, with flooders, times a fresh client's
+/// `stop_all` as often), with `config.subscribers` telemetry subscribers reading alongside.
 fn drive_client(
     daemon: &Daemon,
     config: &BenchConfig,
     channels: usize,
     clock: &dyn Clock,
-) -> Result<(Vec<Sent>, u64), ServeError> {
-    let io = |e: std::io::Error| ServeError::Io {
-        context: "bench client".into(),
-        source: e,
-    };
+) -> Result<Driven, ServeError> {
     let runtime = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()
-        .map_err(io)?;
+        .map_err(client_error)?;
     // The clients stand for other processes: off the loop's CPU, as the daemon's network threads are.
     if let Some(cpus) = config
         .realtime
@@ -407,56 +458,146 @@ fn drive_client(
         let _ = thermode_platform::rt::pin_current_thread(&cpus);
     }
     let url = format!("ws://{}/api/ws", daemon.http_addr());
-    let received = Arc::new(std::sync::atomic::AtomicU64::new(0));
-    runtime.block_on(async {
+    let received = Arc::new(AtomicU64::new(0));
+    let flooding = Arc::new(AtomicBool::new(true));
+    let program = flood_program(channels);
+    let flooders: Vec<_> = (0..config.flooders)
+        .map(|_| {
+            let (url, program, flooding) = (url.clone(), program.clone(), flooding.clone());
+            std::thread::spawn(move || flood(&url, program, &flooding))
+        })
+        .collect();
+    let driven = runtime.block_on(async {
         let mut subscribers = Vec::new();
         for id in 0..config.subscribers {
             let (mut sub, _) = tokio_tungstenite::connect_async(url.as_str())
                 .await
-                .map_err(|e| io(std::io::Error::other(e.to_string())))?;
+                .map_err(client_error)?;
             let text = format!(r#"{{"type":"subscribe","id":{id},"rate_hz":100}}"#);
-            sub.send(Message::Text(text.into()))
-                .await
-                .map_err(|e| io(std::io::Error::other(e.to_string())))?;
+            sub.send(Message::Text(text.into())).await.map_err(client_error)?;
             let received = received.clone();
             subscribers.push(tokio::spawn(async move {
                 while let Some(Ok(message)) = sub.next().await {
                     if message.is_text() {
-                        received.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        received.fetch_add(1, Ordering::Relaxed);
                     }
                 }
             }));
         }
-        let (mut ws, _) = tokio_tungstenite::connect_async(url.as_str())
-            .await
-            .map_err(|e| io(std::io::Error::other(e.to_string())))?;
         tokio::time::sleep(Duration::from_millis(500)).await; // settle
-        received.store(0, std::sync::atomic::Ordering::Relaxed);
-        let start_s = clock.now_s();
-        let mut sent = Vec::new();
-        let mut k = 0usize;
-        while clock.now_s() - start_s < config.duration_s {
-            let channel = k % channels;
-            for (kind, extra) in [("touch", r#","material":"aluminium""#), ("release", "")] {
-                let text = format!(r#"{{"type":"{kind}","id":{k},"channel":{channel}{extra}}}"#);
-                let at_s = clock.now_s();
-                ws.send(Message::Text(text.into()))
-                    .await
-                    .map_err(|e| io(std::io::Error::other(e.to_string())))?;
-                let _reply = ws.next().await;
-                if kind == "touch" {
-                    sent.push(Sent { channel, at_s });
-                }
-                tokio::time::sleep(Duration::from_secs_f64(config.touch_interval_s / 2.0)).await;
-            }
-            k += 1;
-        }
-        let _ = ws.close(None).await;
+        received.store(0, Ordering::Relaxed);
+        let mut driven = if config.flooders > 0 {
+            time_stop_all(&url, config, clock).await
+        } else {
+            touch_and_release(&url, config, channels, clock).await
+        }?;
         for subscriber in subscribers {
             subscriber.abort();
         }
-        Ok((sent, received.load(std::sync::atomic::Ordering::Relaxed)))
+        driven.telemetry_messages = received.load(Ordering::Relaxed);
+        Ok(driven)
+    });
+    flooding.store(false, Ordering::Relaxed);
+    for flooder in flooders {
+        let _ = flooder.join();
+    }
+    driven
+}
+
+/// Touches aluminium on one channel after another and releases it again, for the run's duration.
+async fn touch_and_release(
+    url: &str,
+    config: &BenchConfig,
+    channels: usize,
+    clock: &dyn Clock,
+) -> Result<Driven, ServeError> {
+    let (mut ws, _) = tokio_tungstenite::connect_async(url).await.map_err(client_error)?;
+    let start_s = clock.now_s();
+    let mut touches = Vec::new();
+    let mut k = 0usize;
+    while clock.now_s() - start_s < config.duration_s {
+        let channel = k % channels;
+        for (kind, extra) in [("touch", r#","material":"aluminium""#), ("release", "")] {
+            let text = format!(r#"{{"type":"{kind}","id":{k},"channel":{channel}{extra}}}"#);
+            let at_s = clock.now_s();
+            ws.send(Message::Text(text.into())).await.map_err(client_error)?;
+            let _reply = ws.next().await;
+            if kind == "touch" {
+                touches.push(Sent { channel, at_s });
+            }
+            tokio::time::sleep(Duration::from_secs_f64(config.touch_interval_s / 2.0)).await;
+        }
+        k += 1;
+    }
+    let _ = ws.close(None).await;
+    Ok(Driven {
+        touches,
+        telemetry_messages: 0,
+        stop_all_reply_s: Vec::new(),
+        stop_all_connect_reply_s: Vec::new(),
     })
+}
+
+/// A fresh client every touch interval: connects, sends `stop_all`, waits for its reply.
+async fn time_stop_all(url: &str, config: &BenchConfig, clock: &dyn Clock) -> Result<Driven, ServeError> {
+    let (mut reply_s, mut connect_reply_s) = (Vec::new(), Vec::new());
+    let start_s = clock.now_s();
+    while clock.now_s() - start_s < config.duration_s {
+        let connect_s = clock.now_s();
+        let (mut ws, _) = tokio_tungstenite::connect_async(url).await.map_err(client_error)?;
+        let sent_s = clock.now_s();
+        let text = r#"{"type":"stop_all","id":"stop"}"#;
+        ws.send(Message::Text(text.into())).await.map_err(client_error)?;
+        while let Some(Ok(message)) = ws.next().await {
+            if message.to_text().is_ok_and(|t| t.contains(r#""id":"stop""#)) {
+                let replied_s = clock.now_s();
+                reply_s.push(replied_s - sent_s);
+                connect_reply_s.push(replied_s - connect_s);
+                break;
+            }
+        }
+        let _ = ws.close(None).await;
+        tokio::time::sleep(Duration::from_secs_f64(config.touch_interval_s)).await;
+    }
+    Ok(Driven {
+        touches: Vec::new(),
+        telemetry_messages: 0,
+        stop_all_reply_s: reply_s,
+        stop_all_connect_reply_s: connect_reply_s,
+    })
+}
+
+/// A `program` of [`thermode_runtime::program::MAX_SEGMENTS`] 1 ms holds on each of `channels` channels.
+fn flood_program(channels: usize) -> Utf8Bytes {
+    let holds = vec![r#"{"hold_s":0.001}"#; thermode_runtime::program::MAX_SEGMENTS].join(",");
+    let per_channel: Vec<String> = (0..channels).map(|c| format!(r#""{c}":[{holds}]"#)).collect();
+    format!(
+        r#"{{"type":"program","id":1,"channels":{{{}}}}}"#,
+        per_channel.join(",")
+    )
+    .into()
+}
+
+/// One flooding client on its own thread: sends `program` back to back, reading (and dropping) the replies,
+/// while `flooding` holds.
+fn flood(url: &str, program: Utf8Bytes, flooding: &AtomicBool) {
+    let Ok(runtime) = tokio::runtime::Builder::new_current_thread().enable_all().build() else {
+        return;
+    };
+    runtime.block_on(async {
+        let Ok((ws, _)) = tokio_tungstenite::connect_async(url).await else {
+            return;
+        };
+        let (mut sink, mut replies) = ws.split();
+        let drain = tokio::spawn(async move { while let Some(Ok(_)) = replies.next().await {} });
+        while flooding.load(Ordering::Relaxed) {
+            if sink.send(Message::Text(program.clone())).await.is_err() {
+                break;
+            }
+            tokio::task::yield_now().await;
+        }
+        drain.abort();
+    });
 }
 
 fn report(
@@ -510,6 +651,9 @@ fn report(
         subscribers: 0,
         telemetry_messages: 0,
         realtime: String::new(),
+        flooders: 0,
+        stop_all_reply_s: Spread::default(),
+        stop_all_connect_reply_s: Spread::default(),
     }
 }
 

@@ -163,7 +163,7 @@ pub async fn post(State(app): State<Arc<App>>, body: Body) -> Response {
     };
     app.http.commands.fetch_add(1, Ordering::Relaxed);
     if !app.command_lease.admit() {
-        return respond(&execute::rate_limited(&app, &text, Owner::Nobody));
+        return respond(&execute::rate_limited(&app, &text));
     }
     let taken = app.command_lease.take(&app);
     if let Some((client, ended_s)) = taken.expired {
@@ -172,7 +172,7 @@ pub async fn post(State(app): State<Arc<App>>, body: Body) -> Response {
     if taken.opened {
         tokio::spawn(watch_lease(app.clone(), taken.client));
     }
-    let reply = match execute::parsed(&app, &text, Owner::Client(taken.client)) {
+    let reply = match execute::parsed(&app, &text, Owner::Client(taken.client)).await {
         Ok((id, request)) => execute::execute(&app, request, id).await,
         Err(reply) => *reply,
     };

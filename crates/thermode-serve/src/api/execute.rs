@@ -13,9 +13,29 @@ use super::{recording_status, status, App};
 use thermode_runtime::command::{Command, CommandError, Owner};
 use thermode_runtime::recorder::RecordState;
 
+/// Messages longer than this \[bytes\] are read on the blocking pool, not on a network worker: a 999-segment
+/// program takes milliseconds to read, and a few clients sending them back to back would otherwise hold both
+/// workers while a `stop_all` waits behind them. 16384 (the soft message limit: only a `program` is longer).
+pub(crate) const INLINE_READ_BYTES: usize = 16 * 1024;
+
 /// Reads one request's text from `owner`: the request with its `id`, or the error reply to send.
-pub(crate) fn parsed(app: &App, text: &str, owner: Owner) -> Result<(RequestId, ApiRequest), Box<Reply>> {
-    match protocol::parse(text, &app.limits, owner) {
+pub(crate) async fn parsed(app: &App, text: &str, owner: Owner) -> Result<(RequestId, ApiRequest), Box<Reply>> {
+    let read = if text.len() <= INLINE_READ_BYTES {
+        protocol::parse(text, &app.limits, owner)
+    } else {
+        let (text, limits) = (text.to_owned(), app.limits.clone());
+        match tokio::task::spawn_blocking(move || protocol::parse(&text, &limits, owner)).await {
+            Ok(read) => read,
+            Err(_) => (
+                None,
+                Err(ApiError::new(
+                    ErrorCode::Busy,
+                    "the request could not be read; nothing was done",
+                )),
+            ),
+        }
+    };
+    match read {
         (Some(id), Ok(request)) => Ok((id, request)),
         (id, Err(e)) => Err(Box::new(e.reply(id))),
         // parse_request gives every request it accepts its id; answered as a missing one all the same.
@@ -25,14 +45,14 @@ pub(crate) fn parsed(app: &App, text: &str, owner: Owner) -> Result<(RequestId, 
     }
 }
 
-/// The `rate_limited` reply to `text` (with its `id` when it has a readable one).
-pub(crate) fn rate_limited(app: &App, text: &str, owner: Owner) -> Reply {
-    let (id, _) = protocol::parse(text, &app.limits, owner);
+/// The `rate_limited` reply to `text` (with its `id` when it has a readable one: only the id is read, so that a
+/// refused flood costs little).
+pub(crate) fn rate_limited(app: &App, text: &str) -> Reply {
     let message = format!(
         "more than {} requests per second (burst {}); slow down",
         app.net.requests_per_s, app.net.burst
     );
-    ApiError::new(ErrorCode::RateLimited, message).reply(id)
+    ApiError::new(ErrorCode::RateLimited, message).reply(thermode_protocol::request_id_only(text))
 }
 
 /// Runs a request that needs no connection and gives its reply; a `subscribe` or `unsubscribe` (telemetry is

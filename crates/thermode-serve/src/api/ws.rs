@@ -194,9 +194,9 @@ impl Connection {
         let owner = Owner::Client(self.client);
         let now_s = self.origin.elapsed().as_secs_f64();
         if !self.bucket.take(now_s) {
-            return execute::rate_limited(&self.app, text, owner);
+            return execute::rate_limited(&self.app, text);
         }
-        let (id, request) = match execute::parsed(&self.app, text, owner) {
+        let (id, request) = match execute::parsed(&self.app, text, owner).await {
             Ok(parsed) => parsed,
             Err(reply) => return *reply,
         };

@@ -3,14 +3,18 @@
 //! rate, targets clipped to the display's range with `cutoff_c`, and the events subscribers get.
 
 use serde_json::{json, Value};
-use thermode_serve::Daemon;
+use thermode_serve::{Daemon, DaemonConfig};
 
 use crate::common::{self, ask, client_runtime, next_json, ws_connect, SpyDevice};
 
 /// A daemon of `channels` simulated channels with the render pipelines at `rate_hz`, recording into `dir`, once
 /// every channel has a first reading (a program starts from the display's temperature).
 fn daemon(channels: usize, rate_hz: f64, dir: &std::path::Path) -> Daemon {
-    let mut config = common::test_config();
+    daemon_with(channels, rate_hz, dir, common::test_config())
+}
+
+/// [`daemon`] from `config`.
+fn daemon_with(channels: usize, rate_hz: f64, dir: &std::path::Path, mut config: DaemonConfig) -> Daemon {
     config.core.loop_config.rate_hz = rate_hz;
     config.core.record_dir = Some(dir.to_path_buf());
     let daemon = common::start(config, SpyDevice::new(channels), common::pipelines());
@@ -117,6 +121,49 @@ fn a_999_segment_program_is_accepted_and_a_1000_segment_one_refused_naming_the_l
             message.contains("999") && message.contains("1000"),
             "the limit is named: {message}"
         );
+    });
+}
+
+#[test]
+fn a_flood_of_long_programs_gets_a_reply_to_each_by_its_id_and_a_second_client_still_stops_all() {
+    use futures_util::SinkExt;
+    use tokio_tungstenite::tungstenite::Message;
+    let dir = tempfile::tempdir().expect("temp dir");
+    let mut config = common::test_config();
+    // A bucket of 20 requests refilled at 1 per second: of 150 sent back to back, most are refused.
+    (config.server.net.requests_per_s, config.server.net.burst) = (1.0, 20.0);
+    let daemon = daemon_with(2, 100.0, dir.path(), config);
+    client_runtime().block_on(async {
+        let mut flood = ws_connect(daemon.http_addr(), "").await;
+        // 999 holds on each channel: about 34 KB, read on the blocking pool (above the 16 KiB read inline).
+        let holds = Value::Array(vec![json!({"hold_s": 0.01}); 999]);
+        let n = 150u64;
+        for id in 0..n {
+            let text = json!({"type": "program", "id": id, "channels": {"0": holds, "1": holds}}).to_string();
+            flood.send(Message::Text(text.into())).await.expect("send");
+        }
+        let mut stopper = ws_connect(daemon.http_addr(), "").await;
+        let stopped = ask(&mut stopper, r#"{"type":"stop_all","id":"stop"}"#).await;
+        assert_eq!(stopped["type"], "ok", "stop_all beside the flood: {stopped}");
+        let (mut ids, mut limited) = (Vec::new(), 0);
+        while (ids.len() as u64) < n {
+            let reply = next_json(&mut flood).await;
+            if reply["type"] == "program_event" || reply["type"] == "telemetry" {
+                continue;
+            }
+            limited += usize::from(reply["code"] == "rate_limited");
+            ids.push(
+                reply["id"]
+                    .as_u64()
+                    .unwrap_or_else(|| panic!("a reply without the id: {reply}")),
+            );
+        }
+        assert_eq!(
+            ids,
+            (0..n).collect::<Vec<_>>(),
+            "one reply per program, in order, each with its id"
+        );
+        assert!(limited >= 100, "{limited} of {n} refused as rate_limited");
     });
 }
 

@@ -1,6 +1,7 @@
 //! `thermode bench`: control-loop jitter at a given rate and channel count (default 1 kHz, 10 channels of the full
 //! render pipeline on the simulated display) and the latency from a WebSocket `touch` to the drive command, in loop
-//! periods. Prints figures; asserts nothing. Build with `--release` for meaningful numbers.
+//! periods (or, with `--flooders`, a fresh client's `stop_all` under a program flood, in ms). Prints figures;
+//! asserts nothing. Build with `--release` for meaningful numbers.
 
 use std::sync::Arc;
 
@@ -38,6 +39,10 @@ pub struct BenchArgs {
     /// WebSocket clients subscribed to telemetry at 100 Hz during the run.
     #[arg(long, value_name = "N", default_value_t = 0)]
     pub subscribers: usize,
+    /// WebSocket clients flooding the daemon with 999-segment programs on every channel, sent back to back; with
+    /// any, a fresh client's `stop_all` is timed (every 0.5 s) instead of the touches.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub flooders: usize,
     /// Ask for real-time scheduling (SCHED_FIFO) of the loop and locked memory, as `serve` does by default.
     #[arg(long)]
     pub realtime: bool,
@@ -74,6 +79,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         rate_hz: args.rate,
         duration_s: args.duration,
         subscribers: args.subscribers,
+        flooders: args.flooders,
         realtime: args.realtime,
         ..BenchConfig::default()
     };

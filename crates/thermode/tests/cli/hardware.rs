@@ -188,6 +188,39 @@ fn bad_several_device_spellings_are_refused_with_the_reason() {
 }
 
 #[test]
+fn bench_with_flooders_times_stop_all_from_a_fresh_client_instead_of_touches() {
+    let out = Command::new(env!("CARGO_BIN_EXE_thermode"))
+        .args([
+            "bench",
+            "--rate",
+            "100",
+            "--duration",
+            "1",
+            "--flooders",
+            "2",
+            "--format",
+            "json",
+        ])
+        .output()
+        .unwrap_or_else(|e| panic!("run bench --flooders: {e}"));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout} {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let report: serde_json::Value = serde_json::from_str(&stdout).unwrap_or_else(|e| panic!("{e}: {stdout}"));
+    assert_eq!(report["flooders"], 2, "{report}");
+    // One stop every 0.5 s for 1 s, each answered (the reply's time is a figure, not checked).
+    let stops = report["stop_all_reply_s"]["count"].as_u64().unwrap_or(0);
+    assert!(stops >= 2, "{stops} stop_all replies timed: {report}");
+    assert_eq!(
+        report["touch_applied_ticks"]["count"], 0,
+        "no touches under the flood: {report}"
+    );
+}
+
+#[test]
 fn bench_floor_measures_an_empty_loop_and_refuses_impossible_rates() {
     let out = Command::new(env!("CARGO_BIN_EXE_thermode"))
         .args([
