@@ -448,15 +448,15 @@ pub fn weber_fraction_at(params: &PerceptionParams, reference: &CurveFeatures, t
 /// The method of limits minus the method of levels for cold detection at `rate_c_s` \[°C\]: the limits estimate
 /// `θ + r·(t_rt + lag)` against the trapezoid threshold (plateau `plateau_s`, return at the same rate) of the
 /// procedures' skin response (`thermode_procedures::skin_response`) on the display's contact conductance.
-pub fn limits_levels_gap_c(threshold_c: f64, rate_c_s: f64, reaction_time_s: f64, plateau_s: f64) -> Option<f64> {
+pub fn limits_levels_gap_c(threshold_c: f64, rate_c_per_s: f64, reaction_time_s: f64, plateau_s: f64) -> Option<f64> {
     use thermode_procedures::skin_response::{SkinResponse, Trapezoid};
     let skin = thermode_model::skin::Skin::fingertip();
     let response = SkinResponse::new(&skin, thermode_model::inverse::DEFAULT_DISPLAY_CONDUCTANCE_W_M2K).ok()?;
-    let limits = response.limits_estimate_c(threshold_c, rate_c_s, reaction_time_s)?;
+    let limits = response.limits_estimate_c(threshold_c, rate_c_per_s, reaction_time_s)?;
     let timing = Trapezoid {
-        rate_c_s,
+        rate_c_per_s,
         plateau_s,
-        return_rate_c_s: rate_c_s,
+        return_rate_c_per_s: rate_c_per_s,
     };
     let levels = response.trapezoid_threshold_c(threshold_c, timing)?;
     Some(limits - levels)

@@ -69,11 +69,14 @@ pub struct LimitsConfig {
     /// The baseline every ramp starts from \[°C\]. Default 32.
     pub baseline_c: f64,
     /// The ramps' rate \[°C/s\]. Default 1.
-    pub rate_c_s: f64,
+    #[serde(rename = "rate_c_s")]
+    pub rate_c_per_s: f64,
     /// The return rate after a detection (CDT, WDT, TSL) \[°C/s\]. Default 1.
-    pub detection_return_rate_c_s: f64,
+    #[serde(rename = "detection_return_rate_c_s")]
+    pub detection_return_rate_c_per_s: f64,
     /// The return rate after a pain threshold (CPT, HPT) \[°C/s\]. Default 5.
-    pub pain_return_rate_c_s: f64,
+    #[serde(rename = "pain_return_rate_c_s")]
+    pub pain_return_rate_c_per_s: f64,
     /// The cooling ramps' cut-off \[°C\]. Default 0 (a display with a narrower range cuts off at its own limit).
     pub cold_cutoff_c: f64,
     /// The warming ramps' cut-off \[°C\]. Default 50 (likewise).
@@ -97,9 +100,9 @@ impl Default for LimitsConfig {
                 LimitsTest::Hpt,
             ],
             baseline_c: 32.0,
-            rate_c_s: 1.0,
-            detection_return_rate_c_s: 1.0,
-            pain_return_rate_c_s: 5.0,
+            rate_c_per_s: 1.0,
+            detection_return_rate_c_per_s: 1.0,
+            pain_return_rate_c_per_s: 5.0,
             cold_cutoff_c: 0.0,
             heat_cutoff_c: 50.0,
             runs: 3,
@@ -120,13 +123,13 @@ impl LimitsConfig {
             ));
         }
         check_range("limits.baseline_c", self.baseline_c, 20.0, 40.0)?;
-        check_positive("limits.rate_c_s", self.rate_c_s, 300.0)?;
+        check_positive("limits.rate_c_s", self.rate_c_per_s, 300.0)?;
         check_positive(
             "limits.detection_return_rate_c_s",
-            self.detection_return_rate_c_s,
+            self.detection_return_rate_c_per_s,
             300.0,
         )?;
-        check_positive("limits.pain_return_rate_c_s", self.pain_return_rate_c_s, 300.0)?;
+        check_positive("limits.pain_return_rate_c_s", self.pain_return_rate_c_per_s, 300.0)?;
         check_range("limits.cold_cutoff_c", self.cold_cutoff_c, -10.0, self.baseline_c - 0.1)?;
         check_range("limits.heat_cutoff_c", self.heat_cutoff_c, self.baseline_c + 0.1, 60.0)?;
         check_range("limits.isi_s", self.isi_s, 0.0, 3600.0)?;
@@ -252,10 +255,10 @@ impl LimitsProcedure {
             _ => c.baseline_c,
         };
         let returns = step.test != LimitsTest::Tsl || step.tsl_last;
-        let return_rate_c_s = if step.test.is_pain() {
-            c.pain_return_rate_c_s
+        let return_rate_c_per_s = if step.test.is_pain() {
+            c.pain_return_rate_c_per_s
         } else {
-            c.detection_return_rate_c_s
+            c.detection_return_rate_c_per_s
         };
         TrialPlan {
             index: self.next,
@@ -263,11 +266,11 @@ impl LimitsProcedure {
             run: step.run,
             baseline_c: start_c,
             intensity_c: self.cutoff_c(step.direction) - start_c,
-            rate_c_s: c.rate_c_s,
+            rate_c_per_s: c.rate_c_per_s,
             until_response: true,
             plateau_s: 0.0,
             return_c: returns.then_some(c.baseline_c),
-            return_rate_c_s,
+            return_rate_c_per_s,
             isi_s: if returns { c.isi_s } else { 0.0 },
             pain: step.test.is_pain(),
             continues_previous: continues,

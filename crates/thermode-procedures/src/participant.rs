@@ -231,9 +231,9 @@ impl SimulatedParticipant {
     fn run_ramp(&mut self, plan: &TrialPlan, criterion: Criterion, dt_s: f64) -> Response {
         self.begin_trial(criterion);
         let sign = plan.intensity_c.signum();
-        let steps = (plan.intensity_c.abs() / plan.rate_c_s / dt_s).ceil() as u64;
+        let steps = (plan.intensity_c.abs() / plan.rate_c_per_s / dt_s).ceil() as u64;
         for k in 1..=steps {
-            let change = (plan.rate_c_s * k as f64 * dt_s).min(plan.intensity_c.abs());
+            let change = (plan.rate_c_per_s * k as f64 * dt_s).min(plan.intensity_c.abs());
             let plate_c = plan.baseline_c + sign * change;
             if self.observe(dt_s, plate_c) {
                 return Response::yes_no(true, plate_c);
@@ -246,18 +246,18 @@ impl SimulatedParticipant {
         self.begin_trial(criterion);
         let amplitude = plan.intensity_c.abs();
         let sign = plan.intensity_c.signum();
-        let t1 = amplitude / plan.rate_c_s;
+        let t1 = amplitude / plan.rate_c_per_s;
         let t2 = t1 + plan.plateau_s;
-        let t3 = t2 + amplitude / plan.return_rate_c_s;
+        let t3 = t2 + amplitude / plan.return_rate_c_per_s;
         let steps = ((t3 + ANSWER_WINDOW_S) / dt_s).ceil() as u64;
         for k in 1..=steps {
             let t = k as f64 * dt_s;
             let change = if t < t1 {
-                plan.rate_c_s * t
+                plan.rate_c_per_s * t
             } else if t < t2 {
                 amplitude
             } else {
-                (amplitude - plan.return_rate_c_s * (t - t2)).max(0.0)
+                (amplitude - plan.return_rate_c_per_s * (t - t2)).max(0.0)
             };
             self.observe(dt_s, plan.baseline_c + sign * change);
         }

@@ -40,7 +40,8 @@ pub enum Segment {
         /// Target set-point \[°C\].
         to_c: f64,
         /// Rate \[°C/s\], positive.
-        rate_c_s: f64,
+        #[serde(rename = "rate_c_s")]
+        rate_c_per_s: f64,
         /// `Some(Until::Response)`: a response on the channel ends the ramp early.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         until: Option<Until>,
@@ -83,7 +84,8 @@ pub struct TrialPlan {
     /// method of limits it is the change to the cut-off, where the ramp ends if nobody responds.
     pub intensity_c: f64,
     /// The ramp's rate \[°C/s\].
-    pub rate_c_s: f64,
+    #[serde(rename = "rate_c_s")]
+    pub rate_c_per_s: f64,
     /// A response ends the ramp (method of limits); otherwise the ramp runs to `baseline_c + intensity_c`.
     pub until_response: bool,
     /// The plateau held at the target \[s\] (0 for the method of limits).
@@ -91,7 +93,8 @@ pub struct TrialPlan {
     /// Where the plate returns after the ramp (or plateau) \[°C\]; `None`: it stays (thermal sensory limen).
     pub return_c: Option<f64>,
     /// The return ramp's rate \[°C/s\].
-    pub return_rate_c_s: f64,
+    #[serde(rename = "return_rate_c_s")]
+    pub return_rate_c_per_s: f64,
     /// The pause after the trial \[s\].
     pub isi_s: f64,
     /// The response asked for is pain (CPT, HPT), not the first sensation.
@@ -125,7 +128,7 @@ impl TrialPlan {
         let until = self.until_response.then_some(Until::Response);
         let mut segments = vec![Segment::Ramp {
             to_c: self.target_c(),
-            rate_c_s: self.rate_c_s,
+            rate_c_per_s: self.rate_c_per_s,
             until,
         }];
         if self.plateau_s > 0.0 {
@@ -137,7 +140,7 @@ impl TrialPlan {
         if let Some(to_c) = self.return_c {
             segments.push(Segment::Ramp {
                 to_c,
-                rate_c_s: self.return_rate_c_s,
+                rate_c_per_s: self.return_rate_c_per_s,
                 until: None,
             });
         }

@@ -186,9 +186,9 @@ impl ZoneStimulus {
 
 fn check_segment(at: &str, segment: &Segment) -> Result<(), ProcedureError> {
     match *segment {
-        Segment::Ramp { to_c, rate_c_s, .. } => {
+        Segment::Ramp { to_c, rate_c_per_s, .. } => {
             check_range(&format!("{at}.to_c"), to_c, 0.0, 50.0)?;
-            check_positive(&format!("{at}.rate_c_s"), rate_c_s, 300.0).map(drop)
+            check_positive(&format!("{at}.rate_c_s"), rate_c_per_s, 300.0).map(drop)
         }
         Segment::Step { to_c } => check_range(&format!("{at}.to_c"), to_c, 0.0, 50.0).map(drop),
         Segment::Hold { hold_s, .. } => check_positive(&format!("{at}.hold_s"), hold_s, 3600.0).map(drop),
@@ -204,8 +204,8 @@ pub fn segment_times_s(baseline_c: f64, segments: &[Segment]) -> Vec<f64> {
     let (mut t, mut setpoint_c) = (0.0, baseline_c);
     for segment in segments {
         match *segment {
-            Segment::Ramp { to_c, rate_c_s, .. } => {
-                t += (to_c - setpoint_c).abs() / rate_c_s;
+            Segment::Ramp { to_c, rate_c_per_s, .. } => {
+                t += (to_c - setpoint_c).abs() / rate_c_per_s;
                 setpoint_c = to_c;
             }
             Segment::Step { to_c } => setpoint_c = to_c,

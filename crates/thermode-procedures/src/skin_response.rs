@@ -139,8 +139,8 @@ impl SkinResponse {
 
     /// The time \[s\] after a ramp of `rate_c_s` starts at which the receptor has changed by `threshold_c` (bisection
     /// to 1e-12 s; the response grows monotonically). `None` if it never does within 10⁴ s.
-    pub fn detection_time_s(&self, threshold_c: f64, rate_c_s: f64) -> Option<f64> {
-        let reached = |t: f64| rate_c_s * self.unit_ramp_c(t) >= threshold_c;
+    pub fn detection_time_s(&self, threshold_c: f64, rate_c_per_s: f64) -> Option<f64> {
+        let reached = |t: f64| rate_c_per_s * self.unit_ramp_c(t) >= threshold_c;
         let mut high = 1e-3;
         while !reached(high) {
             high *= 2.0;
@@ -162,23 +162,23 @@ impl SkinResponse {
 
     /// The skin's lag behind the plate under a ramp of `rate_c_s` at the moment the receptor has changed by
     /// `threshold_c` \[s\]: `t_d − θ/r`.
-    pub fn lag_s(&self, threshold_c: f64, rate_c_s: f64) -> Option<f64> {
-        Some(self.detection_time_s(threshold_c, rate_c_s)? - threshold_c / rate_c_s)
+    pub fn lag_s(&self, threshold_c: f64, rate_c_per_s: f64) -> Option<f64> {
+        Some(self.detection_time_s(threshold_c, rate_c_per_s)? - threshold_c / rate_c_per_s)
     }
 
     /// The method of limits' expected estimate \[°C of plate change, a magnitude\]: `θ + r·(t_rt + lag)`.
-    pub fn limits_estimate_c(&self, threshold_c: f64, rate_c_s: f64, reaction_time_s: f64) -> Option<f64> {
-        Some(threshold_c + rate_c_s * (reaction_time_s + self.lag_s(threshold_c, rate_c_s)?))
+    pub fn limits_estimate_c(&self, threshold_c: f64, rate_c_per_s: f64, reaction_time_s: f64) -> Option<f64> {
+        Some(threshold_c + rate_c_per_s * (reaction_time_s + self.lag_s(threshold_c, rate_c_per_s)?))
     }
 
     /// The receptor's change \[°C\] at `t_s` for a trapezoid of amplitude `amplitude_c` (ramp at `rate_c_s`, plateau
     /// `plateau_s`, return at `return_rate_c_s`), as a sum of shifted ramp responses.
     pub fn trapezoid_c(&self, t_s: f64, amplitude_c: f64, timing: Trapezoid) -> f64 {
-        let t1 = amplitude_c / timing.rate_c_s;
+        let t1 = amplitude_c / timing.rate_c_per_s;
         let t2 = t1 + timing.plateau_s;
-        let t3 = t2 + amplitude_c / timing.return_rate_c_s;
-        let up = timing.rate_c_s * (self.unit_ramp_c(t_s) - self.unit_ramp_c(t_s - t1));
-        let down = timing.return_rate_c_s * (self.unit_ramp_c(t_s - t2) - self.unit_ramp_c(t_s - t3));
+        let t3 = t2 + amplitude_c / timing.return_rate_c_per_s;
+        let up = timing.rate_c_per_s * (self.unit_ramp_c(t_s) - self.unit_ramp_c(t_s - t1));
+        let down = timing.return_rate_c_per_s * (self.unit_ramp_c(t_s - t2) - self.unit_ramp_c(t_s - t3));
         up - down
     }
 
@@ -228,16 +228,16 @@ impl SkinResponse {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Trapezoid {
     /// The ramp's rate \[°C/s\].
-    pub rate_c_s: f64,
+    pub rate_c_per_s: f64,
     /// The plateau \[s\].
     pub plateau_s: f64,
     /// The return ramp's rate \[°C/s\].
-    pub return_rate_c_s: f64,
+    pub return_rate_c_per_s: f64,
 }
 
 impl Trapezoid {
     /// From the ramp to the end of the return for an amplitude of `amplitude_c` \[°C\] \[s\].
     pub fn duration_s(&self, amplitude_c: f64) -> f64 {
-        amplitude_c / self.rate_c_s + self.plateau_s + amplitude_c / self.return_rate_c_s
+        amplitude_c / self.rate_c_per_s + self.plateau_s + amplitude_c / self.return_rate_c_per_s
     }
 }

@@ -16,11 +16,13 @@ pub struct StimulusConfig {
     /// Cooling or warming. Default `cold`.
     pub direction: Direction,
     /// The ramp's rate \[°C/s\] (the safety envelope's rate limit by default). Default 10.
-    pub rate_c_s: f64,
+    #[serde(rename = "rate_c_s")]
+    pub rate_c_per_s: f64,
     /// The plateau \[s\]. Default 1.
     pub plateau_s: f64,
     /// The return ramp's rate \[°C/s\]. Default 10.
-    pub return_rate_c_s: f64,
+    #[serde(rename = "return_rate_c_s")]
+    pub return_rate_c_per_s: f64,
     /// The pause after the trial, while the participant answers \[s\]. Default 5.
     pub isi_s: f64,
     /// The largest amplitude a procedure may ask for \[°C\]. Default 10.
@@ -32,9 +34,9 @@ impl Default for StimulusConfig {
         StimulusConfig {
             baseline_c: 32.0,
             direction: Direction::Cold,
-            rate_c_s: 10.0,
+            rate_c_per_s: 10.0,
             plateau_s: 1.0,
-            return_rate_c_s: 10.0,
+            return_rate_c_per_s: 10.0,
             isi_s: 5.0,
             max_amplitude_c: 10.0,
         }
@@ -45,9 +47,9 @@ impl StimulusConfig {
     /// Checks every value (key names as in the experiment file).
     pub fn validate(&self) -> Result<(), ProcedureError> {
         check_range("stimulus.baseline_c", self.baseline_c, 20.0, 40.0)?;
-        check_positive("stimulus.rate_c_s", self.rate_c_s, 300.0)?;
+        check_positive("stimulus.rate_c_s", self.rate_c_per_s, 300.0)?;
         check_range("stimulus.plateau_s", self.plateau_s, 0.0, 600.0)?;
-        check_positive("stimulus.return_rate_c_s", self.return_rate_c_s, 300.0)?;
+        check_positive("stimulus.return_rate_c_s", self.return_rate_c_per_s, 300.0)?;
         check_range("stimulus.isi_s", self.isi_s, 0.0, 3600.0)?;
         check_positive("stimulus.max_amplitude_c", self.max_amplitude_c, 30.0)?;
         Ok(())
@@ -62,11 +64,11 @@ impl StimulusConfig {
             run: index + 1,
             baseline_c: self.baseline_c,
             intensity_c: self.direction.sign() * amplitude,
-            rate_c_s: self.rate_c_s,
+            rate_c_per_s: self.rate_c_per_s,
             until_response: false,
             plateau_s: self.plateau_s,
             return_c: Some(self.baseline_c),
-            return_rate_c_s: self.return_rate_c_s,
+            return_rate_c_per_s: self.return_rate_c_per_s,
             isi_s: self.isi_s,
             pain: false,
             continues_previous: false,

@@ -72,10 +72,10 @@ pub struct ProcedurePlan {
 }
 
 fn plan_duration_s(plan: &TrialPlan) -> f64 {
-    let ramp = plan.intensity_c.abs() / plan.rate_c_s;
+    let ramp = plan.intensity_c.abs() / plan.rate_c_per_s;
     let back = plan
         .return_c
-        .map_or(0.0, |r| (plan.target_c() - r).abs() / plan.return_rate_c_s);
+        .map_or(0.0, |r| (plan.target_c() - r).abs() / plan.return_rate_c_per_s);
     ramp + plan.plateau_s + back + plan.isi_s
 }
 
@@ -92,7 +92,7 @@ fn plan_row(plan: &TrialPlan, channel: usize) -> Vec<String> {
         },
         number(plan.intensity_c),
         number(plan.target_c()),
-        number(plan.rate_c_s),
+        number(plan.rate_c_per_s),
         plan.until_response.to_string(),
         number(plan.plateau_s),
         plan.return_c.map_or(String::new(), number),

@@ -2,7 +2,7 @@
 //! responder watching the plate and answering, every trial's row, events and trace on disk before the next starts.
 //!
 //! Before the first trial (and before any trial that does not continue the previous one from a plate away from its
-//! baseline) the plate goes to the baseline at [`TO_BASELINE_RATE_C_S`] and holds the file's `adaptation_s` while the finger
+//! baseline) the plate goes to the baseline at [`TO_BASELINE_RATE_C_PER_S`] and holds the file's `adaptation_s` while the finger
 //! adapts. A single-channel procedure's trial is its plan's segments on `channel`: a ramp that a press ends
 //! (method of limits: the response is sent the moment the responder presses, applied on the display's next tick,
 //! and the plate at that tick is the delivered temperature), or a trapezoid answered yes/no afterwards (delivered:
@@ -21,7 +21,7 @@ use super::session::{number, EventRow, ProcedureRow, ProcedureSession};
 use super::ProcedureRunError;
 
 /// The rate the plate goes to a trial's baseline at before it \[°C/s\] (the DFNS return rate).
-pub const TO_BASELINE_RATE_C_S: f64 = 1.0;
+pub const TO_BASELINE_RATE_C_PER_S: f64 = 1.0;
 /// The traces' sampling interval \[s\] (100 Hz, the daemon's telemetry).
 pub const TRACE_INTERVAL_S: f64 = 0.01;
 /// A set-point this close to a baseline is at it \[°C\].
@@ -233,7 +233,7 @@ impl ProcedureRunner<'_> {
                 baseline_c: trial.baseline_c,
                 intensity_c: f64::NAN,
                 target_c: f64::NAN,
-                rate_c_s: f64::NAN,
+                rate_c_per_s: f64::NAN,
                 delivered_c: f64::NAN,
                 response: if rating.is_some() { "rating" } else { "none" }.to_string(),
                 rating: rating.unwrap_or(f64::NAN),
@@ -294,7 +294,7 @@ impl ProcedureRunner<'_> {
             baseline_c: plan.baseline_c,
             intensity_c: plan.intensity_c,
             target_c: plan.target_c(),
-            rate_c_s: plan.rate_c_s,
+            rate_c_per_s: plan.rate_c_per_s,
             delivered_c: response.delivered_c,
             response: answer.to_string(),
             rating: f64::NAN,
@@ -502,11 +502,11 @@ fn check_channels(
     Ok(())
 }
 
-/// The way to a baseline: a ramp at [`TO_BASELINE_RATE_C_S`], then `adaptation_s` \[s\] there.
+/// The way to a baseline: a ramp at [`TO_BASELINE_RATE_C_PER_S`], then `adaptation_s` \[s\] there.
 fn adaptation(baseline_c: f64, adaptation_s: f64) -> Vec<Segment> {
     let mut segments = vec![Segment::Ramp {
         to_c: baseline_c,
-        rate_c_s: TO_BASELINE_RATE_C_S,
+        rate_c_per_s: TO_BASELINE_RATE_C_PER_S,
         until: None,
     }];
     if adaptation_s > 0.0 {
@@ -550,11 +550,11 @@ fn zone_plan(trial: &ZoneTrial) -> TrialPlan {
         run: trial.repetition,
         baseline_c: trial.baseline_c,
         intensity_c: first_target_c - trial.baseline_c,
-        rate_c_s: f64::NAN,
+        rate_c_per_s: f64::NAN,
         until_response: false,
         plateau_s: 0.0,
         return_c: Some(trial.baseline_c),
-        return_rate_c_s: f64::NAN,
+        return_rate_c_per_s: f64::NAN,
         isi_s: trial.isi_s,
         pain: false,
         continues_previous: false,

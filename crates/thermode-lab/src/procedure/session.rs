@@ -81,7 +81,7 @@ pub struct ProcedureRow {
     /// The display's limit the target was clipped to \[°C\] (NaN: not clipped).
     pub cutoff_c: f64,
     /// The ramp's rate \[°C/s\].
-    pub rate_c_s: f64,
+    pub rate_c_per_s: f64,
     /// The delivered intensity's plate temperature \[°C\].
     pub delivered_c: f64,
     /// `press`, `none`, `yes`, `no`, `rating`.
@@ -132,7 +132,7 @@ impl ProcedureRow {
                 "intensity_c" => number(self.intensity_c),
                 "target_c" => number(self.target_c),
                 "cutoff_c" => number(self.cutoff_c),
-                "rate_c_s" => number(self.rate_c_s),
+                "rate_c_s" => number(self.rate_c_per_s),
                 "delivered_c" => number(self.delivered_c),
                 "response" => self.response.clone(),
                 "rating" => number(self.rating),
@@ -183,7 +183,7 @@ impl ProcedureRow {
             intensity_c: float("intensity_c")?,
             target_c: float("target_c")?,
             cutoff_c: float("cutoff_c")?,
-            rate_c_s: float("rate_c_s")?,
+            rate_c_per_s: float("rate_c_s")?,
             delivered_c: float("delivered_c")?,
             response: field("response")?.to_string(),
             rating: float("rating")?,

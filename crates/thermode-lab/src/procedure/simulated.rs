@@ -169,9 +169,13 @@ impl SimulatedProgramDisplay {
 /// A procedure's segment as the loop's program takes it.
 pub fn loop_segment(segment: &Segment) -> LoopSegment {
     match *segment {
-        Segment::Ramp { to_c, rate_c_s, until } => LoopSegment::Ramp {
+        Segment::Ramp {
             to_c,
-            rate_c_per_s: rate_c_s,
+            rate_c_per_s,
+            until,
+        } => LoopSegment::Ramp {
+            to_c,
+            rate_c_per_s,
             until_response: until.is_some(),
         },
         Segment::Hold { hold_s, until } => LoopSegment::Hold {

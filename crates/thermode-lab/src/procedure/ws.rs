@@ -19,11 +19,11 @@ fn spec(segment: &Segment) -> SegmentSpec {
     match *segment {
         Segment::Ramp {
             to_c,
-            rate_c_s,
+            rate_c_per_s,
             until: u,
         } => SegmentSpec {
             to_c: Some(to_c),
-            rate_c_per_s: Some(rate_c_s),
+            rate_c_per_s: Some(rate_c_per_s),
             until: until(u),
             ..SegmentSpec::default()
         },

@@ -121,12 +121,12 @@ fn the_limits_plans_are_the_dfns_ramps() {
     let expected = [
         Segment::Ramp {
             to_c: 0.0,
-            rate_c_s: 1.0,
+            rate_c_per_s: 1.0,
             until: Some(Until::Response),
         },
         Segment::Ramp {
             to_c: 32.0,
-            rate_c_s: 1.0,
+            rate_c_per_s: 1.0,
             until: None,
         },
         Segment::Hold {
@@ -175,7 +175,7 @@ fn the_limits_plans_are_the_dfns_ramps() {
     assert_eq!(tsl[5].return_c, Some(32.0), "the last TSL ramp returns to the baseline");
     let hpt = plans.iter().find(|p| p.label == "HPT").expect("HPT");
     assert_eq!(
-        (hpt.target_c(), hpt.return_rate_c_s, hpt.pain),
+        (hpt.target_c(), hpt.return_rate_c_per_s, hpt.pain),
         (50.0, 5.0, true),
         "HPT: cut-off, fast return, pain"
     );

@@ -54,9 +54,9 @@ fn the_dfns_file_is_the_protocol() {
     let limits = load("dfns-thermal.toml").limits.expect("[limits]");
     let got = (
         limits.baseline_c,
-        limits.rate_c_s,
-        limits.detection_return_rate_c_s,
-        limits.pain_return_rate_c_s,
+        limits.rate_c_per_s,
+        limits.detection_return_rate_c_per_s,
+        limits.pain_return_rate_c_per_s,
     );
     assert_eq!(got, (32.0, 1.0, 1.0, 5.0), "baseline, rate, return rates");
     assert_eq!(
@@ -131,7 +131,7 @@ fn thermal_icons_vary_direction_magnitude_and_rate_across_five_zones() {
         icon.channels
             .values()
             .map(|s| match s[0] {
-                Segment::Ramp { to_c, rate_c_s, .. } => (to_c - icon.baseline_c, rate_c_s),
+                Segment::Ramp { to_c, rate_c_per_s, .. } => (to_c - icon.baseline_c, rate_c_per_s),
                 other => panic!("{}: first segment {other:?}", icon.name),
             })
             .collect()

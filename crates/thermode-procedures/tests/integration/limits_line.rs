@@ -19,10 +19,10 @@ fn participant() -> ParticipantConfig {
 }
 
 /// Runs CDT and WDT (3 runs each) at `rate_c_s` and returns their thresholds' magnitudes.
-fn limits_session(rate_c_s: f64) -> (f64, f64) {
+fn limits_session(rate_c_per_s: f64) -> (f64, f64) {
     let config = LimitsConfig {
         tests: vec![LimitsTest::Cdt, LimitsTest::Wdt],
-        rate_c_s,
+        rate_c_per_s,
         ..LimitsConfig::default()
     };
     let mut procedure = LimitsProcedure::new(config).expect("valid limits");

@@ -25,9 +25,9 @@ fn plate_threshold_c(file: &ProcedureFile) -> f64 {
     let (s, p) = (file.stimulus(), file.participant());
     let skin = SkinResponse::new(&Skin::fingertip(), p.contact_conductance_w_m2k).expect("skin");
     let timing = Trapezoid {
-        rate_c_s: s.rate_c_s,
+        rate_c_per_s: s.rate_c_per_s,
         plateau_s: s.plateau_s,
-        return_rate_c_s: s.return_rate_c_s,
+        return_rate_c_per_s: s.return_rate_c_per_s,
     };
     skin.trapezoid_threshold_c(p.threshold_c, timing).expect("reachable")
 }

@@ -63,14 +63,14 @@ fn run_simulated(file: &Path, data: &Path) -> String {
 fn the_method_of_limits_run_by_lab_follows_the_analytic_line_at_three_rates() {
     let participant = ParticipantConfig::default();
     let skin = SkinResponse::new(&Skin::fingertip(), participant.contact_conductance_w_m2k).expect("skin response");
-    for rate_c_s in [1.0, 2.0, 4.0] {
+    for rate_c_per_s in [1.0, 2.0, 4.0] {
         let dir = tempfile::tempdir().expect("tempdir");
         let file = dir.path().join("limits.toml");
         std::fs::write(
             &file,
             format!(
                 "name = \"limits\"\nprocedure = \"limits\"\nseed = 3\nadaptation_s = 5.0\n[limits]\n\
-                 tests = [\"CDT\", \"WDT\"]\nrate_c_s = {rate_c_s}\nruns = 3\nisi_s = 4.0\n\
+                 tests = [\"CDT\", \"WDT\"]\nrate_c_s = {rate_c_per_s}\nruns = 3\nisi_s = 4.0\n\
                  [simulated_participant]\nthreshold_c = 0.5\nreaction_time_s = 0.4\nnoise_c = 0.0\nlapse = 0.0\n"
             ),
         )
@@ -78,7 +78,7 @@ fn the_method_of_limits_run_by_lab_follows_the_analytic_line_at_three_rates() {
         let data = dir.path().join("data");
         run_simulated(&file, &data);
         let expected_c = skin
-            .limits_estimate_c(0.5, rate_c_s, 0.4)
+            .limits_estimate_c(0.5, rate_c_per_s, 0.4)
             .expect("the skin reaches the threshold");
         let (header, rows) = read_csv(&session_csv(&data));
         let (delivered, baseline, response) = (
@@ -94,7 +94,7 @@ fn the_method_of_limits_run_by_lab_follows_the_analytic_line_at_three_rates() {
             .abs();
             assert!(
                 (change_c - expected_c).abs() <= 0.05,
-                "at {rate_c_s} °C/s the display's plate at the press moved {change_c:.4} °C; the analytic line \
+                "at {rate_c_per_s} °C/s the display's plate at the press moved {change_c:.4} °C; the analytic line \
                  θ + r·(reaction time + skin lag) gives {expected_c:.4} °C"
             );
         }
@@ -351,12 +351,12 @@ fn the_space_bar_stops_a_ramp_on_the_simulated_display_in_real_time() {
 fn lab_plan_refuses_a_ramp_the_display_refuses_as_lab_run_does() {
     let dir = tempfile::tempdir().expect("tempdir");
     let file = dir.path().join("fast.toml");
-    let write = |rate_c_s: f64| {
+    let write = |rate_c_per_s: f64| {
         std::fs::write(
             &file,
             format!(
                 "name = \"fast\"\nprocedure = \"limits\"\nadaptation_s = 1.0\n[limits]\ntests = [\"CDT\"]\n\
-                 runs = 1\nrate_c_s = {rate_c_s}\nisi_s = 1.0\n"
+                 runs = 1\nrate_c_s = {rate_c_per_s}\nisi_s = 1.0\n"
             ),
         )
         .expect("write experiment")
