@@ -1,14 +1,19 @@
 //! The procedures' typed error: a configuration that cannot run, or a response given out of turn.
 
+use thermode_model::params::BadValue;
 use thiserror::Error;
 
 /// Why a procedure, a participant, an experiment file or an analysis was refused.
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum ProcedureError {
-    /// A parameter is outside its range; the message names the key, the value and the range.
+    /// A number outside its range; the message names the key (as written in an experiment file, e.g.
+    /// `limits.rate_c_s`), the value and the rule.
+    #[error(transparent)]
+    BadValue(#[from] BadValue),
+    /// A setting that is not a number (a list, a name, a combination of keys) and is not what it must be.
     #[error("{key} = {value}: {expected}")]
-    BadValue {
-        /// The parameter's key as written in an experiment file (e.g. `limits.rate_c_s`).
+    Invalid {
+        /// The setting's key as written in an experiment file (e.g. `limits.tests`).
         key: String,
         /// The value given, as text.
         value: String,
@@ -43,38 +48,12 @@ pub enum ProcedureError {
 }
 
 impl ProcedureError {
-    /// A [`ProcedureError::BadValue`] for `key` = `value`, which must be `expected`.
-    pub fn bad(key: &str, value: impl std::fmt::Display, expected: &str) -> Self {
-        ProcedureError::BadValue {
+    /// A [`ProcedureError::Invalid`] for `key` = `value`, which must be `expected`.
+    pub fn invalid(key: &str, value: impl std::fmt::Display, expected: &str) -> Self {
+        ProcedureError::Invalid {
             key: key.to_string(),
             value: value.to_string(),
             expected: expected.to_string(),
         }
-    }
-}
-
-/// Checks that `value` is finite and within `[min, max]`; the error names `key` and the range.
-pub fn check_range(key: &str, value: f64, min: f64, max: f64) -> Result<f64, ProcedureError> {
-    if value.is_finite() && value >= min && value <= max {
-        Ok(value)
-    } else {
-        Err(ProcedureError::bad(
-            key,
-            value,
-            &format!("a number from {min} to {max}"),
-        ))
-    }
-}
-
-/// Checks that `value` is finite and strictly positive, at most `max`.
-pub fn check_positive(key: &str, value: f64, max: f64) -> Result<f64, ProcedureError> {
-    if value.is_finite() && value > 0.0 && value <= max {
-        Ok(value)
-    } else {
-        Err(ProcedureError::bad(
-            key,
-            value,
-            &format!("a number above 0, at most {max}"),
-        ))
     }
 }

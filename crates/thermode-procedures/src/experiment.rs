@@ -3,6 +3,7 @@
 //! yes/no procedures, a `seed`, and the optional `[simulated_participant]`.
 
 use serde::{Deserialize, Serialize};
+use thermode_model::params::Rule;
 
 use crate::levels::{Levels, LevelsConfig};
 use crate::limits::{LimitsConfig, LimitsProcedure};
@@ -109,14 +110,12 @@ impl ProcedureFile {
 
     /// Checks that the procedure's table is present and every table valid (building the procedure once).
     pub fn validate(&self) -> Result<(), ProcedureError> {
-        if self.participants == 0 || self.participants > 10_000 {
-            return Err(ProcedureError::bad(
-                "participants",
-                self.participants,
-                "an integer from 1 to 10000",
-            ));
+        Rule::Within {
+            min: 1.0,
+            max: 10_000.0,
         }
-        crate::error::check_range("adaptation_s", self.adaptation_s, 0.0, 600.0)?;
+        .check("participants", self.participants as f64)?;
+        Rule::Within { min: 0.0, max: 600.0 }.check("adaptation_s", self.adaptation_s)?;
         if let Some(p) = &self.simulated_participant {
             p.validate()?;
         }

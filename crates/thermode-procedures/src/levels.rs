@@ -7,8 +7,8 @@
 //! threshold and oscillates around it at the smallest step).
 
 use serde::{Deserialize, Serialize};
+use thermode_model::params::Rule;
 
-use crate::error::{check_positive, check_range};
 use crate::plan::{Procedure, Response, TrialPlan};
 use crate::stimulus::StimulusConfig;
 use crate::ProcedureError;
@@ -44,23 +44,24 @@ impl Default for LevelsConfig {
 impl LevelsConfig {
     /// Checks every value (key names as in the experiment file).
     pub fn validate(&self) -> Result<(), ProcedureError> {
-        check_positive("levels.start_c", self.start_c, 30.0)?;
-        check_positive("levels.step_c", self.step_c, 30.0)?;
-        check_range("levels.min_step_c", self.min_step_c, 1e-4, self.step_c)?;
-        if self.trials == 0 || self.trials > 10_000 {
-            return Err(ProcedureError::bad(
-                "levels.trials",
-                self.trials,
-                "an integer from 1 to 10000",
-            ));
+        Rule::PositiveUpTo { max: 30.0 }.check("levels.start_c", self.start_c)?;
+        Rule::PositiveUpTo { max: 30.0 }.check("levels.step_c", self.step_c)?;
+        Rule::Within {
+            min: 1e-4,
+            max: self.step_c,
         }
-        if self.average_last == 0 || self.average_last > self.trials {
-            return Err(ProcedureError::bad(
-                "levels.average_last",
-                self.average_last,
-                "an integer from 1 to levels.trials",
-            ));
+        .check("levels.min_step_c", self.min_step_c)?;
+        Rule::Within {
+            min: 1.0,
+            max: 10_000.0,
         }
+        .check("levels.trials", self.trials as f64)?;
+        let up_to_trials = Rule::AtMost {
+            max: self.trials as f64,
+            what: "levels.trials",
+        };
+        Rule::AtLeast { min: 1.0 }.check("levels.average_last", self.average_last as f64)?;
+        up_to_trials.check("levels.average_last", self.average_last as f64)?;
         Ok(())
     }
 }

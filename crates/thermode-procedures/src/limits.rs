@@ -10,8 +10,8 @@
 //! - CPT, HPT: cold and heat pain thresholds (cooling, warming ramps, pain asked for, fast return).
 
 use serde::{Deserialize, Serialize};
+use thermode_model::params::Rule;
 
-use crate::error::{check_positive, check_range};
 use crate::plan::{Direction, Procedure, Response, TrialPlan};
 use crate::ProcedureError;
 
@@ -116,30 +116,29 @@ impl LimitsConfig {
     /// Checks every value (key names as in the experiment file).
     pub fn validate(&self) -> Result<(), ProcedureError> {
         if self.tests.is_empty() {
-            return Err(ProcedureError::bad(
+            return Err(ProcedureError::invalid(
                 "limits.tests",
                 "[]",
                 "at least one of CDT, WDT, TSL, CPT, HPT",
             ));
         }
-        check_range("limits.baseline_c", self.baseline_c, 20.0, 40.0)?;
-        check_positive("limits.rate_c_s", self.rate_c_per_s, 300.0)?;
-        check_positive(
-            "limits.detection_return_rate_c_s",
-            self.detection_return_rate_c_per_s,
-            300.0,
-        )?;
-        check_positive("limits.pain_return_rate_c_s", self.pain_return_rate_c_per_s, 300.0)?;
-        check_range("limits.cold_cutoff_c", self.cold_cutoff_c, -10.0, self.baseline_c - 0.1)?;
-        check_range("limits.heat_cutoff_c", self.heat_cutoff_c, self.baseline_c + 0.1, 60.0)?;
-        check_range("limits.isi_s", self.isi_s, 0.0, 3600.0)?;
-        if self.runs == 0 || self.runs > 100 {
-            return Err(ProcedureError::bad(
-                "limits.runs",
-                self.runs,
-                "an integer from 1 to 100",
-            ));
+        Rule::Within { min: 20.0, max: 40.0 }.check("limits.baseline_c", self.baseline_c)?;
+        Rule::PositiveUpTo { max: 300.0 }.check("limits.rate_c_s", self.rate_c_per_s)?;
+        Rule::PositiveUpTo { max: 300.0 }
+            .check("limits.detection_return_rate_c_s", self.detection_return_rate_c_per_s)?;
+        Rule::PositiveUpTo { max: 300.0 }.check("limits.pain_return_rate_c_s", self.pain_return_rate_c_per_s)?;
+        Rule::Within {
+            min: -10.0,
+            max: self.baseline_c - 0.1,
         }
+        .check("limits.cold_cutoff_c", self.cold_cutoff_c)?;
+        Rule::Within {
+            min: self.baseline_c + 0.1,
+            max: 60.0,
+        }
+        .check("limits.heat_cutoff_c", self.heat_cutoff_c)?;
+        Rule::Within { min: 0.0, max: 3600.0 }.check("limits.isi_s", self.isi_s)?;
+        Rule::Within { min: 1.0, max: 100.0 }.check("limits.runs", self.runs as f64)?;
         Ok(())
     }
 }

@@ -17,9 +17,9 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::{Deserialize, Serialize};
 use thermode_model::inverse::DEFAULT_DISPLAY_CONDUCTANCE_W_M2K;
+use thermode_model::params::Rule;
 use thermode_model::{KronEnvironment, KronModel, Skin};
 
-use crate::error::{check_positive, check_range};
 use crate::plan::{Procedure, Response, TrialPlan};
 use crate::skin_response::ANSWER_WINDOW_S;
 use crate::ProcedureError;
@@ -62,16 +62,15 @@ impl Default for ParticipantConfig {
 impl ParticipantConfig {
     /// Checks every value's range (key names as in the experiment file).
     pub fn validate(&self) -> Result<(), ProcedureError> {
-        check_positive("simulated_participant.threshold_c", self.threshold_c, 30.0)?;
-        check_range("simulated_participant.reaction_time_s", self.reaction_time_s, 0.0, 10.0)?;
-        check_range("simulated_participant.noise_c", self.noise_c, 0.0, 10.0)?;
-        check_range("simulated_participant.lapse", self.lapse, 0.0, 1.0)?;
-        check_range("simulated_participant.cold_pain_c", self.cold_pain_c, -10.0, 40.0)?;
-        check_range("simulated_participant.heat_pain_c", self.heat_pain_c, 30.0, 60.0)?;
-        check_positive(
+        Rule::PositiveUpTo { max: 30.0 }.check("simulated_participant.threshold_c", self.threshold_c)?;
+        Rule::Within { min: 0.0, max: 10.0 }.check("simulated_participant.reaction_time_s", self.reaction_time_s)?;
+        Rule::Within { min: 0.0, max: 10.0 }.check("simulated_participant.noise_c", self.noise_c)?;
+        Rule::Within { min: 0.0, max: 1.0 }.check("simulated_participant.lapse", self.lapse)?;
+        Rule::Within { min: -10.0, max: 40.0 }.check("simulated_participant.cold_pain_c", self.cold_pain_c)?;
+        Rule::Within { min: 30.0, max: 60.0 }.check("simulated_participant.heat_pain_c", self.heat_pain_c)?;
+        Rule::PositiveUpTo { max: 1e6 }.check(
             "simulated_participant.contact_conductance_w_m2k",
             self.contact_conductance_w_m2k,
-            1e6,
         )?;
         Ok(())
     }

@@ -4,10 +4,10 @@
 //! each presentation (0–100).
 
 use std::collections::BTreeMap;
+use thermode_model::params::Rule;
 
 use serde::{Deserialize, Serialize};
 
-use crate::error::{check_positive, check_range};
 use crate::plan::Segment;
 use crate::ProcedureError;
 
@@ -86,23 +86,15 @@ impl ProgramConfig {
     /// 0–50 °C, positive rates and durations, and every channel's first segment a ramp or step away from the
     /// baseline (so that every channel's first set-point change is on the program's first tick).
     pub fn validate(&self) -> Result<(), ProcedureError> {
-        if self.channels == 0 || self.channels > 64 {
-            return Err(ProcedureError::bad(
-                "program.channels",
-                self.channels,
-                "an integer from 1 to 64",
-            ));
-        }
-        if self.repetitions == 0 || self.repetitions > 1000 {
-            return Err(ProcedureError::bad(
-                "program.repetitions",
-                self.repetitions,
-                "an integer from 1 to 1000",
-            ));
-        }
-        check_range("program.isi_s", self.isi_s, 0.0, 3600.0)?;
+        Rule::Within { min: 1.0, max: 64.0 }.check("program.channels", self.channels as f64)?;
+        Rule::Within { min: 1.0, max: 1000.0 }.check("program.repetitions", self.repetitions as f64)?;
+        Rule::Within { min: 0.0, max: 3600.0 }.check("program.isi_s", self.isi_s)?;
         if self.stimuli.is_empty() {
-            return Err(ProcedureError::bad("program.stimuli", "[]", "at least one stimulus"));
+            return Err(ProcedureError::invalid(
+                "program.stimuli",
+                "[]",
+                "at least one stimulus",
+            ));
         }
         self.stimuli.iter().try_for_each(|s| s.validate(self.channels))
     }
@@ -133,7 +125,7 @@ impl ZoneStimulus {
             .iter()
             .map(|(key, segments)| {
                 let channel = key.trim().parse::<usize>().map_err(|_| {
-                    ProcedureError::bad(
+                    ProcedureError::invalid(
                         &format!("program.stimuli.{}.channels", self.name),
                         key,
                         "a channel number",
@@ -146,10 +138,10 @@ impl ZoneStimulus {
 
     fn validate(&self, channels: usize) -> Result<(), ProcedureError> {
         let key = format!("program.stimuli.{}", self.name);
-        check_range(&format!("{key}.baseline_c"), self.baseline_c, 0.0, 50.0)?;
+        Rule::Within { min: 0.0, max: 50.0 }.check(format!("{key}.baseline_c"), self.baseline_c)?;
         let map = self.channel_segments()?;
         if map.is_empty() {
-            return Err(ProcedureError::bad(
+            return Err(ProcedureError::invalid(
                 &format!("{key}.channels"),
                 "{}",
                 "at least one channel",
@@ -157,23 +149,23 @@ impl ZoneStimulus {
         }
         for (channel, segments) in &map {
             let at = format!("{key}.channels.{channel}");
-            if *channel >= channels {
-                return Err(ProcedureError::bad(
-                    &at,
-                    channel,
-                    &format!("a channel below {channels}"),
-                ));
-            }
-            if segments.is_empty() || segments.len() > MAX_SEGMENTS {
-                return Err(ProcedureError::bad(&at, segments.len(), "1 to 999 segments"));
-            }
+            let below_channels = Rule::Below {
+                max: channels as f64,
+                what: "program.channels",
+            };
+            below_channels.check(format!("{key}.channels"), *channel as f64)?;
+            let segment_count = Rule::Within {
+                min: 1.0,
+                max: MAX_SEGMENTS as f64,
+            };
+            segment_count.check(format!("{at} (segments)"), segments.len() as f64)?;
             segments.iter().try_for_each(|s| check_segment(&at, s))?;
             let starts = match segments[0] {
                 Segment::Ramp { to_c, .. } | Segment::Step { to_c } => to_c != self.baseline_c,
                 Segment::Hold { .. } => false,
             };
             if !starts {
-                return Err(ProcedureError::bad(
+                return Err(ProcedureError::invalid(
                     &at,
                     "its first segment",
                     "a ramp or step away from the baseline",
@@ -185,14 +177,20 @@ impl ZoneStimulus {
 }
 
 fn check_segment(at: &str, segment: &Segment) -> Result<(), ProcedureError> {
+    let target = Rule::Within { min: 0.0, max: 50.0 };
     match *segment {
         Segment::Ramp { to_c, rate_c_per_s, .. } => {
-            check_range(&format!("{at}.to_c"), to_c, 0.0, 50.0)?;
-            check_positive(&format!("{at}.rate_c_s"), rate_c_per_s, 300.0).map(drop)
+            target.check(format!("{at}.to_c"), to_c)?;
+            Rule::PositiveUpTo { max: 300.0 }.check(format!("{at}.rate_c_s"), rate_c_per_s)?;
         }
-        Segment::Step { to_c } => check_range(&format!("{at}.to_c"), to_c, 0.0, 50.0).map(drop),
-        Segment::Hold { hold_s, .. } => check_positive(&format!("{at}.hold_s"), hold_s, 3600.0).map(drop),
+        Segment::Step { to_c } => {
+            target.check(format!("{at}.to_c"), to_c)?;
+        }
+        Segment::Hold { hold_s, .. } => {
+            Rule::PositiveUpTo { max: 3600.0 }.check(format!("{at}.hold_s"), hold_s)?;
+        }
     }
+    Ok(())
 }
 
 /// The nominal start time of every segment from the program's first tick \[s\], and the end of the last one as a final

@@ -21,6 +21,7 @@
 //! `log10`, and 20·log10 of it on `dB`.
 
 use serde::{Deserialize, Serialize};
+use thermode_model::params::Rule;
 
 use crate::plan::{Procedure, Response, TrialPlan};
 use crate::stimulus::StimulusConfig;
@@ -51,7 +52,7 @@ impl Grid {
             Grid::Values(ref v) => v.clone(),
             Grid::Range { start, stop, step } => {
                 if !(step > 0.0 && start.is_finite() && stop.is_finite()) || (stop - start) / step > 1e5 {
-                    return Err(ProcedureError::bad(
+                    return Err(ProcedureError::invalid(
                         key,
                         format!("{self:?}"),
                         "a range with a positive step",
@@ -62,7 +63,7 @@ impl Grid {
             }
         };
         if values.is_empty() || values.len() > 100_000 || values.iter().any(|v| !v.is_finite()) {
-            return Err(ProcedureError::bad(
+            return Err(ProcedureError::invalid(
                 key,
                 format!("{values:?}"),
                 "1 to 100000 finite values",
@@ -225,27 +226,25 @@ impl QuestPlus {
         let stim = config.stim_domain.intensity.values("questplus.stim_domain.intensity")?;
         let params = param_grids(config)?;
         if config.outcome_domain.response.len() != 2 {
-            return Err(ProcedureError::bad(
+            return Err(ProcedureError::invalid(
                 "questplus.outcome_domain.response",
                 format!("{:?}", config.outcome_domain.response),
                 "two responses (detected first)",
             ));
         }
         if config.func == Func::NormCdf && config.stim_scale != StimScale::Linear {
-            return Err(ProcedureError::bad(
+            return Err(ProcedureError::invalid(
                 "questplus.stim_scale",
                 format!("{:?}", config.stim_scale),
                 "linear (the only scale of norm_cdf)",
             ));
         }
         let cells: usize = params.iter().map(Vec::len).product();
-        if cells.saturating_mul(stim.len()) > 50_000_000 {
-            return Err(ProcedureError::bad(
-                "questplus",
-                cells * stim.len(),
-                "at most 5e7 grid cells",
-            ));
-        }
+        let grid_cells = Rule::AtMost {
+            max: 5e7,
+            what: "the grid cells QUEST+ holds",
+        };
+        grid_cells.check("questplus (grid cells)", cells.saturating_mul(stim.len()) as f64)?;
         let mut qp = QuestPlus {
             func: config.func,
             scale: config.stim_scale,
@@ -262,7 +261,7 @@ impl QuestPlus {
             .map(|(x, c)| qp.p(x, c))
             .collect();
         if qp.likelihood.iter().any(|p| !p.is_finite()) {
-            return Err(ProcedureError::bad(
+            return Err(ProcedureError::invalid(
                 "questplus.param_domain",
                 "the grid",
                 "parameters giving finite probabilities",
@@ -401,7 +400,7 @@ fn param_grids(config: &QuestPlusConfig) -> Result<[Vec<f64>; 4], ProcedureError
         Func::Weibull => [("mean", &d.mean), ("sd", &d.sd)],
     };
     if let Some((name, _)) = unused.iter().find(|(_, g)| g.is_some()) {
-        return Err(ProcedureError::bad(
+        return Err(ProcedureError::invalid(
             &format!("questplus.param_domain.{name}"),
             "given",
             &format!("absent: {:?} takes {} and {}", config.func, names[0], names[1]),
@@ -410,7 +409,7 @@ fn param_grids(config: &QuestPlusConfig) -> Result<[Vec<f64>; 4], ProcedureError
     let required = |grid: &Option<Grid>, name: &str| -> Result<Vec<f64>, ProcedureError> {
         let key = format!("questplus.param_domain.{name}");
         grid.as_ref()
-            .ok_or_else(|| ProcedureError::bad(&key, "missing", "a grid"))?
+            .ok_or_else(|| ProcedureError::invalid(&key, "missing", "a grid"))?
             .values(&key)
     };
     let optional = |grid: &Option<Grid>, name: &str| match grid {
@@ -439,13 +438,11 @@ impl QuestPlusProcedure {
     /// The procedure for `config`, presenting trapezoids of `stimulus`.
     pub fn new(config: &QuestPlusConfig, stimulus: StimulusConfig) -> Result<Self, ProcedureError> {
         stimulus.validate()?;
-        if config.trials == 0 || config.trials > 10_000 {
-            return Err(ProcedureError::bad(
-                "questplus.trials",
-                config.trials,
-                "an integer from 1 to 10000",
-            ));
+        Rule::Within {
+            min: 1.0,
+            max: 10_000.0,
         }
+        .check("questplus.trials", config.trials as f64)?;
         Ok(QuestPlusProcedure {
             engine: QuestPlus::new(config)?,
             stimulus,

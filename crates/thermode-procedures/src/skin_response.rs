@@ -24,6 +24,7 @@
 //! receptor change reaches θ, so the 50 % point of its psychometric function, in plate units, is the amplitude whose
 //! peak receptor change is θ ([`SkinResponse::trapezoid_threshold_c`]).
 
+use thermode_model::params::Rule;
 use thermode_model::{KronModel, Skin};
 
 use crate::ProcedureError;
@@ -91,7 +92,7 @@ impl SkinResponse {
     /// The response of `skin` (three layers) on a plate through `contact_conductance_w_m2k` [W/(m²·K)].
     pub fn new(skin: &Skin, contact_conductance_w_m2k: f64) -> Result<Self, ProcedureError> {
         let model = KronModel::new(skin).map_err(|e| ProcedureError::Skin(e.to_string()))?;
-        crate::error::check_positive("contact_conductance_w_m2k", contact_conductance_w_m2k, 1e6)?;
+        Rule::PositiveUpTo { max: 1e6 }.check("contact_conductance_w_m2k", contact_conductance_w_m2k)?;
         let c = model.capacities_j_m2k();
         let (g12, g23) = model.conductances_w_m2k();
         let blood = &skin.blood;

@@ -20,6 +20,7 @@
 //! last `estimate_reversals` reversal intensities (what PsychoPy's demos compute).
 
 use serde::{Deserialize, Serialize};
+use thermode_model::params::Rule;
 
 use crate::plan::{Procedure, Response, TrialPlan};
 use crate::stimulus::StimulusConfig;
@@ -89,30 +90,19 @@ impl Default for StaircaseConfig {
 impl StaircaseConfig {
     /// Checks every value (key names as in the experiment file).
     pub fn validate(&self) -> Result<(), ProcedureError> {
-        if !(self.start_val.is_finite()) {
-            return Err(ProcedureError::bad(
-                "staircase.start_val",
-                self.start_val,
-                "a finite number",
-            ));
-        }
+        Rule::Finite.check("staircase.start_val", self.start_val)?;
         if self.step_sizes.is_empty() || self.step_sizes.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
-            return Err(ProcedureError::bad(
+            return Err(ProcedureError::invalid(
                 "staircase.step_sizes",
                 format!("{:?}", self.step_sizes),
                 "a non-empty list of positive numbers",
             ));
         }
-        if self.n_up == 0 || self.n_down == 0 {
-            return Err(ProcedureError::bad("staircase.n_up/n_down", 0, "at least 1"));
-        }
-        if self.max_trials == 0 || self.estimate_reversals == 0 {
-            return Err(ProcedureError::bad(
-                "staircase.max_trials/estimate_reversals",
-                0,
-                "at least 1",
-            ));
-        }
+        let count = Rule::AtLeast { min: 1.0 };
+        count.check("staircase.n_up", self.n_up as f64)?;
+        count.check("staircase.n_down", self.n_down as f64)?;
+        count.check("staircase.max_trials", self.max_trials as f64)?;
+        count.check("staircase.estimate_reversals", self.estimate_reversals as f64)?;
         Ok(())
     }
 }

@@ -2,8 +2,8 @@
 //! baseline, whose amplitude the procedure chooses.
 
 use serde::{Deserialize, Serialize};
+use thermode_model::params::Rule;
 
-use crate::error::{check_positive, check_range};
 use crate::plan::{Direction, TrialPlan};
 use crate::ProcedureError;
 
@@ -46,12 +46,12 @@ impl Default for StimulusConfig {
 impl StimulusConfig {
     /// Checks every value (key names as in the experiment file).
     pub fn validate(&self) -> Result<(), ProcedureError> {
-        check_range("stimulus.baseline_c", self.baseline_c, 20.0, 40.0)?;
-        check_positive("stimulus.rate_c_s", self.rate_c_per_s, 300.0)?;
-        check_range("stimulus.plateau_s", self.plateau_s, 0.0, 600.0)?;
-        check_positive("stimulus.return_rate_c_s", self.return_rate_c_per_s, 300.0)?;
-        check_range("stimulus.isi_s", self.isi_s, 0.0, 3600.0)?;
-        check_positive("stimulus.max_amplitude_c", self.max_amplitude_c, 30.0)?;
+        Rule::Within { min: 20.0, max: 40.0 }.check("stimulus.baseline_c", self.baseline_c)?;
+        Rule::PositiveUpTo { max: 300.0 }.check("stimulus.rate_c_s", self.rate_c_per_s)?;
+        Rule::Within { min: 0.0, max: 600.0 }.check("stimulus.plateau_s", self.plateau_s)?;
+        Rule::PositiveUpTo { max: 300.0 }.check("stimulus.return_rate_c_s", self.return_rate_c_per_s)?;
+        Rule::Within { min: 0.0, max: 3600.0 }.check("stimulus.isi_s", self.isi_s)?;
+        Rule::PositiveUpTo { max: 30.0 }.check("stimulus.max_amplitude_c", self.max_amplitude_c)?;
         Ok(())
     }
 

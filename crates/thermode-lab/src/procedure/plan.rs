@@ -126,7 +126,7 @@ pub fn procedure_plan(
             let config = file
                 .program
                 .as_ref()
-                .ok_or_else(|| ProcedureError::bad("program", "none", "a [program] table"))?;
+                .ok_or_else(|| ProcedureError::invalid("program", "none", "a [program] table"))?;
             for trial in config.trials()? {
                 for (&zone, segments) in &trial.channels {
                     check_trial(trial.index + 1, zone, segments, limits)?;

@@ -38,6 +38,11 @@ pub enum Rule {
         /// Largest allowed value.
         max: f64,
     },
+    /// A finite number above zero and not above `max` (a rate of at most 300 °C/s, a hold of at most an hour).
+    PositiveUpTo {
+        /// Largest allowed value.
+        max: f64,
+    },
     /// A requirement the other rules cannot say, in words (`"must last at least one tick"`); checked by the caller.
     Custom(&'static str),
     /// A finite number strictly between `min` and `max` (both excluded).
@@ -82,6 +87,7 @@ impl Rule {
                 Rule::NonNegative => value >= 0.0,
                 Rule::AtLeast { min } => value >= min,
                 Rule::Within { min, max } => value >= min && value <= max,
+                Rule::PositiveUpTo { max } => value > 0.0 && value <= max,
                 Rule::Between { min, max } => value > min && value < max,
                 Rule::AtMost { max, .. } => value <= max,
                 Rule::Below { max, .. } => value < max,
@@ -116,6 +122,9 @@ impl fmt::Display for Rule {
                 Significant(*min),
                 Significant(*max)
             ),
+            Rule::PositiveUpTo { max } => {
+                write!(f, "must be a finite number above zero, at most {}", Significant(*max))
+            }
             Rule::Custom(text) => f.write_str(text),
             Rule::Between { min, max } => write!(
                 f,
@@ -220,6 +229,7 @@ mod tests {
             },
             Rule::AtMost { max: 1e300, what: "x" },
             Rule::Below { max: 1e300, what: "x" },
+            Rule::PositiveUpTo { max: 1e300 },
         ] {
             for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
                 assert!(!rule.admits(bad), "{rule:?} admitted {bad}");
@@ -244,6 +254,12 @@ mod tests {
         );
         let below = Rule::Below { max: 1.0, what: "one" };
         assert!(below.admits(0.5) && !below.admits(1.0));
+        let up_to = Rule::PositiveUpTo { max: 300.0 };
+        assert!(up_to.admits(300.0) && up_to.admits(1e-9) && !up_to.admits(0.0) && !up_to.admits(300.5));
+        assert_eq!(
+            up_to.check("limits.rate_c_s", 400.0).map_err(|e| e.to_string()),
+            Err("`limits.rate_c_s` = 400 is invalid: must be a finite number above zero, at most 300".to_string())
+        );
     }
 
     #[test]
