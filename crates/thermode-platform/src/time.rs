@@ -329,6 +329,11 @@ impl Ticker {
         self.missed_total
     }
 
+    /// The deadline the next [`Ticker::wait`] waits for \[s\].
+    pub fn next_deadline_s(&self) -> f64 {
+        self.deadline_s(self.next_index)
+    }
+
     fn deadline_s(&self, index: u64) -> f64 {
         self.start_s + index as f64 * self.period_s
     }

@@ -59,6 +59,8 @@ pub const MAX_STATS_WINDOW_TICKS: usize = 10_000;
 pub const ENGINE_FAILED: FaultCode = FaultCode::NonFiniteCommand;
 /// Attempts to take the snapshot lock per tick before the publish is skipped.
 const PUBLISH_ATTEMPTS: usize = 4;
+/// How long the loop waits between retries of a skipped publish, while it waits for its next deadline \[s\].
+const PUBLISH_RETRY_S: f64 = 2e-4;
 /// Loop time between refreshes of the published statistics \[s\].
 const STATS_REFRESH_S: f64 = 1.0;
 
@@ -367,6 +369,8 @@ struct ControlLoop {
     last_woke_s: Option<f64>,
     next_stats_s: f64,
     time_s: f64,
+    /// The tick whose snapshot a reader kept the loop from publishing, until a retry lands.
+    publish_pending: Option<u64>,
 }
 
 /// A reading that is not one: before the first successful read (the envelope refuses it as non-finite).
@@ -456,6 +460,7 @@ impl ControlLoop {
             last_woke_s: None,
             next_stats_s: STATS_REFRESH_S,
             time_s: 0.0,
+            publish_pending: None,
         })
     }
 
@@ -463,6 +468,7 @@ impl ControlLoop {
     fn run(mut self, clock: &dyn Clock, mut ticker: Ticker, stop: &AtomicBool) -> Result<(), DeviceError> {
         while let Some(tick) = ticker.wait(clock, stop) {
             self.tick_once(clock, &tick, ticker.missed_total());
+            self.retry_publish(clock, ticker.next_deadline_s());
         }
         self.shutdown()
     }
@@ -494,6 +500,7 @@ impl ControlLoop {
             }
             let Some(tick) = ticker.wait(clock, stop) else { break };
             self.tick_once(clock, &tick, ticker.missed_total());
+            self.retry_publish(clock, ticker.next_deadline_s());
         }
         if running(self) {
             // Never past the limit on a display under test: the channels still testing are held off.
@@ -981,8 +988,10 @@ impl ControlLoop {
     }
 
     /// Publishes the snapshot; a reader holds the lock only while copying it, so a few yields suffice. Never
-    /// waits on the lock: after [`PUBLISH_ATTEMPTS`] the publish is skipped (and counted) until the next tick.
-    fn publish(&self, tick: u64) {
+    /// waits on the lock: after [`PUBLISH_ATTEMPTS`] the publish is skipped (and counted), then retried between
+    /// ticks ([`ControlLoop::retry_publish`]).
+    fn publish(&mut self, tick: u64) {
+        self.publish_pending = None;
         for _ in 0..PUBLISH_ATTEMPTS {
             if self.shared.try_publish(|snapshot| self.write(snapshot, tick, true)) {
                 return;
@@ -990,6 +999,23 @@ impl ControlLoop {
             std::thread::yield_now();
         }
         self.shared.skipped_publishes.fetch_add(1, Ordering::Relaxed);
+        self.publish_pending = Some(tick);
+    }
+
+    /// Retries a publish a reader made the loop skip until it lands or the next deadline comes: a reader never
+    /// sees a tick older than the newest for a whole period, and one waiting for a tick on a manual clock (which
+    /// moves only when that tick is seen) is not left waiting for ever.
+    fn retry_publish(&mut self, clock: &dyn Clock, next_deadline_s: f64) {
+        while let Some(tick) = self.publish_pending {
+            if clock.now_s() >= next_deadline_s {
+                return;
+            }
+            if self.shared.try_publish(|snapshot| self.write(snapshot, tick, true)) {
+                self.publish_pending = None;
+                return;
+            }
+            clock.sleep_until((clock.now_s() + PUBLISH_RETRY_S).min(next_deadline_s));
+        }
     }
 
     fn write(&self, snapshot: &mut Snapshot, tick: u64, running: bool) {
