@@ -27,10 +27,29 @@ use crate::engine::{EngineError, Stimulus};
 use crate::program::Program;
 use crate::reply::{self, Closed, ReplyReceiver, ReplySender};
 
-/// Who set a channel's stimulus: the wire's vocabulary (`thermode_protocol::Owner`).
-pub use thermode_protocol::Owner;
-/// The kind of a participant's response: the wire's vocabulary (`thermode_protocol::ResponseKind`).
-pub use thermode_protocol::ResponseKind;
+/// Who set a channel's stimulus. A client's contacts are released when it is gone (after a grace period); OSC and
+/// script contacts have no connection and stay until released. (The wire spells it `thermode_protocol::Owner`; the
+/// daemon converts at its edge.)
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Owner {
+    /// Nobody (air, or released).
+    Nobody,
+    /// A client (a WebSocket connection, or the HTTP commands' lease), by its number.
+    Client(u64),
+    /// An OSC sender.
+    Osc,
+    /// The demo script or the daemon itself.
+    Script,
+}
+
+/// The kind of a participant's response.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ResponseKind {
+    /// A button press.
+    Button,
+    /// A rating on a visual analogue scale, 0 to 100.
+    Rating,
+}
 
 /// A command for the control loop: the one vocabulary of the WebSocket API, OSC, the demo script and tests. What
 /// a channel should show travels as the pipeline's [`Stimulus`], so nothing between the wire and the engine spells

@@ -30,8 +30,16 @@ pub const EMPTY_TELEMETRY: Telemetry = Telemetry {
     fault: None,
 };
 
-/// What a channel renders: the wire's vocabulary (`thermode_protocol::Mode`).
-pub use thermode_protocol::Mode;
+/// What a channel renders. (The wire spells it `thermode_protocol::Mode`; the daemon converts at its edge.)
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// Air: no contact.
+    Air,
+    /// A material contact.
+    Touch,
+    /// Direct set-point mode (a set-point or a program).
+    Direct,
+}
 
 /// The properties of a touched material, as the recording names them (so that a custom material, which no library
 /// knows, can be read back).

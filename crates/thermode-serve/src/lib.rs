@@ -22,6 +22,7 @@ pub mod error;
 pub mod lsl;
 pub mod osc;
 pub mod program_events;
+pub mod wire;
 
 pub use daemon::{Daemon, DaemonConfig, ServerConfig, StopReport, DEFAULT_OSC_PORT, DEFAULT_PORT};
 pub use error::ServeError;

@@ -48,7 +48,8 @@ use crate::api::limit::TokenBucket;
 use crate::api::protocol::{self, ApiError, ErrorCode};
 use crate::api::{App, OscCounters};
 use thermode_protocol::program::{ProgramRequest, ResponseInput};
-use thermode_runtime::command::{Command, Owner, ResponseKind};
+use thermode_protocol::ResponseKind;
+use thermode_runtime::command::{Command, Owner};
 use thermode_runtime::engine::Stimulus;
 use thermode_runtime::snapshot::ChannelStatus;
 

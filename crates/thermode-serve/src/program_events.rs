@@ -52,7 +52,7 @@ fn of_row(channel: usize, row: &RecordRow, tick: u64, time_s: f64) -> Vec<Progra
     let mut events = Vec::new();
     if let Some((kind, value, ended)) = mark.response {
         events.push(ProgramEvent {
-            kind: Some(kind),
+            kind: Some(crate::wire::response_kind(kind)),
             value,
             segment: ended,
             ..event(ProgramEventKind::Response)
@@ -209,7 +209,7 @@ fn csv_row(event: &ProgramEvent) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use thermode_protocol::ResponseKind;
+    use thermode_runtime::command::ResponseKind;
     use thermode_runtime::snapshot::{Mode, ProgramMark, EMPTY_TELEMETRY};
 
     fn row(program: ProgramMark) -> RecordRow {

@@ -495,8 +495,8 @@ fn contacts(snapshot: &Snapshot) -> Vec<Contact> {
         .map(|c| Contact {
             channel: c.channel,
             material: c.label.to_string(),
-            mode: c.mode,
-            owner: c.owner,
+            mode: crate::wire::mode(c.mode),
+            owner: crate::wire::owner(c.owner),
         })
         .collect()
 }

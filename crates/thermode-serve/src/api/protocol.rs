@@ -246,7 +246,7 @@ pub fn response_command(response: ResponseInput, limits: &RequestLimits) -> Resu
     };
     Ok(Command::Response {
         channel,
-        kind: response.kind,
+        kind: crate::wire::loop_response_kind(response.kind),
         value,
     })
 }
@@ -287,7 +287,7 @@ pub fn done(command: &Command, applied: &Applied) -> Done {
             let reading = applied.at_response;
             Done::Response {
                 channel: *channel,
-                kind: *kind,
+                kind: crate::wire::response_kind(*kind),
                 value: *value,
                 sensor_c: reading.and_then(|r| finite(r.sensor_c)),
                 plate_estimate_c: reading.and_then(|r| finite(r.plate_estimate_c)),
@@ -414,7 +414,7 @@ pub fn channel_telemetry(status: &ChannelStatus) -> ChannelTelemetry {
         channel: status.channel,
         contact: touch,
         material: touch.then(|| status.label.to_string()),
-        mode: status.mode,
+        mode: crate::wire::mode(status.mode),
         target_skin_c: finite(t.target_skin_c),
         skin_c: finite(t.skin_c),
         display_setpoint_c: finite(t.display_setpoint_c),
@@ -450,7 +450,7 @@ pub fn channel_status(status: &ChannelStatus, name: Option<&str>) -> ChannelStat
         direct_temp_c: status.direct.map(|d| d.0),
         direct_rate_c_per_s: status.direct.map(|d| d.1),
         held_off: status.held_off,
-        owner: status.owner,
+        owner: crate::wire::owner(status.owner),
         release_at_s: status.release_at_s.map(to_clock_resolution),
         link_ok: status.link_ok,
         device_cut: status.device_cut.map(|c| c.name().to_string()),
