@@ -56,11 +56,10 @@ impl LevelsConfig {
             max: 10_000.0,
         }
         .check("levels.trials", self.trials as f64)?;
-        let up_to_trials = Rule::AtMost {
+        let up_to_trials = Rule::Within {
+            min: 1.0,
             max: self.trials as f64,
-            what: "levels.trials",
         };
-        Rule::AtLeast { min: 1.0 }.check("levels.average_last", self.average_last as f64)?;
         up_to_trials.check("levels.average_last", self.average_last as f64)?;
         Ok(())
     }

@@ -12,7 +12,7 @@
 use serde::{Deserialize, Serialize};
 use thermode_model::params::Rule;
 
-use crate::plan::{Direction, Procedure, Response, TrialPlan};
+use crate::plan::{Direction, Procedure, Response, TrialPlan, RAMP_RATE};
 use crate::ProcedureError;
 
 /// A DFNS thermal test.
@@ -123,10 +123,9 @@ impl LimitsConfig {
             ));
         }
         Rule::Within { min: 20.0, max: 40.0 }.check("limits.baseline_c", self.baseline_c)?;
-        Rule::PositiveUpTo { max: 300.0 }.check("limits.rate_c_s", self.rate_c_per_s)?;
-        Rule::PositiveUpTo { max: 300.0 }
-            .check("limits.detection_return_rate_c_s", self.detection_return_rate_c_per_s)?;
-        Rule::PositiveUpTo { max: 300.0 }.check("limits.pain_return_rate_c_s", self.pain_return_rate_c_per_s)?;
+        RAMP_RATE.check("limits.rate_c_s", self.rate_c_per_s)?;
+        RAMP_RATE.check("limits.detection_return_rate_c_s", self.detection_return_rate_c_per_s)?;
+        RAMP_RATE.check("limits.pain_return_rate_c_s", self.pain_return_rate_c_per_s)?;
         Rule::Within {
             min: -10.0,
             max: self.baseline_c - 0.1,

@@ -2,6 +2,11 @@
 //! procedure records for it, and the program segments the plan becomes on a display's loop.
 
 use serde::{Deserialize, Serialize};
+use thermode_model::params::Rule;
+
+/// What a ramp's rate in an experiment file must be \[°C/s\]: above 0, at most 300 (the display's own, lower limit
+/// is checked when the file is planned or run on it).
+pub const RAMP_RATE: Rule = Rule::PositiveUpTo { max: 300.0 };
 
 /// Which way a stimulus changes the plate from its baseline.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

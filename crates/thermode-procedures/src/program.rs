@@ -8,7 +8,7 @@ use thermode_model::params::Rule;
 
 use serde::{Deserialize, Serialize};
 
-use crate::plan::Segment;
+use crate::plan::{Segment, RAMP_RATE};
 use crate::ProcedureError;
 
 /// The most segments a channel's program may have (the loop's limit).
@@ -181,7 +181,7 @@ fn check_segment(at: &str, segment: &Segment) -> Result<(), ProcedureError> {
     match *segment {
         Segment::Ramp { to_c, rate_c_per_s, .. } => {
             target.check(format!("{at}.to_c"), to_c)?;
-            Rule::PositiveUpTo { max: 300.0 }.check(format!("{at}.rate_c_s"), rate_c_per_s)?;
+            RAMP_RATE.check(format!("{at}.rate_c_s"), rate_c_per_s)?;
         }
         Segment::Step { to_c } => {
             target.check(format!("{at}.to_c"), to_c)?;

@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 use thermode_model::params::Rule;
 
-use crate::plan::{Direction, TrialPlan};
+use crate::plan::{Direction, TrialPlan, RAMP_RATE};
 use crate::ProcedureError;
 
 /// A trapezoidal stimulus of chosen amplitude: ramp, plateau, return, pause.
@@ -47,9 +47,9 @@ impl StimulusConfig {
     /// Checks every value (key names as in the experiment file).
     pub fn validate(&self) -> Result<(), ProcedureError> {
         Rule::Within { min: 20.0, max: 40.0 }.check("stimulus.baseline_c", self.baseline_c)?;
-        Rule::PositiveUpTo { max: 300.0 }.check("stimulus.rate_c_s", self.rate_c_per_s)?;
+        RAMP_RATE.check("stimulus.rate_c_s", self.rate_c_per_s)?;
         Rule::Within { min: 0.0, max: 600.0 }.check("stimulus.plateau_s", self.plateau_s)?;
-        Rule::PositiveUpTo { max: 300.0 }.check("stimulus.return_rate_c_s", self.return_rate_c_per_s)?;
+        RAMP_RATE.check("stimulus.return_rate_c_s", self.return_rate_c_per_s)?;
         Rule::Within { min: 0.0, max: 3600.0 }.check("stimulus.isi_s", self.isi_s)?;
         Rule::PositiveUpTo { max: 30.0 }.check("stimulus.max_amplitude_c", self.max_amplitude_c)?;
         Ok(())

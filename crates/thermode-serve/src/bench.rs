@@ -12,7 +12,7 @@
 //!   drive current differs from the pre-touch current by more than [`DRIVE_CHANGE_A`] (`drive_changed`); and the
 //!   time from sending to the start of that tick, in periods.
 //! - *`stop_all` under a program flood* (`flooders` > 0, instead of the touches): that many clients send
-//!   999-segment programs on every channel back to back without waiting for their replies (about 19 KB per
+//!   999-segment programs on every channel back to back without waiting for their replies (about 17 KB per
 //!   channel), while a fresh client connects every touch interval and times its `stop_all` from sending to the
 //!   reply (and from connecting to the reply).
 

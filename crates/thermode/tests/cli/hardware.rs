@@ -187,29 +187,26 @@ fn bad_several_device_spellings_are_refused_with_the_reason() {
     }
 }
 
-#[test]
-fn bench_with_flooders_times_stop_all_from_a_fresh_client_instead_of_touches() {
+/// `thermode bench ARGS --format json`, which must succeed: its report.
+fn bench_json(args: &[&str]) -> serde_json::Value {
     let out = Command::new(env!("CARGO_BIN_EXE_thermode"))
-        .args([
-            "bench",
-            "--rate",
-            "100",
-            "--duration",
-            "1",
-            "--flooders",
-            "2",
-            "--format",
-            "json",
-        ])
+        .arg("bench")
+        .args(args)
+        .args(["--format", "json"])
         .output()
-        .unwrap_or_else(|e| panic!("run bench --flooders: {e}"));
+        .unwrap_or_else(|e| panic!("run bench {args:?}: {e}"));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
         out.status.success(),
         "{stdout} {}",
         String::from_utf8_lossy(&out.stderr)
     );
-    let report: serde_json::Value = serde_json::from_str(&stdout).unwrap_or_else(|e| panic!("{e}: {stdout}"));
+    serde_json::from_str(&stdout).unwrap_or_else(|e| panic!("{e}: {stdout}"))
+}
+
+#[test]
+fn bench_with_flooders_times_stop_all_from_a_fresh_client_instead_of_touches() {
+    let report = bench_json(&["--rate", "100", "--duration", "1", "--flooders", "2"]);
     assert_eq!(report["flooders"], 2, "{report}");
     // One stop every 0.5 s for 1 s, each answered (the reply's time is a figure, not checked).
     let stops = report["stop_all_reply_s"]["count"].as_u64().unwrap_or(0);
@@ -222,26 +219,7 @@ fn bench_with_flooders_times_stop_all_from_a_fresh_client_instead_of_touches() {
 
 #[test]
 fn bench_floor_measures_an_empty_loop_and_refuses_impossible_rates() {
-    let out = Command::new(env!("CARGO_BIN_EXE_thermode"))
-        .args([
-            "bench",
-            "--floor",
-            "--rate",
-            "200",
-            "--duration",
-            "0.5",
-            "--format",
-            "json",
-        ])
-        .output()
-        .unwrap_or_else(|e| panic!("run bench --floor: {e}"));
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout} {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let report: serde_json::Value = serde_json::from_str(&stdout).unwrap_or_else(|e| panic!("{e}: {stdout}"));
+    let report = bench_json(&["--floor", "--rate", "200", "--duration", "0.5"]);
     let (ticks, missed) = (report["ticks"].as_u64(), report["missed_deadlines"].as_u64());
     // 0.5 s at 200 Hz: 100 deadlines (and the first), each either woken or counted as missed.
     let deadlines = ticks.zip(missed).map(|(t, m)| t + m);
