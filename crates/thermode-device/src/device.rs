@@ -129,6 +129,37 @@ pub trait Device {
     }
 }
 
+/// A boxed device is a device (the daemon's loop holds whichever display it was given as one).
+impl<D: Device + ?Sized> Device for Box<D> {
+    fn channel_count(&self) -> usize {
+        (**self).channel_count()
+    }
+    fn apply(&mut self, channel: usize, command: &DriveCommand) -> Result<(), DeviceError> {
+        (**self).apply(channel, command)
+    }
+    fn read(&mut self, channel: usize) -> Result<Reading, DeviceError> {
+        (**self).read(channel)
+    }
+    fn poll(&mut self, now_s: f64) {
+        (**self).poll(now_s);
+    }
+    fn all_off(&mut self) -> Result<(), DeviceError> {
+        (**self).all_off()
+    }
+    fn link_health(&self) -> Option<std::sync::Arc<crate::LinkHealth>> {
+        (**self).link_health()
+    }
+    fn measures(&self) -> Measures {
+        (**self).measures()
+    }
+    fn identity(&self) -> Option<String> {
+        (**self).identity()
+    }
+    fn parts(&self) -> Vec<DevicePart> {
+        (**self).parts()
+    }
+}
+
 /// The simulated display: up to [`MAX_CHANNELS`] identical, independent channels, each with its own finger and its
 /// own noise stream (ChaCha8 seeded from one seed, stream = channel index).
 #[derive(Debug, Clone)]

@@ -95,12 +95,16 @@ impl Clock for MonotonicClock {
 }
 
 /// A clock that moves only when told to (tests). A sleeper wakes as soon as the time reaches its deadline (and at
-/// least every 20 ms of real time). A *jumping* clock instead moves to every deadline it is asked to sleep until.
+/// least every 20 ms of real time). A *jumping* clock instead moves to every deadline it is asked to sleep until,
+/// up to its jump limit ([`ManualClock::jump_until`]; none by default): a test lets the loop run at once to a time it
+/// chooses, and no further.
 #[derive(Debug, Default)]
 pub struct ManualClock {
     now_s: Mutex<f64>,
     moved: Condvar,
     jumps: bool,
+    /// How far a jumping clock jumps \[s\] (`None`: without limit).
+    jump_limit_s: Mutex<Option<f64>>,
     origin_unix_s: f64,
 }
 
@@ -117,6 +121,17 @@ impl ManualClock {
             jumps: true,
             ..ManualClock::default()
         }
+    }
+
+    /// Lets a jumping clock jump no further than `limit_s` \[s\] (raised or lowered at any time; the clock never goes
+    /// back); sleepers past it wait as on a manual clock until the limit is raised.
+    pub fn jump_until(&self, limit_s: f64) {
+        *self
+            .jump_limit_s
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner()) = Some(limit_s);
+        let _now = self.lock();
+        self.moved.notify_all();
     }
 
     /// The same clock with its wall clock starting at `unix_s` \[s since 1970-01-01 UTC\] (dates under test).
@@ -156,8 +171,17 @@ impl Clock for ManualClock {
 
     fn sleep_until(&self, deadline_s: f64) {
         if self.jumps {
-            self.set(deadline_s);
-            return;
+            let limit_s = *self
+                .jump_limit_s
+                .lock()
+                .unwrap_or_else(|poisoned| poisoned.into_inner());
+            match limit_s {
+                Some(limit_s) if deadline_s > limit_s => self.set(limit_s),
+                _ => {
+                    self.set(deadline_s);
+                    return;
+                }
+            }
         }
         let now = self.lock();
         if *now >= deadline_s {
@@ -424,6 +448,19 @@ mod tests {
         clock.sleep_until(10.0);
         assert_eq!(clock.now_s(), 30.0, "a jumping clock must not go back");
         assert_eq!(civil_date(clock.unix_time_s()), "2024-01-01");
+    }
+
+    #[test]
+    fn a_jumping_clock_stops_at_its_jump_limit_until_the_limit_is_raised() {
+        let clock = ManualClock::jumping();
+        clock.jump_until(1.5);
+        clock.sleep_until(1.0);
+        assert_eq!(clock.now_s(), 1.0, "within the limit the clock jumps to the deadline");
+        clock.sleep_until(2.0);
+        assert_eq!(clock.now_s(), 1.5, "past the limit the clock stops at the limit");
+        clock.jump_until(3.0);
+        clock.sleep_until(2.0);
+        assert_eq!(clock.now_s(), 2.0, "a raised limit lets the sleeper jump on");
     }
 
     #[test]

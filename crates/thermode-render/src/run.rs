@@ -44,13 +44,14 @@
 
 use std::io::Write;
 
-use thermode_device::{Device, SimulatedDisplay};
+use thermode_device::SimulatedDisplay;
 use thermode_model::fv::{FvConfig, FvModel};
-use thermode_pipeline::pipeline::{ChannelPipeline, Telemetry};
+use thermode_pipeline::pipeline::ChannelPipeline;
 use thermode_pipeline::renderer::{fv_config, Renderer, RendererKind, LIGHT_TOUCH_RESISTANCE_M2K_W};
 use thermode_pipeline::stimulus::Stimulus;
 pub use thermode_platform::csv_text::Precision;
 use thermode_platform::csv_text::{self, CsvText};
+use thermode_runtime::{Command, CommandError, ControlLoop, LoopConfig, Owner, VirtualLoop};
 
 use crate::error::RenderError;
 pub use crate::spec::noise_seed;
@@ -146,20 +147,29 @@ pub fn render_all_with_progress(
     })
 }
 
-/// Runs `spec` with a pipeline of the caller's (e.g. with a custom controller). A run that records a number that
-/// is not finite is refused ([`RenderError::NonFinite`], see [`Trajectory::first_non_finite`]).
+/// Runs `spec` with a pipeline of the caller's (e.g. with a custom controller), on the daemon's loop core in
+/// virtual time ([`VirtualLoop`]): the touch and the release are the loop's commands, each tick the loop's tick,
+/// and the plant advanced after it in substeps of at most [`RenderSpec::plant_substep_s`]. A run that records a number that is not
+/// finite is refused ([`RenderError::NonFinite`], see [`Trajectory::first_non_finite`]). A display its self-test
+/// refused (fault 106) is refused the touch as the daemon refuses it: it renders air at 0 A throughout.
 pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<RenderRun, RenderError> {
     spec.validate()?;
-    let mut plant = resting_plant(spec)?;
+    let plant = resting_plant(spec)?;
     let self_test = crate::self_test::self_test(spec, &pipeline)?;
     if let Some(report) = &self_test {
         pipeline.take_self_test(report, plant.time_s());
     }
     let (truth, _) = truth_skin_c(spec)?;
     let (pre, contact_ticks, release) = spec.tick_counts();
-    let dt = spec.tick_s();
     let depth_m = spec.receptor_depth_m();
     let start_s = plant.time_s();
+    let config = LoopConfig {
+        rate_hz: spec.rate_hz,
+        ..LoopConfig::default()
+    };
+    let core = ControlLoop::new(&config, plant, vec![pipeline], Vec::new(), Default::default())
+        .map_err(|e| RenderError::Invalid(e.to_string()))?;
+    let mut display = VirtualLoop::new(core, start_s, spec.tick_s());
     let mut trajectory = Trajectory::with_capacity(pre + contact_ticks);
     let mut at_contact = None;
     let touch = Stimulus::Touch {
@@ -168,33 +178,41 @@ pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<R
     };
     for (k, &truth_c) in truth.iter().enumerate().take(pre + contact_ticks) {
         if k == pre {
-            pipeline.set_stimulus(touch.clone())?;
+            command(&mut display, Command::stimulate(0, touch.clone(), Owner::Nobody))?;
+            let core = display.core();
             at_contact = Some(ContactState {
-                target_c: pipeline.renderer().receptor_c(),
-                skin_c: finger_at_depth_c(plant.channel(0)?, depth_m),
-                plant: plant.clone(),
+                target_c: core.engine(0).map_or(f64::NAN, |p| p.renderer().receptor_c()),
+                skin_c: finger_at_depth_c(core.device().channel(0)?, depth_m),
+                plant: core.device().clone(),
             });
         }
         if release.is_some_and(|r| k == pre + r) {
-            pipeline.set_stimulus(Stimulus::Air)?;
+            command(&mut display, Command::Release { channel: 0 })?;
         }
-        let telemetry = tick(&mut pipeline, &mut plant, start_s + k as f64 * dt, dt, spec.substeps())?;
-        let time_s = (k + 1) as f64 * dt - pre as f64 * dt;
-        trajectory.record(time_s, truth_c, &telemetry, &plant, depth_m);
+        display.tick();
+        display.advance(spec.substeps());
+        let time_s = (k + 1) as f64 * spec.tick_s() - pre as f64 * spec.tick_s();
+        let core = display.core();
+        trajectory.record(time_s, truth_c, &core.status()[0].telemetry, core.device(), depth_m);
     }
     let contact = at_contact.ok_or_else(|| RenderError::Invalid("the run never reached the touch".into()))?;
+    let controller = display
+        .core()
+        .engine(0)
+        .map_or("", |p| p.controller().name())
+        .to_string();
     if let Some((quantity, row)) = trajectory.first_non_finite() {
         let column = trajectory.numbers().find(|(name, _)| *name == quantity).map(|(_, c)| c);
         return Err(RenderError::NonFinite {
             material: spec.material.name.clone(),
-            controller: pipeline.controller().name().to_string(),
+            controller,
             quantity,
             value: column.map_or(f64::NAN, |c| c[row]),
             time_s: trajectory.time_s[row],
         });
     }
     let limit = actuator_limit(spec, &trajectory, &contact)?;
-    let summary = summarise(spec, pipeline.controller().name(), &trajectory, &contact, limit);
+    let summary = summarise(spec, &controller, &trajectory, &contact, limit);
     Ok(RenderRun {
         spec: spec.clone(),
         trajectory,
@@ -203,23 +221,15 @@ pub fn render_with(spec: &RenderSpec, mut pipeline: ChannelPipeline) -> Result<R
     })
 }
 
-/// One tick of the pipeline on the plant's newest reading, then the plant advanced by `dt` in `substeps` equal
-/// substeps with the gated drive.
-pub fn tick(
-    pipeline: &mut ChannelPipeline,
-    plant: &mut Plant,
-    now_s: f64,
-    dt: f64,
-    substeps: usize,
-) -> Result<Telemetry, RenderError> {
-    let reading = plant.read(0)?;
-    let (drive, telemetry) = pipeline.tick(now_s, dt, &reading);
-    plant.apply(0, &drive)?;
-    let h = dt / substeps as f64;
-    for _ in 0..substeps {
-        plant.advance(h);
+/// Gives `command` to the render's loop at once; a channel its self-test refused is refused it, as on the daemon,
+/// and renders on in air.
+fn command(display: &mut VirtualLoop<Plant, ChannelPipeline>, command: Command) -> Result<(), RenderError> {
+    match display.core_mut().command(command) {
+        Ok(_) | Err(CommandError::Faulted { .. }) => Ok(()),
+        Err(e) => Err(RenderError::Invalid(format!(
+            "the display refused the run's stimulus: {e}"
+        ))),
     }
-    Ok(telemetry)
 }
 
 /// The CSV columns, in order.

@@ -151,7 +151,16 @@ pub const SELF_TEST_LIMIT_S: f64 = 120.0;
 
 /// What the loop thread reports once its engines are built and their start-up self-tests are done: the published
 /// state, each channel's limits, what real-time treatment it obtained, and the self-tests.
-type Started = Result<(Arc<Shared>, Vec<StimulusLimits>, Realtime, Vec<SelfTestState>), RuntimeError>;
+type Started = Result<
+    (
+        Arc<Shared>,
+        CommandSender,
+        Vec<StimulusLimits>,
+        Realtime,
+        Vec<SelfTestState>,
+    ),
+    RuntimeError,
+>;
 
 impl LoopHandle {
     /// Starts the loop on its own thread. `engines` builds one engine per device channel on that thread. Each of
@@ -176,12 +185,6 @@ impl LoopHandle {
         }
         let link = device.link_health();
         let parts = device.parts();
-        let (queue, queue_receiver) = sync_channel(config.command_queue_len);
-        let (urgent, urgent_receiver) = sync_channel(URGENT_QUEUE_LEN);
-        let receiver = CommandReceiver {
-            urgent: urgent_receiver,
-            queue: queue_receiver,
-        };
         let (ready, started) = sync_channel::<Started>(1);
         let stop = Arc::new(AtomicBool::new(false));
         let thread = {
@@ -191,7 +194,7 @@ impl LoopHandle {
                 .spawn(move || {
                     let built = engines(count)
                         .map_err(RuntimeError::Engine)
-                        .and_then(|engines| ControlLoop::new(&config, device, engines, receiver, feeds, interlock));
+                        .and_then(|engines| ControlLoop::new(&config, device, engines, feeds, interlock));
                     let mut control = match built {
                         Ok(control) => control,
                         Err(e) => {
@@ -206,7 +209,7 @@ impl LoopHandle {
                             return None;
                         }
                     };
-                    let limits = control.slots.iter().map(|s| s.limits).collect();
+                    let limits = control.channel_limits();
                     // After the engines are built (they allocate), before the first tick.
                     let realtime = if config.realtime {
                         request_realtime_alone()
@@ -215,7 +218,7 @@ impl LoopHandle {
                     };
                     // Before anyone holds the handle, so no command can reach a display under test.
                     let self_tests = control.self_tests(clock.as_ref(), &mut ticker, &stop);
-                    let _ = ready.send(Ok((control.shared.clone(), limits, realtime, self_tests)));
+                    let _ = ready.send(Ok((control.shared(), control.commands(), limits, realtime, self_tests)));
                     Some(control.run(clock.as_ref(), ticker, &stop))
                 })
                 .map_err(|source| RuntimeError::Io {
@@ -223,7 +226,7 @@ impl LoopHandle {
                     source,
                 })?
         };
-        let (shared, limits, realtime, self_tests) = match started.recv() {
+        let (shared, commands, limits, realtime, self_tests) = match started.recv() {
             Ok(result) => result?,
             Err(_) => {
                 return Err(RuntimeError::Config(
@@ -232,7 +235,7 @@ impl LoopHandle {
             }
         };
         Ok(LoopHandle {
-            commands: CommandSender::new(queue, urgent),
+            commands,
             shared,
             stop,
             thread: Some(thread),
@@ -319,8 +322,8 @@ impl Drop for LoopHandle {
 }
 
 /// Per-channel state the loop owns.
-struct Slot {
-    engine: Box<dyn ChannelEngine>,
+struct Slot<E> {
+    engine: E,
     /// The engine's limits, read once when the loop starts.
     limits: StimulusLimits,
     reading: Reading,
@@ -340,13 +343,22 @@ struct Counters {
     device_errors: u64,
 }
 
-struct ControlLoop {
-    device: Box<dyn Device + Send>,
+/// The loop core, one tick at a time: commands drained, programs started and stepped, every channel read → tick
+/// → apply, the recorder fed, the snapshot published. It has no thread and no clock of its own: the real-time
+/// driver ([`LoopHandle::spawn`]) steps it on its thread at the clock's deadlines; a virtual-time driver
+/// ([`crate::virtual_time::VirtualLoop`]) steps it as fast as the machine goes for the lab's simulated displays and
+/// `thermode render`. `D` is the display, `E` each channel's engine (the daemon holds boxed ones).
+pub struct ControlLoop<D, E> {
+    device: D,
     /// What the device measures or drives itself (read once: it does not change).
     measures: Measures,
-    slots: Vec<Slot>,
+    slots: Vec<Slot<E>>,
     status: Vec<ChannelStatus>,
     commands: CommandReceiver,
+    /// The sending end of `commands`, handed out by [`ControlLoop::commands`].
+    sender: CommandSender,
+    /// The newest tick's number (0 before the first).
+    tick_index: u64,
     shared: Arc<Shared>,
     feeds: Vec<SyncSender<TickRecord>>,
     /// Answers of this tick's commands, sent after the publish.
@@ -384,12 +396,15 @@ const NO_READING: Reading = Reading {
     heating_limit_a: f64::INFINITY,
 };
 
-impl ControlLoop {
-    fn new(
+impl<D: Device, E: ChannelEngine> ControlLoop<D, E> {
+    /// A loop core for `device` with one engine per channel; each of `feeds` receives a [`TickRecord`] per tick
+    /// (never waited for); the core obeys `interlock`. Commands reach it through [`ControlLoop::commands`] (drained
+    /// at each step) or [`ControlLoop::command`] (applied at once). `config` is its driver's to check: the
+    /// real-time driver holds it to [`LoopConfig::validate`], a virtual-time one steps at its caller's rate.
+    pub fn new(
         config: &LoopConfig,
-        device: Box<dyn Device + Send>,
-        engines: Vec<Box<dyn ChannelEngine>>,
-        commands: CommandReceiver,
+        device: D,
+        engines: Vec<E>,
         feeds: Vec<SyncSender<TickRecord>>,
         interlock: Arc<Interlock>,
     ) -> Result<Self, RuntimeError> {
@@ -436,12 +451,19 @@ impl ControlLoop {
             running: true,
         }));
         let window = config.stats_window_ticks();
+        let (queue, queue_receiver) = sync_channel(config.command_queue_len);
+        let (urgent, urgent_receiver) = sync_channel(URGENT_QUEUE_LEN);
         Ok(ControlLoop {
             measures: device.measures(),
             device,
             slots,
             status,
-            commands,
+            commands: CommandReceiver {
+                urgent: urgent_receiver,
+                queue: queue_receiver,
+            },
+            sender: CommandSender::new(queue, urgent),
+            tick_index: 0,
             shared,
             feeds,
             answers: Vec::with_capacity(config.commands_per_tick() + URGENT_QUEUE_LEN),
@@ -464,6 +486,64 @@ impl ControlLoop {
         })
     }
 
+    /// Where commands go: drained at each step, at most [`LoopConfig::commands_per_tick`] (and the whole urgent
+    /// lane) per tick.
+    pub fn commands(&self) -> CommandSender {
+        self.sender.clone()
+    }
+
+    /// What the core publishes ([`ControlLoop::publish`]).
+    pub fn shared(&self) -> Arc<Shared> {
+        self.shared.clone()
+    }
+
+    /// Every channel as the newest tick left it.
+    pub fn status(&self) -> &[ChannelStatus] {
+        &self.status
+    }
+
+    /// Each channel's limits, read from its engine when the core was built.
+    pub fn channel_limits(&self) -> Vec<StimulusLimits> {
+        self.slots.iter().map(|slot| slot.limits).collect()
+    }
+
+    /// The display.
+    pub fn device(&self) -> &D {
+        &self.device
+    }
+
+    /// The display, mutable (a virtual-time driver advances a simulated display's physics).
+    pub fn device_mut(&mut self) -> &mut D {
+        &mut self.device
+    }
+
+    /// Channel `channel`'s engine (`None`: no such channel).
+    pub fn engine(&self, channel: usize) -> Option<&E> {
+        self.slots.get(channel).map(|slot| &slot.engine)
+    }
+
+    /// Loop time of the newest tick \[s\].
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// Applies `command` at once, between ticks, as the step would have at the next tick (a virtual-time driver
+    /// with nothing else in its queue), stamped with the newest tick; counted like every other command.
+    pub fn command(&mut self, command: Command) -> Reply {
+        let answer = self.apply(command, self.tick_index);
+        match answer {
+            Ok(_) => self.counters.applied += 1,
+            Err(_) => self.counters.refused += 1,
+        }
+        answer
+    }
+
+    /// Brings the device to loop time `time_s` \[s\] ([`Device::poll`]: a simulated display's physics, a polled
+    /// link's requests); the real-time driver calls it before each step.
+    pub fn poll(&mut self, time_s: f64) {
+        self.device.poll(time_s);
+    }
+
     /// Ticks until `stop`; then every drive to 0 A (the device's answer is returned).
     fn run(mut self, clock: &dyn Clock, mut ticker: Ticker, stop: &AtomicBool) -> Result<(), DeviceError> {
         while let Some(tick) = ticker.wait(clock, stop) {
@@ -475,10 +555,17 @@ impl ControlLoop {
 
     /// One tick of the loop: the step, its accounting, the snapshot and the answers.
     fn tick_once(&mut self, clock: &dyn Clock, tick: &Tick, missed_total: u64) {
-        self.step(tick, tick.scheduled_s);
+        self.poll(tick.scheduled_s);
+        self.step(tick);
         let done_s = clock.now_s();
         self.account(tick, done_s, missed_total);
         self.publish(tick.index);
+        self.send_answers();
+    }
+
+    /// Sends the answers of the newest step's commands (after its publish, so that a client told "ok" sees the
+    /// change in the status).
+    pub fn send_answers(&mut self) {
         for (reply, answer) in self.answers.drain(..) {
             reply.send(answer);
         }
@@ -509,12 +596,12 @@ impl ControlLoop {
         self.slots.iter().map(|slot| slot.engine.self_test_state()).collect()
     }
 
-    /// One tick at loop time `time_s`.
-    fn step(&mut self, tick: &Tick, time_s: f64) {
-        // A simulated device's clock starts at 0: each tick brings it to the loop's time (the clock's), so readings
-        // and the envelope share one time base.
-        self.device.poll(time_s);
-        self.time_s = time_s;
+    /// One tick at loop time `tick.scheduled_s`: commands drained, every channel read → tick → apply, the recorder
+    /// fed. The device is where the driver left it ([`ControlLoop::poll`] in real time); the answers wait for
+    /// [`ControlLoop::send_answers`].
+    pub fn step(&mut self, tick: &Tick) {
+        self.time_s = tick.scheduled_s;
+        self.tick_index = tick.index;
         let trips = self.interlock.stops();
         if trips != self.interlock_trips {
             self.interlock_trips = trips;
@@ -988,9 +1075,9 @@ impl ControlLoop {
     }
 
     /// Publishes the snapshot; a reader holds the lock only while copying it, so a few yields suffice. Never
-    /// waits on the lock: after [`PUBLISH_ATTEMPTS`] the publish is skipped (and counted), then retried between
-    /// ticks ([`ControlLoop::retry_publish`]).
-    fn publish(&mut self, tick: u64) {
+    /// waits on the lock: after a few attempts the publish is skipped (and counted), then retried between ticks by
+    /// the real-time driver.
+    pub fn publish(&mut self, tick: u64) {
         self.publish_pending = None;
         for _ in 0..PUBLISH_ATTEMPTS {
             if self.shared.try_publish(|snapshot| self.write(snapshot, tick, true)) {
@@ -1031,7 +1118,7 @@ impl ControlLoop {
     }
 
     /// Every drive to 0 A at once; the final snapshot says the loop stopped.
-    fn shutdown(&mut self) -> Result<(), DeviceError> {
+    pub fn shutdown(&mut self) -> Result<(), DeviceError> {
         let result = self.device.all_off();
         for status in &mut self.status {
             status.telemetry.current_a = 0.0;
@@ -1067,7 +1154,7 @@ fn air_status(channel: usize, air: &Arc<str>, dose: DoseLedger, dose_budget_spen
 
 /// The program's set-point of this tick as the engine's direct stimulus (`None` without a running program), its
 /// events noted in `status`.
-fn program_setpoint(slot: &mut Slot, status: &mut ChannelStatus, dt_s: f64) -> Option<Stimulus> {
+fn program_setpoint<E>(slot: &mut Slot<E>, status: &mut ChannelStatus, dt_s: f64) -> Option<Stimulus> {
     let executor = slot.program.as_mut().filter(|e| !e.finished())?;
     let step = executor.step(dt_s);
     let mark = &mut status.program;

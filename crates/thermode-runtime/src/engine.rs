@@ -57,6 +57,37 @@ pub trait ChannelEngine {
     }
 }
 
+/// A boxed engine is an engine (the daemon's loop holds whichever engines its factory built as these).
+impl<E: ChannelEngine + ?Sized> ChannelEngine for Box<E> {
+    fn limits(&self) -> StimulusLimits {
+        (**self).limits()
+    }
+    fn set_stimulus(&mut self, stimulus: Stimulus) -> Result<(), EngineError> {
+        (**self).set_stimulus(stimulus)
+    }
+    fn tick(&mut self, now_s: f64, dt_s: f64, reading: &Reading) -> (DriveCommand, Telemetry) {
+        (**self).tick(now_s, dt_s, reading)
+    }
+    fn clear_fault(&mut self, now_s: f64) -> Result<Option<FaultCode>, EngineError> {
+        (**self).clear_fault(now_s)
+    }
+    fn hold(&mut self) {
+        (**self).hold();
+    }
+    fn dose(&self) -> DoseLedger {
+        (**self).dose()
+    }
+    fn dose_budget_spent(&self) -> bool {
+        (**self).dose_budget_spent()
+    }
+    fn restore_dose(&mut self, saved: &DoseLedger) -> Result<(), EngineError> {
+        (**self).restore_dose(saved)
+    }
+    fn self_test_state(&self) -> SelfTestState {
+        (**self).self_test_state()
+    }
+}
+
 /// Builds a channel's engines on the loop thread (engines need not be `Send`): called once with the device's
 /// channel count, it returns one engine per channel.
 pub type EngineFactory = Box<dyn FnOnce(usize) -> Result<Vec<Box<dyn ChannelEngine>>, EngineError> + Send>;

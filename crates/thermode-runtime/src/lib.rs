@@ -3,9 +3,12 @@
 //! two ports: a command sender in ([`CommandSender`]), snapshots and events out ([`snapshot::Shared`],
 //! [`recorder::RecordStatus::listen`]).
 //!
-//! - [`control_loop`]: the fixed-rate control loop on its own std thread ([`LoopHandle`]), with an injected
+//! - [`control_loop`]: the loop core one tick at a time ([`ControlLoop`]: no thread, no clock) and its real-time
+//!   driver, the fixed-rate control loop on its own std thread ([`LoopHandle`]), with an injected
 //!   `thermode_platform::Clock` (`MonotonicClock`, `ManualClock`) and drift-free `Ticker`, no allocation and no async per
 //!   tick, missed-deadline counting and period statistics ([`stats`]).
+//! - [`virtual_time`]: the core's virtual-time driver ([`VirtualLoop`]), for the lab's simulated displays and
+//!   offline renders.
 //! - [`engine`]: the [`ChannelEngine`] trait the loop drives per channel (renderer → controller → safety envelope);
 //!   every drive it returns is a gated `DriveCommand`.
 //! - [`command`]: the one command vocabulary ([`Command`]: a channel's [`Stimulus`], release, clear fault, stop
@@ -56,12 +59,14 @@ pub mod recorder;
 pub mod reply;
 pub mod snapshot;
 pub mod stats;
+pub mod virtual_time;
 
 pub use command::{Applied, Command, CommandError, CommandSender, Owner};
-pub use control_loop::{LoopConfig, LoopHandle, MAX_RATE_HZ};
+pub use control_loop::{ControlLoop, LoopConfig, LoopHandle, MAX_RATE_HZ};
 pub use engine::{ChannelEngine, EngineError, EngineFactory, Stimulus, Telemetry, TrackingEngine};
 pub use error::RuntimeError;
 pub use interlock::Interlock;
 pub use limits::StimulusLimits;
 pub use loop_core::{CoreConfig, CoreStop, LoopCore, PreparedCore};
 pub use snapshot::{ChannelStatus, LoopStats, MaterialProperties, Mode, Snapshot, TickRecord};
+pub use virtual_time::{SimulatedPhysics, VirtualLoop};

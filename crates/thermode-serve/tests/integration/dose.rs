@@ -29,11 +29,19 @@ fn start(dir: &std::path::Path, engines: EngineFactory) -> (Daemon, Arc<std::syn
 
 /// [`start`], and the spy's remote control.
 fn start_spy(dir: &std::path::Path, engines: EngineFactory) -> (Daemon, SpyLogShared, SpyControlShared) {
+    start_spy_on(dir, engines, Arc::new(ManualClock::jumping()))
+}
+
+/// As [`start_spy`], on `clock`.
+fn start_spy_on(
+    dir: &std::path::Path,
+    engines: EngineFactory,
+    clock: Arc<dyn Clock>,
+) -> (Daemon, SpyLogShared, SpyControlShared) {
     let device = SpyDevice::new(1);
     let (log, control) = (device.log.clone(), device.control.clone());
     let mut config = test_config();
     config.core.state_dir = Some(dir.to_path_buf());
-    let clock: Arc<dyn Clock> = Arc::new(ManualClock::jumping());
     let daemon = Daemon::start(config, Box::new(device), engines, clock).expect("daemon starts");
     (daemon, log, control)
 }
@@ -421,29 +429,40 @@ fn a_link_fault_during_a_hot_touch_spends_the_budget_at_the_bound_and_the_channe
 #[test]
 fn a_device_cut_that_still_reports_its_plate_counts_the_dose_the_plate_had() {
     let tmp = tempfile::tempdir().expect("temp dir");
-    let (daemon, log, control) = start_spy(tmp.path(), pipelines());
+    // The loop runs at once to each time the test lets it reach, and no further.
+    let clock = Arc::new(ManualClock::jumping());
+    clock.jump_until(0.0);
+    let (daemon, log, control) = start_spy_on(tmp.path(), pipelines(), clock.clone());
     {
         let mut c = control.lock().expect("control");
         c.outage_when_hot = Some((43.5, 3.0, 60.0));
         c.outage_is_cut = true;
     }
-    daemon
+    let answer = daemon
         .commands()
         .expect("commands")
         .request(Command::direct(0, 44.0, 20.0, Owner::Script))
-        .expect("queued")
-        .blocking_recv()
-        .expect("answered")
-        .expect("applied");
-    let scheduled = wait_until(60.0, || log.lock().expect("log").outage_s.is_some());
-    assert!(scheduled, "the plate never reached 43.5 °C");
+        .expect("queued");
+    let run_to = |time_s: f64| {
+        clock.jump_until(time_s);
+        // The loop's newest tick is the last deadline at or before the limit (within a tick of it).
+        run_until(&daemon, time_s - 0.011);
+    };
+    run_to(0.1);
+    answer.blocking_recv().expect("answered").expect("applied");
+    let mut limit_s = 0.1;
+    while log.lock().expect("log").outage_s.is_none() {
+        assert!(limit_s < 60.0, "the plate never reached 43.5 °C");
+        limit_s += 0.1;
+        run_to(limit_s);
+    }
     let (from_s, until_s) = log.lock().expect("log").outage_s.expect("cut");
     let dose_at = |time_s: f64| {
-        run_until(&daemon, time_s);
+        run_to(time_s);
         let snapshot = daemon.snapshot().expect("snapshot");
         (snapshot.time_s, snapshot.channels[0].dose.cem43_min)
     };
-    // From just before the cut to 10 s into it (the loop's clock jumps: each snapshot is taken where it got to).
+    // From just before the cut to 10 s into it.
     let ((t0_s, before), (t1_s, after)) = (dose_at(from_s - 2.5), dose_at(from_s + 10.0));
     assert!(
         t0_s < from_s && t1_s < until_s,
@@ -460,5 +479,6 @@ fn a_device_cut_that_still_reports_its_plate_counts_the_dose_the_plate_had() {
         (counted - truth).abs() <= tolerance,
         "counted {counted} CEM43-min, the true plate's {truth} ± {tolerance}"
     );
+    clock.jump_until(f64::INFINITY);
     daemon.shutdown().expect("clean shutdown");
 }
