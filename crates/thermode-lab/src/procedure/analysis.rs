@@ -240,7 +240,12 @@ fn trace_figure(csv: &Path, sidecar: &ProcedureSidecar, row: &ProcedureRow, dir:
         "{} {} trial {}",
         sidecar.participant, sidecar.experiment, row.trial
     ));
-    let name = format!("{}_trial-{:03}.svg", sidecar.participant, row.trial);
+    // Named by the session's file (participant, experiment, day), so several sessions of one participant analysed
+    // together keep every figure.
+    let stem = csv
+        .file_stem()
+        .map_or_else(|| sidecar.participant.clone(), |s| s.to_string_lossy().into_owned());
+    let name = format!("{stem}_trial-{:03}.svg", row.trial);
     std::fs::create_dir_all(dir).map_err(|e| bad(dir, e.to_string()))?;
     thermode_plot::write_figure(&figure, &dir.join(&name)).map_err(|e| bad(dir, e.to_string()))?;
     Ok(name)

@@ -7,7 +7,7 @@
 //! whole analysis succeeded, so a bad input (malformed row, missing column, empty file, unknown condition or material)
 //! leaves nothing behind; the error names the file and line, and `main` exits with code 2.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
@@ -96,9 +96,29 @@ pub fn run(args: &LabAnalyzeArgs) -> Result<()> {
     }
 }
 
+/// Whether `file` is the events file (`<stem>_events.csv`) of a session `<stem>.csv` also among `files`: a glob over
+/// a participant's sessions matches both, and the analysis reads the events with their session.
+fn is_events_of_a_given_session(file: &Path, files: &[PathBuf]) -> bool {
+    let Some(stem) = file
+        .file_name()
+        .and_then(|n| n.to_str())
+        .and_then(|n| n.strip_suffix("_events.csv"))
+    else {
+        return false;
+    };
+    let session = file.with_file_name(format!("{stem}.csv"));
+    files.contains(&session)
+}
+
 /// `lab analyze` of procedure sessions: thresholds, z-scores, estimates, ratings, a trace figure per trial.
 fn run_procedures(args: &LabAnalyzeArgs) -> Result<()> {
-    if let Some(other) = args.files.iter().find(|f| !procedure::is_procedure_csv(f)) {
+    let files: Vec<PathBuf> = args
+        .files
+        .iter()
+        .filter(|f| !is_events_of_a_given_session(f, &args.files))
+        .cloned()
+        .collect();
+    if let Some(other) = files.iter().find(|f| !procedure::is_procedure_csv(f)) {
         anyhow::bail!(
             "{}: not a procedure session; analyse identification sessions and procedure sessions separately",
             other.display()
@@ -121,7 +141,7 @@ fn run_procedures(args: &LabAnalyzeArgs) -> Result<()> {
     if args.format == ReportFormat::Html {
         anyhow::bail!("--format html: a procedure session's report is Markdown (md) or JSON");
     }
-    let sessions = procedure::analyze_sessions(&args.files, reference.as_ref(), figures)?;
+    let sessions = procedure::analyze_sessions(&files, reference.as_ref(), figures)?;
     if figures.is_some() {
         std::fs::create_dir_all(&out).with_context(|| out.display().to_string())?;
     }

@@ -228,10 +228,18 @@ fn a_procedure_session_is_analysed_with_z_scores_and_exported_with_its_events() 
     let out = dir.path().join("report");
     let csv = session_csv(&data);
     let s = |p: &Path| p.to_str().expect("utf-8").to_string();
+    // The README's glob (`P01_dfns-thermal_*.csv`) also matches the session's events file: it is read with its
+    // session, not refused.
+    let events = csv.with_file_name(format!(
+        "{}_events.csv",
+        csv.file_stem().expect("stem").to_string_lossy()
+    ));
+    assert!(events.exists(), "{} beside the session", events.display());
     let args = [
         "lab",
         "analyze",
         &s(&csv),
+        &s(&events),
         "--format",
         "json",
         "--out",
@@ -264,7 +272,9 @@ fn a_procedure_session_is_analysed_with_z_scores_and_exported_with_its_events() 
         session["trials"].as_u64().unwrap_or(0) as usize,
         "a trace figure per trial"
     );
-    let svg = std::fs::read_to_string(out.join("figures/P01_trial-001.svg")).expect("first trace figure");
+    // Named by the session's file, so another session of P01 analysed with it keeps its own figures.
+    let stem = csv.file_stem().expect("stem").to_string_lossy().into_owned();
+    let svg = std::fs::read_to_string(out.join(format!("figures/{stem}_trial-001.svg"))).expect("first trace figure");
     assert!(svg.contains("response"), "the response is marked in the trace figure");
 
     let bids = dir.path().join("bids");
