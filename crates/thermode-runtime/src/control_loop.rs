@@ -522,20 +522,20 @@ impl<D: Device, E: ChannelEngine> ControlLoop<D, E> {
         self.slots.get(channel).map(|slot| &slot.engine)
     }
 
-    /// Loop time of the newest tick \[s\].
-    pub fn time_s(&self) -> f64 {
-        self.time_s
-    }
-
     /// Applies `command` at once, between ticks, as the step would have at the next tick (a virtual-time driver
     /// with nothing else in its queue), stamped with the newest tick; counted like every other command.
     pub fn command(&mut self, command: Command) -> Reply {
         let answer = self.apply(command, self.tick_index);
+        self.count(&answer);
+        answer
+    }
+
+    /// Counts an applied or refused command.
+    fn count(&mut self, answer: &Reply) {
         match answer {
             Ok(_) => self.counters.applied += 1,
             Err(_) => self.counters.refused += 1,
         }
-        answer
     }
 
     /// Brings the device to loop time `time_s` \[s\] ([`Device::poll`]: a simulated display's physics, a polled
@@ -741,10 +741,7 @@ impl<D: Device, E: ChannelEngine> ControlLoop<D, E> {
             }
             self.apply(command, tick)
         };
-        match answer {
-            Ok(_) => self.counters.applied += 1,
-            Err(_) => self.counters.refused += 1,
-        }
+        self.count(&answer);
         if let Some(reply) = reply {
             // Answered after this tick's snapshot is published, so a client that got "ok" sees the change in
             // the status. Capacity for every command a tick can take is reserved: no allocation.

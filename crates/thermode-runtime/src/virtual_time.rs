@@ -68,11 +68,6 @@ impl<D: SimulatedPhysics, E: ChannelEngine> VirtualLoop<D, E> {
         self.start_s + self.next_index as f64 * self.dt_s
     }
 
-    /// The tick \[s\].
-    pub fn dt_s(&self) -> f64 {
-        self.dt_s
-    }
-
     /// Runs the next tick (its commands answered); returns its number. The display is not advanced.
     pub fn tick(&mut self) -> u64 {
         let index = self.next_index;
